@@ -1,0 +1,34 @@
+//! # roitrack-core
+//!
+//! The pure mathematics of roitrack, with no I/O and no threads:
+//!
+//! - [`so3`]: the SO(3) exponential, an accurate logarithm and the left Jacobian (what nalgebra lacks);
+//! - [`camera`]: pinhole projection with skew and plumb_bob (OpenCV) distortion and its inverse;
+//! - [`target`]: the rigid target (model points, optional blob diameters) and the bundled `grid4x4`;
+//! - [`state`]: the 12-dof [`state::MotionState`] (pose and constant twist at a reference time);
+//! - [`samples`]: timestamped measurements, poses and twists as exchanged with files;
+//! - [`projection`]: the spatio-temporal projection model and its exact and paper (eqs. 17-24) Jacobians.
+//!
+//! Conventions (SPEC section 2): camera frame x right, y down, z forward. The state holds `cam_r_obj` (c_R_o),
+//! `cam_t_obj_m` (c_t_o), the velocity of the object origin `velocity_mps` and the angular velocity
+//! `angular_velocity_radps`, both in the camera frame. A model point `p` observed `d` seconds after the reference time is
+//! at `Exp(W d) R p + t + V d`. A 12-vector correction `(v, w, dV, dW)` acts as `R <- Exp(w) R`, `t <- t + v`,
+//! `V <- V + dV`, `W <- W + dW`.
+
+pub mod camera;
+pub mod projection;
+pub mod samples;
+pub mod so3;
+pub mod state;
+pub mod target;
+
+pub use camera::{CameraError, CameraModel, PinholeIntrinsics, PlumbBob};
+pub use projection::{JacobianKind, SpatioTemporalModel};
+pub use samples::{Measurement, PoseSample, TwistSample};
+pub use state::MotionState;
+pub use target::{Target, TargetError, TargetPoint};
+
+/// A 12-vector (v, w, dV, dW): a correction of the state, see [`MotionState::corrected`].
+pub type Vector12 = nalgebra::SVector<f64, 12>;
+/// A 2 x 12 block of the interaction matrix: d(u, v) / d(correction).
+pub type Matrix2x12 = nalgebra::SMatrix<f64, 2, 12>;

@@ -1,0 +1,182 @@
+//! SO(3): exponential, logarithm, and the left Jacobian with its inverse.
+//!
+//! Rotations are nalgebra's [`Rotation3`]. A tangent vector `a` (rad) maps to `Exp(a) = I + sin(θ) K + (1 - cos θ) K²`
+//! with `θ = |a|`, `K = [a/θ]×` (the paper's eq. 3 prints `1 - cos²`: a typo). Perturbations are on the left:
+//! `Exp(a + δ) ≈ Exp(J_l(a) δ) Exp(a)`.
+
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3};
+
+/// Below this angle (rad) the closed forms lose digits and their Taylor series are used instead.
+const SMALL_ANGLE_RAD: f64 = 1e-4;
+
+/// The skew-symmetric matrix `[v]×` such that `[v]× x = v × x`.
+#[inline]
+pub fn hat(v: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -v.z, v.y, v.z, 0.0, -v.x, -v.y, v.x, 0.0)
+}
+
+/// The SO(3) exponential of a rotation vector (rad), exact for every angle.
+#[inline]
+pub fn exp(a: &Vector3<f64>) -> Rotation3<f64> {
+    Rotation3::new(*a)
+}
+
+/// The SO(3) logarithm: the rotation vector (rad, angle in [0, π]) of `r`.
+///
+/// nalgebra's `scaled_axis` recovers the angle through `acos`, which loses half the digits near zero (about 1e-8 rad);
+/// this goes through the unit quaternion and `atan2`, accurate to machine precision at every angle.
+pub fn log(r: &Rotation3<f64>) -> Vector3<f64> {
+    log_quaternion(&UnitQuaternion::from_rotation_matrix(r))
+}
+
+/// The rotation vector (rad) of a unit quaternion, accurate at every angle (see [`log`]).
+pub fn log_quaternion(q: &UnitQuaternion<f64>) -> Vector3<f64> {
+    // q and -q are the same rotation: pick w >= 0 so the angle is in [0, π].
+    let (w, v) = if q.w < 0.0 {
+        (-q.w, -q.imag())
+    } else {
+        (q.w, q.imag())
+    };
+    let n = v.norm();
+    if n < 1e-300 {
+        return Vector3::zeros();
+    }
+    let angle = 2.0 * n.atan2(w);
+    v * (angle / n)
+}
+
+/// The geodesic angle (rad) between two rotations: `|Log(a⁻¹ b)|`.
+pub fn angle_between(a: &Rotation3<f64>, b: &Rotation3<f64>) -> f64 {
+    log(&(a.inverse() * b)).norm()
+}
+
+/// The left Jacobian `J_l(a) = I + (1 - cos θ)/θ² [a]× + (θ - sin θ)/θ³ [a]×²`.
+pub fn left_jacobian(a: &Vector3<f64>) -> Matrix3<f64> {
+    let theta2 = a.norm_squared();
+    let theta = theta2.sqrt();
+    let k = hat(a);
+    let (c1, c2) = if theta < SMALL_ANGLE_RAD {
+        (
+            0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0,
+            1.0 / 6.0 - theta2 / 120.0 + theta2 * theta2 / 5040.0,
+        )
+    } else {
+        let (s, c) = theta.sin_cos();
+        ((1.0 - c) / theta2, (theta - s) / (theta2 * theta))
+    };
+    Matrix3::identity() + k * c1 + k * k * c2
+}
+
+/// The inverse of [`left_jacobian`]: `I - ½ [a]× + (1/θ² - (1 + cos θ)/(2 θ sin θ)) [a]×²`. Singular at θ = 2π.
+pub fn left_jacobian_inverse(a: &Vector3<f64>) -> Matrix3<f64> {
+    let theta2 = a.norm_squared();
+    let theta = theta2.sqrt();
+    let k = hat(a);
+    let c2 = if theta < SMALL_ANGLE_RAD {
+        1.0 / 12.0 + theta2 / 720.0 + theta2 * theta2 / 30240.0
+    } else {
+        let (s, c) = theta.sin_cos();
+        1.0 / theta2 - (1.0 + c) / (2.0 * theta * s)
+    };
+    Matrix3::identity() - k * 0.5 + k * k * c2
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn vec3(max: f64) -> impl Strategy<Value = Vector3<f64>> {
+        (-max..max, -max..max, -max..max).prop_map(|(x, y, z)| Vector3::new(x, y, z))
+    }
+
+    /// Rotation vectors of every scale, so the small-angle branches are always exercised.
+    fn tangent() -> impl Strategy<Value = Vector3<f64>> {
+        (vec3(1.0), -12.0..0.45f64).prop_map(|(v, log_scale)| v * 10f64.powf(log_scale))
+    }
+
+    proptest! {
+        #[test]
+        fn log_inverts_exp(a in tangent()) {
+            // Stay inside the injectivity radius |a| < π.
+            prop_assume!(a.norm() < 3.1);
+            let back = log(&exp(&a));
+            prop_assert!((back - a).norm() <= 1e-14 + 1e-13 * a.norm(), "a = {a:?}, back = {back:?}");
+        }
+
+        #[test]
+        fn exp_inverts_log(a in vec3(3.0)) {
+            let r = exp(&a);
+            let again = exp(&log(&r));
+            prop_assert!((again.matrix() - r.matrix()).norm() < 1e-13);
+        }
+
+        #[test]
+        fn exp_matches_rodrigues_with_cos_not_cos_squared(a in vec3(3.0)) {
+            let theta = a.norm();
+            prop_assume!(theta > 1e-3);
+            let k = hat(&(a / theta));
+            let rodrigues = Matrix3::identity() + k * theta.sin() + k * k * (1.0 - theta.cos());
+            prop_assert!((exp(&a).matrix() - rodrigues).norm() < 1e-14);
+        }
+
+        #[test]
+        fn left_jacobian_is_the_derivative_of_exp(a in tangent(), dir in vec3(1.0)) {
+            // Exp(a + h δ) Exp(a)^-1 ≈ Exp(h J_l(a) δ): compare by central differences.
+            prop_assume!(a.norm() < 3.0 && dir.norm() > 1e-3);
+            let h = 1e-6;
+            let r0_inv = exp(&a).inverse();
+            let plus = log(&(exp(&(a + dir * h)) * r0_inv));
+            let minus = log(&(exp(&(a - dir * h)) * r0_inv));
+            let numeric = (plus - minus) / (2.0 * h);
+            let analytic = left_jacobian(&a) * dir;
+            prop_assert!((numeric - analytic).norm() < 1e-8 * (1.0 + analytic.norm()), "{numeric:?} vs {analytic:?}");
+        }
+
+        #[test]
+        fn left_jacobian_inverse_inverts(a in tangent()) {
+            prop_assume!(a.norm() < 3.0);
+            let product = left_jacobian(&a) * left_jacobian_inverse(&a);
+            prop_assert!((product - Matrix3::identity()).norm() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn small_angle_limits() {
+        for scale in [0.0, 1e-12, 1e-8, 1e-5, 0.99e-4, 1.01e-4] {
+            let a = Vector3::new(0.3, -0.5, 0.8) * scale;
+            // Exp(a) ≈ I + [a]× to first order; J_l(a) ≈ I + ½[a]×.
+            let r = exp(&a);
+            assert!(
+                (r.matrix() - (Matrix3::identity() + hat(&a))).norm() <= a.norm_squared() + 1e-16
+            );
+            assert!(
+                (left_jacobian(&a) - (Matrix3::identity() + hat(&a) * 0.5)).norm()
+                    <= a.norm_squared() + 1e-16
+            );
+            assert!((log(&r) - a).norm() <= 1e-15 * (1.0 + a.norm()));
+        }
+        // The branch switch is continuous.
+        let a = Vector3::new(0.0, 0.0, SMALL_ANGLE_RAD);
+        let below = left_jacobian(&(a * (1.0 - 1e-9)));
+        let above = left_jacobian(&(a * (1.0 + 1e-9)));
+        assert!((below - above).norm() < 1e-12);
+        let below = left_jacobian_inverse(&(a * (1.0 - 1e-9)));
+        let above = left_jacobian_inverse(&(a * (1.0 + 1e-9)));
+        assert!((below - above).norm() < 1e-12);
+    }
+
+    #[test]
+    fn log_is_accurate_where_acos_is_not() {
+        let a = Vector3::new(3e-9, -1e-9, 2e-9);
+        let err = (log(&exp(&a)) - a).norm();
+        assert!(err < 1e-22, "err = {err}");
+    }
+
+    #[test]
+    fn log_near_pi() {
+        let a = Vector3::new(1.0, 2.0, -0.5).normalize() * (std::f64::consts::PI - 1e-9);
+        let back = log(&exp(&a));
+        assert!((back - a).norm() < 1e-7);
+    }
+}

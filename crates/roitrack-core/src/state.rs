@@ -1,0 +1,156 @@
+//! The 12-dof state: pose and constant twist of the object at a reference time.
+
+use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+
+use crate::{Vector12, so3};
+
+/// Pose and twist of the object in the camera frame at the reference time `t_ref` (SPEC section 2).
+///
+/// - `cam_r_obj` = c_R_o, `cam_t_obj_m` = c_t_o: the object's pose in the camera;
+/// - `velocity_mps` = V: velocity of the object's origin, camera frame;
+/// - `angular_velocity_radps` = W: angular velocity of the object, camera frame (a constant body rate ω_o is the same
+///   motion as W = R ω_o).
+///
+/// With the twist held constant, the pose `d` seconds after `t_ref` is `R(d) = Exp(W d) R`, `t(d) = t + V d`, and a
+/// model point `p` is at `R(d) p + t(d)`. A correction `δ = (v, w, dV, dW)` (tangent order: translation, rotation,
+/// velocity, angular velocity) acts as `R <- Exp(w) R`, `t <- t + v`, `V <- V + dV`, `W <- W + dW`: rotation
+/// perturbations are on the left, about the object's origin, in the camera frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MotionState {
+    pub cam_r_obj: Rotation3<f64>,
+    pub cam_t_obj_m: Vector3<f64>,
+    pub velocity_mps: Vector3<f64>,
+    pub angular_velocity_radps: Vector3<f64>,
+}
+
+impl MotionState {
+    /// A pose at rest.
+    pub fn at_rest(cam_r_obj: Rotation3<f64>, cam_t_obj_m: Vector3<f64>) -> Self {
+        Self {
+            cam_r_obj,
+            cam_t_obj_m,
+            velocity_mps: Vector3::zeros(),
+            angular_velocity_radps: Vector3::zeros(),
+        }
+    }
+
+    /// The pose `d_s` seconds after the reference time, under the constant twist.
+    #[inline]
+    pub fn pose_at(&self, d_s: f64) -> (Rotation3<f64>, Vector3<f64>) {
+        (
+            so3::exp(&(self.angular_velocity_radps * d_s)) * self.cam_r_obj,
+            self.cam_t_obj_m + self.velocity_mps * d_s,
+        )
+    }
+
+    /// Where the model point `point_in_obj_m` is, in the camera frame, `d_s` seconds after the reference time.
+    #[inline]
+    pub fn point_in_cam_at(&self, point_in_obj_m: &Vector3<f64>, d_s: f64) -> Vector3<f64> {
+        let (r, t) = self.pose_at(d_s);
+        r * point_in_obj_m + t
+    }
+
+    /// The same motion with its reference time moved `dt_s` later (the paper's compensation term, eq. 12).
+    #[inline]
+    pub fn predicted(&self, dt_s: f64) -> Self {
+        let (cam_r_obj, cam_t_obj_m) = self.pose_at(dt_s);
+        Self {
+            cam_r_obj,
+            cam_t_obj_m,
+            ..*self
+        }
+    }
+
+    /// The state after a correction `δ = (v, w, dV, dW)`.
+    #[inline]
+    pub fn corrected(&self, delta: &Vector12) -> Self {
+        let v = delta.fixed_rows::<3>(0).into_owned();
+        let w = delta.fixed_rows::<3>(3).into_owned();
+        let dv = delta.fixed_rows::<3>(6).into_owned();
+        let dw = delta.fixed_rows::<3>(9).into_owned();
+        let mut cam_r_obj = so3::exp(&w) * self.cam_r_obj;
+        cam_r_obj.renormalize();
+        Self {
+            cam_r_obj,
+            cam_t_obj_m: self.cam_t_obj_m + v,
+            velocity_mps: self.velocity_mps + dv,
+            angular_velocity_radps: self.angular_velocity_radps + dw,
+        }
+    }
+
+    /// The 12-vector `δ` with `a.corrected(δ) == b` (inverse of [`Self::corrected`]).
+    pub fn difference(a: &Self, b: &Self) -> Vector12 {
+        let mut delta = Vector12::zeros();
+        delta
+            .fixed_rows_mut::<3>(0)
+            .copy_from(&(b.cam_t_obj_m - a.cam_t_obj_m));
+        delta
+            .fixed_rows_mut::<3>(3)
+            .copy_from(&so3::log(&(b.cam_r_obj * a.cam_r_obj.inverse())));
+        delta
+            .fixed_rows_mut::<3>(6)
+            .copy_from(&(b.velocity_mps - a.velocity_mps));
+        delta
+            .fixed_rows_mut::<3>(9)
+            .copy_from(&(b.angular_velocity_radps - a.angular_velocity_radps));
+        delta
+    }
+
+    /// The pose as an isometry camera_T_object.
+    pub fn cam_from_obj(&self) -> Isometry3<f64> {
+        Isometry3::from_parts(
+            Translation3::from(self.cam_t_obj_m),
+            UnitQuaternion::from_rotation_matrix(&self.cam_r_obj),
+        )
+    }
+
+    /// Whether every component is finite.
+    pub fn is_finite(&self) -> bool {
+        self.cam_r_obj.matrix().iter().all(|x| x.is_finite())
+            && self.cam_t_obj_m.iter().all(|x| x.is_finite())
+            && self.velocity_mps.iter().all(|x| x.is_finite())
+            && self.angular_velocity_radps.iter().all(|x| x.is_finite())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn moving() -> MotionState {
+        MotionState {
+            cam_r_obj: Rotation3::from_euler_angles(0.1, -0.2, 0.3),
+            cam_t_obj_m: Vector3::new(0.02, -0.01, 0.6),
+            velocity_mps: Vector3::new(0.5, -0.3, 0.1),
+            angular_velocity_radps: Vector3::new(2.0, -6.0, 1.0),
+        }
+    }
+
+    #[test]
+    fn prediction_composes() {
+        let s = moving();
+        let a = s.predicted(0.003).predicted(0.002);
+        let b = s.predicted(0.005);
+        assert!(MotionState::difference(&a, &b).norm() < 1e-14);
+        let back = s.predicted(0.004).predicted(-0.004);
+        assert!(MotionState::difference(&s, &back).norm() < 1e-14);
+    }
+
+    #[test]
+    fn difference_inverts_correction() {
+        let s = moving();
+        let delta = Vector12::from_fn(|i, _| 0.01 * (i as f64 - 5.5));
+        let back = MotionState::difference(&s, &s.corrected(&delta));
+        assert!((back - delta).norm() < 1e-14);
+    }
+
+    #[test]
+    fn constant_twist_point_motion() {
+        // A point on the rotation axis through the origin only translates.
+        let s = moving();
+        let axis_in_obj = s.cam_r_obj.inverse() * s.angular_velocity_radps.normalize();
+        let p = s.point_in_cam_at(&(axis_in_obj * 0.05), 0.01);
+        let expected = s.cam_r_obj * (axis_in_obj * 0.05) + s.cam_t_obj_m + s.velocity_mps * 0.01;
+        assert!((p - expected).norm() < 1e-15);
+    }
+}
