@@ -7,6 +7,7 @@
 //! - [`target`]: the rigid target (model points, optional blob diameters) and the bundled `grid4x4`;
 //! - [`state`]: the 12-dof [`state::MotionState`] (pose and constant twist at a reference time);
 //! - [`samples`]: timestamped measurements, poses and twists as exchanged with files;
+//! - [`roi_order`]: the order in which ROIs visit the points (bit-reversed, row-major, random);
 //! - [`projection`]: the spatio-temporal projection model and its exact and paper (eqs. 17-24) Jacobians.
 //!
 //! Conventions (SPEC section 2): camera frame x right, y down, z forward. The state holds `cam_r_obj` (c_R_o),
@@ -17,6 +18,7 @@
 
 pub mod camera;
 pub mod projection;
+pub mod roi_order;
 pub mod samples;
 pub mod so3;
 pub mod state;
@@ -24,6 +26,7 @@ pub mod target;
 
 pub use camera::{CameraError, CameraModel, PinholeIntrinsics, PlumbBob};
 pub use projection::{JacobianKind, SpatioTemporalModel};
+pub use roi_order::RoiOrder;
 pub use samples::{Measurement, PoseSample, TwistSample};
 pub use state::MotionState;
 pub use target::{Target, TargetError, TargetPoint};

@@ -1,0 +1,461 @@
+//! Scenario trajectories: the true pose and twist of the target at any time.
+//!
+//! Each scenario gives, at time `t`, a [`MotionState`] whose pose is the true pose at `t` and whose twist is the true
+//! instantaneous twist at `t` (V = d t/dt, and W with dR/dt = [W]× R, both in the camera frame, SPEC section 2).
+
+use std::f64::consts::PI;
+
+use nalgebra::{Rotation3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use roitrack_core::{CameraModel, MotionState, Target, so3};
+
+/// The scenarios the simulator offers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ScenarioKind {
+    /// The bench pose of SPEC section 6, at rest, 1 s.
+    Static,
+    /// SPEC section 7: the paper's Orthoglide experiment (translations in the image plane, peak 1 m/s), 4.914 s.
+    Orthoglide,
+    /// Fast rotation: 3 rev/s about an axis tilted 20 deg from the optical axis while translating slowly, 3 s.
+    Spin,
+    /// Smooth random 6-dof motion (sums of sinusoids), peak 1.5 m/s and 4 rad/s, depth 0.45-0.8 m, 4 s.
+    Random,
+}
+
+impl ScenarioKind {
+    pub const ALL: [ScenarioKind; 4] = [Self::Static, Self::Orthoglide, Self::Spin, Self::Random];
+
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Static => "static",
+            Self::Orthoglide => "orthoglide",
+            Self::Spin => "spin",
+            Self::Random => "random",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+/// R = Rz(5 deg) Ry(-15 deg) Rx(10 deg), the bench rotation of SPEC section 6.
+pub fn bench_rotation() -> Rotation3<f64> {
+    Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
+        * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
+        * Rotation3::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians())
+}
+
+/// The quintic time scaling s(u) = 10u³ - 15u⁴ + 6u⁵ and its derivative ds/du, for u clamped to [0, 1].
+fn quintic(u: f64) -> (f64, f64) {
+    let u = u.clamp(0.0, 1.0);
+    let u2 = u * u;
+    (
+        u2 * u * (10.0 - 15.0 * u + 6.0 * u2),
+        30.0 * u2 * (1.0 - 2.0 * u + u2),
+    )
+}
+
+/// Sum of sinusoids per axis: value and time derivative.
+#[derive(Debug, Clone)]
+struct SinusoidSum {
+    /// (amplitude, angular frequency rad/s, phase rad) per axis.
+    terms: [Vec<(f64, f64, f64)>; 3],
+}
+
+impl SinusoidSum {
+    fn random(
+        rng: &mut ChaCha8Rng,
+        per_axis: usize,
+        freq_hz: (f64, f64),
+        amplitude: [f64; 3],
+    ) -> Self {
+        let terms = std::array::from_fn(|axis| {
+            (0..per_axis)
+                .map(|_| {
+                    (
+                        amplitude[axis] * rng.random_range(0.3..1.0),
+                        2.0 * PI * rng.random_range(freq_hz.0..freq_hz.1),
+                        rng.random_range(0.0..2.0 * PI),
+                    )
+                })
+                .collect()
+        });
+        Self { terms }
+    }
+
+    fn eval(&self, t: f64) -> (Vector3<f64>, Vector3<f64>) {
+        let mut value = Vector3::zeros();
+        let mut rate = Vector3::zeros();
+        for (axis, terms) in self.terms.iter().enumerate() {
+            for &(a, w, phase) in terms {
+                let (s, c) = (w * t + phase).sin_cos();
+                value[axis] += a * s;
+                rate[axis] += a * w * c;
+            }
+        }
+        (value, rate)
+    }
+
+    fn scale(&mut self, factor: f64) {
+        for terms in &mut self.terms {
+            for term in terms.iter_mut() {
+                term.0 *= factor;
+            }
+        }
+    }
+}
+
+#[derive(Debug, Clone)]
+enum Motion {
+    Static,
+    Orthoglide,
+    Spin,
+    Random {
+        position: SinusoidSum,
+        rotation: SinusoidSum,
+        centre_m: Vector3<f64>,
+    },
+}
+
+/// A scenario: the canonical camera and target, and the true motion over `[0, duration_s]`.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    pub kind: ScenarioKind,
+    pub camera: CameraModel,
+    pub target: Target,
+    pub duration_s: f64,
+    motion: Motion,
+}
+
+// Orthoglide phases (SPEC section 7).
+const HOME_M: [f64; 3] = [0.0, 0.0, 0.60];
+const LINE_M: f64 = 0.080;
+const RADIUS_M: f64 = 0.060;
+const LINE_DURATION_S: f64 = 0.5;
+fn circle_duration_s() -> f64 {
+    1.875 * 4.0 * PI * RADIUS_M
+}
+/// Start times of the seven phases and the end.
+fn orthoglide_breaks_s() -> [f64; 8] {
+    let durations = [
+        0.25,
+        LINE_DURATION_S,
+        1.0,
+        circle_duration_s(),
+        0.25,
+        LINE_DURATION_S,
+        1.0,
+    ];
+    let mut breaks = [0.0; 8];
+    for (i, d) in durations.iter().enumerate() {
+        breaks[i + 1] = breaks[i] + d;
+    }
+    breaks
+}
+
+const SPIN_RATE_REV_S: f64 = 3.0;
+const SPIN_AXIS_TILT_DEG: f64 = 20.0;
+
+const RANDOM_PEAK_SPEED_MPS: f64 = 1.5;
+const RANDOM_PEAK_ANGULAR_RADPS: f64 = 4.0;
+const RANDOM_DURATION_S: f64 = 4.0;
+
+impl Scenario {
+    /// The scenario of this kind. `seed` only matters for [`ScenarioKind::Random`].
+    pub fn new(kind: ScenarioKind, seed: u64) -> Self {
+        let (duration_s, motion) = match kind {
+            ScenarioKind::Static => (1.0, Motion::Static),
+            ScenarioKind::Orthoglide => (orthoglide_breaks_s()[7], Motion::Orthoglide),
+            ScenarioKind::Spin => (3.0, Motion::Spin),
+            ScenarioKind::Random => (RANDOM_DURATION_S, random_motion(seed)),
+        };
+        Self {
+            kind,
+            camera: CameraModel::canonical(),
+            target: Target::grid4x4(),
+            duration_s,
+            motion,
+        }
+    }
+
+    /// True pose and instantaneous twist at time `t_s`.
+    pub fn state_at(&self, t_s: f64) -> MotionState {
+        match &self.motion {
+            Motion::Static => {
+                MotionState::at_rest(bench_rotation(), Vector3::new(0.02, -0.01, 0.60))
+            }
+            Motion::Orthoglide => orthoglide_state(t_s),
+            Motion::Spin => spin_state(t_s),
+            Motion::Random {
+                position,
+                rotation,
+                centre_m,
+            } => random_state(t_s, position, rotation, centre_m),
+        }
+    }
+
+    /// The smallest margin (px) between any blob centre and the image border over the whole scenario, sampled at
+    /// 1 kHz; negative if a blob leaves the image or goes behind the camera.
+    pub fn min_image_margin_px(&self) -> f64 {
+        min_image_margin_px(&self.camera, &self.target, self.duration_s, |t| {
+            self.state_at(t)
+        })
+    }
+}
+
+fn min_image_margin_px(
+    camera: &CameraModel,
+    target: &Target,
+    duration_s: f64,
+    state_at: impl Fn(f64) -> MotionState,
+) -> f64 {
+    let steps = (duration_s * 1000.0).ceil() as usize;
+    let (w, h) = (camera.width_px as f64, camera.height_px as f64);
+    let mut margin = f64::INFINITY;
+    for k in 0..=steps {
+        let state = state_at((k as f64 / 1000.0).min(duration_s));
+        for p in target.points() {
+            match camera.raw_pixel_from_cam(&state.point_in_cam_at(&p.point_in_obj_m, 0.0)) {
+                Some(px) => {
+                    margin = margin
+                        .min(px.x)
+                        .min(px.y)
+                        .min(w - 1.0 - px.x)
+                        .min(h - 1.0 - px.y)
+                }
+                None => return f64::NEG_INFINITY,
+            }
+        }
+    }
+    margin
+}
+
+fn orthoglide_state(t_s: f64) -> MotionState {
+    let b = orthoglide_breaks_s();
+    let home = Vector3::from(HOME_M);
+    let side = home + Vector3::new(LINE_M, 0.0, 0.0);
+    let line = |from: Vector3<f64>, to: Vector3<f64>, t0: f64| {
+        let (s, ds) = quintic((t_s - t0) / LINE_DURATION_S);
+        (from + (to - from) * s, (to - from) * (ds / LINE_DURATION_S))
+    };
+    let (position, velocity) = if t_s < b[1] {
+        (home, Vector3::zeros())
+    } else if t_s < b[2] {
+        line(home, side, b[1])
+    } else if t_s < b[3] {
+        (side, Vector3::zeros())
+    } else if t_s < b[4] {
+        let duration = circle_duration_s();
+        let (s, ds) = quintic((t_s - b[3]) / duration);
+        let total_angle = 4.0 * PI;
+        let phi = total_angle * s;
+        let phi_rate = total_angle * ds / duration;
+        let centre = side - Vector3::new(RADIUS_M, 0.0, 0.0);
+        let (sin, cos) = phi.sin_cos();
+        // Starts at `side` and first moves towards -y: counter-clockwise as displayed (y down).
+        (
+            centre + Vector3::new(RADIUS_M * cos, -RADIUS_M * sin, 0.0),
+            Vector3::new(-RADIUS_M * sin, -RADIUS_M * cos, 0.0) * phi_rate,
+        )
+    } else if t_s < b[5] {
+        (side, Vector3::zeros())
+    } else if t_s < b[6] {
+        line(side, home, b[5])
+    } else {
+        (home, Vector3::zeros())
+    };
+    MotionState {
+        cam_r_obj: bench_rotation(),
+        cam_t_obj_m: position,
+        velocity_mps: velocity,
+        angular_velocity_radps: Vector3::zeros(),
+    }
+}
+
+fn spin_state(t_s: f64) -> MotionState {
+    let axis = Rotation3::from_axis_angle(&Vector3::x_axis(), SPIN_AXIS_TILT_DEG.to_radians())
+        * Vector3::z();
+    let w = axis * (2.0 * PI * SPIN_RATE_REV_S);
+    // Slow translation: a few centimetres at well under 1 Hz.
+    let (a, f) = (
+        Vector3::new(0.03, 0.02, 0.05),
+        Vector3::new(0.5, 0.7, 0.3) * (2.0 * PI),
+    );
+    let position =
+        Vector3::new(0.02, -0.01, 0.60) + a.component_mul(&f.map(|x| x * t_s).map(f64::sin));
+    let velocity = a
+        .component_mul(&f)
+        .component_mul(&f.map(|x| x * t_s).map(f64::cos));
+    MotionState {
+        cam_r_obj: so3::exp(&(w * t_s)) * bench_rotation(),
+        cam_t_obj_m: position,
+        velocity_mps: velocity,
+        angular_velocity_radps: w,
+    }
+}
+
+fn random_state(
+    t_s: f64,
+    position: &SinusoidSum,
+    rotation: &SinusoidSum,
+    centre_m: &Vector3<f64>,
+) -> MotionState {
+    let (p, v) = position.eval(t_s);
+    let (phi, phi_rate) = rotation.eval(t_s);
+    // R(t) = Exp(φ(t)) R0, so dR/dt = [J_l(φ) φ']× R.
+    MotionState {
+        cam_r_obj: so3::exp(&phi) * bench_rotation(),
+        cam_t_obj_m: centre_m + p,
+        velocity_mps: v,
+        angular_velocity_radps: so3::left_jacobian(&phi) * phi_rate,
+    }
+}
+
+/// Draws random smooth motions until one keeps every blob inside the image with a margin, the depth in
+/// [0.45, 0.8] m and the target facing the camera, scaled to the peak speeds.
+fn random_motion(seed: u64) -> Motion {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_0f_7a4d_0e);
+    let camera = CameraModel::canonical();
+    let target = Target::grid4x4();
+    let centre_m = Vector3::new(0.0, 0.0, 0.625);
+    loop {
+        let mut position = SinusoidSum::random(&mut rng, 3, (0.4, 2.5), [0.06, 0.06, 0.06]);
+        let mut rotation = SinusoidSum::random(&mut rng, 3, (0.3, 1.5), [0.3, 0.3, 0.3]);
+        let peak = |f: &dyn Fn(f64) -> f64| {
+            (0..=(RANDOM_DURATION_S * 500.0) as usize)
+                .map(|k| f(k as f64 / 500.0))
+                .fold(0.0, f64::max)
+        };
+        let speed = peak(&|t| position.eval(t).1.norm());
+        position.scale(RANDOM_PEAK_SPEED_MPS / speed);
+        for _ in 0..3 {
+            let angular = peak(&|t| {
+                random_state(t, &position, &rotation, &centre_m)
+                    .angular_velocity_radps
+                    .norm()
+            });
+            rotation.scale(RANDOM_PEAK_ANGULAR_RADPS / angular);
+        }
+        let state_at = |t| random_state(t, &position, &rotation, &centre_m);
+        let steps = (RANDOM_DURATION_S * 500.0) as usize;
+        let acceptable = (0..=steps).all(|k| {
+            let s = state_at(k as f64 / 500.0);
+            let facing = (s.cam_r_obj * Vector3::z()).z.abs() > 60f64.to_radians().cos();
+            (0.45..=0.8).contains(&s.cam_t_obj_m.z) && facing
+        }) && min_image_margin_px(&camera, &target, RANDOM_DURATION_S, state_at)
+            > 20.0;
+        if acceptable {
+            return Motion::Random {
+                position,
+                rotation,
+                centre_m,
+            };
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Finite differences of the pose reproduce the scenario's twist (pins the convention: V = dt/dt, dR/dt = [W]× R).
+    fn assert_twist_is_pose_derivative(s: &Scenario) {
+        let h = 1e-6;
+        for k in 1..200 {
+            let t = s.duration_s * k as f64 / 200.0;
+            let (a, b, mid) = (s.state_at(t - h), s.state_at(t + h), s.state_at(t));
+            let v = (b.cam_t_obj_m - a.cam_t_obj_m) / (2.0 * h);
+            let w = so3::log(&(b.cam_r_obj * a.cam_r_obj.inverse())) / (2.0 * h);
+            assert!(
+                (v - mid.velocity_mps).norm() < 1e-6,
+                "{:?} t={t}: v {v:?} vs {:?}",
+                s.kind,
+                mid.velocity_mps
+            );
+            assert!(
+                (w - mid.angular_velocity_radps).norm() < 1e-5,
+                "{:?} t={t}: w {w:?} vs {:?}",
+                s.kind,
+                mid.angular_velocity_radps
+            );
+        }
+    }
+
+    #[test]
+    fn every_scenario_twist_is_the_derivative_of_its_pose() {
+        for kind in ScenarioKind::ALL {
+            assert_twist_is_pose_derivative(&Scenario::new(kind, 1));
+        }
+        assert_twist_is_pose_derivative(&Scenario::new(ScenarioKind::Random, 7));
+    }
+
+    #[test]
+    fn every_blob_stays_inside_the_image() {
+        for kind in ScenarioKind::ALL {
+            let s = Scenario::new(kind, 1);
+            assert!(
+                s.min_image_margin_px() > 10.0,
+                "{kind:?}: margin {}",
+                s.min_image_margin_px()
+            );
+        }
+    }
+
+    #[test]
+    fn orthoglide_matches_the_spec() {
+        let s = Scenario::new(ScenarioKind::Orthoglide, 0);
+        assert!((s.duration_s - 4.91372).abs() < 1e-5);
+        let b = orthoglide_breaks_s();
+        let home = Vector3::new(0.0, 0.0, 0.6);
+        let side = Vector3::new(0.08, 0.0, 0.6);
+        assert!((s.state_at(0.1).cam_t_obj_m - home).norm() < 1e-15);
+        assert!((s.state_at(b[2]).cam_t_obj_m - side).norm() < 1e-12);
+        // The circle starts at `side` moving towards -y, peaks at 1.0 m/s, passes the far side at (-0.04, 0).
+        let early = s.state_at(b[3] + 0.05);
+        assert!(
+            early.velocity_mps.y < 0.0 && early.velocity_mps.x.abs() < early.velocity_mps.y.abs()
+        );
+        let peak = (0..10_000)
+            .map(|k| {
+                s.state_at(b[3] + circle_duration_s() * k as f64 / 10_000.0)
+                    .velocity_mps
+                    .norm()
+            })
+            .fold(0.0, f64::max);
+        assert!((peak - 1.0).abs() < 1e-6, "peak speed {peak}");
+        let half = s.state_at(b[3] + circle_duration_s() / 2.0);
+        assert!(
+            (half.cam_t_obj_m - side).norm() < 1e-12,
+            "two laps: back at the start halfway"
+        );
+        assert!((s.state_at(s.duration_s).cam_t_obj_m - home).norm() < 1e-15);
+        assert_eq!(s.state_at(1.0).cam_r_obj, bench_rotation());
+    }
+
+    #[test]
+    fn random_scenario_meets_its_envelope_and_depends_on_the_seed() {
+        for seed in [1, 2, 3] {
+            let s = Scenario::new(ScenarioKind::Random, seed);
+            let (mut speed, mut angular): (f64, f64) = (0.0, 0.0);
+            for k in 0..=4000 {
+                let st = s.state_at(k as f64 / 1000.0);
+                speed = speed.max(st.velocity_mps.norm());
+                angular = angular.max(st.angular_velocity_radps.norm());
+                assert!((0.45..=0.8).contains(&st.cam_t_obj_m.z));
+            }
+            assert!(
+                (speed - 1.5).abs() < 0.01,
+                "seed {seed}: peak speed {speed}"
+            );
+            assert!(
+                (angular - 4.0).abs() < 0.1,
+                "seed {seed}: peak angular rate {angular}"
+            );
+        }
+        let a = Scenario::new(ScenarioKind::Random, 1).state_at(1.0);
+        let b = Scenario::new(ScenarioKind::Random, 2).state_at(1.0);
+        assert_ne!(a.cam_t_obj_m, b.cam_t_obj_m);
+    }
+}
