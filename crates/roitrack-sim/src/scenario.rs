@@ -316,7 +316,7 @@ fn random_state(
 /// Draws random smooth motions until one keeps every blob inside the image with a margin, the depth in
 /// [0.45, 0.8] m and the target facing the camera, scaled to the peak speeds.
 fn random_motion(seed: u64) -> Motion {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_0f_7a4d_0e);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_0f7a_4d0e);
     let camera = CameraModel::canonical();
     let target = Target::grid4x4();
     let centre_m = Vector3::new(0.0, 0.0, 0.625);
