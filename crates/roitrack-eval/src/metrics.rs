@@ -1,0 +1,126 @@
+//! The accuracy figures of one evaluation, and their text and JSON renderings.
+
+use std::fmt::Write as _;
+
+use serde::{Deserialize, Serialize};
+
+/// Accuracy of an estimated trajectory against ground truth (SPEC section 9); every field carries its unit.
+///
+/// Errors are estimate minus truth, in the camera frame, at the estimate's times. The velocity fields are `None`
+/// unless both the truth and the estimate have twists.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Number of estimates compared.
+    pub count: usize,
+    /// Time from the first to the last estimate (s).
+    pub duration_s: f64,
+    /// Median interval between consecutive estimates (ms); 0 for a single estimate.
+    pub estimator_period_ms: f64,
+    /// RMS of the position error's norm (mm).
+    pub position_rmse_mm: f64,
+    /// RMS of the position error along each camera axis x, y, z (mm).
+    pub position_rmse_xyz_mm: [f64; 3],
+    /// Largest position error norm (mm).
+    pub max_position_error_mm: f64,
+    /// RMS of the geodesic angle of `R_est⁻¹ R_true` (deg).
+    pub rotation_rmse_deg: f64,
+    /// RMS of the linear velocity error's norm (mm/s).
+    pub velocity_rmse_mm_s: Option<f64>,
+    /// RMS of the linear velocity error along each camera axis x, y, z (mm/s).
+    pub velocity_rmse_xyz_mm_s: Option<[f64; 3]>,
+    /// RMS of the angular velocity error's norm (deg/s).
+    pub angular_velocity_rmse_deg_s: Option<f64>,
+    /// Shift (estimator samples) maximising the cross-correlation of estimated and true linear velocity; positive
+    /// when the estimate lags behind the truth (`est[k] ≈ truth[k - lag]`).
+    pub velocity_lag_samples: Option<i64>,
+    /// [`velocity_lag_samples`](Self::velocity_lag_samples) refined by a parabola through the correlation peak.
+    pub velocity_lag_subsample: Option<f64>,
+    /// `velocity_lag_samples × estimator_period_ms` (ms).
+    pub velocity_lag_ms: Option<f64>,
+}
+
+impl Metrics {
+    /// The metrics as one compact JSON object (the field names above, `null` for absent velocity figures).
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).expect("Metrics holds only numbers, which always serialize")
+    }
+
+    /// A readable table with aligned columns: metric, value, unit. Velocity rows appear only when present.
+    pub fn to_table(&self) -> String {
+        let mut rows: Vec<(&str, String, &str)> = vec![
+            ("estimates", self.count.to_string(), ""),
+            ("duration", number(self.duration_s), "s"),
+            ("estimator period", number(self.estimator_period_ms), "ms"),
+            ("position RMSE", number(self.position_rmse_mm), "mm"),
+        ];
+        for (name, value) in ["position RMSE x", "position RMSE y", "position RMSE z"]
+            .into_iter()
+            .zip(self.position_rmse_xyz_mm)
+        {
+            rows.push((name, number(value), "mm"));
+        }
+        rows.push((
+            "max position error",
+            number(self.max_position_error_mm),
+            "mm",
+        ));
+        rows.push(("rotation RMSE", number(self.rotation_rmse_deg), "deg"));
+        if let Some(v) = self.velocity_rmse_mm_s {
+            rows.push(("velocity RMSE", number(v), "mm/s"));
+        }
+        if let Some(xyz) = self.velocity_rmse_xyz_mm_s {
+            for (name, value) in ["velocity RMSE x", "velocity RMSE y", "velocity RMSE z"]
+                .into_iter()
+                .zip(xyz)
+            {
+                rows.push((name, number(value), "mm/s"));
+            }
+        }
+        if let Some(w) = self.angular_velocity_rmse_deg_s {
+            rows.push(("angular velocity RMSE", number(w), "deg/s"));
+        }
+        if let Some(lag) = self.velocity_lag_samples {
+            rows.push(("velocity lag", lag.to_string(), "samples"));
+        }
+        if let Some(lag) = self.velocity_lag_subsample {
+            rows.push(("velocity lag (subsample)", format!("{lag:.3}"), "samples"));
+        }
+        if let Some(lag) = self.velocity_lag_ms {
+            rows.push(("velocity lag", number(lag), "ms"));
+        }
+
+        let header = ("metric", "value", "unit");
+        let name_width = rows
+            .iter()
+            .map(|r| r.0.len())
+            .chain([header.0.len()])
+            .max()
+            .unwrap_or(0);
+        let value_width = rows
+            .iter()
+            .map(|r| r.1.len())
+            .chain([header.1.len()])
+            .max()
+            .unwrap_or(0);
+        let mut table = String::new();
+        let mut line = |name: &str, value: &str, unit: &str| {
+            let text = format!("{name:<name_width$}  {value:>value_width$}  {unit}");
+            // Writing to a String cannot fail.
+            let _ = writeln!(table, "{}", text.trim_end());
+        };
+        line(header.0, header.1, header.2);
+        for (name, value, unit) in &rows {
+            line(name, value, unit);
+        }
+        table
+    }
+}
+
+/// Four decimals, or scientific notation for magnitudes too small to show that way.
+fn number(value: f64) -> String {
+    if value != 0.0 && value.abs() < 1e-3 {
+        format!("{value:.3e}")
+    } else {
+        format!("{value:.4}")
+    }
+}
