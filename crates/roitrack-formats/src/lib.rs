@@ -1,0 +1,63 @@
+//! # roitrack-formats
+//!
+//! The files roitrack reads and writes (SPEC section 8), with strict readers whose errors name the file, the line and
+//! the field, and writers that never leave a half-written file behind:
+//!
+//! | file | reader | writer |
+//! | --- | --- | --- |
+//! | camera: ROS camera_info YAML | [`read_camera_yaml`], [`parse_camera_yaml`] | [`write_camera_yaml`], [`camera_yaml_string`] |
+//! | target: CSV `id,x,y,z[,diameter]` (m, object frame) | [`read_target_csv`], [`parse_target_csv`] | [`write_target_csv`], [`target_csv_string`] |
+//! | measurements: CSV `t,id,u,v` (s, raw px) | [`MeasurementReader`] (streaming), [`read_measurements_csv`] | [`MeasurementWriter`], [`write_measurements_csv`] |
+//! | poses: TUM `t tx ty tz qx qy qz qw` (camera_T_object) | [`read_tum`], [`parse_tum`] | [`PoseWriter`], [`write_tum`] |
+//! | twists: CSV `t,vx,vy,vz,wx,wy,wz` (camera frame) | [`read_twists_csv`], [`parse_twists_csv`] | [`TwistWriter`], [`write_twists_csv`] |
+//!
+//! Every reader refuses non-finite numbers and times out of order; every writer refuses what the reader would refuse
+//! and writes numbers with full round-trip precision (the shortest decimal that reads back to the same `f64`).
+//! Writers go through [`AtomicFile`]: the file appears at its path, complete, only on `finish()`.
+//!
+//! No function here panics on any input; all failures are [`FormatError`]s.
+//!
+//! ```
+//! use roitrack_core::{Measurement, Target};
+//! use roitrack_formats::{MeasurementReader, MeasurementWriter, read_target_csv, write_target_csv};
+//!
+//! # fn main() -> Result<(), roitrack_formats::FormatError> {
+//! let dir = tempfile::tempdir().unwrap();
+//! let target_path = dir.path().join("target.csv");
+//! write_target_csv(&target_path, &Target::grid4x4())?;
+//! let target = read_target_csv(&target_path)?;
+//!
+//! let path = dir.path().join("measurements.csv");
+//! let mut writer = MeasurementWriter::create(&path)?;
+//! writer.write(&Measurement { t_s: 0.0, id: 5, u_px: 512.25, v_px: 498.5 })?;
+//! writer.finish()?; // only now does measurements.csv appear
+//!
+//! // Stream the rows back, refusing ids the target does not have.
+//! let ids = target.points().iter().map(|p| p.id);
+//! for m in MeasurementReader::open(&path)?.with_known_ids(ids) {
+//!     let m = m?;
+//!     assert_eq!((m.id, m.u_px), (5, 512.25));
+//! }
+//! # Ok(())
+//! # }
+//! ```
+
+mod atomic;
+mod camera_yaml;
+mod csv_util;
+mod error;
+mod measurements;
+mod row_writer;
+mod target_csv;
+mod tum;
+mod twists;
+
+pub use atomic::AtomicFile;
+pub use camera_yaml::{camera_yaml_string, parse_camera_yaml, read_camera_yaml, write_camera_yaml};
+pub use error::FormatError;
+pub use measurements::{
+    MeasurementReader, MeasurementWriter, read_measurements_csv, write_measurements_csv,
+};
+pub use target_csv::{parse_target_csv, read_target_csv, target_csv_string, write_target_csv};
+pub use tum::{PoseWriter, QUATERNION_NORM_TOLERANCE, parse_tum, read_tum, write_tum};
+pub use twists::{TwistWriter, parse_twists_csv, read_twists_csv, write_twists_csv};

@@ -1,0 +1,356 @@
+//! Measurements CSV (SPEC section 8): header `t,id,u,v`, one measured blob centroid per row, rows in time order.
+//!
+//! `t` is the time of the exposure midpoint (seconds, any origin), `id` the target point id, `u v` the centroid in raw
+//! (distorted) pixels: `u` to the right, `v` down, pixel centres at integer coordinates.
+
+use std::collections::HashSet;
+use std::fs::File;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+
+use csv::StringRecord;
+use roitrack_core::Measurement;
+
+use crate::FormatError;
+use crate::csv_util::{Row, check_time_order, csv_reader, read_header, read_row};
+use crate::row_writer::RowWriter;
+
+const COLUMNS: [&str; 4] = ["t", "id", "u", "v"];
+
+/// A streaming reader of a measurements CSV: one [`Measurement`] per row, in constant memory.
+///
+/// It checks every row: four fields, `t`, `u`, `v` finite numbers, `id` a non-negative integer (and, with
+/// [`Self::with_known_ids`], an id of the target), times not decreasing. The first error is returned as an `Err` item
+/// naming the line and field, after which the iterator ends.
+#[derive(Debug)]
+pub struct MeasurementReader<R: Read> {
+    csv: csv::Reader<R>,
+    record: StringRecord,
+    path: PathBuf,
+    known_ids: Option<HashSet<u32>>,
+    /// Time (s) and line of the previous row.
+    previous: Option<(f64, u64)>,
+    done: bool,
+}
+
+impl MeasurementReader<File> {
+    /// Opens a measurements CSV and checks its header.
+    pub fn open(path: impl AsRef<Path>) -> Result<Self, FormatError> {
+        let path = path.as_ref();
+        let file =
+            File::open(path).map_err(|e| FormatError::io(path, "cannot open for reading", e))?;
+        Self::from_reader(file, path)
+    }
+}
+
+impl<R: Read> MeasurementReader<R> {
+    /// Reads measurements from any byte source; `path` names it in errors. Checks the header.
+    pub fn from_reader(reader: R, path: impl AsRef<Path>) -> Result<Self, FormatError> {
+        let path = path.as_ref().to_path_buf();
+        let mut csv = csv_reader(reader);
+        read_header(&mut csv, &path, &COLUMNS, None)?;
+        Ok(Self {
+            csv,
+            record: StringRecord::new(),
+            path,
+            known_ids: None,
+            previous: None,
+            done: false,
+        })
+    }
+
+    /// Makes an id outside `ids` (the target's point ids) an error.
+    #[must_use]
+    pub fn with_known_ids(mut self, ids: impl IntoIterator<Item = u32>) -> Self {
+        self.known_ids = Some(ids.into_iter().collect());
+        self
+    }
+
+    fn next_measurement(&mut self) -> Result<Option<Measurement>, FormatError> {
+        let Some(line) = read_row(&mut self.csv, &mut self.record, &self.path, &COLUMNS)? else {
+            return Ok(None);
+        };
+        let row = Row {
+            record: &self.record,
+            line,
+            path: &self.path,
+            columns: &COLUMNS,
+        };
+        let t_s = row.finite(0)?;
+        let id = row.id(1)?;
+        let u_px = row.finite(2)?;
+        let v_px = row.finite(3)?;
+        if let Some(known) = &self.known_ids
+            && !known.contains(&id)
+        {
+            return Err(row.error(
+                1,
+                format!("unknown point id {id}: the target has no such point"),
+            ));
+        }
+        check_time_order(self.previous, t_s, false, &self.path, line, "t")?;
+        self.previous = Some((t_s, line));
+        Ok(Some(Measurement {
+            t_s,
+            id,
+            u_px,
+            v_px,
+        }))
+    }
+}
+
+impl<R: Read> Iterator for MeasurementReader<R> {
+    type Item = Result<Measurement, FormatError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.done {
+            return None;
+        }
+        let item = self.next_measurement().transpose();
+        if !matches!(item, Some(Ok(_))) {
+            self.done = true;
+        }
+        item
+    }
+}
+
+/// Reads a whole measurements CSV into memory (see [`MeasurementReader`] for the checks and for streaming).
+pub fn read_measurements_csv(path: impl AsRef<Path>) -> Result<Vec<Measurement>, FormatError> {
+    MeasurementReader::open(path)?.collect()
+}
+
+/// Writes a measurements CSV atomically: nothing appears at the path until [`Self::finish`].
+///
+/// Numbers are written with full round-trip precision. Values that the reader would refuse (non-finite, times going
+/// backwards) are refused here.
+#[derive(Debug)]
+pub struct MeasurementWriter {
+    rows: RowWriter,
+}
+
+impl MeasurementWriter {
+    /// Starts writing `path` (its directory must exist) and writes the header `t,id,u,v`.
+    pub fn create(path: impl AsRef<Path>) -> Result<Self, FormatError> {
+        Ok(Self {
+            rows: RowWriter::create(path.as_ref(), Some("t,id,u,v"), false)?,
+        })
+    }
+
+    /// Appends one measurement (t in seconds, raw pixels).
+    pub fn write(&mut self, m: &Measurement) -> Result<(), FormatError> {
+        self.rows.check(m.t_s, &[("u", m.u_px), ("v", m.v_px)])?;
+        self.rows.write_record(
+            m.t_s,
+            format_args!("{},{},{},{}", m.t_s, m.id, m.u_px, m.v_px),
+        )
+    }
+
+    /// Completes the file and moves it into place.
+    pub fn finish(self) -> Result<(), FormatError> {
+        self.rows.finish()
+    }
+}
+
+/// Writes all `measurements` to a measurements CSV, atomically.
+pub fn write_measurements_csv(
+    path: impl AsRef<Path>,
+    measurements: &[Measurement],
+) -> Result<(), FormatError> {
+    let mut writer = MeasurementWriter::create(path)?;
+    for m in measurements {
+        writer.write(m)?;
+    }
+    writer.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Vec<Measurement>, FormatError> {
+        MeasurementReader::from_reader(text.as_bytes(), "measurements.csv")?.collect()
+    }
+
+    fn parse_err(text: &str) -> String {
+        parse(text).unwrap_err().to_string()
+    }
+
+    #[test]
+    fn round_trip_is_bit_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("measurements.csv");
+        let ms: Vec<Measurement> = (0..200u32)
+            .map(|i| Measurement {
+                t_s: 0.1 * (i / 3) as f64 + 1e-13,
+                id: i % 16,
+                u_px: 512.0 + (i as f64).sin() * 123.456_789_012_345_67,
+                v_px: -3.0e-9 * i as f64 + 1e6 * (i as f64).cos(),
+            })
+            .collect();
+        write_measurements_csv(&path, &ms).unwrap();
+        let back = read_measurements_csv(&path).unwrap();
+        assert_eq!(back, ms);
+        let mut reader = MeasurementReader::open(&path)
+            .unwrap()
+            .with_known_ids(0..16);
+        assert_eq!(reader.next().unwrap().unwrap(), ms[0]);
+        assert_eq!(reader.count(), 199);
+    }
+
+    #[test]
+    fn accepts_header_only_whitespace_and_equal_times() {
+        assert!(parse("t,id,u,v\n").unwrap().is_empty());
+        assert!(parse("t,id,u,v").unwrap().is_empty());
+        let ms = parse(" t , id,u,v\r\n0.5, 3 ,1.5,2\n\n0.5,4,1e3,-2.25\n").unwrap();
+        assert_eq!(ms.len(), 2);
+        assert_eq!(
+            ms[1],
+            Measurement {
+                t_s: 0.5,
+                id: 4,
+                u_px: 1000.0,
+                v_px: -2.25
+            }
+        );
+    }
+
+    #[test]
+    fn byte_order_mark_is_ignored() {
+        let ms = parse("\u{feff}t,id,u,v\n0,1,2,3\n").unwrap();
+        assert_eq!(ms.len(), 1);
+    }
+
+    #[test]
+    fn completely_empty_file_is_an_error_naming_the_file() {
+        let e = parse_err("");
+        assert!(e.starts_with("measurements.csv: "), "{e}");
+        assert!(e.contains("empty"), "{e}");
+    }
+
+    #[test]
+    fn time_going_backwards_names_the_line_and_both_times() {
+        let e = parse_err("t,id,u,v\n0.5,1,1,1\n0.75,2,1,1\n0.25,3,1,1\n");
+        assert!(e.starts_with("measurements.csv:4: field 't': "), "{e}");
+        assert!(
+            e.contains("0.25") && e.contains("0.75") && e.contains("line 3"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn nan_u_is_refused() {
+        let e = parse_err("t,id,u,v\n0,1,1,1\n0.1,1,NaN,1\n");
+        assert!(e.starts_with("measurements.csv:3: field 'u': "), "{e}");
+        assert!(e.contains("finite"), "{e}");
+        let e = parse_err("t,id,u,v\n0,1,abc,1\n");
+        assert_eq!(e, "measurements.csv:2: field 'u': not a number: \"abc\"");
+        let e = parse_err("t,id,u,v\ninf,1,1,1\n");
+        assert!(e.starts_with("measurements.csv:2: field 't': "), "{e}");
+    }
+
+    #[test]
+    fn unknown_and_invalid_ids_are_refused() {
+        let text = "t,id,u,v\n0,1,1,1\n0.1,42,1,1\n";
+        assert_eq!(parse(text).unwrap().len(), 2);
+        let e = MeasurementReader::from_reader(text.as_bytes(), "measurements.csv")
+            .unwrap()
+            .with_known_ids([0, 1, 2])
+            .collect::<Result<Vec<_>, _>>()
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("measurements.csv:3: field 'id': "), "{e}");
+        assert!(e.contains("42"), "{e}");
+        for bad in ["-1", "1.5", "x", "", "4294967296"] {
+            let e = parse_err(&format!("t,id,u,v\n0,{bad},1,1\n"));
+            assert!(e.starts_with("measurements.csv:2: field 'id': "), "{e}");
+        }
+    }
+
+    #[test]
+    fn truncated_last_line_is_an_error_naming_the_line() {
+        let e = parse_err("t,id,u,v\n0,1,1,1\n0.1,2,3");
+        assert!(
+            e.starts_with("measurements.csv:3: field 'v': missing"),
+            "{e}"
+        );
+        let e = parse_err("t,id,u,v\n0,1,1,1,7\n");
+        assert!(
+            e.starts_with("measurements.csv:2: field 'column 5': "),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn wrong_header_is_refused() {
+        let e = parse_err("t,id,x,v\n");
+        assert!(e.starts_with("measurements.csv:1: field 'u': "), "{e}");
+        let e = parse_err("t,id,u\n");
+        assert!(
+            e.starts_with("measurements.csv:1: field 'v': missing column"),
+            "{e}"
+        );
+        let e = parse_err("t,id,u,v,w\n");
+        assert!(
+            e.starts_with("measurements.csv:1: field 'w': unexpected"),
+            "{e}"
+        );
+        // No header at all: the first data row is taken as one and refused.
+        let e = parse_err("0,1,1,1\n");
+        assert!(e.starts_with("measurements.csv:1: field 't': "), "{e}");
+    }
+
+    #[test]
+    fn iteration_stops_after_the_first_error() {
+        let mut reader =
+            MeasurementReader::from_reader("t,id,u,v\n0,1,x,1\n0,1,1,1\n".as_bytes(), "m.csv")
+                .unwrap();
+        assert!(reader.next().unwrap().is_err());
+        assert!(reader.next().is_none());
+    }
+
+    #[test]
+    fn invalid_utf8_names_the_line() {
+        let bytes = b"t,id,u,v\n0,1,1,1\n0,1,\xff,1\n";
+        let e = MeasurementReader::from_reader(&bytes[..], "m.csv")
+            .unwrap()
+            .collect::<Result<Vec<_>, _>>()
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("m.csv:3: "), "{e}");
+    }
+
+    #[test]
+    fn missing_file_is_an_error_naming_it() {
+        let e = read_measurements_csv("/nonexistent-dir/meas.csv").unwrap_err();
+        assert!(
+            e.to_string()
+                .starts_with("/nonexistent-dir/meas.csv: cannot open")
+        );
+        assert!(e.io_error().is_some());
+    }
+
+    #[test]
+    fn writer_refuses_what_the_reader_would_refuse() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("m.csv");
+        let mut w = MeasurementWriter::create(&path).unwrap();
+        let m = Measurement {
+            t_s: 1.0,
+            id: 0,
+            u_px: 1.0,
+            v_px: 2.0,
+        };
+        w.write(&m).unwrap();
+        let e = w.write(&Measurement { t_s: 0.5, ..m }).unwrap_err();
+        assert!(e.to_string().contains("m.csv:3: field 't'"), "{e}");
+        let e = w
+            .write(&Measurement {
+                u_px: f64::INFINITY,
+                ..m
+            })
+            .unwrap_err();
+        assert!(e.to_string().contains("m.csv:3: field 'u'"), "{e}");
+        drop(w);
+        assert!(!path.exists());
+    }
+}

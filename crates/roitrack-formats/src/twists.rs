@@ -1,0 +1,178 @@
+//! Twists CSV (SPEC section 8): header `t,vx,vy,vz,wx,wy,wz`, one twist per row, times strictly increasing.
+//!
+//! `t` in seconds; `vx vy vz` the velocity V of the object origin (m/s) and `wx wy wz` the angular velocity W
+//! (rad/s), both expressed in the camera frame (SPEC section 2). The rows have the same times as the poses.
+
+use std::fs::File;
+use std::io::Read;
+use std::path::Path;
+
+use csv::StringRecord;
+use nalgebra::Vector3;
+use roitrack_core::TwistSample;
+
+use crate::FormatError;
+use crate::csv_util::{Row, check_time_order, csv_reader, read_header, read_row};
+use crate::row_writer::RowWriter;
+
+const COLUMNS: [&str; 7] = ["t", "vx", "vy", "vz", "wx", "wy", "wz"];
+
+/// Reads a twists CSV (see [`parse_twists_csv`]).
+pub fn read_twists_csv(path: impl AsRef<Path>) -> Result<Vec<TwistSample>, FormatError> {
+    let path = path.as_ref();
+    let file = File::open(path).map_err(|e| FormatError::io(path, "cannot open for reading", e))?;
+    parse_twists_csv(file, path)
+}
+
+/// Parses a twists CSV from any byte source; `path` names it in errors. Every value must be a finite number and the
+/// times must increase strictly; a header-only file holds no twists, an empty one is an error.
+pub fn parse_twists_csv<R: Read>(
+    reader: R,
+    path: impl AsRef<Path>,
+) -> Result<Vec<TwistSample>, FormatError> {
+    let path = path.as_ref();
+    let mut csv = csv_reader(reader);
+    read_header(&mut csv, path, &COLUMNS, None)?;
+    let mut record = StringRecord::new();
+    let mut twists = Vec::new();
+    let mut previous = None;
+    while let Some(line) = read_row(&mut csv, &mut record, path, &COLUMNS)? {
+        let row = Row {
+            record: &record,
+            line,
+            path,
+            columns: &COLUMNS,
+        };
+        let mut values = [0.0; 7];
+        for (i, value) in values.iter_mut().enumerate() {
+            *value = row.finite(i)?;
+        }
+        let [t_s, vx, vy, vz, wx, wy, wz] = values;
+        check_time_order(previous, t_s, true, path, line, "t")?;
+        previous = Some((t_s, line));
+        twists.push(TwistSample {
+            t_s,
+            velocity_mps: Vector3::new(vx, vy, vz),
+            angular_velocity_radps: Vector3::new(wx, wy, wz),
+        });
+    }
+    Ok(twists)
+}
+
+/// Writes a twists CSV atomically: nothing appears at the path until [`Self::finish`].
+///
+/// Numbers are written with full round-trip precision; non-finite values and times that do not increase are
+/// refused.
+#[derive(Debug)]
+pub struct TwistWriter {
+    rows: RowWriter,
+}
+
+impl TwistWriter {
+    /// Starts writing `path` (its directory must exist) and writes the header.
+    pub fn create(path: impl AsRef<Path>) -> Result<Self, FormatError> {
+        Ok(Self {
+            rows: RowWriter::create(path.as_ref(), Some(&COLUMNS.join(",")), true)?,
+        })
+    }
+
+    /// Appends one twist (s, m/s, rad/s; camera frame).
+    pub fn write(&mut self, twist: &TwistSample) -> Result<(), FormatError> {
+        let v = &twist.velocity_mps;
+        let w = &twist.angular_velocity_radps;
+        self.rows.check(
+            twist.t_s,
+            &[
+                ("vx", v.x),
+                ("vy", v.y),
+                ("vz", v.z),
+                ("wx", w.x),
+                ("wy", w.y),
+                ("wz", w.z),
+            ],
+        )?;
+        self.rows.write_record(
+            twist.t_s,
+            format_args!(
+                "{},{},{},{},{},{},{}",
+                twist.t_s, v.x, v.y, v.z, w.x, w.y, w.z
+            ),
+        )
+    }
+
+    /// Completes the file and moves it into place.
+    pub fn finish(self) -> Result<(), FormatError> {
+        self.rows.finish()
+    }
+}
+
+/// Writes all `twists` to a twists CSV, atomically.
+pub fn write_twists_csv(path: impl AsRef<Path>, twists: &[TwistSample]) -> Result<(), FormatError> {
+    let mut writer = TwistWriter::create(path)?;
+    for twist in twists {
+        writer.write(twist)?;
+    }
+    writer.finish()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse_err(text: &str) -> String {
+        parse_twists_csv(text.as_bytes(), "twists.csv")
+            .unwrap_err()
+            .to_string()
+    }
+
+    #[test]
+    fn round_trip_is_bit_exact() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("twists.csv");
+        let twists: Vec<TwistSample> = (0..100)
+            .map(|i| {
+                let x = i as f64;
+                TwistSample {
+                    t_s: 1e3 + x / 3.0,
+                    velocity_mps: Vector3::new(x.sin(), -1e-12 * x, 0.1 + 0.2),
+                    angular_velocity_radps: Vector3::new(1e-300, x.cos() * 7.0, -0.0),
+                }
+            })
+            .collect();
+        write_twists_csv(&path, &twists).unwrap();
+        let back = read_twists_csv(&path).unwrap();
+        assert_eq!(back.len(), twists.len());
+        for (a, b) in back.iter().zip(&twists) {
+            assert_eq!(a.t_s.to_bits(), b.t_s.to_bits());
+            for k in 0..3 {
+                assert_eq!(a.velocity_mps[k].to_bits(), b.velocity_mps[k].to_bits());
+                assert_eq!(
+                    a.angular_velocity_radps[k].to_bits(),
+                    b.angular_velocity_radps[k].to_bits()
+                );
+            }
+        }
+        assert!(
+            parse_twists_csv("t,vx,vy,vz,wx,wy,wz\n".as_bytes(), "x")
+                .unwrap()
+                .is_empty()
+        );
+    }
+
+    #[test]
+    fn malformed_twists() {
+        let e = parse_err("t,vx,vy,vz,wx,wy,wz\n0,0,0,0,0,0,0\n1,0,0,fast,0,0,0\n");
+        assert_eq!(e, "twists.csv:3: field 'vz': not a number: \"fast\"");
+        let e = parse_err("t,vx,vy,vz,wx,wy,wz\n0,0,0,0,0,0,0\n0,0,0,0,0,0,0\n");
+        assert!(e.starts_with("twists.csv:3: field 't': "), "{e}");
+        assert!(e.contains("line 2"), "{e}");
+        let e = parse_err("t,vx,vy,vz,wx,wy,wz\n0,0,0,0,0,0\n");
+        assert!(e.starts_with("twists.csv:2: field 'wz': missing"), "{e}");
+        let e = parse_err("t,vx,vy,vz,wx,wy\n");
+        assert!(e.starts_with("twists.csv:1: field 'wz': "), "{e}");
+        let e = parse_err("t,vx,vy,vz,wx,wy,wz\n0,0,0,0,0,NaN,0\n");
+        assert!(e.starts_with("twists.csv:2: field 'wy': "), "{e}");
+        let e = parse_err("");
+        assert!(e.starts_with("twists.csv: empty file"), "{e}");
+    }
+}
