@@ -8,6 +8,8 @@
 //! - [`state`]: the 12-dof [`state::MotionState`] (pose and constant twist at a reference time);
 //! - [`samples`]: timestamped measurements, poses and twists as exchanged with files;
 //! - [`roi_order`]: the order in which ROIs visit the points (bit-reversed, row-major, random);
+//! - [`estimator`]: the streaming [`estimator::Tracker`] (Kalman, the paper's VVS loop, static and batch baselines)
+//!   with its initialisation and degeneracy gate;
 //! - [`projection`]: the spatio-temporal projection model and its exact and paper (eqs. 17-24) Jacobians.
 //!
 //! Conventions (SPEC section 2): camera frame x right, y down, z forward. The state holds `cam_r_obj` (c_R_o),
@@ -17,6 +19,7 @@
 //! `V <- V + dV`, `W <- W + dW`.
 
 pub mod camera;
+pub mod estimator;
 pub mod projection;
 pub mod roi_order;
 pub mod samples;

@@ -1,0 +1,149 @@
+//! The measurement window: the newest undistorted centroids, kept without allocating once built.
+
+use nalgebra::Vector2;
+
+/// One undistorted centroid: time (s), index of the model point in the target, ideal pixel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation {
+    pub t_s: f64,
+    pub point_index: usize,
+    pub ideal_px: Vector2<f64>,
+}
+
+/// Which measurements a control step uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WindowMode {
+    /// The newest measurement of each point (the paper).
+    NewestPerPoint,
+    /// The last `n` measurements.
+    Last(usize),
+}
+
+/// A ring buffer of the last `capacity` observations plus the newest observation of each point.
+#[derive(Debug, Clone)]
+pub struct ObservationWindow {
+    ring: Vec<Observation>,
+    /// Index where the next observation goes.
+    head: usize,
+    len: usize,
+    newest_by_point: Vec<Option<Observation>>,
+    points_seen: usize,
+}
+
+impl ObservationWindow {
+    pub fn new(point_count: usize, capacity: usize) -> Self {
+        let capacity = capacity.max(1);
+        Self {
+            ring: vec![
+                Observation {
+                    t_s: 0.0,
+                    point_index: 0,
+                    ideal_px: Vector2::zeros(),
+                };
+                capacity
+            ],
+            head: 0,
+            len: 0,
+            newest_by_point: vec![None; point_count],
+            points_seen: 0,
+        }
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.ring.len()
+    }
+
+    pub fn clear(&mut self) {
+        self.head = 0;
+        self.len = 0;
+        self.newest_by_point.iter_mut().for_each(|o| *o = None);
+        self.points_seen = 0;
+    }
+
+    pub fn push(&mut self, obs: Observation) {
+        let capacity = self.ring.len();
+        self.ring[self.head] = obs;
+        self.head = (self.head + 1) % capacity;
+        self.len = (self.len + 1).min(capacity);
+        if self.newest_by_point[obs.point_index].replace(obs).is_none() {
+            self.points_seen += 1;
+        }
+    }
+
+    /// Number of observations held in the ring.
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Number of distinct points with at least one observation.
+    pub fn points_seen(&self) -> usize {
+        self.points_seen
+    }
+
+    /// The newest observation of each point seen.
+    pub fn newest_per_point(&self) -> impl Iterator<Item = &Observation> {
+        self.newest_by_point.iter().flatten()
+    }
+
+    /// The last `n` observations (fewer if fewer are held), newest first.
+    pub fn last(&self, n: usize) -> impl Iterator<Item = &Observation> {
+        let capacity = self.ring.len();
+        (0..n.min(self.len)).map(move |k| &self.ring[(self.head + capacity - 1 - k) % capacity])
+    }
+
+    /// The observations selected by `mode`.
+    pub fn select(&self, mode: WindowMode) -> impl Iterator<Item = &Observation> {
+        let (newest, last) = match mode {
+            WindowMode::NewestPerPoint => (Some(self.newest_per_point()), None),
+            WindowMode::Last(n) => (None, Some(self.last(n))),
+        };
+        newest
+            .into_iter()
+            .flatten()
+            .chain(last.into_iter().flatten())
+    }
+
+    /// How many observations `mode` selects.
+    pub fn count(&self, mode: WindowMode) -> usize {
+        match mode {
+            WindowMode::NewestPerPoint => self.points_seen,
+            WindowMode::Last(n) => n.min(self.len),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn obs(t: f64, i: usize) -> Observation {
+        Observation {
+            t_s: t,
+            point_index: i,
+            ideal_px: Vector2::new(t, i as f64),
+        }
+    }
+
+    #[test]
+    fn keeps_the_newest() {
+        let mut w = ObservationWindow::new(3, 4);
+        for k in 0..7 {
+            w.push(obs(k as f64, k % 3));
+        }
+        let last: Vec<f64> = w.last(10).map(|o| o.t_s).collect();
+        assert_eq!(last, vec![6.0, 5.0, 4.0, 3.0]);
+        let mut newest: Vec<f64> = w.newest_per_point().map(|o| o.t_s).collect();
+        newest.sort_by(f64::total_cmp);
+        assert_eq!(newest, vec![4.0, 5.0, 6.0]);
+        assert_eq!(w.count(WindowMode::Last(2)), 2);
+        assert_eq!(w.select(WindowMode::Last(2)).count(), 2);
+        assert_eq!(w.select(WindowMode::NewestPerPoint).count(), 3);
+        w.clear();
+        assert!(w.is_empty());
+        assert_eq!(w.points_seen(), 0);
+    }
+}
