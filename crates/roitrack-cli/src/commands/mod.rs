@@ -1,0 +1,6 @@
+//! One module per subcommand.
+
+pub mod eval;
+pub mod simulate;
+pub mod target;
+pub mod track;
