@@ -27,12 +27,12 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: &EvalArgs) -> Result<()> {
-    let truth_poses = roitrack_formats::read_tum(&args.truth.join(TRUTH_POSES_FILE))?;
+    let truth_poses = roitrack_formats::read_tum(args.truth.join(TRUTH_POSES_FILE))?;
     let estimated_poses = roitrack_formats::read_tum(&args.poses)?;
     let (truth_twists, estimated_twists) = match &args.twists {
         Some(path) => (
             Some(roitrack_formats::read_twists_csv(
-                &args.truth.join(TRUTH_TWISTS_FILE),
+                args.truth.join(TRUTH_TWISTS_FILE),
             )?),
             Some(roitrack_formats::read_twists_csv(path)?),
         ),

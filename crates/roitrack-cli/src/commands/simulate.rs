@@ -114,14 +114,14 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
 pub fn write_run(run: &SimulatedRun, dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create folder {}", dir.display()))?;
-    roitrack_formats::write_camera_yaml(&dir.join(CAMERA_FILE), &run.camera)?;
-    roitrack_formats::write_target_csv(&dir.join(TARGET_FILE), &run.target)?;
-    let mut writer = roitrack_formats::MeasurementWriter::create(&dir.join(MEASUREMENTS_FILE))?;
+    roitrack_formats::write_camera_yaml(dir.join(CAMERA_FILE), &run.camera)?;
+    roitrack_formats::write_target_csv(dir.join(TARGET_FILE), &run.target)?;
+    let mut writer = roitrack_formats::MeasurementWriter::create(dir.join(MEASUREMENTS_FILE))?;
     for m in &run.measurements {
         writer.write(m)?;
     }
     writer.finish()?;
-    roitrack_formats::write_tum(&dir.join(TRUTH_POSES_FILE), &run.truth_poses)?;
-    roitrack_formats::write_twists_csv(&dir.join(TRUTH_TWISTS_FILE), &run.truth_twists)?;
+    roitrack_formats::write_tum(dir.join(TRUTH_POSES_FILE), &run.truth_poses)?;
+    roitrack_formats::write_twists_csv(dir.join(TRUTH_TWISTS_FILE), &run.truth_twists)?;
     Ok(())
 }

@@ -64,6 +64,10 @@ pub struct EstimatorArgs {
     /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz).
     #[arg(long)]
     pub angular_accel_psd: Option<f64>,
+    /// Degeneracy gate: windows whose column-scaled Jacobian has a reciprocal condition number below this are not
+    /// used for an update (the estimate is flagged degenerate and the window widened).
+    #[arg(long)]
+    pub min_conditioning: Option<f64>,
 }
 
 impl EstimatorArgs {
@@ -86,6 +90,9 @@ impl EstimatorArgs {
         }
         if let Some(q) = self.angular_accel_psd {
             config.kalman.angular_accel_psd = q;
+        }
+        if let Some(c) = self.min_conditioning {
+            config.min_inverse_condition = c;
         }
         config
     }

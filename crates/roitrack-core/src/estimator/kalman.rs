@@ -25,8 +25,8 @@ pub struct KalmanTuning {
 impl Default for KalmanTuning {
     fn default() -> Self {
         Self {
-            linear_accel_psd: 2000.0,
-            angular_accel_psd: 2.0e5,
+            linear_accel_psd: 1.0,
+            angular_accel_psd: 10.0,
             gate_sigma: 6.0,
         }
     }

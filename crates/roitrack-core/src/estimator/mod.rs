@@ -78,7 +78,7 @@ impl Default for TrackerConfig {
             window: WindowMode::NewestPerPoint,
             every: 10,
             noise_px: 0.1,
-            min_inverse_condition: 1e-6,
+            min_inverse_condition: 3e-3,
             lost_residual_px: 5.0,
             kalman: KalmanTuning::default(),
         }
@@ -169,7 +169,9 @@ enum Phase {
     Running,
 }
 
-/// Consecutive good steps needed before a widened window shrinks back.
+/// Consecutive good steps needed before a widened window shrinks back; doubled at every degenerate window since the
+/// initialisation (up to 2^6 times), so an acquisition order that keeps producing degenerate windows keeps the wider
+/// window.
 const SHRINK_AFTER_GOOD_STEPS: usize = 20;
 /// Estimates reported as `Converging` after an initialisation.
 const CONVERGING_ESTIMATES: usize = 3;
@@ -195,6 +197,7 @@ pub struct Tracker {
     /// Window widening after a degenerate window: number of extra cycles (0 = the configured window).
     widening: usize,
     good_steps: usize,
+    degenerate_windows: usize,
     bad_estimates: usize,
     kalman: ErrorStateKalman,
     /// Previous pose for the static baseline's finite differences.
@@ -292,6 +295,7 @@ impl Tracker {
             estimates_since_init: 0,
             widening: 0,
             good_steps: 0,
+            degenerate_windows: 0,
             bad_estimates: 0,
             kalman: ErrorStateKalman::new(Matrix12::identity(), config.kalman),
             previous_static: None,
@@ -332,13 +336,13 @@ impl Tracker {
                 });
             }
         }
-        if let Some(previous_s) = self.last_t_s {
-            if m.t_s < previous_s {
-                return Err(TrackError::TimeOutOfOrder {
-                    t_s: m.t_s,
-                    previous_s,
-                });
-            }
+        if let Some(previous_s) = self.last_t_s
+            && m.t_s < previous_s
+        {
+            return Err(TrackError::TimeOutOfOrder {
+                t_s: m.t_s,
+                previous_s,
+            });
         }
         let point_index = self.target.index_of(m.id).ok_or(TrackError::UnknownId {
             t_s: m.t_s,
@@ -401,6 +405,7 @@ impl Tracker {
         self.estimates_since_init = 0;
         self.widening = 0;
         self.good_steps = 0;
+        self.degenerate_windows = 0;
         self.bad_estimates = 0;
         self.previous_static = None;
         let covariance = self.window_covariance(&ne);
@@ -648,9 +653,11 @@ impl Tracker {
         if inverse_condition < self.config.min_inverse_condition {
             self.widening = (self.widening + 1).min(3);
             self.good_steps = 0;
+            self.degenerate_windows += 1;
         } else {
             self.good_steps += 1;
-            if self.widening > 0 && self.good_steps >= SHRINK_AFTER_GOOD_STEPS {
+            let shrink_after = SHRINK_AFTER_GOOD_STEPS << self.degenerate_windows.min(6);
+            if self.widening > 0 && self.good_steps >= shrink_after {
                 self.widening -= 1;
                 self.good_steps = 0;
             }
