@@ -16,6 +16,7 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    Demo(commands::demo::DemoArgs),
     Simulate(commands::simulate::SimulateArgs),
     Track(commands::track::TrackArgs),
     Eval(commands::eval::EvalArgs),
@@ -25,6 +26,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Demo(args) => commands::demo::run(&args),
         Command::Simulate(args) => commands::simulate::run(&args),
         Command::Track(args) => commands::track::run(&args),
         Command::Eval(args) => commands::eval::run(&args),
