@@ -21,6 +21,7 @@ enum Command {
     Track(commands::track::TrackArgs),
     Eval(commands::eval::EvalArgs),
     Target(commands::target::TargetArgs),
+    Tradeoff(commands::tradeoff::TradeoffArgs),
 }
 
 fn main() -> ExitCode {
@@ -31,6 +32,7 @@ fn main() -> ExitCode {
         Command::Track(args) => commands::track::run(&args),
         Command::Eval(args) => commands::eval::run(&args),
         Command::Target(args) => commands::target::run(&args),
+        Command::Tradeoff(args) => commands::tradeoff::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

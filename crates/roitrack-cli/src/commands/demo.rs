@@ -5,10 +5,10 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use roitrack_core::estimator::TrackerConfig;
+use roitrack_core::estimator::{Estimate, TrackerConfig};
 use roitrack_core::{PoseSample, TwistSample};
 use roitrack_eval::{EvalOptions, Metrics, evaluate};
-use roitrack_sim::{Scenario, SimulationOptions, simulate};
+use roitrack_sim::{Scenario, SimulatedRun, SimulationOptions, simulate};
 
 use super::simulate::{ScenarioArg, write_run};
 use super::track::{EstimateWriter, EstimatorArg, TrackSummary, track_stream};
@@ -74,27 +74,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         let diagnostics_path = args.out.join(format!("{stem}_diagnostics.csv"));
         let mut writer =
             EstimateWriter::create(&poses_path, &twists_path, Some(&diagnostics_path))?;
-        let mut poses = Vec::new();
-        let mut twists = Vec::new();
-        let summary = track_stream(
-            &data.camera,
-            &data.target,
-            config,
-            data.measurements.iter().map(|m| Ok(*m)),
-            |e| {
-                poses.push(PoseSample::from_state(e.t_ref_s, &e.state));
-                twists.push(TwistSample::from_state(e.t_ref_s, &e.state));
-                writer.write(e)
-            },
-        )?;
+        let (metrics, summary) = score(&data, config, |e| writer.write(e))?;
         writer.finish()?;
-        let metrics = evaluate(
-            &data.truth_poses,
-            Some(&data.truth_twists),
-            &poses,
-            Some(&twists),
-            &EvalOptions::default(),
-        )?;
         rows.push((label, metrics, summary));
     }
     if args.json {
@@ -109,6 +90,35 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         print!("{}", table(&rows));
     }
     Ok(())
+}
+
+/// Tracks a simulated run with `config`, handing each estimate to `sink`, and scores it against the ground truth.
+pub fn score(
+    data: &SimulatedRun,
+    config: TrackerConfig,
+    mut sink: impl FnMut(&Estimate) -> Result<()>,
+) -> Result<(Metrics, TrackSummary)> {
+    let mut poses = Vec::new();
+    let mut twists = Vec::new();
+    let summary = track_stream(
+        &data.camera,
+        &data.target,
+        config,
+        data.measurements.iter().map(|m| Ok(*m)),
+        |e| {
+            poses.push(PoseSample::from_state(e.t_ref_s, &e.state));
+            twists.push(TwistSample::from_state(e.t_ref_s, &e.state));
+            sink(e)
+        },
+    )?;
+    let metrics = evaluate(
+        &data.truth_poses,
+        Some(&data.truth_twists),
+        &poses,
+        Some(&twists),
+        &EvalOptions::default(),
+    )?;
+    Ok((metrics, summary))
 }
 
 fn table(rows: &[(&str, Metrics, TrackSummary)]) -> String {

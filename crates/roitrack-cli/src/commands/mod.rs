@@ -5,3 +5,4 @@ pub mod eval;
 pub mod simulate;
 pub mod target;
 pub mod track;
+pub mod tradeoff;

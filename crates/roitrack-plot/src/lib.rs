@@ -1,0 +1,266 @@
+//! # roitrack-plot
+//!
+//! Line and scatter charts written as PNG and SVG with the same look everywhere: the font is embedded, nothing is
+//! read from the system.
+
+use std::path::{Path, PathBuf};
+use std::sync::Once;
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+use thiserror::Error;
+
+const FONT: &str = "roitrack-sans";
+static FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
+static REGISTER: Once = Once::new();
+
+fn register_font() {
+    REGISTER.call_once(|| {
+        // The embedded font is a valid TrueType file: registration cannot fail at run time.
+        let _ = plotters::style::register_font(FONT, FontStyle::Normal, FONT_BYTES);
+    });
+}
+
+#[derive(Debug, Error)]
+pub enum PlotError {
+    #[error("cannot draw {path}: {message}")]
+    Draw { path: PathBuf, message: String },
+    #[error("nothing to plot in {title}: every series is empty or not finite")]
+    Empty { title: String },
+}
+
+/// How a series is drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Style {
+    Line,
+    Points,
+    LinePoints,
+}
+
+/// One named series of (x, y) points, optionally labelled point by point.
+#[derive(Debug, Clone)]
+pub struct Series {
+    pub name: String,
+    pub points: Vec<(f64, f64)>,
+    /// Text written next to each point (same length as `points`, or empty).
+    pub point_labels: Vec<String>,
+    pub style: Style,
+}
+
+impl Series {
+    pub fn new(name: impl Into<String>, points: Vec<(f64, f64)>, style: Style) -> Self {
+        Self {
+            name: name.into(),
+            points,
+            point_labels: Vec::new(),
+            style,
+        }
+    }
+
+    pub fn with_labels(mut self, labels: Vec<String>) -> Self {
+        self.point_labels = labels;
+        self
+    }
+}
+
+/// A chart: title, axis labels and series.
+#[derive(Debug, Clone)]
+pub struct Chart {
+    pub title: String,
+    pub x_label: String,
+    pub y_label: String,
+    pub series: Vec<Series>,
+    pub log_y: bool,
+}
+
+const PALETTE: [RGBColor; 6] = [
+    RGBColor(31, 119, 180),
+    RGBColor(214, 39, 40),
+    RGBColor(44, 160, 44),
+    RGBColor(255, 127, 14),
+    RGBColor(148, 103, 189),
+    RGBColor(80, 80, 80),
+];
+
+fn finite_points(series: &[Series]) -> impl Iterator<Item = &(f64, f64)> {
+    series
+        .iter()
+        .flat_map(|s| s.points.iter())
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+}
+
+fn padded(lo: f64, hi: f64) -> (f64, f64) {
+    let span = (hi - lo).abs().max(1e-12 * hi.abs().max(1.0));
+    (lo - 0.05 * span, hi + 0.05 * span)
+}
+
+fn draw<DB: DrawingBackend>(area: DrawingArea<DB, Shift>, chart: &Chart) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    area.fill(&WHITE).map_err(|e| e.to_string())?;
+    let (x_lo, x_hi, y_lo, y_hi) = finite_points(&chart.series).fold(
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |(a, b, c, d), &(x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
+    );
+    let (x0, x1) = padded(x_lo, x_hi);
+    let mut builder = ChartBuilder::on(&area);
+    builder
+        .caption(&chart.title, (FONT, 22))
+        .margin(12)
+        .x_label_area_size(44)
+        .y_label_area_size(70);
+    macro_rules! body {
+        ($ctx:expr) => {{
+            let mut ctx = $ctx;
+            ctx.configure_mesh()
+                .x_desc(&chart.x_label)
+                .y_desc(&chart.y_label)
+                .label_style((FONT, 14))
+                .axis_desc_style((FONT, 16))
+                .light_line_style(RGBColor(235, 235, 235))
+                .draw()
+                .map_err(|e| e.to_string())?;
+            for (i, s) in chart.series.iter().enumerate() {
+                let color = PALETTE[i % PALETTE.len()];
+                let pts: Vec<(f64, f64)> = s
+                    .points
+                    .iter()
+                    .copied()
+                    .filter(|(x, y)| x.is_finite() && y.is_finite())
+                    .collect();
+                let legend_color = color;
+                if matches!(s.style, Style::Line | Style::LinePoints) {
+                    ctx.draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+                        .map_err(|e| e.to_string())?
+                        .label(&s.name)
+                        .legend(move |(x, y)| {
+                            PathElement::new(
+                                vec![(x, y), (x + 18, y)],
+                                legend_color.stroke_width(2),
+                            )
+                        });
+                }
+                if matches!(s.style, Style::Points | Style::LinePoints) {
+                    let drawn = ctx
+                        .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+                        .map_err(|e| e.to_string())?;
+                    if s.style == Style::Points {
+                        drawn.label(&s.name).legend(move |(x, y)| {
+                            Circle::new((x + 9, y), 4, legend_color.filled())
+                        });
+                    }
+                }
+                for (p, label) in s.points.iter().zip(&s.point_labels) {
+                    if p.0.is_finite() && p.1.is_finite() {
+                        ctx.draw_series(std::iter::once(Text::new(
+                            label.clone(),
+                            *p,
+                            (FONT, 12).into_font().color(&color),
+                        )))
+                        .map_err(|e| e.to_string())?;
+                    }
+                }
+            }
+            ctx.configure_series_labels()
+                .background_style(WHITE.mix(0.85))
+                .border_style(RGBColor(180, 180, 180))
+                .label_font((FONT, 14))
+                .position(SeriesLabelPosition::UpperRight)
+                .draw()
+                .map_err(|e| e.to_string())?;
+        }};
+    }
+    if chart.log_y {
+        let (y0, y1) = (y_lo.max(1e-12) / 1.3, y_hi * 1.3);
+        body!(
+            builder
+                .build_cartesian_2d(x0..x1, (y0..y1).log_scale())
+                .map_err(|e| e.to_string())?
+        );
+    } else {
+        let (y0, y1) = padded(y_lo, y_hi);
+        body!(
+            builder
+                .build_cartesian_2d(x0..x1, y0..y1)
+                .map_err(|e| e.to_string())?
+        );
+    }
+    area.present().map_err(|e| e.to_string())
+}
+
+/// Writes `stem.png` and `stem.svg` (1000 x 700 px).
+pub fn write_chart(stem: &Path, chart: &Chart) -> Result<(PathBuf, PathBuf), PlotError> {
+    register_font();
+    if finite_points(&chart.series).next().is_none() {
+        return Err(PlotError::Empty {
+            title: chart.title.clone(),
+        });
+    }
+    let png = stem.with_extension("png");
+    let svg = stem.with_extension("svg");
+    let size = (1000, 700);
+    draw(BitMapBackend::new(&png, size).into_drawing_area(), chart).map_err(|message| {
+        PlotError::Draw {
+            path: png.clone(),
+            message,
+        }
+    })?;
+    draw(SVGBackend::new(&svg, size).into_drawing_area(), chart).map_err(|message| {
+        PlotError::Draw {
+            path: svg.clone(),
+            message,
+        }
+    })?;
+    Ok((png, svg))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_png_and_svg() {
+        let dir = tempfile::tempdir().unwrap();
+        let chart = Chart {
+            title: "test".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            series: vec![
+                Series::new(
+                    "a",
+                    vec![(0.0, 1.0), (1.0, 2.0), (2.0, 1.5)],
+                    Style::LinePoints,
+                )
+                .with_labels(vec!["p".into(), "q".into(), "r".into()]),
+                Series::new("b", vec![(0.5, 3.0)], Style::Points),
+            ],
+            log_y: true,
+        };
+        let (png, svg) = write_chart(&dir.path().join("chart"), &chart).unwrap();
+        assert!(std::fs::metadata(&png).unwrap().len() > 5000);
+        let svg_text = std::fs::read_to_string(&svg).unwrap();
+        assert!(svg_text.contains("<svg") && svg_text.contains("test"));
+    }
+
+    #[test]
+    fn refuses_empty_charts() {
+        let dir = tempfile::tempdir().unwrap();
+        let chart = Chart {
+            title: "empty".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            series: vec![Series::new("nan", vec![(f64::NAN, 1.0)], Style::Line)],
+            log_y: false,
+        };
+        assert!(matches!(
+            write_chart(&dir.path().join("c"), &chart),
+            Err(PlotError::Empty { .. })
+        ));
+    }
+}
