@@ -81,8 +81,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     if args.json {
         for (label, metrics, summary) in &rows {
             println!(
-                "{{\"estimator\":\"{label}\",\"us_per_measurement\":{},\"metrics\":{}}}",
+                "{{\"estimator\":\"{label}\",\"us_per_measurement\":{},\"us_per_estimate\":{},\"metrics\":{}}}",
                 summary.us_per_measurement(),
+                summary.us_per_estimate(),
                 metrics.to_json()
             );
         }
@@ -133,7 +134,7 @@ fn table(rows: &[(&str, Metrics, TrackSummary)]) -> String {
         "w deg/s",
         "lag smp(ms)",
         "degen",
-        "us/meas"
+        "us/step"
     );
     for (label, m, s) in rows {
         let vel = m.velocity_rmse_xyz_mm_s.unwrap_or([f64::NAN; 3]);
@@ -150,7 +151,7 @@ fn table(rows: &[(&str, Metrics, TrackSummary)]) -> String {
             m.velocity_lag_samples.unwrap_or(0),
             m.velocity_lag_ms.unwrap_or(f64::NAN),
             s.degenerate,
-            s.us_per_measurement()
+            s.us_per_estimate()
         );
     }
     out

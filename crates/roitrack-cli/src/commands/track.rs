@@ -137,6 +137,11 @@ impl TrackSummary {
     pub fn us_per_measurement(&self) -> f64 {
         1e6 * self.seconds / self.measurements.max(1) as f64
     }
+
+    /// Wall time per control step, including the handling of the `k` measurements that lead to it (µs).
+    pub fn us_per_estimate(&self) -> f64 {
+        1e6 * self.seconds / self.estimates.max(1) as f64
+    }
 }
 
 /// Runs a tracker over measurements, handing each estimate to `sink`.
