@@ -249,14 +249,30 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     let mut writer =
         EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?;
     let path = args.measurements.display().to_string();
+    // Progress on stderr for long files (drawn only when stderr is a terminal).
+    let progress = indicatif::ProgressBar::new_spinner().with_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} {human_pos} measurements tracked ({per_sec}) {elapsed}",
+        )
+        .expect("valid progress template"),
+    );
+    const PROGRESS_EVERY: u64 = 4096;
+    let mut count = 0u64;
     let summary = track_stream(
         &camera,
         &target,
         args.estimator.config(),
-        reader.map(|r| r.map_err(anyhow::Error::from)),
+        reader.map(|r| {
+            count += 1;
+            if count % PROGRESS_EVERY == 0 {
+                progress.inc(PROGRESS_EVERY);
+            }
+            r.map_err(anyhow::Error::from)
+        }),
         |e| writer.write(e),
     )
     .with_context(|| format!("tracking {path} failed"))?;
+    progress.finish_and_clear();
     if summary.estimates == 0 {
         bail!(
             "{path}: no estimate from {} measurements: the tracker could not initialise (it needs two cycles \

@@ -1,0 +1,95 @@
+//! The tracker's steady state allocates nothing: every estimator, once initialised, pushes measurements and emits
+//! estimates without touching the heap (counted through a counting global allocator).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use roitrack_core::JacobianKind;
+use roitrack_core::estimator::{EstimatorKind, Tracker, TrackerConfig};
+use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
+
+struct CountingAllocator;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAllocator = CountingAllocator;
+
+#[test]
+fn steady_state_tracking_does_not_allocate() {
+    let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
+    let data = simulate(&scenario, &SimulationOptions::default()).unwrap();
+    let base = TrackerConfig::default();
+    for (name, config) in [
+        ("kalman", base),
+        (
+            "vvs-paper",
+            TrackerConfig {
+                estimator: EstimatorKind::Vvs,
+                jacobian: JacobianKind::Paper,
+                ..base
+            },
+        ),
+        (
+            "vvs-exact-gn",
+            TrackerConfig {
+                estimator: EstimatorKind::Vvs,
+                iterations: 3,
+                ..base
+            },
+        ),
+        (
+            "batch",
+            TrackerConfig {
+                estimator: EstimatorKind::Batch,
+                ..base
+            },
+        ),
+        (
+            "static",
+            TrackerConfig {
+                estimator: EstimatorKind::Static,
+                ..base
+            },
+        ),
+    ] {
+        let mut tracker = Tracker::new(data.camera.clone(), data.target.clone(), config).unwrap();
+        let (warm_up, steady) = data.measurements.split_at(200);
+        for m in warm_up {
+            tracker.push(m).unwrap();
+        }
+        assert!(
+            tracker.state().is_some(),
+            "{name}: initialised during warm-up"
+        );
+        let before = ALLOCATIONS.load(Ordering::SeqCst);
+        let mut estimates = 0;
+        for m in steady {
+            if tracker.push(m).unwrap().is_some() {
+                estimates += 1;
+            }
+        }
+        let allocations = ALLOCATIONS.load(Ordering::SeqCst) - before;
+        assert!(estimates > 1900, "{name}: {estimates} estimates");
+        assert_eq!(
+            allocations,
+            0,
+            "{name}: {allocations} allocations over {} measurements",
+            steady.len()
+        );
+    }
+}
