@@ -264,7 +264,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         args.estimator.config(),
         reader.map(|r| {
             count += 1;
-            if count % PROGRESS_EVERY == 0 {
+            if count.is_multiple_of(PROGRESS_EVERY) {
                 progress.inc(PROGRESS_EVERY);
             }
             r.map_err(anyhow::Error::from)
