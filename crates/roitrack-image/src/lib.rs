@@ -1,0 +1,1 @@
+//! Image side of roitrack (being written).
