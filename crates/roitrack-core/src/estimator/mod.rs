@@ -325,6 +325,35 @@ impl Tracker {
         (self.phase == Phase::Running).then_some((self.t_ref_s, self.state))
     }
 
+    /// Drops the current track: the next measurements initialise a new one (after a re-initialisation from a full
+    /// frame, say). Measurement times must still not decrease.
+    pub fn reset(&mut self) {
+        self.phase = Phase::Initializing;
+        self.window.clear();
+        self.since_estimate = 0;
+    }
+
+    /// Starts tracking from a known state at time `t_s` (e.g. a static pose from a full frame, velocity zero) with
+    /// its covariance (error-state order v, w, dV, dW), instead of initialising from the first two cycles.
+    pub fn start_from(&mut self, t_s: f64, state: MotionState, covariance: Option<Matrix12>) {
+        self.window.clear();
+        self.state = state;
+        self.t_ref_s = t_s;
+        self.last_t_s = Some(self.last_t_s.map_or(t_s, |last| last.max(t_s)));
+        self.phase = Phase::Running;
+        self.since_estimate = 0;
+        self.estimates_since_init = 0;
+        self.widening = 0;
+        self.good_steps = 0;
+        self.degenerate_windows = 0;
+        self.bad_estimates = 0;
+        self.previous_static = None;
+        self.kalman = ErrorStateKalman::new(
+            covariance.unwrap_or_else(|| self.prior_covariance()),
+            self.config.kalman,
+        );
+    }
+
     /// Takes one raw centroid; returns an estimate every `every` measurements once initialised.
     pub fn push(&mut self, m: &Measurement) -> Result<Option<Estimate>, TrackError> {
         for (field, value) in [("t", m.t_s), ("u", m.u_px), ("v", m.v_px)] {
