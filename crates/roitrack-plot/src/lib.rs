@@ -2,6 +2,13 @@
 //!
 //! Line and scatter charts written as PNG and SVG with the same look everywhere: the font is embedded, nothing is
 //! read from the system.
+//!
+//! [`figures`] draws the multi-panel figures of a tracking run (trajectory, position and velocity against the
+//! truth), after figures 5 to 7 of the paper.
+
+pub mod figures;
+
+pub use figures::{TrackSeries, TruthSeries, write_figures};
 
 use std::path::{Path, PathBuf};
 use std::sync::Once;
@@ -27,6 +34,8 @@ pub enum PlotError {
     Draw { path: PathBuf, message: String },
     #[error("nothing to plot in {title}: every series is empty or not finite")]
     Empty { title: String },
+    #[error("invalid {what}: {message}")]
+    Invalid { what: String, message: String },
 }
 
 /// How a series is drawn.
