@@ -1,1 +1,33 @@
-//! Image side of roitrack (being written).
+//! # roitrack-image
+//!
+//! The image side of roitrack (SPEC section 5), pure computation (no I/O, no threads):
+//!
+//! - [`roi`]: regions of interest ([`Roi`]), centred on a predicted blob and clamped to the sensor;
+//! - [`sensor`] and [`render`]: a simulated high-speed camera ([`RoiRenderer`], [`SensorModel`]) that renders ROIs or
+//!   full frames of the target's blobs as exact perspective images of flat disks, with lens distortion, area coverage,
+//!   optical and motion blur, shot and read noise and quantisation;
+//! - [`centroid`]: the blob centroid of an ROI ([`measure_blob`]): threshold, connected component of the brightest
+//!   pixel, first-order moments, allocation-free;
+//! - [`detect`]: blob detection in a full frame ([`detect_blobs`]) for initialisation;
+//! - [`accuracy`]: the centroid's bias and spread against the truth ([`centroid_accuracy`]).
+//!
+//! Pixel convention (everywhere): pixel (i, j) (column i, row j) has its centre at image coordinates (u, v) = (i, j)
+//! and covers [i - 0.5, i + 0.5] x [j - 0.5, j + 0.5], as the raw pixels of [`roitrack_core::CameraModel`]. Images are
+//! row-major `u16` buffers of values 0 to 2^bits - 1.
+
+pub mod accuracy;
+pub mod centroid;
+pub mod detect;
+pub mod render;
+pub mod roi;
+pub mod sensor;
+
+pub use accuracy::{CentroidAccuracy, bench_rotation, bench_state, centroid_accuracy};
+pub use centroid::{
+    BlobRejection, Centroid, CentroidOptions, MAX_ROI_HEIGHT, MAX_ROI_WIDTH, Threshold,
+    measure_blob,
+};
+pub use detect::detect_blobs;
+pub use render::{DEFAULT_BLOB_DIAMETER_M, DiskOrientation, RenderScratch, RoiRenderer};
+pub use roi::Roi;
+pub use sensor::{SensorError, SensorModel};

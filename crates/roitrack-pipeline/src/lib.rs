@@ -4,4 +4,7 @@
 //! of each next ROI ([`scheduler`]), and the real-time loop of two threads, acquisition and estimation, joined by
 //! lock-free single-producer single-consumer queues ([`realtime`]).
 
+pub mod cameras;
 pub mod matching;
+pub mod realtime;
+pub mod scheduler;

@@ -1,0 +1,147 @@
+//! Accuracy of the ROI centroid against the truth, on rendered images.
+
+use nalgebra::{Rotation3, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use roitrack_core::{MotionState, so3};
+
+use crate::centroid::{CentroidOptions, measure_blob};
+use crate::render::{RenderScratch, RoiRenderer};
+use crate::roi::Roi;
+
+/// R = Rz(5 deg) Ry(-15 deg) Rx(10 deg), the bench rotation of SPEC section 6.
+pub fn bench_rotation() -> Rotation3<f64> {
+    Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
+        * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
+        * Rotation3::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians())
+}
+
+/// The bench pose of SPEC section 6, at rest: origin at (0.02, -0.01, 0.60) m, rotation [`bench_rotation`].
+pub fn bench_state() -> MotionState {
+    MotionState::at_rest(bench_rotation(), Vector3::new(0.02, -0.01, 0.60))
+}
+
+/// Largest random shift of the position about the bench pose, per axis (m).
+pub const ACCURACY_POSITION_SPREAD_M: f64 = 0.005;
+/// Largest random rotation about the bench rotation, per axis of the rotation vector (rad): 5 degrees.
+pub const ACCURACY_ROTATION_SPREAD_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
+/// Largest random speed of the origin (m/s): the paper's peak speed, 0.25 px of motion blur in 100 µs.
+pub const ACCURACY_MAX_SPEED_MPS: f64 = 1.0;
+/// Largest random angular speed (rad/s).
+pub const ACCURACY_MAX_ANGULAR_SPEED_RADPS: f64 = 3.0;
+/// Largest random offset of the ROI's centre from the true blob centre, per axis (px).
+pub const ACCURACY_ROI_OFFSET_PX: f64 = 3.0;
+
+/// Error statistics of centroids against the true projected blob centres (px; error = measured - true).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CentroidAccuracy {
+    /// Measured blobs.
+    pub count: usize,
+    /// ROIs that gave no centroid (the 9 mm key blob, 22 px wide, does not fit a 24 px ROI: about 1 in 16).
+    pub rejected: usize,
+    /// Mean error.
+    pub bias_u_px: f64,
+    pub bias_v_px: f64,
+    /// Standard deviation of the error.
+    pub std_u_px: f64,
+    pub std_v_px: f64,
+    /// Root mean square of the error vector's length, sqrt(mean(du² + dv²)) (divide by √2 for a per-axis figure).
+    pub rms_px: f64,
+}
+
+/// Renders `count` ROIs of `roi_size` x `roi_size` pixels, each of a random blob of the renderer's target at a random
+/// state near the SPEC bench pose (position within ±5 mm per axis, rotation within ±5° per axis, speed up to 1 m/s,
+/// angular speed up to 3 rad/s, so motion blur is exercised), with the ROI centred on the true blob centre plus a
+/// random offset of up to ±3 px per axis; measures each with `opts` and compares with the TRUE projected centre
+/// (`camera.raw_pixel_from_cam` of the model point at mid-exposure). Deterministic for a `seed`.
+pub fn centroid_accuracy(
+    renderer: &RoiRenderer,
+    opts: &CentroidOptions,
+    roi_size: u32,
+    count: usize,
+    seed: u64,
+) -> CentroidAccuracy {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let camera = renderer.camera();
+    let target = renderer.target();
+    let mut scratch = RenderScratch::new();
+    let mut pixels = vec![0u16; (roi_size * roi_size) as usize];
+    let (mut n, mut rejected) = (0usize, 0usize);
+    let (mut sum_u, mut sum_v, mut sum_uu, mut sum_vv) = (0.0, 0.0, 0.0, 0.0);
+    let bench = bench_state();
+    for _ in 0..count {
+        let mut symmetric = |half: f64| Vector3::from_fn(|_, _| rng.random_range(-half..=half));
+        let position = bench.cam_t_obj_m + symmetric(ACCURACY_POSITION_SPREAD_M);
+        let rotation = so3::exp(&symmetric(ACCURACY_ROTATION_SPREAD_RAD)) * bench.cam_r_obj;
+        let velocity = random_in_ball(&mut rng, ACCURACY_MAX_SPEED_MPS);
+        let angular = random_in_ball(&mut rng, ACCURACY_MAX_ANGULAR_SPEED_RADPS);
+        let state = MotionState {
+            cam_r_obj: rotation,
+            cam_t_obj_m: position,
+            velocity_mps: velocity,
+            angular_velocity_radps: angular,
+        };
+        // Mid-exposure at t = 0; the true state at t follows the constant twist.
+        let state_at = |t: f64| state.predicted(t);
+        let index = rng.random_range(0..target.len());
+        let point = state.point_in_cam_at(&target.points()[index].point_in_obj_m, 0.0);
+        let Some(truth) = camera.raw_pixel_from_cam(&point) else {
+            rejected += 1;
+            continue;
+        };
+        let (du, dv) = (
+            rng.random_range(-ACCURACY_ROI_OFFSET_PX..=ACCURACY_ROI_OFFSET_PX),
+            rng.random_range(-ACCURACY_ROI_OFFSET_PX..=ACCURACY_ROI_OFFSET_PX),
+        );
+        let Some(roi) = Roi::centred(
+            truth.x + du,
+            truth.y + dv,
+            roi_size,
+            camera.width_px,
+            camera.height_px,
+        ) else {
+            rejected += 1;
+            continue;
+        };
+        renderer.render_roi_with_scratch(&state_at, &roi, 0.0, &mut rng, &mut scratch, &mut pixels);
+        match measure_blob(&pixels, &roi, opts) {
+            Ok(c) => {
+                let (eu, ev) = (c.u_px - truth.x, c.v_px - truth.y);
+                n += 1;
+                sum_u += eu;
+                sum_v += ev;
+                sum_uu += eu * eu;
+                sum_vv += ev * ev;
+            }
+            Err(_) => rejected += 1,
+        }
+    }
+    let nf = n.max(1) as f64;
+    let (bias_u_px, bias_v_px) = (sum_u / nf, sum_v / nf);
+    let spread = |sum_sq: f64, bias: f64| {
+        if n > 1 {
+            ((sum_sq - nf * bias * bias) / (nf - 1.0)).max(0.0).sqrt()
+        } else {
+            0.0
+        }
+    };
+    CentroidAccuracy {
+        count: n,
+        rejected,
+        bias_u_px,
+        bias_v_px,
+        std_u_px: spread(sum_uu, bias_u_px),
+        std_v_px: spread(sum_vv, bias_v_px),
+        rms_px: ((sum_uu + sum_vv) / nf).sqrt(),
+    }
+}
+
+/// A vector uniformly distributed in the ball of radius `radius`.
+fn random_in_ball(rng: &mut impl Rng, radius: f64) -> Vector3<f64> {
+    loop {
+        let v = Vector3::from_fn(|_, _| rng.random_range(-1.0..=1.0));
+        if v.norm_squared() <= 1.0 {
+            return v * radius;
+        }
+    }
+}

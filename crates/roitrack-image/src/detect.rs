@@ -1,0 +1,265 @@
+//! Blob detection in a full frame: threshold, connected components (8-connectivity), first-order moments.
+
+use crate::centroid::{
+    AUTO_MIN_CONTRAST_DN, AUTO_MIN_CONTRAST_SIGMAS, AUTO_THRESHOLD_FRACTION, Centroid,
+    CentroidOptions, Threshold,
+};
+
+/// A horizontal run of above-threshold pixels and its moments.
+#[derive(Debug, Clone, Copy)]
+struct Run {
+    row: u32,
+    start: u32,
+    /// Inclusive.
+    end: u32,
+}
+
+/// Moments of a component (integers: exact).
+#[derive(Debug, Clone, Copy, Default)]
+struct Moments {
+    n: u64,
+    sum_i: u64,
+    sum_j: u64,
+    sum_p: u64,
+    sum_pi: u64,
+    sum_pj: u64,
+    peak: u16,
+    touches_border: bool,
+}
+
+impl Moments {
+    fn add(&mut self, o: &Moments) {
+        self.n += o.n;
+        self.sum_i += o.sum_i;
+        self.sum_j += o.sum_j;
+        self.sum_p += o.sum_p;
+        self.sum_pi += o.sum_pi;
+        self.sum_pj += o.sum_pj;
+        self.peak = self.peak.max(o.peak);
+        self.touches_border |= o.touches_border;
+    }
+}
+
+fn find(parent: &mut [u32], mut x: u32) -> u32 {
+    while parent[x as usize] != x {
+        let grand = parent[parent[x as usize] as usize];
+        parent[x as usize] = grand;
+        x = grand;
+    }
+    x
+}
+
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    // The older run stays the root, so components keep the order of their first pixel.
+    if ra < rb {
+        parent[rb as usize] = ra;
+    } else if rb < ra {
+        parent[ra as usize] = rb;
+    }
+}
+
+/// Background (DN), integer threshold and weight origin (DN) of a full frame; `None` if nothing stands out.
+fn frame_levels(pixels: &[u16], threshold: Threshold) -> Option<(f64, u16, f64)> {
+    let peak = pixels.iter().copied().max()?;
+    let mut histogram = vec![0u32; usize::from(peak) + 1];
+    for &p in pixels {
+        histogram[usize::from(p)] += 1;
+    }
+    // Smallest value with at least `fraction` of the pixels at or below it.
+    let percentile = |fraction: f64| {
+        let rank = (fraction * pixels.len() as f64).ceil().max(1.0) as u64;
+        let mut seen = 0u64;
+        histogram
+            .iter()
+            .position(|&c| {
+                seen += u64::from(c);
+                seen >= rank
+            })
+            .unwrap_or(0) as f64
+    };
+    let background = percentile(0.5);
+    match threshold {
+        Threshold::Fixed(t) => (peak > t).then_some((background, t, f64::from(t))),
+        Threshold::Auto => {
+            // One standard deviation below the median of a normal background is its 15.87th percentile.
+            let sigma = background - percentile(0.158_655);
+            let contrast = f64::from(peak) - background;
+            let level = background + AUTO_THRESHOLD_FRACTION * contrast;
+            (contrast >= (AUTO_MIN_CONTRAST_SIGMAS * sigma).max(AUTO_MIN_CONTRAST_DN))
+                .then(|| (background, level.floor() as u16, level))
+        }
+    }
+}
+
+/// Detects the blobs of a row-major `width` x `height` frame: the connected components (8-connectivity) of the
+/// pixels above the threshold ([`Threshold::Auto`]: the image's median, taken as the background, plus
+/// [`AUTO_THRESHOLD_FRACTION`] of the contrast of its maximum), skipping those that touch the image's border or fall outside `opts`' area limits. Each centroid is
+/// measured as by [`crate::measure_blob`] (weighted by `value - background` or binary). Blobs come in the order of
+/// their first pixel (row-major).
+///
+/// # Panics
+/// If `pixels.len() != width * height`.
+pub fn detect_blobs(
+    pixels: &[u16],
+    width: u32,
+    height: u32,
+    opts: &CentroidOptions,
+) -> Vec<Centroid> {
+    let (w, h) = (width as usize, height as usize);
+    assert_eq!(pixels.len(), w * h, "pixel buffer length");
+    let Some((background, threshold, weight_origin)) = frame_levels(pixels, opts.threshold) else {
+        return Vec::new();
+    };
+    let mut runs: Vec<Run> = Vec::new();
+    let mut moments: Vec<Moments> = Vec::new();
+    let mut parent: Vec<u32> = Vec::new();
+    let mut previous_row = 0..0;
+    for (j, row) in pixels.chunks_exact(w.max(1)).enumerate() {
+        let row_start = runs.len();
+        let mut i = 0;
+        while i < w {
+            if row[i] <= threshold {
+                i += 1;
+                continue;
+            }
+            let start = i;
+            let mut m = Moments::default();
+            while i < w && row[i] > threshold {
+                let p = u64::from(row[i]);
+                m.n += 1;
+                m.sum_i += i as u64;
+                m.sum_p += p;
+                m.sum_pi += p * i as u64;
+                m.peak = m.peak.max(row[i]);
+                i += 1;
+            }
+            m.sum_j = m.n * j as u64;
+            m.sum_pj = m.sum_p * j as u64;
+            m.touches_border = j == 0 || j + 1 == h || start == 0 || i == w;
+            let id = runs.len() as u32;
+            runs.push(Run {
+                row: j as u32,
+                start: start as u32,
+                end: (i - 1) as u32,
+            });
+            moments.push(m);
+            parent.push(id);
+        }
+        // Join with the overlapping runs of the row above (8-connectivity: touching diagonally counts).
+        let mut p = previous_row.start;
+        for r in row_start..runs.len() {
+            let run = runs[r];
+            while p < previous_row.end && runs[p].end + 1 < run.start {
+                p += 1;
+            }
+            let mut q = p;
+            while q < previous_row.end && runs[q].start <= run.end + 1 {
+                union(&mut parent, q as u32, r as u32);
+                q += 1;
+            }
+        }
+        previous_row = row_start..runs.len();
+    }
+    // Aggregate per component (roots are each component's first run).
+    let mut totals: Vec<Option<Moments>> = vec![None; runs.len()];
+    for r in 0..runs.len() {
+        let root = find(&mut parent, r as u32) as usize;
+        totals[root]
+            .get_or_insert_with(Moments::default)
+            .add(&moments[r]);
+    }
+    debug_assert!(runs.iter().all(|r| r.row < height));
+    totals
+        .into_iter()
+        .flatten()
+        .filter(|m| !m.touches_border)
+        .filter_map(|m| {
+            let area_px = u32::try_from(m.n).ok()?;
+            if area_px < opts.min_area_px || area_px > opts.max_area_px {
+                return None;
+            }
+            let n = m.n as f64;
+            let weight_sum = m.sum_p as f64 - weight_origin * n;
+            let (u_px, v_px) = if opts.intensity_weighted && weight_sum > 0.0 {
+                (
+                    (m.sum_pi as f64 - weight_origin * m.sum_i as f64) / weight_sum,
+                    (m.sum_pj as f64 - weight_origin * m.sum_j as f64) / weight_sum,
+                )
+            } else {
+                (m.sum_i as f64 / n, m.sum_j as f64 / n)
+            };
+            Some(Centroid {
+                u_px,
+                v_px,
+                area_px,
+                sum: m.sum_p as f64 - background * n,
+                peak: m.peak,
+            })
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Roi, measure_blob};
+
+    fn frame(w: usize, h: usize, blobs: &[(usize, usize, usize, usize)]) -> Vec<u16> {
+        let mut f = vec![12u16; w * h];
+        for &(x, y, bw, bh) in blobs {
+            for j in y..y + bh {
+                for i in x..x + bw {
+                    f[j * w + i] = 220;
+                }
+            }
+        }
+        f
+    }
+
+    #[test]
+    fn finds_components_skips_border_and_limits() {
+        // A U (one component), a diagonal pair (one), a single pixel (too small), one on the border.
+        let mut f = frame(
+            40,
+            30,
+            &[
+                (3, 3, 2, 6),
+                (9, 3, 2, 6),
+                (3, 9, 8, 2),
+                (20, 20, 3, 3),
+                (37, 10, 3, 3),
+            ],
+        );
+        f[10 * 40 + 25] = 220;
+        f[11 * 40 + 26] = 220;
+        f[26 * 40 + 5] = 220;
+        let opts = CentroidOptions::default();
+        let blobs = detect_blobs(&f, 40, 30, &opts);
+        let areas: Vec<u32> = blobs.iter().map(|b| b.area_px).collect();
+        assert_eq!(areas, vec![40, 9]);
+        assert!((blobs[1].u_px - 21.0).abs() < 1e-12 && (blobs[1].v_px - 21.0).abs() < 1e-12);
+        let with_small = CentroidOptions {
+            min_area_px: 1,
+            ..opts
+        };
+        assert_eq!(detect_blobs(&f, 40, 30, &with_small).len(), 4);
+        let flat = vec![12u16; 100];
+        assert!(detect_blobs(&flat, 10, 10, &opts).is_empty());
+    }
+
+    #[test]
+    fn agrees_with_measure_blob() {
+        let mut f = frame(30, 30, &[(10, 11, 5, 4)]);
+        f[12 * 30 + 12] = 180;
+        f[11 * 30 + 15] = 150;
+        for opts in [CentroidOptions::default(), CentroidOptions::binary()] {
+            let d = detect_blobs(&f, 30, 30, &opts);
+            let roi = Roi::new(0, 0, 30, 30);
+            let m = measure_blob(&f, &roi, &opts).unwrap();
+            assert_eq!(d.len(), 1);
+            assert!((d[0].u_px - m.u_px).abs() < 1e-12 && (d[0].v_px - m.v_px).abs() < 1e-12);
+            assert_eq!(d[0].area_px, m.area_px);
+        }
+    }
+}

@@ -1,0 +1,169 @@
+//! Regions of interest: rectangles of whole pixels on the sensor.
+
+/// A region of interest: `width` x `height` pixels whose top-left pixel is (`x0`, `y0`) (column, row).
+///
+/// Pixel (i, j) has its centre at image coordinates (u, v) = (i, j) and covers [i - 0.5, i + 0.5] x [j - 0.5, j + 0.5]
+/// (the convention of [`roitrack_core::CameraModel`]). An ROI's pixels are stored row-major: pixel (x0 + i, y0 + j) at
+/// index `j * width + i`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub struct Roi {
+    pub x0: u32,
+    pub y0: u32,
+    pub width: u32,
+    pub height: u32,
+}
+
+impl Roi {
+    pub fn new(x0: u32, y0: u32, width: u32, height: u32) -> Self {
+        Self {
+            x0,
+            y0,
+            width,
+            height,
+        }
+    }
+
+    /// The whole sensor as an ROI.
+    pub fn full(width: u32, height: u32) -> Self {
+        Self::new(0, 0, width, height)
+    }
+
+    /// An ROI of `size` x `size` pixels centred (to the nearest pixel) on the image point (`u_px`, `v_px`), shifted
+    /// as little as needed to lie inside a `sensor_w` x `sensor_h` sensor. `None` if the sensor is smaller than the
+    /// ROI, `size` is 0, or the point is not finite.
+    ///
+    /// For an even size the point falls within half a pixel of the ROI's centre (the corner shared by its four middle
+    /// pixels); for an odd size within half a pixel of its middle pixel's centre.
+    pub fn centred(u_px: f64, v_px: f64, size: u32, sensor_w: u32, sensor_h: u32) -> Option<Roi> {
+        if size == 0 || size > sensor_w || size > sensor_h || !u_px.is_finite() || !v_px.is_finite()
+        {
+            return None;
+        }
+        // The ROI's centre in image coordinates is x0 + (size - 1) / 2.
+        let half = f64::from(size - 1) / 2.0;
+        let place = |p: f64, sensor: u32| -> u32 {
+            let max = f64::from(sensor - size);
+            (p - half).round().clamp(0.0, max) as u32
+        };
+        Some(Roi::new(
+            place(u_px, sensor_w),
+            place(v_px, sensor_h),
+            size,
+            size,
+        ))
+    }
+
+    /// Number of pixels.
+    pub fn len(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// One past the last column.
+    pub fn x_end(&self) -> u32 {
+        self.x0 + self.width
+    }
+
+    /// One past the last row.
+    pub fn y_end(&self) -> u32 {
+        self.y0 + self.height
+    }
+
+    /// Whether the image point (`u_px`, `v_px`) lies on the ROI's pixels, i.e. in
+    /// [x0 - 0.5, x0 + width - 0.5) x [y0 - 0.5, y0 + height - 0.5).
+    pub fn contains(&self, u_px: f64, v_px: f64) -> bool {
+        let (x0, y0) = (f64::from(self.x0) - 0.5, f64::from(self.y0) - 0.5);
+        u_px >= x0
+            && v_px >= y0
+            && u_px < x0 + f64::from(self.width)
+            && v_px < y0 + f64::from(self.height)
+    }
+
+    /// Whether pixel (column `i`, row `j`) of the sensor belongs to the ROI.
+    pub fn contains_pixel(&self, i: u32, j: u32) -> bool {
+        i >= self.x0 && j >= self.y0 && i < self.x_end() && j < self.y_end()
+    }
+
+    /// Whether the ROI lies entirely on a `sensor_w` x `sensor_h` sensor.
+    pub fn fits_in(&self, sensor_w: u32, sensor_h: u32) -> bool {
+        self.x_end() <= sensor_w && self.y_end() <= sensor_h
+    }
+
+    /// Index in the ROI's buffer of sensor pixel (`i`, `j`), if it belongs to the ROI.
+    pub fn index_of(&self, i: u32, j: u32) -> Option<usize> {
+        self.contains_pixel(i, j)
+            .then(|| (j - self.y0) as usize * self.width as usize + (i - self.x0) as usize)
+    }
+
+    /// Sensor pixel (column, row) at `index` of the ROI's buffer.
+    pub fn pixel_at(&self, index: usize) -> (u32, u32) {
+        let w = self.width as usize;
+        (self.x0 + (index % w) as u32, self.y0 + (index / w) as u32)
+    }
+
+    /// Copies the ROI out of a row-major full frame `frame_width` pixels wide.
+    ///
+    /// # Panics
+    /// If the ROI does not lie inside the frame or `out` is not `self.len()` long.
+    pub fn crop_from(&self, frame: &[u16], frame_width: u32, out: &mut [u16]) {
+        assert_eq!(out.len(), self.len(), "output buffer length");
+        assert!(self.x_end() <= frame_width, "ROI beyond the frame's width");
+        let (fw, w) = (frame_width as usize, self.width as usize);
+        for (j, row) in out.chunks_exact_mut(w.max(1)).enumerate() {
+            let start = (self.y0 as usize + j) * fw + self.x0 as usize;
+            row.copy_from_slice(&frame[start..start + w]);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn centred_puts_the_point_in_the_middle() {
+        let r = Roi::centred(100.2, 50.7, 24, 1024, 1024).unwrap();
+        assert_eq!(r, Roi::new(89, 39, 24, 24));
+        // Centre of the ROI: x0 + 11.5.
+        assert!((f64::from(r.x0) + 11.5 - 100.2).abs() <= 0.5);
+        assert!((f64::from(r.y0) + 11.5 - 50.7).abs() <= 0.5);
+        let odd = Roi::centred(100.2, 50.7, 25, 1024, 1024).unwrap();
+        assert_eq!((odd.x0 + 12, odd.y0 + 12), (100, 51));
+        assert!(r.contains(100.2, 50.7) && odd.contains(100.2, 50.7));
+    }
+
+    #[test]
+    fn centred_clamps_to_the_sensor() {
+        assert_eq!(
+            Roi::centred(-40.0, 3.0, 24, 1024, 768),
+            Some(Roi::new(0, 0, 24, 24))
+        );
+        assert_eq!(
+            Roi::centred(2000.0, 767.4, 24, 1024, 768),
+            Some(Roi::new(1000, 744, 24, 24))
+        );
+        assert_eq!(Roi::centred(5.0, 5.0, 24, 20, 768), None);
+        assert_eq!(Roi::centred(f64::NAN, 5.0, 24, 1024, 768), None);
+        assert_eq!(
+            Roi::centred(5.0, 5.0, 24, 24, 24),
+            Some(Roi::new(0, 0, 24, 24))
+        );
+    }
+
+    #[test]
+    fn pixel_bookkeeping() {
+        let r = Roi::new(10, 20, 4, 3);
+        assert_eq!(r.len(), 12);
+        assert!(r.contains(9.5, 19.5) && !r.contains(13.5, 20.0) && r.contains(13.49, 22.49));
+        assert_eq!(r.index_of(11, 22), Some(9));
+        assert_eq!(r.pixel_at(9), (11, 22));
+        assert_eq!(r.index_of(14, 22), None);
+        let frame: Vec<u16> = (0..100 * 100).map(|k| k as u16).collect();
+        let mut out = vec![0; r.len()];
+        r.crop_from(&frame, 100, &mut out);
+        assert_eq!(out[9], 22 * 100 + 11);
+    }
+}

@@ -1,0 +1,166 @@
+//! Cameras for the loop: a simulated ROI camera rendering the true motion, and a replay of pre-rendered ROIs.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use roitrack_core::MotionState;
+use roitrack_image::{RenderScratch, Roi, RoiRenderer};
+
+use crate::realtime::RoiCamera;
+
+/// A simulated camera: renders each requested ROI from the true motion `truth(t)` (pixels, noise, blur), deterministic
+/// per seed.
+pub struct SimulatedCamera<F> {
+    renderer: RoiRenderer,
+    truth: F,
+    rng: ChaCha8Rng,
+    scratch: RenderScratch,
+}
+
+impl<F: Fn(f64) -> MotionState + Send> SimulatedCamera<F> {
+    pub fn new(renderer: RoiRenderer, truth: F, seed: u64) -> Self {
+        Self {
+            renderer,
+            truth,
+            rng: ChaCha8Rng::seed_from_u64(seed),
+            scratch: RenderScratch::new(),
+        }
+    }
+}
+
+impl<F: Fn(f64) -> MotionState + Send> RoiCamera for SimulatedCamera<F> {
+    fn grab_roi(
+        &mut self,
+        _point_index: usize,
+        request: &Roi,
+        t_mid_s: f64,
+        pixels: &mut [u16],
+    ) -> Roi {
+        let n = request.len();
+        self.renderer.render_roi_with_scratch(
+            &self.truth,
+            request,
+            t_mid_s,
+            &mut self.rng,
+            &mut self.scratch,
+            &mut pixels[..n],
+        );
+        *request
+    }
+
+    fn grab_full_frame(&mut self, t_mid_s: f64) -> Vec<u16> {
+        self.renderer
+            .render_full_frame(&self.truth, t_mid_s, &mut self.rng)
+    }
+}
+
+/// One pre-rendered ROI.
+#[derive(Debug, Clone)]
+pub struct RecordedRoi {
+    pub point_index: usize,
+    pub roi: Roi,
+    pub pixels: Vec<u16>,
+}
+
+/// Replays pre-rendered ROIs in order, whatever is requested (for throughput benchmarks, where rendering must not
+/// count, and for recorded camera data). The schedule that recorded them must match the one that replays them: a
+/// request for another point than the recorded one is counted in [`ReplayCamera::mismatches`].
+pub struct ReplayCamera {
+    rois: Vec<RecordedRoi>,
+    full_frame: Vec<u16>,
+    cursor: usize,
+    pub mismatches: usize,
+}
+
+impl ReplayCamera {
+    pub fn new(rois: Vec<RecordedRoi>, full_frame: Vec<u16>) -> Self {
+        Self {
+            rois,
+            full_frame,
+            cursor: 0,
+            mismatches: 0,
+        }
+    }
+
+    /// Renders `count` ROIs of side `size` at the true blob positions, cycling through `order`, starting at
+    /// `t_start_s`, plus one full frame at `t_start_s`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn prerender(
+        renderer: &RoiRenderer,
+        truth: &impl Fn(f64) -> MotionState,
+        order: &[usize],
+        size: u32,
+        t_start_s: f64,
+        rate_hz: f64,
+        count: usize,
+        seed: u64,
+    ) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let camera = renderer.camera().clone();
+        let full_frame = renderer.render_full_frame(truth, t_start_s, &mut rng);
+        let mut scratch = RenderScratch::new();
+        let rois = (0..count)
+            .filter_map(|k| {
+                let t = t_start_s + k as f64 / rate_hz;
+                let point_index = order[k % order.len()];
+                let centre = renderer.disk_image_centre_px(&truth(t), point_index)?;
+                let roi =
+                    Roi::centred(centre.x, centre.y, size, camera.width_px, camera.height_px)?;
+                let mut pixels = vec![0u16; roi.len()];
+                renderer.render_roi_with_scratch(
+                    truth,
+                    &roi,
+                    t,
+                    &mut rng,
+                    &mut scratch,
+                    &mut pixels,
+                );
+                Some(RecordedRoi {
+                    point_index,
+                    roi,
+                    pixels,
+                })
+            })
+            .collect();
+        Self::new(rois, full_frame)
+    }
+
+    pub fn len(&self) -> usize {
+        self.rois.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rois.is_empty()
+    }
+
+    /// Starts the replay again from the first ROI.
+    pub fn rewind(&mut self) {
+        self.cursor = 0;
+        self.mismatches = 0;
+    }
+}
+
+impl RoiCamera for ReplayCamera {
+    fn grab_roi(
+        &mut self,
+        point_index: usize,
+        request: &Roi,
+        _t_mid_s: f64,
+        pixels: &mut [u16],
+    ) -> Roi {
+        let Some(recorded) = self.rois.get(self.cursor) else {
+            // Past the end: an empty (dark) ROI, which the centroider rejects as absent.
+            pixels[..request.len()].iter_mut().for_each(|p| *p = 0);
+            return *request;
+        };
+        self.cursor += 1;
+        if recorded.point_index != point_index {
+            self.mismatches += 1;
+        }
+        pixels[..recorded.pixels.len()].copy_from_slice(&recorded.pixels);
+        recorded.roi
+    }
+
+    fn grab_full_frame(&mut self, _t_mid_s: f64) -> Vec<u16> {
+        self.full_frame.clone()
+    }
+}

@@ -1,0 +1,393 @@
+//! The real-time loop: an acquisition thread (trigger, grab, centroid: the camera side) and an estimation thread
+//! (the tracker), joined by a lock-free single-producer single-consumer queue of measurements; the estimates flow
+//! back through a second queue as [`Predictor`]s that place the next ROIs.
+//!
+//! The camera side can be paced to a ROI rate (the paper: 4 kHz, one trigger every 250 µs) or free-running. Nothing
+//! allocates in the steady state: buffers and queues are sized when the loop starts. Dropped measurements (queue
+//! full), late triggers (paced mode), rejected blobs and re-initialisations are counted.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use roitrack_core::estimator::{Estimate, Matrix12, Tracker, TrackerConfig};
+use roitrack_core::{CameraModel, Measurement, MotionState, Target};
+use roitrack_image::{BlobRejection, CentroidOptions, Roi, detect_blobs, measure_blob};
+use thiserror::Error;
+
+use crate::matching::{DetectedBlob, match_full_frame};
+use crate::scheduler::{Predictor, RoiScheduler, SchedulerConfig};
+
+/// A camera that reads one ROI at a time (and, to initialise, a full frame).
+pub trait RoiCamera: Send {
+    /// Exposes and reads the ROI `request` (placed on `point_index`) with its exposure midpoint at `t_mid_s`; writes
+    /// its pixels row-major into `pixels` and returns the ROI actually read (a camera may adjust it).
+    fn grab_roi(
+        &mut self,
+        point_index: usize,
+        request: &Roi,
+        t_mid_s: f64,
+        pixels: &mut [u16],
+    ) -> Roi;
+    /// Reads a full frame with its exposure midpoint at `t_mid_s` (row-major, the camera's width x height).
+    fn grab_full_frame(&mut self, t_mid_s: f64) -> Vec<u16>;
+}
+
+/// Options of the loop.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopConfig {
+    /// ROI trigger rate (Hz): ROI k is exposed at `t_start_s + k / rate_hz`.
+    pub rate_hz: f64,
+    /// Wait for each trigger time on the wall clock (a real camera's trigger); otherwise run as fast as possible.
+    pub paced: bool,
+    /// Number of ROI slots to run.
+    pub roi_slots: usize,
+    pub t_start_s: f64,
+    /// ROI slots a full-frame read costs (its readout time).
+    pub full_frame_slots: usize,
+    /// Capacity of the measurement queue.
+    pub queue_capacity: usize,
+    /// Free-running only: the camera side waits while more than this many measurements are queued, unprocessed.
+    /// Without it a camera faster than the estimator would place its ROIs from ever staler estimates; a paced camera
+    /// cannot wait, and the queue absorbs (or drops) what the estimator does not keep up with.
+    pub max_queued: usize,
+    pub scheduler: SchedulerConfig,
+    pub centroid: CentroidOptions,
+}
+
+impl Default for LoopConfig {
+    fn default() -> Self {
+        Self {
+            rate_hz: 4000.0,
+            paced: false,
+            roi_slots: 4000,
+            t_start_s: 0.0,
+            full_frame_slots: 4,
+            queue_capacity: 1024,
+            max_queued: 16,
+            scheduler: SchedulerConfig::default(),
+            centroid: CentroidOptions::default(),
+        }
+    }
+}
+
+/// Counts of rejected blobs, by reason.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RejectionCounts {
+    pub absent: usize,
+    pub touches_border: usize,
+    pub too_small: usize,
+    pub too_large: usize,
+}
+
+impl RejectionCounts {
+    fn count(&mut self, r: &BlobRejection) {
+        match r {
+            BlobRejection::Absent => self.absent += 1,
+            BlobRejection::TouchesBorder => self.touches_border += 1,
+            BlobRejection::TooSmall { .. } => self.too_small += 1,
+            BlobRejection::TooLarge { .. } => self.too_large += 1,
+        }
+    }
+
+    pub fn total(&self) -> usize {
+        self.absent + self.touches_border + self.too_small + self.too_large
+    }
+}
+
+/// What a run of the loop did.
+#[derive(Debug, Clone)]
+pub struct LoopReport {
+    pub estimates: Vec<Estimate>,
+    /// Per estimate: wall time from the grab of the ROI that completed it to the estimate (µs).
+    pub latencies_us: Vec<f64>,
+    /// ROIs read.
+    pub rois: usize,
+    /// Centroids sent to the estimator.
+    pub measurements: usize,
+    pub rejections: RejectionCounts,
+    /// Measurements lost because the queue was full.
+    pub dropped: usize,
+    /// Paced mode: triggers the camera side reached more than one period late.
+    pub late: usize,
+    /// Full-frame (re-)initialisations that succeeded, and those that failed.
+    pub initialisations: usize,
+    pub failed_initialisations: usize,
+    /// Measurements the tracker refused (none expected).
+    pub refused: usize,
+    /// Wall time of the whole run (s).
+    pub wall_s: f64,
+}
+
+impl LoopReport {
+    /// ROIs read per second of wall time.
+    pub fn rois_per_s(&self) -> f64 {
+        self.rois as f64 / self.wall_s.max(1e-12)
+    }
+}
+
+#[derive(Debug, Error)]
+pub enum PipelineError {
+    #[error("invalid tracker options: {0}")]
+    Config(#[from] roitrack_core::estimator::ConfigError),
+    #[error("the estimation thread panicked")]
+    EstimatorPanicked,
+}
+
+enum Event {
+    Measurement {
+        m: Measurement,
+        grabbed: Instant,
+    },
+    /// A full-frame initialisation: restart the tracker from this static pose.
+    Restart {
+        t_s: f64,
+        state: MotionState,
+    },
+}
+
+/// The broad prior of a pose from a full frame: 2 mm, 0.02 rad, 1 m/s, 10 rad/s (1 sigma).
+fn full_frame_covariance() -> Matrix12 {
+    let sigmas = [
+        2e-3, 2e-3, 2e-3, 0.02, 0.02, 0.02, 1.0, 1.0, 1.0, 10.0, 10.0, 10.0,
+    ];
+    Matrix12::from_diagonal(&nalgebra::SVector::<f64, 12>::from_fn(|i, _| {
+        sigmas[i] * sigmas[i]
+    }))
+}
+
+/// Spins briefly, then yields: queues on a busy 2-core machine must not burn the other thread's core.
+fn backoff(spins: &mut u32) {
+    if *spins < 64 {
+        std::hint::spin_loop();
+    } else {
+        std::thread::yield_now();
+    }
+    *spins = spins.saturating_add(1);
+}
+
+/// Runs the loop: `camera` on the acquisition thread, a [`Tracker`] on the estimation thread.
+pub fn run_loop<C: RoiCamera>(
+    camera: C,
+    camera_model: &CameraModel,
+    target: &Target,
+    tracker_config: TrackerConfig,
+    config: &LoopConfig,
+) -> Result<LoopReport, PipelineError> {
+    run_loop_with_progress(camera, camera_model, target, tracker_config, config, None)
+}
+
+/// [`run_loop`], publishing the number of ROI slots done to `progress` (every 256 slots) for a progress display.
+pub fn run_loop_with_progress<C: RoiCamera>(
+    mut camera: C,
+    camera_model: &CameraModel,
+    target: &Target,
+    tracker_config: TrackerConfig,
+    config: &LoopConfig,
+    progress: Option<&std::sync::atomic::AtomicUsize>,
+) -> Result<LoopReport, PipelineError> {
+    let mut tracker = Tracker::new(camera_model.clone(), target.clone(), tracker_config)?;
+    let (mut measurement_tx, mut measurement_rx) =
+        rtrb::RingBuffer::<Event>::new(config.queue_capacity.max(2));
+    let (mut predictor_tx, mut predictor_rx) = rtrb::RingBuffer::<Predictor>::new(8);
+    let expected_estimates = config.roi_slots / tracker_config.every.max(1) + 64;
+    let camera_done = AtomicBool::new(false);
+    let start = Instant::now();
+
+    let (camera_side, estimation_side) = std::thread::scope(|scope| {
+        let estimation = scope.spawn(|| {
+            let mut estimates = Vec::with_capacity(expected_estimates);
+            let mut latencies_us = Vec::with_capacity(expected_estimates);
+            let mut refused = 0usize;
+            let mut spins = 0u32;
+            loop {
+                match measurement_rx.pop() {
+                    Ok(Event::Measurement { m, grabbed }) => {
+                        spins = 0;
+                        match tracker.push(&m) {
+                            Ok(Some(e)) => {
+                                if estimates.len() < estimates.capacity() {
+                                    latencies_us.push(grabbed.elapsed().as_secs_f64() * 1e6);
+                                    estimates.push(e);
+                                }
+                                // If the camera side has not taken the previous ones, this one is skipped: it will
+                                // get the next.
+                                let _ = predictor_tx.push(Predictor {
+                                    t_ref_s: e.t_ref_s,
+                                    state: e.state,
+                                    covariance: e.covariance,
+                                });
+                            }
+                            Ok(None) => {}
+                            Err(_) => refused += 1,
+                        }
+                    }
+                    Ok(Event::Restart { t_s, state }) => {
+                        tracker.start_from(t_s, state, Some(full_frame_covariance()));
+                    }
+                    Err(_) => {
+                        if camera_done.load(Ordering::Acquire) && measurement_rx.is_empty() {
+                            break;
+                        }
+                        backoff(&mut spins);
+                    }
+                }
+            }
+            (estimates, latencies_us, refused)
+        });
+
+        // The acquisition side runs on this thread.
+        let mut scheduler =
+            RoiScheduler::new(camera_model.clone(), target.clone(), config.scheduler);
+        let max_side = config.scheduler.max_size_px as usize;
+        let mut pixels = vec![0u16; max_side * max_side];
+        let mut predictor: Option<Predictor> = None;
+        let mut restart_t_s = f64::NEG_INFINITY;
+        let mut report = Counters::default();
+        let period = Duration::from_secs_f64(1.0 / config.rate_hz);
+        let mut slot = 0usize;
+        while slot < config.roi_slots {
+            let t_s = config.t_start_s + slot as f64 / config.rate_hz;
+            if let Some(progress) = progress
+                && slot % 256 == 0
+            {
+                progress.store(slot, Ordering::Relaxed);
+            }
+            if config.paced {
+                let due = start + period * slot as u32;
+                let mut spins = 0;
+                while Instant::now() < due {
+                    backoff(&mut spins);
+                }
+                if Instant::now() > due + period {
+                    report.late += 1;
+                }
+            } else {
+                let mut spins = 0;
+                while measurement_tx.buffer().capacity() - measurement_tx.slots()
+                    > config.max_queued
+                {
+                    backoff(&mut spins);
+                }
+            }
+            while let Ok(p) = predictor_rx.pop() {
+                // Estimates from before the last re-initialisation describe the old track.
+                if p.t_ref_s >= restart_t_s {
+                    predictor = Some(p);
+                }
+            }
+            if predictor.is_none() || scheduler.needs_reinitialisation() {
+                let frame = camera.grab_full_frame(t_s);
+                let blobs: Vec<DetectedBlob> = detect_blobs(
+                    &frame,
+                    camera_model.width_px,
+                    camera_model.height_px,
+                    &config.centroid,
+                )
+                .iter()
+                .map(|c| DetectedBlob {
+                    u_px: c.u_px,
+                    v_px: c.v_px,
+                    area_px: c.area_px as f64,
+                })
+                .collect();
+                match match_full_frame(camera_model, target, &blobs) {
+                    Ok(m) => {
+                        predictor = Some(Predictor {
+                            t_ref_s: t_s,
+                            state: m.state,
+                            covariance: Some(full_frame_covariance()),
+                        });
+                        restart_t_s = t_s;
+                        scheduler.reset();
+                        let mut spins = 0;
+                        let mut event = Event::Restart {
+                            t_s,
+                            state: m.state,
+                        };
+                        loop {
+                            match measurement_tx.push(event) {
+                                Ok(()) => break,
+                                Err(rtrb::PushError::Full(back)) => {
+                                    event = back;
+                                    backoff(&mut spins);
+                                }
+                            }
+                        }
+                        report.initialisations += 1;
+                    }
+                    Err(_) => {
+                        predictor = None;
+                        report.failed_initialisations += 1;
+                    }
+                }
+                slot += config.full_frame_slots.max(1);
+                continue;
+            }
+            let Some(p) = predictor else {
+                slot += 1;
+                continue;
+            };
+            let Some(request) = scheduler.next(&p, t_s) else {
+                report.rejections.absent += 1;
+                slot += 1;
+                continue;
+            };
+            let roi = camera.grab_roi(request.point_index, &request.roi, t_s, &mut pixels);
+            let grabbed = Instant::now();
+            report.rois += 1;
+            match measure_blob(&pixels[..roi.len()], &roi, &config.centroid) {
+                Ok(c) => {
+                    scheduler.report(request.point_index, true);
+                    let m = Measurement {
+                        t_s,
+                        id: target.points()[request.point_index].id,
+                        u_px: c.u_px,
+                        v_px: c.v_px,
+                    };
+                    if measurement_tx
+                        .push(Event::Measurement { m, grabbed })
+                        .is_err()
+                    {
+                        report.dropped += 1;
+                    } else {
+                        report.measurements += 1;
+                    }
+                }
+                Err(r) => {
+                    scheduler.report(request.point_index, false);
+                    report.rejections.count(&r);
+                }
+            }
+            slot += 1;
+        }
+        camera_done.store(true, Ordering::Release);
+        let estimation = estimation.join();
+        (report, estimation)
+    });
+    let (estimates, latencies_us, refused) =
+        estimation_side.map_err(|_| PipelineError::EstimatorPanicked)?;
+    Ok(LoopReport {
+        estimates,
+        latencies_us,
+        rois: camera_side.rois,
+        measurements: camera_side.measurements,
+        rejections: camera_side.rejections,
+        dropped: camera_side.dropped,
+        late: camera_side.late,
+        initialisations: camera_side.initialisations,
+        failed_initialisations: camera_side.failed_initialisations,
+        refused,
+        wall_s: start.elapsed().as_secs_f64(),
+    })
+}
+
+#[derive(Debug, Default)]
+struct Counters {
+    rois: usize,
+    measurements: usize,
+    rejections: RejectionCounts,
+    dropped: usize,
+    late: usize,
+    initialisations: usize,
+    failed_initialisations: usize,
+}
