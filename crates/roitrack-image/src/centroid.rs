@@ -620,7 +620,8 @@ mod tests {
         let c = measure_blob(&pixels, &roi, &opts).unwrap();
         assert_eq!(c.area_px, 11);
         // Binary moments of the U: columns 1..5, rows 1..4.
-        let (si, sj) = (1 * 4 + 5 * 4 + 2 + 3 + 4, 1 * 2 + 2 * 2 + 3 * 2 + 4 * 5);
+        // Column 1 and 5 (rows 1-4), bottom row columns 2-4; rows 1, 2, 3 two pixels each, row 4 five.
+        let (si, sj) = (4 + 5 * 4 + 2 + 3 + 4, 2 + 2 * 2 + 3 * 2 + 4 * 5);
         assert!((c.u_px - (100.0 + si as f64 / 11.0)).abs() < 1e-12);
         assert!((c.v_px - (50.0 + sj as f64 / 11.0)).abs() < 1e-12);
         assert_eq!(c.peak, 200);

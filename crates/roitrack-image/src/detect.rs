@@ -5,10 +5,9 @@ use crate::centroid::{
     CentroidOptions, Threshold,
 };
 
-/// A horizontal run of above-threshold pixels and its moments.
+/// A horizontal run of above-threshold pixels (its moments are kept alongside).
 #[derive(Debug, Clone, Copy)]
 struct Run {
-    row: u32,
     start: u32,
     /// Inclusive.
     end: u32,
@@ -139,7 +138,6 @@ pub fn detect_blobs(
             m.touches_border = j == 0 || j + 1 == h || start == 0 || i == w;
             let id = runs.len() as u32;
             runs.push(Run {
-                row: j as u32,
                 start: start as u32,
                 end: (i - 1) as u32,
             });
@@ -163,13 +161,10 @@ pub fn detect_blobs(
     }
     // Aggregate per component (roots are each component's first run).
     let mut totals: Vec<Option<Moments>> = vec![None; runs.len()];
-    for r in 0..runs.len() {
+    for (r, m) in moments.iter().enumerate() {
         let root = find(&mut parent, r as u32) as usize;
-        totals[root]
-            .get_or_insert_with(Moments::default)
-            .add(&moments[r]);
+        totals[root].get_or_insert_with(Moments::default).add(m);
     }
-    debug_assert!(runs.iter().all(|r| r.row < height));
     totals
         .into_iter()
         .flatten()

@@ -54,7 +54,7 @@ impl<F: Fn(f64) -> MotionState + Send> RoiCamera for SimulatedCamera<F> {
 }
 
 /// One pre-rendered ROI.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct RecordedRoi {
     pub point_index: usize,
     pub roi: Roi,
@@ -130,6 +130,11 @@ impl ReplayCamera {
 
     pub fn is_empty(&self) -> bool {
         self.rois.is_empty()
+    }
+
+    /// A copy of the recording, rewound (allocates: make it before timing or counting anything).
+    pub fn rewound_copy(&self) -> Self {
+        Self::new(self.rois.clone(), self.full_frame.clone())
     }
 
     /// Starts the replay again from the first ROI.

@@ -1,0 +1,78 @@
+//! Steady-state ROI rendering (with a kept `RenderScratch`) and blob measurement allocate nothing (counted through a
+//! counting global allocator; this test binary holds only this test, so nothing else allocates meanwhile).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use nalgebra::Vector3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use roitrack_core::{CameraModel, MotionState, Target};
+use roitrack_image::{
+    CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel, bench_state, measure_blob,
+};
+
+struct CountingAllocator;
+
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAllocator = CountingAllocator;
+
+#[test]
+fn steady_state_rendering_and_measuring_do_not_allocate() {
+    let target = Target::grid4x4();
+    let renderer = RoiRenderer::new(
+        CameraModel::canonical(),
+        target.clone(),
+        SensorModel::default(),
+    )
+    .unwrap();
+    let state = MotionState {
+        velocity_mps: Vector3::new(0.8, -0.4, 0.1),
+        angular_velocity_radps: Vector3::new(1.0, -2.0, 0.5),
+        ..bench_state()
+    };
+    let state_at = |t: f64| state.predicted(t);
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let mut scratch = RenderScratch::new();
+    let mut pixels = vec![0u16; 24 * 24];
+    let opts = CentroidOptions::default();
+    let run = |rng: &mut ChaCha8Rng, scratch: &mut RenderScratch, pixels: &mut [u16]| {
+        let mut measured = 0;
+        for (k, point) in target.points().iter().enumerate() {
+            let t_s = k as f64 * 250e-6;
+            let p = state.point_in_cam_at(&point.point_in_obj_m, t_s);
+            let c = renderer.camera().raw_pixel_from_cam(&p).unwrap();
+            let roi = Roi::centred(c.x, c.y, 24, 1024, 1024).unwrap();
+            renderer.render_roi_with_scratch(&state_at, &roi, t_s, rng, scratch, pixels);
+            measured += usize::from(measure_blob(pixels, &roi, &opts).is_ok());
+        }
+        measured
+    };
+    // Warm-up: the scratch buffers grow to their working size.
+    run(&mut rng, &mut scratch, &mut pixels);
+    let before = ALLOCATIONS.load(Ordering::Relaxed);
+    let mut measured = 0;
+    for _ in 0..20 {
+        measured += run(&mut rng, &mut scratch, &mut pixels);
+    }
+    let allocations = ALLOCATIONS.load(Ordering::Relaxed) - before;
+    assert_eq!(allocations, 0);
+    // All but the key blob (too big for 24 px).
+    assert_eq!(measured, 20 * 15);
+}

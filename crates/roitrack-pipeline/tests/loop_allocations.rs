@@ -1,0 +1,71 @@
+//! The real-time loop allocates nothing per ROI or per control step: two runs of N and 2N ROIs through the same
+//! loop (replayed, pre-rendered ROIs, both threads) make exactly the same number of heap allocations, all of them
+//! set-up (threads, queues, buffers sized up front, the full-frame initialisation).
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use roitrack_core::estimator::{EstimatorKind, TrackerConfig};
+use roitrack_core::roi_order::bit_reversed_indices;
+use roitrack_image::{RoiRenderer, SensorModel};
+use roitrack_pipeline::cameras::ReplayCamera;
+use roitrack_pipeline::realtime::{LoopConfig, run_loop};
+use roitrack_sim::{Scenario, ScenarioKind};
+
+struct CountingAllocator;
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAllocator = CountingAllocator;
+
+#[test]
+fn steady_state_loop_does_not_allocate() {
+    let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
+    let renderer = RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
+    let truth = |t: f64| scenario.state_at(t);
+    let order = bit_reversed_indices(16);
+    let n = 3000;
+    // ROI k is exposed at 0.3 s + (k + 1) / 4 kHz: slot 0 is the full frame.
+    let replay = ReplayCamera::prerender(&renderer, &truth, &order, 32, 0.3 + 1.0 / 4000.0, 4000.0, 2 * n + 8, 5);
+    for (name, estimator) in [("kalman", EstimatorKind::Kalman), ("vvs", EstimatorKind::Vvs)] {
+        let tracker = TrackerConfig {
+            estimator,
+            ..Default::default()
+        };
+        let mut counts = Vec::new();
+        for slots in [n, 2 * n] {
+            let camera = replay.rewound_copy();
+            let config = LoopConfig {
+                roi_slots: slots,
+                t_start_s: 0.3,
+                // The replay holds no ROIs for the full-frame slots: start with them.
+                full_frame_slots: 1,
+                ..Default::default()
+            };
+            let before = ALLOCATIONS.load(Ordering::SeqCst);
+            let report = run_loop(camera, &scenario.camera, &scenario.target, tracker, &config).unwrap();
+            let allocations = ALLOCATIONS.load(Ordering::SeqCst) - before;
+            assert!(report.estimates.len() > slots / 10 - 5, "{name}: {} estimates", report.estimates.len());
+            assert_eq!(report.dropped, 0);
+            counts.push((allocations, report.rois));
+        }
+        assert_eq!(
+            counts[0].0, counts[1].0,
+            "{name}: allocations grow with the number of ROIs: {counts:?} (allocations, ROIs)"
+        );
+    }
+}
