@@ -17,6 +17,7 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     Demo(commands::demo::DemoArgs),
+    Bench(commands::bench::BenchArgs),
     Simulate(commands::simulate::SimulateArgs),
     Track(commands::track::TrackArgs),
     Eval(commands::eval::EvalArgs),
@@ -28,6 +29,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(args) => commands::demo::run(&args),
+        Command::Bench(args) => commands::bench::run(&args),
         Command::Simulate(args) => commands::simulate::run(&args),
         Command::Track(args) => commands::track::run(&args),
         Command::Eval(args) => commands::eval::run(&args),

@@ -1,4 +1,8 @@
-//! Speed and accuracy figures of roitrack-image: `cargo run --release -p roitrack-image --example image_bench`.
+//! Speed and accuracy figures of roitrack-image on the canonical scene:
+//! `cargo run --release -p roitrack-image --example image_bench`.
+//!
+//! Timings are per call, over many repetitions: the median and the minimum of the repetition means (the minimum is
+//! the figure least disturbed by other processes on the machine).
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -12,8 +16,8 @@ use roitrack_image::{
     centroid_accuracy, detect_blobs, measure_blob,
 };
 
-/// Median of `runs` timings (µs) of `f`, each averaged over `inner` calls.
-fn median_us(runs: usize, inner: usize, mut f: impl FnMut()) -> f64 {
+/// (median, minimum) over `runs` repetitions of the mean time (µs) of `inner` calls of `f`.
+fn time_us(runs: usize, inner: usize, mut f: impl FnMut()) -> (f64, f64) {
     let mut t: Vec<f64> = (0..runs)
         .map(|_| {
             let start = Instant::now();
@@ -24,7 +28,7 @@ fn median_us(runs: usize, inner: usize, mut f: impl FnMut()) -> f64 {
         })
         .collect();
     t.sort_by(f64::total_cmp);
-    t[t.len() / 2]
+    (t[t.len() / 2], t[0])
 }
 
 fn main() {
@@ -41,13 +45,22 @@ fn main() {
         angular_velocity_radps: Vector3::new(0.0, 2.0, 0.0),
         ..bench
     };
-    for (name, state) in [("static", bench), ("1 m/s", moving)] {
+    let fast = MotionState {
+        velocity_mps: Vector3::new(1.5, 0.5, 0.3),
+        angular_velocity_radps: Vector3::new(2.0, -3.0, 1.0),
+        ..bench
+    };
+    for (name, state) in [
+        ("static", bench),
+        ("1 m/s, 2 rad/s", moving),
+        ("1.6 m/s, 3.7 rad/s", fast),
+    ] {
         let state_at = |t: f64| state.predicted(t);
         let p = state.point_in_cam_at(&target.points()[5].point_in_obj_m, 0.0);
         let c = camera.raw_pixel_from_cam(&p).unwrap();
         let roi = Roi::centred(c.x, c.y, 24, 1024, 1024).unwrap();
         let mut out = vec![0u16; roi.len()];
-        let us = median_us(21, 200, || {
+        let (med, min) = time_us(31, 300, || {
             renderer.render_roi_with_scratch(
                 &state_at,
                 &roi,
@@ -58,28 +71,35 @@ fn main() {
             );
             black_box(&out);
         });
-        let us_alloc = median_us(21, 200, || {
+        let (med_alloc, _) = time_us(11, 300, || {
             renderer.render_roi(&state_at, &roi, 0.0, &mut rng, &mut out);
             black_box(&out);
         });
         println!(
-            "render_roi 24x24, one 6 mm blob, {name}: {us:.1} us (with scratch), {us_alloc:.1} us (allocating)"
+            "render_roi 24x24, one 6 mm blob, {name}: median {med:.1} us, min {min:.1} us (kept scratch); \
+             median {med_alloc:.1} us (allocating)"
         );
-        for (oname, opts) in [
-            ("weighted auto", CentroidOptions::default()),
-            ("binary auto", CentroidOptions::binary()),
-            (
-                "weighted fixed(120)",
-                CentroidOptions {
-                    threshold: Threshold::Fixed(120),
-                    ..Default::default()
-                },
-            ),
-        ] {
-            let us = median_us(101, 2000, || {
-                black_box(measure_blob(black_box(&out), &roi, &opts).ok());
-            });
-            println!("  measure_blob {oname}: {:.3} us", us);
+        if name == "static" {
+            let options = [
+                (
+                    "weighted, auto threshold (default)",
+                    CentroidOptions::default(),
+                ),
+                ("binary, auto threshold (paper)", CentroidOptions::binary()),
+                (
+                    "weighted, fixed threshold",
+                    CentroidOptions {
+                        threshold: Threshold::Fixed(45),
+                        ..Default::default()
+                    },
+                ),
+            ];
+            for (oname, opts) in options {
+                let (med, min) = time_us(101, 5000, || {
+                    black_box(measure_blob(black_box(&out), &roi, &opts).ok());
+                });
+                println!("  measure_blob 24x24 {oname}: median {med:.3} us, min {min:.3} us");
+            }
         }
     }
     let state_at = |_t: f64| bench;
@@ -94,15 +114,17 @@ fn main() {
         blobs.len()
     );
 
-    for (oname, opts) in [
-        ("weighted", CentroidOptions::default()),
-        ("binary", CentroidOptions::binary()),
-    ] {
-        for size in [24, 32] {
+    let quiet = RoiRenderer::new(camera.clone(), target.clone(), SensorModel::noiseless()).unwrap();
+    for (rname, r) in [("default sensor", &renderer), ("noiseless", &quiet)] {
+        for (oname, opts) in [
+            ("weighted (default)", CentroidOptions::default()),
+            ("binary (paper)", CentroidOptions::binary()),
+        ] {
             let start = Instant::now();
-            let a = centroid_accuracy(&renderer, &opts, size, 4000, 7);
+            let a = centroid_accuracy(r, &opts, 24, 1000, 2024);
             println!(
-                "centroid_accuracy {oname} roi {size}: n {} rejected {} bias ({:+.4}, {:+.4}) std ({:.4}, {:.4}) rms {:.4} px [{:.0} ms]",
+                "centroid_accuracy {rname}, {oname}, 24 px ROIs, 1000: measured {} rejected {} bias ({:+.4}, {:+.4}) \
+                 std ({:.4}, {:.4}) rms {:.4} px [{:.0} ms]",
                 a.count,
                 a.rejected,
                 a.bias_u_px,
@@ -114,18 +136,7 @@ fn main() {
             );
         }
     }
-    let quiet = RoiRenderer::new(camera.clone(), target.clone(), SensorModel::noiseless()).unwrap();
-    for (oname, opts) in [
-        ("weighted", CentroidOptions::default()),
-        ("binary", CentroidOptions::binary()),
-    ] {
-        let a = centroid_accuracy(&quiet, &opts, 32, 4000, 7);
-        println!(
-            "noiseless {oname} roi 32: n {} rej {} bias ({:+.4}, {:+.4}) std ({:.4}, {:.4}) rms {:.4}",
-            a.count, a.rejected, a.bias_u_px, a.bias_v_px, a.std_u_px, a.std_v_px, a.rms_px
-        );
-    }
-    // Perspective: ellipse centre vs projected centre at the bench pose.
+    // Perspective: the disks' image ellipses are not centred on the projected centres.
     for i in [0usize, 1, 5, 15] {
         let p = bench.point_in_cam_at(&target.points()[i].point_in_obj_m, 0.0);
         let c = camera.raw_pixel_from_cam(&p).unwrap();
