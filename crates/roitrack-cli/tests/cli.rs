@@ -426,3 +426,83 @@ fn target_command_writes_the_bundled_target_and_camera() {
         roitrack_core::CameraModel::canonical()
     );
 }
+
+#[test]
+fn roi_recordings_replay_through_track() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    simulate(dir, "spin", &["--rois"]);
+    let (camera, target, rois) = (
+        dir.join("camera.yaml"),
+        dir.join("target.csv"),
+        dir.join("rois.bin"),
+    );
+    let (poses, twists) = (dir.join("r.tum"), dir.join("r.csv"));
+    let out = roitrack(&[
+        "track",
+        "--camera",
+        p(&camera),
+        "--target",
+        p(&target),
+        "--rois",
+        p(&rois),
+        "--poses",
+        p(&poses),
+        "--twists",
+        p(&twists),
+        "--noise-px",
+        "0.02",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("ROIs centroided"), "{stderr}");
+    let m: serde_json::Value = serde_json::from_str(&ok(&[
+        "eval",
+        "--truth",
+        p(dir),
+        "--poses",
+        p(&poses),
+        "--twists",
+        p(&twists),
+        "--json",
+    ]))
+    .unwrap();
+    assert!(f(&m, "position_rmse_mm") < 0.2, "{m}");
+    // A corrupted recording is refused with the file, the record and the field.
+    let mut bytes = std::fs::read(&rois).unwrap();
+    bytes.truncate(bytes.len() - 7);
+    std::fs::write(&rois, &bytes).unwrap();
+    let err = fails(&[
+        "track",
+        "--camera",
+        p(&camera),
+        "--target",
+        p(&target),
+        "--rois",
+        p(&rois),
+        "--poses",
+        p(&poses),
+        "--twists",
+        p(&twists),
+    ]);
+    assert!(err.contains("rois.bin:") && err.contains("pixels"), "{err}");
+}
+
+#[test]
+fn bench_prints_the_loop_figures_as_json() {
+    let out = ok(&["bench", "--json", "--rois", "2000", "--repeats", "1"]);
+    let m: serde_json::Value = serde_json::from_str(&out).unwrap();
+    for key in [
+        "loop_k10_rois_per_s",
+        "loop_k1_rois_per_s",
+        "latency_us_p50",
+        "latency_us_p99",
+    ] {
+        assert!(f(&m, key) > 0.0, "{key} in {m}");
+    }
+    assert_eq!(m["loop_k10_dropped"].as_u64(), Some(0));
+}

@@ -10,7 +10,7 @@ use std::time::Instant;
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use roitrack_core::{CameraModel, MotionState, Target};
+use roitrack_core::{CameraModel, MotionState, PinholeIntrinsics, PlumbBob, Target};
 use roitrack_image::{
     CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel, Threshold, bench_state,
     centroid_accuracy, detect_blobs, measure_blob,
@@ -102,7 +102,35 @@ fn main() {
             }
         }
     }
+    // A strongly distorting wide-angle lens: every pixel corner near the blob is undistorted by Newton's method.
+    let wide = CameraModel::new(
+        "wide",
+        1024,
+        1024,
+        PinholeIntrinsics {
+            fx_px: 1480.0,
+            fy_px: 1510.0,
+            skew_px: 0.8,
+            cx_px: 515.0,
+            cy_px: 506.0,
+        },
+        PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, -0.03]),
+    )
+    .unwrap();
+    let distorted = RoiRenderer::new(wide.clone(), target.clone(), SensorModel::default()).unwrap();
     let state_at = |_t: f64| bench;
+    let p = bench.point_in_cam_at(&target.points()[5].point_in_obj_m, 0.0);
+    let c = wide.raw_pixel_from_cam(&p).unwrap();
+    let roi = Roi::centred(c.x, c.y, 24, 1024, 1024).unwrap();
+    let mut out = vec![0u16; roi.len()];
+    let (med, min) = time_us(31, 300, || {
+        distorted.render_roi_with_scratch(&state_at, &roi, 0.0, &mut rng, &mut scratch, &mut out);
+        black_box(&out);
+    });
+    println!(
+        "render_roi 24x24, static, distorted camera (k1 = -0.28): median {med:.1} us, min {min:.1} us"
+    );
+
     let start = Instant::now();
     let frame = renderer.render_full_frame(&state_at, 0.0, &mut rng);
     let render_ms = start.elapsed().as_secs_f64() * 1e3;

@@ -54,6 +54,13 @@ pub struct CentroidAccuracy {
 /// angular speed up to 3 rad/s, so motion blur is exercised), with the ROI centred on the true blob centre plus a
 /// random offset of up to ±3 px per axis; measures each with `opts` and compares with the TRUE projected centre
 /// (`camera.raw_pixel_from_cam` of the model point at mid-exposure). Deterministic for a `seed`.
+///
+/// With the defaults the bias is the perspective offset of the disks' image centres from the projected centres
+/// (about -0.008 px on each axis near the bench pose, see [`RoiRenderer::disk_image_centre_px`]), not an error of the
+/// centroid.
+///
+/// # Panics
+/// If `roi_size` is larger than [`crate::MAX_ROI_WIDTH`] (64).
 pub fn centroid_accuracy(
     renderer: &RoiRenderer,
     opts: &CentroidOptions,

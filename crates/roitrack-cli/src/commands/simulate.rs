@@ -13,6 +13,58 @@ pub const TARGET_FILE: &str = "target.csv";
 pub const MEASUREMENTS_FILE: &str = "measurements.csv";
 pub const TRUTH_POSES_FILE: &str = "gt_poses.tum";
 pub const TRUTH_TWISTS_FILE: &str = "gt_twists.csv";
+pub const ROIS_FILE: &str = "rois.bin";
+
+/// Renders a 40 x 40 ROI for each measurement of `run` (same time and point) and writes the recording.
+pub fn write_roi_recording(
+    scenario: &Scenario,
+    run: &SimulatedRun,
+    path: &Path,
+    seed: u64,
+) -> Result<()> {
+    use rand::{Rng, SeedableRng};
+    use roitrack_image::{RenderScratch, Roi, RoiRenderer, SensorModel};
+    const SIZE: u32 = 40;
+    let sensor = SensorModel::default();
+    let bit_depth = sensor.bit_depth as u8;
+    let renderer = RoiRenderer::new(run.camera.clone(), run.target.clone(), sensor)?;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x0005_1f0c_a11e);
+    let mut scratch = RenderScratch::new();
+    let truth = |t: f64| scenario.state_at(t);
+    let mut writer = roitrack_formats::RoiRecordingWriter::create(path)?;
+    for m in &run.measurements {
+        let index = run
+            .target
+            .index_of(m.id)
+            .context("measurement of an unknown point")?;
+        let centre = renderer
+            .disk_image_centre_px(&truth(m.t_s), index)
+            .context("blob not visible")?;
+        let (du, dv): (f64, f64) = (rng.random_range(-4.0..4.0), rng.random_range(-4.0..4.0));
+        let roi = Roi::centred(
+            centre.x + du,
+            centre.y + dv,
+            SIZE,
+            run.camera.width_px,
+            run.camera.height_px,
+        )
+        .context("ROI larger than the sensor")?;
+        let mut pixels = vec![0u16; roi.len()];
+        renderer.render_roi_with_scratch(&truth, &roi, m.t_s, &mut rng, &mut scratch, &mut pixels);
+        writer.write(&roitrack_formats::RoiRecord {
+            t_s: m.t_s,
+            id: m.id,
+            x0: roi.x0,
+            y0: roi.y0,
+            width: roi.width,
+            height: roi.height,
+            bit_depth,
+            pixels,
+        })?;
+    }
+    writer.finish()?;
+    Ok(())
+}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ScenarioArg {
@@ -81,6 +133,10 @@ pub struct SimulateArgs {
     /// Fraction of centroids moved 5-20 px, in [0, 1].
     #[arg(long = "outliers", default_value_t = 0.0)]
     pub outlier_fraction: f64,
+    /// Also render the ROI of every measurement (40 x 40 px, placed with a random error of up to 4 px as a real
+    /// scheduler would) and write them to rois.bin, a recording `roitrack track --rois` replays.
+    #[arg(long)]
+    pub rois: bool,
 }
 
 impl SimulateArgs {
@@ -100,6 +156,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let scenario = Scenario::new(args.scenario.into(), args.seed);
     let run = simulate(&scenario, &args.options()).context("simulation failed")?;
     write_run(&run, &args.out)?;
+    if args.rois {
+        write_roi_recording(&scenario, &run, &args.out.join(ROIS_FILE), args.seed)?;
+    }
     eprintln!(
         "roitrack: {} scenario: {} measurements over {:.3} s written to {}",
         scenario.kind.name(),

@@ -108,8 +108,11 @@ pub struct TrackArgs {
     #[arg(long)]
     pub target: PathBuf,
     /// Measured centroids (CSV t,id,u,v; raw pixels; time order).
+    #[arg(long, required_unless_present = "rois", conflicts_with = "rois")]
+    pub measurements: Option<PathBuf>,
+    /// Instead of centroids: a recording of ROI images (see roitrack_formats::RoiRecordingReader), centroided here.
     #[arg(long)]
-    pub measurements: PathBuf,
+    pub rois: Option<PathBuf>,
     /// Output poses (TUM: t tx ty tz qx qy qz qw, camera_T_object).
     #[arg(long)]
     pub poses: PathBuf,
@@ -244,11 +247,27 @@ impl EstimateWriter {
 pub fn run(args: &TrackArgs) -> Result<()> {
     let camera = roitrack_formats::read_camera_yaml(&args.camera)?;
     let target = roitrack_formats::read_target_csv(&args.target)?;
-    let reader = MeasurementReader::open(&args.measurements)?
-        .with_known_ids(target.points().iter().map(|p| p.id));
+    let known_ids = target.points().iter().map(|p| p.id);
+    // One stream of measurements, from centroids or from ROI images centroided on the fly.
+    let mut rejected = RejectionTally::default();
+    let (path, measurements): (String, Box<dyn Iterator<Item = Result<Measurement>>>) =
+        match (&args.measurements, &args.rois) {
+            (Some(path), _) => (
+                path.display().to_string(),
+                Box::new(
+                    MeasurementReader::open(path)?
+                        .with_known_ids(known_ids)
+                        .map(|r| r.map_err(anyhow::Error::from)),
+                ),
+            ),
+            (None, Some(path)) => (
+                path.display().to_string(),
+                Box::new(centroided_rois(path, &target, &mut rejected)?),
+            ),
+            (None, None) => bail!("give --measurements or --rois"),
+        };
     let mut writer =
         EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?;
-    let path = args.measurements.display().to_string();
     // Progress on stderr for long files (drawn only when stderr is a terminal).
     let progress = indicatif::ProgressBar::new_spinner().with_style(
         indicatif::ProgressStyle::with_template(
@@ -262,12 +281,11 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         &camera,
         &target,
         args.estimator.config(),
-        reader.map(|r| {
+        measurements.inspect(|_| {
             count += 1;
             if count.is_multiple_of(PROGRESS_EVERY) {
                 progress.inc(PROGRESS_EVERY);
             }
-            r.map_err(anyhow::Error::from)
         }),
         |e| writer.write(e),
     )
@@ -281,6 +299,9 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         );
     }
     writer.finish()?;
+    if args.rois.is_some() {
+        eprintln!("roitrack: {}", rejected.summary());
+    }
     eprintln!(
         "roitrack: {} measurements -> {} estimates ({} degenerate, {} lost) in {:.3} s ({:.2} us per measurement)",
         summary.measurements,
@@ -291,4 +312,80 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         summary.us_per_measurement()
     );
     Ok(())
+}
+
+/// Blobs rejected while centroiding a recording, by reason.
+#[derive(Debug, Default)]
+struct RejectionTally {
+    rois: std::rc::Rc<std::cell::Cell<[usize; 5]>>,
+}
+
+impl RejectionTally {
+    fn summary(&self) -> String {
+        let [rois, absent, border, small, large] = self.rois.get();
+        format!(
+            "{rois} ROIs centroided; rejected: {absent} absent, {border} touching the ROI border, {small} too small, \
+             {large} too large"
+        )
+    }
+}
+
+/// Measurements from a ROI recording: each ROI's blob centroid (rejected blobs are skipped and counted).
+fn centroided_rois(
+    path: &Path,
+    target: &Target,
+    tally: &mut RejectionTally,
+) -> Result<impl Iterator<Item = Result<Measurement>> + use<>> {
+    use roitrack_image::{BlobRejection, CentroidOptions, Roi, measure_blob};
+    let reader = roitrack_formats::RoiRecordingReader::open(path)?;
+    let counts = tally.rois.clone();
+    let ids: std::collections::HashSet<u32> = target.points().iter().map(|p| p.id).collect();
+    let path = path.to_path_buf();
+    let options = CentroidOptions::default();
+    Ok(reader.enumerate().filter_map(move |(index, record)| {
+        let record = match record {
+            Ok(r) => r,
+            Err(e) => return Some(Err(e.into())),
+        };
+        if !ids.contains(&record.id) {
+            return Some(Err(anyhow::anyhow!(
+                "{}:{}: field 'id': point id {} is not in the target",
+                path.display(),
+                index + 1,
+                record.id
+            )));
+        }
+        let roi = Roi::new(record.x0, record.y0, record.width, record.height);
+        let mut c = counts.get();
+        c[0] += 1;
+        let result = if record.width > roitrack_image::centroid::MAX_ROI_WIDTH
+            || record.height > roitrack_image::centroid::MAX_ROI_HEIGHT
+        {
+            Err(BlobRejection::TooLarge {
+                area_px: record.width * record.height,
+            })
+        } else {
+            measure_blob(&record.pixels, &roi, &options)
+        };
+        let out = match result {
+            Ok(centroid) => Some(Ok(Measurement {
+                t_s: record.t_s,
+                id: record.id,
+                u_px: centroid.u_px,
+                v_px: centroid.v_px,
+            })),
+            Err(r) => {
+                let slot = match r {
+                    BlobRejection::Absent => 1,
+                    BlobRejection::TouchesBorder => 2,
+                    BlobRejection::TooSmall { .. } => 3,
+                    BlobRejection::TooLarge { .. } => 4,
+                };
+                c[slot] += 1;
+                None
+            }
+        };
+        counts.set(c);
+        out
+    }))
 }
