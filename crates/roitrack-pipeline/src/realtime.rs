@@ -248,7 +248,7 @@ pub fn run_loop_with_progress<C: RoiCamera>(
         while slot < config.roi_slots {
             let t_s = config.t_start_s + slot as f64 / config.rate_hz;
             if let Some(progress) = progress
-                && slot % 256 == 0
+                && slot.is_multiple_of(256)
             {
                 progress.store(slot, Ordering::Relaxed);
             }

@@ -35,13 +35,30 @@ static GLOBAL: CountingAllocator = CountingAllocator;
 #[test]
 fn steady_state_loop_does_not_allocate() {
     let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
-    let renderer = RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
+    let renderer = RoiRenderer::new(
+        scenario.camera.clone(),
+        scenario.target.clone(),
+        SensorModel::default(),
+    )
+    .unwrap();
     let truth = |t: f64| scenario.state_at(t);
     let order = bit_reversed_indices(16);
     let n = 3000;
     // ROI k is exposed at 0.3 s + (k + 1) / 4 kHz: slot 0 is the full frame.
-    let replay = ReplayCamera::prerender(&renderer, &truth, &order, 32, 0.3 + 1.0 / 4000.0, 4000.0, 2 * n + 8, 5);
-    for (name, estimator) in [("kalman", EstimatorKind::Kalman), ("vvs", EstimatorKind::Vvs)] {
+    let replay = ReplayCamera::prerender(
+        &renderer,
+        &truth,
+        &order,
+        32,
+        0.3 + 1.0 / 4000.0,
+        4000.0,
+        2 * n + 8,
+        5,
+    );
+    for (name, estimator) in [
+        ("kalman", EstimatorKind::Kalman),
+        ("vvs", EstimatorKind::Vvs),
+    ] {
         let tracker = TrackerConfig {
             estimator,
             ..Default::default()
@@ -57,9 +74,14 @@ fn steady_state_loop_does_not_allocate() {
                 ..Default::default()
             };
             let before = ALLOCATIONS.load(Ordering::SeqCst);
-            let report = run_loop(camera, &scenario.camera, &scenario.target, tracker, &config).unwrap();
+            let report =
+                run_loop(camera, &scenario.camera, &scenario.target, tracker, &config).unwrap();
             let allocations = ALLOCATIONS.load(Ordering::SeqCst) - before;
-            assert!(report.estimates.len() > slots / 10 - 5, "{name}: {} estimates", report.estimates.len());
+            assert!(
+                report.estimates.len() > slots / 10 - 5,
+                "{name}: {} estimates",
+                report.estimates.len()
+            );
             assert_eq!(report.dropped, 0);
             counts.push((allocations, report.rois));
         }
