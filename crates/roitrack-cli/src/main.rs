@@ -18,6 +18,7 @@ struct Cli {
 enum Command {
     Demo(commands::demo::DemoArgs),
     Bench(commands::bench::BenchArgs),
+    Compare(commands::compare::CompareArgs),
     Simulate(commands::simulate::SimulateArgs),
     Track(commands::track::TrackArgs),
     Eval(commands::eval::EvalArgs),
@@ -26,10 +27,18 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // Like other command-line tools, end quietly when the reader of our output goes away (`roitrack eval | head`)
+    // instead of panicking on a broken pipe.
+    #[cfg(unix)]
+    // SAFETY: called first thing in main, before any other thread exists; restores the default signal action.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Demo(args) => commands::demo::run(&args),
         Command::Bench(args) => commands::bench::run(&args),
+        Command::Compare(args) => commands::compare::run(&args),
         Command::Simulate(args) => commands::simulate::run(&args),
         Command::Track(args) => commands::track::run(&args),
         Command::Eval(args) => commands::eval::run(&args),

@@ -1,9 +1,10 @@
 //! Blob centroid in an ROI: threshold, keep the connected component of the brightest pixel, first-order moments.
 //!
 //! [`measure_blob`] allocates nothing and reads each pixel at most three times (maximum, threshold mask, moments of
-//! the component's rows), 16 at a time where it can. It handles ROIs up to [`MAX_ROI_WIDTH`] x [`MAX_ROI_HEIGHT`] pixels: each row's
-//! above-threshold mask is one `u64`, and the connected component (8-connectivity) is grown a whole row at a time
-//! with bit operations (a run of set bits containing a seed is `((m + s) ^ m) & m` towards the high bits).
+//! the component's rows), 16 at a time where it can. It handles ROIs up to [`MAX_ROI_WIDTH`] x [`MAX_ROI_HEIGHT`]
+//! pixels: each row's above-threshold mask is one `u64`, and the connected component (8-connectivity) is grown a whole
+//! row at a time with bit operations (the run of set bits of `m` from a seed bit `s` towards the high bits is
+//! `((m + s) ^ m) & m`).
 
 use thiserror::Error;
 
@@ -376,8 +377,9 @@ fn grow_component(mask: &[u64], seed_i: usize, seed_j: usize, comp: &mut [u64]) 
 
 /// Measures the blob of an ROI: the connected component (8-connectivity) of above-threshold pixels that contains the
 /// brightest pixel (the first in row-major order if several), so another blob or a reflection elsewhere in the ROI
-/// does not bias it. The centroid is the component's first-order moments, weighted by `value - background` or binary
-/// (see [`CentroidOptions`]), in full-sensor pixel coordinates.
+/// does not bias it (a blob of equal brightness elsewhere in the ROI may win the tie: size the ROI to hold one blob).
+/// The centroid is the component's first-order moments, weighted by `value - threshold` or binary (see
+/// [`CentroidOptions`]), in full-sensor pixel coordinates.
 ///
 /// Rejections, in this order: [`BlobRejection::Absent`] (nothing above the threshold or too little contrast),
 /// [`BlobRejection::TouchesBorder`] (the component reaches the ROI's outer rows or columns), then the area limits.

@@ -93,9 +93,9 @@ fn frame_levels(pixels: &[u16], threshold: Threshold) -> Option<(f64, u16, f64)>
 
 /// Detects the blobs of a row-major `width` x `height` frame: the connected components (8-connectivity) of the
 /// pixels above the threshold ([`Threshold::Auto`]: the image's median, taken as the background, plus
-/// [`AUTO_THRESHOLD_FRACTION`] of the contrast of its maximum), skipping those that touch the image's border or fall outside `opts`' area limits. Each centroid is
-/// measured as by [`crate::measure_blob`] (weighted by `value - background` or binary). Blobs come in the order of
-/// their first pixel (row-major).
+/// [`AUTO_THRESHOLD_FRACTION`] of the contrast of its maximum), skipping those that touch the image's border or fall
+/// outside `opts`' area limits. Each centroid is measured as by [`crate::measure_blob`] (weighted by
+/// `value - threshold`, or binary). Blobs come in the order of their first pixel (row-major).
 ///
 /// # Panics
 /// If `pixels.len() != width * height`.

@@ -317,8 +317,9 @@ impl RoiRenderer {
     ///
     /// Perspective moves the centre of a tilted disk's image ellipse away from the projection of the disk's centre
     /// (the near half looks bigger, the offset grows as the square of the size): by 0.010-0.012 px for the 6 mm blobs
-    /// and 0.026 px for the 9 mm key blob at the bench pose. The centre is exact for a pinhole camera; with distortion it is the distorted centre of the pinhole
-    /// ellipse (the distortion's own effect on the centroid is of second order). `None` if the blob is not visible.
+    /// and 0.026 px for the 9 mm key blob at the bench pose. The centre is exact for a pinhole camera; with distortion
+    /// it is the distorted centre of the pinhole ellipse (the distortion's own effect on the centroid is of second
+    /// order). `None` if the blob is not visible.
     pub fn disk_image_centre_px(&self, state: &MotionState, index: usize) -> Option<Vector2<f64>> {
         let frame = self.disk_frame(index, &state.cam_r_obj, &state.cam_t_obj_m);
         let h = plane_homography(&frame)?.try_inverse()?;

@@ -309,7 +309,8 @@ mod tests {
         );
         assert!((centre - px).norm() < 1.0);
         // The 9 mm key blob is about 22 px across at 0.6 m: the ROI holds it with margins.
-        assert!(r.roi.width >= 28 && r.roi.width <= 40, "{:?}", r.roi);
+        // 22 px of key blob + blur margins + 4 sigma of the 1 px minimum uncertainty on each side.
+        assert!(r.roi.width >= 28 && r.roi.width <= 48, "{:?}", r.roi);
         // Then the bit-reversed order.
         let ids: Vec<usize> = (0..4)
             .map(|_| s.next(&p, 0.004).unwrap().point_index)
