@@ -16,6 +16,7 @@ use roitrack_eval::{EvalOptions, Metrics, evaluate};
 use roitrack_image::{CentroidOptions, RoiRenderer, SensorModel, centroid_accuracy};
 use roitrack_pipeline::cameras::SimulatedCamera;
 use roitrack_pipeline::realtime::{LoopConfig, LoopReport, run_loop_with_progress};
+use roitrack_pipeline::scheduler::ScheduleOrder;
 use roitrack_plot::figures::{TrackSeries, TruthSeries, write_figures};
 use roitrack_sim::{Scenario, SimulatedRun, SimulationOptions, simulate};
 
@@ -38,9 +39,29 @@ pub struct DemoArgs {
     /// Pace the camera at the ROI rate (4 kHz, real time) instead of running free.
     #[arg(long)]
     pub paced: bool,
+    /// Order in which the scheduler reads the points: bit-reversed, row-major, or active (most informative next).
+    #[arg(long, value_enum, default_value = "bitrev")]
+    pub order: ScheduleOrderArg,
     /// Print one JSON object per row instead of a table.
     #[arg(long)]
     pub json: bool,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ScheduleOrderArg {
+    Bitrev,
+    Rowmajor,
+    Active,
+}
+
+impl From<ScheduleOrderArg> for ScheduleOrder {
+    fn from(o: ScheduleOrderArg) -> Self {
+        match o {
+            ScheduleOrderArg::Bitrev => ScheduleOrder::BitReversed,
+            ScheduleOrderArg::Rowmajor => ScheduleOrder::RowMajor,
+            ScheduleOrderArg::Active => ScheduleOrder::Active,
+        }
+    }
 }
 
 /// The estimators the demo compares: label, file stem, estimator, VVS gain.
@@ -122,12 +143,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             },
             args.seed,
         );
-        let loop_config = LoopConfig {
+        let mut loop_config = LoopConfig {
             rate_hz: options.rate_hz,
             paced: args.paced,
             roi_slots: slots,
             ..LoopConfig::default()
         };
+        loop_config.scheduler.order = args.order.into();
+        loop_config.scheduler.noise_px = noise_px;
         let done = AtomicUsize::new(0);
         let finished = AtomicBool::new(false);
         let report = std::thread::scope(|scope| {
