@@ -19,6 +19,7 @@ pub mod kalman;
 pub mod normal_equations;
 pub mod static_pose;
 pub mod window;
+pub mod window_fit;
 
 use nalgebra::{SMatrix, Vector2};
 use thiserror::Error;
@@ -495,19 +496,14 @@ impl Tracker {
         state: &MotionState,
         t_ref: f64,
     ) -> NormalEquations<12> {
-        let mut ne = NormalEquations::<12>::default();
-        let points = self.target.points();
-        for o in &self.scratch {
-            let p = &points[o.point_index].point_in_obj_m;
-            match self
-                .model
-                .project_with_jacobian(kind, state, p, o.t_s - t_ref)
-            {
-                Some(pp) => ne.add(&pp.jacobian, &(pp.pixel - o.ideal_px), 1.0),
-                None => ne.cost = f64::INFINITY,
-            }
-        }
-        ne
+        window_fit::window_normal_equations(
+            &self.model,
+            self.target.points(),
+            kind,
+            state,
+            t_ref,
+            &self.scratch,
+        )
     }
 
     /// Levenberg-Marquardt of the 12 parameters on the scratch window, to convergence.
@@ -517,31 +513,14 @@ impl Tracker {
         t_ref: f64,
         max_iterations: usize,
     ) -> (MotionState, NormalEquations<12>, usize) {
-        let mut state = initial;
-        let mut ne = self.accumulate(JacobianKind::Exact, &state, t_ref);
-        let mut damping = 1e-4;
-        let mut iterations = 0;
-        while iterations < max_iterations && ne.cost.is_finite() {
-            iterations += 1;
-            let Some(step) = ne.solve(damping) else { break };
-            let candidate = state.corrected(&step);
-            let candidate_ne = self.accumulate(JacobianKind::Exact, &candidate, t_ref);
-            if candidate_ne.cost <= ne.cost {
-                let converged = ne.cost - candidate_ne.cost <= 1e-12 * ne.cost + 1e-24;
-                state = candidate;
-                ne = candidate_ne;
-                damping = (damping * 0.1).max(1e-10);
-                if converged {
-                    break;
-                }
-            } else {
-                damping *= 10.0;
-                if damping > 1e8 {
-                    break;
-                }
-            }
-        }
-        (state, ne, iterations)
+        window_fit::levenberg_marquardt(
+            &self.model,
+            self.target.points(),
+            initial,
+            t_ref,
+            &self.scratch,
+            max_iterations,
+        )
     }
 
     fn kalman_update(&mut self, obs: &Observation) {
@@ -592,25 +571,25 @@ impl Tracker {
                 let mut iterations = 0;
                 let mut last_ne = None;
                 for _ in 0..self.config.iterations {
-                    let ne = self.accumulate(self.config.jacobian, &self.state, t_new);
-                    inverse_condition = ne.inverse_condition();
-                    last_ne = Some(ne);
-                    if inverse_condition < self.config.min_inverse_condition {
+                    let step = window_fit::vvs_iteration(
+                        &self.model,
+                        self.target.points(),
+                        self.config.jacobian,
+                        &self.state,
+                        t_new,
+                        &self.scratch,
+                        self.config.gain,
+                        self.config.min_inverse_condition,
+                    );
+                    inverse_condition = step.inverse_condition;
+                    last_ne = Some(step.normal_equations);
+                    if !step.applied {
                         status = TrackStatus::Degenerate;
                         break;
                     }
-                    let Some(step) = ne.solve(0.0) else {
-                        status = TrackStatus::Degenerate;
-                        break;
-                    };
-                    let candidate = self.state.corrected(&(step * self.config.gain));
-                    if !candidate.is_finite() {
-                        status = TrackStatus::Degenerate;
-                        break;
-                    }
-                    self.state = candidate;
+                    self.state = step.state;
                     iterations += 1;
-                    if step.norm() < 1e-12 {
+                    if step.step_norm < 1e-12 {
                         break;
                     }
                 }
