@@ -32,7 +32,7 @@ pub use projection::{JacobianKind, SpatioTemporalModel};
 pub use roi_order::RoiOrder;
 pub use samples::{Measurement, PoseSample, TwistSample};
 pub use state::MotionState;
-pub use target::{Target, TargetError, TargetPoint};
+pub use target::{Target, TargetError, TargetPlane, TargetPoint};
 
 /// A 12-vector (v, w, dV, dW): a correction of the state, see [`MotionState::corrected`].
 pub type Vector12 = nalgebra::SVector<f64, 12>;

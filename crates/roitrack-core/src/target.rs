@@ -40,6 +40,18 @@ pub struct TargetPoint {
 pub struct Target {
     points: Vec<TargetPoint>,
     index_of_id: HashMap<u32, usize>,
+    /// For a planar target: its plane's frame and the points in it (computed once: the static pose solver uses them).
+    plane: Option<TargetPlane>,
+}
+
+/// The plane of a planar target: `point_in_obj = centre + obj_r_plane (x, y, 0)`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetPlane {
+    pub centre_m: Vector3<f64>,
+    /// Columns: the two in-plane axes (largest spread first) and their cross product.
+    pub obj_r_plane: Matrix3<f64>,
+    /// Each point's (x, y) in the plane (m), in the order of [`Target::points`].
+    pub points_in_plane_m: Vec<nalgebra::Vector2<f64>>,
 }
 
 /// Minimum number of points of a target (a pose needs 3 non-collinear points; 4 make it unique for planar targets).
@@ -87,14 +99,31 @@ impl Target {
                 return Err(TargetError::DuplicateId { id: p.id });
             }
         }
-        let target = Self {
+        let mut target = Self {
             points,
             index_of_id,
+            plane: None,
         };
         let spread = target.principal_spreads_m();
         if spread[1] < COLLINEAR_TOLERANCE_M {
             return Err(TargetError::Collinear {
                 spread_m: spread[1],
+            });
+        }
+        if target.is_planar() {
+            let (centre_m, obj_r_plane) = target.principal_frame();
+            let points_in_plane_m = target
+                .points
+                .iter()
+                .map(|p| {
+                    let q = obj_r_plane.transpose() * (p.point_in_obj_m - centre_m);
+                    nalgebra::Vector2::new(q.x, q.y)
+                })
+                .collect();
+            target.plane = Some(TargetPlane {
+                centre_m,
+                obj_r_plane,
+                points_in_plane_m,
             });
         }
         Ok(target)
@@ -145,6 +174,28 @@ impl Target {
             (Some(p), None) if largest.is_finite() => Some(p),
             _ => None,
         }
+    }
+
+    /// The plane of a planar target (`None` if the points are not on one plane).
+    pub fn plane(&self) -> Option<&TargetPlane> {
+        self.plane.as_ref()
+    }
+
+    /// Centroid and principal axes (columns, largest spread first, the third their cross product).
+    fn principal_frame(&self) -> (Vector3<f64>, Matrix3<f64>) {
+        let n = self.points.len() as f64;
+        let centre = self.points.iter().map(|p| p.point_in_obj_m).sum::<Vector3<f64>>() / n;
+        let mut scatter = Matrix3::zeros();
+        for p in &self.points {
+            let d = p.point_in_obj_m - centre;
+            scatter += d * d.transpose();
+        }
+        let eig = scatter.symmetric_eigen();
+        let mut order = [0usize, 1, 2];
+        order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+        let e1 = eig.eigenvectors.column(order[0]).into_owned();
+        let e2 = eig.eigenvectors.column(order[1]).into_owned();
+        (centre, Matrix3::from_columns(&[e1, e2, e1.cross(&e2)]))
     }
 
     /// Standard deviations of the points along their three principal axes, largest first (m).

@@ -472,7 +472,7 @@ impl Tracker {
             return None;
         }
         let sigma2 = self.config.noise_px * self.config.noise_px;
-        ne.jtj.try_inverse().map(|inv| inv * sigma2)
+        ne.symmetric_jtj().try_inverse().map(|inv| inv * sigma2)
     }
 
     fn effective_window(&self) -> WindowMode {

@@ -58,7 +58,8 @@ pub fn vvs_iteration(
     min_inverse_condition: f64,
 ) -> VvsStep {
     let ne = window_normal_equations(model, points, kind, state, t_ref_s, window);
-    let inverse_condition = ne.inverse_condition();
+    let solved = ne.solve_with_conditioning();
+    let inverse_condition = solved.map_or(0.0, |(_, c)| c);
     let refused = VvsStep {
         state: *state,
         inverse_condition,
@@ -67,10 +68,7 @@ pub fn vvs_iteration(
         residual_rms_px: ne.residual_rms_px(),
         normal_equations: ne,
     };
-    if inverse_condition < min_inverse_condition {
-        return refused;
-    }
-    let Some(step) = ne.solve(0.0) else {
+    let Some((step, _)) = solved.filter(|_| inverse_condition >= min_inverse_condition) else {
         return refused;
     };
     let candidate = state.corrected(&(step * gain));
