@@ -64,53 +64,50 @@ impl SpatioTemporalModel {
         d_s: f64,
     ) -> Option<ProjectedPoint> {
         let rotation_increment = state.angular_velocity_radps * d_s;
-        let e = so3::exp(&rotation_increment);
+        let (e, left_jacobian) = so3::exp_and_left_jacobian(&rotation_increment);
         let op0 = state.cam_r_obj * point_in_obj_m;
         let op = e * op0;
         let point_in_cam_m = op + state.cam_t_obj_m + state.velocity_mps * d_s;
         let pixel = self.intrinsics.pixel_from_cam(&point_in_cam_m)?;
         let dm_dp: Matrix2x3<f64> = self.intrinsics.pixel_jacobian_wrt_cam(&point_in_cam_m);
-        let (d_trans, d_rot, d_vel, d_angvel): (
-            Matrix3<f64>,
-            Matrix3<f64>,
-            Matrix3<f64>,
-            Matrix3<f64>,
-        ) = match kind {
+        let mut jacobian = Matrix2x12::zeros();
+        match kind {
             JacobianKind::Exact => {
-                let op_hat = so3::hat(&op);
-                (
-                    Matrix3::identity(),
-                    -op_hat * e.matrix(),
-                    Matrix3::identity() * d_s,
-                    -op_hat * so3::left_jacobian(&rotation_increment) * d_s,
-                )
+                // dm/dP [I, -[OP]x E, d I, -[OP]x J_l d], with the rows of dm/dP [OP]x as cross products:
+                // (a [OP]x)ᵀ = a × OP for a row a.
+                let a_op = Matrix2x3::from_rows(&[
+                    dm_dp.row(0).transpose().cross(&op).transpose(),
+                    dm_dp.row(1).transpose().cross(&op).transpose(),
+                ]);
+                jacobian.fixed_view_mut::<2, 3>(0, 0).copy_from(&dm_dp);
+                jacobian
+                    .fixed_view_mut::<2, 3>(0, 3)
+                    .copy_from(&(-(a_op * e)));
+                jacobian
+                    .fixed_view_mut::<2, 3>(0, 6)
+                    .copy_from(&(dm_dp * d_s));
+                jacobian
+                    .fixed_view_mut::<2, 3>(0, 9)
+                    .copy_from(&(-(a_op * left_jacobian) * d_s));
             }
             JacobianKind::Paper => {
                 let w = &state.angular_velocity_radps;
                 let op0_hat = so3::hat(&op0);
                 let h_trans = so3::hat(w) * 2.0;
                 let h_rot = so3::hat(&(op0_hat * w));
-                (
+                let blocks: [Matrix3<f64>; 4] = [
                     Matrix3::identity() + h_trans * d_s,
                     -op0_hat + h_rot * d_s,
                     Matrix3::identity() * d_s,
                     -op0_hat * d_s,
-                )
+                ];
+                for (k, block) in blocks.iter().enumerate() {
+                    jacobian
+                        .fixed_view_mut::<2, 3>(0, 3 * k)
+                        .copy_from(&(dm_dp * block));
+                }
             }
-        };
-        let mut jacobian = Matrix2x12::zeros();
-        jacobian
-            .fixed_view_mut::<2, 3>(0, 0)
-            .copy_from(&(dm_dp * d_trans));
-        jacobian
-            .fixed_view_mut::<2, 3>(0, 3)
-            .copy_from(&(dm_dp * d_rot));
-        jacobian
-            .fixed_view_mut::<2, 3>(0, 6)
-            .copy_from(&(dm_dp * d_vel));
-        jacobian
-            .fixed_view_mut::<2, 3>(0, 9)
-            .copy_from(&(dm_dp * d_angvel));
+        }
         Some(ProjectedPoint {
             pixel,
             jacobian,

@@ -67,6 +67,34 @@ pub fn left_jacobian(a: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::identity() + k * c1 + k * k * c2
 }
 
+/// `Exp(a)` (as a matrix) and `J_l(a)` together, sharing one `sin_cos`: the hot path of the projection Jacobian.
+#[inline]
+pub fn exp_and_left_jacobian(a: &Vector3<f64>) -> (Matrix3<f64>, Matrix3<f64>) {
+    let theta2 = a.norm_squared();
+    let k = hat(a);
+    let k2 = k * k;
+    // Exp(a) = I + s1 K + c1 K², J_l(a) = I + c1 K + c2 K², with K = [a]× (not normalised).
+    let (s1, c1, c2) = if theta2 < SMALL_ANGLE_RAD * SMALL_ANGLE_RAD {
+        (
+            1.0 - theta2 / 6.0 + theta2 * theta2 / 120.0,
+            0.5 - theta2 / 24.0 + theta2 * theta2 / 720.0,
+            1.0 / 6.0 - theta2 / 120.0 + theta2 * theta2 / 5040.0,
+        )
+    } else {
+        let theta = theta2.sqrt();
+        let (s, c) = theta.sin_cos();
+        (
+            s / theta,
+            (1.0 - c) / theta2,
+            (theta - s) / (theta2 * theta),
+        )
+    };
+    (
+        Matrix3::identity() + k * s1 + k2 * c1,
+        Matrix3::identity() + k * c1 + k2 * c2,
+    )
+}
+
 /// The inverse of [`left_jacobian`]: `I - ½ [a]× + (1/θ² - (1 + cos θ)/(2 θ sin θ)) [a]×²`. Singular at θ = 2π.
 pub fn left_jacobian_inverse(a: &Vector3<f64>) -> Matrix3<f64> {
     let theta2 = a.norm_squared();
@@ -138,6 +166,16 @@ mod tests {
             prop_assume!(a.norm() < 3.0);
             let product = left_jacobian(&a) * left_jacobian_inverse(&a);
             prop_assert!((product - Matrix3::identity()).norm() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn exp_and_left_jacobian_agree_with_the_separate_functions() {
+        for scale in [0.0, 1e-9, 1e-5, 0.99e-4, 1.01e-4, 0.3, 2.0, 3.0] {
+            let a = Vector3::new(0.3, -0.5, 0.8) * scale;
+            let (e, j) = exp_and_left_jacobian(&a);
+            assert!((e - exp(&a).matrix()).norm() < 1e-15, "scale {scale}");
+            assert!((j - left_jacobian(&a)).norm() < 1e-15, "scale {scale}");
         }
     }
 

@@ -184,7 +184,12 @@ impl Target {
     /// Centroid and principal axes (columns, largest spread first, the third their cross product).
     fn principal_frame(&self) -> (Vector3<f64>, Matrix3<f64>) {
         let n = self.points.len() as f64;
-        let centre = self.points.iter().map(|p| p.point_in_obj_m).sum::<Vector3<f64>>() / n;
+        let centre = self
+            .points
+            .iter()
+            .map(|p| p.point_in_obj_m)
+            .sum::<Vector3<f64>>()
+            / n;
         let mut scatter = Matrix3::zeros();
         for p in &self.points {
             let d = p.point_in_obj_m - centre;

@@ -74,7 +74,11 @@ fn normalisation<const D: usize>(
 /// Planar target: the homography from the target's plane to normalised image coordinates (8 unknowns, h33 = 1, which
 /// holds for any plane in front of the camera, by normal equations on Hartley-normalised coordinates), decomposed
 /// into a pose. Fixed-size, no allocation: a few hundred nanoseconds.
-fn planar_pose(target: &Target, obs: &[Observation], model: &SpatioTemporalModel) -> Result<MotionState, InitError> {
+fn planar_pose(
+    target: &Target,
+    obs: &[Observation],
+    model: &SpatioTemporalModel,
+) -> Result<MotionState, InitError> {
     let plane = target.plane().ok_or(InitError::Degenerate {
         reason: "the target is not planar",
     })?;
@@ -90,10 +94,19 @@ fn planar_pose(target: &Target, obs: &[Observation], model: &SpatioTemporalModel
     let (mut plane_spread, mut image_spread) = (0.0, 0.0);
     for o in obs {
         plane_spread += (plane.points_in_plane_m[o.point_index] - plane_mean).norm_squared();
-        image_spread += (model.intrinsics.normalized_from_pixel(&o.ideal_px) - image_mean).norm_squared();
+        image_spread +=
+            (model.intrinsics.normalized_from_pixel(&o.ideal_px) - image_mean).norm_squared();
     }
-    let ps = if plane_spread > 0.0 { (n / plane_spread).sqrt() } else { 1.0 };
-    let is = if image_spread > 0.0 { (n / image_spread).sqrt() } else { 1.0 };
+    let ps = if plane_spread > 0.0 {
+        (n / plane_spread).sqrt()
+    } else {
+        1.0
+    };
+    let is = if image_spread > 0.0 {
+        (n / image_spread).sqrt()
+    } else {
+        1.0
+    };
     let mut ata = SMatrix::<f64, 8, 8>::zeros();
     let mut atb = SVector::<f64, 8>::zeros();
     for o in obs {
@@ -125,10 +138,34 @@ fn planar_pose(target: &Target, obs: &[Observation], model: &SpatioTemporalModel
     })?;
     let h = h.solve(&atb);
     let hn = Matrix3::new(h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], 1.0);
-    let t_plane = Matrix3::new(ps, 0.0, -ps * plane_mean.x, 0.0, ps, -ps * plane_mean.y, 0.0, 0.0, 1.0);
-    let t_image_inv = Matrix3::new(1.0 / is, 0.0, image_mean.x, 0.0, 1.0 / is, image_mean.y, 0.0, 0.0, 1.0);
+    let t_plane = Matrix3::new(
+        ps,
+        0.0,
+        -ps * plane_mean.x,
+        0.0,
+        ps,
+        -ps * plane_mean.y,
+        0.0,
+        0.0,
+        1.0,
+    );
+    let t_image_inv = Matrix3::new(
+        1.0 / is,
+        0.0,
+        image_mean.x,
+        0.0,
+        1.0 / is,
+        image_mean.y,
+        0.0,
+        0.0,
+        1.0,
+    );
     let hm = t_image_inv * hn * t_plane;
-    let (h1, h2, h3) = (hm.column(0).into_owned(), hm.column(1).into_owned(), hm.column(2).into_owned());
+    let (h1, h2, h3) = (
+        hm.column(0).into_owned(),
+        hm.column(1).into_owned(),
+        hm.column(2).into_owned(),
+    );
     let mut scale = 2.0 / (h1.norm() + h2.norm());
     if !scale.is_finite() {
         return Err(InitError::Degenerate {
@@ -145,10 +182,14 @@ fn planar_pose(target: &Target, obs: &[Observation], model: &SpatioTemporalModel
         let v = h2 * scale;
         (v - r1 * r1.dot(&v)).normalize()
     };
-    let cam_r_plane = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]));
+    let cam_r_plane =
+        Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[r1, r2, r1.cross(&r2)]));
     let cam_t_plane = h3 * scale;
     let cam_r_obj = cam_r_plane * Rotation3::from_matrix_unchecked(plane.obj_r_plane.transpose());
-    Ok(MotionState::at_rest(cam_r_obj, cam_t_plane - cam_r_obj * plane.centre_m))
+    Ok(MotionState::at_rest(
+        cam_r_obj,
+        cam_t_plane - cam_r_obj * plane.centre_m,
+    ))
 }
 
 /// Non-planar target: the direct linear transform of the 3 x 4 projection matrix (at least 6 points).
@@ -276,7 +317,10 @@ pub fn refine_static_pose(
         // Gauss-Newton converges about quadratically here: after a step this small the next is about 1e-9 (m, rad),
         // far below the noise, so it is taken without checking the cost (the normal equations at the previous state
         // serve the figures).
-        if damping == 0.0 && step.fixed_rows::<3>(0).norm() < 1e-6 && step.fixed_rows::<3>(3).norm() < 1e-6 {
+        if damping == 0.0
+            && step.fixed_rows::<3>(0).norm() < 1e-6
+            && step.fixed_rows::<3>(3).norm() < 1e-6
+        {
             state = candidate;
             converged = true;
             break;
