@@ -418,7 +418,7 @@ impl Tracker {
         let t_ref = self.window.last(1).next()?.t_s;
         self.fill_scratch(WindowMode::Last(init_len));
         let (state, ne, iterations) = self.levenberg_marquardt(fit.state, t_ref, 50);
-        let inverse_condition = ne.inverse_condition();
+        let inverse_condition = ne.fast_inverse_condition();
         let well_posed = inverse_condition >= self.config.min_inverse_condition;
         // Residuals far above the noise mean a wrong local minimum or bad data: wait for more measurements.
         if ne.residual_rms_px() > self.config.lost_residual_px {
@@ -468,7 +468,7 @@ impl Tracker {
 
     /// σ² (JᵀJ)⁻¹ of a window, when it is well posed.
     fn window_covariance(&self, ne: &NormalEquations<12>) -> Option<Matrix12> {
-        if ne.inverse_condition() < self.config.min_inverse_condition {
+        if ne.fast_inverse_condition() < self.config.min_inverse_condition {
             return None;
         }
         let sigma2 = self.config.noise_px * self.config.noise_px;
@@ -547,7 +547,7 @@ impl Tracker {
             EstimatorKind::Kalman => {
                 // The filter is already at t_new; the window only gives the residual and conditioning figures.
                 let ne = self.accumulate(JacobianKind::Exact, &self.state, t_new);
-                let inverse_condition = ne.inverse_condition();
+                let inverse_condition = ne.fast_inverse_condition();
                 self.track_conditioning(inverse_condition);
                 let status = if inverse_condition < self.config.min_inverse_condition {
                     TrackStatus::Degenerate
@@ -607,7 +607,7 @@ impl Tracker {
                 let predicted = self.state.predicted(t_new - self.t_ref_s);
                 self.t_ref_s = t_new;
                 let (state, ne, iterations) = self.levenberg_marquardt(predicted, t_new, 30);
-                let inverse_condition = ne.inverse_condition();
+                let inverse_condition = ne.fast_inverse_condition();
                 self.track_conditioning(inverse_condition);
                 let status = if inverse_condition < self.config.min_inverse_condition
                     || !state.is_finite()
