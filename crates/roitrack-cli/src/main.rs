@@ -24,6 +24,7 @@ enum Command {
     Eval(commands::eval::EvalArgs),
     Target(commands::target::TargetArgs),
     Tradeoff(commands::tradeoff::TradeoffArgs),
+    PnpBench(commands::pnp_bench::PnpBenchArgs),
 }
 
 fn main() -> ExitCode {
@@ -44,6 +45,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => commands::eval::run(&args),
         Command::Target(args) => commands::target::run(&args),
         Command::Tradeoff(args) => commands::tradeoff::run(&args),
+        Command::PnpBench(args) => commands::pnp_bench::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

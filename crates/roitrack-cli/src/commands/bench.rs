@@ -1,8 +1,46 @@
-//! `roitrack bench`: a quick measurement of the real-time loop, free-running on pre-rendered ROIs (rendering does not
-//! count): ROI throughput with an estimate every 10 ROIs and at every ROI, and the ROI-to-estimate latency.
+//! `roitrack bench`: a quick measurement (about 10 s) of the hot paths and of the real-time loop.
+//!
+//! **Hot paths**, on the canonical scene of SPEC section 6 (inputs and timer shared with the criterion benches of
+//! `cargo bench -p roitrack-bench`, see [`roitrack_bench`]): each item is timed for `--item-ms` in batches of calls
+//! lasting at least 5 µs (a sub-µs item is called many times per clock reading); the figures are the median and the
+//! 99th percentile over batches of batch time / batch size, in µs (for a batch of one call, the p99 is per call; for
+//! larger batches it is the p99 of a batch's mean).
+//!
+//! **Real-time loop**, free-running on pre-rendered ROIs of the orthoglide scenario (rendering does not count): ROI
+//! throughput with an estimate every 10 ROIs and at every ROI, and the ROI-to-estimate latency with the camera paced at
+//! 20 kHz.
+//!
+//! With `--json`, one JSON object with these stable keys (times in µs, rates in ROIs/s; a figure that could not be
+//! measured is `null`):
+//!
+//! - `jacobian_residual_w16_us_median`, `jacobian_residual_w16_us_p99`: exact Jacobian + residual (accumulated as
+//!   normal equations) of a 16-measurement window;
+//! - `control_step_w16_us_median`, `control_step_w16_us_p99`: one control step (VVS, exact Jacobian, 1 iteration,
+//!   gain 1, degeneracy gate 3e-3, so with the conditioning figure) on 16 measurements;
+//! - `control_step_w32_us_median`, `control_step_w32_us_p99`: the same on 32 measurements;
+//! - `gauss_newton_solve_us_median`, `gauss_newton_solve_us_p99`: Levenberg-Marquardt of the 12 parameters to
+//!   convergence on 32 measurements, from 1 mm / 0.5° / 0.1 m/s / 0.1 rad/s off the truth;
+//!   `gauss_newton_iterations`: the iterations it takes;
+//! - `static_pose_us_median`, `static_pose_us_p99`: the static pose from scratch, 16 points, no prior, refined to
+//!   convergence; `static_pose_iterations`: the iterations of that refinement;
+//! - `centroid_24_us_median`, `centroid_24_us_p99`: blob centroid of a 24x24 8-bit ROI (6 mm blob);
+//! - `render_roi_us_median`, `render_roi_us_p99`: the simulator's rendering of that ROI (one blob, noise drawn);
+//! - `item_ms`: the timing budget of each of those items (ms);
+//! - `loop_k10_rois_per_s`, `loop_k1_rois_per_s`: free-running loop throughput with an estimate every 10 ROIs and at
+//!   every ROI (best of `--repeats`); `loop_k10_dropped`, `loop_k1_dropped`: ROIs dropped in those runs;
+//!   `loop_k10_rejected`, `loop_k1_rejected`: ROIs whose centroid was rejected;
+//! - `latency_us_p50`, `latency_us_p99`: ROI-to-estimate latency with the camera paced at `paced_hz` (median over
+//!   `--repeats` of each run's quantile); `paced_rois_per_s`, `paced_dropped`, `paced_late`: that run's throughput,
+//!   drops and late ROIs;
+//! - `rois_per_run`: ROIs per loop run.
+//!
+//! Keys are only ever added, never renamed or removed.
+
+use std::time::Duration;
 
 use anyhow::Result;
 use clap::Args;
+use roitrack_bench::{HotPaths, Item, Timing, quantile, time_all};
 use roitrack_core::estimator::TrackerConfig;
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_image::{RoiRenderer, SensorModel};
@@ -10,26 +48,50 @@ use roitrack_pipeline::cameras::ReplayCamera;
 use roitrack_pipeline::realtime::{LoopConfig, LoopReport, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};
 
-/// Measure the real-time loop (throughput, latency) on pre-rendered ROIs of the orthoglide scenario.
+/// Time the hot paths (median, p99) and the real-time loop (throughput, latency).
 #[derive(Debug, Args)]
 pub struct BenchArgs {
     /// Print one JSON object with stable keys instead of a table.
     #[arg(long)]
     pub json: bool,
     /// ROIs per loop run.
-    #[arg(long, default_value_t = 16_000)]
+    #[arg(long, default_value_t = DEFAULT_ROIS)]
     pub rois: usize,
     /// Runs of each configuration (the best throughput and the median latencies are reported).
-    #[arg(long, default_value_t = 3)]
+    #[arg(long, default_value_t = DEFAULT_REPEATS)]
     pub repeats: usize,
+    /// Timing budget of each hot-path item (ms). Default: 400 ms, scaled down with the loop's work when `--rois` x
+    /// `--repeats` is below the default 16,000 x 3 (at least 10 ms), so a short run stays short.
+    #[arg(long)]
+    pub item_ms: Option<u64>,
 }
 
-/// Quantile of a sorted slice.
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
+const DEFAULT_ROIS: usize = 16_000;
+const DEFAULT_REPEATS: usize = 3;
+/// Timing budget of each hot-path item at the default loop size (ms).
+const DEFAULT_ITEM_MS: f64 = 400.0;
+
+impl BenchArgs {
+    fn item_budget(&self) -> Duration {
+        let ms = match self.item_ms {
+            Some(ms) => ms as f64,
+            None => {
+                let work = (self.rois * self.repeats.max(1)) as f64
+                    / (DEFAULT_ROIS * DEFAULT_REPEATS) as f64;
+                (DEFAULT_ITEM_MS * work.min(1.0)).max(10.0)
+            }
+        };
+        Duration::from_secs_f64(ms / 1e3)
     }
-    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
+}
+
+/// A JSON number with `decimals` decimals, `null` if not finite.
+fn json_number(x: f64, decimals: usize) -> String {
+    if x.is_finite() {
+        format!("{x:.decimals$}")
+    } else {
+        "null".to_string()
+    }
 }
 
 struct LoopFigures {
@@ -101,6 +163,13 @@ const START_S: f64 = 0.2;
 const PACED_HZ: f64 = 20_000.0;
 
 pub fn run(args: &BenchArgs) -> Result<()> {
+    // The hot paths first, on a quiet machine (before the loop's two threads have run).
+    let item_budget = args.item_budget();
+    let mut hot = HotPaths::new();
+    let timings = time_all(&mut hot, item_budget);
+    let gauss_newton_iterations = hot.gauss_newton_solve(32).2;
+    let static_pose_iterations = hot.static_pose().map_or(0, |fit| fit.iterations);
+
     let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
     let renderer = RoiRenderer::new(
         scenario.camera.clone(),
@@ -124,26 +193,47 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     // Latency without queueing: the camera paced at 20 kHz (5x the paper), below the loop's capacity.
     let paced = measure(&replay, &scenario, 10, Some(PACED_HZ), args)?;
     if args.json {
-        println!(
-            "{{\"loop_k10_rois_per_s\":{:.0},\"loop_k1_rois_per_s\":{:.0},\"latency_us_p50\":{:.2},\"latency_us_p99\":{:.2},\
-             \"paced_hz\":{},\"paced_rois_per_s\":{:.0},\"paced_dropped\":{},\"paced_late\":{},\
-             \"loop_k10_dropped\":{},\"loop_k1_dropped\":{},\"loop_k10_rejected\":{},\"loop_k1_rejected\":{},\
-             \"rois_per_run\":{}}}",
-            k10.rois_per_s,
-            k1.rois_per_s,
-            paced.latency_p50_us,
-            paced.latency_p99_us,
-            PACED_HZ,
-            paced.rois_per_s,
-            paced.dropped,
-            paced.late,
-            k10.dropped,
-            k1.dropped,
-            k10.rejected,
-            k1.rejected,
-            replay.len()
+        let mut fields: Vec<(String, String)> = Vec::new();
+        for (item, t) in &timings {
+            fields.push((
+                format!("{}_us_median", item.key()),
+                json_number(t.median_us, 4),
+            ));
+            fields.push((format!("{}_us_p99", item.key()), json_number(t.p99_us, 4)));
+        }
+        let mut field = |key: &str, value: String| fields.push((key.to_string(), value));
+        field(
+            "gauss_newton_iterations",
+            gauss_newton_iterations.to_string(),
         );
+        field("static_pose_iterations", static_pose_iterations.to_string());
+        field("item_ms", json_number(item_budget.as_secs_f64() * 1e3, 1));
+        field("loop_k10_rois_per_s", json_number(k10.rois_per_s, 0));
+        field("loop_k1_rois_per_s", json_number(k1.rois_per_s, 0));
+        field("latency_us_p50", json_number(paced.latency_p50_us, 2));
+        field("latency_us_p99", json_number(paced.latency_p99_us, 2));
+        field("paced_hz", json_number(PACED_HZ, 0));
+        field("paced_rois_per_s", json_number(paced.rois_per_s, 0));
+        field("paced_dropped", paced.dropped.to_string());
+        field("paced_late", paced.late.to_string());
+        field("loop_k10_dropped", k10.dropped.to_string());
+        field("loop_k1_dropped", k1.dropped.to_string());
+        field("loop_k10_rejected", k10.rejected.to_string());
+        field("loop_k1_rejected", k1.rejected.to_string());
+        field("rois_per_run", replay.len().to_string());
+        let body: Vec<String> = fields
+            .iter()
+            .map(|(key, value)| format!("\"{key}\":{value}"))
+            .collect();
+        println!("{{{}}}", body.join(","));
     } else {
+        print_items(
+            &timings,
+            item_budget,
+            gauss_newton_iterations,
+            static_pose_iterations,
+        );
+        println!();
         println!(
             "real-time loop, free-running on {} pre-rendered 32x32 ROIs (orthoglide), two threads:",
             replay.len()
@@ -168,4 +258,40 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The hot-path table.
+fn print_items(
+    timings: &[(Item, Timing)],
+    budget: Duration,
+    gauss_newton_iterations: usize,
+    static_pose_iterations: usize,
+) {
+    println!(
+        "hot paths, canonical scene (SPEC section 6), one thread, {:.0} ms each:",
+        budget.as_secs_f64() * 1e3
+    );
+    println!(
+        "{:<46} {:>11} {:>11} {:>7} {:>8}",
+        "", "median us", "p99 us", "batch", "batches"
+    );
+    for (item, t) in timings {
+        let note = match item {
+            Item::GaussNewtonSolve => format!(" ({gauss_newton_iterations} iterations)"),
+            Item::StaticPose => format!(" ({static_pose_iterations} iterations)"),
+            _ => String::new(),
+        };
+        println!(
+            "{:<46} {:>11.4} {:>11.4} {:>7} {:>8}{note}",
+            item.label(),
+            t.median_us,
+            t.p99_us,
+            t.batch_size,
+            t.batches
+        );
+    }
+    println!(
+        "Items under 5 us are timed in batches: their p99 is that of a batch's mean. \
+         Criterion: cargo bench -p roitrack-bench."
+    );
 }

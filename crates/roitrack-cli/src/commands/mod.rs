@@ -4,6 +4,7 @@ pub mod bench;
 pub mod compare;
 pub mod demo;
 pub mod eval;
+pub mod pnp_bench;
 pub mod simulate;
 pub mod target;
 pub mod track;

@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use roitrack_core::estimator::{
-    Estimate, EstimatorKind, TrackStatus, Tracker, TrackerConfig, WindowMode,
+    Estimate, EstimatorKind, RobustLoss, TrackStatus, Tracker, TrackerConfig, WindowMode,
 };
 use roitrack_core::{CameraModel, JacobianKind, Measurement, PoseSample, Target, TwistSample};
 use roitrack_formats::{MeasurementReader, PoseWriter, TwistWriter};
@@ -64,10 +64,21 @@ pub struct EstimatorArgs {
     /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz).
     #[arg(long)]
     pub angular_accel_psd: Option<f64>,
+    /// M-estimator against outliers: tukey (default), huber (window fits; the Kalman filter uses Huber either way)
+    /// or none (plain least squares, and no Huber weighting in the Kalman filter).
+    #[arg(long, value_enum, default_value = "tukey")]
+    pub robust: RobustArg,
     /// Degeneracy gate: windows whose column-scaled Jacobian has a reciprocal condition number below this are not
     /// used for an update (the estimate is flagged degenerate and the window widened).
     #[arg(long)]
     pub min_conditioning: Option<f64>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RobustArg {
+    None,
+    Huber,
+    Tukey,
 }
 
 impl EstimatorArgs {
@@ -93,6 +104,14 @@ impl EstimatorArgs {
         }
         if let Some(c) = self.min_conditioning {
             config.min_inverse_condition = c;
+        }
+        config.robust = match self.robust {
+            RobustArg::None => RobustLoss::None,
+            RobustArg::Huber => RobustLoss::Huber,
+            RobustArg::Tukey => RobustLoss::Tukey,
+        };
+        if self.robust == RobustArg::None {
+            config.kalman.huber_sigma = f64::INFINITY;
         }
         config
     }

@@ -20,6 +20,9 @@ pub struct KalmanTuning {
     pub angular_accel_psd: f64,
     /// Innovations beyond this many standard deviations (Mahalanobis, 2 dof) are rejected as outliers.
     pub gate_sigma: f64,
+    /// Huber threshold (standard deviations, Mahalanobis): a larger innovation gets its measurement noise inflated
+    /// by `distance / huber_sigma` (the Huber weight), so a moderate outlier pulls less; `f64::INFINITY` turns it off.
+    pub huber_sigma: f64,
 }
 
 impl Default for KalmanTuning {
@@ -28,6 +31,7 @@ impl Default for KalmanTuning {
             linear_accel_psd: 1.0,
             angular_accel_psd: 10.0,
             gate_sigma: 6.0,
+            huber_sigma: 2.5,
         }
     }
 }
@@ -115,6 +119,16 @@ impl ErrorStateKalman {
         if mahalanobis2 > self.tuning.gate_sigma * self.tuning.gate_sigma {
             return UpdateOutcome::Gated;
         }
+        let distance = mahalanobis2.sqrt();
+        let (sigma2, s_inv) = if distance > self.tuning.huber_sigma {
+            let inflated = sigma_px * sigma_px * distance / self.tuning.huber_sigma;
+            match (h * ph_t + Matrix2::identity() * inflated).try_inverse() {
+                Some(inv) => (inflated, inv),
+                None => return UpdateOutcome::Invalid,
+            }
+        } else {
+            (sigma_px * sigma_px, s_inv)
+        };
         let gain = ph_t * s_inv;
         let correction = gain * innovation;
         let corrected = state.corrected(&correction);
@@ -124,8 +138,8 @@ impl ErrorStateKalman {
         *state = corrected;
         // Joseph form: stays symmetric positive definite in floating point.
         let i_kh = Matrix12::identity() - gain * h;
-        self.covariance = i_kh * self.covariance * i_kh.transpose()
-            + gain * gain.transpose() * (sigma_px * sigma_px);
+        self.covariance =
+            i_kh * self.covariance * i_kh.transpose() + gain * gain.transpose() * sigma2;
         UpdateOutcome::Accepted
     }
 }

@@ -31,6 +31,7 @@ pub use kalman::{ErrorStateKalman, KalmanTuning, Matrix12, UpdateOutcome};
 use normal_equations::NormalEquations;
 pub use static_pose::{InitError, PoseFit, refine_static_pose, solve_static_pose};
 pub use window::{Observation, ObservationWindow, WindowMode};
+pub use window_fit::RobustLoss;
 
 /// Which estimator a [`Tracker`] runs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -64,8 +65,11 @@ pub struct TrackerConfig {
     pub noise_px: f64,
     /// Windows whose column-scaled Jacobian has a reciprocal condition number below this are degenerate.
     pub min_inverse_condition: f64,
-    /// Residual RMS (px) above which an estimate counts as bad; 3 bad estimates in a row mean lost.
+    /// Median residual (px) above which an estimate counts as bad; 3 bad estimates in a row mean lost.
     pub lost_residual_px: f64,
+    /// M-estimator of the window fits (VVS, batch, initialisation): Tukey (default: it rejects gross outliers, which
+    /// Huber only down-weights), Huber or none. The Kalman filter has its own (`kalman.huber_sigma`, `gate_sigma`).
+    pub robust: RobustLoss,
     pub kalman: KalmanTuning,
 }
 
@@ -81,6 +85,7 @@ impl Default for TrackerConfig {
             noise_px: 0.1,
             min_inverse_condition: 3e-3,
             lost_residual_px: 5.0,
+            robust: RobustLoss::Tukey,
             kalman: KalmanTuning::default(),
         }
     }
@@ -174,6 +179,11 @@ enum Phase {
 /// initialisation (up to 2^6 times), so an acquisition order that keeps producing degenerate windows keeps the wider
 /// window.
 const SHRINK_AFTER_GOOD_STEPS: usize = 20;
+/// Smallest residual scale (px) of the window fits' M-estimator: below it, the spread of a window's residuals is the
+/// model's own (a prediction across a fast rotation, a gain-limited loop), not outliers, and must not be cut away.
+/// With Tukey's c = 4.685 scales, residuals beyond about 5 px are rejected.
+const ROBUST_SCALE_FLOOR_PX: f64 = 1.0;
+
 /// Estimates reported as `Converging` after an initialisation.
 const CONVERGING_ESTIMATES: usize = 3;
 /// Consecutive bad estimates before the track is declared lost.
@@ -513,14 +523,39 @@ impl Tracker {
         t_ref: f64,
         max_iterations: usize,
     ) -> (MotionState, NormalEquations<12>, usize) {
-        window_fit::levenberg_marquardt(
+        // Least squares first: from a rough start (a static pose of a moving target, a prediction across a fast
+        // rotation) the residuals are large for every point and a robust loss would discard the good ones. Then the
+        // robust refinement from there rejects the outliers.
+        let (state, ne, iterations) = window_fit::levenberg_marquardt(
             &self.model,
             self.target.points(),
             initial,
             t_ref,
             &self.scratch,
             max_iterations,
-        )
+        );
+        if self.config.robust == RobustLoss::None {
+            return (state, ne, iterations);
+        }
+        let scale_px = window_fit::robust_scale_px(
+            &self.model,
+            self.target.points(),
+            &state,
+            t_ref,
+            &self.scratch,
+            ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px),
+        );
+        let (state, ne, more) = window_fit::robust_levenberg_marquardt(
+            &self.model,
+            self.target.points(),
+            state,
+            t_ref,
+            &self.scratch,
+            max_iterations,
+            self.config.robust,
+            scale_px,
+        );
+        (state, ne, iterations + more)
     }
 
     fn kalman_update(&mut self, obs: &Observation) {
@@ -571,7 +606,15 @@ impl Tracker {
                 let mut iterations = 0;
                 let mut last_ne = None;
                 for _ in 0..self.config.iterations {
-                    let step = window_fit::vvs_iteration(
+                    let scale_px = window_fit::robust_scale_px(
+                        &self.model,
+                        self.target.points(),
+                        &self.state,
+                        t_new,
+                        &self.scratch,
+                        ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px),
+                    );
+                    let step = window_fit::robust_vvs_iteration(
                         &self.model,
                         self.target.points(),
                         self.config.jacobian,
@@ -580,6 +623,8 @@ impl Tracker {
                         &self.scratch,
                         self.config.gain,
                         self.config.min_inverse_condition,
+                        self.config.robust,
+                        scale_px,
                     );
                     inverse_condition = step.inverse_condition;
                     last_ne = Some(step.normal_equations);
@@ -681,11 +726,12 @@ impl Tracker {
         status: TrackStatus,
         covariance: Option<Matrix12>,
     ) -> Estimate {
-        // Residual over the configured window at the emitted state (static: as if simultaneous, as it fits).
-        let residual_rms_px = self.residual_rms_px();
+        // Residual over the configured window at the emitted state (static: as if simultaneous, as it fits). The
+        // track is judged on the median residual: a few outliers in the window must not make it look lost.
+        let (residual_rms_px, residual_median_px) = self.residual_figures_px();
         let mut status = status;
-        let bad = !residual_rms_px.is_finite()
-            || residual_rms_px > self.config.lost_residual_px
+        let bad = !residual_median_px.is_finite()
+            || residual_median_px > self.config.lost_residual_px
             || !self.state.is_finite();
         self.bad_estimates = if bad { self.bad_estimates + 1 } else { 0 };
         if self.bad_estimates >= LOST_AFTER_BAD_ESTIMATES {
@@ -710,9 +756,12 @@ impl Tracker {
         }
     }
 
-    fn residual_rms_px(&self) -> f64 {
+    /// RMS residual (px per coordinate) and median residual norm (px) of the scratch window at the current state.
+    fn residual_figures_px(&self) -> (f64, f64) {
+        const MAX: usize = 128;
         let points = self.target.points();
         let simultaneous = self.config.estimator == EstimatorKind::Static;
+        let mut norms = [0.0f64; MAX];
         let (mut sum, mut count) = (0.0, 0usize);
         for o in &self.scratch {
             let d = if simultaneous {
@@ -724,16 +773,23 @@ impl Tracker {
                 .model
                 .project(&self.state, &points[o.point_index].point_in_obj_m, d)
             {
-                Some(px) => sum += (px - o.ideal_px).norm_squared(),
-                None => return f64::INFINITY,
+                Some(px) => {
+                    let r2 = (px - o.ideal_px).norm_squared();
+                    sum += r2;
+                    if count < MAX {
+                        norms[count] = r2.sqrt();
+                    }
+                }
+                None => return (f64::INFINITY, f64::INFINITY),
             }
             count += 1;
         }
         if count == 0 {
-            0.0
-        } else {
-            (sum / (2 * count) as f64).sqrt()
+            return (0.0, 0.0);
         }
+        let n = count.min(MAX);
+        let (_, median, _) = norms[..n].select_nth_unstable_by(n / 2, f64::total_cmp);
+        ((sum / (2 * count) as f64).sqrt(), *median)
     }
 }
 

@@ -6,6 +6,80 @@ use super::normal_equations::NormalEquations;
 use super::window::Observation;
 use crate::{JacobianKind, MotionState, SpatioTemporalModel, TargetPoint};
 
+/// A robust loss for the window fits (M-estimator by iteratively reweighted least squares). Residuals are measured in
+/// units of an automatic scale: the noise level or, when larger, the median residual of the window (a robust
+/// estimate of the spread that outliers do not inflate).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RobustLoss {
+    /// Plain least squares.
+    None,
+    /// Huber, k = 1.345 scales (95 % efficiency on Gaussian noise): outliers weigh as `k / r`.
+    Huber,
+    /// Tukey's biweight, c = 4.685 scales (95 % efficiency): outliers beyond c weigh nothing.
+    #[default]
+    Tukey,
+}
+
+impl RobustLoss {
+    pub const HUBER_K: f64 = 1.345;
+    pub const TUKEY_C: f64 = 4.685;
+
+    /// IRLS weight of a residual of `r` scales.
+    #[inline]
+    pub fn weight(&self, r: f64) -> f64 {
+        match self {
+            Self::None => 1.0,
+            Self::Huber => {
+                if r <= Self::HUBER_K {
+                    1.0
+                } else {
+                    Self::HUBER_K / r
+                }
+            }
+            Self::Tukey => {
+                if r >= Self::TUKEY_C {
+                    0.0
+                } else {
+                    let q = 1.0 - (r / Self::TUKEY_C).powi(2);
+                    q * q
+                }
+            }
+        }
+    }
+}
+
+/// Largest window whose median residual sets the robust scale (a stack buffer: no allocation).
+const MAX_SCALE_SAMPLES: usize = 128;
+
+/// The robust scale (px per axis) of the window's residuals at `state`: the median residual norm / 1.1774 (the median
+/// of the norm of a 2-D Gaussian of σ per axis is 1.1774 σ), never below `noise_px`.
+pub fn robust_scale_px(
+    model: &SpatioTemporalModel,
+    points: &[TargetPoint],
+    state: &MotionState,
+    t_ref_s: f64,
+    window: &[Observation],
+    noise_px: f64,
+) -> f64 {
+    let mut norms = [0.0f64; MAX_SCALE_SAMPLES];
+    let mut n = 0;
+    for o in window.iter().take(MAX_SCALE_SAMPLES) {
+        if let Some(px) = model.project(
+            state,
+            &points[o.point_index].point_in_obj_m,
+            o.t_s - t_ref_s,
+        ) {
+            norms[n] = (px - o.ideal_px).norm();
+            n += 1;
+        }
+    }
+    if n == 0 {
+        return noise_px;
+    }
+    let (_, median, _) = norms[..n].select_nth_unstable_by(n / 2, f64::total_cmp);
+    (*median / 1.1774).max(noise_px)
+}
+
 /// `JᵀJ` and `Jᵀe` of the window at `state` (reference time `t_ref_s`), with `e` = projection - measurement (px).
 /// A point behind the camera makes the cost infinite.
 pub fn window_normal_equations(
@@ -16,11 +90,39 @@ pub fn window_normal_equations(
     t_ref_s: f64,
     window: &[Observation],
 ) -> NormalEquations<12> {
+    weighted_window_normal_equations(
+        model,
+        points,
+        kind,
+        state,
+        t_ref_s,
+        window,
+        RobustLoss::None,
+        1.0,
+    )
+}
+
+/// [`window_normal_equations`] with each measurement weighted by `loss` at its residual in units of `scale_px`.
+#[allow(clippy::too_many_arguments)]
+pub fn weighted_window_normal_equations(
+    model: &SpatioTemporalModel,
+    points: &[TargetPoint],
+    kind: JacobianKind,
+    state: &MotionState,
+    t_ref_s: f64,
+    window: &[Observation],
+    loss: RobustLoss,
+    scale_px: f64,
+) -> NormalEquations<12> {
     let mut ne = NormalEquations::<12>::default();
     for o in window {
         let p = &points[o.point_index].point_in_obj_m;
         match model.project_with_jacobian(kind, state, p, o.t_s - t_ref_s) {
-            Some(pp) => ne.add(&pp.jacobian, &(pp.pixel - o.ideal_px), 1.0),
+            Some(pp) => {
+                let e = pp.pixel - o.ideal_px;
+                let w = loss.weight(e.norm() / scale_px);
+                ne.add(&pp.jacobian, &e, w);
+            }
             None => ne.cost = f64::INFINITY,
         }
     }
@@ -57,7 +159,38 @@ pub fn vvs_iteration(
     gain: f64,
     min_inverse_condition: f64,
 ) -> VvsStep {
-    let ne = window_normal_equations(model, points, kind, state, t_ref_s, window);
+    robust_vvs_iteration(
+        model,
+        points,
+        kind,
+        state,
+        t_ref_s,
+        window,
+        gain,
+        min_inverse_condition,
+        RobustLoss::None,
+        1.0,
+    )
+}
+
+/// [`vvs_iteration`] with an M-estimator: one IRLS iteration, the weights taken at `state` with the residual scale
+/// `scale_px` (see [`robust_scale_px`]).
+#[allow(clippy::too_many_arguments)]
+pub fn robust_vvs_iteration(
+    model: &SpatioTemporalModel,
+    points: &[TargetPoint],
+    kind: JacobianKind,
+    state: &MotionState,
+    t_ref_s: f64,
+    window: &[Observation],
+    gain: f64,
+    min_inverse_condition: f64,
+    loss: RobustLoss,
+    scale_px: f64,
+) -> VvsStep {
+    let ne = weighted_window_normal_equations(
+        model, points, kind, state, t_ref_s, window, loss, scale_px,
+    );
     let solved = ne.solve_with_conditioning();
     let inverse_condition = solved.map_or(0.0, |(_, c)| c);
     let refused = VvsStep {
@@ -93,8 +226,41 @@ pub fn levenberg_marquardt(
     window: &[Observation],
     max_iterations: usize,
 ) -> (MotionState, NormalEquations<12>, usize) {
+    robust_levenberg_marquardt(
+        model,
+        points,
+        initial,
+        t_ref_s,
+        window,
+        max_iterations,
+        RobustLoss::None,
+        1.0,
+    )
+}
+
+/// [`levenberg_marquardt`] on the robust (weighted) cost, with a fixed residual scale `scale_px`.
+#[allow(clippy::too_many_arguments)]
+pub fn robust_levenberg_marquardt(
+    model: &SpatioTemporalModel,
+    points: &[TargetPoint],
+    initial: MotionState,
+    t_ref_s: f64,
+    window: &[Observation],
+    max_iterations: usize,
+    loss: RobustLoss,
+    scale_px: f64,
+) -> (MotionState, NormalEquations<12>, usize) {
     let accumulate = |s: &MotionState| {
-        window_normal_equations(model, points, JacobianKind::Exact, s, t_ref_s, window)
+        weighted_window_normal_equations(
+            model,
+            points,
+            JacobianKind::Exact,
+            s,
+            t_ref_s,
+            window,
+            loss,
+            scale_px,
+        )
     };
     let mut state = initial;
     let mut ne = accumulate(&state);
@@ -105,8 +271,9 @@ pub fn levenberg_marquardt(
         let Some(step) = ne.solve(damping) else { break };
         let candidate = state.corrected(&step);
         let candidate_ne = accumulate(&candidate);
-        if candidate_ne.cost <= ne.cost {
-            let converged = ne.cost - candidate_ne.cost <= 1e-12 * ne.cost + 1e-24;
+        if candidate_ne.weighted_cost <= ne.weighted_cost {
+            let converged =
+                ne.weighted_cost - candidate_ne.weighted_cost <= 1e-12 * ne.weighted_cost + 1e-24;
             state = candidate;
             ne = candidate_ne;
             damping = (damping * 0.1).max(1e-10);
