@@ -181,8 +181,8 @@ impl Target {
         self.plane.as_ref()
     }
 
-    /// Centroid and principal axes (columns, largest spread first, the third their cross product).
-    fn principal_frame(&self) -> (Vector3<f64>, Matrix3<f64>) {
+    /// Centroid and scatter matrix (mean of the outer products of the centred points) of the points.
+    fn centroid_and_scatter(&self) -> (Vector3<f64>, Matrix3<f64>) {
         let n = self.points.len() as f64;
         let centre = self
             .points
@@ -195,6 +195,12 @@ impl Target {
             let d = p.point_in_obj_m - centre;
             scatter += d * d.transpose();
         }
+        (centre, scatter / n)
+    }
+
+    /// Centroid and principal axes (columns, largest spread first, the third their cross product).
+    fn principal_frame(&self) -> (Vector3<f64>, Matrix3<f64>) {
+        let (centre, scatter) = self.centroid_and_scatter();
         let eig = scatter.symmetric_eigen();
         let mut order = [0usize, 1, 2];
         order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
@@ -205,19 +211,8 @@ impl Target {
 
     /// Standard deviations of the points along their three principal axes, largest first (m).
     pub fn principal_spreads_m(&self) -> [f64; 3] {
-        let n = self.points.len() as f64;
-        let centroid = self
-            .points
-            .iter()
-            .map(|p| p.point_in_obj_m)
-            .sum::<Vector3<f64>>()
-            / n;
-        let mut scatter = Matrix3::zeros();
-        for p in &self.points {
-            let d = p.point_in_obj_m - centroid;
-            scatter += d * d.transpose();
-        }
-        let mut eig: Vec<f64> = (scatter / n)
+        let (_, scatter) = self.centroid_and_scatter();
+        let mut eig: Vec<f64> = scatter
             .symmetric_eigenvalues()
             .iter()
             .map(|e| e.max(0.0).sqrt())

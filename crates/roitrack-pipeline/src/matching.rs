@@ -8,7 +8,7 @@
 //! pose from the hull correspondences; the model points projected with it are matched to their nearest blobs, and the
 //! hypothesis matching most blobs with the smallest residual wins.
 
-use nalgebra::{Matrix3, Vector2, Vector3};
+use nalgebra::{Vector2, Vector3};
 use roitrack_core::estimator::{Observation, solve_static_pose};
 use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
 use thiserror::Error;
@@ -64,26 +64,13 @@ pub struct FullFrameMatch {
 /// Residual (px) above which a hypothesis is not a fit.
 const MAX_FIT_RESIDUAL_PX: f64 = 2.0;
 
-/// Points of a planar target in its own plane, and the plane's front normal (object frame, see [`match_full_frame`]).
-fn plane_coordinates(target: &Target) -> (Vec<Vector2<f64>>, Vector3<f64>) {
-    let points: Vec<_> = target.points().iter().map(|p| p.point_in_obj_m).collect();
-    let centre = points.iter().sum::<nalgebra::Vector3<f64>>() / points.len() as f64;
-    let mut scatter = Matrix3::zeros();
-    for p in &points {
-        scatter += (p - centre) * (p - centre).transpose();
-    }
-    let eig = scatter.symmetric_eigen();
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-    let e1 = eig.eigenvectors.column(order[0]).into_owned();
-    let e2 = eig.eigenvectors.column(order[1]).into_owned();
-    let normal = e1.cross(&e2);
+/// Points of a planar target in its own plane, and the plane's front normal (object frame, see
+/// [`match_full_frame`]); `None` for a non-planar target.
+fn plane_coordinates(target: &Target) -> Option<(Vec<Vector2<f64>>, Vector3<f64>)> {
+    let plane = target.plane()?;
+    let normal: Vector3<f64> = plane.obj_r_plane.column(2).into_owned();
     let front = if normal.z > 0.0 { -normal } else { normal };
-    let coordinates = points
-        .iter()
-        .map(|p| Vector2::new(e1.dot(&(p - centre)), e2.dot(&(p - centre))))
-        .collect();
-    (coordinates, front)
+    Some((plane.points_in_plane_m.clone(), front))
 }
 
 /// Indices of the convex hull vertices in counter-clockwise order (in the coordinates' own sense). Points within 3 %
@@ -149,15 +136,14 @@ pub fn match_full_frame(
             required,
         });
     }
-    if !target.is_planar() {
+    let Some((plane, front)) = plane_coordinates(target) else {
         return Err(MatchError::NotPlanar);
-    }
+    };
     let model = SpatioTemporalModel::new(camera.intrinsics);
     let ideal: Vec<Vector2<f64>> = blobs
         .iter()
         .map(|b| camera.undistort_pixel(&Vector2::new(b.u_px, b.v_px)))
         .collect::<Result<_, _>>()?;
-    let (plane, front) = plane_coordinates(target);
     let centre = target
         .points()
         .iter()
@@ -489,7 +475,7 @@ mod tests {
 
     #[test]
     fn hull_of_a_grid_is_its_four_corners() {
-        let (plane, front) = plane_coordinates(&Target::grid4x4());
+        let (plane, front) = plane_coordinates(&Target::grid4x4()).unwrap();
         assert_eq!(front, Vector3::new(0.0, 0.0, -1.0));
         let mut hull = convex_hull(&plane);
         hull.sort_unstable();
