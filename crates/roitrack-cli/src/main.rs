@@ -19,12 +19,14 @@ enum Command {
     Demo(commands::demo::DemoArgs),
     Bench(commands::bench::BenchArgs),
     Compare(commands::compare::CompareArgs),
+    Soak(commands::soak::SoakArgs),
     Simulate(commands::simulate::SimulateArgs),
     Track(commands::track::TrackArgs),
     Eval(commands::eval::EvalArgs),
     Target(commands::target::TargetArgs),
     Tradeoff(commands::tradeoff::TradeoffArgs),
     PnpBench(commands::pnp_bench::PnpBenchArgs),
+    Faults(commands::faults::FaultsArgs),
 }
 
 fn main() -> ExitCode {
@@ -40,12 +42,14 @@ fn main() -> ExitCode {
         Command::Demo(args) => commands::demo::run(&args),
         Command::Bench(args) => commands::bench::run(&args),
         Command::Compare(args) => commands::compare::run(&args),
+        Command::Soak(args) => commands::soak::run(&args),
         Command::Simulate(args) => commands::simulate::run(&args),
         Command::Track(args) => commands::track::run(&args),
         Command::Eval(args) => commands::eval::run(&args),
         Command::Target(args) => commands::target::run(&args),
         Command::Tradeoff(args) => commands::tradeoff::run(&args),
         Command::PnpBench(args) => commands::pnp_bench::run(&args),
+        Command::Faults(args) => commands::faults::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

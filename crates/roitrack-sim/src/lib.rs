@@ -2,10 +2,13 @@
 //!
 //! Ground-truth motions ([`scenario`]) and a measurement-level simulator of a camera that reads one ROI at a time
 //! ([`measurements`]): every centroid is the projection of the true pose at its own exposure-midpoint time, with
-//! Gaussian noise, dropped ROIs and outliers as options.
+//! Gaussian noise, dropped ROIs and outliers as options, and faults (occlusions, time gaps, bursts of lost ROIs, a
+//! sudden jump of the target, blobs leaving the image).
 
 pub mod measurements;
 pub mod scenario;
 
-pub use measurements::{SimError, SimulatedRun, SimulationOptions, simulate};
+pub use measurements::{
+    Jump, Occlusion, RoiBurst, SimError, SimulatedRun, SimulationOptions, TimeGap, simulate,
+};
 pub use scenario::{Scenario, ScenarioKind, bench_rotation};

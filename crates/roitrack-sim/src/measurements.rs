@@ -1,12 +1,14 @@
 //! The measurement-level simulator: sequential ROI centroids with their own timestamps, plus ground truth.
 
-use nalgebra::Vector2;
+use nalgebra::{Vector2, Vector3};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use roitrack_core::roi_order::bit_reversed_indices;
-use roitrack_core::{CameraModel, Measurement, PoseSample, RoiOrder, Target, TwistSample};
+use roitrack_core::{
+    CameraModel, Measurement, MotionState, PoseSample, RoiOrder, Target, TwistSample,
+};
 use thiserror::Error;
 
 use crate::Scenario;
@@ -25,6 +27,84 @@ pub struct SimulationOptions {
     pub drop_fraction: f64,
     /// Fraction of measurements moved 5-20 px in a random direction, in [0, 1].
     pub outlier_fraction: f64,
+    /// Fault: points hidden during a time interval (each entry one occlusion). Default none.
+    pub occlusions: Vec<Occlusion>,
+    /// Fault: intervals with no measurement at all. Default none.
+    pub gaps: Vec<TimeGap>,
+    /// Fault: runs of consecutive lost ROIs. Default none.
+    pub bursts: Vec<RoiBurst>,
+    /// Fault: from a time on, the true pose is translated (the ground truth includes the jump). Default none.
+    pub jump: Option<Jump>,
+    /// Drop the measurements of blobs outside the image instead of failing with [`SimError::BlobOffImage`].
+    pub skip_off_image: bool,
+}
+
+/// The points `ids` are not measured during `[t0_s, t1_s)` (their ROIs are read but find nothing).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Occlusion {
+    pub ids: Vec<u32>,
+    pub t0_s: f64,
+    pub t1_s: f64,
+}
+
+/// No measurement during `[t0_s, t0_s + duration_s)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimeGap {
+    pub t0_s: f64,
+    pub duration_s: f64,
+}
+
+/// `count` consecutive ROIs lost, starting with the first ROI at or after `t0_s`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RoiBurst {
+    pub t0_s: f64,
+    pub count: usize,
+}
+
+/// From `t_s` on, the true target position (camera frame) is offset by `offset_m`; the twist is unchanged.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Jump {
+    pub t_s: f64,
+    pub offset_m: Vector3<f64>,
+}
+
+impl Jump {
+    /// `state` (the scenario's truth at `t_s`) with the jump applied.
+    pub fn apply(&self, t_s: f64, mut state: MotionState) -> MotionState {
+        if t_s >= self.t_s {
+            state.cam_t_obj_m += self.offset_m;
+        }
+        state
+    }
+}
+
+impl SimulationOptions {
+    /// The true state at `t_s`: the scenario's, with the jump (if any) applied. Use it to render or to score a run
+    /// simulated with these options.
+    pub fn truth_at(&self, scenario: &Scenario, t_s: f64) -> MotionState {
+        let state = scenario.state_at(t_s);
+        match &self.jump {
+            Some(jump) => jump.apply(t_s, state),
+            None => state,
+        }
+    }
+
+    /// True when a fault removes the measurement of point `id` taken at `t_s` (ROI index `k`; `burst_starts` holds
+    /// the first ROI index of each burst).
+    fn fault_hides(&self, id: u32, t_s: f64, k: usize, burst_starts: &[usize]) -> bool {
+        self.occlusions
+            .iter()
+            .any(|o| o.ids.contains(&id) && t_s >= o.t0_s && t_s < o.t1_s)
+            || self
+                .gaps
+                .iter()
+                .any(|g| t_s >= g.t0_s && t_s < g.t0_s + g.duration_s)
+            || self
+                .bursts
+                .iter()
+                .zip(burst_starts)
+                .any(|(b, &start)| k >= start && k < start + b.count)
+    }
 }
 
 impl Default for SimulationOptions {
@@ -36,6 +116,11 @@ impl Default for SimulationOptions {
             order: RoiOrder::BitReversed,
             drop_fraction: 0.0,
             outlier_fraction: 0.0,
+            occlusions: Vec::new(),
+            gaps: Vec::new(),
+            bursts: Vec::new(),
+            jump: None,
+            skip_off_image: false,
         }
     }
 }
@@ -107,6 +192,43 @@ pub fn simulate(scenario: &Scenario, opts: &SimulationOptions) -> Result<Simulat
         "in [0, 1]",
         (0.0..=1.0).contains(&opts.outlier_fraction),
     )?;
+    for o in &opts.occlusions {
+        check_option("occlusion t0_s", o.t0_s, "finite", true)?;
+        check_option(
+            "occlusion t1_s",
+            o.t1_s,
+            "finite and >= t0_s",
+            o.t1_s >= o.t0_s,
+        )?;
+    }
+    for g in &opts.gaps {
+        check_option("gap t0_s", g.t0_s, "finite", true)?;
+        check_option(
+            "gap duration_s",
+            g.duration_s,
+            "finite and >= 0",
+            g.duration_s >= 0.0,
+        )?;
+    }
+    for b in &opts.bursts {
+        check_option("burst t0_s", b.t0_s, "finite", true)?;
+    }
+    if let Some(j) = &opts.jump {
+        check_option("jump t_s", j.t_s, "finite", true)?;
+        for (field, value) in [
+            ("jump dx_m", j.offset_m.x),
+            ("jump dy_m", j.offset_m.y),
+            ("jump dz_m", j.offset_m.z),
+        ] {
+            check_option(field, value, "finite", true)?;
+        }
+    }
+    // The first ROI index of each burst: the first sample at or after its start time.
+    let burst_starts: Vec<usize> = opts
+        .bursts
+        .iter()
+        .map(|b| (b.t0_s.max(0.0) * opts.rate_hz - 1e-9).ceil().max(0.0) as usize)
+        .collect();
     let camera = scenario.camera.clone();
     let target = scenario.target.clone();
     let n = target.len();
@@ -127,26 +249,30 @@ pub fn simulate(scenario: &Scenario, opts: &SimulationOptions) -> Result<Simulat
             cycle.shuffle(&mut rng);
         }
         let t_s = k as f64 / opts.rate_hz;
-        let state = scenario.state_at(t_s);
+        let state = opts.truth_at(scenario, t_s);
         truth_poses.push(PoseSample::from_state(t_s, &state));
         truth_twists.push(TwistSample::from_state(t_s, &state));
         let point = target.points()[cycle[slot]];
         let raw = camera
             .raw_pixel_from_cam(&state.point_in_cam_at(&point.point_in_obj_m, 0.0))
-            .filter(|px| camera.contains_raw_pixel(px))
-            .ok_or_else(|| {
+            .filter(|px| camera.contains_raw_pixel(px));
+        let raw = match raw {
+            Some(px) => Some(px),
+            None if opts.skip_off_image => None,
+            None => {
                 let p = state.point_in_cam_at(&point.point_in_obj_m, 0.0);
                 let px = camera
                     .intrinsics
                     .pixel_from_cam(&p)
                     .unwrap_or(Vector2::new(f64::NAN, f64::NAN));
-                SimError::BlobOffImage {
+                return Err(SimError::BlobOffImage {
                     id: point.id,
                     t_s,
                     u_px: px.x,
                     v_px: px.y,
-                }
-            })?;
+                });
+            }
+        };
         // Draw every random number whether or not it is used, so options change only what they control.
         let dropped = rng.random::<f64>() < opts.drop_fraction;
         let outlier = rng.random::<f64>() < opts.outlier_fraction;
@@ -154,11 +280,15 @@ pub fn simulate(scenario: &Scenario, opts: &SimulationOptions) -> Result<Simulat
             let angle = rng.random_range(0.0..std::f64::consts::TAU);
             Vector2::new(angle.cos(), angle.sin()) * rng.random_range(5.0..20.0)
         };
-        let mut measured = raw + Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
+        let noise_px = Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
+        // Faults and blobs off the image remove a measurement after its random numbers are drawn, so the others are
+        // those of the run without the fault.
+        let Some(raw) = raw else { continue };
+        let mut measured = raw + noise_px;
         if outlier {
             measured += outlier_offset;
         }
-        if !dropped {
+        if !dropped && !opts.fault_hides(point.id, t_s, k, &burst_starts) {
             measurements.push(Measurement {
                 t_s,
                 id: point.id,
@@ -330,6 +460,242 @@ mod tests {
             },
             SimulationOptions {
                 outlier_fraction: f64::NAN,
+                ..Default::default()
+            },
+        ] {
+            assert!(matches!(
+                simulate(&s, &opts),
+                Err(SimError::BadOption { .. })
+            ));
+        }
+    }
+
+    fn ideal(kind: ScenarioKind) -> (Scenario, SimulatedRun) {
+        let scenario = Scenario::new(kind, 1);
+        let run = simulate(&scenario, &SimulationOptions::default()).unwrap();
+        (scenario, run)
+    }
+
+    /// The measurements of a run with a hiding fault are those of the clean run minus the hidden ones, bit for bit.
+    fn assert_clean_minus(
+        clean: &SimulatedRun,
+        faulty: &SimulatedRun,
+        hidden: impl Fn(usize, &Measurement) -> bool,
+    ) {
+        let expected: Vec<Measurement> = clean
+            .measurements
+            .iter()
+            .enumerate()
+            .filter(|(k, m)| !hidden(*k, m))
+            .map(|(_, m)| *m)
+            .collect();
+        assert_eq!(faulty.measurements, expected);
+        assert_eq!(faulty.truth_poses, clean.truth_poses);
+        assert_eq!(faulty.truth_twists, clean.truth_twists);
+    }
+
+    #[test]
+    fn occlusion_hides_exactly_its_points_during_its_interval() {
+        let (scenario, clean) = ideal(ScenarioKind::Orthoglide);
+        let opts = SimulationOptions {
+            occlusions: vec![Occlusion {
+                ids: vec![0, 5, 10, 15],
+                t0_s: 1.0,
+                t1_s: 1.2,
+            }],
+            ..Default::default()
+        };
+        let run = simulate(&scenario, &opts).unwrap();
+        let hidden = |_: usize, m: &Measurement| {
+            [0, 5, 10, 15].contains(&m.id) && (1.0..1.2).contains(&m.t_s)
+        };
+        assert_clean_minus(&clean, &run, hidden);
+        // 0.2 s at 4 kHz = 800 ROIs, a quarter of them on the hidden points.
+        assert_eq!(clean.measurements.len() - run.measurements.len(), 200);
+    }
+
+    #[test]
+    fn a_time_gap_removes_every_measurement_of_its_interval() {
+        let (scenario, clean) = ideal(ScenarioKind::Orthoglide);
+        let opts = SimulationOptions {
+            gaps: vec![TimeGap {
+                t0_s: 2.0,
+                duration_s: 0.05,
+            }],
+            ..Default::default()
+        };
+        let run = simulate(&scenario, &opts).unwrap();
+        assert_clean_minus(&clean, &run, |_, m| (2.0..2.05).contains(&m.t_s));
+        assert_eq!(clean.measurements.len() - run.measurements.len(), 200);
+        assert!(
+            run.measurements
+                .iter()
+                .all(|m| !(2.0..2.05).contains(&m.t_s))
+        );
+    }
+
+    #[test]
+    fn a_burst_loses_n_consecutive_rois_from_its_start() {
+        let (scenario, clean) = ideal(ScenarioKind::Orthoglide);
+        let opts = SimulationOptions {
+            bursts: vec![RoiBurst {
+                t0_s: 1.5,
+                count: 40,
+            }],
+            ..Default::default()
+        };
+        let run = simulate(&scenario, &opts).unwrap();
+        assert_clean_minus(&clean, &run, |k, _| (6000..6040).contains(&k));
+        // Also with drops: the burst removes ROIs on top of the random drops, which are unchanged.
+        let drop = SimulationOptions {
+            drop_fraction: 0.3,
+            ..Default::default()
+        };
+        let dropped = simulate(&scenario, &drop).unwrap();
+        let both = simulate(
+            &scenario,
+            &SimulationOptions {
+                bursts: opts.bursts.clone(),
+                ..drop
+            },
+        )
+        .unwrap();
+        let expected: Vec<Measurement> = dropped
+            .measurements
+            .iter()
+            .filter(|m| !(1.5..1.51).contains(&m.t_s))
+            .copied()
+            .collect();
+        assert_eq!(both.measurements, expected);
+    }
+
+    #[test]
+    fn a_jump_moves_the_truth_and_the_measurements_from_its_time() {
+        let scenario = Scenario::new(ScenarioKind::Random, 1);
+        let base = SimulationOptions {
+            noise_px: 0.0,
+            ..Default::default()
+        };
+        let clean = simulate(&scenario, &base).unwrap();
+        let offset = Vector3::new(0.02, 0.0, 0.0);
+        let opts = SimulationOptions {
+            jump: Some(Jump {
+                t_s: 2.5,
+                offset_m: offset,
+            }),
+            ..base
+        };
+        let run = simulate(&scenario, &opts).unwrap();
+        assert_eq!(run.measurements.len(), clean.measurements.len());
+        assert_eq!(run.truth_twists, clean.truth_twists);
+        for (a, b) in clean.truth_poses.iter().zip(&run.truth_poses) {
+            let shift = b.cam_from_obj.translation.vector - a.cam_from_obj.translation.vector;
+            let expected = if a.t_s >= 2.5 {
+                offset
+            } else {
+                Vector3::zeros()
+            };
+            assert!(
+                (shift - expected).norm() < 1e-12,
+                "t = {}: shift {shift}",
+                a.t_s
+            );
+            assert_eq!(a.cam_from_obj.rotation, b.cam_from_obj.rotation);
+        }
+        for (a, b) in clean.measurements.iter().zip(&run.measurements) {
+            if a.t_s < 2.5 {
+                assert_eq!(a, b);
+            } else {
+                let p = run.target.points()[run.target.index_of(b.id).unwrap()].point_in_obj_m;
+                let px = run
+                    .camera
+                    .raw_pixel_from_cam(&opts.truth_at(&scenario, b.t_s).point_in_cam_at(&p, 0.0))
+                    .unwrap();
+                assert_eq!((px.x, px.y), (b.u_px, b.v_px));
+                assert!(
+                    (a.u_px - b.u_px).abs() > 1.0,
+                    "a 2 cm jump moves the blobs by pixels"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn blobs_off_the_image_fail_by_default_and_are_skipped_on_request() {
+        let scenario = Scenario::new(ScenarioKind::Static, 1);
+        let jump = Some(Jump {
+            t_s: 0.5,
+            offset_m: Vector3::new(0.2, 0.0, 0.0),
+        });
+        let opts = SimulationOptions {
+            jump,
+            ..Default::default()
+        };
+        assert!(matches!(
+            simulate(&scenario, &opts),
+            Err(SimError::BlobOffImage { .. })
+        ));
+        let clean = simulate(&scenario, &SimulationOptions::default()).unwrap();
+        let run = simulate(
+            &scenario,
+            &SimulationOptions {
+                skip_off_image: true,
+                ..opts.clone()
+            },
+        )
+        .unwrap();
+        assert!(run.measurements.len() < clean.measurements.len());
+        assert!(
+            run.measurements.iter().any(|m| m.t_s >= 0.5),
+            "some blobs stay visible"
+        );
+        assert_eq!(run.truth_poses.len(), clean.truth_poses.len());
+        let before: Vec<_> = clean
+            .measurements
+            .iter()
+            .filter(|m| m.t_s < 0.5)
+            .copied()
+            .collect();
+        assert_eq!(&run.measurements[..before.len()], &before[..]);
+        for m in &run.measurements {
+            assert!(run.camera.contains_raw_pixel(&Vector2::new(m.u_px, m.v_px)) || m.t_s < 0.5);
+        }
+        // Skipping changes nothing when every blob stays inside.
+        let skip = simulate(
+            &scenario,
+            &SimulationOptions {
+                skip_off_image: true,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(skip.measurements, clean.measurements);
+    }
+
+    #[test]
+    fn bad_fault_options_are_refused() {
+        let s = Scenario::new(ScenarioKind::Static, 1);
+        for opts in [
+            SimulationOptions {
+                occlusions: vec![Occlusion {
+                    ids: vec![0],
+                    t0_s: 1.0,
+                    t1_s: 0.5,
+                }],
+                ..Default::default()
+            },
+            SimulationOptions {
+                gaps: vec![TimeGap {
+                    t0_s: 0.1,
+                    duration_s: -1.0,
+                }],
+                ..Default::default()
+            },
+            SimulationOptions {
+                jump: Some(Jump {
+                    t_s: f64::NAN,
+                    offset_m: Vector3::zeros(),
+                }),
                 ..Default::default()
             },
         ] {

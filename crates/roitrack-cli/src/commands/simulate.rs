@@ -4,8 +4,12 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
+use nalgebra::Vector3;
 use roitrack_core::RoiOrder;
-use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simulate};
+use roitrack_sim::{
+    Jump, Occlusion, RoiBurst, Scenario, ScenarioKind, SimulatedRun, SimulationOptions, TimeGap,
+    simulate,
+};
 
 /// File names inside a simulation folder (SPEC section 8 formats).
 pub const CAMERA_FILE: &str = "camera.yaml";
@@ -15,13 +19,15 @@ pub const TRUTH_POSES_FILE: &str = "gt_poses.tum";
 pub const TRUTH_TWISTS_FILE: &str = "gt_twists.csv";
 pub const ROIS_FILE: &str = "rois.bin";
 
-/// Renders a 40 x 40 ROI for each measurement of `run` (same time and point) and writes the recording.
+/// Renders a 40 x 40 ROI for each measurement of `run` (same time and point, the truth of `options`, jump included)
+/// and writes the recording.
 pub fn write_roi_recording(
     scenario: &Scenario,
+    options: &SimulationOptions,
     run: &SimulatedRun,
     path: &Path,
-    seed: u64,
 ) -> Result<()> {
+    let seed = options.seed;
     use rand::{Rng, SeedableRng};
     use roitrack_image::{RenderScratch, Roi, RoiRenderer, SensorModel};
     const SIZE: u32 = 40;
@@ -30,7 +36,7 @@ pub fn write_roi_recording(
     let renderer = RoiRenderer::new(run.camera.clone(), run.target.clone(), sensor)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x0005_1f0c_a11e);
     let mut scratch = RenderScratch::new();
-    let truth = |t: f64| scenario.state_at(t);
+    let truth = |t: f64| options.truth_at(scenario, t);
     let mut writer = roitrack_formats::RoiRecordingWriter::create(path)?;
     for m in &run.measurements {
         let index = run
@@ -137,6 +143,97 @@ pub struct SimulateArgs {
     /// scheduler would) and write them to rois.bin, a recording `roitrack track --rois` replays.
     #[arg(long)]
     pub rois: bool,
+    /// Fault: hide points during [T0, T1) s, e.g. `0,5,10,15@1.0:1.2` (repeatable).
+    #[arg(long = "occlude", value_name = "IDS@T0:T1", value_parser = parse_occlusion)]
+    pub occlusions: Vec<Occlusion>,
+    /// Fault: no measurement during [T0, T0 + DURATION) s, e.g. `2.0:0.05` (repeatable).
+    #[arg(long = "gap", value_name = "T0:DURATION", value_parser = parse_gap)]
+    pub gaps: Vec<TimeGap>,
+    /// Fault: COUNT consecutive ROIs lost from time T0 s, e.g. `1.5:40` (repeatable).
+    #[arg(long = "burst", value_name = "T0:COUNT", value_parser = parse_burst)]
+    pub bursts: Vec<RoiBurst>,
+    /// Fault: from time T s the target is translated by (DX, DY, DZ) m in the camera frame, ground truth included,
+    /// e.g. `2.5:0.02,0,0`.
+    #[arg(long, value_name = "T:DX,DY,DZ", value_parser = parse_jump, allow_hyphen_values = true)]
+    pub jump: Option<Jump>,
+    /// Drop the measurements of blobs outside the image instead of failing.
+    #[arg(long)]
+    pub skip_off_image: bool,
+}
+
+fn parse_number(text: &str, what: &str) -> Result<f64, String> {
+    text.trim()
+        .parse::<f64>()
+        .ok()
+        .filter(|v| v.is_finite())
+        .ok_or_else(|| format!("{what} `{text}` is not a finite number"))
+}
+
+fn split_pair<'a>(text: &'a str, sep: char, form: &str) -> Result<(&'a str, &'a str), String> {
+    text.split_once(sep)
+        .ok_or_else(|| format!("expected {form}, got `{text}`"))
+}
+
+/// `IDS@T0:T1`, ids comma-separated.
+pub fn parse_occlusion(text: &str) -> Result<Occlusion, String> {
+    const FORM: &str = "IDS@T0:T1 (e.g. 0,5,10,15@1.0:1.2)";
+    let (ids, times) = split_pair(text, '@', FORM)?;
+    let (t0, t1) = split_pair(times, ':', FORM)?;
+    let ids = ids
+        .split(',')
+        .map(|id| {
+            id.trim()
+                .parse::<u32>()
+                .map_err(|_| format!("point id `{id}` is not a non-negative integer ({FORM})"))
+        })
+        .collect::<Result<Vec<u32>, String>>()?;
+    let (t0_s, t1_s) = (parse_number(t0, "T0")?, parse_number(t1, "T1")?);
+    if t1_s < t0_s {
+        return Err(format!("T1 ({t1_s}) must not be before T0 ({t0_s})"));
+    }
+    Ok(Occlusion { ids, t0_s, t1_s })
+}
+
+/// `T0:DURATION`.
+pub fn parse_gap(text: &str) -> Result<TimeGap, String> {
+    let (t0, duration) = split_pair(text, ':', "T0:DURATION (e.g. 2.0:0.05)")?;
+    let (t0_s, duration_s) = (parse_number(t0, "T0")?, parse_number(duration, "DURATION")?);
+    if duration_s < 0.0 {
+        return Err(format!("DURATION ({duration_s}) must be >= 0"));
+    }
+    Ok(TimeGap { t0_s, duration_s })
+}
+
+/// `T0:COUNT`.
+pub fn parse_burst(text: &str) -> Result<RoiBurst, String> {
+    let (t0, count) = split_pair(text, ':', "T0:COUNT (e.g. 1.5:40)")?;
+    let t0_s = parse_number(t0, "T0")?;
+    let count = count
+        .trim()
+        .parse::<usize>()
+        .map_err(|_| format!("COUNT `{count}` is not a non-negative integer"))?;
+    Ok(RoiBurst { t0_s, count })
+}
+
+/// `T:DX,DY,DZ` (metres).
+pub fn parse_jump(text: &str) -> Result<Jump, String> {
+    const FORM: &str = "T:DX,DY,DZ in metres (e.g. 2.5:0.02,0,0)";
+    let (t, offset) = split_pair(text, ':', FORM)?;
+    let t_s = parse_number(t, "T")?;
+    let parts: Vec<&str> = offset.split(',').collect();
+    let [dx, dy, dz] = parts[..] else {
+        return Err(format!(
+            "expected three offsets DX,DY,DZ, got `{offset}` ({FORM})"
+        ));
+    };
+    Ok(Jump {
+        t_s,
+        offset_m: Vector3::new(
+            parse_number(dx, "DX")?,
+            parse_number(dy, "DY")?,
+            parse_number(dz, "DZ")?,
+        ),
+    })
 }
 
 impl SimulateArgs {
@@ -148,16 +245,22 @@ impl SimulateArgs {
             order: self.order.into(),
             drop_fraction: self.drop_fraction,
             outlier_fraction: self.outlier_fraction,
+            occlusions: self.occlusions.clone(),
+            gaps: self.gaps.clone(),
+            bursts: self.bursts.clone(),
+            jump: self.jump,
+            skip_off_image: self.skip_off_image,
         }
     }
 }
 
 pub fn run(args: &SimulateArgs) -> Result<()> {
     let scenario = Scenario::new(args.scenario.into(), args.seed);
-    let run = simulate(&scenario, &args.options()).context("simulation failed")?;
+    let options = args.options();
+    let run = simulate(&scenario, &options).context("simulation failed")?;
     write_run(&run, &args.out)?;
     if args.rois {
-        write_roi_recording(&scenario, &run, &args.out.join(ROIS_FILE), args.seed)?;
+        write_roi_recording(&scenario, &options, &run, &args.out.join(ROIS_FILE))?;
     }
     eprintln!(
         "roitrack: {} scenario: {} measurements over {:.3} s written to {}",

@@ -184,6 +184,9 @@ const SHRINK_AFTER_GOOD_STEPS: usize = 20;
 /// With Tukey's c = 4.685 scales, residuals beyond about 5 px are rejected.
 const ROBUST_SCALE_FLOOR_PX: f64 = 1.0;
 
+/// Consecutive measurements rejected by the Kalman filter's gate after which its covariance is widened.
+const GATED_IN_A_ROW_FOR_RESET: usize = 6;
+
 /// Estimates reported as `Converging` after an initialisation.
 const CONVERGING_ESTIMATES: usize = 3;
 /// Consecutive bad estimates before the track is declared lost.
@@ -210,6 +213,9 @@ pub struct Tracker {
     good_steps: usize,
     degenerate_windows: usize,
     bad_estimates: usize,
+    /// Kalman: measurements rejected by the gate in a row, and covariance resets since the last estimate.
+    gated_in_a_row: usize,
+    covariance_resets: usize,
     kalman: ErrorStateKalman,
     /// Previous pose for the static baseline's finite differences.
     previous_static: Option<(f64, MotionState)>,
@@ -308,6 +314,8 @@ impl Tracker {
             good_steps: 0,
             degenerate_windows: 0,
             bad_estimates: 0,
+            gated_in_a_row: 0,
+            covariance_resets: 0,
             kalman: ErrorStateKalman::new(Matrix12::identity(), config.kalman),
             previous_static: None,
         })
@@ -563,13 +571,26 @@ impl Tracker {
         self.kalman.predict(&mut self.state, dt);
         self.t_ref_s = obs.t_s;
         let p = self.target.points()[obs.point_index].point_in_obj_m;
-        self.kalman.update(
+        let outcome = self.kalman.update(
             &self.model,
             &mut self.state,
             &p,
             &obs.ideal_px,
             self.config.noise_px,
         );
+        // Outliers are rare and scattered; a run of gated measurements means the filter itself is off (after a jump
+        // of the target, or an outlier that got through): widen its covariance so the measurements pull it back,
+        // instead of coasting on a wrong state.
+        self.gated_in_a_row = if outcome == UpdateOutcome::Gated {
+            self.gated_in_a_row + 1
+        } else {
+            0
+        };
+        if self.gated_in_a_row >= GATED_IN_A_ROW_FOR_RESET {
+            self.kalman.covariance += self.prior_covariance();
+            self.gated_in_a_row = 0;
+            self.covariance_resets += 1;
+        }
     }
 
     /// One control step at the newest measurement's time.
@@ -584,7 +605,11 @@ impl Tracker {
                 let ne = self.accumulate(JacobianKind::Exact, &self.state, t_new);
                 let inverse_condition = ne.fast_inverse_condition();
                 self.track_conditioning(inverse_condition);
-                let status = if inverse_condition < self.config.min_inverse_condition {
+                // After a covariance reset the filter is re-converging: say so.
+                let status = if self.covariance_resets > 0 {
+                    self.covariance_resets = 0;
+                    TrackStatus::Converging
+                } else if inverse_condition < self.config.min_inverse_condition {
                     TrackStatus::Degenerate
                 } else {
                     TrackStatus::Tracking
