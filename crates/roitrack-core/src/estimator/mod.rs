@@ -439,7 +439,19 @@ impl Tracker {
         let inverse_condition = ne.fast_inverse_condition();
         let well_posed = inverse_condition >= self.config.min_inverse_condition;
         // Residuals far above the noise mean a wrong local minimum or bad data: wait for more measurements.
-        if ne.residual_rms_px() > self.config.lost_residual_px {
+        // The median residual, which outliers do not inflate, must be at the noise level: the 12-dof model is exact
+        // over two cycles.
+        let median_px = window_fit::robust_scale_px(
+            &self.model,
+            self.target.points(),
+            &state,
+            t_ref,
+            &self.scratch,
+            0.0,
+        ) * 1.1774;
+        if ne.residual_rms_px() > self.config.lost_residual_px
+            || median_px > (3.0 * self.config.noise_px).max(0.3)
+        {
             return None;
         }
         self.state = if well_posed {
@@ -553,7 +565,7 @@ impl Tracker {
             &self.scratch,
             ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px),
         );
-        let (state, ne, more) = window_fit::robust_levenberg_marquardt(
+        let (state, _, more) = window_fit::robust_levenberg_marquardt(
             &self.model,
             self.target.points(),
             state,
@@ -563,7 +575,26 @@ impl Tracker {
             self.config.robust,
             scale_px,
         );
-        (state, ne, iterations + more)
+        // A second round with the scale of the cleaner fit rejects what the first, started from a pulled fit, kept.
+        let scale_px = window_fit::robust_scale_px(
+            &self.model,
+            self.target.points(),
+            &state,
+            t_ref,
+            &self.scratch,
+            ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px),
+        );
+        let (state, ne, last) = window_fit::robust_levenberg_marquardt(
+            &self.model,
+            self.target.points(),
+            state,
+            t_ref,
+            &self.scratch,
+            max_iterations,
+            self.config.robust,
+            scale_px,
+        );
+        (state, ne, iterations + more + last)
     }
 
     fn kalman_update(&mut self, obs: &Observation) {
