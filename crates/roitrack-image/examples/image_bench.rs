@@ -3,6 +3,9 @@
 //!
 //! Timings are per call, over many repetitions: the median and the minimum of the repetition means (the minimum is
 //! the figure least disturbed by other processes on the machine).
+//!
+//! `image_bench measure_blob` times only [`measure_blob`] on the static 24 x 24 ROI, longer (a micro-benchmark);
+//! `image_bench measure_blob_calls N` makes N calls and times nothing (for `valgrind --tool=callgrind`).
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -31,7 +34,79 @@ fn time_us(runs: usize, inner: usize, mut f: impl FnMut()) -> (f64, f64) {
     (t[t.len() / 2], t[0])
 }
 
+/// The static bench ROI (24 x 24, blob 5) as rendered with the default sensor and seed 1.
+fn bench_roi(camera: &CameraModel, target: &Target, renderer: &RoiRenderer) -> (Vec<u16>, Roi) {
+    let bench = bench_state();
+    let p = bench.point_in_cam_at(&target.points()[5].point_in_obj_m, 0.0);
+    let c = camera.raw_pixel_from_cam(&p).unwrap();
+    let roi = Roi::centred(c.x, c.y, 24, 1024, 1024).unwrap();
+    let mut out = vec![0u16; roi.len()];
+    renderer.render_roi(
+        &|_t| bench,
+        &roi,
+        0.0,
+        &mut ChaCha8Rng::seed_from_u64(1),
+        &mut out,
+    );
+    (out, roi)
+}
+
+/// The three option sets timed.
+fn centroid_options() -> [(&'static str, CentroidOptions); 3] {
+    [
+        (
+            "weighted, auto threshold (default)",
+            CentroidOptions::default(),
+        ),
+        ("binary, auto threshold (paper)", CentroidOptions::binary()),
+        (
+            "weighted, fixed threshold",
+            CentroidOptions {
+                threshold: Threshold::Fixed(45),
+                ..Default::default()
+            },
+        ),
+    ]
+}
+
+/// `measure_blob` alone: a longer timing (median over more repetitions), or `calls` untimed calls (callgrind).
+fn measure_blob_only(calls: Option<usize>) {
+    let camera = CameraModel::canonical();
+    let target = Target::grid4x4();
+    let renderer =
+        RoiRenderer::new(camera.clone(), target.clone(), SensorModel::default()).unwrap();
+    let (pixels, roi) = bench_roi(&camera, &target, &renderer);
+    let opts = CentroidOptions::default();
+    if let Some(calls) = calls {
+        let mut found = 0usize;
+        for _ in 0..calls {
+            found += usize::from(measure_blob(black_box(&pixels), black_box(&roi), &opts).is_ok());
+        }
+        println!(
+            "{calls} calls, {found} blobs: {:?}",
+            measure_blob(&pixels, &roi, &opts)
+        );
+        return;
+    }
+    println!("{:?}", measure_blob(&pixels, &roi, &opts));
+    for (oname, opts) in centroid_options() {
+        let (med, min) = time_us(301, 20000, || {
+            black_box(measure_blob(black_box(&pixels), black_box(&roi), &opts).ok());
+        });
+        println!("measure_blob 24x24 {oname}: median {med:.3} us, min {min:.3} us");
+    }
+}
+
 fn main() {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("measure_blob") => return measure_blob_only(None),
+        Some("measure_blob_calls") => {
+            let calls = args.get(1).and_then(|n| n.parse().ok()).unwrap_or(100_000);
+            return measure_blob_only(Some(calls));
+        }
+        _ => {}
+    }
     let camera = CameraModel::canonical();
     let target = Target::grid4x4();
     let renderer =
@@ -80,21 +155,7 @@ fn main() {
              median {med_alloc:.1} us (allocating)"
         );
         if name == "static" {
-            let options = [
-                (
-                    "weighted, auto threshold (default)",
-                    CentroidOptions::default(),
-                ),
-                ("binary, auto threshold (paper)", CentroidOptions::binary()),
-                (
-                    "weighted, fixed threshold",
-                    CentroidOptions {
-                        threshold: Threshold::Fixed(45),
-                        ..Default::default()
-                    },
-                ),
-            ];
-            for (oname, opts) in options {
+            for (oname, opts) in centroid_options() {
                 let (med, min) = time_us(101, 5000, || {
                     black_box(measure_blob(black_box(&out), &roi, &opts).ok());
                 });
