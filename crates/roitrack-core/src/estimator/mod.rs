@@ -557,44 +557,35 @@ impl Tracker {
         if self.config.robust == RobustLoss::None {
             return (state, ne, iterations);
         }
-        let scale_px = window_fit::robust_scale_px(
-            &self.model,
-            self.target.points(),
-            &state,
-            t_ref,
-            &self.scratch,
-            ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px),
-        );
-        let (state, _, more) = window_fit::robust_levenberg_marquardt(
-            &self.model,
-            self.target.points(),
-            state,
-            t_ref,
-            &self.scratch,
-            max_iterations,
-            self.config.robust,
-            scale_px,
-        );
-        // A second round with the scale of the cleaner fit rejects what the first, started from a pulled fit, kept.
-        let scale_px = window_fit::robust_scale_px(
-            &self.model,
-            self.target.points(),
-            &state,
-            t_ref,
-            &self.scratch,
-            ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px),
-        );
-        let (state, ne, last) = window_fit::robust_levenberg_marquardt(
+        // Two rounds: the second, with the scale of the cleaner first fit, rejects what the first (started from a
+        // fit pulled by the outliers) kept.
+        let (mut state, mut ne, mut iterations) = (state, ne, iterations);
+        for _ in 0..2 {
+            let (next, next_ne, more) = window_fit::robust_levenberg_marquardt(
+                &self.model,
+                self.target.points(),
+                state,
+                t_ref,
+                &self.scratch,
+                max_iterations,
+                self.config.robust,
+                self.robust_scale_px(&state, t_ref),
+            );
+            (state, ne, iterations) = (next, next_ne, iterations + more);
+        }
+        (state, ne, iterations)
+    }
+
+    /// The M-estimator's residual scale of the scratch window at `state` (at least the noise and 1 px).
+    fn robust_scale_px(&self, state: &MotionState, t_ref: f64) -> f64 {
+        window_fit::robust_scale_px(
             &self.model,
             self.target.points(),
             state,
             t_ref,
             &self.scratch,
-            max_iterations,
-            self.config.robust,
-            scale_px,
-        );
-        (state, ne, iterations + more + last)
+            ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px),
+        )
     }
 
     fn kalman_update(&mut self, obs: &Observation) {
@@ -662,14 +653,7 @@ impl Tracker {
                 let mut iterations = 0;
                 let mut last_ne = None;
                 for _ in 0..self.config.iterations {
-                    let scale_px = window_fit::robust_scale_px(
-                        &self.model,
-                        self.target.points(),
-                        &self.state,
-                        t_new,
-                        &self.scratch,
-                        ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px),
-                    );
+                    let scale_px = self.robust_scale_px(&self.state, t_new);
                     let step = window_fit::robust_vvs_iteration(
                         &self.model,
                         self.target.points(),
