@@ -1,33 +1,10 @@
 //! End-to-end tests of the `roitrack` binary: simulate, track, eval, bad input, and the cross-check against evo.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
-fn roitrack(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_roitrack"))
-        .args(args)
-        .output()
-        .expect("the roitrack binary runs")
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = roitrack(args);
-    assert!(
-        out.status.success(),
-        "roitrack {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
-
-fn fails(args: &[&str]) -> String {
-    let out = roitrack(args);
-    assert!(
-        !out.status.success(),
-        "roitrack {args:?} should have failed"
-    );
-    String::from_utf8(out.stderr).unwrap()
-}
+mod common;
+use common::{fails, ok, roitrack};
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()

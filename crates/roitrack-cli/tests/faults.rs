@@ -1,33 +1,9 @@
 //! The fault flags of `roitrack simulate` and the `roitrack faults` table.
 
 use std::path::Path;
-use std::process::{Command, Output};
 
-fn roitrack(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_roitrack"))
-        .args(args)
-        .output()
-        .expect("the roitrack binary runs")
-}
-
-fn ok(args: &[&str]) -> String {
-    let out = roitrack(args);
-    assert!(
-        out.status.success(),
-        "roitrack {args:?} failed: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    String::from_utf8(out.stdout).unwrap()
-}
-
-fn fails(args: &[&str]) -> String {
-    let out = roitrack(args);
-    assert!(
-        !out.status.success(),
-        "roitrack {args:?} should have failed"
-    );
-    String::from_utf8(out.stderr).unwrap()
-}
+mod common;
+use common::{fails, ok};
 
 /// (t, id) of every measurement in a simulation folder.
 fn measurements(dir: &Path) -> Vec<(f64, u32)> {

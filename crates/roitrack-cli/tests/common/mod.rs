@@ -1,0 +1,31 @@
+//! Helpers shared by the integration tests: run the `roitrack` binary and check how it ended.
+
+use std::process::{Command, Output};
+
+pub fn roitrack(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_roitrack"))
+        .args(args)
+        .output()
+        .expect("the roitrack binary runs")
+}
+
+/// Runs `roitrack args`, asserts success and returns its standard output.
+pub fn ok(args: &[&str]) -> String {
+    let out = roitrack(args);
+    assert!(
+        out.status.success(),
+        "roitrack {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// Runs `roitrack args`, asserts failure and returns its standard error.
+pub fn fails(args: &[&str]) -> String {
+    let out = roitrack(args);
+    assert!(
+        !out.status.success(),
+        "roitrack {args:?} should have failed"
+    );
+    String::from_utf8(out.stderr).unwrap()
+}
