@@ -356,9 +356,15 @@ impl Tracker {
     /// its covariance (error-state order v, w, dV, dW), instead of initialising from the first two cycles.
     pub fn start_from(&mut self, t_s: f64, state: MotionState, covariance: Option<Matrix12>) {
         self.window.clear();
+        self.last_t_s = Some(self.last_t_s.map_or(t_s, |last| last.max(t_s)));
+        self.begin_track(t_s, state, covariance);
+    }
+
+    /// Starts a new track at `state` (time `t_s`): every per-track counter back to zero, the Kalman filter at
+    /// `covariance` (a broad prior without one). The measurement window is kept.
+    fn begin_track(&mut self, t_s: f64, state: MotionState, covariance: Option<Matrix12>) {
         self.state = state;
         self.t_ref_s = t_s;
-        self.last_t_s = Some(self.last_t_s.map_or(t_s, |last| last.max(t_s)));
         self.phase = Phase::Running;
         self.since_estimate = 0;
         self.estimates_since_init = 0;
@@ -366,6 +372,8 @@ impl Tracker {
         self.good_steps = 0;
         self.degenerate_windows = 0;
         self.bad_estimates = 0;
+        self.gated_in_a_row = 0;
+        self.covariance_resets = 0;
         self.previous_static = None;
         self.kalman = ErrorStateKalman::new(
             covariance.unwrap_or_else(|| self.prior_covariance()),
@@ -454,25 +462,13 @@ impl Tracker {
         {
             return None;
         }
-        self.state = if well_posed {
+        let state = if well_posed {
             state
         } else {
-            MotionState::at_rest(fit.state.cam_r_obj, fit.state.cam_t_obj_m).predicted(0.0)
+            MotionState::at_rest(fit.state.cam_r_obj, fit.state.cam_t_obj_m)
         };
-        self.t_ref_s = t_ref;
-        self.phase = Phase::Running;
-        self.since_estimate = 0;
-        self.estimates_since_init = 0;
-        self.widening = 0;
-        self.good_steps = 0;
-        self.degenerate_windows = 0;
-        self.bad_estimates = 0;
-        self.previous_static = None;
         let covariance = self.window_covariance(&ne);
-        self.kalman = ErrorStateKalman::new(
-            covariance.unwrap_or_else(|| self.prior_covariance()),
-            self.config.kalman,
-        );
+        self.begin_track(t_ref, state, covariance);
         Some(self.finish_estimate(
             inverse_condition,
             ne.count,
