@@ -151,11 +151,12 @@ mod tests {
     ) -> Matrix2x12 {
         let mut j = Matrix2x12::zeros();
         for k in 0..12 {
-            // Velocity columns scale with d: use a step that perturbs the pixel comparably.
+            // Velocity columns act through d: a step of 1e-6 / |d| moves the point as much as the pose steps do, so
+            // round-off stays negligible even for d of a fraction of a microsecond.
             let h = if k < 6 {
                 1e-6
             } else {
-                1e-6 / d.abs().max(1e-3)
+                1e-6 / d.abs().max(1e-12)
             };
             let mut delta = Vector12::zeros();
             delta[k] = h;
