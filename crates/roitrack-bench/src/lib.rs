@@ -8,7 +8,7 @@
 //! The scene ([`scene`]): camera [`CameraModel::canonical`], target [`Target::grid4x4`], the bench pose (origin at
 //! (0.02, -0.01, 0.60) m, R = Rz(5°) Ry(-15°) Rx(10°), [`roitrack_sim::bench_rotation`]) at the reference time,
 //! moving with a moderate twist ([`TRUTH_VELOCITY_MPS`], [`TRUTH_ANGULAR_VELOCITY_RADPS`]) so that every path of a
-//! moving target is timed (the time-dependent rotation takes its general branch, not the small-angle one).
+//! moving target is timed (the time-dependent rotation `Exp(W d)`, a few milliradians over a window, as in tracking).
 //! Measurements are taken [`ROI_PERIOD_S`] (250 µs) apart, visiting the points in the bit-reversed order, each the
 //! projection of the true pose at its own time plus Gaussian noise of [`NOISE_PX`] (0.1 px), drawn from a seeded
 //! generator: every run times the same problem. The static pose problem is the bench pose at rest, one noisy

@@ -63,32 +63,27 @@ impl SpatioTemporalModel {
         point_in_obj_m: &Vector3<f64>,
         d_s: f64,
     ) -> Option<ProjectedPoint> {
-        let rotation_increment = state.angular_velocity_radps * d_s;
-        let (e, left_jacobian) = so3::exp_and_left_jacobian(&rotation_increment);
+        let increment = so3::RotationIncrement::new(&(state.angular_velocity_radps * d_s));
         let op0 = state.cam_r_obj * point_in_obj_m;
-        let op = e * op0;
+        let op = increment.rotate(&op0);
         let point_in_cam_m = op + state.cam_t_obj_m + state.velocity_mps * d_s;
         let pixel = self.intrinsics.pixel_from_cam(&point_in_cam_m)?;
         let dm_dp: Matrix2x3<f64> = self.intrinsics.pixel_jacobian_wrt_cam(&point_in_cam_m);
         let mut jacobian = Matrix2x12::zeros();
         match kind {
             JacobianKind::Exact => {
-                // dm/dP [I, -[OP]x E, d I, -[OP]x J_l d], with the rows of dm/dP [OP]x as cross products:
-                // (a [OP]x)ᵀ = a × OP for a row a.
-                let a_op = Matrix2x3::from_rows(&[
-                    dm_dp.row(0).transpose().cross(&op).transpose(),
-                    dm_dp.row(1).transpose().cross(&op).transpose(),
-                ]);
-                jacobian.fixed_view_mut::<2, 3>(0, 0).copy_from(&dm_dp);
-                jacobian
-                    .fixed_view_mut::<2, 3>(0, 3)
-                    .copy_from(&(-(a_op * e)));
-                jacobian
-                    .fixed_view_mut::<2, 3>(0, 6)
-                    .copy_from(&(dm_dp * d_s));
-                jacobian
-                    .fixed_view_mut::<2, 3>(0, 9)
-                    .copy_from(&(-(a_op * left_jacobian) * d_s));
+                // dm/dP [I, -[OP]x E, d I, -[OP]x J_l d]. For a row a of dm/dP, (a [OP]x)ᵀ = a × OP, and the products
+                // of that row with E and J_l are taken by cross products (no 3 x 3 matrices).
+                for r in 0..2 {
+                    let a = dm_dp.row(r).transpose();
+                    let (a_op_e, a_op_j) = increment.row_times_exp_and_left_jacobian(&a.cross(&op));
+                    for c in 0..3 {
+                        jacobian[(r, c)] = a[c];
+                        jacobian[(r, 3 + c)] = -a_op_e[c];
+                        jacobian[(r, 6 + c)] = a[c] * d_s;
+                        jacobian[(r, 9 + c)] = -a_op_j[c] * d_s;
+                    }
+                }
             }
             JacobianKind::Paper => {
                 let w = &state.angular_velocity_radps;

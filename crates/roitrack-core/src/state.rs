@@ -46,8 +46,11 @@ impl MotionState {
     /// Where the model point `point_in_obj_m` is, in the camera frame, `d_s` seconds after the reference time.
     #[inline]
     pub fn point_in_cam_at(&self, point_in_obj_m: &Vector3<f64>, d_s: f64) -> Vector3<f64> {
-        let (r, t) = self.pose_at(d_s);
-        r * point_in_obj_m + t
+        // Exp(W d) applied to the rotated point by cross products: no rotation matrix for every point and time.
+        so3::RotationIncrement::new(&(self.angular_velocity_radps * d_s))
+            .rotate(&(self.cam_r_obj * point_in_obj_m))
+            + self.cam_t_obj_m
+            + self.velocity_mps * d_s
     }
 
     /// The same motion with its reference time moved `dt_s` later (the paper's compensation term, eq. 12).
@@ -68,10 +71,8 @@ impl MotionState {
         let w = delta.fixed_rows::<3>(3).into_owned();
         let dv = delta.fixed_rows::<3>(6).into_owned();
         let dw = delta.fixed_rows::<3>(9).into_owned();
-        let mut cam_r_obj = so3::exp(&w) * self.cam_r_obj;
-        cam_r_obj.renormalize();
         Self {
-            cam_r_obj,
+            cam_r_obj: so3::orthonormalized(&(so3::exp(&w) * self.cam_r_obj)),
             cam_t_obj_m: self.cam_t_obj_m + v,
             velocity_mps: self.velocity_mps + dv,
             angular_velocity_radps: self.angular_velocity_radps + dw,

@@ -15,6 +15,7 @@
 //! Every estimator refuses to update on a degenerate window (reciprocal condition number of the column-scaled
 //! Jacobian below [`TrackerConfig::min_inverse_condition`]), flags the estimate, and widens its window.
 
+pub mod cholesky;
 pub mod kalman;
 pub mod normal_equations;
 pub mod static_pose;

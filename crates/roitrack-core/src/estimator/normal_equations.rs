@@ -1,9 +1,11 @@
-//! Gauss-Newton normal equations, accumulated row pair by row pair (no per-step allocation), with a conditioning
-//! figure and a damped, column-scaled solve.
+//! Gauss-Newton normal equations, accumulated measurement by measurement in batches (no allocation), with a
+//! conditioning figure and a damped, column-scaled solve.
 
 use nalgebra::{SMatrix, SVector, Vector2};
 
-/// `JᵀWJ` and `JᵀWe` of a least-squares problem with `N` parameters, built one 2-row block at a time.
+use super::cholesky::FixedCholesky;
+
+/// `JᵀWJ` and `JᵀWe` of a least-squares problem with `N` parameters, built by a [`NormalEquationsBuilder`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NormalEquations<const N: usize> {
     /// Upper triangle of `JᵀWJ` (the lower one is not maintained: use [`Self::symmetric_jtj`]).
@@ -32,32 +34,6 @@ impl<const N: usize> Default for NormalEquations<N> {
 impl<const N: usize> NormalEquations<N> {
     pub fn clear(&mut self) {
         *self = Self::default();
-    }
-
-    /// Adds one measurement: its 2 x N Jacobian, residual `e` = predicted - measured (px), and weight.
-    ///
-    /// Only the upper triangle of `JᵀJ` is accumulated (half the work); [`Self::jtj`] is symmetrised on read by
-    /// [`Self::symmetric_jtj`], and every method here uses it.
-    #[inline]
-    pub fn add(&mut self, jacobian: &SMatrix<f64, 2, N>, residual: &Vector2<f64>, weight: f64) {
-        // Column-major storage: the 2 x N Jacobian is N pairs, `JᵀJ`'s column j is jtj[j N .. j N + N].
-        let pairs = jacobian.as_slice();
-        let jtj = self.jtj.as_mut_slice();
-        for (j, (column, pair_j)) in jtj
-            .chunks_exact_mut(N)
-            .zip(pairs.chunks_exact(2))
-            .enumerate()
-        {
-            let (a0, a1) = (pair_j[0] * weight, pair_j[1] * weight);
-            for (c, pair_i) in column[..=j].iter_mut().zip(pairs.chunks_exact(2)) {
-                *c += a0 * pair_i[0] + a1 * pair_i[1];
-            }
-            self.jte[j] += a0 * residual.x + a1 * residual.y;
-        }
-        let r2 = residual.norm_squared();
-        self.weighted_cost += weight * r2;
-        self.cost += r2;
-        self.count += 1;
     }
 
     /// Root mean square of the residual (px, per coordinate), unweighted.
@@ -111,7 +87,7 @@ impl<const N: usize> NormalEquations<N> {
     pub fn solve_with_conditioning(&self) -> Option<(SVector<f64, N>, f64)> {
         let s = self.column_scale();
         let scaled = self.scaled_jtj();
-        let cholesky = scaled.cholesky()?;
+        let cholesky = FixedCholesky::factor(&scaled)?;
         let step = -cholesky
             .solve(&self.jte.component_mul(&s))
             .component_mul(&s);
@@ -119,23 +95,22 @@ impl<const N: usize> NormalEquations<N> {
             return None;
         }
         const ITERATIONS: usize = 4;
-        // A start vector with components along every eigenvector in practice.
+        // A start vector with components along every eigenvector in practice. The two iterations are independent
+        // chains, run in one loop so that the processor overlaps them; they are not normalised on the way (the
+        // Rayleigh quotients do not depend on the scale): the power iterate grows at most N⁴ (unit diagonal), the
+        // inverse one λmin⁻⁴, which overflows only for windows singular to working precision (reported as 0).
         let start = SVector::<f64, N>::from_fn(|i, _| 1.0 + 0.37 * i as f64);
-        let mut x = start.normalize();
+        let (mut x, mut y) = (start, start);
         for _ in 0..ITERATIONS {
-            x = (scaled * x).normalize();
+            x = scaled * x;
+            y = cholesky.solve(&y);
         }
-        let lambda_max = x.dot(&(scaled * x));
-        let mut y = start.normalize();
-        for _ in 0..ITERATIONS {
-            let next = cholesky.solve(&y);
-            let norm = next.norm();
-            if !norm.is_finite() || norm == 0.0 {
-                return Some((step, 0.0));
-            }
-            y = next / norm;
+        let rayleigh = |v: &SVector<f64, N>| v.dot(&(scaled * v)) / v.norm_squared();
+        let lambda_max = rayleigh(&x);
+        let lambda_min = rayleigh(&y);
+        if !(lambda_min.is_finite() && lambda_max.is_finite()) {
+            return Some((step, 0.0));
         }
-        let lambda_min = y.dot(&(scaled * y));
         let inverse_condition = if lambda_max > 0.0 {
             (lambda_min.max(0.0) / lambda_max).sqrt()
         } else {
@@ -159,10 +134,145 @@ impl<const N: usize> NormalEquations<N> {
             scaled[(i, i)] += damping;
         }
         let rhs = self.jte.component_mul(&s);
-        let scaled_step = scaled.cholesky()?.solve(&rhs);
+        let scaled_step = FixedCholesky::factor(&scaled)?.solve(&rhs);
         let step = -scaled_step.component_mul(&s);
         step.iter().all(|x| x.is_finite()).then_some(step)
     }
+}
+
+/// Measurements buffered by a [`NormalEquationsBuilder`] before they are folded into the normal equations.
+const BATCH_MEASUREMENTS: usize = 16;
+const BATCH_ROWS: usize = 2 * BATCH_MEASUREMENTS;
+
+/// Builds [`NormalEquations`] one measurement (2 rows) at a time.
+///
+/// Why batches: the weighted rows are buffered column by column, and every 16 measurements each entry of the upper
+/// triangle of `JᵀJ` is one dot product over 32 rows, four at a time in registers. In the control step of a
+/// 16-measurement window this took 2.85 µs a step against 3.25-3.4 µs for adding each measurement's `JᵀJ` to the
+/// sums as it comes (its loads and stores of the 78 sums interleaved with the projections; same run, same machine),
+/// although the latter alone is faster in a loop of its own: what counts is the whole step.
+#[derive(Debug, Clone, Copy)]
+pub struct NormalEquationsBuilder<const N: usize> {
+    folded: NormalEquations<N>,
+    /// `columns[i][k]`: column i of the buffered rows, each row scaled by the square root of its weight.
+    columns: [[f64; BATCH_ROWS]; N],
+    /// The buffered residuals, scaled as their rows.
+    residuals: [f64; BATCH_ROWS],
+    rows: usize,
+}
+
+impl<const N: usize> Default for NormalEquationsBuilder<N> {
+    fn default() -> Self {
+        Self {
+            folded: NormalEquations::default(),
+            columns: [[0.0; BATCH_ROWS]; N],
+            residuals: [0.0; BATCH_ROWS],
+            rows: 0,
+        }
+    }
+}
+
+impl<const N: usize> NormalEquationsBuilder<N> {
+    /// Adds one measurement: its 2 x N Jacobian, residual `e` = predicted - measured (px), and weight (>= 0).
+    #[inline]
+    pub fn add(&mut self, jacobian: &SMatrix<f64, 2, N>, residual: &Vector2<f64>, weight: f64) {
+        let r2 = residual.norm_squared();
+        self.folded.weighted_cost += weight * r2;
+        self.folded.cost += r2;
+        self.folded.count += 1;
+        // √w on both the rows and the residuals gives Σ w JᵀJ and Σ w Jᵀe.
+        let root = weight.sqrt();
+        let k = self.rows;
+        for (column, pair) in self
+            .columns
+            .iter_mut()
+            .zip(jacobian.as_slice().chunks_exact(2))
+        {
+            column[k] = pair[0] * root;
+            column[k + 1] = pair[1] * root;
+        }
+        self.residuals[k] = residual.x * root;
+        self.residuals[k + 1] = residual.y * root;
+        self.rows += 2;
+        if self.rows == BATCH_ROWS {
+            self.fold();
+        }
+    }
+
+    /// Marks the problem infinitely costly (a point behind the camera).
+    pub fn set_infinite_cost(&mut self) {
+        self.folded.cost = f64::INFINITY;
+    }
+
+    /// The normal equations of every measurement added.
+    pub fn finish(&mut self) -> NormalEquations<N> {
+        self.fold();
+        self.folded
+    }
+
+    /// Folds the buffered rows into the sums: each entry of the upper triangle is a dot product over the batch.
+    fn fold(&mut self) {
+        if self.rows == 0 {
+            return;
+        }
+        // A partial batch: zero rows add nothing, and the dot products keep their fixed length.
+        for column in &mut self.columns {
+            column[self.rows..].fill(0.0);
+        }
+        self.residuals[self.rows..].fill(0.0);
+        for j in 0..N {
+            let column_j = &self.columns[j];
+            // Four dot products at a time against column j: four independent sums in flight, column j loaded once.
+            let mut i = 0;
+            while i + 4 <= j + 1 {
+                let sums = dot4(
+                    [
+                        &self.columns[i],
+                        &self.columns[i + 1],
+                        &self.columns[i + 2],
+                        &self.columns[i + 3],
+                    ],
+                    column_j,
+                );
+                for (g, sum) in sums.into_iter().enumerate() {
+                    self.folded.jtj[(i + g, j)] += sum;
+                }
+                i += 4;
+            }
+            // The rest of the column, and the residual, padded with column j itself (its sum is discarded).
+            let padded = |g: usize| {
+                if i + g <= j {
+                    &self.columns[i + g]
+                } else if g == 3 {
+                    &self.residuals
+                } else {
+                    column_j
+                }
+            };
+            let sums = dot4([padded(0), padded(1), padded(2), padded(3)], column_j);
+            for (g, &sum) in sums.iter().enumerate().take(3) {
+                if i + g <= j {
+                    self.folded.jtj[(i + g, j)] += sum;
+                }
+            }
+            self.folded.jte[j] += sums[3];
+        }
+        self.rows = 0;
+    }
+}
+
+/// Four dot products `a[g] · b` over a batch, by pairs of lanes (one SIMD register each): strict floating point
+/// cannot reorder a single sum, so the independent sums are what keeps the multipliers busy.
+#[inline(always)]
+fn dot4(a: [&[f64; BATCH_ROWS]; 4], b: &[f64; BATCH_ROWS]) -> [f64; 4] {
+    let mut lanes = [[0.0; 2]; 4];
+    for k in (0..BATCH_ROWS).step_by(2) {
+        for g in 0..4 {
+            lanes[g][0] += a[g][k] * b[k];
+            lanes[g][1] += a[g][k + 1] * b[k + 1];
+        }
+    }
+    lanes.map(|l| l[0] + l[1])
 }
 
 /// nalgebra's symmetric eigensolver needs a concrete dimension: implemented for the sizes roitrack uses.
@@ -195,13 +305,14 @@ mod tests {
     fn solves_a_linear_problem_exactly() {
         // e(x) = A x - b, with x* known: one Gauss-Newton step from 0 lands on x*.
         let x_true = SVector::<f64, 3>::new(1.0, -2.0, 0.5);
-        let mut ne = NormalEquations::<3>::default();
+        let mut builder = NormalEquationsBuilder::<3>::default();
         for k in 0..5 {
             let a =
                 SMatrix::<f64, 2, 3>::from_fn(|i, j| ((k * 7 + i * 3 + j * 5) % 11) as f64 - 5.0);
             let b = a * x_true;
-            ne.add(&a, &(-b), 1.0);
+            builder.add(&a, &(-b), 1.0);
         }
+        let ne = builder.finish();
         let step = ne.solve(0.0).unwrap();
         assert!((step - x_true).norm() < 1e-12);
         assert!(ne.inverse_condition() > 0.01);
@@ -212,18 +323,54 @@ mod tests {
 
     #[test]
     fn singular_problems_report_zero_conditioning() {
-        let mut ne = NormalEquations::<3>::default();
+        let mut builder = NormalEquationsBuilder::<3>::default();
         // The third parameter never appears: a zero column.
         let a = SMatrix::<f64, 2, 3>::new(1.0, 2.0, 0.0, 3.0, -1.0, 0.0);
-        ne.add(&a, &Vector2::new(1.0, 1.0), 1.0);
+        builder.add(&a, &Vector2::new(1.0, 1.0), 1.0);
+        let ne = builder.finish();
         assert!(ne.inverse_condition() < 1e-12);
         // Two equal columns.
-        let mut ne = NormalEquations::<2>::default();
-        ne.add(
+        let mut builder = NormalEquationsBuilder::<2>::default();
+        builder.add(
             &SMatrix::<f64, 2, 2>::new(1.0, 1.0, 2.0, 2.0),
             &Vector2::new(1.0, 0.0),
             1.0,
         );
+        let ne = builder.finish();
         assert!(ne.inverse_condition() < 1e-7);
+    }
+
+    #[test]
+    fn batches_give_the_weighted_sums_of_the_measurements() {
+        // 0, 1, 15, 16, 17, 40 measurements: empty, partial, exactly one batch, a batch and a remainder, several.
+        for count in [0usize, 1, 15, 16, 17, 40] {
+            let mut builder = NormalEquationsBuilder::<12>::default();
+            let mut jtj = SMatrix::<f64, 12, 12>::zeros();
+            let mut jte = SVector::<f64, 12>::zeros();
+            let mut weighted_cost = 0.0;
+            for k in 0..count {
+                let j = SMatrix::<f64, 2, 12>::from_fn(|r, c| {
+                    ((k * 13 + r * 7 + c * 3) % 17) as f64 - 8.0 + 0.1 * c as f64
+                });
+                let e = Vector2::new(k as f64 * 0.3 - 2.0, 1.0 - k as f64 * 0.1);
+                let w = [1.0, 0.25, 0.0, 0.7][k % 4];
+                builder.add(&j, &e, w);
+                jtj += j.transpose() * j * w;
+                jte += j.transpose() * e * w;
+                weighted_cost += w * e.norm_squared();
+            }
+            let ne = builder.finish();
+            assert_eq!(ne.count, count);
+            let scale = 1.0 + jtj.norm();
+            assert!(
+                (ne.symmetric_jtj() - jtj).norm() <= 1e-12 * scale,
+                "count {count}"
+            );
+            assert!(
+                (ne.jte - jte).norm() <= 1e-12 * (1.0 + jte.norm()),
+                "count {count}"
+            );
+            assert!((ne.weighted_cost - weighted_cost).abs() <= 1e-12 * (1.0 + weighted_cost));
+        }
     }
 }

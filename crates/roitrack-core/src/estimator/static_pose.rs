@@ -5,7 +5,7 @@
 use nalgebra::{DMatrix, Matrix3, Rotation3, SMatrix, SVector, Vector2, Vector3};
 use thiserror::Error;
 
-use super::normal_equations::NormalEquations;
+use super::normal_equations::{NormalEquations, NormalEquationsBuilder};
 use super::window::Observation;
 use crate::{MotionState, SpatioTemporalModel, Target};
 
@@ -268,14 +268,14 @@ fn static_normal_equations(
     obs: &[Observation],
     state: &MotionState,
 ) -> NormalEquations<6> {
-    let mut ne = NormalEquations::<6>::default();
+    let mut builder = NormalEquationsBuilder::<6>::default();
     let points = target.points();
     let r = state.cam_r_obj.matrix();
     for o in obs {
         let op = r * points[o.point_index].point_in_obj_m;
         let p = op + state.cam_t_obj_m;
         let Some(pixel) = model.intrinsics.pixel_from_cam(&p) else {
-            ne.cost = f64::INFINITY;
+            builder.set_infinite_cost();
             continue;
         };
         // d(u,v)/dP [I, -[OP]x]
@@ -284,9 +284,9 @@ fn static_normal_equations(
         let mut j = SMatrix::<f64, 2, 6>::zeros();
         j.fixed_view_mut::<2, 3>(0, 0).copy_from(&d);
         j.fixed_view_mut::<2, 3>(0, 3).copy_from(&rot);
-        ne.add(&j, &(pixel - o.ideal_px), 1.0);
+        builder.add(&j, &(pixel - o.ideal_px), 1.0);
     }
-    ne
+    builder.finish()
 }
 
 fn apply_pose_step(state: &MotionState, step: &SVector<f64, 6>) -> MotionState {

@@ -2,7 +2,7 @@
 //! virtual visual servoing loop, and Levenberg-Marquardt to convergence. Pure functions on slices, no allocation:
 //! the [`super::Tracker`] calls them, and so do the benchmarks.
 
-use super::normal_equations::NormalEquations;
+use super::normal_equations::{NormalEquations, NormalEquationsBuilder};
 use super::window::Observation;
 use crate::{JacobianKind, MotionState, SpatioTemporalModel, TargetPoint};
 
@@ -114,19 +114,19 @@ pub fn weighted_window_normal_equations(
     loss: RobustLoss,
     scale_px: f64,
 ) -> NormalEquations<12> {
-    let mut ne = NormalEquations::<12>::default();
+    let mut builder = NormalEquationsBuilder::<12>::default();
     for o in window {
         let p = &points[o.point_index].point_in_obj_m;
         match model.project_with_jacobian(kind, state, p, o.t_s - t_ref_s) {
             Some(pp) => {
                 let e = pp.pixel - o.ideal_px;
                 let w = loss.weight(e.norm() / scale_px);
-                ne.add(&pp.jacobian, &e, w);
+                builder.add(&pp.jacobian, &e, w);
             }
-            None => ne.cost = f64::INFINITY,
+            None => builder.set_infinite_cost(),
         }
     }
-    ne
+    builder.finish()
 }
 
 /// What one step of the virtual visual servoing loop did.
