@@ -127,7 +127,15 @@ fn faults_json_reports_every_row() {
         .map(|l| serde_json::from_str(l).unwrap())
         .collect();
     let faults: Vec<&str> = rows.iter().map(|r| r["fault"].as_str().unwrap()).collect();
-    assert_eq!(faults, ["clean", "burst 40 ROIs lost", "jump 20 mm in x"]);
+    assert_eq!(
+        faults,
+        [
+            "clean",
+            "burst 40 ROIs lost",
+            "jump 20 mm in x",
+            "4 blobs leave image 0.4 s"
+        ]
+    );
     for r in &rows {
         assert_eq!(r["scenario"], "orthoglide");
         assert!(r["position_rmse_mm"].as_f64().unwrap() > 0.0);
@@ -140,4 +148,13 @@ fn faults_json_reports_every_row() {
     let rmse = |r: &serde_json::Value| r["position_rmse_mm"].as_f64().unwrap();
     assert!(rmse(&rows[1]) < 2.0 * rmse(&rows[0]));
     assert!(rmse(&rows[2]) > rmse(&rows[0]));
+    // The estimate that first sees the jump cannot tell it from an outlier: it is flagged (disputed), and no
+    // estimate is wrong without a flag.
+    assert!(rows[2]["flagged"].as_u64().unwrap() >= 1);
+    // Blobs leaving the image and coming back: tracked throughout, recovered within 50 ms of the end.
+    assert!(rmse(&rows[3]) < 1.5 * rmse(&rows[0]));
+    assert!(rows[3]["recovery_ms"].as_f64().unwrap() <= 50.0);
+    for r in &rows {
+        assert_eq!(r["unflagged_wrong"], 0, "{}", r["fault"]);
+    }
 }

@@ -51,3 +51,61 @@ fn tracks_orthoglide_from_rendered_rois() {
     }
     assert!(worst_mm < 2.0, "worst position error {worst_mm} mm");
 }
+
+#[test]
+fn reflections_add_a_spot_that_moves_the_centroid_and_nothing_else() {
+    use roitrack_image::{CentroidOptions, Roi, measure_blob};
+    use roitrack_pipeline::cameras::ReflectionFault;
+    use roitrack_pipeline::realtime::RoiCamera;
+    let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
+    let renderer = RoiRenderer::new(
+        scenario.camera.clone(),
+        scenario.target.clone(),
+        SensorModel::default(),
+    )
+    .unwrap();
+    let state = scenario.state_at(0.1);
+    let p = scenario.target.points()[5].point_in_obj_m;
+    let px = scenario
+        .camera
+        .intrinsics
+        .pixel_from_cam(&state.point_in_cam_at(&p, 0.0))
+        .unwrap();
+    let roi = Roi::new(px.x as u32 - 16, px.y as u32 - 16, 32, 32);
+    let truth = move |_t: f64| state;
+    let mut clean = SimulatedCamera::new(renderer.clone(), truth, 3);
+    let always = ReflectionFault {
+        fraction: 1.0,
+        relative_peak: (2.0, 2.0),
+        ..ReflectionFault::default()
+    };
+    let mut faulty = SimulatedCamera::new(renderer.clone(), truth, 3).with_reflections(always);
+    let never = ReflectionFault {
+        fraction: 0.0,
+        ..ReflectionFault::default()
+    };
+    let mut unaffected = SimulatedCamera::new(renderer, truth, 3).with_reflections(never);
+    let (mut a, mut b, mut c) = (
+        vec![0u16; roi.len()],
+        vec![0u16; roi.len()],
+        vec![0u16; roi.len()],
+    );
+    for k in 0..20 {
+        let t = 0.1 + k as f64 * 250e-6;
+        clean.grab_roi(5, &roi, t, &mut a);
+        faulty.grab_roi(5, &roi, t, &mut b);
+        unaffected.grab_roi(5, &roi, t, &mut c);
+        // The fault draws from its own generator: without reflections the pixels are the clean camera's.
+        assert_eq!(a, c);
+        assert_ne!(a, b);
+        let opts = CentroidOptions::default();
+        let clean_centroid = measure_blob(&a, &roi, &opts).unwrap();
+        // Twice as bright as the blob, the spot takes the centroid (or the blob is rejected when it reaches the border).
+        if let Ok(faulty_centroid) = measure_blob(&b, &roi, &opts) {
+            let moved = ((faulty_centroid.u_px - clean_centroid.u_px).powi(2)
+                + (faulty_centroid.v_px - clean_centroid.v_px).powi(2))
+            .sqrt();
+            assert!(moved > 0.2, "ROI {k}: the centroid moved {moved} px");
+        }
+    }
+}

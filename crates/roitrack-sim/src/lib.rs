@@ -9,6 +9,7 @@ pub mod measurements;
 pub mod scenario;
 
 pub use measurements::{
-    Jump, Occlusion, RoiBurst, SimError, SimulatedRun, SimulationOptions, TimeGap, simulate,
+    Excursion, Jump, Occlusion, RoiBurst, SimError, SimulatedRun, SimulationOptions, TimeGap,
+    simulate,
 };
 pub use scenario::{Scenario, ScenarioKind, bench_rotation};

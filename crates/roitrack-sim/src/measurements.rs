@@ -35,6 +35,9 @@ pub struct SimulationOptions {
     pub bursts: Vec<RoiBurst>,
     /// Fault: from a time on, the true pose is translated (the ground truth includes the jump). Default none.
     pub jump: Option<Jump>,
+    /// Fault: a sideways excursion of the target during an interval, far enough to take blobs out of the image (the
+    /// ground truth includes it). Default none.
+    pub excursion: Option<Excursion>,
     /// Drop the measurements of blobs outside the image instead of failing with [`SimError::BlobOffImage`].
     pub skip_off_image: bool,
 }
@@ -78,15 +81,41 @@ impl Jump {
     }
 }
 
-impl SimulationOptions {
-    /// The true state at `t_s`: the scenario's, with the jump (if any) applied. Use it to render or to score a run
-    /// simulated with these options.
-    pub fn truth_at(&self, scenario: &Scenario, t_s: f64) -> MotionState {
-        let state = scenario.state_at(t_s);
-        match &self.jump {
-            Some(jump) => jump.apply(t_s, state),
-            None => state,
+/// During `[t0_s, t1_s]` the true target position (camera frame) is moved by `offset_m` times a raised-cosine bump
+/// `(1 - cos(2π (t - t0) / (t1 - t0))) / 2`, which rises from 0 to 1 and back: a smooth excursion and return, with
+/// the bump's derivative added to the true velocity (the truth stays a consistent motion).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Excursion {
+    pub t0_s: f64,
+    pub t1_s: f64,
+    pub offset_m: Vector3<f64>,
+}
+
+impl Excursion {
+    /// `state` (the scenario's truth at `t_s`) with the excursion applied.
+    pub fn apply(&self, t_s: f64, mut state: MotionState) -> MotionState {
+        if t_s > self.t0_s && t_s < self.t1_s {
+            let omega = std::f64::consts::TAU / (self.t1_s - self.t0_s);
+            let phase = omega * (t_s - self.t0_s);
+            state.cam_t_obj_m += self.offset_m * (0.5 * (1.0 - phase.cos()));
+            state.velocity_mps += self.offset_m * (0.5 * omega * phase.sin());
         }
+        state
+    }
+}
+
+impl SimulationOptions {
+    /// The true state at `t_s`: the scenario's, with the jump and the excursion (if any) applied. Use it to render or
+    /// to score a run simulated with these options.
+    pub fn truth_at(&self, scenario: &Scenario, t_s: f64) -> MotionState {
+        let mut state = scenario.state_at(t_s);
+        if let Some(jump) = &self.jump {
+            state = jump.apply(t_s, state);
+        }
+        if let Some(excursion) = &self.excursion {
+            state = excursion.apply(t_s, state);
+        }
+        state
     }
 
     /// True when a fault removes the measurement of point `id` taken at `t_s` (ROI index `k`; `burst_starts` holds
@@ -120,6 +149,7 @@ impl Default for SimulationOptions {
             gaps: Vec::new(),
             bursts: Vec::new(),
             jump: None,
+            excursion: None,
             skip_off_image: false,
         }
     }
@@ -219,6 +249,22 @@ pub fn simulate(scenario: &Scenario, opts: &SimulationOptions) -> Result<Simulat
             ("jump dx_m", j.offset_m.x),
             ("jump dy_m", j.offset_m.y),
             ("jump dz_m", j.offset_m.z),
+        ] {
+            check_option(field, value, "finite", true)?;
+        }
+    }
+    if let Some(e) = &opts.excursion {
+        check_option("excursion t0_s", e.t0_s, "finite", true)?;
+        check_option(
+            "excursion t1_s",
+            e.t1_s,
+            "finite and > t0_s",
+            e.t1_s > e.t0_s,
+        )?;
+        for (field, value) in [
+            ("excursion dx_m", e.offset_m.x),
+            ("excursion dy_m", e.offset_m.y),
+            ("excursion dz_m", e.offset_m.z),
         ] {
             check_option(field, value, "finite", true)?;
         }
@@ -567,6 +613,66 @@ mod tests {
             .copied()
             .collect();
         assert_eq!(both.measurements, expected);
+    }
+
+    #[test]
+    fn an_excursion_is_a_consistent_motion_that_takes_blobs_off_the_image() {
+        let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
+        // Far enough right, at the peak, for the image's right edge to fall within the target (6 cm wide).
+        let mid = scenario.state_at(1.2).cam_t_obj_m;
+        let half_field_m = 512.0 / 1500.0 * mid.z;
+        let excursion = Excursion {
+            t0_s: 1.0,
+            t1_s: 1.4,
+            offset_m: Vector3::new(half_field_m - mid.x - 0.01, 0.0, 0.0),
+        };
+        let opts = SimulationOptions {
+            excursion: Some(excursion),
+            skip_off_image: true,
+            ..Default::default()
+        };
+        // The offset is 0 outside, the full offset at mid-interval, and the velocity is its derivative.
+        let shift =
+            |t: f64| opts.truth_at(&scenario, t).cam_t_obj_m - scenario.state_at(t).cam_t_obj_m;
+        assert_eq!(shift(0.99), Vector3::zeros());
+        assert_eq!(shift(1.41), Vector3::zeros());
+        assert!((shift(1.2) - excursion.offset_m).norm() < 1e-12);
+        for t in [1.05, 1.2, 1.33] {
+            let h = 1e-6;
+            let numeric = (opts.truth_at(&scenario, t + h).cam_t_obj_m
+                - opts.truth_at(&scenario, t - h).cam_t_obj_m)
+                / (2.0 * h);
+            let analytic = opts.truth_at(&scenario, t).velocity_mps;
+            assert!(
+                (numeric - analytic).norm() < 1e-6,
+                "t = {t}: {numeric} vs {analytic}"
+            );
+        }
+        // Blobs leave the image during the excursion only, and not all of them.
+        let run = simulate(&scenario, &opts).unwrap();
+        let clean = simulate(&scenario, &SimulationOptions::default()).unwrap();
+        let count = |r: &SimulatedRun, a: f64, b: f64| {
+            r.measurements
+                .iter()
+                .filter(|m| m.t_s >= a && m.t_s < b)
+                .count()
+        };
+        assert_eq!(count(&run, 0.0, 1.0), count(&clean, 0.0, 1.0));
+        assert_eq!(count(&run, 1.4, 10.0), count(&clean, 1.4, 10.0));
+        let (during, all) = (count(&run, 1.15, 1.25), count(&clean, 1.15, 1.25));
+        assert!(
+            during < all && during > all / 4,
+            "{during} of {all} measured at the peak"
+        );
+        // An interval that does not move forward is refused.
+        let bad = SimulationOptions {
+            excursion: Some(Excursion {
+                t1_s: 1.0,
+                ..excursion
+            }),
+            ..opts
+        };
+        assert!(simulate(&scenario, &bad).is_err());
     }
 
     #[test]

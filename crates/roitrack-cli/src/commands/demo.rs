@@ -94,9 +94,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     // the two rows of an estimator compare the image side with a perfect one of equal precision, and the trackers are
     // told that noise.
     let accuracy = centroid_accuracy(&renderer, &CentroidOptions::default(), 32, 2000, args.seed);
-    let noise_px = (0.5 * (accuracy.std_u_px.powi(2) + accuracy.std_v_px.powi(2)))
-        .sqrt()
-        .max(0.005);
+    let noise_px = image_noise_px(&accuracy);
     let options = SimulationOptions {
         noise_px,
         ..options
@@ -234,6 +232,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     Ok(())
 }
 
+/// The centroid noise (px per axis) the trackers are told for rendered ROIs: the measured spread, at least 0.005 px.
+pub fn image_noise_px(accuracy: &roitrack_image::CentroidAccuracy) -> f64 {
+    (0.5 * (accuracy.std_u_px.powi(2) + accuracy.std_v_px.powi(2)))
+        .sqrt()
+        .max(0.005)
+}
+
 fn count(estimates: &[Estimate], status: TrackStatus) -> usize {
     estimates.iter().filter(|e| e.status == status).count()
 }
@@ -290,6 +295,11 @@ fn write_and_score(
         writer.write(e)?;
     }
     writer.finish()?;
+    score_estimates(data, estimates)
+}
+
+/// Scores estimates against a simulated run's ground truth.
+pub fn score_estimates(data: &SimulatedRun, estimates: &[Estimate]) -> Result<Metrics> {
     let poses: Vec<PoseSample> = estimates
         .iter()
         .map(|e| PoseSample::from_state(e.t_ref_s, &e.state))

@@ -1,16 +1,22 @@
-//! `roitrack faults`: the default estimator under measurement faults (outliers, drops, occlusion, a burst of lost
-//! ROIs, a time gap, a sudden jump of the target), scored against the ground truth: accuracy, time to recover,
-//! re-initialisations and wrong estimates the status did not flag.
+//! `roitrack faults`: the default estimator under faults, scored against the ground truth: accuracy, time to recover,
+//! re-initialisations, flagged estimates and wrong estimates the status did not flag. Measurement faults (outliers,
+//! drops, occlusion, blobs leaving the image, a burst of lost ROIs, a time gap, a sudden jump of the target) go
+//! through the measurement simulator; reflections (a second spot in the ROI) go through the simulated camera, the
+//! centroid and the two-thread loop, compared with the clean run from images.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use clap::Args;
 use nalgebra::Vector3;
-use roitrack_core::estimator::{TrackStatus, TrackerConfig};
+use roitrack_core::estimator::{Estimate, TrackStatus, TrackerConfig};
+use roitrack_image::{CentroidOptions, RoiRenderer, SensorModel, centroid_accuracy};
+use roitrack_pipeline::cameras::{ReflectionFault, SimulatedCamera};
+use roitrack_pipeline::realtime::{LoopConfig, run_loop_with_progress};
 use roitrack_sim::{
-    Jump, Occlusion, RoiBurst, Scenario, ScenarioKind, SimulationOptions, TimeGap, simulate,
+    Excursion, Jump, Occlusion, RoiBurst, Scenario, ScenarioKind, SimulationOptions, TimeGap,
+    simulate,
 };
 
-use super::demo::score;
+use super::demo::{image_noise_px, score, score_estimates};
 
 /// Run the default estimator on clean and faulty simulated measurements (orthoglide and random scenarios, seed 1,
 /// 0.1 px, 4 kHz, bit-reversed order) and print a fault table.
@@ -31,14 +37,59 @@ const RECOVERY_HOLD_S: f64 = 0.05;
 /// An estimate whose position error exceeds this many clean RMSEs is wrong.
 const WRONG_FACTOR: f64 = 10.0;
 
-/// One fault case: its name, the options, and the time the fault ends (None for faults spread over the run).
+/// Where a case's measurements come from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Source {
+    /// The measurement simulator (ideal centroids plus noise and the options' faults).
+    Measurements,
+    /// Rendered ROIs through the simulated camera (with these reflections), the centroid and the two-thread loop.
+    Images(Option<ReflectionFault>),
+}
+
+/// One fault case: its name, the options, where the measurements come from, and the time the fault ends (None for
+/// faults spread over the run). The first case of each source is its clean reference.
 struct Case {
     name: &'static str,
     options: SimulationOptions,
+    source: Source,
     fault_end_s: Option<f64>,
 }
 
-fn cases(kind: ScenarioKind, quick: bool) -> Vec<Case> {
+/// An excursion to the right during `[t0_s, t1_s]`, sized on the scenario's pose at mid-interval so that the image's
+/// right edge falls between the target's last two columns of blobs at its peak: 4 of the 16 blobs leave the image.
+fn excursion_taking_a_column_off(scenario: &Scenario, t0_s: f64, t1_s: f64) -> Excursion {
+    let camera = &scenario.camera;
+    let state = scenario.state_at(0.5 * (t0_s + t1_s));
+    // Pixel columns of the blobs at the peak pose without the excursion.
+    let mut u: Vec<f64> = scenario
+        .target
+        .points()
+        .iter()
+        .filter_map(|p| {
+            camera
+                .intrinsics
+                .pixel_from_cam(&state.point_in_cam_at(&p.point_in_obj_m, 0.0))
+        })
+        .map(|px| px.x)
+        .collect();
+    u.sort_by(f64::total_cmp);
+    // Between the 4th and 5th blob from the right.
+    let n = u.len();
+    let cut_px = 0.5 * (u[n - 4] + u[n - 5]);
+    let shift_px = f64::from(camera.width_px) - cut_px;
+    Excursion {
+        t0_s,
+        t1_s,
+        offset_m: Vector3::new(
+            shift_px * state.cam_t_obj_m.z / camera.intrinsics.fx_px,
+            0.0,
+            0.0,
+        ),
+    }
+}
+
+fn cases(scenario: &Scenario, quick: bool) -> Vec<Case> {
+    let kind = scenario.kind;
     let base = SimulationOptions {
         seed: 1,
         noise_px: 0.1,
@@ -58,14 +109,17 @@ fn cases(kind: ScenarioKind, quick: bool) -> Vec<Case> {
         t0_s: 2.0,
         duration_s: 0.05,
     };
+    let excursion = excursion_taking_a_column_off(scenario, 3.0, 3.4);
     let all = vec![
         Case {
             name: "clean",
             options: base.clone(),
+            source: Source::Measurements,
             fault_end_s: None,
         },
         Case {
             name: "10% outliers",
+            source: Source::Measurements,
             options: SimulationOptions {
                 outlier_fraction: 0.1,
                 ..base.clone()
@@ -74,6 +128,7 @@ fn cases(kind: ScenarioKind, quick: bool) -> Vec<Case> {
         },
         Case {
             name: "50% dropped",
+            source: Source::Measurements,
             options: SimulationOptions {
                 drop_fraction: 0.5,
                 ..base.clone()
@@ -82,6 +137,7 @@ fn cases(kind: ScenarioKind, quick: bool) -> Vec<Case> {
         },
         Case {
             name: "occlusion 4 blobs 0.2 s",
+            source: Source::Measurements,
             options: SimulationOptions {
                 occlusions: vec![Occlusion {
                     ids: vec![0, 5, 10, 15],
@@ -94,6 +150,7 @@ fn cases(kind: ScenarioKind, quick: bool) -> Vec<Case> {
         },
         Case {
             name: "burst 40 ROIs lost",
+            source: Source::Measurements,
             options: SimulationOptions {
                 bursts: vec![burst],
                 ..base.clone()
@@ -102,6 +159,7 @@ fn cases(kind: ScenarioKind, quick: bool) -> Vec<Case> {
         },
         Case {
             name: "gap 50 ms",
+            source: Source::Measurements,
             options: SimulationOptions {
                 gaps: vec![gap],
                 ..base.clone()
@@ -110,6 +168,7 @@ fn cases(kind: ScenarioKind, quick: bool) -> Vec<Case> {
         },
         Case {
             name: "jump 20 mm in x",
+            source: Source::Measurements,
             options: SimulationOptions {
                 jump: Some(Jump {
                     t_s: jump_t_s,
@@ -119,10 +178,40 @@ fn cases(kind: ScenarioKind, quick: bool) -> Vec<Case> {
             },
             fault_end_s: Some(jump_t_s),
         },
+        Case {
+            name: "4 blobs leave image 0.4 s",
+            source: Source::Measurements,
+            options: SimulationOptions {
+                excursion: Some(excursion),
+                skip_off_image: true,
+                ..base.clone()
+            },
+            fault_end_s: Some(excursion.t1_s),
+        },
+        Case {
+            name: "images: clean",
+            source: Source::Images(None),
+            options: base.clone(),
+            fault_end_s: None,
+        },
+        Case {
+            name: "images: 10% reflections",
+            source: Source::Images(Some(ReflectionFault::default())),
+            options: base.clone(),
+            fault_end_s: None,
+        },
     ];
     if quick {
         all.into_iter()
-            .filter(|c| matches!(c.name, "clean" | "burst 40 ROIs lost" | "jump 20 mm in x"))
+            .filter(|c| {
+                matches!(
+                    c.name,
+                    "clean"
+                        | "burst 40 ROIs lost"
+                        | "jump 20 mm in x"
+                        | "4 blobs leave image 0.4 s"
+                )
+            })
             .collect()
     } else {
         all
@@ -146,9 +235,12 @@ pub struct FaultRow {
     pub recovered: bool,
     /// Estimates with status `lost`.
     pub lost: usize,
+    /// Estimates flagged: status `disputed`, `degenerate` or `lost`.
+    pub flagged: usize,
     /// Re-initialisations: entries into `converging` after the first.
     pub reinitialisations: usize,
-    /// Estimates with a position error above 10x the clean RMSE and status `tracking` or `converging`.
+    /// Estimates with a position error above 10x the clean RMSE (of the same source) and status `tracking` or
+    /// `converging`.
     pub unflagged_wrong: usize,
 }
 
@@ -176,22 +268,78 @@ fn recovery_time(points: &[Point], from_s: f64, threshold_m: f64, hold_s: f64) -
     None
 }
 
+/// The tracker's view of a case: its estimates, scored, and their per-estimate errors.
 fn run_case(scenario: &Scenario, case: &Case) -> Result<(FaultRow, Vec<Point>)> {
     let data = simulate(scenario, &case.options)?;
-    let mut points = Vec::new();
-    let config = TrackerConfig {
+    let mut config = TrackerConfig {
         noise_px: case.options.noise_px,
         ..TrackerConfig::default()
     };
-    let (metrics, summary) = score(&data, config, |e| {
-        let truth = case.options.truth_at(scenario, e.t_ref_s);
-        points.push(Point {
+    let (metrics, estimates, lost) = match case.source {
+        Source::Measurements => {
+            let mut estimates = Vec::new();
+            let (metrics, summary) = score(&data, config, |e| {
+                estimates.push(*e);
+                Ok(())
+            })?;
+            (metrics, estimates, summary.lost)
+        }
+        Source::Images(reflections) => {
+            let renderer = RoiRenderer::new(
+                scenario.camera.clone(),
+                scenario.target.clone(),
+                SensorModel::default(),
+            )
+            .context("invalid sensor model")?;
+            let accuracy = centroid_accuracy(
+                &renderer,
+                &CentroidOptions::default(),
+                32,
+                500,
+                case.options.seed,
+            );
+            config.noise_px = image_noise_px(&accuracy);
+            let truth = {
+                let s = scenario.clone();
+                let options = case.options.clone();
+                move |t: f64| options.truth_at(&s, t)
+            };
+            let mut camera = SimulatedCamera::new(renderer, truth, case.options.seed);
+            if let Some(fault) = reflections {
+                camera = camera.with_reflections(fault);
+            }
+            let mut loop_config = LoopConfig {
+                rate_hz: case.options.rate_hz,
+                roi_slots: data.truth_poses.len(),
+                ..LoopConfig::default()
+            };
+            loop_config.scheduler.noise_px = config.noise_px;
+            let report = run_loop_with_progress(
+                camera,
+                &scenario.camera,
+                &scenario.target,
+                config,
+                &loop_config,
+                None,
+            )?;
+            let metrics = score_estimates(&data, &report.estimates)?;
+            let lost = report
+                .estimates
+                .iter()
+                .filter(|e| e.status == TrackStatus::Lost)
+                .count();
+            (metrics, report.estimates, lost)
+        }
+    };
+    let points: Vec<Point> = estimates
+        .iter()
+        .map(|e: &Estimate| Point {
             t_s: e.t_ref_s,
-            error_m: (e.state.cam_t_obj_m - truth.cam_t_obj_m).norm(),
+            error_m: (e.state.cam_t_obj_m - case.options.truth_at(scenario, e.t_ref_s).cam_t_obj_m)
+                .norm(),
             status: e.status,
-        });
-        Ok(())
-    })?;
+        })
+        .collect();
     let reinitialisations = points
         .windows(2)
         .filter(|w| {
@@ -201,23 +349,29 @@ fn run_case(scenario: &Scenario, case: &Case) -> Result<(FaultRow, Vec<Point>)> 
     let row = FaultRow {
         scenario: scenario.kind.name(),
         fault: case.name,
-        estimates: summary.estimates,
+        estimates: estimates.len(),
         position_rmse_mm: metrics.position_rmse_mm,
         velocity_rmse_mm_s: metrics.velocity_rmse_mm_s,
         fault_end_s: case.fault_end_s,
         recovery_ms: None,
         recovered: true,
-        lost: summary.lost,
+        lost,
+        flagged: points.iter().filter(|p| !is_vouched_for(p.status)).count(),
         reinitialisations,
         unflagged_wrong: 0,
     };
     Ok((row, points))
 }
 
-/// Every row of the table for one scenario; the first case must be the clean run (it sets the thresholds).
+/// Statuses that present the estimate as valid.
+fn is_vouched_for(status: TrackStatus) -> bool {
+    matches!(status, TrackStatus::Tracking | TrackStatus::Converging)
+}
+
+/// Every row of the table for one scenario; the first case of each source is its clean run (it sets the thresholds).
 pub fn scenario_rows(kind: ScenarioKind, quick: bool) -> Result<Vec<FaultRow>> {
     let scenario = Scenario::new(kind, 1);
-    let cases = cases(kind, quick);
+    let cases = cases(&scenario, quick);
     // The cases are independent: run them on threads.
     let results: Vec<Result<(FaultRow, Vec<Point>)>> = std::thread::scope(|s| {
         let handles: Vec<_> = cases
@@ -230,16 +384,27 @@ pub fn scenario_rows(kind: ScenarioKind, quick: bool) -> Result<Vec<FaultRow>> {
             .collect()
     });
     let results = results.into_iter().collect::<Result<Vec<_>>>()?;
-    let clean_rmse_m = results[0].0.position_rmse_mm * 1e-3;
+    // Per case, the clean RMSE of its source (the first case of that source).
+    let clean_rmse_m: Vec<f64> = cases
+        .iter()
+        .map(|case| {
+            let same = |c: &Case| {
+                std::mem::discriminant(&c.source) == std::mem::discriminant(&case.source)
+            };
+            let first = cases
+                .iter()
+                .position(same)
+                .expect("a case is its own source");
+            results[first].0.position_rmse_mm * 1e-3
+        })
+        .collect();
     Ok(results
         .into_iter()
-        .map(|(mut row, points)| {
+        .zip(clean_rmse_m)
+        .map(|((mut row, points), clean_rmse_m)| {
             row.unflagged_wrong = points
                 .iter()
-                .filter(|p| {
-                    p.error_m > WRONG_FACTOR * clean_rmse_m
-                        && matches!(p.status, TrackStatus::Tracking | TrackStatus::Converging)
-                })
+                .filter(|p| p.error_m > WRONG_FACTOR * clean_rmse_m && is_vouched_for(p.status))
                 .count();
             if let Some(end_s) = row.fault_end_s {
                 match recovery_time(
@@ -265,8 +430,16 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
     };
     if !args.json {
         println!(
-            "{:<11} {:<24} {:>9} {:>10} {:>12} {:>5} {:>7} {:>10}",
-            "scenario", "fault", "pos mm", "vel mm/s", "recover ms", "lost", "reinit", "unflagged"
+            "{:<11} {:<26} {:>9} {:>10} {:>12} {:>5} {:>7} {:>8} {:>10}",
+            "scenario",
+            "fault",
+            "pos mm",
+            "vel mm/s",
+            "recover ms",
+            "lost",
+            "reinit",
+            "flagged",
+            "unflagged"
         );
     }
     for &kind in kinds {
@@ -281,7 +454,7 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
                 (Some(_), None) => "never".to_string(),
             };
             println!(
-                "{:<11} {:<24} {:>9.4} {:>10.2} {:>12} {:>5} {:>7} {:>10}",
+                "{:<11} {:<26} {:>9.4} {:>10.2} {:>12} {:>5} {:>7} {:>8} {:>10}",
                 row.scenario,
                 row.fault,
                 row.position_rmse_mm,
@@ -289,6 +462,7 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
                 recovery,
                 row.lost,
                 row.reinitialisations,
+                row.flagged,
                 row.unflagged_wrong
             );
         }
@@ -296,8 +470,9 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
     if !args.json {
         println!(
             "recover: from the end of the fault until the position error stays within {RECOVERY_FACTOR}x the clean \
-             RMSE for {} ms; unflagged: estimates off by more than {WRONG_FACTOR}x the clean RMSE with status \
-             tracking or converging (target 0)",
+             RMSE for {} ms; flagged: estimates with status disputed, degenerate or lost; unflagged: estimates off \
+             by more than {WRONG_FACTOR}x the clean RMSE (of the same source) with status tracking or converging \
+             (target 0)",
             1e3 * RECOVERY_HOLD_S
         );
     }

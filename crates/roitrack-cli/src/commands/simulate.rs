@@ -7,8 +7,8 @@ use clap::{Args, ValueEnum};
 use nalgebra::Vector3;
 use roitrack_core::RoiOrder;
 use roitrack_sim::{
-    Jump, Occlusion, RoiBurst, Scenario, ScenarioKind, SimulatedRun, SimulationOptions, TimeGap,
-    simulate,
+    Excursion, Jump, Occlusion, RoiBurst, Scenario, ScenarioKind, SimulatedRun, SimulationOptions,
+    TimeGap, simulate,
 };
 
 /// File names inside a simulation folder (SPEC section 8 formats).
@@ -156,6 +156,11 @@ pub struct SimulateArgs {
     /// e.g. `2.5:0.02,0,0`.
     #[arg(long, value_name = "T:DX,DY,DZ", value_parser = parse_jump, allow_hyphen_values = true)]
     pub jump: Option<Jump>,
+    /// Fault: during [T0, T1] s the target makes a smooth sideways excursion of (DX, DY, DZ) m at its peak and comes
+    /// back, ground truth included, e.g. `1.0:1.4:0.12,0,0`; with `--skip-off-image`, far enough to take blobs out
+    /// of the image.
+    #[arg(long, value_name = "T0:T1:DX,DY,DZ", value_parser = parse_excursion, allow_hyphen_values = true)]
+    pub excursion: Option<Excursion>,
     /// Drop the measurements of blobs outside the image instead of failing.
     #[arg(long)]
     pub skip_off_image: bool,
@@ -215,24 +220,44 @@ pub fn parse_burst(text: &str) -> Result<RoiBurst, String> {
     Ok(RoiBurst { t0_s, count })
 }
 
+/// `DX,DY,DZ` (metres).
+fn parse_offset(offset: &str, form: &str) -> Result<Vector3<f64>, String> {
+    let parts: Vec<&str> = offset.split(',').collect();
+    let [dx, dy, dz] = parts[..] else {
+        return Err(format!(
+            "expected three offsets DX,DY,DZ, got `{offset}` ({form})"
+        ));
+    };
+    Ok(Vector3::new(
+        parse_number(dx, "DX")?,
+        parse_number(dy, "DY")?,
+        parse_number(dz, "DZ")?,
+    ))
+}
+
 /// `T:DX,DY,DZ` (metres).
 pub fn parse_jump(text: &str) -> Result<Jump, String> {
     const FORM: &str = "T:DX,DY,DZ in metres (e.g. 2.5:0.02,0,0)";
     let (t, offset) = split_pair(text, ':', FORM)?;
-    let t_s = parse_number(t, "T")?;
-    let parts: Vec<&str> = offset.split(',').collect();
-    let [dx, dy, dz] = parts[..] else {
-        return Err(format!(
-            "expected three offsets DX,DY,DZ, got `{offset}` ({FORM})"
-        ));
-    };
     Ok(Jump {
-        t_s,
-        offset_m: Vector3::new(
-            parse_number(dx, "DX")?,
-            parse_number(dy, "DY")?,
-            parse_number(dz, "DZ")?,
-        ),
+        t_s: parse_number(t, "T")?,
+        offset_m: parse_offset(offset, FORM)?,
+    })
+}
+
+/// `T0:T1:DX,DY,DZ` (seconds, metres).
+pub fn parse_excursion(text: &str) -> Result<Excursion, String> {
+    const FORM: &str = "T0:T1:DX,DY,DZ in seconds and metres (e.g. 1.0:1.4:0.12,0,0)";
+    let (t0, rest) = split_pair(text, ':', FORM)?;
+    let (t1, offset) = split_pair(rest, ':', FORM)?;
+    let (t0_s, t1_s) = (parse_number(t0, "T0")?, parse_number(t1, "T1")?);
+    if t1_s <= t0_s {
+        return Err(format!("T1 ({t1_s}) must be after T0 ({t0_s})"));
+    }
+    Ok(Excursion {
+        t0_s,
+        t1_s,
+        offset_m: parse_offset(offset, FORM)?,
     })
 }
 
@@ -249,6 +274,7 @@ impl SimulateArgs {
             gaps: self.gaps.clone(),
             bursts: self.bursts.clone(),
             jump: self.jump,
+            excursion: self.excursion,
             skip_off_image: self.skip_off_image,
         }
     }

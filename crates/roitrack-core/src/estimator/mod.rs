@@ -103,6 +103,11 @@ pub enum TrackStatus {
     Degenerate,
     /// The residual stayed too large: the tracker drops this track and re-initialises from the next measurements.
     Lost,
+    /// The newest measurement disagreed with the track beyond the outlier gate and was rejected (Kalman) or weighed
+    /// nothing (robust window fits): the estimate rests on the earlier measurements. It is right if that measurement
+    /// was an outlier and out of date if the target has just jumped; one measurement cannot tell which, so the
+    /// estimate is not vouched for.
+    Disputed,
 }
 
 impl TrackStatus {
@@ -112,6 +117,7 @@ impl TrackStatus {
             Self::Tracking => "tracking",
             Self::Degenerate => "degenerate",
             Self::Lost => "lost",
+            Self::Disputed => "disputed",
         }
     }
 }
@@ -217,6 +223,8 @@ pub struct Tracker {
     /// Kalman: measurements rejected by the gate in a row, and covariance resets since the last estimate.
     gated_in_a_row: usize,
     covariance_resets: usize,
+    /// Kalman: measurements rejected by the gate since the last estimate.
+    gated_since_estimate: usize,
     kalman: ErrorStateKalman,
     /// Previous pose for the static baseline's finite differences.
     previous_static: Option<(f64, MotionState)>,
@@ -316,6 +324,7 @@ impl Tracker {
             degenerate_windows: 0,
             bad_estimates: 0,
             gated_in_a_row: 0,
+            gated_since_estimate: 0,
             covariance_resets: 0,
             kalman: ErrorStateKalman::new(Matrix12::identity(), config.kalman),
             previous_static: None,
@@ -374,6 +383,7 @@ impl Tracker {
         self.degenerate_windows = 0;
         self.bad_estimates = 0;
         self.gated_in_a_row = 0;
+        self.gated_since_estimate = 0;
         self.covariance_resets = 0;
         self.previous_static = None;
         self.kalman = ErrorStateKalman::new(
@@ -600,6 +610,9 @@ impl Tracker {
         // Outliers are rare and scattered; a run of gated measurements means the filter itself is off (after a jump
         // of the target, or an outlier that got through): widen its covariance so the measurements pull it back,
         // instead of coasting on a wrong state.
+        if outcome == UpdateOutcome::Gated {
+            self.gated_since_estimate += 1;
+        }
         self.gated_in_a_row = if outcome == UpdateOutcome::Gated {
             self.gated_in_a_row + 1
         } else {
@@ -765,7 +778,22 @@ impl Tracker {
     ) -> Estimate {
         // Residual over the configured window at the emitted state (static: as if simultaneous, as it fits). The
         // track is judged on the median residual: a few outliers in the window must not make it look lost.
-        let (residual_rms_px, residual_median_px) = self.residual_figures_px();
+        let (residual_rms_px, residual_median_px, newest_residual_px) = self.residual_figures_px();
+        let disputed = match self.config.estimator {
+            // The newest measurement rejected, or most of those since the last estimate (the filter was reset after a
+            // run of them and is still re-converging).
+            EstimatorKind::Kalman => {
+                self.gated_in_a_row > 0 || 2 * self.gated_since_estimate >= self.config.every.max(2)
+            }
+            // The robust scale of the window fits (see `robust_scale_px`); beyond Tukey's c a measurement weighs
+            // nothing.
+            EstimatorKind::Vvs | EstimatorKind::Batch => {
+                let scale_px = (residual_median_px / 1.1774)
+                    .max(ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px));
+                newest_residual_px > RobustLoss::TUKEY_C * scale_px
+            }
+            EstimatorKind::Static => false,
+        };
         let mut status = status;
         let bad = !residual_median_px.is_finite()
             || residual_median_px > self.config.lost_residual_px
@@ -775,12 +803,15 @@ impl Tracker {
             status = TrackStatus::Lost;
             self.phase = Phase::Initializing;
             self.window.clear();
+        } else if disputed && matches!(status, TrackStatus::Tracking | TrackStatus::Converging) {
+            status = TrackStatus::Disputed;
         } else if status == TrackStatus::Tracking
             && self.estimates_since_init < CONVERGING_ESTIMATES
         {
             status = TrackStatus::Converging;
         }
         self.estimates_since_init += 1;
+        self.gated_since_estimate = 0;
         Estimate {
             t_ref_s: self.t_ref_s,
             state: self.state,
@@ -793,13 +824,15 @@ impl Tracker {
         }
     }
 
-    /// RMS residual (px per coordinate) and median residual norm (px) of the scratch window at the current state.
-    fn residual_figures_px(&self) -> (f64, f64) {
+    /// RMS residual (px per coordinate), median residual norm (px) and the residual norm of the newest measurement
+    /// (px) of the scratch window at the current state.
+    fn residual_figures_px(&self) -> (f64, f64, f64) {
         const MAX: usize = 128;
         let points = self.target.points();
         let simultaneous = self.config.estimator == EstimatorKind::Static;
         let mut norms = [0.0f64; MAX];
         let (mut sum, mut count) = (0.0, 0usize);
+        let (mut newest_t_s, mut newest_px) = (f64::NEG_INFINITY, 0.0);
         for o in &self.scratch {
             let d = if simultaneous {
                 0.0
@@ -816,17 +849,20 @@ impl Tracker {
                     if count < MAX {
                         norms[count] = r2.sqrt();
                     }
+                    if o.t_s >= newest_t_s {
+                        (newest_t_s, newest_px) = (o.t_s, r2.sqrt());
+                    }
                 }
-                None => return (f64::INFINITY, f64::INFINITY),
+                None => return (f64::INFINITY, f64::INFINITY, f64::INFINITY),
             }
             count += 1;
         }
         if count == 0 {
-            return (0.0, 0.0);
+            return (0.0, 0.0, 0.0);
         }
         let n = count.min(MAX);
         let (_, median, _) = norms[..n].select_nth_unstable_by(n / 2, f64::total_cmp);
-        ((sum / (2 * count) as f64).sqrt(), *median)
+        ((sum / (2 * count) as f64).sqrt(), *median, newest_px)
     }
 }
 
