@@ -18,7 +18,12 @@ pub struct KalmanTuning {
     pub linear_accel_psd: f64,
     /// White angular acceleration spectral density q_α ((rad/s²)²/Hz).
     pub angular_accel_psd: f64,
-    /// Innovations beyond this many standard deviations (Mahalanobis, 2 dof) are rejected as outliers.
+    /// Innovations beyond this many standard deviations (Mahalanobis, 2 dof) are rejected as outliers. Default 3:
+    /// it rejects exp(-9/2) = 1.1 % of good measurements. Measured with `roitrack faults` (3 runs each): against 6,
+    /// it costs 0.9 % of position RMSE on clean measurements (0.2647 against 0.2623 mm on orthoglide), and with 10 %
+    /// of rendered ROIs carrying a reflection it keeps the error at 1.4-3.6x the clean image run instead of 1.9-21x
+    /// (a reflection merged with the blob biases its centroid by a fraction of a pixel, well inside 6 σ of the
+    /// prediction); 3.5 left up to 30x.
     pub gate_sigma: f64,
     /// Huber threshold (standard deviations, Mahalanobis): a larger innovation gets its measurement noise inflated
     /// by `distance / huber_sigma` (the Huber weight), so a moderate outlier pulls less; `f64::INFINITY` turns it off.
@@ -30,7 +35,7 @@ impl Default for KalmanTuning {
         Self {
             linear_accel_psd: 1.0,
             angular_accel_psd: 10.0,
-            gate_sigma: 6.0,
+            gate_sigma: 3.0,
             huber_sigma: 2.5,
         }
     }

@@ -193,6 +193,11 @@ const ROBUST_SCALE_FLOOR_PX: f64 = 1.0;
 
 /// Consecutive measurements rejected by the Kalman filter's gate after which its covariance is widened.
 const GATED_IN_A_ROW_FOR_RESET: usize = 6;
+/// Fractions of the broad prior covariance added at successive covariance resets (variance scales: 1/100 is a tenth
+/// of its standard deviations).
+const RESET_SCALES: [f64; 3] = [0.01, 0.1, 1.0];
+/// Accepted measurements in a row after which the next reset starts small again.
+const ACCEPTED_IN_A_ROW_FOR_CALM: usize = 64;
 
 /// Estimates reported as `Converging` after an initialisation.
 const CONVERGING_ESTIMATES: usize = 3;
@@ -223,6 +228,10 @@ pub struct Tracker {
     /// Kalman: measurements rejected by the gate in a row, and covariance resets since the last estimate.
     gated_in_a_row: usize,
     covariance_resets: usize,
+    /// Kalman: how far the covariance is widened at the next reset (escalates while resets follow each other) and the
+    /// measurements accepted in a row since the last one.
+    reset_level: usize,
+    accepted_in_a_row: usize,
     /// Kalman: measurements rejected by the gate since the last estimate.
     gated_since_estimate: usize,
     kalman: ErrorStateKalman,
@@ -326,6 +335,8 @@ impl Tracker {
             gated_in_a_row: 0,
             gated_since_estimate: 0,
             covariance_resets: 0,
+            reset_level: 0,
+            accepted_in_a_row: 0,
             kalman: ErrorStateKalman::new(Matrix12::identity(), config.kalman),
             previous_static: None,
         })
@@ -385,6 +396,8 @@ impl Tracker {
         self.gated_in_a_row = 0;
         self.gated_since_estimate = 0;
         self.covariance_resets = 0;
+        self.reset_level = 0;
+        self.accepted_in_a_row = 0;
         self.previous_static = None;
         self.kalman = ErrorStateKalman::new(
             covariance.unwrap_or_else(|| self.prior_covariance()),
@@ -618,8 +631,21 @@ impl Tracker {
         } else {
             0
         };
+        self.accepted_in_a_row = if outcome == UpdateOutcome::Gated {
+            0
+        } else {
+            self.accepted_in_a_row + 1
+        };
+        if self.accepted_in_a_row >= ACCEPTED_IN_A_ROW_FOR_CALM {
+            self.reset_level = 0;
+        }
         if self.gated_in_a_row >= GATED_IN_A_ROW_FOR_RESET {
-            self.kalman.covariance += self.prior_covariance();
+            // Escalate: a run of rejections is more often a bad update than a jump of the target; a little widening
+            // lets the measurements correct it without exposing the filter to every outlier, and if the runs go on
+            // (a jump), the next resets widen it to the broad prior.
+            let scale = RESET_SCALES[self.reset_level.min(RESET_SCALES.len() - 1)];
+            self.kalman.covariance += self.prior_covariance() * scale;
+            self.reset_level += 1;
             self.gated_in_a_row = 0;
             self.covariance_resets += 1;
         }
