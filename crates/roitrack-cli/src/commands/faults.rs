@@ -242,6 +242,8 @@ pub struct FaultRow {
     /// Estimates with a position error above 10x the clean RMSE (of the same source) and status `tracking` or
     /// `converging`.
     pub unflagged_wrong: usize,
+    /// The largest position error of an estimate with status `tracking` or `converging` (mm).
+    pub worst_unflagged_mm: f64,
 }
 
 /// Per-estimate record: time, position error (m), status.
@@ -359,6 +361,11 @@ fn run_case(scenario: &Scenario, case: &Case) -> Result<(FaultRow, Vec<Point>)> 
         flagged: points.iter().filter(|p| !is_vouched_for(p.status)).count(),
         reinitialisations,
         unflagged_wrong: 0,
+        worst_unflagged_mm: points
+            .iter()
+            .filter(|p| is_vouched_for(p.status))
+            .map(|p| 1e3 * p.error_m)
+            .fold(0.0, f64::max),
     };
     Ok((row, points))
 }
@@ -454,7 +461,7 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
                 (Some(_), None) => "never".to_string(),
             };
             println!(
-                "{:<11} {:<26} {:>9.4} {:>10.2} {:>12} {:>5} {:>7} {:>8} {:>10}",
+                "{:<11} {:<26} {:>9.4} {:>10.2} {:>12} {:>5} {:>7} {:>8} {:>10} {:>15.3}",
                 row.scenario,
                 row.fault,
                 row.position_rmse_mm,
@@ -463,7 +470,8 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
                 row.lost,
                 row.reinitialisations,
                 row.flagged,
-                row.unflagged_wrong
+                row.unflagged_wrong,
+                row.worst_unflagged_mm
             );
         }
     }
@@ -472,7 +480,7 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
             "recover: from the end of the fault until the position error stays within {RECOVERY_FACTOR}x the clean \
              RMSE for {} ms; flagged: estimates with status disputed, degenerate or lost; unflagged: estimates off \
              by more than {WRONG_FACTOR}x the clean RMSE (of the same source) with status tracking or converging \
-             (target 0)",
+             (target 0); worst unflg: the largest error of such an estimate",
             1e3 * RECOVERY_HOLD_S
         );
     }
