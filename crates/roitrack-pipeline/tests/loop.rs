@@ -6,8 +6,8 @@ use roitrack_pipeline::cameras::SimulatedCamera;
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};
 
-#[test]
-fn tracks_orthoglide_from_rendered_rois() {
+/// The orthoglide scenario (seed 1) and a renderer of its camera and target with the default sensor.
+fn orthoglide_with_renderer() -> (Scenario, RoiRenderer) {
     let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
     let renderer = RoiRenderer::new(
         scenario.camera.clone(),
@@ -15,6 +15,12 @@ fn tracks_orthoglide_from_rendered_rois() {
         SensorModel::default(),
     )
     .unwrap();
+    (scenario, renderer)
+}
+
+#[test]
+fn tracks_orthoglide_from_rendered_rois() {
+    let (scenario, renderer) = orthoglide_with_renderer();
     let truth = {
         let s = scenario.clone();
         move |t: f64| s.state_at(t)
@@ -57,13 +63,7 @@ fn reflections_add_a_spot_that_moves_the_centroid_and_nothing_else() {
     use roitrack_image::{CentroidOptions, Roi, measure_blob};
     use roitrack_pipeline::cameras::ReflectionFault;
     use roitrack_pipeline::realtime::RoiCamera;
-    let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
-    let renderer = RoiRenderer::new(
-        scenario.camera.clone(),
-        scenario.target.clone(),
-        SensorModel::default(),
-    )
-    .unwrap();
+    let (scenario, renderer) = orthoglide_with_renderer();
     let state = scenario.state_at(0.1);
     let p = scenario.target.points()[5].point_in_obj_m;
     let px = scenario
