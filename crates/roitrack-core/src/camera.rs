@@ -246,6 +246,24 @@ impl CameraModel {
         }
     }
 
+    /// A strongly distorting but realistic 1024 x 1024 wide-angle lens (an industrial lens calibrated with OpenCV:
+    /// k1 = -0.28, skew 0.8 px), for exercising the distortion paths in tests and benchmarks.
+    pub fn wide_angle_example() -> Self {
+        Self {
+            name: "wide".to_string(),
+            width_px: 1024,
+            height_px: 1024,
+            intrinsics: PinholeIntrinsics {
+                fx_px: 1480.0,
+                fy_px: 1510.0,
+                skew_px: 0.8,
+                cx_px: 515.0,
+                cy_px: 506.0,
+            },
+            distortion: PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, -0.03]),
+        }
+    }
+
     /// Raw (distorted) pixel of a point in the camera frame, or `None` if it is behind the camera.
     pub fn raw_pixel_from_cam(&self, point_in_cam: &Vector3<f64>) -> Option<Vector2<f64>> {
         if point_in_cam.z <= 0.0 || !point_in_cam.z.is_finite() {
@@ -293,27 +311,9 @@ impl CameraModel {
 mod tests {
     use super::*;
 
-    /// A strongly distorting but realistic lens (a wide-angle industrial lens calibrated with OpenCV).
-    fn distorted_camera() -> CameraModel {
-        CameraModel::new(
-            "test",
-            1024,
-            1024,
-            PinholeIntrinsics {
-                fx_px: 1480.0,
-                fy_px: 1510.0,
-                skew_px: 0.8,
-                cx_px: 515.0,
-                cy_px: 506.0,
-            },
-            PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, -0.03]),
-        )
-        .unwrap()
-    }
-
     #[test]
     fn undistortion_round_trip_over_the_whole_image() {
-        let camera = distorted_camera();
+        let camera = CameraModel::wide_angle_example();
         let mut worst_px: f64 = 0.0;
         for i in 0..=64 {
             for j in 0..=64 {
@@ -330,7 +330,7 @@ mod tests {
 
     #[test]
     fn distortion_jacobian_matches_central_differences() {
-        let d = distorted_camera().distortion;
+        let d = CameraModel::wide_angle_example().distortion;
         for n in [
             Vector2::new(0.1, -0.2),
             Vector2::new(-0.3, 0.25),
@@ -349,7 +349,7 @@ mod tests {
 
     #[test]
     fn skew_sits_in_u_only() {
-        let k = distorted_camera().intrinsics;
+        let k = CameraModel::wide_angle_example().intrinsics;
         let p = Vector3::new(0.1, 0.2, 1.0);
         let px = k.pixel_from_cam(&p).unwrap();
         assert!((px.x - (1480.0 * 0.1 + 0.8 * 0.2 + 515.0)).abs() < 1e-12);
@@ -359,7 +359,7 @@ mod tests {
 
     #[test]
     fn pixel_jacobian_matches_central_differences() {
-        let k = distorted_camera().intrinsics;
+        let k = CameraModel::wide_angle_example().intrinsics;
         let p = Vector3::new(0.05, -0.03, 0.6);
         let j = k.pixel_jacobian_wrt_cam(&p);
         let h = 1e-7;

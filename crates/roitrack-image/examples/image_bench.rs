@@ -13,7 +13,7 @@ use std::time::Instant;
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use roitrack_core::{CameraModel, MotionState, PinholeIntrinsics, PlumbBob, Target};
+use roitrack_core::{CameraModel, MotionState, Target};
 use roitrack_image::{
     CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel, Threshold, bench_state,
     centroid_accuracy, detect_blobs, measure_blob,
@@ -164,20 +164,7 @@ fn main() {
         }
     }
     // A strongly distorting wide-angle lens: every pixel corner near the blob is undistorted by Newton's method.
-    let wide = CameraModel::new(
-        "wide",
-        1024,
-        1024,
-        PinholeIntrinsics {
-            fx_px: 1480.0,
-            fy_px: 1510.0,
-            skew_px: 0.8,
-            cx_px: 515.0,
-            cy_px: 506.0,
-        },
-        PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, -0.03]),
-    )
-    .unwrap();
+    let wide = CameraModel::wide_angle_example();
     let distorted = RoiRenderer::new(wide.clone(), target.clone(), SensorModel::default()).unwrap();
     let state_at = |_t: f64| bench;
     let p = bench.point_in_cam_at(&target.points()[5].point_in_obj_m, 0.0);

@@ -905,22 +905,8 @@ mod tests {
 
     #[test]
     fn bilinear_rays_match_exact_undistortion() {
-        use roitrack_core::{PinholeIntrinsics, PlumbBob};
         // A strongly distorting wide-angle lens; the worst place is the image's corner.
-        let camera = CameraModel::new(
-            "wide",
-            1024,
-            1024,
-            PinholeIntrinsics {
-                fx_px: 1480.0,
-                fy_px: 1510.0,
-                skew_px: 0.8,
-                cx_px: 515.0,
-                cy_px: 506.0,
-            },
-            PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, -0.03]),
-        )
-        .unwrap();
+        let camera = CameraModel::wide_angle_example();
         let renderer =
             RoiRenderer::new(camera.clone(), Target::grid4x4(), SensorModel::default()).unwrap();
         let mut corners = Vec::new();

@@ -3,7 +3,7 @@
 use nalgebra::{Vector2, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use roitrack_core::{CameraModel, MotionState, PinholeIntrinsics, PlumbBob, Target, TargetPoint};
+use roitrack_core::{CameraModel, MotionState, Target, TargetPoint};
 use roitrack_image::{
     BlobRejection, CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel, Threshold,
     bench_state, centroid_accuracy, detect_blobs, measure_blob,
@@ -409,20 +409,7 @@ fn motion_blur_elongates_along_the_motion() {
 #[test]
 fn distorted_camera_and_non_planar_target() {
     // A strongly distorting lens: blobs near the image's corners still measure at their distorted projections.
-    let camera = CameraModel::new(
-        "wide",
-        1024,
-        1024,
-        PinholeIntrinsics {
-            fx_px: 1480.0,
-            fy_px: 1510.0,
-            skew_px: 0.8,
-            cx_px: 515.0,
-            cy_px: 506.0,
-        },
-        PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, -0.03]),
-    )
-    .unwrap();
+    let camera = CameraModel::wide_angle_example();
     let r = RoiRenderer::new(camera.clone(), Target::grid4x4(), SensorModel::noiseless()).unwrap();
     let mut state = bench_state();
     state.cam_t_obj_m = Vector3::new(0.17, 0.16, 0.6);

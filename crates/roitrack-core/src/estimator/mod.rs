@@ -491,7 +491,7 @@ impl Tracker {
         } else {
             MotionState::at_rest(fit.state.cam_r_obj, fit.state.cam_t_obj_m)
         };
-        let covariance = self.window_covariance(&ne);
+        let covariance = self.window_covariance(&ne, inverse_condition);
         self.begin_track(t_ref, state, covariance);
         Some(self.finish_estimate(
             inverse_condition,
@@ -516,9 +516,14 @@ impl Tracker {
         }))
     }
 
-    /// σ² (JᵀJ)⁻¹ of a window, when it is well posed.
-    fn window_covariance(&self, ne: &NormalEquations<12>) -> Option<Matrix12> {
-        if ne.fast_inverse_condition() < self.config.min_inverse_condition {
+    /// σ² (JᵀJ)⁻¹ of a window, when it is well posed; `inverse_condition` is that of `ne`, already computed by the
+    /// caller's step.
+    fn window_covariance(
+        &self,
+        ne: &NormalEquations<12>,
+        inverse_condition: f64,
+    ) -> Option<Matrix12> {
+        if inverse_condition < self.config.min_inverse_condition {
             return None;
         }
         let sigma2 = self.config.noise_px * self.config.noise_px;
@@ -625,17 +630,12 @@ impl Tracker {
         // instead of coasting on a wrong state.
         if outcome == UpdateOutcome::Gated {
             self.gated_since_estimate += 1;
+            self.gated_in_a_row += 1;
+            self.accepted_in_a_row = 0;
+        } else {
+            self.gated_in_a_row = 0;
+            self.accepted_in_a_row += 1;
         }
-        self.gated_in_a_row = if outcome == UpdateOutcome::Gated {
-            self.gated_in_a_row + 1
-        } else {
-            0
-        };
-        self.accepted_in_a_row = if outcome == UpdateOutcome::Gated {
-            0
-        } else {
-            self.accepted_in_a_row + 1
-        };
         if self.accepted_in_a_row >= ACCEPTED_IN_A_ROW_FOR_CALM {
             self.reset_level = 0;
         }
@@ -715,7 +715,9 @@ impl Tracker {
                     }
                 }
                 self.track_conditioning(inverse_condition);
-                let covariance = last_ne.as_ref().and_then(|ne| self.window_covariance(ne));
+                let covariance = last_ne
+                    .as_ref()
+                    .and_then(|ne| self.window_covariance(ne, inverse_condition));
                 self.finish_estimate(
                     inverse_condition,
                     self.scratch.len(),
@@ -739,7 +741,7 @@ impl Tracker {
                     self.state = state;
                     TrackStatus::Tracking
                 };
-                let covariance = self.window_covariance(&ne);
+                let covariance = self.window_covariance(&ne, inverse_condition);
                 self.finish_estimate(inverse_condition, ne.count, iterations, status, covariance)
             }
             EstimatorKind::Static => {
