@@ -21,6 +21,16 @@ pub struct DetectedBlob {
     pub area_px: f64,
 }
 
+impl From<&roitrack_image::Centroid> for DetectedBlob {
+    fn from(c: &roitrack_image::Centroid) -> Self {
+        Self {
+            u_px: c.u_px,
+            v_px: c.v_px,
+            area_px: f64::from(c.area_px),
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum MatchError {
     #[error("found {found} blobs, the target has {expected} points: need at least {required}")]

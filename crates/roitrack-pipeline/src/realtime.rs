@@ -284,11 +284,7 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                     &config.centroid,
                 )
                 .iter()
-                .map(|c| DetectedBlob {
-                    u_px: c.u_px,
-                    v_px: c.v_px,
-                    area_px: c.area_px as f64,
-                })
+                .map(DetectedBlob::from)
                 .collect();
                 match match_full_frame(camera_model, target, &blobs) {
                     Ok(m) => {

@@ -25,11 +25,7 @@ fn initialises_from_a_rendered_full_frame() {
         let blobs: Vec<DetectedBlob> =
             detect_blobs(&frame, 1024, 1024, &CentroidOptions::default())
                 .iter()
-                .map(|c| DetectedBlob {
-                    u_px: c.u_px,
-                    v_px: c.v_px,
-                    area_px: c.area_px as f64,
-                })
+                .map(DetectedBlob::from)
                 .collect();
         assert_eq!(blobs.len(), 16, "{kind:?}: {} blobs", blobs.len());
         let m = match_full_frame(&scenario.camera, &scenario.target, &blobs).unwrap();
