@@ -473,14 +473,14 @@ impl Tracker {
         // Residuals far above the noise mean a wrong local minimum or bad data: wait for more measurements.
         // The median residual, which outliers do not inflate, must be at the noise level: the 12-dof model is exact
         // over two cycles.
-        let median_px = window_fit::robust_scale_px(
+        let median_px = window_fit::median_residual_px(
             &self.model,
             self.target.points(),
             &state,
             t_ref,
             &self.scratch,
-            0.0,
-        ) * 1.1774;
+        )
+        .unwrap_or(0.0);
         if ne.residual_rms_px() > self.config.lost_residual_px
             || median_px > (3.0 * self.config.noise_px).max(0.3)
         {
@@ -602,6 +602,11 @@ impl Tracker {
     }
 
     /// The M-estimator's residual scale of the scratch window at `state` (at least the noise and 1 px).
+    /// The smallest robust scale of the window fits (px): the noise, and at least [`ROBUST_SCALE_FLOOR_PX`].
+    fn robust_scale_floor_px(&self) -> f64 {
+        ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px)
+    }
+
     fn robust_scale_px(&self, state: &MotionState, t_ref: f64) -> f64 {
         window_fit::robust_scale_px(
             &self.model,
@@ -609,7 +614,7 @@ impl Tracker {
             state,
             t_ref,
             &self.scratch,
-            ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px),
+            self.robust_scale_floor_px(),
         )
     }
 
@@ -816,8 +821,10 @@ impl Tracker {
             // The robust scale of the window fits (see `robust_scale_px`); beyond Tukey's c a measurement weighs
             // nothing.
             EstimatorKind::Vvs | EstimatorKind::Batch => {
-                let scale_px = (residual_median_px / 1.1774)
-                    .max(ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px));
+                let scale_px = window_fit::scale_from_median_px(
+                    residual_median_px,
+                    self.robust_scale_floor_px(),
+                );
                 newest_residual_px > RobustLoss::TUKEY_C * scale_px
             }
             EstimatorKind::Static => false,

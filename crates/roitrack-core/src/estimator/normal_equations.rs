@@ -32,10 +32,6 @@ impl<const N: usize> Default for NormalEquations<N> {
 }
 
 impl<const N: usize> NormalEquations<N> {
-    pub fn clear(&mut self) {
-        *self = Self::default();
-    }
-
     /// Root mean square of the residual (px, per coordinate), unweighted.
     pub fn residual_rms_px(&self) -> f64 {
         if self.count == 0 {

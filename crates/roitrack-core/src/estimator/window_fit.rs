@@ -51,16 +51,18 @@ impl RobustLoss {
 /// Largest window whose median residual sets the robust scale (a stack buffer: no allocation).
 const MAX_SCALE_SAMPLES: usize = 128;
 
-/// The robust scale (px per axis) of the window's residuals at `state`: the median residual norm / 1.1774 (the median
-/// of the norm of a 2-D Gaussian of σ per axis is 1.1774 σ), never below `noise_px`.
-pub fn robust_scale_px(
+/// The median of the norm of a 2-D Gaussian residual, in standard deviations per axis.
+pub const MEDIAN_NORM_PER_SIGMA: f64 = 1.1774;
+
+/// The median residual norm (px) of the window at `state` (its first [`MAX_SCALE_SAMPLES`] measurements); `None` when
+/// no point projects.
+pub fn median_residual_px(
     model: &SpatioTemporalModel,
     points: &[TargetPoint],
     state: &MotionState,
     t_ref_s: f64,
     window: &[Observation],
-    noise_px: f64,
-) -> f64 {
+) -> Option<f64> {
     let mut norms = [0.0f64; MAX_SCALE_SAMPLES];
     let mut n = 0;
     for o in window.iter().take(MAX_SCALE_SAMPLES) {
@@ -74,10 +76,30 @@ pub fn robust_scale_px(
         }
     }
     if n == 0 {
-        return noise_px;
+        return None;
     }
     let (_, median, _) = norms[..n].select_nth_unstable_by(n / 2, f64::total_cmp);
-    (*median / 1.1774).max(noise_px)
+    Some(*median)
+}
+
+/// The robust scale (px per axis) for a median residual norm: `median / MEDIAN_NORM_PER_SIGMA`, never below
+/// `floor_px`.
+pub fn scale_from_median_px(median_px: f64, floor_px: f64) -> f64 {
+    (median_px / MEDIAN_NORM_PER_SIGMA).max(floor_px)
+}
+
+/// The robust scale (px per axis) of the window's residuals at `state` ([`scale_from_median_px`] of the
+/// [`median_residual_px`]), never below `noise_px`.
+pub fn robust_scale_px(
+    model: &SpatioTemporalModel,
+    points: &[TargetPoint],
+    state: &MotionState,
+    t_ref_s: f64,
+    window: &[Observation],
+    noise_px: f64,
+) -> f64 {
+    median_residual_px(model, points, state, t_ref_s, window)
+        .map_or(noise_px, |median| scale_from_median_px(median, noise_px))
 }
 
 /// `JᵀJ` and `Jᵀe` of the window at `state` (reference time `t_ref_s`), with `e` = projection - measurement (px).
