@@ -15,6 +15,7 @@
 use thiserror::Error;
 
 use crate::roi::Roi;
+use crate::symmetry::outline_centre;
 
 /// Widest ROI [`measure_blob`] accepts (pixels): a row's mask is one `u64`.
 pub const MAX_ROI_WIDTH: u32 = 64;
@@ -50,7 +51,7 @@ pub enum Threshold {
 }
 
 /// How a blob's centroid is measured.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CentroidOptions {
     pub threshold: Threshold,
     /// `true` (the default, the more accurate): first-order moments weighted by `value - threshold` over the
@@ -64,6 +65,39 @@ pub struct CentroidOptions {
     pub min_area_px: u32,
     /// Largest accepted component (pixels). Default 4096 (a full 64 x 64 ROI).
     pub max_area_px: u32,
+    /// Reject blobs that are not centrally symmetric (see [`SymmetryCheck`]). Default on.
+    pub symmetry: Option<SymmetryCheck>,
+}
+
+/// A test that the blob is the image of a disk, and nothing merged with it: a reflection or a glint touching the blob,
+/// or an occluder cutting it, pulls the first-order moments by up to about half a pixel while the blob still looks like
+/// one blob. A disk's image (an ellipse, blurred, and motion-blurred along a line) is centrally symmetric, so the
+/// midpoints of its chords (rows, then columns) at half contrast lie on two lines through its centre (see
+/// [`crate::symmetry`]); robust line fits find them despite the chords a spot moves. The blob is rejected as
+/// [`BlobRejection::Asymmetric`] when that centre is off the centroid, or a chord midpoint off its line.
+///
+/// Measured on rendered ROIs (the default sensor, 32 px ROIs, blobs of 7 to 22 px, motion blur up to 3 m/s, the wide
+/// -angle lens's corners; a spot of sigma 1.2 px, 0.5 to 1.5 times the blob's peak, 6 to 10 px from the ROI's centre):
+/// clean, the centre differs from the centroid by at most 0.033 px (15 px blobs) to 0.064 px (7 px blobs), and the
+/// midpoints lie within 0.17 px of their lines; with the defaults, at most 3 clean blobs in 4,000 were rejected
+/// (7 px blobs; none for larger ones), and of the spots that moved the centroid, none by more than 0.21 px passed.
+/// Costs about a microsecond a blob. Blobs with fewer than 4 usable chords a direction (under about 5 px across) are
+/// not tested.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SymmetryCheck {
+    /// Largest distance between the centroid and the outline's centre (px). Default 0.06.
+    pub max_centre_offset_px: f64,
+    /// Largest distance of a chord's midpoint from the fitted line of midpoints (px). Default 0.2.
+    pub max_outline_residual_px: f64,
+}
+
+impl Default for SymmetryCheck {
+    fn default() -> Self {
+        Self {
+            max_centre_offset_px: 0.06,
+            max_outline_residual_px: 0.2,
+        }
+    }
 }
 
 impl Default for CentroidOptions {
@@ -73,6 +107,7 @@ impl Default for CentroidOptions {
             intensity_weighted: true,
             min_area_px: 4,
             max_area_px: 4096,
+            symmetry: Some(SymmetryCheck::default()),
         }
     }
 }
@@ -112,6 +147,10 @@ pub enum BlobRejection {
     TooSmall { area_px: u32 },
     #[error("the blob is too large ({area_px} px)")]
     TooLarge { area_px: u32 },
+    #[error(
+        "the blob is not centrally symmetric (a reflection or an occluder merged with it would bias its centroid)"
+    )]
+    Asymmetric,
 }
 
 /// Background level (DN), the integer threshold (pixels `> threshold` are blob) and the level weights are measured
@@ -1762,14 +1801,41 @@ fn measure_blob_with(
     }
     let n = f64::from(area_px);
     let weight_sum = sum_p as f64 - weight_origin * n;
-    let (ci, cj) = if opts.intensity_weighted && weight_sum > 0.0 {
+    let binary = (sum_i as f64 / n, sum_j as f64 / n);
+    let weighted = if weight_sum > 0.0 {
         (
             (sum_pi as f64 - weight_origin * sum_i as f64) / weight_sum,
             (sum_pj as f64 - weight_origin * sum_j as f64) / weight_sum,
         )
     } else {
-        (sum_i as f64 / n, sum_j as f64 / n)
+        binary
     };
+    let (ci, cj) = if opts.intensity_weighted {
+        weighted
+    } else {
+        binary
+    };
+    if let Some(check) = &opts.symmetry {
+        // The outline at half the peak's contrast: the steepest part of a blurred edge.
+        let level = background + 0.5 * (f64::from(peak) - background);
+        let cols = (
+            cols.trailing_zeros() as usize,
+            63 - cols.leading_zeros() as usize,
+        );
+        if let Some(outline) = outline_centre(pixels, w, (lo, hi), cols, level) {
+            // Against the weighted centroid whatever is output: binary moments lock to the pixel grid by up to
+            // 0.1 px.
+            let (du, dv) = (
+                outline.centre_px.0 - weighted.0,
+                outline.centre_px.1 - weighted.1,
+            );
+            if (du * du + dv * dv).sqrt() > check.max_centre_offset_px
+                || outline.worst_residual_px > check.max_outline_residual_px
+            {
+                return Err(BlobRejection::Asymmetric);
+            }
+        }
+    }
     Ok(Centroid {
         u_px: f64::from(roi.x0) + ci,
         v_px: f64::from(roi.y0) + cj,

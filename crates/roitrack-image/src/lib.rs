@@ -9,6 +9,7 @@
 //! - [`centroid`]: the blob centroid of an ROI ([`measure_blob`]): threshold, connected component of the brightest
 //!   pixel, first-order moments, allocation-free;
 //! - [`detect`]: blob detection in a full frame ([`detect_blobs`]) for initialisation;
+//! - [`reflection`]: a simulated reflection, a second bright spot in an ROI ([`ReflectionFault`]);
 //! - [`accuracy`]: the centroid's bias and spread against the truth ([`centroid_accuracy`]).
 //!
 //! Pixel convention (everywhere): pixel (i, j) (column i, row j) has its centre at image coordinates (u, v) = (i, j)
@@ -18,16 +19,19 @@
 pub mod accuracy;
 pub mod centroid;
 pub mod detect;
+pub mod reflection;
 pub mod render;
 pub mod roi;
 pub mod sensor;
+pub mod symmetry;
 
 pub use accuracy::{CentroidAccuracy, bench_rotation, bench_state, centroid_accuracy};
 pub use centroid::{
-    BlobRejection, Centroid, CentroidOptions, MAX_ROI_HEIGHT, MAX_ROI_WIDTH, Threshold,
-    measure_blob,
+    BlobRejection, Centroid, CentroidOptions, MAX_ROI_HEIGHT, MAX_ROI_WIDTH, SymmetryCheck,
+    Threshold, measure_blob,
 };
 pub use detect::detect_blobs;
+pub use reflection::ReflectionFault;
 pub use render::{DEFAULT_BLOB_DIAMETER_M, DiskOrientation, RenderScratch, RoiRenderer};
 pub use roi::Roi;
 pub use sensor::{SensorError, SensorModel};

@@ -3,37 +3,10 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::MotionState;
+pub use roitrack_image::ReflectionFault;
 use roitrack_image::{RenderScratch, Roi, RoiRenderer};
 
 use crate::realtime::RoiCamera;
-
-/// Fault of the simulated camera: a reflection (a second, compact spot) in a fraction of the ROIs, at a random
-/// direction and distance from the ROI's centre (where the scheduler expects the blob), as bright as a random
-/// multiple of the blob's peak. Brighter than the blob, it takes the centroid (an outlier of several pixels) unless
-/// it touches the ROI's border; dimmer, it is a separate component the centroid ignores, or it merges with the blob
-/// and biases it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ReflectionFault {
-    /// Fraction of ROIs with a reflection, in [0, 1].
-    pub fraction: f64,
-    /// Distance of the spot from the ROI's centre (px), drawn uniformly in this range (clamped inside the ROI).
-    pub distance_px: (f64, f64),
-    /// Peak of the spot over the background, as a multiple of the blob's, drawn uniformly in this range.
-    pub relative_peak: (f64, f64),
-    /// Standard deviation of the spot's Gaussian profile (px).
-    pub sigma_px: f64,
-}
-
-impl Default for ReflectionFault {
-    fn default() -> Self {
-        Self {
-            fraction: 0.1,
-            distance_px: (6.0, 10.0),
-            relative_peak: (0.5, 1.5),
-            sigma_px: 1.2,
-        }
-    }
-}
 
 /// A simulated camera: renders each requested ROI from the true motion `truth(t)` (pixels, noise, blur), deterministic
 /// per seed, with optional faults.
@@ -64,39 +37,6 @@ impl<F: Fn(f64) -> MotionState + Send> SimulatedCamera<F> {
         self.reflections = Some(fault);
         self
     }
-
-    /// Adds a reflection to a rendered ROI (see [`ReflectionFault`]).
-    fn add_reflection(
-        fault: &ReflectionFault,
-        rng: &mut ChaCha8Rng,
-        roi: &Roi,
-        pixels: &mut [u16],
-        max_dn: u16,
-    ) {
-        let (w, h) = (roi.width as usize, roi.height as usize);
-        let (Some(&peak), Some(&floor)) = (pixels.iter().max(), pixels.iter().min()) else {
-            return;
-        };
-        let angle = rng.random_range(0.0..std::f64::consts::TAU);
-        let distance = rng.random_range(fault.distance_px.0..=fault.distance_px.1);
-        let amplitude = f64::from(peak - floor)
-            * rng.random_range(fault.relative_peak.0..=fault.relative_peak.1);
-        // Keep the spot's centre two pixels inside the ROI.
-        let half = |n: usize| (n as f64 / 2.0 - 2.0).max(0.0);
-        let cx = (w as f64 / 2.0 + distance * angle.cos())
-            .clamp(w as f64 / 2.0 - half(w), w as f64 / 2.0 + half(w));
-        let cy = (h as f64 / 2.0 + distance * angle.sin())
-            .clamp(h as f64 / 2.0 - half(h), h as f64 / 2.0 + half(h));
-        let inv_two_var = 1.0 / (2.0 * fault.sigma_px * fault.sigma_px);
-        for (j, row) in pixels.chunks_exact_mut(w).enumerate() {
-            let dy = j as f64 + 0.5 - cy;
-            for (i, p) in row.iter_mut().enumerate() {
-                let dx = i as f64 + 0.5 - cx;
-                let add = amplitude * (-(dx * dx + dy * dy) * inv_two_var).exp();
-                *p = (f64::from(*p) + add).round().min(f64::from(max_dn)) as u16;
-            }
-        }
-    }
 }
 
 impl<F: Fn(f64) -> MotionState + Send> RoiCamera for SimulatedCamera<F> {
@@ -120,13 +60,7 @@ impl<F: Fn(f64) -> MotionState + Send> RoiCamera for SimulatedCamera<F> {
             && self.fault_rng.random::<f64>() < fault.fraction
         {
             let max_dn = self.renderer.sensor().max_dn();
-            Self::add_reflection(
-                fault,
-                &mut self.fault_rng,
-                request,
-                &mut pixels[..n],
-                max_dn,
-            );
+            fault.add_spot(&mut self.fault_rng, request, &mut pixels[..n], max_dn);
         }
         *request
     }

@@ -77,20 +77,34 @@ pub struct RejectionCounts {
     pub touches_border: usize,
     pub too_small: usize,
     pub too_large: usize,
+    /// Not centrally symmetric: a reflection or an occluder merged with the blob.
+    pub asymmetric: usize,
 }
 
 impl RejectionCounts {
-    fn count(&mut self, r: &BlobRejection) {
+    /// Counts one rejection.
+    pub fn count(&mut self, r: &BlobRejection) {
         match r {
             BlobRejection::Absent => self.absent += 1,
             BlobRejection::TouchesBorder => self.touches_border += 1,
             BlobRejection::TooSmall { .. } => self.too_small += 1,
             BlobRejection::TooLarge { .. } => self.too_large += 1,
+            BlobRejection::Asymmetric => self.asymmetric += 1,
         }
     }
 
     pub fn total(&self) -> usize {
-        self.absent + self.touches_border + self.too_small + self.too_large
+        self.absent + self.touches_border + self.too_small + self.too_large + self.asymmetric
+    }
+}
+
+impl std::fmt::Display for RejectionCounts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} absent, {} touching the ROI border, {} too small, {} too large, {} asymmetric",
+            self.absent, self.touches_border, self.too_small, self.too_large, self.asymmetric
+        )
     }
 }
 

@@ -10,6 +10,7 @@ use roitrack_core::estimator::{
 };
 use roitrack_core::{CameraModel, JacobianKind, Measurement, PoseSample, Target, TwistSample};
 use roitrack_formats::{MeasurementReader, PoseWriter, TwistWriter};
+use roitrack_pipeline::realtime::RejectionCounts;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum EstimatorArg {
@@ -333,19 +334,16 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     Ok(())
 }
 
-/// Blobs rejected while centroiding a recording, by reason.
+/// ROIs centroided from a recording, and the blobs rejected, by reason.
 #[derive(Debug, Default)]
 struct RejectionTally {
-    rois: std::rc::Rc<std::cell::Cell<[usize; 5]>>,
+    rois: std::rc::Rc<std::cell::Cell<(usize, RejectionCounts)>>,
 }
 
 impl RejectionTally {
     fn summary(&self) -> String {
-        let [rois, absent, border, small, large] = self.rois.get();
-        format!(
-            "{rois} ROIs centroided; rejected: {absent} absent, {border} touching the ROI border, {small} too small, \
-             {large} too large"
-        )
+        let (rois, rejected) = self.rois.get();
+        format!("{rois} ROIs centroided; rejected: {rejected}")
     }
 }
 
@@ -375,8 +373,8 @@ fn centroided_rois(
             )));
         }
         let roi = Roi::new(record.x0, record.y0, record.width, record.height);
-        let mut c = counts.get();
-        c[0] += 1;
+        let (mut rois, mut rejected) = counts.get();
+        rois += 1;
         let result = if record.width > roitrack_image::centroid::MAX_ROI_WIDTH
             || record.height > roitrack_image::centroid::MAX_ROI_HEIGHT
         {
@@ -394,17 +392,11 @@ fn centroided_rois(
                 v_px: centroid.v_px,
             })),
             Err(r) => {
-                let slot = match r {
-                    BlobRejection::Absent => 1,
-                    BlobRejection::TouchesBorder => 2,
-                    BlobRejection::TooSmall { .. } => 3,
-                    BlobRejection::TooLarge { .. } => 4,
-                };
-                c[slot] += 1;
+                rejected.count(&r);
                 None
             }
         };
-        counts.set(c);
+        counts.set((rois, rejected));
         out
     }))
 }
