@@ -25,7 +25,8 @@
 //! - `static_pose`: the static pose from scratch, 16 points, no prior: closed form then Gauss-Newton to convergence,
 //!   i.e. to the accuracy of a converged 6-dof VVS ([`estimator::solve_static_pose`]);
 //! - `centroid_24`: the blob centroid of a 24 x 24 8-bit ROI around a 6 mm blob, rendered once by the simulator with
-//!   the default sensor ([`measure_blob`], default options);
+//!   the default sensor ([`measure_blob`], default options, so with the symmetry check);
+//! - `centroid_24_moments`: the same without the symmetry check (the first-order moments alone);
 //! - `render_roi`: the simulator's rendering of that ROI (one blob, shot and read noise drawn)
 //!   ([`RoiRenderer::render_roi_with_scratch`], scratch buffers reused).
 
@@ -356,6 +357,20 @@ impl HotPaths {
         )
     }
 
+    /// The centroid of the pre-rendered 24 x 24 ROI without the symmetry check.
+    #[inline(never)]
+    pub fn centroid_moments(&self) -> Result<Centroid, BlobRejection> {
+        let options = CentroidOptions {
+            symmetry: None,
+            ..self.roi.options
+        };
+        measure_blob(
+            black_box(&self.roi.pixels),
+            black_box(&self.roi.roi),
+            black_box(&options),
+        )
+    }
+
     /// Renders the 24 x 24 ROI again (fresh noise each call, scratch buffers reused); returns its centre pixel.
     #[inline(never)]
     pub fn render_roi(&mut self) -> u16 {
@@ -382,17 +397,19 @@ pub enum Item {
     GaussNewtonSolve,
     StaticPose,
     Centroid24,
+    Centroid24Moments,
     RenderRoi,
 }
 
 impl Item {
-    pub const ALL: [Item; 7] = [
+    pub const ALL: [Item; 8] = [
         Item::JacobianResidualW16,
         Item::ControlStepW16,
         Item::ControlStepW32,
         Item::GaussNewtonSolve,
         Item::StaticPose,
         Item::Centroid24,
+        Item::Centroid24Moments,
         Item::RenderRoi,
     ];
 
@@ -405,6 +422,7 @@ impl Item {
             Item::GaussNewtonSolve => "gauss_newton_solve",
             Item::StaticPose => "static_pose",
             Item::Centroid24 => "centroid_24",
+            Item::Centroid24Moments => "centroid_24_moments",
             Item::RenderRoi => "render_roi",
         }
     }
@@ -417,7 +435,8 @@ impl Item {
             Item::ControlStepW32 => "control step, exact, 1 iteration, window 32",
             Item::GaussNewtonSolve => "Gauss-Newton (LM) to convergence, window 32",
             Item::StaticPose => "static pose from scratch, 16 points",
-            Item::Centroid24 => "ROI centroid, 24x24 8-bit",
+            Item::Centroid24 => "ROI centroid, 24x24 8-bit, symmetry checked",
+            Item::Centroid24Moments => "ROI centroid, 24x24 8-bit, moments only",
             Item::RenderRoi => "ROI rendering (simulator), 24x24, one blob",
         }
     }
@@ -508,6 +527,7 @@ pub fn time_all(hot: &mut HotPaths, budget: Duration) -> Vec<(Item, Timing)> {
                 Item::GaussNewtonSolve => time_item(|| hot.gauss_newton_solve(32), budget),
                 Item::StaticPose => time_item(|| hot.static_pose(), budget),
                 Item::Centroid24 => time_item(|| hot.centroid(), budget),
+                Item::Centroid24Moments => time_item(|| hot.centroid_moments(), budget),
                 Item::RenderRoi => time_item(|| hot.render_roi(), budget),
             };
             (item, timing)

@@ -1,11 +1,12 @@
 //! Accuracy of the ROI centroid against the truth, on rendered images.
 
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::{Rotation3, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{MotionState, so3};
 
-use crate::centroid::{CentroidOptions, measure_blob};
+use crate::centroid::{BlobRejection, CentroidOptions, measure_blob};
+use crate::reflection::ReflectionFault;
 use crate::render::{RenderScratch, RoiRenderer};
 use crate::roi::Roi;
 
@@ -68,13 +69,146 @@ pub fn centroid_accuracy(
     count: usize,
     seed: u64,
 ) -> CentroidAccuracy {
+    let (mut n, mut rejected) = (0usize, 0usize);
+    let (mut sum_u, mut sum_v, mut sum_uu, mut sum_vv) = (0.0, 0.0, 0.0, 0.0);
+    for_each_random_roi(renderer, roi_size, count, seed, |rendered| {
+        let Some((roi, pixels, truth)) = rendered else {
+            rejected += 1;
+            return;
+        };
+        match measure_blob(pixels, roi, opts) {
+            Ok(c) => {
+                let (eu, ev) = (c.u_px - truth.x, c.v_px - truth.y);
+                n += 1;
+                sum_u += eu;
+                sum_v += ev;
+                sum_uu += eu * eu;
+                sum_vv += ev * ev;
+            }
+            Err(_) => rejected += 1,
+        }
+    });
+    let nf = n.max(1) as f64;
+    let (bias_u_px, bias_v_px) = (sum_u / nf, sum_v / nf);
+    let spread = |sum_sq: f64, bias: f64| {
+        if n > 1 {
+            ((sum_sq - nf * bias * bias) / (nf - 1.0)).max(0.0).sqrt()
+        } else {
+            0.0
+        }
+    };
+    CentroidAccuracy {
+        count: n,
+        rejected,
+        bias_u_px,
+        bias_v_px,
+        std_u_px: spread(sum_uu, bias_u_px),
+        std_v_px: spread(sum_vv, bias_v_px),
+        rms_px: ((sum_uu + sum_vv) / nf).sqrt(),
+    }
+}
+
+/// The centroid's errors on ROIs with a reflection, and what its symmetry check rejects, clean and with the spot.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReflectionAccuracy {
+    /// ROIs measured both clean and with a spot (the clean blob was accepted).
+    pub count: usize,
+    /// Of them, clean blobs the options rejected as [`BlobRejection::Asymmetric`].
+    pub clean_rejected_asymmetric: usize,
+    /// Of them, blobs with the spot rejected (for any reason).
+    pub reflected_rejected: usize,
+    /// Blobs with the spot accepted whose centroid is more than [`REFLECTION_CAPTURED_PX`] from the clean one: the
+    /// spot, brighter than the blob and apart from it, took the centroid (a gross outlier, left to the estimator).
+    pub reflected_captured: usize,
+    /// Blobs with the spot accepted whose centroid moved by more than [`REFLECTION_MOVED_PX`] (and was not captured).
+    pub reflected_moved: usize,
+    /// The largest distance between the centroid with the spot and the clean one, over accepted blobs not captured
+    /// (px).
+    pub worst_accepted_shift_px: f64,
+    /// Root mean square of that distance over the same blobs (px).
+    pub rms_accepted_shift_px: f64,
+}
+
+/// A centroid moved by more than this by a spot counts in [`ReflectionAccuracy::reflected_moved`] (px): several
+/// times the clean centroid's noise (0.01 px per axis with the default sensor).
+pub const REFLECTION_MOVED_PX: f64 = 0.1;
+/// A centroid moved by more than this by a spot counts in [`ReflectionAccuracy::reflected_captured`] (px).
+pub const REFLECTION_CAPTURED_PX: f64 = 2.0;
+
+/// Renders ROIs as [`centroid_accuracy`] does, measures each clean, adds a spot of `fault` to it (its `fraction`
+/// ignored: every ROI gets one) and measures it again, comparing the centroid with the clean one. Deterministic for a
+/// `seed`.
+pub fn reflection_accuracy(
+    renderer: &RoiRenderer,
+    opts: &CentroidOptions,
+    roi_size: u32,
+    count: usize,
+    seed: u64,
+    fault: &ReflectionFault,
+) -> ReflectionAccuracy {
+    let mut spot_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5907);
+    let mut with_spot = vec![0u16; (roi_size * roi_size) as usize];
+    let max_dn = renderer.sensor().max_dn();
+    let mut stats = ReflectionAccuracy {
+        count: 0,
+        clean_rejected_asymmetric: 0,
+        reflected_rejected: 0,
+        reflected_captured: 0,
+        reflected_moved: 0,
+        worst_accepted_shift_px: 0.0,
+        rms_accepted_shift_px: 0.0,
+    };
+    let (mut accepted, mut sum_sq) = (0usize, 0.0);
+    for_each_random_roi(renderer, roi_size, count, seed, |rendered| {
+        let Some((roi, pixels, _)) = rendered else {
+            return;
+        };
+        with_spot.copy_from_slice(pixels);
+        fault.add_spot(&mut spot_rng, roi, &mut with_spot, max_dn);
+        let clean = match measure_blob(pixels, roi, opts) {
+            Ok(c) => c,
+            Err(BlobRejection::Asymmetric) => {
+                stats.count += 1;
+                stats.clean_rejected_asymmetric += 1;
+                return;
+            }
+            Err(_) => return,
+        };
+        stats.count += 1;
+        let Ok(c) = measure_blob(&with_spot, roi, opts) else {
+            stats.reflected_rejected += 1;
+            return;
+        };
+        let shift = (c.u_px - clean.u_px).hypot(c.v_px - clean.v_px);
+        if shift > REFLECTION_CAPTURED_PX {
+            stats.reflected_captured += 1;
+            return;
+        }
+        accepted += 1;
+        sum_sq += shift * shift;
+        stats.worst_accepted_shift_px = stats.worst_accepted_shift_px.max(shift);
+        if shift > REFLECTION_MOVED_PX {
+            stats.reflected_moved += 1;
+        }
+    });
+    stats.rms_accepted_shift_px = (sum_sq / accepted.max(1) as f64).sqrt();
+    stats
+}
+
+/// Calls `visit` with each of `count` random ROIs of [`centroid_accuracy`] (ROI, pixels, true blob centre), or
+/// `None` where the blob does not project or its ROI leaves the sensor.
+fn for_each_random_roi(
+    renderer: &RoiRenderer,
+    roi_size: u32,
+    count: usize,
+    seed: u64,
+    mut visit: impl FnMut(Option<(&Roi, &[u16], Vector2<f64>)>),
+) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let camera = renderer.camera();
     let target = renderer.target();
     let mut scratch = RenderScratch::new();
     let mut pixels = vec![0u16; (roi_size * roi_size) as usize];
-    let (mut n, mut rejected) = (0usize, 0usize);
-    let (mut sum_u, mut sum_v, mut sum_uu, mut sum_vv) = (0.0, 0.0, 0.0, 0.0);
     let bench = bench_state();
     for _ in 0..count {
         let mut symmetric = |half: f64| Vector3::from_fn(|_, _| rng.random_range(-half..=half));
@@ -93,7 +227,7 @@ pub fn centroid_accuracy(
         let index = rng.random_range(0..target.len());
         let point = state.point_in_cam_at(&target.points()[index].point_in_obj_m, 0.0);
         let Some(truth) = camera.raw_pixel_from_cam(&point) else {
-            rejected += 1;
+            visit(None);
             continue;
         };
         let (du, dv) = (
@@ -107,39 +241,11 @@ pub fn centroid_accuracy(
             camera.width_px,
             camera.height_px,
         ) else {
-            rejected += 1;
+            visit(None);
             continue;
         };
         renderer.render_roi_with_scratch(&state_at, &roi, 0.0, &mut rng, &mut scratch, &mut pixels);
-        match measure_blob(&pixels, &roi, opts) {
-            Ok(c) => {
-                let (eu, ev) = (c.u_px - truth.x, c.v_px - truth.y);
-                n += 1;
-                sum_u += eu;
-                sum_v += ev;
-                sum_uu += eu * eu;
-                sum_vv += ev * ev;
-            }
-            Err(_) => rejected += 1,
-        }
-    }
-    let nf = n.max(1) as f64;
-    let (bias_u_px, bias_v_px) = (sum_u / nf, sum_v / nf);
-    let spread = |sum_sq: f64, bias: f64| {
-        if n > 1 {
-            ((sum_sq - nf * bias * bias) / (nf - 1.0)).max(0.0).sqrt()
-        } else {
-            0.0
-        }
-    };
-    CentroidAccuracy {
-        count: n,
-        rejected,
-        bias_u_px,
-        bias_v_px,
-        std_u_px: spread(sum_uu, bias_u_px),
-        std_v_px: spread(sum_vv, bias_v_px),
-        rms_px: ((sum_uu + sum_vv) / nf).sqrt(),
+        visit(Some((&roi, &pixels, truth)));
     }
 }
 

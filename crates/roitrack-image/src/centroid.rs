@@ -1818,11 +1818,16 @@ fn measure_blob_with(
     if let Some(check) = &opts.symmetry {
         // The outline at half the peak's contrast: the steepest part of a blurred edge.
         let level = background + 0.5 * (f64::from(peak) - background);
-        let cols = (
-            cols.trailing_zeros() as usize,
-            63 - cols.leading_zeros() as usize,
+        let mut above = [0u64; MAX_ROI_HEIGHT as usize];
+        row_masks(
+            isa,
+            &pixels[lo * w..(hi + 1) * w],
+            w,
+            level as u16,
+            &mut above[lo..=hi],
         );
-        if let Some(outline) = outline_centre(pixels, w, (lo, hi), cols, level) {
+        above[lo..=hi].iter_mut().for_each(|m| *m &= cols);
+        if let Some(outline) = outline_centre(pixels, w, &above[..h], (lo, hi), level) {
             // Against the weighted centroid whatever is output: binary moments lock to the pixel grid by up to
             // 0.1 px.
             let (du, dv) = (

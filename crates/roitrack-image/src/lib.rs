@@ -25,7 +25,10 @@ pub mod roi;
 pub mod sensor;
 pub mod symmetry;
 
-pub use accuracy::{CentroidAccuracy, bench_rotation, bench_state, centroid_accuracy};
+pub use accuracy::{
+    CentroidAccuracy, ReflectionAccuracy, bench_rotation, bench_state, centroid_accuracy,
+    reflection_accuracy,
+};
 pub use centroid::{
     BlobRejection, Centroid, CentroidOptions, MAX_ROI_HEIGHT, MAX_ROI_WIDTH, SymmetryCheck,
     Threshold, measure_blob,

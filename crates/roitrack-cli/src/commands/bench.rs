@@ -23,7 +23,8 @@
 //!   `gauss_newton_iterations`: the iterations it takes;
 //! - `static_pose_us_median`, `static_pose_us_p99`: the static pose from scratch, 16 points, no prior, refined to
 //!   convergence; `static_pose_iterations`: the iterations of that refinement;
-//! - `centroid_24_us_median`, `centroid_24_us_p99`: blob centroid of a 24x24 8-bit ROI (6 mm blob);
+//! - `centroid_24_us_median`, `centroid_24_us_p99`: blob centroid of a 24x24 8-bit ROI (6 mm blob), default options
+//!   (with the symmetry check); `centroid_24_moments_us_median`, `centroid_24_moments_us_p99`: the same without it;
 //! - `render_roi_us_median`, `render_roi_us_p99`: the simulator's rendering of that ROI (one blob, noise drawn);
 //! - `item_ms`: the timing budget of each of those items (ms);
 //! - `loop_k10_rois_per_s`, `loop_k1_rois_per_s`: free-running loop throughput with an estimate every 10 ROIs and at
