@@ -5,7 +5,9 @@
 //! the figure least disturbed by other processes on the machine).
 //!
 //! `image_bench measure_blob` times only [`measure_blob`] on the static 24 x 24 ROI, longer (a micro-benchmark);
-//! `image_bench measure_blob_calls N` makes N calls and times nothing (for `valgrind --tool=callgrind`).
+//! `image_bench measure_blob_calls N` makes N calls and times nothing (for `valgrind --tool=callgrind`);
+//! `image_bench reflections` prints what the symmetry check does against merged reflections, for blobs of 3 to 9 mm
+//! (about 7 to 22 px) and two lenses ([`reflection_accuracy`]).
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -15,8 +17,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
 use roitrack_image::{
-    CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel, Threshold, bench_state,
-    centroid_accuracy, detect_blobs, measure_blob,
+    CentroidOptions, ReflectionFault, RenderScratch, Roi, RoiRenderer, SensorModel, Threshold,
+    bench_state, centroid_accuracy, detect_blobs, measure_blob, reflection_accuracy,
 };
 
 /// (median, minimum) over `runs` repetitions of the mean time (µs) of `inner` calls of `f`.
@@ -97,10 +99,80 @@ fn measure_blob_only(calls: Option<usize>) {
     }
 }
 
+/// The symmetry check against merged reflections: blob sizes, lenses, with and without the check.
+fn reflections() {
+    let fault = ReflectionFault::default();
+    println!("spots: {fault:?}, in every ROI; 4000 ROIs each");
+    println!(
+        "{:<28} {:>5} {:>6} {:>8} {:>8} {:>8} {:>9} {:>9}",
+        "case", "roi", "check", "clean rj", "rejected", "captured", "moved>0.1", "worst px"
+    );
+    let grid_with = |diameter_m: f64| {
+        let points = Target::grid4x4()
+            .points()
+            .iter()
+            .map(|p| roitrack_core::TargetPoint {
+                diameter_m: Some(diameter_m),
+                ..*p
+            })
+            .collect();
+        Target::new(points).unwrap()
+    };
+    for (name, camera, target, roi) in [
+        (
+            "6 mm blobs (15 px)",
+            CameraModel::canonical(),
+            Target::grid4x4(),
+            32,
+        ),
+        (
+            "3 mm blobs (7 px)",
+            CameraModel::canonical(),
+            grid_with(0.003),
+            24,
+        ),
+        (
+            "9 mm blobs (22 px)",
+            CameraModel::canonical(),
+            grid_with(0.009),
+            40,
+        ),
+        (
+            "6 mm, wide-angle lens",
+            CameraModel::wide_angle_example(),
+            Target::grid4x4(),
+            32,
+        ),
+    ] {
+        let renderer = RoiRenderer::new(camera, target, SensorModel::default()).unwrap();
+        for (check, opts) in [
+            (
+                "off",
+                CentroidOptions {
+                    symmetry: None,
+                    ..Default::default()
+                },
+            ),
+            ("on", CentroidOptions::default()),
+        ] {
+            let r = reflection_accuracy(&renderer, &opts, roi, 4000, 5, &fault);
+            println!(
+                "{name:<28} {roi:>5} {check:>6} {:>8} {:>8} {:>8} {:>9} {:>9.3}",
+                r.clean_rejected_asymmetric,
+                r.reflected_rejected,
+                r.reflected_captured,
+                r.reflected_moved,
+                r.worst_accepted_shift_px
+            );
+        }
+    }
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
         Some("measure_blob") => return measure_blob_only(None),
+        Some("reflections") => return reflections(),
         Some("measure_blob_calls") => {
             let calls = args.get(1).and_then(|n| n.parse().ok()).unwrap_or(100_000);
             return measure_blob_only(Some(calls));
