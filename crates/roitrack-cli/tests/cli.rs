@@ -405,6 +405,71 @@ fn target_command_writes_the_bundled_target_and_camera() {
 }
 
 #[test]
+fn reflections_in_roi_recordings_are_rejected_by_the_symmetry_check() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    simulate(dir, "spin", &["--rois", "--reflections", "0.3"]);
+    let (camera, target, rois) = (
+        dir.join("camera.yaml"),
+        dir.join("target.csv"),
+        dir.join("rois.bin"),
+    );
+    let track = |name: &str, extra: &[&str]| {
+        let (poses, twists) = (
+            dir.join(format!("{name}.tum")),
+            dir.join(format!("{name}.csv")),
+        );
+        let mut args = vec![
+            "track",
+            "--camera",
+            p(&camera),
+            "--target",
+            p(&target),
+            "--rois",
+            p(&rois),
+            "--poses",
+            p(&poses),
+            "--twists",
+            p(&twists),
+            "--noise-px",
+            "0.02",
+        ];
+        args.extend_from_slice(extra);
+        let out = roitrack(&args);
+        let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+        assert!(out.status.success(), "{stderr}");
+        let m: serde_json::Value = serde_json::from_str(&ok(&[
+            "eval",
+            "--truth",
+            p(dir),
+            "--poses",
+            p(&poses),
+            "--twists",
+            p(&twists),
+            "--json",
+        ]))
+        .unwrap();
+        (stderr, f(&m, "position_rmse_mm"))
+    };
+    let (stderr, checked_mm) = track("checked", &[]);
+    // About a third of the ROIs carry a spot, most of them merged with the blob: rejected.
+    let asymmetric: usize = stderr
+        .lines()
+        .flat_map(|line| line.split(", "))
+        .find_map(|part| part.strip_suffix(" asymmetric"))
+        .and_then(|n| n.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no asymmetric count in {stderr}"));
+    assert!((2000..4000).contains(&asymmetric), "{stderr}");
+    assert!(checked_mm < 0.05, "{checked_mm} mm");
+    let (stderr, unchecked_mm) = track("unchecked", &["--no-symmetry-check"]);
+    assert!(stderr.contains(" 0 asymmetric"), "{stderr}");
+    assert!(
+        unchecked_mm > 5.0 * checked_mm,
+        "{unchecked_mm} mm against {checked_mm} mm"
+    );
+}
+
+#[test]
 fn roi_recordings_replay_through_track() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();

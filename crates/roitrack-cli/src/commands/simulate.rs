@@ -19,12 +19,13 @@ pub const TRUTH_POSES_FILE: &str = "gt_poses.tum";
 pub const TRUTH_TWISTS_FILE: &str = "gt_twists.csv";
 pub const ROIS_FILE: &str = "rois.bin";
 
-/// Renders a 40 x 40 ROI for each measurement of `run` (same time and point, the truth of `options`, jump included)
-/// and writes the recording.
+/// Renders a 40 x 40 ROI for each measurement of `run` (same time and point, the truth of `options`, jump included),
+/// with a reflection in a fraction of them if asked, and writes the recording.
 pub fn write_roi_recording(
     scenario: &Scenario,
     options: &SimulationOptions,
     run: &SimulatedRun,
+    reflections: Option<&roitrack_image::ReflectionFault>,
     path: &Path,
 ) -> Result<()> {
     let seed = options.seed;
@@ -35,6 +36,8 @@ pub fn write_roi_recording(
     let bit_depth = sensor.bit_depth as u8;
     let renderer = RoiRenderer::new(run.camera.clone(), run.target.clone(), sensor)?;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x0005_1f0c_a11e);
+    // The reflections' own generator: the ROIs are the same with and without them.
+    let mut fault_rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_FA17);
     let mut scratch = RenderScratch::new();
     let truth = |t: f64| options.truth_at(scenario, t);
     let mut writer = roitrack_formats::RoiRecordingWriter::create(path)?;
@@ -57,6 +60,16 @@ pub fn write_roi_recording(
         .context("ROI larger than the sensor")?;
         let mut pixels = vec![0u16; roi.len()];
         renderer.render_roi_with_scratch(&truth, &roi, m.t_s, &mut rng, &mut scratch, &mut pixels);
+        if let Some(fault) = reflections
+            && fault_rng.random::<f64>() < fault.fraction
+        {
+            fault.add_spot(
+                &mut fault_rng,
+                &roi,
+                &mut pixels,
+                renderer.sensor().max_dn(),
+            );
+        }
         writer.write(&roitrack_formats::RoiRecord {
             t_s: m.t_s,
             id: m.id,
@@ -143,6 +156,10 @@ pub struct SimulateArgs {
     /// scheduler would) and write them to rois.bin, a recording `roitrack track --rois` replays.
     #[arg(long)]
     pub rois: bool,
+    /// Fault, with --rois: a reflection (a spot of sigma 1.2 px, 0.5-1.5 times the blob's peak, 6-10 px from the
+    /// ROI's centre, so often merged with the blob) in this fraction of the ROIs, in [0, 1].
+    #[arg(long, value_name = "FRACTION", requires = "rois", value_parser = parse_fraction)]
+    pub reflections: Option<f64>,
     /// Fault: hide points during [T0, T1) s, e.g. `0,5,10,15@1.0:1.2` (repeatable).
     #[arg(long = "occlude", value_name = "IDS@T0:T1", value_parser = parse_occlusion)]
     pub occlusions: Vec<Occlusion>,
@@ -164,6 +181,16 @@ pub struct SimulateArgs {
     /// Drop the measurements of blobs outside the image instead of failing.
     #[arg(long)]
     pub skip_off_image: bool,
+}
+
+/// A fraction in [0, 1].
+fn parse_fraction(text: &str) -> Result<f64, String> {
+    let value = parse_number(text, "fraction")?;
+    if (0.0..=1.0).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!("{value} is not a fraction in [0, 1]"))
+    }
 }
 
 fn parse_number(text: &str, what: &str) -> Result<f64, String> {
@@ -286,7 +313,19 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let run = simulate(&scenario, &options).context("simulation failed")?;
     write_run(&run, &args.out)?;
     if args.rois {
-        write_roi_recording(&scenario, &options, &run, &args.out.join(ROIS_FILE))?;
+        let reflections = args
+            .reflections
+            .map(|fraction| roitrack_image::ReflectionFault {
+                fraction,
+                ..Default::default()
+            });
+        write_roi_recording(
+            &scenario,
+            &options,
+            &run,
+            reflections.as_ref(),
+            &args.out.join(ROIS_FILE),
+        )?;
     }
     eprintln!(
         "roitrack: {} scenario: {} measurements over {:.3} s written to {}",

@@ -133,6 +133,10 @@ pub struct TrackArgs {
     /// Instead of centroids: a recording of ROI images (see roitrack_formats::RoiRecordingReader), centroided here.
     #[arg(long)]
     pub rois: Option<PathBuf>,
+    /// With --rois: keep blobs that are not centrally symmetric (by default they are rejected: a reflection or an
+    /// occluder merged with a blob biases its centroid by up to half a pixel). For blobs that are not images of disks.
+    #[arg(long, requires = "rois")]
+    pub no_symmetry_check: bool,
     /// Output poses (TUM: t tx ty tz qx qy qz qw, camera_T_object).
     #[arg(long)]
     pub poses: PathBuf,
@@ -282,7 +286,12 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             ),
             (None, Some(path)) => (
                 path.display().to_string(),
-                Box::new(centroided_rois(path, &target, &mut rejected)?),
+                Box::new(centroided_rois(
+                    path,
+                    &target,
+                    !args.no_symmetry_check,
+                    &mut rejected,
+                )?),
             ),
             (None, None) => bail!("give --measurements or --rois"),
         };
@@ -351,6 +360,7 @@ impl RejectionTally {
 fn centroided_rois(
     path: &Path,
     target: &Target,
+    symmetry_check: bool,
     tally: &mut RejectionTally,
 ) -> Result<impl Iterator<Item = Result<Measurement>> + use<>> {
     use roitrack_image::{BlobRejection, CentroidOptions, Roi, measure_blob};
@@ -358,7 +368,10 @@ fn centroided_rois(
     let counts = tally.rois.clone();
     let ids: std::collections::HashSet<u32> = target.points().iter().map(|p| p.id).collect();
     let path = path.to_path_buf();
-    let options = CentroidOptions::default();
+    let mut options = CentroidOptions::default();
+    if !symmetry_check {
+        options.symmetry = None;
+    }
     Ok(reader.enumerate().filter_map(move |(index, record)| {
         let record = match record {
             Ok(r) => r,
