@@ -437,7 +437,7 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
     };
     if !args.json {
         println!(
-            "{:<11} {:<26} {:>9} {:>10} {:>12} {:>5} {:>7} {:>8} {:>10}",
+            "{:<11} {:<26} {:>9} {:>10} {:>12} {:>5} {:>7} {:>8} {:>10} {:>15}",
             "scenario",
             "fault",
             "pos mm",
@@ -446,7 +446,8 @@ pub fn run(args: &FaultsArgs) -> Result<()> {
             "lost",
             "reinit",
             "flagged",
-            "unflagged"
+            "unflagged",
+            "worst unflg mm"
         );
     }
     for &kind in kinds {
