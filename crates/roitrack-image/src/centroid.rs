@@ -82,7 +82,7 @@ pub struct CentroidOptions {
 /// 3,458 to 3 (worst 0.18 px) for 6 mm blobs (15 px), from 1,935 to 7 (worst 0.11 px) for 9 mm blobs (22 px), from
 /// 3,453 to 5 with the wide-angle lens, and from 1,457 to 28 for 3 mm blobs (7 px), whose few chords leave a spot as
 /// large as the blob harder to see. A spot apart from the blob and brighter takes the centroid whatever the check
-/// (a gross outlier, for the estimator's gate). Costs about 1.2 µs a blob (the moments alone: 0.14 µs). Blobs with
+/// (a gross outlier, for the estimator's gate). Costs about 1.3 µs a blob (the moments alone: 0.14 µs). Blobs with
 /// fewer than 3 usable chords a direction (under about 5 px across) are not tested.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SymmetryCheck {
