@@ -9,6 +9,9 @@
 //! operations (the run of set bits of `m` from a seed bit `s` towards the high bits is `((m + s) ^ m) & m`), and its
 //! moments are summed over the window of its rows and columns.
 //!
+//! With the default options the blob must then pass a symmetry check ([`SymmetryCheck`], in [`crate::symmetry`]): a
+//! reflection merged with a blob pulls its moments by up to half a pixel, and is caught by the outline's asymmetry.
+//!
 //! The kernels take 8 pixels a vector with SSE2 (every x86_64 CPU) or 32 with AVX-512 where the CPU has it, a pixel
 //! at a time elsewhere. The moments are integer sums (exact), so every path gives the same centroid to the bit.
 
@@ -1738,7 +1741,8 @@ fn component_moments(
 /// [`CentroidOptions`]), in full-sensor pixel coordinates.
 ///
 /// Rejections, in this order: [`BlobRejection::Absent`] (nothing above the threshold or too little contrast),
-/// [`BlobRejection::TouchesBorder`] (the component reaches the ROI's outer rows or columns), then the area limits.
+/// [`BlobRejection::TouchesBorder`] (the component reaches the ROI's outer rows or columns), the area limits, then
+/// [`BlobRejection::Asymmetric`] (with [`CentroidOptions::symmetry`], the default: something merged with the blob).
 ///
 /// # Panics
 /// If `pixels.len() != roi.len()`, or the ROI is empty or larger than [`MAX_ROI_WIDTH`] x [`MAX_ROI_HEIGHT`].

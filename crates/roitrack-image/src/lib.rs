@@ -7,7 +7,7 @@
 //!   full frames of the target's blobs as exact perspective images of flat disks, with lens distortion, area coverage,
 //!   optical and motion blur, shot and read noise and quantisation;
 //! - [`centroid`]: the blob centroid of an ROI ([`measure_blob`]): threshold, connected component of the brightest
-//!   pixel, first-order moments, allocation-free;
+//!   pixel, first-order moments, a symmetry check against merged reflections ([`symmetry`]), allocation-free;
 //! - [`detect`]: blob detection in a full frame ([`detect_blobs`]) for initialisation;
 //! - [`reflection`]: a simulated reflection, a second bright spot in an ROI ([`ReflectionFault`]);
 //! - [`accuracy`]: the centroid's bias and spread against the truth ([`centroid_accuracy`]).
