@@ -4,7 +4,8 @@
 //! midpoints of its horizontal chords then lie on a line through the centre (for an ellipse exactly: the conjugate
 //! diameter), and so do the midpoints of its vertical chords; the centre is where the two lines cross. A spot merged
 //! with the blob moves the ends of a few chords only (those of the rows or columns it crosses), so a robust line fit
-//! (least squares, then Tukey reweighting) leaves them out, where it pulls a first-order moment by a fraction of a pixel.
+//! (least squares, then Tukey reweighting) leaves them out, or shows them far off the line, where it pulls a
+//! first-order moment by a fraction of a pixel.
 //! The chord ends are the level's crossings, interpolated linearly between neighbouring pixels.
 //!
 //! Allocation-free: everything lives in fixed arrays sized for [`crate::MAX_ROI_WIDTH`] x [`crate::MAX_ROI_HEIGHT`].
