@@ -16,30 +16,30 @@ fn simulate(dir: &Path, scenario: &str, extra: &[&str]) {
     ok(&args);
 }
 
-/// Runs `track` with the given estimator options, then `eval --json`.
+/// Runs `track` on the simulated measurements with the given estimator options, then `eval --json`.
 fn track_and_eval(dir: &Path, name: &str, options: &[&str]) -> serde_json::Value {
+    let measurements = dir.join("measurements.csv");
+    track_input_and_eval(dir, name, &["--measurements", p(&measurements)], options).1
+}
+
+/// Runs `track` on `input` (`--measurements FILE` or `--rois FILE`) of the simulation in `dir` with the given options,
+/// then `eval --json`: track's standard error and eval's metrics.
+fn track_input_and_eval(
+    dir: &Path,
+    name: &str,
+    input: &[&str],
+    options: &[&str],
+) -> (String, serde_json::Value) {
     let poses = dir.join(format!("{name}.tum"));
     let twists = dir.join(format!("{name}.csv"));
-    let (camera, target, measurements) = (
-        dir.join("camera.yaml"),
-        dir.join("target.csv"),
-        dir.join("measurements.csv"),
-    );
-    let mut args = vec![
-        "track",
-        "--camera",
-        p(&camera),
-        "--target",
-        p(&target),
-        "--measurements",
-        p(&measurements),
-        "--poses",
-        p(&poses),
-        "--twists",
-        p(&twists),
-    ];
+    let (camera, target) = (dir.join("camera.yaml"), dir.join("target.csv"));
+    let mut args = vec!["track", "--camera", p(&camera), "--target", p(&target)];
+    args.extend_from_slice(input);
+    args.extend_from_slice(&["--poses", p(&poses), "--twists", p(&twists)]);
     args.extend_from_slice(options);
-    ok(&args);
+    let out = roitrack(&args);
+    let stderr = String::from_utf8_lossy(&out.stderr).to_string();
+    assert!(out.status.success(), "roitrack {args:?} failed: {stderr}");
     let json = ok(&[
         "eval",
         "--truth",
@@ -50,7 +50,7 @@ fn track_and_eval(dir: &Path, name: &str, options: &[&str]) -> serde_json::Value
         p(&twists),
         "--json",
     ]);
-    serde_json::from_str(&json).unwrap()
+    (stderr, serde_json::from_str(&json).unwrap())
 }
 
 fn f(v: &serde_json::Value, key: &str) -> f64 {
@@ -409,46 +409,11 @@ fn reflections_in_roi_recordings_are_rejected_by_the_symmetry_check() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     simulate(dir, "spin", &["--rois", "--reflections", "0.3"]);
-    let (camera, target, rois) = (
-        dir.join("camera.yaml"),
-        dir.join("target.csv"),
-        dir.join("rois.bin"),
-    );
+    let rois = dir.join("rois.bin");
     let track = |name: &str, extra: &[&str]| {
-        let (poses, twists) = (
-            dir.join(format!("{name}.tum")),
-            dir.join(format!("{name}.csv")),
-        );
-        let mut args = vec![
-            "track",
-            "--camera",
-            p(&camera),
-            "--target",
-            p(&target),
-            "--rois",
-            p(&rois),
-            "--poses",
-            p(&poses),
-            "--twists",
-            p(&twists),
-            "--noise-px",
-            "0.02",
-        ];
-        args.extend_from_slice(extra);
-        let out = roitrack(&args);
-        let stderr = String::from_utf8_lossy(&out.stderr).to_string();
-        assert!(out.status.success(), "{stderr}");
-        let m: serde_json::Value = serde_json::from_str(&ok(&[
-            "eval",
-            "--truth",
-            p(dir),
-            "--poses",
-            p(&poses),
-            "--twists",
-            p(&twists),
-            "--json",
-        ]))
-        .unwrap();
+        let mut options = vec!["--noise-px", "0.02"];
+        options.extend_from_slice(extra);
+        let (stderr, m) = track_input_and_eval(dir, name, &["--rois", p(&rois)], &options);
         (stderr, f(&m, "position_rmse_mm"))
     };
     let (stderr, checked_mm) = track("checked", &[]);
@@ -480,39 +445,9 @@ fn roi_recordings_replay_through_track() {
         dir.join("rois.bin"),
     );
     let (poses, twists) = (dir.join("r.tum"), dir.join("r.csv"));
-    let out = roitrack(&[
-        "track",
-        "--camera",
-        p(&camera),
-        "--target",
-        p(&target),
-        "--rois",
-        p(&rois),
-        "--poses",
-        p(&poses),
-        "--twists",
-        p(&twists),
-        "--noise-px",
-        "0.02",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let stderr = String::from_utf8_lossy(&out.stderr);
+    let (stderr, m) =
+        track_input_and_eval(dir, "r", &["--rois", p(&rois)], &["--noise-px", "0.02"]);
     assert!(stderr.contains("ROIs centroided"), "{stderr}");
-    let m: serde_json::Value = serde_json::from_str(&ok(&[
-        "eval",
-        "--truth",
-        p(dir),
-        "--poses",
-        p(&poses),
-        "--twists",
-        p(&twists),
-        "--json",
-    ]))
-    .unwrap();
     assert!(f(&m, "position_rmse_mm") < 0.2, "{m}");
     // A corrupted recording is refused with the file, the record and the field.
     let mut bytes = std::fs::read(&rois).unwrap();
