@@ -16,12 +16,12 @@
 //!
 //! The timed items ([`Item`]):
 //! - `jacobian_residual_w16`: `JᵀJ`, `Jᵀe` of a 16-measurement window with the exact Jacobian
-//!   ([`window_fit::window_normal_equations`]);
+//!   ([`WindowProblem::normal_equations`]);
 //! - `control_step_w16`, `control_step_w32`: one step of the virtual visual servoing loop, 1 iteration, exact Jacobian,
 //!   gain 1, degeneracy gate 3e-3 (so it includes the conditioning figure) on 16 and 32 measurements
-//!   ([`window_fit::vvs_iteration`]), from a state off the truth by [`perturbation`];
+//!   ([`solver::solve`] with [`SolverOptions::servo`]), from a state off the truth by [`perturbation`];
 //! - `gauss_newton_solve`: Levenberg-Marquardt (Gauss-Newton with damping) of the 12 parameters to convergence on 32
-//!   measurements from the same perturbed state ([`window_fit::levenberg_marquardt`]);
+//!   measurements from the same perturbed state ([`SolverOptions::levenberg_marquardt`]);
 //! - `static_pose`: the static pose from scratch, 16 points, no prior: closed form then Gauss-Newton to convergence,
 //!   i.e. to the accuracy of a converged 6-dof VVS ([`estimator::solve_static_pose`]);
 //! - `centroid_24`: the blob centroid of a 24 x 24 8-bit ROI around a 6 mm blob, rendered once by the simulator with
@@ -37,13 +37,10 @@ use nalgebra::{Vector2, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use roitrack_core::estimator::normal_equations::NormalEquations;
-use roitrack_core::estimator::window_fit::{self, VvsStep};
-use roitrack_core::estimator::{self, InitError, Observation, PoseFit};
+use roitrack_core::estimator::{self, InitError, Observation, PoseFit, WindowProblem};
 use roitrack_core::roi_order::bit_reversed_indices;
-use roitrack_core::{
-    CameraModel, JacobianKind, MotionState, SpatioTemporalModel, Target, Vector12,
-};
+use roitrack_core::solver::{self, NormalEquations, Solution, SolverOptions};
+use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target, Vector12};
 use roitrack_image::{
     BlobRejection, Centroid, CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel,
     measure_blob,
@@ -128,7 +125,7 @@ pub fn perturbation() -> Vector12 {
 
 /// A window of measurements to fit the 12-dof state to.
 #[derive(Debug, Clone)]
-pub struct WindowProblem {
+pub struct BenchWindow {
     /// Oldest first, [`ROI_PERIOD_S`] apart, in the bit-reversed order of the points.
     pub observations: Vec<Observation>,
     /// Reference time: that of the newest measurement (s).
@@ -137,10 +134,22 @@ pub struct WindowProblem {
     pub initial: MotionState,
 }
 
+impl BenchWindow {
+    /// The 12-dof least-squares problem of the window (exact Jacobian, plain least squares).
+    pub fn problem<'a>(&'a self, scene: &'a Scene) -> WindowProblem<'a> {
+        WindowProblem::new(
+            &scene.model,
+            scene.target.points(),
+            &self.observations,
+            self.t_ref_s,
+        )
+    }
+}
+
 impl Scene {
     /// `n` measurements 250 µs apart in the bit-reversed order, the newest at the truth's reference time, with
     /// noise of [`NOISE_PX`] drawn from `seed`.
-    pub fn window(&self, n: usize, seed: u64) -> WindowProblem {
+    pub fn window(&self, n: usize, seed: u64) -> BenchWindow {
         let order = bit_reversed_indices(self.target.len());
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let noise = Normal::new(0.0, NOISE_PX).expect("valid noise");
@@ -161,7 +170,7 @@ impl Scene {
                 }
             })
             .collect();
-        WindowProblem {
+        BenchWindow {
             observations,
             t_ref_s,
             initial: self.truth.corrected(&perturbation()),
@@ -260,8 +269,8 @@ impl RoiProblem {
 #[derive(Debug, Clone)]
 pub struct HotPaths {
     pub scene: Scene,
-    pub w16: WindowProblem,
-    pub w32: WindowProblem,
+    pub w16: BenchWindow,
+    pub w32: BenchWindow,
     pub static_observations: Vec<Observation>,
     pub roi: RoiProblem,
 }
@@ -285,7 +294,7 @@ impl HotPaths {
     }
 
     /// The window of `n` (16 or 32) measurements.
-    pub fn window(&self, n: usize) -> &WindowProblem {
+    pub fn window(&self, n: usize) -> &BenchWindow {
         match n {
             16 => &self.w16,
             32 => &self.w32,
@@ -297,43 +306,30 @@ impl HotPaths {
     #[inline(never)]
     pub fn jacobian_residual(&self, n: usize) -> NormalEquations<12> {
         let w = self.window(n);
-        window_fit::window_normal_equations(
-            black_box(&self.scene.model),
-            black_box(self.scene.target.points()),
-            JacobianKind::Exact,
-            black_box(&w.initial),
-            black_box(w.t_ref_s),
-            black_box(&w.observations),
-        )
+        black_box(w.problem(black_box(&self.scene))).normal_equations(black_box(&w.initial))
     }
 
     /// One control step: 1 iteration, exact Jacobian, gain 1, with the conditioning figure.
     #[inline(never)]
-    pub fn control_step(&self, n: usize) -> VvsStep {
+    pub fn control_step(&self, n: usize) -> Solution<MotionState, 12> {
         let w = self.window(n);
-        window_fit::vvs_iteration(
-            black_box(&self.scene.model),
-            black_box(self.scene.target.points()),
-            JacobianKind::Exact,
-            black_box(&w.initial),
-            black_box(w.t_ref_s),
-            black_box(&w.observations),
-            GAIN,
-            MIN_INVERSE_CONDITION,
+        let mut problem = black_box(w.problem(black_box(&self.scene)));
+        solver::solve(
+            &mut problem,
+            black_box(w.initial),
+            &SolverOptions::servo(1, GAIN, MIN_INVERSE_CONDITION),
         )
     }
 
-    /// Levenberg-Marquardt of the 12 parameters to convergence on the window: state, normal equations, iterations.
+    /// Levenberg-Marquardt of the 12 parameters to convergence on the window.
     #[inline(never)]
-    pub fn gauss_newton_solve(&self, n: usize) -> (MotionState, NormalEquations<12>, usize) {
+    pub fn gauss_newton_solve(&self, n: usize) -> Solution<MotionState, 12> {
         let w = self.window(n);
-        window_fit::levenberg_marquardt(
-            black_box(&self.scene.model),
-            black_box(self.scene.target.points()),
+        let mut problem = black_box(w.problem(black_box(&self.scene)));
+        solver::solve(
+            &mut problem,
             black_box(w.initial),
-            black_box(w.t_ref_s),
-            black_box(&w.observations),
-            MAX_ITERATIONS,
+            &SolverOptions::levenberg_marquardt(MAX_ITERATIONS),
         )
     }
 
@@ -553,19 +549,24 @@ mod tests {
         // The control steps are applied (the windows pass the degeneracy gate) and reduce the error.
         for n in [16, 32] {
             let step = hot.control_step(n);
-            assert!(step.applied, "window {n}: {step:?}");
-            assert!(step.inverse_condition >= MIN_INVERSE_CONDITION);
+            assert_eq!(
+                step.report.steps_applied, 1,
+                "window {n}: {:?}",
+                step.report
+            );
+            assert!(step.report.inverse_condition.unwrap() >= MIN_INVERSE_CONDITION);
             let before = (hot.window(n).initial.cam_t_obj_m - hot.scene.truth.cam_t_obj_m).norm();
-            let after = (step.state.cam_t_obj_m - hot.scene.truth.cam_t_obj_m).norm();
+            let after = (step.params.cam_t_obj_m - hot.scene.truth.cam_t_obj_m).norm();
             assert!(after < before, "window {n}: {after} >= {before}");
-            assert_eq!(hot.jacobian_residual(n).count, n);
+            assert_eq!(hot.jacobian_residual(n).count(), n);
         }
 
         // The full solve converges well before the cap, near the truth (Cramer-Rao: 0.4 mm in depth for 32).
-        let (state, ne, iterations) = hot.gauss_newton_solve(32);
-        assert!(iterations < MAX_ITERATIONS, "{iterations}");
-        assert!(ne.residual_rms_px() < 3.0 * NOISE_PX);
-        assert!((state.cam_t_obj_m - hot.scene.truth.cam_t_obj_m).norm() < 3e-3);
+        let fit = hot.gauss_newton_solve(32);
+        assert!(fit.report.converged, "{:?}", fit.report);
+        assert!(fit.report.iterations < MAX_ITERATIONS, "{:?}", fit.report);
+        assert!(fit.normal_equations.residual_rms_px() < 3.0 * NOISE_PX);
+        assert!((fit.params.cam_t_obj_m - hot.scene.truth.cam_t_obj_m).norm() < 3e-3);
 
         // The static pose from scratch is the converged 6-dof VVS from the truth.
         let fit = hot.static_pose().unwrap();

@@ -3,9 +3,14 @@
 //! Pixels come in two kinds. *Raw* pixels are what the sensor measures (distorted). *Ideal* pixels are the pinhole
 //! projection `u = fx x/z + s y/z + cx`, `v = fy y/z + cy` of the same ray, with the distortion removed. The estimator
 //! works in ideal pixels: measured centroids are undistorted once, on arrival.
+//!
+//! A camera also says when its pixels were exposed ([`TimeModel`]: one ROI at a time, a global or a rolling shutter,
+//! and the exposure duration).
 
 use nalgebra::{Matrix2, Vector2, Vector3};
 use thiserror::Error;
+
+use crate::time::{TimeModel, TimeModelError};
 
 /// Why a camera model is unusable, or why a pixel could not be undistorted.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -21,6 +26,8 @@ pub enum CameraError {
          distortion model is invertible"
     )]
     UndistortionDiverged { u_px: f64, v_px: f64 },
+    #[error("{0}")]
+    TimeModel(#[from] TimeModelError),
 }
 
 /// Pinhole intrinsics (pixels): the camera matrix `[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`.
@@ -193,7 +200,22 @@ impl PlumbBob {
     }
 }
 
-/// A calibrated camera: image size, pinhole intrinsics and plumb_bob distortion.
+/// A calibrated camera: image size, pinhole intrinsics, plumb_bob distortion, and when its pixels are exposed.
+///
+/// ```
+/// use nalgebra::{Vector2, Vector3};
+/// use roitrack_core::CameraModel;
+/// use roitrack_core::time::{Readout, TimeModel};
+///
+/// let camera = CameraModel::canonical();
+/// let px = camera.raw_pixel_from_cam(&Vector3::new(0.01, -0.02, 0.6)).unwrap();
+/// assert!((px - Vector2::new(537.0, 462.0)).norm() < 1e-9);
+/// // A rolling-shutter version of the same camera, 20 µs a row, 1 ms exposure.
+/// let rolling = camera
+///     .with_time_model(TimeModel { readout: Readout::RollingShutter { line_delay_s: 20e-6 }, exposure_s: 1e-3 })
+///     .unwrap();
+/// assert!(rolling.time.is_rolling());
+/// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraModel {
     pub name: String,
@@ -201,6 +223,8 @@ pub struct CameraModel {
     pub height_px: u32,
     pub intrinsics: PinholeIntrinsics,
     pub distortion: PlumbBob,
+    /// When each blob is exposed (default: sequential ROIs, 100 µs).
+    pub time: TimeModel,
 }
 
 impl CameraModel {
@@ -226,7 +250,14 @@ impl CameraModel {
             height_px,
             intrinsics,
             distortion,
+            time: TimeModel::default(),
         })
+    }
+
+    /// The same camera with another time model (refused if invalid).
+    pub fn with_time_model(self, time: TimeModel) -> Result<Self, CameraError> {
+        time.validate()?;
+        Ok(Self { time, ..self })
     }
 
     /// The canonical camera of SPEC section 6: 1024 x 1024 px, fx = fy = 1500, no skew, centre (512, 512), no distortion.
@@ -243,6 +274,7 @@ impl CameraModel {
                 cy_px: 512.0,
             },
             distortion: PlumbBob::default(),
+            time: TimeModel::default(),
         }
     }
 
@@ -261,6 +293,7 @@ impl CameraModel {
                 cy_px: 506.0,
             },
             distortion: PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, -0.03]),
+            time: TimeModel::default(),
         }
     }
 

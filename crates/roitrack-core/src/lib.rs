@@ -8,9 +8,11 @@
 //! - [`state`]: the 12-dof [`state::MotionState`] (pose and constant twist at a reference time);
 //! - [`samples`]: timestamped measurements, poses and twists as exchanged with files;
 //! - [`roi_order`]: the order in which ROIs visit the points (bit-reversed, row-major, random);
-//! - [`estimator`]: the streaming [`estimator::Tracker`] (Kalman, the paper's VVS loop, static and batch baselines)
-//!   with its initialisation and degeneracy gate;
-//! - [`projection`]: the spatio-temporal projection model and its exact and paper (eqs. 17-24) Jacobians.
+//! - [`time`]: the time model, when each blob was taken (sequential ROIs, global or rolling shutter) and for how long;
+//! - [`projection`]: the spatio-temporal projection model and its exact and paper (eqs. 17-24) Jacobians;
+//! - [`solver`]: the one nonlinear least-squares solver (Levenberg-Marquardt, and the paper's servo law);
+//! - [`estimator`]: the estimators behind one trait ([`estimator::Estimator`]): Kalman (default), the paper's VVS
+//!   loop, the batch and static baselines, with their shared initialisation and degeneracy gate.
 //!
 //! Conventions (SPEC section 2): camera frame x right, y down, z forward. The state holds `cam_r_obj` (c_R_o),
 //! `cam_t_obj_m` (c_t_o), the velocity of the object origin `velocity_mps` and the angular velocity
@@ -24,8 +26,10 @@ pub mod projection;
 pub mod roi_order;
 pub mod samples;
 pub mod so3;
+pub mod solver;
 pub mod state;
 pub mod target;
+pub mod time;
 
 pub use camera::{CameraError, CameraModel, PinholeIntrinsics, PlumbBob};
 pub use projection::{JacobianKind, SpatioTemporalModel};
@@ -33,6 +37,7 @@ pub use roi_order::RoiOrder;
 pub use samples::{Measurement, PoseSample, TwistSample};
 pub use state::MotionState;
 pub use target::{Target, TargetError, TargetPlane, TargetPoint};
+pub use time::{Readout, TimeModel};
 
 /// A 12-vector (v, w, dV, dW): a correction of the state, see [`MotionState::corrected`].
 pub type Vector12 = nalgebra::SVector<f64, 12>;

@@ -298,6 +298,8 @@ fn camera_error(error: &CameraError, path: &Path) -> FormatError {
         CameraError::EmptyImage { width_px: 0, .. } => "image_width",
         CameraError::EmptyImage { .. } => "image_height",
         CameraError::UndistortionDiverged { .. } => "distortion_coefficients",
+        // A camera_info file carries no time model: the camera's timing comes from the command line.
+        CameraError::TimeModel(_) => "time model",
     };
     FormatError::new(path, error.to_string()).with_field(field)
 }

@@ -9,7 +9,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use roitrack_core::estimator::{Estimate, Matrix12, Tracker, TrackerConfig};
+use roitrack_core::estimator::{Estimate, Estimator, Matrix12, Tracker, TrackerConfig};
 use roitrack_core::{CameraModel, Measurement, MotionState, Target};
 use roitrack_image::{BlobRejection, CentroidOptions, Roi, detect_blobs, measure_blob};
 use thiserror::Error;

@@ -5,7 +5,7 @@
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use roitrack_core::estimator::{EstimatorKind, TrackerConfig};
+use roitrack_core::estimator::{EstimatorConfig, TrackerConfig, VvsSettings};
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_image::{RoiRenderer, SensorModel};
 use roitrack_pipeline::cameras::ReplayCamera;
@@ -56,8 +56,8 @@ fn steady_state_loop_does_not_allocate() {
         5,
     );
     for (name, estimator) in [
-        ("kalman", EstimatorKind::Kalman),
-        ("vvs", EstimatorKind::Vvs),
+        ("kalman", EstimatorConfig::default()),
+        ("vvs", EstimatorConfig::Vvs(VvsSettings::default())),
     ] {
         let tracker = TrackerConfig {
             estimator,

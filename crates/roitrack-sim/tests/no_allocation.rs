@@ -5,7 +5,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use roitrack_core::JacobianKind;
-use roitrack_core::estimator::{EstimatorKind, Tracker, TrackerConfig};
+use roitrack_core::estimator::{Estimator, EstimatorConfig, Tracker, TrackerConfig, VvsSettings};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 
 struct CountingAllocator;
@@ -39,30 +39,34 @@ fn steady_state_tracking_does_not_allocate() {
         (
             "vvs-paper",
             TrackerConfig {
-                estimator: EstimatorKind::Vvs,
-                jacobian: JacobianKind::Paper,
+                estimator: EstimatorConfig::Vvs(VvsSettings {
+                    jacobian: JacobianKind::Paper,
+                    ..VvsSettings::default()
+                }),
                 ..base
             },
         ),
         (
             "vvs-exact-gn",
             TrackerConfig {
-                estimator: EstimatorKind::Vvs,
-                iterations: 3,
+                estimator: EstimatorConfig::Vvs(VvsSettings {
+                    iterations: 3,
+                    ..VvsSettings::default()
+                }),
                 ..base
             },
         ),
         (
             "batch",
             TrackerConfig {
-                estimator: EstimatorKind::Batch,
+                estimator: EstimatorConfig::Batch,
                 ..base
             },
         ),
         (
             "static",
             TrackerConfig {
-                estimator: EstimatorKind::Static,
+                estimator: EstimatorConfig::Static,
                 ..base
             },
         ),

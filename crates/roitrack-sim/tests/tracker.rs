@@ -3,7 +3,8 @@
 
 use nalgebra::{Rotation3, Vector3};
 use roitrack_core::estimator::{
-    Estimate, EstimatorKind, TrackError, TrackStatus, Tracker, TrackerConfig,
+    Estimate, Estimator, EstimatorConfig, TrackError, TrackStatus, Tracker, TrackerConfig,
+    VvsSettings,
 };
 use roitrack_core::{CameraModel, JacobianKind, Measurement, MotionState, RoiOrder, Target, so3};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, bench_rotation, simulate};
@@ -15,29 +16,31 @@ fn configs() -> Vec<(&'static str, TrackerConfig)> {
         (
             "vvs-exact",
             TrackerConfig {
-                estimator: EstimatorKind::Vvs,
+                estimator: EstimatorConfig::Vvs(VvsSettings::default()),
                 ..base
             },
         ),
         (
             "vvs-paper",
             TrackerConfig {
-                estimator: EstimatorKind::Vvs,
-                jacobian: JacobianKind::Paper,
+                estimator: EstimatorConfig::Vvs(VvsSettings {
+                    jacobian: JacobianKind::Paper,
+                    ..VvsSettings::default()
+                }),
                 ..base
             },
         ),
         (
             "batch",
             TrackerConfig {
-                estimator: EstimatorKind::Batch,
+                estimator: EstimatorConfig::Batch,
                 ..base
             },
         ),
         (
             "static",
             TrackerConfig {
-                estimator: EstimatorKind::Static,
+                estimator: EstimatorConfig::Static,
                 ..base
             },
         ),
@@ -281,7 +284,10 @@ fn bad_measurements_are_refused_without_changing_the_state() {
 fn invalid_configurations_are_refused() {
     for config in [
         TrackerConfig {
-            gain: 0.0,
+            estimator: EstimatorConfig::Vvs(VvsSettings {
+                gain: 0.0,
+                ..VvsSettings::default()
+            }),
             ..Default::default()
         },
         TrackerConfig {

@@ -168,7 +168,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let item_budget = args.item_budget();
     let mut hot = HotPaths::new();
     let timings = time_all(&mut hot, item_budget);
-    let gauss_newton_iterations = hot.gauss_newton_solve(32).2;
+    let gauss_newton_iterations = hot.gauss_newton_solve(32).report.iterations;
     let static_pose_iterations = hot.static_pose().map_or(0, |fit| fit.iterations);
 
     let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);

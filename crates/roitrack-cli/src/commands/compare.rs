@@ -57,12 +57,11 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         );
     }
     for (label, estimator, gain) in LINEUP {
-        let mut config = TrackerConfig {
-            gain,
+        let config = TrackerConfig {
+            estimator: estimator.with_gain(gain),
             noise_px: args.noise_px,
             ..TrackerConfig::default()
         };
-        estimator.apply(&mut config);
         let (m, s) = score(&data, config, |_| Ok(()))?;
         if args.json {
             println!(

@@ -125,12 +125,11 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let mut rows = Vec::new();
     let mut series = Vec::new();
     for (k, (label, stem, estimator, gain)) in LINEUP.into_iter().enumerate() {
-        let mut config = TrackerConfig {
-            gain,
+        let config = TrackerConfig {
+            estimator: estimator.with_gain(gain),
             noise_px,
             ..TrackerConfig::default()
         };
-        estimator.apply(&mut config);
         bar.set_message(label);
         // From pixels, through the real-time loop.
         let camera = SimulatedCamera::new(

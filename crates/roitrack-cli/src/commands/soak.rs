@@ -11,7 +11,7 @@ use nalgebra::Vector2;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use roitrack_core::Measurement;
-use roitrack_core::estimator::{TrackStatus, Tracker, TrackerConfig};
+use roitrack_core::estimator::{Estimator, TrackStatus, Tracker, TrackerConfig};
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_sim::{Scenario, ScenarioKind};
 

@@ -6,7 +6,8 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use roitrack_core::estimator::{
-    Estimate, EstimatorKind, RobustLoss, TrackStatus, Tracker, TrackerConfig, WindowMode,
+    Estimate, Estimator, EstimatorConfig, KalmanTuning, RobustLoss, TrackStatus, Tracker,
+    TrackerConfig, VvsSettings, WindowMode,
 };
 use roitrack_core::{CameraModel, JacobianKind, Measurement, PoseSample, Target, TwistSample};
 use roitrack_formats::{MeasurementReader, PoseWriter, TwistWriter};
@@ -27,14 +28,32 @@ pub enum EstimatorArg {
 }
 
 impl EstimatorArg {
-    pub fn apply(self, config: &mut TrackerConfig) {
-        (config.estimator, config.jacobian) = match self {
-            Self::Kalman => (EstimatorKind::Kalman, JacobianKind::Exact),
-            Self::Exact => (EstimatorKind::Vvs, JacobianKind::Exact),
-            Self::Paper => (EstimatorKind::Vvs, JacobianKind::Paper),
-            Self::Static => (EstimatorKind::Static, JacobianKind::Exact),
-            Self::Batch => (EstimatorKind::Batch, JacobianKind::Exact),
-        };
+    /// The estimator, with the Kalman tuning and the VVS settings given.
+    pub fn config(self, kalman: KalmanTuning, vvs: VvsSettings) -> EstimatorConfig {
+        match self {
+            Self::Kalman => EstimatorConfig::Kalman(kalman),
+            Self::Exact => EstimatorConfig::Vvs(VvsSettings {
+                jacobian: JacobianKind::Exact,
+                ..vvs
+            }),
+            Self::Paper => EstimatorConfig::Vvs(VvsSettings {
+                jacobian: JacobianKind::Paper,
+                ..vvs
+            }),
+            Self::Static => EstimatorConfig::Static,
+            Self::Batch => EstimatorConfig::Batch,
+        }
+    }
+
+    /// The estimator with default settings, but for the VVS gain.
+    pub fn with_gain(self, gain: f64) -> EstimatorConfig {
+        self.config(
+            KalmanTuning::default(),
+            VvsSettings {
+                gain,
+                ..VvsSettings::default()
+            },
+        )
     }
 }
 
@@ -84,9 +103,23 @@ pub enum RobustArg {
 
 impl EstimatorArgs {
     pub fn config(&self) -> TrackerConfig {
-        let mut config = TrackerConfig {
+        let mut kalman = KalmanTuning::default();
+        if let Some(q) = self.accel_psd {
+            kalman.linear_accel_psd = q;
+        }
+        if let Some(q) = self.angular_accel_psd {
+            kalman.angular_accel_psd = q;
+        }
+        if self.robust == RobustArg::None {
+            kalman.huber_sigma = f64::INFINITY;
+        }
+        let vvs = VvsSettings {
             gain: self.gain,
             iterations: self.iterations,
+            ..VvsSettings::default()
+        };
+        let mut config = TrackerConfig {
+            estimator: self.estimator.config(kalman, vvs),
             window: if self.window == 0 {
                 WindowMode::NewestPerPoint
             } else {
@@ -96,13 +129,6 @@ impl EstimatorArgs {
             noise_px: self.noise_px,
             ..TrackerConfig::default()
         };
-        self.estimator.apply(&mut config);
-        if let Some(q) = self.accel_psd {
-            config.kalman.linear_accel_psd = q;
-        }
-        if let Some(q) = self.angular_accel_psd {
-            config.kalman.angular_accel_psd = q;
-        }
         if let Some(c) = self.min_conditioning {
             config.min_inverse_condition = c;
         }
@@ -111,9 +137,6 @@ impl EstimatorArgs {
             RobustArg::Huber => RobustLoss::Huber,
             RobustArg::Tukey => RobustLoss::Tukey,
         };
-        if self.robust == RobustArg::None {
-            config.kalman.huber_sigma = f64::INFINITY;
-        }
         config
     }
 }

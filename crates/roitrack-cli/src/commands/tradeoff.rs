@@ -7,7 +7,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use clap::Args;
 use roitrack_core::JacobianKind;
-use roitrack_core::estimator::{EstimatorKind, TrackerConfig};
+use roitrack_core::estimator::{EstimatorConfig, KalmanTuning, TrackerConfig, VvsSettings};
 use roitrack_plot::{Chart, Series, Style, write_chart};
 use roitrack_sim::{Scenario, SimulationOptions, simulate};
 
@@ -56,15 +56,22 @@ pub fn run(args: &TradeoffArgs) -> Result<()> {
         .map(|&g| ("paper", "gain", g))
         .chain(ACCEL_PSDS.iter().map(|&q| ("kalman", "accel_psd", q)));
     for (scheme, parameter, value) in runs {
-        let mut config = TrackerConfig::default();
-        if scheme == "paper" {
-            config.estimator = EstimatorKind::Vvs;
-            config.jacobian = JacobianKind::Paper;
-            config.iterations = 1;
-            config.gain = value;
+        let estimator = if scheme == "paper" {
+            EstimatorConfig::Vvs(VvsSettings {
+                jacobian: JacobianKind::Paper,
+                gain: value,
+                iterations: 1,
+            })
         } else {
-            config.kalman.linear_accel_psd = value;
-        }
+            EstimatorConfig::Kalman(KalmanTuning {
+                linear_accel_psd: value,
+                ..KalmanTuning::default()
+            })
+        };
+        let config = TrackerConfig {
+            estimator,
+            ..TrackerConfig::default()
+        };
         let (m, _) = score(&data, config, |_| Ok(()))?;
         let vel = m.velocity_rmse_mm_s.unwrap_or(f64::NAN);
         let lag = m.velocity_lag_samples.unwrap_or(0);

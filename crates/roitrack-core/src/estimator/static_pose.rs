@@ -5,8 +5,10 @@
 use nalgebra::{DMatrix, Matrix3, Rotation3, SMatrix, SVector, Vector2, Vector3};
 use thiserror::Error;
 
-use super::normal_equations::{NormalEquations, NormalEquationsBuilder};
-use super::window::Observation;
+use super::Observation;
+use crate::solver::{
+    self, DampingSchedule, LeastSquaresProblem, Method, ResidualSink, SolverOptions,
+};
 use crate::{MotionState, SpatioTemporalModel, Target};
 
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -261,43 +263,75 @@ fn dlt_pose(
     Ok(MotionState::at_rest(r, t))
 }
 
-/// Normal equations of the 6-dof static problem: every observation taken at the pose of `state` (velocity ignored).
-fn static_normal_equations(
-    model: &SpatioTemporalModel,
-    target: &Target,
-    obs: &[Observation],
-    state: &MotionState,
-) -> NormalEquations<6> {
-    let mut builder = NormalEquationsBuilder::<6>::default();
-    let points = target.points();
-    let r = state.cam_r_obj.matrix();
-    for o in obs {
-        let op = r * points[o.point_index].point_in_obj_m;
-        let p = op + state.cam_t_obj_m;
-        let Some(pixel) = model.intrinsics.pixel_from_cam(&p) else {
-            builder.set_infinite_cost();
-            continue;
-        };
-        // d(u,v)/dP [I, -[OP]x]
-        let d = model.intrinsics.pixel_jacobian_wrt_cam(&p);
-        let rot = -(d * crate::so3::hat(&op));
-        let mut j = SMatrix::<f64, 2, 6>::zeros();
-        j.fixed_view_mut::<2, 3>(0, 0).copy_from(&d);
-        j.fixed_view_mut::<2, 3>(0, 3).copy_from(&rot);
-        builder.add(&j, &(pixel - o.ideal_px), 1.0);
+/// The 6-dof static problem: the pose that best projects the model points onto the observations, every observation
+/// taken at the same pose (its time ignored, the velocity zero).
+struct StaticPoseProblem<'a> {
+    model: &'a SpatioTemporalModel,
+    target: &'a Target,
+    obs: &'a [Observation],
+}
+
+impl LeastSquaresProblem<6> for StaticPoseProblem<'_> {
+    type Params = MotionState;
+
+    fn linearize<S: ResidualSink<6>>(&self, state: &MotionState, sink: &mut S) {
+        let points = self.target.points();
+        let r = state.cam_r_obj.matrix();
+        for o in self.obs {
+            let op = r * points[o.point_index].point_in_obj_m;
+            let p = op + state.cam_t_obj_m;
+            let Some(pixel) = self.model.intrinsics.pixel_from_cam(&p) else {
+                sink.add_unevaluable();
+                continue;
+            };
+            // d(u,v)/dP [I, -[OP]x]
+            let d = self.model.intrinsics.pixel_jacobian_wrt_cam(&p);
+            let rot = -(d * crate::so3::hat(&op));
+            let mut j = SMatrix::<f64, 2, 6>::zeros();
+            j.fixed_view_mut::<2, 3>(0, 0).copy_from(&d);
+            j.fixed_view_mut::<2, 3>(0, 3).copy_from(&rot);
+            sink.add(&j, &(pixel - o.ideal_px), 1.0);
+        }
     }
-    builder.finish()
+
+    fn apply_step(&self, state: &MotionState, step: &SVector<f64, 6>) -> MotionState {
+        let mut delta = crate::Vector12::zeros();
+        delta.fixed_rows_mut::<6>(0).copy_from(step);
+        state.corrected(&delta)
+    }
+
+    /// Gauss-Newton converges about quadratically here: after a step this small (1e-6 m and rad) the next is about
+    /// 1e-9, far below the noise, so it is taken without checking the cost.
+    fn step_is_negligible(&self, step: &SVector<f64, 6>) -> bool {
+        step.fixed_rows::<3>(0).norm() < 1e-6 && step.fixed_rows::<3>(3).norm() < 1e-6
+    }
 }
 
-fn apply_pose_step(state: &MotionState, step: &SVector<f64, 6>) -> MotionState {
-    let mut delta = crate::Vector12::zeros();
-    delta.fixed_rows_mut::<6>(0).copy_from(step);
-    state.corrected(&delta)
-}
-
-/// Gauss-Newton on the 6-dof pose, all observations taken as simultaneous, with Levenberg-Marquardt safeguarding:
-/// a step that raises the cost is retried with damping. Converged to the accuracy of a converged VVS (about 1e-9 m
-/// and rad, far below the noise) after 2 to 4 iterations from the closed form.
+/// Gauss-Newton on the 6-dof pose, all observations taken as simultaneous, with Levenberg-Marquardt safeguarding
+/// ([`DampingSchedule::GAUSS_NEWTON_FIRST`]): a step that raises the cost is retried with damping. Converged to the
+/// accuracy of a converged VVS (about 1e-9 m and rad, far below the noise) after 2 to 4 iterations from the closed
+/// form.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::estimator::{Observation, refine_static_pose};
+/// use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+///
+/// let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+/// let target = Target::grid4x4();
+/// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.2, -0.1, 0.3), Vector3::new(0.01, 0.0, 0.6));
+/// let obs: Vec<Observation> = (0..16)
+///     .map(|i| Observation {
+///         t_s: 0.0,
+///         point_index: i,
+///         ideal_px: model.project(&truth, &target.points()[i].point_in_obj_m, 0.0).unwrap(),
+///     })
+///     .collect();
+/// let start = MotionState::at_rest(Rotation3::from_euler_angles(0.25, -0.1, 0.3), Vector3::new(0.0, 0.0, 0.65));
+/// let fit = refine_static_pose(&model, &target, &obs, &start, 20);
+/// assert!(fit.converged);
+/// assert!((fit.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-9);
+/// ```
 pub fn refine_static_pose(
     model: &SpatioTemporalModel,
     target: &Target,
@@ -305,47 +339,23 @@ pub fn refine_static_pose(
     initial: &MotionState,
     max_iterations: usize,
 ) -> PoseFit {
-    let mut state = MotionState::at_rest(initial.cam_r_obj, initial.cam_t_obj_m);
-    let mut ne = static_normal_equations(model, target, obs, &state);
-    let mut damping = 0.0;
-    let mut iterations = 0;
-    let mut converged = false;
-    while iterations < max_iterations && ne.cost.is_finite() {
-        iterations += 1;
-        let Some(step) = ne.solve(damping) else { break };
-        let candidate = apply_pose_step(&state, &step);
-        // Gauss-Newton converges about quadratically here: after a step this small the next is about 1e-9 (m, rad),
-        // far below the noise, so it is taken without checking the cost (the normal equations at the previous state
-        // serve the figures).
-        if damping == 0.0
-            && step.fixed_rows::<3>(0).norm() < 1e-6
-            && step.fixed_rows::<3>(3).norm() < 1e-6
-        {
-            state = candidate;
-            converged = true;
-            break;
-        }
-        let candidate_ne = static_normal_equations(model, target, obs, &candidate);
-        if candidate_ne.cost <= ne.cost * (1.0 + 1e-12) + 1e-30 {
-            state = candidate;
-            ne = candidate_ne;
-            damping = 0.0;
-        } else {
-            damping = if damping == 0.0 { 1e-6 } else { damping * 10.0 };
-            if damping > 1e6 {
-                // No descent direction left: at a minimum to machine precision.
-                converged = true;
-                break;
-            }
-        }
-    }
-    let inverse_condition = ne.solve_with_conditioning().map_or(0.0, |(_, c)| c);
+    let mut problem = StaticPoseProblem { model, target, obs };
+    let options = SolverOptions {
+        max_iterations,
+        method: Method::LevenbergMarquardt(DampingSchedule::GAUSS_NEWTON_FIRST),
+    };
+    let fit = solver::solve(
+        &mut problem,
+        MotionState::at_rest(initial.cam_r_obj, initial.cam_t_obj_m),
+        &options,
+    );
+    let ne = fit.normal_equations;
     PoseFit {
-        state,
+        state: fit.params,
         residual_rms_px: ne.residual_rms_px(),
-        inverse_condition,
-        iterations,
-        converged,
+        inverse_condition: ne.fast_inverse_condition(),
+        iterations: fit.report.iterations,
+        converged: fit.report.converged,
     }
 }
 

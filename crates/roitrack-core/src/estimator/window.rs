@@ -2,15 +2,15 @@
 
 use nalgebra::Vector2;
 
-/// One undistorted centroid: time (s), index of the model point in the target, ideal pixel.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Observation {
-    pub t_s: f64,
-    pub point_index: usize,
-    pub ideal_px: Vector2<f64>,
-}
+use super::Observation;
 
 /// Which measurements a control step uses.
+///
+/// ```
+/// use roitrack_core::estimator::{TrackerConfig, WindowMode};
+/// let config = TrackerConfig { window: WindowMode::Last(32), ..TrackerConfig::default() };
+/// assert!(config.validate().is_ok());
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum WindowMode {
     /// The newest measurement of each point (the paper).
@@ -21,7 +21,7 @@ pub enum WindowMode {
 
 /// A ring buffer of the last `capacity` observations plus the newest observation of each point.
 #[derive(Debug, Clone)]
-pub struct ObservationWindow {
+pub(crate) struct ObservationWindow {
     ring: Vec<Observation>,
     /// Index where the next observation goes.
     head: usize,
@@ -49,10 +49,6 @@ impl ObservationWindow {
         }
     }
 
-    pub fn capacity(&self) -> usize {
-        self.ring.len()
-    }
-
     pub fn clear(&mut self) {
         self.head = 0;
         self.len = 0;
@@ -73,10 +69,6 @@ impl ObservationWindow {
     /// Number of observations held in the ring.
     pub fn len(&self) -> usize {
         self.len
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len == 0
     }
 
     /// Number of distinct points with at least one observation.
@@ -106,14 +98,6 @@ impl ObservationWindow {
             .flatten()
             .chain(last.into_iter().flatten())
     }
-
-    /// How many observations `mode` selects.
-    pub fn count(&self, mode: WindowMode) -> usize {
-        match mode {
-            WindowMode::NewestPerPoint => self.points_seen,
-            WindowMode::Last(n) => n.min(self.len),
-        }
-    }
 }
 
 #[cfg(test)]
@@ -139,11 +123,10 @@ mod tests {
         let mut newest: Vec<f64> = w.newest_per_point().map(|o| o.t_s).collect();
         newest.sort_by(f64::total_cmp);
         assert_eq!(newest, vec![4.0, 5.0, 6.0]);
-        assert_eq!(w.count(WindowMode::Last(2)), 2);
         assert_eq!(w.select(WindowMode::Last(2)).count(), 2);
         assert_eq!(w.select(WindowMode::NewestPerPoint).count(), 3);
         w.clear();
-        assert!(w.is_empty());
+        assert_eq!(w.len(), 0);
         assert_eq!(w.points_seen(), 0);
     }
 }

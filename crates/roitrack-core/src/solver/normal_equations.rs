@@ -1,22 +1,47 @@
 //! Gauss-Newton normal equations, accumulated measurement by measurement in batches (no allocation), with a
-//! conditioning figure and a damped, column-scaled solve.
+//! conditioning figure and a damped, column-scaled solve. The builder is the solver's [`ResidualSink`]; problems never
+//! see it.
 
 use nalgebra::{SMatrix, SVector, Vector2};
 
+use super::ResidualSink;
 use super::cholesky::FixedCholesky;
 
-/// `JᵀWJ` and `JᵀWe` of a least-squares problem with `N` parameters, built by a [`NormalEquationsBuilder`].
+/// `JᵀWJ` and `JᵀWe` of a least-squares problem with `N` parameters at one parameter value, with its cost: what
+/// [`super::normal_equations`] and every [`super::solve`] return. Read-only outside the solver.
+///
+/// ```
+/// use nalgebra::{SMatrix, SVector, Vector2};
+/// use roitrack_core::solver::{LeastSquaresProblem, ResidualSink, normal_equations};
+///
+/// /// Fit `x` to two measurements `(x0, x1) = (1, 3)`: residuals `x - (1, 3)`.
+/// struct Mean;
+/// impl LeastSquaresProblem<1> for Mean {
+///     type Params = f64;
+///     fn linearize<S: ResidualSink<1>>(&self, x: &f64, sink: &mut S) {
+///         let j = SMatrix::<f64, 2, 1>::new(1.0, 1.0);
+///         sink.add(&j, &Vector2::new(x - 1.0, x - 3.0), 1.0);
+///     }
+///     fn apply_step(&self, x: &f64, step: &SVector<f64, 1>) -> f64 {
+///         x + step[0]
+///     }
+/// }
+/// let ne = normal_equations(&Mean, &0.0);
+/// assert_eq!(ne.count(), 1);
+/// assert_eq!(ne.cost_px2(), 10.0);
+/// assert!((ne.residual_rms_px() - 5f64.sqrt()).abs() < 1e-15);
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NormalEquations<const N: usize> {
     /// Upper triangle of `JᵀWJ` (the lower one is not maintained: use [`Self::symmetric_jtj`]).
-    pub jtj: SMatrix<f64, N, N>,
-    pub jte: SVector<f64, N>,
-    /// Σ w |e|² (px²).
-    pub weighted_cost: f64,
-    /// Σ |e|² (px²), unweighted.
-    pub cost: f64,
+    pub(crate) jtj: SMatrix<f64, N, N>,
+    pub(crate) jte: SVector<f64, N>,
+    /// Σ w |e|² (px²); infinite when a measurement could not be evaluated.
+    pub(crate) weighted_cost: f64,
+    /// Σ |e|² (px²), unweighted; infinite when a measurement could not be evaluated.
+    pub(crate) cost: f64,
     /// Number of 2-row blocks (measurements) added.
-    pub count: usize,
+    pub(crate) count: usize,
 }
 
 impl<const N: usize> Default for NormalEquations<N> {
@@ -32,6 +57,34 @@ impl<const N: usize> Default for NormalEquations<N> {
 }
 
 impl<const N: usize> NormalEquations<N> {
+    /// Σ |e|² (px²), unweighted; infinite when a measurement could not be evaluated (a point behind the camera).
+    pub fn cost_px2(&self) -> f64 {
+        self.cost
+    }
+
+    /// Σ w |e|² (px²), the cost the solver minimises (the weights of a robust loss applied).
+    pub fn weighted_cost_px2(&self) -> f64 {
+        self.weighted_cost
+    }
+
+    /// Number of measurements (2-row blocks) in the equations.
+    pub fn count(&self) -> usize {
+        self.count
+    }
+
+    /// `JᵀWe`: minus the gradient direction of the cost.
+    pub fn jte(&self) -> &SVector<f64, N> {
+        &self.jte
+    }
+
+    /// `σ² (JᵀWJ)⁻¹`: the covariance of the least-squares estimate for measurements of standard deviation `sigma_px`
+    /// per axis; `None` when `JᵀWJ` is singular.
+    pub fn covariance(&self, sigma_px: f64) -> Option<SMatrix<f64, N, N>> {
+        self.symmetric_jtj()
+            .try_inverse()
+            .map(|inv| inv * (sigma_px * sigma_px))
+    }
+
     /// Root mean square of the residual (px, per coordinate), unweighted.
     pub fn residual_rms_px(&self) -> f64 {
         if self.count == 0 {
@@ -42,7 +95,7 @@ impl<const N: usize> NormalEquations<N> {
     }
 
     /// The column scale `1/sqrt(diag JᵀJ)` that makes the problem unit-free (zero columns keep scale 1).
-    pub fn column_scale(&self) -> SVector<f64, N> {
+    pub(crate) fn column_scale(&self) -> SVector<f64, N> {
         SVector::from_fn(|i, _| {
             let d = self.jtj[(i, i)];
             if d > 0.0 { 1.0 / d.sqrt() } else { 1.0 }
@@ -80,7 +133,7 @@ impl<const N: usize> NormalEquations<N> {
     /// is what the gate must catch). Measured against the eigenvalue figure ([`Self::inverse_condition`]) on 16-point
     /// windows of orthoglide and random: 0.4 % on the bench window, at most 33 % above it (an over-estimate, as a
     /// Rayleigh quotient is); exactly singular windows give 0. `None` (singular) when the factorisation fails.
-    pub fn solve_with_conditioning(&self) -> Option<(SVector<f64, N>, f64)> {
+    pub(crate) fn solve_with_conditioning(&self) -> Option<(SVector<f64, N>, f64)> {
         let s = self.column_scale();
         let scaled = self.scaled_jtj();
         let cholesky = FixedCholesky::factor(&scaled)?;
@@ -123,7 +176,7 @@ impl<const N: usize> NormalEquations<N> {
 
     /// The Gauss-Newton step `-(JᵀJ + μ D)⁻¹ Jᵀe` with Levenberg-Marquardt damping `μ = damping` on the unit-diagonal
     /// scaled problem (0 = Gauss-Newton). `None` if the system cannot be factorised (singular or not finite).
-    pub fn solve(&self, damping: f64) -> Option<SVector<f64, N>> {
+    pub(crate) fn solve(&self, damping: f64) -> Option<SVector<f64, N>> {
         let s = self.column_scale();
         let mut scaled = self.scaled_jtj();
         for i in 0..N {
@@ -148,7 +201,7 @@ const BATCH_ROWS: usize = 2 * BATCH_MEASUREMENTS;
 /// sums as it comes (its loads and stores of the 78 sums interleaved with the projections; same run, same machine),
 /// although the latter alone is faster in a loop of its own: what counts is the whole step.
 #[derive(Debug, Clone, Copy)]
-pub struct NormalEquationsBuilder<const N: usize> {
+pub(crate) struct NormalEquationsBuilder<const N: usize> {
     folded: NormalEquations<N>,
     /// `columns[i][k]`: column i of the buffered rows, each row scaled by the square root of its weight.
     columns: [[f64; BATCH_ROWS]; N],
@@ -195,9 +248,10 @@ impl<const N: usize> NormalEquationsBuilder<N> {
         }
     }
 
-    /// Marks the problem infinitely costly (a point behind the camera).
+    /// Marks the problem infinitely costly (a point behind the camera): weighted or not, no step may lead there.
     pub fn set_infinite_cost(&mut self) {
         self.folded.cost = f64::INFINITY;
+        self.folded.weighted_cost = f64::INFINITY;
     }
 
     /// The normal equations of every measurement added.
@@ -254,6 +308,18 @@ impl<const N: usize> NormalEquationsBuilder<N> {
             self.folded.jte[j] += sums[3];
         }
         self.rows = 0;
+    }
+}
+
+impl<const N: usize> ResidualSink<N> for NormalEquationsBuilder<N> {
+    #[inline]
+    fn add(&mut self, jacobian: &SMatrix<f64, 2, N>, residual: &Vector2<f64>, weight: f64) {
+        NormalEquationsBuilder::add(self, jacobian, residual, weight);
+    }
+
+    #[inline]
+    fn add_unevaluable(&mut self) {
+        self.set_infinite_cost();
     }
 }
 

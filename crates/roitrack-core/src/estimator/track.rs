@@ -1,0 +1,460 @@
+//! What every estimator shares: measurement checks and undistortion, the measurement window, initialisation from no
+//! prior, the degeneracy gate's window widening, and the status of each estimate (converging, tracking, degenerate,
+//! disputed, lost). [`Track`] runs this around a [`Law`], the part that differs between estimators: what a
+//! measurement does to the state, what a control step does, and when an estimate is disputed.
+//!
+//! Each public estimator ([`super::KalmanEstimator`], [`super::VvsEstimator`], [`super::BatchEstimator`],
+//! [`super::StaticEstimator`]) is a `Track` of its own law, so the per-measurement path is monomorphised: no
+//! dispatch inside the hot loop.
+
+use nalgebra::{SMatrix, Vector2};
+
+use super::problem::{Observation, ResidualFigures, WindowProblem};
+use super::window::ObservationWindow;
+use super::{
+    ConfigError, Estimate, EstimatorReport, Matrix12, TrackError, TrackStatus, TrackerConfig,
+    WindowMode, static_pose::solve_static_pose,
+};
+use crate::solver::NormalEquations;
+use crate::{CameraModel, Measurement, MotionState, SpatioTemporalModel, Target};
+
+/// Consecutive good steps needed before a widened window shrinks back; doubled at every degenerate window since the
+/// initialisation (up to 2^6 times), so an acquisition order that keeps producing degenerate windows keeps the wider
+/// window.
+const SHRINK_AFTER_GOOD_STEPS: usize = 20;
+/// Smallest residual scale (px) of the window fits' M-estimator: below it, the spread of a window's residuals is the
+/// model's own (a prediction across a fast rotation, a gain-limited loop), not outliers, and must not be cut away.
+/// With Tukey's c = 4.685 scales, residuals beyond about 5 px are rejected.
+const ROBUST_SCALE_FLOOR_PX: f64 = 1.0;
+/// Estimates reported as `Converging` after an initialisation.
+const CONVERGING_ESTIMATES: usize = 3;
+/// Consecutive bad estimates before the track is declared lost.
+const LOST_AFTER_BAD_ESTIMATES: usize = 3;
+/// Levenberg-Marquardt iterations of the initial 12-dof fit.
+const INIT_MAX_ITERATIONS: usize = 50;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Phase {
+    Initializing,
+    Running,
+}
+
+/// What a control step of a [`Law`] produced; [`Track`] turns it into an [`Estimate`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Step {
+    pub inverse_condition: f64,
+    pub measurements_used: usize,
+    pub iterations: usize,
+    pub status: TrackStatus,
+    pub covariance: Option<Matrix12>,
+}
+
+/// The part of an estimator that differs from the others.
+pub(crate) trait Law: Clone + std::fmt::Debug + Send {
+    /// A new track starts at `core.state` (time `core.t_ref_s`), with this covariance if the start gave one.
+    fn begin_track(&mut self, core: &TrackCore, covariance: Option<Matrix12>);
+    /// A measurement of a running track, already in the window.
+    fn on_measurement(&mut self, _core: &mut TrackCore, _obs: &Observation) {}
+    /// The control step at `t_new_s` (the newest measurement's time); `core.scratch` holds the window it uses.
+    fn control_step(&mut self, core: &mut TrackCore, t_new_s: f64) -> Step;
+    /// Whether the estimate just computed rests on the older measurements only: the newest was rejected.
+    fn is_disputed(&self, core: &TrackCore, residuals: &ResidualFigures) -> bool;
+    /// Whether the estimate's residuals take every measurement as simultaneous (the static baseline).
+    fn simultaneous_residuals(&self) -> bool {
+        false
+    }
+    /// After each estimate (its counters since the last one start again).
+    fn after_estimate(&mut self) {}
+    /// Adds the law's own counters to a report.
+    fn add_to_report(&self, _report: &mut EstimatorReport) {}
+}
+
+/// The state a [`Law`] works on, shared by every estimator.
+#[derive(Debug, Clone)]
+pub(crate) struct TrackCore {
+    pub camera: CameraModel,
+    pub model: SpatioTemporalModel,
+    pub target: Target,
+    pub config: TrackerConfig,
+    window: ObservationWindow,
+    /// Scratch copy of the current window, so solvers can take several passes over a slice.
+    pub scratch: Vec<Observation>,
+    phase: Phase,
+    pub state: MotionState,
+    pub t_ref_s: f64,
+    last_t_s: Option<f64>,
+    since_estimate: usize,
+    estimates_since_init: usize,
+    /// Window widening after a degenerate window: number of extra cycles (0 = the configured window).
+    widening: usize,
+    good_steps: usize,
+    degenerate_windows: usize,
+    bad_estimates: usize,
+    report: EstimatorReport,
+}
+
+impl TrackCore {
+    fn new(camera: CameraModel, target: Target, config: TrackerConfig) -> Self {
+        let n = target.len();
+        let capacity = Self::max_window(&config, n);
+        Self {
+            model: SpatioTemporalModel::new(camera.intrinsics),
+            camera,
+            window: ObservationWindow::new(n, capacity),
+            scratch: Vec::with_capacity(capacity.max(n)),
+            target,
+            config,
+            phase: Phase::Initializing,
+            state: MotionState::at_rest(Default::default(), Default::default()),
+            t_ref_s: 0.0,
+            last_t_s: None,
+            since_estimate: 0,
+            estimates_since_init: 0,
+            widening: 0,
+            good_steps: 0,
+            degenerate_windows: 0,
+            bad_estimates: 0,
+            report: EstimatorReport::default(),
+        }
+    }
+
+    /// Largest window the tracker may use: the configured one widened by up to 3 cycles, and 2 cycles for
+    /// initialisation.
+    fn max_window(config: &TrackerConfig, n: usize) -> usize {
+        let configured = match config.window {
+            WindowMode::NewestPerPoint => n,
+            WindowMode::Last(m) => m,
+        };
+        configured.max(n) + 3 * n
+    }
+
+    /// The scratch window as a 12-dof problem at reference time `t_ref_s` (least squares, exact Jacobian).
+    pub fn window_problem(&self, t_ref_s: f64) -> WindowProblem<'_> {
+        let mut problem =
+            WindowProblem::new(&self.model, self.target.points(), &self.scratch, t_ref_s);
+        problem.scale_floor_px = self.robust_scale_floor_px();
+        problem
+    }
+
+    /// The smallest robust scale of the window fits (px): the noise, and at least 1 px.
+    pub fn robust_scale_floor_px(&self) -> f64 {
+        ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px)
+    }
+
+    /// A broad prior when the initial window cannot give a covariance: 1 cm, 0.1 rad, 1 m/s, 10 rad/s.
+    pub fn prior_covariance(&self) -> Matrix12 {
+        let sigmas = [
+            1e-2, 1e-2, 1e-2, 0.1, 0.1, 0.1, 1.0, 1.0, 1.0, 10.0, 10.0, 10.0,
+        ];
+        Matrix12::from_diagonal(&SMatrix::<f64, 12, 1>::from_fn(|i, _| {
+            sigmas[i] * sigmas[i]
+        }))
+    }
+
+    /// σ² (JᵀJ)⁻¹ of a window, when it is well posed; `inverse_condition` is that of `ne`, already computed by the
+    /// caller's step.
+    pub fn window_covariance(
+        &self,
+        ne: &NormalEquations<12>,
+        inverse_condition: f64,
+    ) -> Option<Matrix12> {
+        if inverse_condition < self.config.min_inverse_condition {
+            return None;
+        }
+        ne.covariance(self.config.noise_px)
+    }
+
+    /// Whether a window with this conditioning is degenerate.
+    pub fn is_degenerate(&self, inverse_condition: f64) -> bool {
+        inverse_condition < self.config.min_inverse_condition
+    }
+
+    fn effective_window(&self) -> WindowMode {
+        let n = self.target.len();
+        match (self.config.window, self.widening) {
+            (mode, 0) => mode,
+            (WindowMode::NewestPerPoint, w) => WindowMode::Last(n * (1 + w)),
+            (WindowMode::Last(m), w) => WindowMode::Last(m + n * w),
+        }
+    }
+
+    /// Fills the scratch window with the measurements `mode` selects.
+    pub fn fill_scratch(&mut self, mode: WindowMode) {
+        self.scratch.clear();
+        self.scratch.extend(self.window.select(mode).copied());
+    }
+
+    /// Checks a raw measurement, undistorts it and adds it to the window.
+    fn accept(&mut self, m: &Measurement) -> Result<Observation, TrackError> {
+        for (field, value) in [("t", m.t_s), ("u", m.u_px), ("v", m.v_px)] {
+            if !value.is_finite() {
+                return Err(TrackError::NotFinite {
+                    t_s: m.t_s,
+                    field,
+                    value,
+                });
+            }
+        }
+        if let Some(previous_s) = self.last_t_s
+            && m.t_s < previous_s
+        {
+            return Err(TrackError::TimeOutOfOrder {
+                t_s: m.t_s,
+                previous_s,
+            });
+        }
+        let point_index = self.target.index_of(m.id).ok_or(TrackError::UnknownId {
+            t_s: m.t_s,
+            id: m.id,
+        })?;
+        let ideal_px = self
+            .camera
+            .undistort_pixel(&Vector2::new(m.u_px, m.v_px))
+            .map_err(|source| TrackError::Undistortion { t_s: m.t_s, source })?;
+        self.last_t_s = Some(m.t_s);
+        let obs = Observation {
+            t_s: m.t_s,
+            point_index,
+            ideal_px,
+        };
+        self.window.push(obs);
+        Ok(obs)
+    }
+
+    /// Widens the window after a degenerate step; shrinks it back after a run of good ones.
+    fn track_conditioning(&mut self, inverse_condition: f64) {
+        if self.is_degenerate(inverse_condition) {
+            self.widening = (self.widening + 1).min(3);
+            self.good_steps = 0;
+            self.degenerate_windows += 1;
+        } else {
+            self.good_steps += 1;
+            let shrink_after = SHRINK_AFTER_GOOD_STEPS << self.degenerate_windows.min(6);
+            if self.widening > 0 && self.good_steps >= shrink_after {
+                self.widening -= 1;
+                self.good_steps = 0;
+            }
+        }
+    }
+}
+
+/// An initial fit, ready to start a track.
+struct Initial {
+    t_ref_s: f64,
+    state: MotionState,
+    covariance: Option<Matrix12>,
+    step: Step,
+}
+
+/// An estimator: the shared machinery around its law.
+#[derive(Debug, Clone)]
+pub(crate) struct Track<L> {
+    pub core: TrackCore,
+    pub law: L,
+}
+
+impl<L: Law> Track<L> {
+    /// Checks the configuration and builds the estimator.
+    pub fn new(
+        camera: CameraModel,
+        target: Target,
+        config: TrackerConfig,
+        law: L,
+    ) -> Result<Self, ConfigError> {
+        config.validate()?;
+        Ok(Self {
+            core: TrackCore::new(camera, target, config),
+            law,
+        })
+    }
+
+    /// Takes one raw centroid; returns an estimate every `every` measurements once initialised.
+    pub fn push(&mut self, m: &Measurement) -> Result<Option<Estimate>, TrackError> {
+        let obs = match self.core.accept(m) {
+            Ok(obs) => obs,
+            Err(e) => {
+                self.core.report.refused += 1;
+                return Err(e);
+            }
+        };
+        self.core.report.measurements += 1;
+        match self.core.phase {
+            Phase::Initializing => Ok(self.try_initialize()),
+            Phase::Running => {
+                self.law.on_measurement(&mut self.core, &obs);
+                self.core.since_estimate += 1;
+                if self.core.since_estimate >= self.core.config.every {
+                    Ok(Some(self.control_step()))
+                } else {
+                    Ok(None)
+                }
+            }
+        }
+    }
+
+    /// Drops the current track: the next measurements initialise a new one.
+    pub fn reset(&mut self) {
+        self.core.phase = Phase::Initializing;
+        self.core.window.clear();
+        self.core.since_estimate = 0;
+    }
+
+    /// Starts tracking from a known state at time `t_s` with its covariance (error-state order v, w, dV, dW).
+    pub fn start_from(&mut self, t_s: f64, state: MotionState, covariance: Option<Matrix12>) {
+        self.core.window.clear();
+        self.core.last_t_s = Some(self.core.last_t_s.map_or(t_s, |last| last.max(t_s)));
+        self.begin_track(t_s, state, covariance);
+    }
+
+    /// The current state (at the time of the newest measurement processed), once initialised.
+    pub fn state(&self) -> Option<(f64, MotionState)> {
+        (self.core.phase == Phase::Running).then_some((self.core.t_ref_s, self.core.state))
+    }
+
+    pub fn config(&self) -> &TrackerConfig {
+        &self.core.config
+    }
+
+    pub fn target(&self) -> &Target {
+        &self.core.target
+    }
+
+    pub fn report(&self) -> EstimatorReport {
+        let mut report = self.core.report;
+        self.law.add_to_report(&mut report);
+        report
+    }
+
+    /// Starts a new track at `state` (time `t_s`): every per-track counter back to zero. The measurement window is
+    /// kept.
+    fn begin_track(&mut self, t_s: f64, state: MotionState, covariance: Option<Matrix12>) {
+        let core = &mut self.core;
+        core.state = state;
+        core.t_ref_s = t_s;
+        core.phase = Phase::Running;
+        core.since_estimate = 0;
+        core.estimates_since_init = 0;
+        core.widening = 0;
+        core.good_steps = 0;
+        core.degenerate_windows = 0;
+        core.bad_estimates = 0;
+        core.report.initialisations += 1;
+        self.law.begin_track(&self.core, covariance);
+    }
+
+    /// Static pose from the newest centroid of each point, then a 12-dof fit on the last two cycles, so that a target
+    /// already moving at the start is initialised with its velocity.
+    fn try_initialize(&mut self) -> Option<Estimate> {
+        let initial = self.initial_fit()?;
+        self.begin_track(initial.t_ref_s, initial.state, initial.covariance);
+        Some(self.finish_estimate(initial.step))
+    }
+
+    fn initial_fit(&mut self) -> Option<Initial> {
+        let core = &mut self.core;
+        let n = core.target.len();
+        let init_len = 2 * n;
+        if core.window.points_seen() < n || core.window.len() < init_len {
+            return None;
+        }
+        core.fill_scratch(WindowMode::NewestPerPoint);
+        let pose = solve_static_pose(&core.model, &core.target, &core.scratch).ok()?;
+        let t_ref_s = core.window.last(1).next()?.t_s;
+        core.fill_scratch(WindowMode::Last(init_len));
+        let problem = core.window_problem(t_ref_s);
+        let fit = problem.fit_robustly(
+            pose.state,
+            INIT_MAX_ITERATIONS,
+            core.config.robust,
+            core.robust_scale_floor_px(),
+        );
+        let (state, ne) = (fit.params, fit.normal_equations);
+        let inverse_condition = ne.fast_inverse_condition();
+        let well_posed = !core.is_degenerate(inverse_condition);
+        // Residuals far above the noise mean a wrong local minimum or bad data: wait for more measurements. The
+        // median residual, which outliers do not inflate, must be at the noise level: the 12-dof model is exact over
+        // two cycles.
+        let median_px = problem.median_residual_px(&state).unwrap_or(0.0);
+        if ne.residual_rms_px() > core.config.lost_residual_px
+            || median_px > (3.0 * core.config.noise_px).max(0.3)
+        {
+            return None;
+        }
+        let state = if well_posed {
+            state
+        } else {
+            MotionState::at_rest(pose.state.cam_r_obj, pose.state.cam_t_obj_m)
+        };
+        let covariance = core.window_covariance(&ne, inverse_condition);
+        Some(Initial {
+            t_ref_s,
+            state,
+            covariance,
+            step: Step {
+                inverse_condition,
+                measurements_used: ne.count(),
+                iterations: fit.report.iterations,
+                status: if well_posed {
+                    TrackStatus::Converging
+                } else {
+                    TrackStatus::Degenerate
+                },
+                covariance,
+            },
+        })
+    }
+
+    /// One control step at the newest measurement's time.
+    fn control_step(&mut self) -> Estimate {
+        let core = &mut self.core;
+        core.since_estimate = 0;
+        let t_new_s = core.last_t_s.unwrap_or(core.t_ref_s);
+        let mode = core.effective_window();
+        core.fill_scratch(mode);
+        let step = self.law.control_step(core, t_new_s);
+        self.core.track_conditioning(step.inverse_condition);
+        self.finish_estimate(step)
+    }
+
+    /// Residual at the emitted state, status bookkeeping (converging, disputed, lost), and the estimate itself.
+    fn finish_estimate(&mut self, step: Step) -> Estimate {
+        // Residual over the step's window at the emitted state. The track is judged on the median residual: a few
+        // outliers in the window must not make it look lost.
+        let residuals = {
+            let mut problem = self.core.window_problem(self.core.t_ref_s);
+            problem.simultaneous = self.law.simultaneous_residuals();
+            problem.residual_figures(&self.core.state)
+        };
+        let disputed = self.law.is_disputed(&self.core, &residuals);
+        let core = &mut self.core;
+        let mut status = step.status;
+        let bad = !residuals.median_px.is_finite()
+            || residuals.median_px > core.config.lost_residual_px
+            || !core.state.is_finite();
+        core.bad_estimates = if bad { core.bad_estimates + 1 } else { 0 };
+        if core.bad_estimates >= LOST_AFTER_BAD_ESTIMATES {
+            status = TrackStatus::Lost;
+            core.phase = Phase::Initializing;
+            core.window.clear();
+        } else if disputed && matches!(status, TrackStatus::Tracking | TrackStatus::Converging) {
+            status = TrackStatus::Disputed;
+        } else if status == TrackStatus::Tracking
+            && core.estimates_since_init < CONVERGING_ESTIMATES
+        {
+            status = TrackStatus::Converging;
+        }
+        core.estimates_since_init += 1;
+        core.report.count(status);
+        self.law.after_estimate();
+        Estimate {
+            t_ref_s: core.t_ref_s,
+            state: core.state,
+            residual_rms_px: residuals.rms_px,
+            inverse_condition: step.inverse_condition,
+            measurements_used: step.measurements_used,
+            iterations: step.iterations,
+            status,
+            covariance: step.covariance,
+        }
+    }
+}
