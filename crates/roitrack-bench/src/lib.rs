@@ -1,5 +1,9 @@
 //! # roitrack-bench
 //!
+//! roitrack's benchmarks as library calls: the hot paths (this page), the real-time loop ([`loop_bench`]), the long
+//! soak run ([`soak`]) and the PnP comparison with OpenCV ([`pnp`]). `roitrack bench`, `roitrack soak` and
+//! `roitrack pnp-bench` only print what these return.
+//!
 //! The inputs of roitrack's hot-path benchmarks, built on the canonical scene of SPEC section 6 with the public APIs
 //! only, and a batch timer. The criterion benches (`cargo bench -p roitrack-bench`, `benches/hot_paths.rs`) and the
 //! quick `roitrack bench` command use the same inputs ([`HotPaths`]) and the same calls ([`time_all`] times the
@@ -29,6 +33,10 @@
 //! - `centroid_24_moments`: the same without the symmetry check (the first-order moments alone);
 //! - `render_roi`: the simulator's rendering of that ROI (one blob, shot and read noise drawn)
 //!   ([`RoiRenderer::render_roi_with_scratch`], scratch buffers reused).
+
+pub mod loop_bench;
+pub mod pnp;
+pub mod soak;
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};
@@ -458,14 +466,6 @@ pub const BATCH_TARGET_S: f64 = 5e-6;
 /// Fewest batches timed, whatever the budget.
 pub const MIN_BATCHES: usize = 20;
 
-/// Quantile `q` of a sorted slice (nearest rank).
-pub fn quantile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    sorted[((sorted.len() - 1) as f64 * q).round() as usize]
-}
-
 /// Times `f` in about `budget`: a tenth of it warms up and estimates the per-call time, which sets the batch size (one
 /// batch lasting at least [`BATCH_TARGET_S`]); then batches are timed until the budget is spent (at least
 /// [`MIN_BATCHES`]), each giving batch time / batch size. Returns the median and p99 of those. The result of every
@@ -504,8 +504,8 @@ pub fn time_item<R>(mut f: impl FnMut() -> R, budget: Duration) -> Timing {
     }
     samples.sort_by(f64::total_cmp);
     Timing {
-        median_us: quantile(&samples, 0.5),
-        p99_us: quantile(&samples, 0.99),
+        median_us: roitrack_core::stats::quantile(&samples, 0.5),
+        p99_us: roitrack_core::stats::quantile(&samples, 0.99),
         batch_size,
         batches: samples.len(),
     }

@@ -72,15 +72,15 @@ fn simulate_writes_every_file_for_every_scenario() {
         ] {
             assert!(dir.join(file).is_file(), "{scenario}: {file}");
         }
-        roitrack_formats::read_camera_yaml(dir.join("camera.yaml")).unwrap();
+        roitrack::formats::read_camera_yaml(dir.join("camera.yaml")).unwrap();
         assert_eq!(
-            roitrack_formats::read_target_csv(dir.join("target.csv"))
+            roitrack::formats::read_target_csv(dir.join("target.csv"))
                 .unwrap()
                 .len(),
             16
         );
-        let m = roitrack_formats::read_measurements_csv(dir.join("measurements.csv")).unwrap();
-        let truth = roitrack_formats::read_tum(dir.join("gt_poses.tum")).unwrap();
+        let m = roitrack::formats::read_measurements_csv(dir.join("measurements.csv")).unwrap();
+        let truth = roitrack::formats::read_tum(dir.join("gt_poses.tum")).unwrap();
         assert_eq!(m.len(), truth.len());
     }
 }
@@ -90,19 +90,19 @@ fn ground_truth_files_pin_the_twist_convention() {
     // Read back from the files: integrating the ground-truth twist over one step reproduces the next pose to 1e-9.
     let tmp = tempfile::tempdir().unwrap();
     simulate(tmp.path(), "random", &[]);
-    let poses = roitrack_formats::read_tum(tmp.path().join("gt_poses.tum")).unwrap();
-    let twists = roitrack_formats::read_twists_csv(tmp.path().join("gt_twists.csv")).unwrap();
+    let poses = roitrack::formats::read_tum(tmp.path().join("gt_poses.tum")).unwrap();
+    let twists = roitrack::formats::read_twists_csv(tmp.path().join("gt_twists.csv")).unwrap();
     let mut worst: f64 = 0.0;
     for (p, w) in poses.windows(2).zip(twists.windows(2)) {
         let dt = p[1].t_s - p[0].t_s;
         let t = p[0].cam_from_obj.translation.vector
             + (w[0].velocity_mps + w[1].velocity_mps) * (dt / 2.0);
-        let r = roitrack_core::so3::exp(
+        let r = roitrack::math::so3::exp(
             &((w[0].angular_velocity_radps + w[1].angular_velocity_radps) * (dt / 2.0)),
         ) * p[0].cam_from_obj.rotation.to_rotation_matrix();
         worst = worst
             .max((t - p[1].cam_from_obj.translation.vector).norm())
-            .max(roitrack_core::so3::angle_between(
+            .max(roitrack::math::so3::angle_between(
                 &r,
                 &p[1].cam_from_obj.rotation.to_rotation_matrix(),
             ));
@@ -135,17 +135,17 @@ fn eval_of_truth_against_itself_is_zero_and_delayed_truth_lags_3() {
     assert_eq!(m["count"].as_u64(), Some(19_655));
 
     // Estimates every 10 samples whose twist is the truth 3 estimator samples (30 ROIs) earlier.
-    let poses = roitrack_formats::read_tum(&truth).unwrap();
-    let twists = roitrack_formats::read_twists_csv(&truth_twists).unwrap();
+    let poses = roitrack::formats::read_tum(&truth).unwrap();
+    let twists = roitrack::formats::read_twists_csv(&truth_twists).unwrap();
     let est_poses: Vec<_> = poses.iter().step_by(10).skip(3).copied().collect();
     let est_twists: Vec<_> = twists
         .iter()
         .step_by(10)
         .zip(est_poses.iter())
-        .map(|(w, p)| roitrack_core::TwistSample { t_s: p.t_s, ..*w })
+        .map(|(w, p)| roitrack::math::TwistSample { t_s: p.t_s, ..*w })
         .collect();
-    roitrack_formats::write_tum(dir.join("late.tum"), &est_poses).unwrap();
-    roitrack_formats::write_twists_csv(dir.join("late.csv"), &est_twists).unwrap();
+    roitrack::formats::write_tum(dir.join("late.tum"), &est_poses).unwrap();
+    roitrack::formats::write_twists_csv(dir.join("late.csv"), &est_twists).unwrap();
     let m: serde_json::Value = serde_json::from_str(&ok(&[
         "eval",
         "--truth",
@@ -396,11 +396,11 @@ fn target_command_writes_the_bundled_target_and_camera() {
     let target = tmp.path().join("grid.csv");
     let camera = tmp.path().join("cam.yaml");
     ok(&["target", "--out", p(&target), "--camera-out", p(&camera)]);
-    let t = roitrack_formats::read_target_csv(&target).unwrap();
-    assert_eq!(t, roitrack_core::Target::grid4x4());
+    let t = roitrack::formats::read_target_csv(&target).unwrap();
+    assert_eq!(t, roitrack::math::Target::grid4x4());
     assert_eq!(
-        roitrack_formats::read_camera_yaml(&camera).unwrap(),
-        roitrack_core::CameraModel::canonical()
+        roitrack::formats::read_camera_yaml(&camera).unwrap(),
+        roitrack::math::CameraModel::canonical()
     );
 }
 

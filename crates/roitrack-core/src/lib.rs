@@ -8,6 +8,7 @@
 //! - [`state`]: the 12-dof [`state::MotionState`] (pose and constant twist at a reference time);
 //! - [`samples`]: timestamped measurements, poses and twists as exchanged with files;
 //! - [`roi_order`]: the order in which ROIs visit the points (bit-reversed, row-major, random);
+//! - [`stats`]: quantiles, medians and RMS, defined once for every report;
 //! - [`time`]: the time model, when each blob was taken (sequential ROIs, global or rolling shutter) and for how long;
 //! - [`projection`]: the spatio-temporal projection model and its exact and paper (eqs. 17-24) Jacobians;
 //! - [`solver`]: the one nonlinear least-squares solver (Levenberg-Marquardt, and the paper's servo law);
@@ -28,6 +29,7 @@ pub mod samples;
 pub mod so3;
 pub mod solver;
 pub mod state;
+pub mod stats;
 pub mod target;
 pub mod time;
 

@@ -12,6 +12,9 @@
 //! - with twists on both sides: linear velocity RMSE (mm/s), angular velocity RMSE (deg/s), and the velocity lag, the
 //!   shift in estimator samples (and ms) maximising the normalized cross-correlation of estimated and true linear
 //!   velocity, positive when the estimate lags behind the truth.
+//!
+//! [`estimate_errors`] gives the error of every estimate, which the figures plot; [`evaluate_estimates`] takes a
+//! tracker's estimates directly. Every metric of roitrack's tables and figures is defined here, once.
 
 mod align;
 mod error;
@@ -19,6 +22,7 @@ mod lag;
 mod metrics;
 
 use nalgebra::Vector3;
+use roitrack_core::estimator::Estimate;
 use roitrack_core::{PoseSample, TwistSample, so3};
 
 pub use error::EvalError;
@@ -47,18 +51,49 @@ impl Default for EvalOptions {
     }
 }
 
-/// Compares estimated poses (and twists) with the truth; see the [crate documentation](crate) and [`Metrics`].
+/// The error of every estimate against the truth at its time (estimate minus truth, camera frame): what
+/// [`evaluate`] sums into its metrics and what the figures plot.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EstimateErrors {
+    /// The estimates' times (s).
+    pub t_s: Vec<f64>,
+    /// Position error of the object origin (m).
+    pub position_m: Vec<Vector3<f64>>,
+    /// Geodesic angle of `R_est⁻¹ R_true` (rad).
+    pub rotation_rad: Vec<f64>,
+    /// With twists on both sides: linear and angular velocity errors (m/s, rad/s).
+    pub velocity_mps: Option<Vec<Vector3<f64>>>,
+    pub angular_velocity_radps: Option<Vec<Vector3<f64>>>,
+    /// The true linear velocity at each estimate (m/s), for the velocity lag.
+    true_velocity_mps: Option<Vec<Vector3<f64>>>,
+    estimated_velocity_mps: Option<Vec<Vector3<f64>>>,
+}
+
+/// Pairs each estimate with the truth at its time (see the [crate documentation](crate)) and returns the errors.
+/// Takes the same arguments, and makes the same checks, as [`evaluate`].
 ///
-/// - `truth_poses`: ground truth, times strictly increasing; `truth_twists`, when given, at the same times.
-/// - `est_poses`: the estimates, times strictly increasing and inside the truth's span; `est_twists`, when given, at
-///   the same times. Velocity metrics need twists on both sides.
-pub fn evaluate(
+/// ```
+/// use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+/// use roitrack_core::PoseSample;
+/// use roitrack_eval::{EvalOptions, estimate_errors};
+///
+/// let at = |t_s: f64, x: f64| PoseSample {
+///     t_s,
+///     cam_from_obj: Isometry3::from_parts(Translation3::new(x, 0.0, 0.6), UnitQuaternion::identity()),
+/// };
+/// let truth = [at(0.0, 0.0), at(1.0, 0.1)];
+/// // An estimate half-way, 1 mm to the right of the interpolated truth.
+/// let errors = estimate_errors(&truth, None, &[at(0.5, 0.051)], None, &EvalOptions::default()).unwrap();
+/// assert!((errors.position_m[0] - Vector3::new(0.001, 0.0, 0.0)).norm() < 1e-12);
+/// assert!(errors.velocity_mps.is_none());
+/// ```
+pub fn estimate_errors(
     truth_poses: &[PoseSample],
     truth_twists: Option<&[TwistSample]>,
     est_poses: &[PoseSample],
     est_twists: Option<&[TwistSample]>,
     opts: &EvalOptions,
-) -> Result<Metrics, EvalError> {
+) -> Result<EstimateErrors, EvalError> {
     if !opts.max_time_gap_s.is_finite() || opts.max_time_gap_s < 0.0 {
         return Err(EvalError::InvalidOption {
             name: "max_time_gap_s",
@@ -94,61 +129,177 @@ pub fn evaluate(
         .map(|(i, &t)| align::locate(&truth_times, i, t, gap))
         .collect::<Result<_, _>>()?;
 
-    let count = est_poses.len();
-    let estimator_period_s = median_period(&est_times);
-
-    let mut position = MeanSquares::default();
-    let mut rotation_sq_sum = 0.0;
-    let mut max_position_error_m: f64 = 0.0;
-    for (est, truth_at) in est_poses.iter().zip(&at) {
-        let (truth_rotation, truth_translation) = truth_at.pose(truth_poses);
-        let error = est.cam_from_obj.translation.vector - truth_translation;
-        position.add(&error);
-        max_position_error_m = max_position_error_m.max(error.norm());
-        let angle = so3::angle_between(
-            &est.cam_from_obj.rotation.to_rotation_matrix(),
-            &truth_rotation.to_rotation_matrix(),
-        );
-        rotation_sq_sum += angle * angle;
-    }
-
-    let mut metrics = Metrics {
-        count,
-        duration_s: est_times[count - 1] - est_times[0],
-        estimator_period_ms: estimator_period_s * 1e3,
-        position_rmse_mm: position.rms_norm(count) * 1e3,
-        position_rmse_xyz_mm: position.rms_axes(count).map(|v| v * 1e3),
-        max_position_error_mm: max_position_error_m * 1e3,
-        rotation_rmse_deg: (rotation_sq_sum / count as f64).sqrt().to_degrees(),
-        velocity_rmse_mm_s: None,
-        velocity_rmse_xyz_mm_s: None,
-        angular_velocity_rmse_deg_s: None,
-        velocity_lag_samples: None,
-        velocity_lag_subsample: None,
-        velocity_lag_ms: None,
+    let (position_m, rotation_rad) = est_poses
+        .iter()
+        .zip(&at)
+        .map(|(est, truth_at)| {
+            let (truth_rotation, truth_translation) = truth_at.pose(truth_poses);
+            let angle = so3::angle_between(
+                &est.cam_from_obj.rotation.to_rotation_matrix(),
+                &truth_rotation.to_rotation_matrix(),
+            );
+            (
+                est.cam_from_obj.translation.vector - truth_translation,
+                angle,
+            )
+        })
+        .unzip();
+    let mut errors = EstimateErrors {
+        t_s: est_times,
+        position_m,
+        rotation_rad,
+        velocity_mps: None,
+        angular_velocity_radps: None,
+        true_velocity_mps: None,
+        estimated_velocity_mps: None,
     };
-
     if let (Some(truth_twists), Some(est_twists)) = (truth_twists, est_twists) {
-        let mut velocity = MeanSquares::default();
-        let mut angular = MeanSquares::default();
-        let mut true_velocities = Vec::with_capacity(count);
+        let count = est_twists.len();
+        let (mut velocity, mut angular, mut truth_v) = (
+            Vec::with_capacity(count),
+            Vec::with_capacity(count),
+            Vec::with_capacity(count),
+        );
         for (est, truth_at) in est_twists.iter().zip(&at) {
-            let (truth_v, truth_w) = truth_at.twist(truth_twists);
-            velocity.add(&(est.velocity_mps - truth_v));
-            angular.add(&(est.angular_velocity_radps - truth_w));
-            true_velocities.push(truth_v);
+            let (true_v, true_w) = truth_at.twist(truth_twists);
+            velocity.push(est.velocity_mps - true_v);
+            angular.push(est.angular_velocity_radps - true_w);
+            truth_v.push(true_v);
         }
-        let est_velocities: Vec<Vector3<f64>> = est_twists.iter().map(|s| s.velocity_mps).collect();
-        let lag = lag::velocity_lag(&est_velocities, &true_velocities, opts.max_lag_samples);
-
-        metrics.velocity_rmse_mm_s = Some(velocity.rms_norm(count) * 1e3);
-        metrics.velocity_rmse_xyz_mm_s = Some(velocity.rms_axes(count).map(|v| v * 1e3));
-        metrics.angular_velocity_rmse_deg_s = Some(angular.rms_norm(count).to_degrees());
-        metrics.velocity_lag_samples = Some(lag.samples);
-        metrics.velocity_lag_subsample = Some(lag.subsample);
-        metrics.velocity_lag_ms = Some(lag.samples as f64 * estimator_period_s * 1e3);
+        errors.velocity_mps = Some(velocity);
+        errors.angular_velocity_radps = Some(angular);
+        errors.true_velocity_mps = Some(truth_v);
+        errors.estimated_velocity_mps = Some(est_twists.iter().map(|s| s.velocity_mps).collect());
     }
-    Ok(metrics)
+    Ok(errors)
+}
+
+impl EstimateErrors {
+    /// The metrics of these errors ([`Metrics`]): RMS, maximum and velocity lag.
+    pub fn metrics(&self, opts: &EvalOptions) -> Metrics {
+        let count = self.t_s.len();
+        let estimator_period_s = median_period(&self.t_s);
+        let mut position = MeanSquares::default();
+        let mut rotation_sq_sum = 0.0;
+        let mut max_position_error_m: f64 = 0.0;
+        for (error, angle) in self.position_m.iter().zip(&self.rotation_rad) {
+            position.add(error);
+            max_position_error_m = max_position_error_m.max(error.norm());
+            rotation_sq_sum += angle * angle;
+        }
+        let mut metrics = Metrics {
+            count,
+            duration_s: self.t_s[count - 1] - self.t_s[0],
+            estimator_period_ms: estimator_period_s * 1e3,
+            position_rmse_mm: position.rms_norm(count) * 1e3,
+            position_rmse_xyz_mm: position.rms_axes(count).map(|v| v * 1e3),
+            max_position_error_mm: max_position_error_m * 1e3,
+            rotation_rmse_deg: (rotation_sq_sum / count as f64).sqrt().to_degrees(),
+            velocity_rmse_mm_s: None,
+            velocity_rmse_xyz_mm_s: None,
+            angular_velocity_rmse_deg_s: None,
+            velocity_lag_samples: None,
+            velocity_lag_subsample: None,
+            velocity_lag_ms: None,
+        };
+        if let (Some(velocity_errors), Some(angular_errors), Some(truth_v), Some(est_v)) = (
+            &self.velocity_mps,
+            &self.angular_velocity_radps,
+            &self.true_velocity_mps,
+            &self.estimated_velocity_mps,
+        ) {
+            let mut velocity = MeanSquares::default();
+            let mut angular = MeanSquares::default();
+            for (v, w) in velocity_errors.iter().zip(angular_errors) {
+                velocity.add(v);
+                angular.add(w);
+            }
+            let lag = lag::velocity_lag(est_v, truth_v, opts.max_lag_samples);
+            metrics.velocity_rmse_mm_s = Some(velocity.rms_norm(count) * 1e3);
+            metrics.velocity_rmse_xyz_mm_s = Some(velocity.rms_axes(count).map(|v| v * 1e3));
+            metrics.angular_velocity_rmse_deg_s = Some(angular.rms_norm(count).to_degrees());
+            metrics.velocity_lag_samples = Some(lag.samples);
+            metrics.velocity_lag_subsample = Some(lag.subsample);
+            metrics.velocity_lag_ms = Some(lag.samples as f64 * estimator_period_s * 1e3);
+        }
+        metrics
+    }
+}
+
+/// Compares estimated poses (and twists) with the truth; see the [crate documentation](crate) and [`Metrics`].
+///
+/// - `truth_poses`: ground truth, times strictly increasing; `truth_twists`, when given, at the same times.
+/// - `est_poses`: the estimates, times strictly increasing and inside the truth's span; `est_twists`, when given, at
+///   the same times. Velocity metrics need twists on both sides.
+///
+/// ```
+/// use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+/// use roitrack_core::PoseSample;
+/// use roitrack_eval::{EvalOptions, evaluate};
+///
+/// let at = |t_s: f64, x: f64| PoseSample {
+///     t_s,
+///     cam_from_obj: Isometry3::from_parts(Translation3::new(x, 0.0, 0.6), UnitQuaternion::identity()),
+/// };
+/// let truth: Vec<_> = (0..10).map(|k| at(k as f64, 0.0)).collect();
+/// let estimate: Vec<_> = (0..10).map(|k| at(k as f64, if k % 2 == 0 { 0.001 } else { -0.001 })).collect();
+/// let metrics = evaluate(&truth, None, &estimate, None, &EvalOptions::default()).unwrap();
+/// assert!((metrics.position_rmse_mm - 1.0).abs() < 1e-9);
+/// assert_eq!(metrics.velocity_rmse_mm_s, None);
+/// ```
+pub fn evaluate(
+    truth_poses: &[PoseSample],
+    truth_twists: Option<&[TwistSample]>,
+    est_poses: &[PoseSample],
+    est_twists: Option<&[TwistSample]>,
+    opts: &EvalOptions,
+) -> Result<Metrics, EvalError> {
+    estimate_errors(truth_poses, truth_twists, est_poses, est_twists, opts).map(|e| e.metrics(opts))
+}
+
+/// [`estimate_errors`] of a tracker's estimates (their poses and twists).
+pub fn estimate_errors_of(
+    truth_poses: &[PoseSample],
+    truth_twists: &[TwistSample],
+    estimates: &[Estimate],
+    opts: &EvalOptions,
+) -> Result<EstimateErrors, EvalError> {
+    let (poses, twists) = samples_of(estimates);
+    estimate_errors(truth_poses, Some(truth_twists), &poses, Some(&twists), opts)
+}
+
+/// [`evaluate`] of a tracker's estimates (their poses and twists) against the truth's poses and twists.
+///
+/// ```
+/// use roitrack_core::estimator::{TrackerConfig, track_all};
+/// use roitrack_eval::{EvalOptions, evaluate_estimates};
+/// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
+///
+/// let run = simulate(&Scenario::new(ScenarioKind::Static, 1), &SimulationOptions::default()).unwrap();
+/// let (estimates, _) = track_all(&run.camera, &run.target, TrackerConfig::default(), &run.measurements).unwrap();
+/// let metrics = evaluate_estimates(&run.truth_poses, &run.truth_twists, &estimates, &EvalOptions::default()).unwrap();
+/// assert!(metrics.position_rmse_mm < 0.5, "{metrics:?}");
+/// ```
+pub fn evaluate_estimates(
+    truth_poses: &[PoseSample],
+    truth_twists: &[TwistSample],
+    estimates: &[Estimate],
+    opts: &EvalOptions,
+) -> Result<Metrics, EvalError> {
+    estimate_errors_of(truth_poses, truth_twists, estimates, opts).map(|e| e.metrics(opts))
+}
+
+/// The poses and twists of estimates, as written to files.
+pub fn samples_of(estimates: &[Estimate]) -> (Vec<PoseSample>, Vec<TwistSample>) {
+    estimates
+        .iter()
+        .map(|e| {
+            (
+                PoseSample::from_state(e.t_ref_s, &e.state),
+                TwistSample::from_state(e.t_ref_s, &e.state),
+            )
+        })
+        .unzip()
 }
 
 /// Running sums of squared error components.
@@ -222,15 +373,9 @@ fn check_twist_times(
 
 /// The median interval between consecutive times (s); 0 with fewer than two.
 fn median_period(times: &[f64]) -> f64 {
-    let mut steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
+    let steps: Vec<f64> = times.windows(2).map(|w| w[1] - w[0]).collect();
     if steps.is_empty() {
         return 0.0;
     }
-    steps.sort_by(f64::total_cmp);
-    let mid = steps.len() / 2;
-    if steps.len() % 2 == 1 {
-        steps[mid]
-    } else {
-        0.5 * (steps[mid - 1] + steps[mid])
-    }
+    roitrack_core::stats::median(&steps)
 }

@@ -9,8 +9,9 @@
 //! | target: CSV `id,x,y,z[,diameter]` (m, object frame) | [`read_target_csv`], [`parse_target_csv`] | [`write_target_csv`], [`target_csv_string`] |
 //! | measurements: CSV `t,id,u,v` (s, raw px) | [`MeasurementReader`] (streaming), [`read_measurements_csv`] | [`MeasurementWriter`], [`write_measurements_csv`] |
 //! | poses: TUM `t tx ty tz qx qy qz qw` (camera_T_object) | [`read_tum`], [`parse_tum`] | [`PoseWriter`], [`write_tum`] |
-//! | ROI recordings: binary, see [`RoiRecordingReader`] | [`RoiRecordingReader`] (streaming) | [`RoiRecordingWriter`] |
+//! | ROI recordings ([`roitrack_image::RoiImage`]s): binary, see [`RoiRecordingReader`] | [`RoiRecordingReader`] (streaming) | [`RoiRecordingWriter`] |
 //! | twists: CSV `t,vx,vy,vz,wx,wy,wz` (camera frame) | [`read_twists_csv`], [`parse_twists_csv`] | [`TwistWriter`], [`write_twists_csv`] |
+//! | estimates: poses, twists and diagnostics CSV together | | [`EstimateWriter`] |
 //!
 //! Every reader refuses non-finite numbers and times out of order; every writer refuses what the reader would refuse
 //! and writes numbers with full round-trip precision (the shortest decimal that reads back to the same `f64`).
@@ -47,6 +48,7 @@ mod atomic;
 mod camera_yaml;
 mod csv_util;
 mod error;
+mod estimates;
 mod measurements;
 mod roi_recording;
 mod row_writer;
@@ -57,11 +59,12 @@ mod twists;
 pub use atomic::AtomicFile;
 pub use camera_yaml::{camera_yaml_string, parse_camera_yaml, read_camera_yaml, write_camera_yaml};
 pub use error::FormatError;
+pub use estimates::{DIAGNOSTICS_HEADER, EstimateWriter};
 pub use measurements::{
     MeasurementReader, MeasurementWriter, read_measurements_csv, write_measurements_csv,
 };
 pub use roi_recording::{
-    MAX_ROI_SIDE_PX, ROI_RECORDING_MAGIC, RoiRecord, RoiRecordingReader, RoiRecordingWriter,
+    MAX_ROI_SIDE_PX, ROI_RECORDING_MAGIC, RoiRecordingReader, RoiRecordingWriter,
 };
 pub use target_csv::{parse_target_csv, read_target_csv, target_csv_string, write_target_csv};
 pub use tum::{PoseWriter, QUATERNION_NORM_TOLERANCE, parse_tum, read_tum, write_tum};

@@ -21,6 +21,8 @@ use std::fs::File;
 use std::io::{BufReader, BufWriter, ErrorKind, Read, Write};
 use std::path::{Path, PathBuf};
 
+use roitrack_image::{Roi, RoiImage};
+
 use crate::{AtomicFile, FormatError};
 
 /// The file's first 16 bytes.
@@ -28,27 +30,14 @@ pub const ROI_RECORDING_MAGIC: &[u8; 16] = b"ROITRACK-ROIS-1\n";
 /// Largest ROI side accepted (px).
 pub const MAX_ROI_SIDE_PX: u32 = 1024;
 
-/// One recorded ROI.
-#[derive(Debug, Clone, PartialEq)]
-pub struct RoiRecord {
-    pub t_s: f64,
-    pub id: u32,
-    pub x0: u32,
-    pub y0: u32,
-    pub width: u32,
-    pub height: u32,
-    pub bit_depth: u8,
-    /// Row-major, `width * height` values.
-    pub pixels: Vec<u16>,
-}
-
-/// Streams records from a recording with constant memory (one record at a time).
+/// Streams the recorded [`RoiImage`]s with constant memory (one record at a time).
 pub struct RoiRecordingReader<R: Read> {
     reader: R,
     path: PathBuf,
     index: u64,
     offset: u64,
     previous_t_s: Option<f64>,
+    known_ids: Option<std::collections::HashSet<u32>>,
     done: bool,
 }
 
@@ -80,8 +69,16 @@ impl<R: Read> RoiRecordingReader<R> {
             index: 0,
             offset: 16,
             previous_t_s: None,
+            known_ids: None,
             done: false,
         })
+    }
+
+    /// Makes a record of a point outside `ids` (the target's point ids) an error.
+    #[must_use]
+    pub fn with_known_ids(mut self, ids: impl IntoIterator<Item = u32>) -> Self {
+        self.known_ids = Some(ids.into_iter().collect());
+        self
     }
 
     fn error(&self, field: &str, message: impl Into<String>) -> FormatError {
@@ -120,7 +117,7 @@ impl<R: Read> RoiRecordingReader<R> {
         Ok(u32::from_le_bytes(b))
     }
 
-    fn read_record(&mut self) -> Result<Option<RoiRecord>, FormatError> {
+    fn read_record(&mut self) -> Result<Option<RoiImage>, FormatError> {
         self.index += 1;
         let mut b8 = [0u8; 8];
         if !self.read_field(&mut b8, "t", true)? {
@@ -139,6 +136,14 @@ impl<R: Read> RoiRecordingReader<R> {
             ));
         }
         let id = self.read_u32("id")?;
+        if let Some(known) = &self.known_ids
+            && !known.contains(&id)
+        {
+            return Err(self.error(
+                "id",
+                format!("unknown point id {id}: the target has no such point"),
+            ));
+        }
         let x0 = self.read_u32("x0")?;
         let y0 = self.read_u32("y0")?;
         let width = self.read_u32("width")?;
@@ -176,13 +181,10 @@ impl<R: Read> RoiRecordingReader<R> {
             ));
         }
         self.previous_t_s = Some(t_s);
-        Ok(Some(RoiRecord {
+        Ok(Some(RoiImage {
             t_s,
-            id,
-            x0,
-            y0,
-            width,
-            height,
+            point_id: id,
+            roi: Roi::new(x0, y0, width, height),
             bit_depth,
             pixels,
         }))
@@ -190,7 +192,7 @@ impl<R: Read> RoiRecordingReader<R> {
 }
 
 impl<R: Read> Iterator for RoiRecordingReader<R> {
-    type Item = Result<RoiRecord, FormatError>;
+    type Item = Result<RoiImage, FormatError>;
 
     fn next(&mut self) -> Option<Self::Item> {
         if self.done {
@@ -232,7 +234,13 @@ impl RoiRecordingWriter {
     }
 
     /// Appends one ROI; refuses what the reader would refuse.
-    pub fn write(&mut self, r: &RoiRecord) -> Result<(), FormatError> {
+    pub fn write(&mut self, r: &RoiImage) -> Result<(), FormatError> {
+        let Roi {
+            x0,
+            y0,
+            width,
+            height,
+        } = r.roi;
         let bad = |field: &str, message: String| {
             Err(FormatError::new(&self.path, message).with_field(field))
         };
@@ -242,12 +250,8 @@ impl RoiRecordingWriter {
                 format!("time {} s is not finite or goes backwards", r.t_s),
             );
         }
-        if r.width == 0 || r.height == 0 || r.width > MAX_ROI_SIDE_PX || r.height > MAX_ROI_SIDE_PX
-        {
-            return bad(
-                "width",
-                format!("ROI size {} x {} out of range", r.width, r.height),
-            );
+        if width == 0 || height == 0 || width > MAX_ROI_SIDE_PX || height > MAX_ROI_SIDE_PX {
+            return bad("width", format!("ROI size {width} x {height} out of range"));
         }
         if ![8, 10, 12, 16].contains(&r.bit_depth) {
             return bad(
@@ -255,15 +259,10 @@ impl RoiRecordingWriter {
                 format!("{} is not 8, 10, 12 or 16", r.bit_depth),
             );
         }
-        if r.pixels.len() != (r.width * r.height) as usize {
+        if r.pixels.len() != (width * height) as usize {
             return bad(
                 "pixels",
-                format!(
-                    "{} pixels for a {} x {} ROI",
-                    r.pixels.len(),
-                    r.width,
-                    r.height
-                ),
+                format!("{} pixels for a {width} x {height} ROI", r.pixels.len()),
             );
         }
         let max = ((1u32 << r.bit_depth) - 1) as u16;
@@ -276,7 +275,7 @@ impl RoiRecordingWriter {
         let io = |e| FormatError::io(&self.path, "cannot write", e);
         let mut header = Vec::with_capacity(29);
         header.extend_from_slice(&r.t_s.to_le_bytes());
-        for v in [r.id, r.x0, r.y0, r.width, r.height] {
+        for v in [r.point_id, x0, y0, width, height] {
             header.extend_from_slice(&v.to_le_bytes());
         }
         header.push(r.bit_depth);
@@ -307,14 +306,11 @@ impl RoiRecordingWriter {
 mod tests {
     use super::*;
 
-    fn record(t_s: f64, bit_depth: u8) -> RoiRecord {
-        RoiRecord {
+    fn record(t_s: f64, bit_depth: u8) -> RoiImage {
+        RoiImage {
             t_s,
-            id: 7,
-            x0: 100,
-            y0: 200,
-            width: 3,
-            height: 2,
+            point_id: 7,
+            roi: Roi::new(100, 200, 3, 2),
             bit_depth,
             pixels: vec![0, 1, 2, 200, 255, 17],
         }
@@ -330,7 +326,7 @@ mod tests {
         w.write(&record(0.25, 8)).unwrap();
         w.write(&deep).unwrap();
         w.finish().unwrap();
-        let back: Vec<RoiRecord> = RoiRecordingReader::open(&path)
+        let back: Vec<RoiImage> = RoiRecordingReader::open(&path)
             .unwrap()
             .map(|r| r.unwrap())
             .collect();

@@ -252,7 +252,15 @@ fn main() {
     );
 
     let start = Instant::now();
-    let frame = renderer.render_full_frame(&state_at, 0.0, &mut rng);
+    let mut frame = roitrack_image::Frame::default();
+    renderer.render_frame(
+        &state_at,
+        0.0,
+        &mut rng,
+        &mut RenderScratch::new(),
+        &mut frame,
+    );
+    let frame = frame.pixels;
     let render_ms = start.elapsed().as_secs_f64() * 1e3;
     let start = Instant::now();
     let blobs = detect_blobs(&frame, 1024, 1024, &CentroidOptions::default());

@@ -2,12 +2,16 @@
 //!
 //! The image side of roitrack (SPEC section 5), pure computation (no I/O, no threads):
 //!
-//! - [`roi`]: regions of interest ([`Roi`]), centred on a predicted blob and clamped to the sensor;
+//! - [`roi`]: regions of interest ([`Roi`]), centred on a predicted blob and clamped to the sensor, and the pixels a
+//!   camera read in one ([`RoiImage`]); [`frame`]: full frames ([`Frame`]);
+//! - [`camera`]: the cameras the real-time loop drives ([`RoiCamera`]: fallible, timestamped grabs into buffers the
+//!   caller owns), a simulated one ([`SimulatedCamera`]) and a replay of recorded ROIs ([`ReplayCamera`]);
 //! - [`sensor`] and [`render`]: a simulated high-speed camera ([`RoiRenderer`], [`SensorModel`]) that renders ROIs or
 //!   full frames of the target's blobs as exact perspective images of flat disks, with lens distortion, area coverage,
 //!   optical and motion blur, shot and read noise and quantisation;
 //! - [`centroid`]: the blob centroid of an ROI ([`measure_blob`]): threshold, connected component of the brightest
 //!   pixel, first-order moments, a symmetry check against merged reflections ([`symmetry`]), allocation-free;
+//! - [`measure`]: an ROI image's centroid as a timed measurement ([`measure_roi`]) and the tally of rejections;
 //! - [`detect`]: blob detection in a full frame ([`detect_blobs`]) for initialisation;
 //! - [`reflection`]: a simulated reflection, a second bright spot in an ROI ([`ReflectionFault`]);
 //! - [`accuracy`]: the centroid's bias and spread against the truth ([`centroid_accuracy`]).
@@ -17,8 +21,11 @@
 //! row-major `u16` buffers of values 0 to 2^bits - 1.
 
 pub mod accuracy;
+pub mod camera;
 pub mod centroid;
 pub mod detect;
+pub mod frame;
+pub mod measure;
 pub mod reflection;
 pub mod render;
 pub mod roi;
@@ -29,12 +36,15 @@ pub use accuracy::{
     CentroidAccuracy, ReflectionAccuracy, bench_rotation, bench_state, centroid_accuracy,
     reflection_accuracy,
 };
+pub use camera::{CameraError, ReplayCamera, RoiCamera, RoiTrigger, SimulatedCamera};
 pub use centroid::{
     BlobRejection, Centroid, CentroidOptions, MAX_ROI_HEIGHT, MAX_ROI_WIDTH, SymmetryCheck,
     Threshold, measure_blob,
 };
 pub use detect::detect_blobs;
+pub use frame::Frame;
+pub use measure::{RejectionCounts, measure_roi};
 pub use reflection::ReflectionFault;
 pub use render::{DEFAULT_BLOB_DIAMETER_M, DiskOrientation, RenderScratch, RoiRenderer};
-pub use roi::Roi;
+pub use roi::{Roi, RoiImage};
 pub use sensor::{SensorError, SensorModel};

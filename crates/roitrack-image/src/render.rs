@@ -14,7 +14,7 @@
 //!
 //! Rendering a region ([`RoiRenderer::render_roi`]):
 //! 1. **Exposure sampling.** The true pose is read at the start, middle and end of the exposure
-//!    (`t_mid ± exposure/2`); the blobs that may reach the region are kept, and the exposure is sampled at `n`
+//!    (`t_mid ± exposure/2`, the exposure of the camera's time model); the blobs that may reach the region are kept, and the exposure is sampled at `n`
 //!    instants (midpoints of `n` equal slices), `n` = ceil(image motion of the fastest blob / `motion_step_px`), at
 //!    most `max_time_samples`, 1 for a static scene. Motion blur is the average over these instants.
 //! 2. **Geometry per instant.** A disk's plane maps to the image by a homography `H = [e1 e2 C]` (in-plane axes and
@@ -41,6 +41,7 @@ use nalgebra::{Matrix2, Matrix2x3, Matrix3, Rotation3, Vector2, Vector3};
 use rand::Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
 
+use crate::Frame;
 use crate::roi::Roi;
 use crate::sensor::{SensorError, SensorModel};
 
@@ -300,17 +301,59 @@ impl RoiRenderer {
         self.render_area(state_at, area, t_mid_s, rng, scratch, out);
     }
 
-    /// The whole sensor (`camera.width_px` x `camera.height_px`, row-major), exposed around `t_mid_s`.
-    pub fn render_full_frame(
+    /// Renders the whole sensor into `frame` (resized to the camera's size and the sensor's bit depth), exposed
+    /// around `t_s` as the camera's time model says: every row at `t_s` for a global shutter or ROI camera, row `v`
+    /// at `t_s + v * line_delay_s` for a rolling shutter (rendered row by row, each at its own time: what a rolling
+    /// shutter sees of a moving target, skew and all). The scratch buffers are reused.
+    ///
+    /// ```
+    /// use rand::SeedableRng;
+    /// use rand_chacha::ChaCha8Rng;
+    /// use roitrack_core::{CameraModel, MotionState, Target};
+    /// use roitrack_image::{Frame, RenderScratch, RoiRenderer, SensorModel};
+    /// use nalgebra::Vector3;
+    ///
+    /// let renderer = RoiRenderer::new(CameraModel::canonical(), Target::grid4x4(), SensorModel::default()).unwrap();
+    /// let still = MotionState::at_rest(Default::default(), Vector3::new(0.0, 0.0, 0.6));
+    /// let mut frame = Frame::default();
+    /// let mut rng = ChaCha8Rng::seed_from_u64(1);
+    /// renderer.render_frame(&|_t| still, 0.0, &mut rng, &mut RenderScratch::new(), &mut frame);
+    /// // The target's centre (between four blobs) is dark, the blob at (-30, -30) mm bright.
+    /// assert!(frame.pixels[frame.index(512, 512)] < 40);
+    /// assert!(frame.pixels[frame.index(437, 437)] > 150);
+    /// ```
+    pub fn render_frame(
         &self,
         state_at: &impl Fn(f64) -> MotionState,
-        t_mid_s: f64,
+        t_s: f64,
         rng: &mut impl Rng,
-    ) -> Vec<u16> {
-        let roi = Roi::full(self.camera.width_px, self.camera.height_px);
-        let mut out = vec![0; roi.len()];
-        self.render_roi(state_at, &roi, t_mid_s, rng, &mut out);
-        out
+        scratch: &mut RenderScratch,
+        frame: &mut Frame,
+    ) {
+        let (width, height) = (self.camera.width_px, self.camera.height_px);
+        frame.resize(width, height, self.sensor.bit_depth as u8);
+        frame.t_s = t_s;
+        let time = self.camera.time;
+        if !time.is_rolling() {
+            let area = Area {
+                x0: 0,
+                y0: 0,
+                width: width as usize,
+                height: height as usize,
+            };
+            self.render_area(state_at, area, t_s, rng, scratch, &mut frame.pixels);
+            return;
+        }
+        for (row, out) in frame.pixels.chunks_exact_mut(width as usize).enumerate() {
+            let area = Area {
+                x0: 0,
+                y0: row as i64,
+                width: width as usize,
+                height: 1,
+            };
+            let t_row_s = time.blob_time_s(t_s, row as f64);
+            self.render_area(state_at, area, t_row_s, rng, scratch, out);
+        }
     }
 
     /// Raw pixel position of the area centroid of blob `index`'s image at the pose of `state` (its reference time).
@@ -474,7 +517,7 @@ impl RoiRenderer {
         t_mid_s: f64,
         scratch: &mut RenderScratch,
     ) -> bool {
-        let exposure_s = self.sensor.exposure_s;
+        let exposure_s = self.camera.time.exposure_s;
         let pose = |t: f64| {
             let s = state_at(t);
             (s.cam_r_obj, s.cam_t_obj_m)

@@ -1,11 +1,20 @@
-//! Regions of interest: rectangles of whole pixels on the sensor.
+//! Regions of interest: rectangles of whole pixels on the sensor ([`Roi`]), and the pixels a camera read in one with
+//! the time it exposed them ([`RoiImage`]): the one ROI type of cameras, recordings and the real-time loop.
 
 /// A region of interest: `width` x `height` pixels whose top-left pixel is (`x0`, `y0`) (column, row).
+///
+/// ```
+/// use roitrack_image::Roi;
+/// // A 24 x 24 ROI centred on (100.2, 50.7) of a 1024 x 1024 sensor.
+/// let roi = Roi::centred(100.2, 50.7, 24, 1024, 1024).unwrap();
+/// assert_eq!(roi, Roi::new(89, 39, 24, 24));
+/// assert!(roi.contains(100.2, 50.7));
+/// ```
 ///
 /// Pixel (i, j) has its centre at image coordinates (u, v) = (i, j) and covers [i - 0.5, i + 0.5] x [j - 0.5, j + 0.5]
 /// (the convention of [`roitrack_core::CameraModel`]). An ROI's pixels are stored row-major: pixel (x0 + i, y0 + j) at
 /// index `j * width + i`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub struct Roi {
     pub x0: u32,
     pub y0: u32,
@@ -116,6 +125,56 @@ impl Roi {
             let start = (self.y0 as usize + j) * fw + self.x0 as usize;
             row.copy_from_slice(&frame[start..start + w]);
         }
+    }
+}
+
+/// The pixels a camera read in one ROI, with when and where: what a [`crate::RoiCamera`] fills, what a ROI recording
+/// holds, and what the real-time loop centroids.
+///
+/// ```
+/// use roitrack_image::{Roi, RoiImage};
+/// let mut image = RoiImage::with_capacity(64 * 64);
+/// image.set(2.5e-3, 7, Roi::new(100, 200, 24, 24), 8);
+/// assert_eq!(image.pixels.len(), 24 * 24);
+/// assert_eq!(image.max_value(), 255);
+/// ```
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RoiImage {
+    /// Mid-exposure time of the ROI (s).
+    pub t_s: f64,
+    /// Id of the target point the ROI was placed on.
+    pub point_id: u32,
+    /// Where the ROI lies on the sensor.
+    pub roi: Roi,
+    /// Bits per pixel value (8 to 16): values are below `2^bit_depth`.
+    pub bit_depth: u8,
+    /// Row-major, `roi.len()` values.
+    pub pixels: Vec<u16>,
+}
+
+impl RoiImage {
+    /// An empty image whose pixel buffer holds `capacity` values without growing: grabbing ROIs up to that size into
+    /// it never allocates.
+    pub fn with_capacity(capacity: usize) -> Self {
+        Self {
+            pixels: Vec::with_capacity(capacity),
+            ..Self::default()
+        }
+    }
+
+    /// Sets time, point, place and depth, and sizes the pixel buffer to the ROI (zeros where it grew; no allocation
+    /// within its capacity).
+    pub fn set(&mut self, t_s: f64, point_id: u32, roi: Roi, bit_depth: u8) {
+        self.t_s = t_s;
+        self.point_id = point_id;
+        self.roi = roi;
+        self.bit_depth = bit_depth;
+        self.pixels.resize(roi.len(), 0);
+    }
+
+    /// The largest value a pixel can have at this bit depth.
+    pub fn max_value(&self) -> u16 {
+        ((1u32 << self.bit_depth.clamp(1, 16)) - 1) as u16
     }
 }
 

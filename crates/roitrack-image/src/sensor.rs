@@ -1,4 +1,4 @@
-//! The sensor: exposure, photometry, noise and quantisation of the simulated camera.
+//! The sensor: photometry, noise and quantisation of the simulated camera.
 
 use rand::Rng;
 use rand_distr::{Distribution, Poisson, StandardNormal};
@@ -32,12 +32,12 @@ pub const MAX_SUPERSAMPLING: u32 = 32;
 ///
 /// [`Default`] models a global-shutter high-speed CMOS camera of the kind the paper used (a Photonfocus-like sensor
 /// read in 8-bit mode, one small ROI at 4 kHz) watching bright (e.g. retro-reflective, LED-lit) blobs. Signals are
-/// given *per exposure* (electrons collected during `exposure_s`): changing the exposure changes the motion blur only,
-/// as if the illumination were adjusted to keep the same brightness.
+/// given *per exposure* (electrons collected during the exposure, whose duration is the camera's
+/// [`roitrack_core::TimeModel::exposure_s`], 100 µs by default: short enough for 4 kHz ROIs and < 0.25 px of blur at
+/// 1 m/s): changing the exposure changes the motion blur only, as if the illumination were adjusted to keep the same
+/// brightness.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SensorModel {
-    /// Exposure time (s). Default 100 µs: short enough for 4 kHz ROIs and < 0.25 px of blur at 1 m/s.
-    pub exposure_s: f64,
     /// Full-well capacity (electrons); the top of the ADC range. Default 10,000 e-: typical of 8-12 µm global-shutter
     /// high-speed CMOS pixels.
     pub full_well_e: f64,
@@ -75,7 +75,6 @@ pub struct SensorModel {
 impl Default for SensorModel {
     fn default() -> Self {
         Self {
-            exposure_s: 100e-6,
             full_well_e: 10_000.0,
             read_noise_e: 10.0,
             shot_noise: true,
@@ -128,7 +127,6 @@ impl SensorModel {
     /// Checks every field: finite, positive where needed, bit depth 1 to 16.
     pub fn validate(&self) -> Result<(), SensorError> {
         for (field, value) in [
-            ("exposure_s", self.exposure_s),
             ("full_well_e", self.full_well_e),
             ("read_noise_e", self.read_noise_e),
             ("blob_signal_e", self.blob_signal_e),
@@ -149,7 +147,6 @@ impl SensorModel {
             }
         }
         for (field, value) in [
-            ("exposure_s", self.exposure_s),
             ("read_noise_e", self.read_noise_e),
             ("blob_signal_e", self.blob_signal_e),
             ("background_e", self.background_e),

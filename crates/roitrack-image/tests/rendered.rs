@@ -9,6 +9,20 @@ use roitrack_image::{
     Threshold, bench_state, centroid_accuracy, detect_blobs, measure_blob, reflection_accuracy,
 };
 
+/// The whole sensor rendered at t = 0 with a seeded generator.
+fn full_frame(r: &RoiRenderer, state_at: &impl Fn(f64) -> MotionState, seed: u64) -> Vec<u16> {
+    let mut frame = roitrack_image::Frame::default();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    r.render_frame(
+        state_at,
+        0.0,
+        &mut rng,
+        &mut roitrack_image::RenderScratch::new(),
+        &mut frame,
+    );
+    frame.pixels
+}
+
 fn renderer(sensor: SensorModel) -> RoiRenderer {
     RoiRenderer::new(CameraModel::canonical(), Target::grid4x4(), sensor).unwrap()
 }
@@ -88,8 +102,8 @@ fn rendering_is_deterministic_per_seed() {
     );
     assert_eq!(d, e);
     let static_at = |_t: f64| bench_state();
-    let f1 = r.render_full_frame(&static_at, 0.0, &mut ChaCha8Rng::seed_from_u64(5));
-    let f2 = r.render_full_frame(&static_at, 0.0, &mut ChaCha8Rng::seed_from_u64(5));
+    let f1 = full_frame(&r, &static_at, 5);
+    let f2 = full_frame(&r, &static_at, 5);
     assert_eq!(f1.len(), 1024 * 1024);
     assert_eq!(f1, f2);
 }
@@ -99,7 +113,7 @@ fn full_frame_and_roi_agree() {
     // A noiseless ROI is the same crop of a noiseless full frame (the blur margin is rendered in both).
     let r = renderer(SensorModel::noiseless());
     let static_at = |_t: f64| bench_state();
-    let frame = r.render_full_frame(&static_at, 0.0, &mut ChaCha8Rng::seed_from_u64(0));
+    let frame = full_frame(&r, &static_at, 0);
     for index in [0, 6, 15] {
         let (roi_pixels, roi) = render_blob(&r, &bench_state(), index, 32, (1.7, -2.2), 0);
         let mut crop = vec![0; roi.len()];
@@ -303,7 +317,7 @@ fn a_second_blob_in_the_roi_does_not_bias_the_first() {
 fn detect_blobs_finds_the_sixteen_blobs() {
     let r = renderer(SensorModel::default());
     let bench = bench_state();
-    let frame = r.render_full_frame(&|_t| bench, 0.0, &mut ChaCha8Rng::seed_from_u64(9));
+    let frame = full_frame(&r, &|_t| bench, 9);
     let blobs = detect_blobs(&frame, 1024, 1024, &CentroidOptions::default());
     assert_eq!(blobs.len(), 16);
     let mut worst: f64 = 0.0;

@@ -1,10 +1,16 @@
 //! # roitrack-pipeline
 //!
-//! The system end to end, around the pure estimator: initialisation from a full frame ([`matching`]), the placement
-//! of each next ROI ([`scheduler`]), and the real-time loop of two threads, acquisition and estimation, joined by
-//! lock-free single-producer single-consumer queues ([`realtime`]).
+//! The system end to end, around the pure estimator: finding the target in a full frame with no prior
+//! ([`matching`], [`find_target`]), the placement of each next ROI ([`scheduler`]), and the real-time loop of two
+//! threads, acquisition and estimation, joined by lock-free single-producer single-consumer queues ([`realtime`]),
+//! driving any [`roitrack_image::RoiCamera`]; and the same tracking offline, from recorded ROI images ([`offline`]).
 
-pub mod cameras;
 pub mod matching;
+pub mod offline;
 pub mod realtime;
 pub mod scheduler;
+
+pub use matching::{MatchError, TargetDetection, find_target, match_full_frame};
+pub use offline::{RoiTrackReport, track_rois};
+pub use realtime::{LoopConfig, LoopReport, PipelineError, run_loop, run_loop_with_progress};
+pub use scheduler::{Predictor, RoiRequest, RoiScheduler, ScheduleOrder, SchedulerConfig};

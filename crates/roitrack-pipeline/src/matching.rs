@@ -10,7 +10,8 @@
 
 use nalgebra::{Vector2, Vector3};
 use roitrack_core::estimator::{Observation, solve_static_pose};
-use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+use roitrack_core::{CameraModel, Measurement, MotionState, SpatioTemporalModel, Target};
+use roitrack_image::{CentroidOptions, Frame, detect_blobs};
 use thiserror::Error;
 
 /// A blob detected in a full frame: raw (distorted) pixel centre and area.
@@ -60,6 +61,98 @@ pub enum MatchError {
     Ambiguous,
     #[error("a blob could not be undistorted: {0}")]
     Undistortion(#[from] roitrack_core::CameraError),
+    #[error(
+        "the frame is {frame_width} x {frame_height} px, the camera's image {camera_width} x {camera_height} px"
+    )]
+    FrameSize {
+        frame_width: u32,
+        frame_height: u32,
+        camera_width: u32,
+        camera_height: u32,
+    },
+}
+
+/// The target found in a full frame ([`find_target`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TargetDetection {
+    /// When the pose holds (s): the frame's time, or for a rolling shutter the time of the matched blobs' mean row.
+    pub t_s: f64,
+    /// The static pose (velocity zero).
+    pub state: MotionState,
+    /// One measurement per matched target point: its blob's centre (raw pixels) at its own time (time model).
+    pub measurements: Vec<Measurement>,
+    /// RMS reprojection residual of the pose (px, per coordinate).
+    pub residual_rms_px: f64,
+    /// Blobs detected in the frame, matched or not.
+    pub blobs_detected: usize,
+}
+
+/// Finds and identifies the target in a full frame with no prior, and solves its static pose: blob detection
+/// ([`detect_blobs`] with `options`' threshold and area limits), matching ([`match_full_frame`]), each blob timed by
+/// the camera's time model.
+///
+/// ```
+/// use rand::SeedableRng;
+/// use rand_chacha::ChaCha8Rng;
+/// use roitrack_core::{CameraModel, MotionState, Target};
+/// use roitrack_image::{CentroidOptions, Frame, RenderScratch, RoiRenderer, SensorModel};
+/// use roitrack_pipeline::find_target;
+/// use nalgebra::{Rotation3, Vector3};
+///
+/// let (camera, target) = (CameraModel::canonical(), Target::grid4x4());
+/// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.2, -0.1, 0.4), Vector3::new(0.01, 0.0, 0.6));
+/// let renderer = RoiRenderer::new(camera.clone(), target.clone(), SensorModel::default()).unwrap();
+/// let mut frame = Frame::default();
+/// let mut rng = ChaCha8Rng::seed_from_u64(1);
+/// renderer.render_frame(&|_t| truth, 0.5, &mut rng, &mut RenderScratch::new(), &mut frame);
+///
+/// let found = find_target(&camera, &target, &frame, &CentroidOptions::default()).unwrap();
+/// assert_eq!(found.measurements.len(), 16);
+/// assert!((found.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-3);
+/// assert_eq!(found.t_s, 0.5);
+/// ```
+pub fn find_target(
+    camera: &CameraModel,
+    target: &Target,
+    frame: &Frame,
+    options: &CentroidOptions,
+) -> Result<TargetDetection, MatchError> {
+    if (frame.width, frame.height) != (camera.width_px, camera.height_px) {
+        return Err(MatchError::FrameSize {
+            frame_width: frame.width,
+            frame_height: frame.height,
+            camera_width: camera.width_px,
+            camera_height: camera.height_px,
+        });
+    }
+    let blobs: Vec<DetectedBlob> = detect_blobs(&frame.pixels, frame.width, frame.height, options)
+        .iter()
+        .map(DetectedBlob::from)
+        .collect();
+    let found = match_full_frame(camera, target, &blobs)?;
+    let time = &camera.time;
+    let measurements: Vec<Measurement> = found
+        .pairs
+        .iter()
+        .map(|&(point_index, blob_index)| {
+            let blob = &blobs[blob_index];
+            Measurement {
+                t_s: time.blob_time_s(frame.t_s, blob.v_px),
+                id: target.points()[point_index].id,
+                u_px: blob.u_px,
+                v_px: blob.v_px,
+            }
+        })
+        .collect();
+    let mean_row_px =
+        measurements.iter().map(|m| m.v_px).sum::<f64>() / measurements.len().max(1) as f64;
+    Ok(TargetDetection {
+        t_s: time.blob_time_s(frame.t_s, mean_row_px),
+        state: found.state,
+        measurements,
+        residual_rms_px: found.residual_rms_px,
+        blobs_detected: blobs.len(),
+    })
 }
 
 /// The result of a full-frame initialisation.

@@ -4,33 +4,22 @@
 //!
 //! The camera side can be paced to a ROI rate (the paper: 4 kHz, one trigger every 250 µs) or free-running. Nothing
 //! allocates in the steady state: buffers and queues are sized when the loop starts. Dropped measurements (queue
-//! full), late triggers (paced mode), rejected blobs and re-initialisations are counted.
+//! full), late triggers (paced mode), rejected blobs, camera errors and re-initialisations are counted. A camera that
+//! ends (disconnected, or the end of a recording) ends the run; what was estimated until then is kept.
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use roitrack_core::estimator::{Estimate, Estimator, Matrix12, Tracker, TrackerConfig};
 use roitrack_core::{CameraModel, Measurement, MotionState, Target};
-use roitrack_image::{BlobRejection, CentroidOptions, Roi, detect_blobs, measure_blob};
+use roitrack_image::{
+    CameraError, CentroidOptions, Frame, RejectionCounts, RoiCamera, RoiImage, RoiTrigger,
+    measure_roi,
+};
 use thiserror::Error;
 
-use crate::matching::{DetectedBlob, match_full_frame};
+use crate::matching::find_target;
 use crate::scheduler::{Predictor, RoiScheduler, SchedulerConfig};
-
-/// A camera that reads one ROI at a time (and, to initialise, a full frame).
-pub trait RoiCamera: Send {
-    /// Exposes and reads the ROI `request` (placed on `point_index`) with its exposure midpoint at `t_mid_s`; writes
-    /// its pixels row-major into `pixels` and returns the ROI actually read (a camera may adjust it).
-    fn grab_roi(
-        &mut self,
-        point_index: usize,
-        request: &Roi,
-        t_mid_s: f64,
-        pixels: &mut [u16],
-    ) -> Roi;
-    /// Reads a full frame with its exposure midpoint at `t_mid_s` (row-major, the camera's width x height).
-    fn grab_full_frame(&mut self, t_mid_s: f64) -> Vec<u16>;
-}
 
 /// Options of the loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,44 +59,6 @@ impl Default for LoopConfig {
     }
 }
 
-/// Counts of rejected blobs, by reason.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct RejectionCounts {
-    pub absent: usize,
-    pub touches_border: usize,
-    pub too_small: usize,
-    pub too_large: usize,
-    /// Not centrally symmetric: a reflection or an occluder merged with the blob.
-    pub asymmetric: usize,
-}
-
-impl RejectionCounts {
-    /// Counts one rejection.
-    pub fn count(&mut self, r: &BlobRejection) {
-        match r {
-            BlobRejection::Absent => self.absent += 1,
-            BlobRejection::TouchesBorder => self.touches_border += 1,
-            BlobRejection::TooSmall { .. } => self.too_small += 1,
-            BlobRejection::TooLarge { .. } => self.too_large += 1,
-            BlobRejection::Asymmetric => self.asymmetric += 1,
-        }
-    }
-
-    pub fn total(&self) -> usize {
-        self.absent + self.touches_border + self.too_small + self.too_large + self.asymmetric
-    }
-}
-
-impl std::fmt::Display for RejectionCounts {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{} absent, {} touching the ROI border, {} too small, {} too large, {} asymmetric",
-            self.absent, self.touches_border, self.too_small, self.too_large, self.asymmetric
-        )
-    }
-}
-
 /// What a run of the loop did.
 #[derive(Debug, Clone)]
 pub struct LoopReport {
@@ -128,6 +79,10 @@ pub struct LoopReport {
     pub failed_initialisations: usize,
     /// Measurements the tracker refused (none expected).
     pub refused: usize,
+    /// Grabs that failed but may be retried (timeouts, dropped buffers).
+    pub camera_errors: usize,
+    /// The camera's end, if it ended the run before its last slot (disconnected, end of a recording).
+    pub stopped_by: Option<CameraError>,
     /// Wall time of the whole run (s).
     pub wall_s: f64,
 }
@@ -136,6 +91,13 @@ impl LoopReport {
     /// ROIs read per second of wall time.
     pub fn rois_per_s(&self) -> f64 {
         self.rois as f64 / self.wall_s.max(1e-12)
+    }
+
+    /// The `q` quantile (nearest rank, 0 to 1) of the ROI-to-estimate latencies (µs); NaN without estimates.
+    pub fn latency_quantile_us(&self, q: f64) -> f64 {
+        let mut sorted = self.latencies_us.clone();
+        sorted.sort_by(f64::total_cmp);
+        roitrack_core::stats::quantile(&sorted, q)
     }
 }
 
@@ -253,7 +215,8 @@ pub fn run_loop_with_progress<C: RoiCamera>(
         let mut scheduler =
             RoiScheduler::new(camera_model.clone(), target.clone(), config.scheduler);
         let max_side = config.scheduler.max_size_px as usize;
-        let mut pixels = vec![0u16; max_side * max_side];
+        let mut image = RoiImage::with_capacity(max_side * max_side);
+        let mut frame = Frame::default();
         let mut predictor: Option<Predictor> = None;
         let mut restart_t_s = f64::NEG_INFINITY;
         let mut report = Counters::default();
@@ -290,29 +253,28 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                 }
             }
             if predictor.is_none() || scheduler.needs_reinitialisation() {
-                let frame = camera.grab_full_frame(t_s);
-                let blobs: Vec<DetectedBlob> = detect_blobs(
-                    &frame,
-                    camera_model.width_px,
-                    camera_model.height_px,
-                    &config.centroid,
-                )
-                .iter()
-                .map(DetectedBlob::from)
-                .collect();
-                match match_full_frame(camera_model, target, &blobs) {
-                    Ok(m) => {
+                if let Err(e) = camera.grab_full_frame(t_s, &mut frame) {
+                    if !e.is_transient() {
+                        report.stopped_by = Some(e);
+                        break;
+                    }
+                    report.camera_errors += 1;
+                    slot += config.full_frame_slots.max(1);
+                    continue;
+                }
+                match find_target(camera_model, target, &frame, &config.centroid) {
+                    Ok(found) => {
                         predictor = Some(Predictor {
-                            t_ref_s: t_s,
-                            state: m.state,
+                            t_ref_s: found.t_s,
+                            state: found.state,
                             covariance: Some(full_frame_covariance()),
                         });
-                        restart_t_s = t_s;
+                        restart_t_s = found.t_s;
                         scheduler.reset();
                         let mut spins = 0;
                         let mut event = Event::Restart {
-                            t_s,
-                            state: m.state,
+                            t_s: found.t_s,
+                            state: found.state,
                         };
                         loop {
                             match measurement_tx.push(event) {
@@ -342,18 +304,25 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                 slot += 1;
                 continue;
             };
-            let roi = camera.grab_roi(request.point_index, &request.roi, t_s, &mut pixels);
+            let trigger = RoiTrigger {
+                point_id: target.points()[request.point_index].id,
+                roi: request.roi,
+                t_s,
+            };
+            if let Err(e) = camera.grab_roi(&trigger, &mut image) {
+                if !e.is_transient() {
+                    report.stopped_by = Some(e);
+                    break;
+                }
+                report.camera_errors += 1;
+                slot += 1;
+                continue;
+            }
             let grabbed = Instant::now();
             report.rois += 1;
-            match measure_blob(&pixels[..roi.len()], &roi, &config.centroid) {
-                Ok(c) => {
+            match measure_roi(&image, &config.centroid, &camera_model.time) {
+                Ok(m) => {
                     scheduler.report(request.point_index, true);
-                    let m = Measurement {
-                        t_s,
-                        id: target.points()[request.point_index].id,
-                        u_px: c.u_px,
-                        v_px: c.v_px,
-                    };
                     if measurement_tx
                         .push(Event::Measurement { m, grabbed })
                         .is_err()
@@ -387,6 +356,8 @@ pub fn run_loop_with_progress<C: RoiCamera>(
         initialisations: camera_side.initialisations,
         failed_initialisations: camera_side.failed_initialisations,
         refused,
+        camera_errors: camera_side.camera_errors,
+        stopped_by: camera_side.stopped_by,
         wall_s: start.elapsed().as_secs_f64(),
     })
 }
@@ -400,4 +371,6 @@ struct Counters {
     late: usize,
     initialisations: usize,
     failed_initialisations: usize,
+    camera_errors: usize,
+    stopped_by: Option<CameraError>,
 }

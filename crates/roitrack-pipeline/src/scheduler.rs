@@ -2,7 +2,7 @@
 //!
 //! Each ROI is centred on the point's predicted raw pixel at the ROI's exposure midpoint, using the latest estimate
 //! (pose and twist) carried forward to that time. Its size is the predicted blob diameter, plus the blob's motion
-//! during the exposure, plus the optical blur, plus `sigma_margin` standard deviations of the prediction's image
+//! during the exposure (the camera's time model), plus the optical blur, plus `sigma_margin` standard deviations of the prediction's image
 //! uncertainty (the state covariance pushed through the exact 2 x 12 Jacobian at the exposure time), clamped to
 //! `[min_size_px, max_size_px]` and to the sensor.
 
@@ -46,8 +46,6 @@ pub struct SchedulerConfig {
     pub sigma_margin: f64,
     /// Extra margin on each side for the optical blur and the blob's edge (px).
     pub blur_margin_px: f64,
-    /// Exposure time (s): the blob moves during it.
-    pub exposure_s: f64,
     /// Centroid noise (px) for the information gain of the active order.
     pub noise_px: f64,
     /// Consecutive misses after which a point counts as lost.
@@ -71,7 +69,6 @@ impl Default for SchedulerConfig {
             max_size_px: 64,
             sigma_margin: 4.0,
             blur_margin_px: 3.0,
-            exposure_s: 100e-6,
             noise_px: 0.1,
             misses_for_lost: 2,
             lost_points_for_reinit: 4,
@@ -226,8 +223,8 @@ impl RoiScheduler {
         let diameter_px = self.camera.intrinsics.fx_px
             * point.diameter_m.unwrap_or(self.config.default_diameter_m)
             / projected.point_in_cam_m.z;
-        // Image motion over the exposure, from the twist.
-        let half = 0.5 * self.config.exposure_s;
+        // Image motion over the exposure (the camera's), from the twist.
+        let half = 0.5 * self.camera.time.exposure_s;
         let smear_px = match (
             self.model
                 .project(&predictor.state, &point.point_in_obj_m, d_s - half),

@@ -20,7 +20,15 @@ fn initialises_from_a_rendered_full_frame() {
         .unwrap();
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(3);
         let start = std::time::Instant::now();
-        let frame = renderer.render_full_frame(&|t| scenario.state_at(t), t, &mut rng);
+        let mut frame = roitrack_image::Frame::default();
+        renderer.render_frame(
+            &|t| scenario.state_at(t),
+            t,
+            &mut rng,
+            &mut roitrack_image::RenderScratch::new(),
+            &mut frame,
+        );
+        let frame = frame.pixels;
         let render_s = start.elapsed().as_secs_f64();
         let blobs: Vec<DetectedBlob> =
             detect_blobs(&frame, 1024, 1024, &CentroidOptions::default())

@@ -1,8 +1,8 @@
 //! The loop end to end on rendered ROIs: it initialises from a full frame, tracks, drops nothing.
 
 use roitrack_core::estimator::{TrackStatus, TrackerConfig};
+use roitrack_image::SimulatedCamera;
 use roitrack_image::{RoiRenderer, SensorModel};
-use roitrack_pipeline::cameras::SimulatedCamera;
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};
 
@@ -60,9 +60,9 @@ fn tracks_orthoglide_from_rendered_rois() {
 
 #[test]
 fn reflections_add_a_spot_that_moves_the_centroid_and_nothing_else() {
-    use roitrack_image::{CentroidOptions, Roi, measure_blob};
-    use roitrack_pipeline::cameras::ReflectionFault;
-    use roitrack_pipeline::realtime::RoiCamera;
+    use roitrack_image::{
+        CentroidOptions, ReflectionFault, Roi, RoiCamera, RoiImage, RoiTrigger, measure_blob,
+    };
     let (scenario, renderer) = orthoglide_with_renderer();
     let state = scenario.state_at(0.1);
     let p = scenario.target.points()[5].point_in_obj_m;
@@ -86,22 +86,28 @@ fn reflections_add_a_spot_that_moves_the_centroid_and_nothing_else() {
     };
     let mut unaffected = SimulatedCamera::new(renderer, truth, 3).with_reflections(never);
     let (mut a, mut b, mut c) = (
-        vec![0u16; roi.len()],
-        vec![0u16; roi.len()],
-        vec![0u16; roi.len()],
+        RoiImage::default(),
+        RoiImage::default(),
+        RoiImage::default(),
     );
     for k in 0..20 {
         let t = 0.1 + k as f64 * 250e-6;
-        clean.grab_roi(5, &roi, t, &mut a);
-        faulty.grab_roi(5, &roi, t, &mut b);
-        unaffected.grab_roi(5, &roi, t, &mut c);
+        let trigger = RoiTrigger {
+            point_id: 5,
+            roi,
+            t_s: t,
+        };
+        clean.grab_roi(&trigger, &mut a).unwrap();
+        faulty.grab_roi(&trigger, &mut b).unwrap();
+        unaffected.grab_roi(&trigger, &mut c).unwrap();
+        assert_eq!((a.t_s, a.roi, a.point_id), (t, roi, 5));
         // The fault draws from its own generator: without reflections the pixels are the clean camera's.
         assert_eq!(a, c);
         assert_ne!(a, b);
         let opts = CentroidOptions::default();
-        let clean_centroid = measure_blob(&a, &roi, &opts).unwrap();
+        let clean_centroid = measure_blob(&a.pixels, &roi, &opts).unwrap();
         // Twice as bright as the blob, the spot takes the centroid (or the blob is rejected when it reaches the border).
-        if let Ok(faulty_centroid) = measure_blob(&b, &roi, &opts) {
+        if let Ok(faulty_centroid) = measure_blob(&b.pixels, &roi, &opts) {
             let moved = ((faulty_centroid.u_px - clean_centroid.u_px).powi(2)
                 + (faulty_centroid.v_px - clean_centroid.v_px).powi(2))
             .sqrt();

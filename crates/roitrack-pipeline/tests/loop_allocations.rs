@@ -7,8 +7,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use roitrack_core::estimator::{EstimatorConfig, TrackerConfig, VvsSettings};
 use roitrack_core::roi_order::bit_reversed_indices;
+use roitrack_image::ReplayCamera;
 use roitrack_image::{RoiRenderer, SensorModel};
-use roitrack_pipeline::cameras::ReplayCamera;
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};
 
@@ -65,7 +65,8 @@ fn steady_state_loop_does_not_allocate() {
         };
         let mut counts = Vec::new();
         for slots in [n, 2 * n] {
-            let camera = replay.rewound_copy();
+            let mut camera = replay.clone();
+            camera.rewind();
             let config = LoopConfig {
                 roi_slots: slots,
                 t_start_s: 0.3,

@@ -5,9 +5,13 @@
 //! * `fig6_position`: (a) true position, (b) position estimated by the first run, (c) position error of every run,
 //!   (d) image residual RMS of every run, against time;
 //! * `fig7_velocity`: (a) true velocity, (b) velocity estimated by the first run, (c) velocity error of every run,
-//!   (d) error statistics of every run (RMS errors, velocity delay, mean residual).
+//!   (d) error statistics of every run (RMS errors, velocity lag, mean residual).
 //!
-//! Each is written as PNG and SVG by the same drawing code. Lengths are shown in mm, velocities in mm/s.
+//! The figures compute no statistic of their own: the errors, RMS values and velocity lag of a run are those of
+//! roitrack-eval ([`EstimateErrors`], [`Metrics`]), handed over with the run ([`TrackSeries::from_estimates`]), so
+//! that a figure and a metrics table never disagree. Only the axis ranges are chosen here.
+//!
+//! Each figure is written as PNG and SVG by the same drawing code. Lengths are shown in mm, velocities in mm/s.
 
 use std::path::{Path, PathBuf};
 
@@ -15,71 +19,133 @@ use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
+use roitrack_core::estimator::Estimate;
+use roitrack_core::stats;
+use roitrack_eval::{EstimateErrors, Metrics};
 
 use crate::{FONT, PlotError, register_font};
 
-/// One estimator's output at its estimate times.
+/// One estimator's output at its estimate times, with its errors and metrics as roitrack-eval computes them.
+///
+/// Positions and velocities are those of the target origin, in the camera frame. Every vector holds one entry per
+/// time of `t_s`, except those documented as possibly empty.
 #[derive(Debug, Clone, Default)]
 pub struct TrackSeries {
     /// Legend text, e.g. `"kalman (default)"`.
     pub label: String,
     /// Estimate times (s), on the same clock as the truth.
     pub t_s: Vec<f64>,
-    /// Camera-frame x, y, z of the target origin (m), one per time.
+    /// Estimated camera-frame x, y, z of the target origin (m).
     pub position_m: Vec<[f64; 3]>,
-    /// Camera-frame velocity of the target origin (m/s), one per time.
+    /// Estimated camera-frame velocity of the target origin (m/s).
     pub velocity_mps: Vec<[f64; 3]>,
-    /// Image residual RMS per point (px), one per time; empty when the estimator has none.
+    /// Image residual RMS (px) as the estimator reports it ([`Estimate::residual_rms_px`]); empty when the
+    /// estimator has none.
     pub residual_rms_px: Vec<f64>,
+    /// Position error, estimate minus truth at the same time, camera frame (m): [`EstimateErrors::position_m`].
+    pub position_error_m: Vec<[f64; 3]>,
+    /// Linear velocity error, estimate minus truth at the same time, camera frame (m/s):
+    /// [`EstimateErrors::velocity_mps`]; empty when the truth or the estimate has no twists.
+    pub velocity_error_mps: Vec<[f64; 3]>,
+    /// The run's metrics, whose RMS errors (mm, mm/s), velocity lag and estimate count the figures show; `None`
+    /// shows no number for this run.
+    pub metrics: Option<Metrics>,
+    /// Mean of the finite values of `residual_rms_px` (px); `None` when there are none.
+    pub mean_residual_px: Option<f64>,
 }
 
-/// The true motion, sampled densely (times ascending).
+impl TrackSeries {
+    /// The series of a tracker's `estimates`, with the `errors` and `metrics` of roitrack-eval for these same
+    /// estimates (as [`roitrack_eval::estimate_errors_of`] and [`EstimateErrors::metrics`] give them).
+    ///
+    /// ```
+    /// use roitrack_core::estimator::{TrackerConfig, track_all};
+    /// use roitrack_eval::{EvalOptions, estimate_errors_of};
+    /// use roitrack_plot::{TrackSeries, TruthSeries, write_figures};
+    /// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
+    ///
+    /// let run = simulate(&Scenario::new(ScenarioKind::Static, 1), &SimulationOptions::default()).unwrap();
+    /// let (estimates, _) = track_all(&run.camera, &run.target, TrackerConfig::default(), &run.measurements).unwrap();
+    /// let opts = EvalOptions::default();
+    /// let errors = estimate_errors_of(&run.truth_poses, &run.truth_twists, &estimates, &opts).unwrap();
+    /// let series = TrackSeries::from_estimates("kalman", &estimates, &errors, errors.metrics(&opts));
+    /// assert_eq!(series.position_error_m.len(), estimates.len());
+    /// assert_eq!(series.metrics.as_ref().map(|m| m.count), Some(estimates.len()));
+    /// assert!(series.mean_residual_px.is_some());
+    ///
+    /// let truth = TruthSeries {
+    ///     t_s: run.truth_poses.iter().map(|p| p.t_s).collect(),
+    ///     position_m: run.truth_poses.iter().map(|p| p.cam_from_obj.translation.vector.into()).collect(),
+    ///     velocity_mps: run.truth_twists.iter().map(|w| w.velocity_mps.into()).collect(),
+    /// };
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let paths = write_figures(dir.path(), "static", &truth, &[series]).unwrap();
+    /// assert_eq!(paths.len(), 6);
+    /// ```
+    pub fn from_estimates(
+        label: impl Into<String>,
+        estimates: &[Estimate],
+        errors: &EstimateErrors,
+        metrics: Metrics,
+    ) -> Self {
+        let residual_rms_px: Vec<f64> = estimates.iter().map(|e| e.residual_rms_px).collect();
+        let (position_error_m, velocity_error_mps) = error_columns(errors);
+        Self {
+            label: label.into(),
+            t_s: estimates.iter().map(|e| e.t_ref_s).collect(),
+            position_m: estimates
+                .iter()
+                .map(|e| e.state.cam_t_obj_m.into())
+                .collect(),
+            velocity_mps: estimates
+                .iter()
+                .map(|e| e.state.velocity_mps.into())
+                .collect(),
+            mean_residual_px: finite_mean(&residual_rms_px),
+            residual_rms_px,
+            position_error_m,
+            velocity_error_mps,
+            metrics: Some(metrics),
+        }
+    }
+}
+
+/// The position and velocity errors of `errors` as plain arrays (m, m/s); no velocity errors without twists.
+fn error_columns(errors: &EstimateErrors) -> (Vec<[f64; 3]>, Vec<[f64; 3]>) {
+    let position = errors.position_m.iter().map(|&e| e.into()).collect();
+    let velocity = errors
+        .velocity_mps
+        .as_ref()
+        .map_or_else(Vec::new, |v| v.iter().map(|&e| e.into()).collect());
+    (position, velocity)
+}
+
+/// The mean of the finite values; `None` when there are none (an estimator may report no residual).
+fn finite_mean(values: &[f64]) -> Option<f64> {
+    let finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    (!finite.is_empty()).then(|| stats::mean(&finite))
+}
+
+/// The true motion of the target origin, sampled densely, drawn as the reference of every panel.
 #[derive(Debug, Clone, Default)]
 pub struct TruthSeries {
+    /// Sample times (s), finite and ascending, on the same clock as the runs.
     pub t_s: Vec<f64>,
+    /// True camera-frame x, y, z of the target origin (m), one per time.
     pub position_m: Vec<[f64; 3]>,
+    /// True camera-frame velocity of the target origin (m/s), one per time.
     pub velocity_mps: Vec<[f64; 3]>,
-}
-
-impl TruthSeries {
-    /// Position (m) and velocity (m/s) at time `t` by linear interpolation between the two samples around it.
-    /// Outside the sampled time span (or when `t` is not finite) both are NaN.
-    pub fn truth_at(&self, t: f64) -> ([f64; 3], [f64; 3]) {
-        const NAN3: [f64; 3] = [f64::NAN; 3];
-        let n = self
-            .t_s
-            .len()
-            .min(self.position_m.len())
-            .min(self.velocity_mps.len());
-        if n == 0 || !t.is_finite() {
-            return (NAN3, NAN3);
-        }
-        let ts = &self.t_s[..n];
-        let tol = 1e-9 * (1.0 + t.abs());
-        if t < ts[0] - tol || t > ts[n - 1] + tol {
-            return (NAN3, NAN3);
-        }
-        let k = ts.partition_point(|&s| s <= t);
-        if k == 0 {
-            return (self.position_m[0], self.velocity_mps[0]);
-        }
-        if k == n {
-            return (self.position_m[n - 1], self.velocity_mps[n - 1]);
-        }
-        let (i, j) = (k - 1, k);
-        let dt = ts[j] - ts[i];
-        let a = if dt > 0.0 { (t - ts[i]) / dt } else { 0.0 };
-        let lerp = |p: &[f64; 3], q: &[f64; 3]| std::array::from_fn(|c| p[c] + a * (q[c] - p[c]));
-        (
-            lerp(&self.position_m[i], &self.position_m[j]),
-            lerp(&self.velocity_mps[i], &self.velocity_mps[j]),
-        )
-    }
 }
 
 /// Writes `fig5_trajectory`, `fig6_position` and `fig7_velocity` (each `.png` and `.svg`) into `dir` (created if
 /// needed) and returns the six paths. `runs[0]` is the estimator shown in panels (b) of figures 6 and 7.
-/// Non-finite values are skipped; every run is compared with `truth` interpolated at its estimate times.
+///
+/// Non-finite values are skipped when drawing. The errors and numbers shown are those each run carries
+/// ([`TrackSeries::position_error_m`], [`TrackSeries::metrics`], ...): nothing is compared with `truth` here.
+///
+/// Fails with [`PlotError::Invalid`] when the truth's or a run's vectors disagree in length (or a run's metrics
+/// count other estimates than its times), with [`PlotError::Empty`] when there is no run or nothing finite to draw,
+/// and with [`PlotError::Draw`] when a file cannot be written.
 pub fn write_figures(
     dir: &Path,
     scenario: &str,
@@ -127,9 +193,6 @@ pub fn write_figures(
 const MM: f64 = 1e3;
 const FIG5_SIZE: (u32, u32) = (1400, 820);
 const FIG67_SIZE: (u32, u32) = (1400, 1000);
-/// Search window and step of the velocity delay estimate.
-const DELAY_MAX_S: f64 = 0.05;
-const DELAY_STEP_S: f64 = 0.5e-3;
 
 const AXES: [&str; 3] = ["x", "y", "z"];
 const AXIS_COLORS: [RGBColor; 3] = [
@@ -157,17 +220,7 @@ struct Truth {
     vel: [Vec<f64>; 3],
 }
 
-struct Stats {
-    /// RMS of the x, y, z errors and of the 3-D error norm (mm).
-    pos_rms: [f64; 4],
-    /// Same for velocity (mm/s).
-    vel_rms: [f64; 4],
-    /// Shift of the truth that best matches the estimated velocity (s); positive when the estimate lags.
-    vel_delay: Option<Delay>,
-    residual_mean: Option<f64>,
-    n: usize,
-}
-
+/// A run ready to draw: columns in mm and mm/s.
 struct Run<'a> {
     label: &'a str,
     color: RGBColor,
@@ -175,9 +228,11 @@ struct Run<'a> {
     pos: [Vec<f64>; 3],
     vel: [Vec<f64>; 3],
     pos_err: [Vec<f64>; 3],
+    /// Empty columns when the run has no velocity errors.
     vel_err: [Vec<f64>; 3],
     residual: Vec<f64>,
-    stats: Stats,
+    metrics: Option<&'a Metrics>,
+    mean_residual_px: Option<f64>,
 }
 
 impl Run<'_> {
@@ -246,19 +301,32 @@ impl<'a> Data<'a> {
         }
         for r in runs {
             let m = r.t_s.len();
+            let empty_or_m = |len: usize| len == 0 || len == m;
             if r.position_m.len() != m
                 || r.velocity_mps.len() != m
-                || !(r.residual_rms_px.is_empty() || r.residual_rms_px.len() == m)
+                || !empty_or_m(r.residual_rms_px.len())
+                || r.position_error_m.len() != m
+                || !empty_or_m(r.velocity_error_mps.len())
             {
                 return Err(invalid(
                     &format!("run '{}'", r.label),
                     format!(
-                        "{} times, {} positions, {} velocities, {} residuals",
+                        "{} times, {} positions, {} velocities, {} residuals, {} position errors, {} velocity \
+                         errors",
                         m,
                         r.position_m.len(),
                         r.velocity_mps.len(),
-                        r.residual_rms_px.len()
+                        r.residual_rms_px.len(),
+                        r.position_error_m.len(),
+                        r.velocity_error_mps.len()
                     ),
+                ));
+            }
+            // Metrics of other estimates than those drawn would label the curves with foreign numbers.
+            if let Some(metrics) = r.metrics.as_ref().filter(|metrics| metrics.count != m) {
+                return Err(invalid(
+                    &format!("run '{}'", r.label),
+                    format!("{} times but metrics of {} estimates", m, metrics.count),
                 ));
             }
         }
@@ -281,7 +349,7 @@ impl<'a> Data<'a> {
         let runs: Vec<Run> = runs
             .iter()
             .enumerate()
-            .map(|(i, r)| prepare_run(truth, r, RUN_COLORS[i % RUN_COLORS.len()]))
+            .map(|(i, r)| prepare_run(r, RUN_COLORS[i % RUN_COLORS.len()]))
             .collect();
         let t_range = finite_range(
             std::iter::once(truth_data.t.as_slice()).chain(runs.iter().map(|r| r.t.as_slice())),
@@ -303,162 +371,19 @@ impl<'a> Data<'a> {
     }
 }
 
-fn prepare_run<'a>(truth: &TruthSeries, r: &'a TrackSeries, color: RGBColor) -> Run<'a> {
-    let at: Vec<([f64; 3], [f64; 3])> = r.t_s.iter().map(|&t| truth.truth_at(t)).collect();
-    let pos = columns(&r.position_m, MM);
-    let vel = columns(&r.velocity_mps, MM);
-    let pos_err: [Vec<f64>; 3] = std::array::from_fn(|c| {
-        r.position_m
-            .iter()
-            .zip(&at)
-            .map(|(p, (tp, _))| (p[c] - tp[c]) * MM)
-            .collect()
-    });
-    let vel_err: [Vec<f64>; 3] = std::array::from_fn(|c| {
-        r.velocity_mps
-            .iter()
-            .zip(&at)
-            .map(|(v, (_, tv))| (v[c] - tv[c]) * MM)
-            .collect()
-    });
-    let residual_mean = mean(&r.residual_rms_px);
-    let stats = Stats {
-        pos_rms: rms4(&pos_err),
-        vel_rms: rms4(&vel_err),
-        vel_delay: velocity_delay(truth, &r.t_s, &r.velocity_mps),
-        residual_mean,
-        n: r.t_s
-            .iter()
-            .zip(&r.position_m)
-            .filter(|(t, p)| t.is_finite() && p.iter().all(|v| v.is_finite()))
-            .count(),
-    };
+fn prepare_run(r: &TrackSeries, color: RGBColor) -> Run<'_> {
     Run {
         label: &r.label,
         color,
         t: r.t_s.clone(),
-        pos,
-        vel,
-        pos_err,
-        vel_err,
+        pos: columns(&r.position_m, MM),
+        vel: columns(&r.velocity_mps, MM),
+        pos_err: columns(&r.position_error_m, MM),
+        vel_err: columns(&r.velocity_error_mps, MM),
         residual: r.residual_rms_px.clone(),
-        stats,
+        metrics: r.metrics.as_ref(),
+        mean_residual_px: r.mean_residual_px,
     }
-}
-
-fn mean(v: &[f64]) -> Option<f64> {
-    let (s, n) = v
-        .iter()
-        .filter(|x| x.is_finite())
-        .fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
-    (n > 0).then(|| s / n as f64)
-}
-
-/// RMS of each component and of the norm, over the samples where they are finite.
-fn rms4(e: &[Vec<f64>; 3]) -> [f64; 4] {
-    let rms = |it: &mut dyn Iterator<Item = f64>| {
-        let (s, n) = it
-            .filter(|x| x.is_finite())
-            .fold((0.0, 0usize), |(s, n), x| (s + x * x, n + 1));
-        if n > 0 {
-            (s / n as f64).sqrt()
-        } else {
-            f64::NAN
-        }
-    };
-    let norm = rms(&mut (0..e[0].len()).map(|i| {
-        let (a, b, c) = (e[0][i], e[1][i], e[2][i]);
-        (a * a + b * b + c * c).sqrt()
-    }));
-    [
-        rms(&mut e[0].iter().copied()),
-        rms(&mut e[1].iter().copied()),
-        rms(&mut e[2].iter().copied()),
-        norm,
-    ]
-}
-
-/// A delay estimate: the shift `d` of the truth (s) and its standard error (s).
-#[derive(Debug, Clone, Copy)]
-struct Delay {
-    s: f64,
-    stderr_s: f64,
-}
-
-/// Above this standard error the delay is reported as not measurable.
-const DELAY_MAX_STDERR_S: f64 = 2e-3;
-
-/// The shift `d` (within ±DELAY_MAX_S) minimising the mean squared difference between the estimated velocity at
-/// `t` and the true velocity at `t - d`, over the estimates far enough from the ends of the truth for every shift
-/// to be compared on the same samples. Its standard error is the least-squares one, σ² / Σ|a(t - d)|², with σ² the
-/// per-component variance left at the best shift and `a` the true acceleration. `None` when there are too few
-/// samples, the truth does not accelerate or the best shift is at the edge of the window.
-fn velocity_delay(truth: &TruthSeries, t: &[f64], v: &[[f64; 3]]) -> Option<Delay> {
-    let (&t_first, &t_last) = (truth.t_s.first()?, truth.t_s.last()?);
-    let samples: Vec<(f64, [f64; 3])> = t
-        .iter()
-        .zip(v)
-        .filter(|(t, v)| {
-            t.is_finite()
-                && **t >= t_first + DELAY_MAX_S + 1e-3
-                && **t <= t_last - DELAY_MAX_S - 1e-3
-                && v.iter().all(|x| x.is_finite())
-        })
-        .map(|(&t, &v)| (t, v))
-        .collect();
-    if samples.len() < 10 {
-        return None;
-    }
-    let mse = |d: f64| -> f64 {
-        samples
-            .iter()
-            .map(|(t, v)| {
-                let tv = truth.truth_at(t - d).1;
-                (0..3).map(|c| (v[c] - tv[c]).powi(2)).sum::<f64>()
-            })
-            .sum::<f64>()
-            / samples.len() as f64
-    };
-    let steps = (DELAY_MAX_S / DELAY_STEP_S).round() as i64;
-    let mut best = (f64::INFINITY, 0i64);
-    for k in -steps..=steps {
-        let e = mse(k as f64 * DELAY_STEP_S);
-        if e < best.0 {
-            best = (e, k);
-        }
-    }
-    if !best.0.is_finite() || best.1.abs() == steps {
-        return None;
-    }
-    // A parabola through the best grid point and its neighbours refines the shift below the grid step.
-    let (m_lo, m_hi) = (
-        mse((best.1 - 1) as f64 * DELAY_STEP_S),
-        mse((best.1 + 1) as f64 * DELAY_STEP_S),
-    );
-    let curvature = m_lo - 2.0 * best.0 + m_hi;
-    let offset = if curvature > 0.0 {
-        (0.5 * (m_lo - m_hi) / curvature).clamp(-0.5, 0.5)
-    } else {
-        0.0
-    };
-    let d = (best.1 as f64 + offset) * DELAY_STEP_S;
-    let h = 0.5e-3;
-    let accel2: f64 = samples
-        .iter()
-        .map(|(t, _)| {
-            let (a, b) = (truth.truth_at(t - d + h).1, truth.truth_at(t - d - h).1);
-            (0..3)
-                .map(|c| ((a[c] - b[c]) / (2.0 * h)).powi(2))
-                .sum::<f64>()
-        })
-        .filter(|x| x.is_finite())
-        .sum();
-    if accel2 <= 1e-12 {
-        return None;
-    }
-    let variance = best.0 / 3.0;
-    let stderr_s = (variance / accel2).sqrt();
-    Some(Delay { s: d, stderr_s })
 }
 
 fn finite_range<'b>(vs: impl IntoIterator<Item = &'b [f64]>) -> Option<(f64, f64)> {
@@ -473,19 +398,13 @@ fn finite_range<'b>(vs: impl IntoIterator<Item = &'b [f64]>) -> Option<(f64, f64
 }
 
 fn sorted_finite<'b>(vs: impl IntoIterator<Item = &'b [f64]>, abs: bool) -> Vec<f64> {
-    let mut v: Vec<f64> = vs
+    let v: Vec<f64> = vs
         .into_iter()
         .flatten()
         .filter(|v| v.is_finite())
         .map(|&v| if abs { v.abs() } else { v })
         .collect();
-    v.sort_by(f64::total_cmp);
-    v
-}
-
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    let i = (q * (sorted.len() - 1) as f64).round() as usize;
-    sorted[i.min(sorted.len() - 1)]
+    stats::sorted(&v)
 }
 
 /// A range holding every finite value of `exact` (the truth) and the 0.5–99.5 % quantiles of `robust` (the
@@ -498,8 +417,8 @@ fn robust_range(exact: &[&[f64]], robust: &[&[f64]], min_span: f64) -> (f64, f64
     }
     let sorted = sorted_finite(robust.iter().copied(), false);
     if !sorted.is_empty() {
-        lo = lo.min(quantile(&sorted, 0.005));
-        hi = hi.max(quantile(&sorted, 0.995));
+        lo = lo.min(stats::quantile(&sorted, 0.005));
+        hi = hi.max(stats::quantile(&sorted, 0.995));
     }
     if lo > hi {
         return (-min_span / 2.0, min_span / 2.0);
@@ -523,7 +442,7 @@ fn error_limit(errs: &[&[f64]], min: f64) -> f64 {
     if sorted.is_empty() {
         return min;
     }
-    (1.2 * quantile(&sorted, 0.99)).max(min)
+    (1.2 * stats::quantile(&sorted, 0.99)).max(min)
 }
 
 /// Number of finite values outside `r`.
@@ -1077,10 +996,15 @@ where
     let truth_style = BLACK.mix(0.3).stroke_width(6);
     let mut keys = vec![truth_key(truth_style)];
     keys.extend(d.runs.iter().enumerate().map(|(i, r)| Key {
-        label: format!(
-            "{} (3-D position RMS error {} mm)",
-            r.label,
-            num(r.stats.pos_rms[3])
+        label: r.metrics.map_or_else(
+            || r.label.to_string(),
+            |m| {
+                format!(
+                    "{} (3-D position RMS error {} mm)",
+                    r.label,
+                    num(m.position_rmse_mm)
+                )
+            },
         ),
         style: r.style(i),
     }));
@@ -1315,10 +1239,12 @@ impl Quantity {
             Self::Velocity => &r.vel_err,
         }
     }
-    fn rms(self, r: &Run) -> [f64; 4] {
+    /// The run's RMS error along x, y, z and of the 3-D error (mm or mm/s), from its metrics; `None` without them.
+    fn rms(self, r: &Run) -> Option<([f64; 3], f64)> {
+        let m = r.metrics?;
         match self {
-            Self::Position => r.stats.pos_rms,
-            Self::Velocity => r.stats.vel_rms,
+            Self::Position => Some((m.position_rmse_xyz_mm, m.position_rmse_mm)),
+            Self::Velocity => Some((m.velocity_rmse_xyz_mm_s?, m.velocity_rmse_mm_s?)),
         }
     }
 }
@@ -1417,7 +1343,19 @@ where
         .iter()
         .enumerate()
         .map(|(i, r)| Key {
-            label: format!("{} (3-D RMS {} {unit})", r.label, num(q.rms(r)[3])),
+            label: q.rms(r).map_or_else(
+                || r.label.to_string(),
+                |(xyz, norm)| {
+                    format!(
+                        "{} (RMS x {} · y {} · z {} · 3-D {} {unit})",
+                        r.label,
+                        num(xyz[0]),
+                        num(xyz[1]),
+                        num(xyz[2]),
+                        num(norm)
+                    )
+                },
+            ),
             style: r.style(i),
         })
         .collect();
@@ -1487,7 +1425,7 @@ where
             label: format!(
                 "{} (mean {} px)",
                 r.label,
-                r.stats.residual_mean.map_or("–".to_string(), num)
+                r.mean_residual_px.map_or("–".to_string(), num)
             ),
             style: r.style(*i),
         })
@@ -1553,7 +1491,7 @@ where
     let cols = [x0 + 8, x0 + 120, x0 + 228, x0 + 336, x0 + 444, x0 + 570];
     let line_h = 24;
     let mut y = 14;
-    let bottom = h as i32 - 12 - 2 * line_h;
+    let bottom = h as i32 - 12 - FOOTNOTES.len() as i32 * line_h;
     for (i, r) in d.runs.iter().enumerate() {
         if y + 4 * line_h > bottom {
             let left = d.runs.len() - i;
@@ -1564,7 +1502,6 @@ where
                     font(14, &NOTE),
                 ))
                 .map_err(de)?;
-            y += line_h;
             break;
         }
         inner
@@ -1573,31 +1510,33 @@ where
                 r.style(i),
             ))
             .map_err(de)?;
-        inner
-            .draw(&Text::new(
+        let title = r.metrics.map_or_else(
+            || r.label.to_string(),
+            |m| {
                 format!(
                     "{}  ({} estimate{})",
                     r.label,
-                    r.stats.n,
-                    if r.stats.n == 1 { "" } else { "s" }
-                ),
-                (x0 + 32, y),
-                font(16, &BLACK),
-            ))
+                    m.count,
+                    if m.count == 1 { "" } else { "s" }
+                )
+            },
+        );
+        inner
+            .draw(&Text::new(title, (x0 + 32, y), font(16, &BLACK)))
             .map_err(de)?;
         y += line_h + 2;
-        for (name, v, unit) in [
-            ("position", r.stats.pos_rms, "mm"),
-            ("velocity", r.stats.vel_rms, "mm/s"),
-        ] {
-            let cells = [
-                name.to_string(),
-                format!("x {}", num(v[0])),
-                format!("y {}", num(v[1])),
-                format!("z {}", num(v[2])),
-                format!("3-D {}", num(v[3])),
-                unit.to_string(),
-            ];
+        for q in [Quantity::Position, Quantity::Velocity] {
+            let cells = match q.rms(r) {
+                Some((xyz, norm)) => vec![
+                    q.name().to_string(),
+                    format!("x {}", num(xyz[0])),
+                    format!("y {}", num(xyz[1])),
+                    format!("z {}", num(xyz[2])),
+                    format!("3-D {}", num(norm)),
+                    q.unit().to_string(),
+                ],
+                None => vec![q.name().to_string(), "n/a".to_string()],
+            };
             for (text, &x) in cells.iter().zip(&cols) {
                 inner
                     .draw(&Text::new(text.clone(), (x, y), font(15, &BLACK)))
@@ -1605,48 +1544,21 @@ where
             }
             y += line_h;
         }
-        let delay = match r.stats.vel_delay {
-            Some(Delay { stderr_s, .. }) if stderr_s > DELAY_MAX_STDERR_S => {
-                format!(
-                    "delay not measurable (± {} ms: too noisy)",
-                    num(stderr_s * 1e3)
-                )
-            }
-            Some(Delay { s, stderr_s }) => {
-                let pm = format!("{} ± {} ms", num(s.abs() * 1e3), num(stderr_s * 1e3));
-                if s > 0.0 {
-                    format!("estimate lags the truth by {pm}")
-                } else if s < 0.0 {
-                    format!("estimate leads the truth by {pm}")
-                } else {
-                    format!("no delay (± {} ms)", num(stderr_s * 1e3))
-                }
-            }
-            None => "delay: n/a".to_string(),
-        };
         let residual = r
-            .stats
-            .residual_mean
+            .mean_residual_px
             .map_or("no image residual".to_string(), |m| {
                 format!("mean image residual {} px", num(m))
             });
         inner
             .draw(&Text::new(
-                format!("velocity: {delay} · {residual}"),
+                format!("{} · {residual}", lag_text(r.metrics)),
                 (cols[0], y),
                 font(14, &NOTE),
             ))
             .map_err(de)?;
         y += line_h + 10;
     }
-    let _ = y;
-    for (k, text) in [
-        "Delay: the shift of the true velocity that best fits the estimate (within ±50 ms) ± its standard error.",
-        "3-D: RMS of the error vector's length. RMS values use every estimate, off-scale points included.",
-    ]
-    .iter()
-    .enumerate()
-    {
+    for (k, text) in FOOTNOTES.iter().enumerate() {
         inner
             .draw(&Text::new(
                 text.to_string(),
@@ -1658,8 +1570,45 @@ where
     Ok(())
 }
 
+/// The footnote of figure 7 (d): how roitrack-eval defines what the table shows. Three lines leave room for three
+/// runs in the table.
+const FOOTNOTES: [&str; 3] = [
+    "Velocity lag: the shift, in estimator samples, maximising the cross-correlation of estimated and true",
+    "velocity; positive: the estimate lags. ms: samples × median period; sub-sample: parabola through the peak.",
+    "3-D: RMS of the error vector's length. RMS values use every estimate, off-scale points included.",
+];
+
+/// The velocity lag of a run, e.g. "velocity lag: 2 samples (5.0 ms; sub-sample 1.74)", or "velocity lag: n/a"
+/// without velocity metrics.
+fn lag_text(metrics: Option<&Metrics>) -> String {
+    let lag = metrics.and_then(|m| {
+        Some((
+            m.velocity_lag_samples?,
+            m.velocity_lag_ms?,
+            m.velocity_lag_subsample?,
+        ))
+    });
+    let Some((samples, ms, subsample)) = lag else {
+        return "velocity lag: n/a".to_string();
+    };
+    // One decimal is exact for the usual periods (2.5 ms and its multiples); shorter lags need two.
+    let ms = if ms.abs() >= 1.0 || ms == 0.0 {
+        format!("{ms:.1}")
+    } else {
+        format!("{ms:.2}")
+    };
+    format!(
+        "velocity lag: {samples} sample{} ({ms} ms; sub-sample {subsample:.2})",
+        if samples.abs() == 1 { "" } else { "s" }
+    )
+}
+
 #[cfg(test)]
 mod tests {
+    use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+    use roitrack_core::{PoseSample, TwistSample};
+    use roitrack_eval::{EvalOptions, estimate_errors};
+
     use super::*;
 
     /// A small deterministic normal generator (xorshift + Box–Muller), to avoid a dependency.
@@ -1676,6 +1625,9 @@ mod tests {
             (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
         }
     }
+
+    /// Interval between the estimates of the synthetic runs (s): 400 Hz.
+    const PERIOD_S: f64 = 1.0 / 400.0;
 
     /// Two laps of a 60 mm circle in the image plane at 0.6 m depth, in 2 s, sampled at 4 kHz.
     fn circle_truth() -> TruthSeries {
@@ -1695,7 +1647,66 @@ mod tests {
         }
     }
 
-    /// A run at 400 Hz: the truth `lag_s` late, plus noise (position sigma in m, depth 3× larger; velocity sigma).
+    /// The truth's position and velocity at `t`, interpolated linearly and held at the ends: a lagging estimate
+    /// between the truth's samples.
+    fn truth_at(truth: &TruthSeries, t: f64) -> ([f64; 3], [f64; 3]) {
+        let ts = &truth.t_s;
+        let j = ts.partition_point(|&s| s <= t).clamp(1, ts.len() - 1);
+        let i = j - 1;
+        let a = ((t - ts[i]) / (ts[j] - ts[i])).clamp(0.0, 1.0);
+        let lerp = |p: &[f64; 3], q: &[f64; 3]| std::array::from_fn(|c| p[c] + a * (q[c] - p[c]));
+        (
+            lerp(&truth.position_m[i], &truth.position_m[j]),
+            lerp(&truth.velocity_mps[i], &truth.velocity_mps[j]),
+        )
+    }
+
+    fn poses(t_s: &[f64], position_m: &[[f64; 3]]) -> Vec<PoseSample> {
+        t_s.iter()
+            .zip(position_m)
+            .map(|(&t_s, p)| PoseSample {
+                t_s,
+                cam_from_obj: Isometry3::from_parts(
+                    Translation3::new(p[0], p[1], p[2]),
+                    UnitQuaternion::identity(),
+                ),
+            })
+            .collect()
+    }
+
+    fn twists(t_s: &[f64], velocity_mps: &[[f64; 3]]) -> Vec<TwistSample> {
+        t_s.iter()
+            .zip(velocity_mps)
+            .map(|(&t_s, v)| TwistSample {
+                t_s,
+                velocity_mps: Vector3::from(*v),
+                angular_velocity_radps: Vector3::zeros(),
+            })
+            .collect()
+    }
+
+    /// `run` with its errors and metrics from roitrack-eval against `truth`, as a caller gives them; without
+    /// `twists`, the estimate's twists are withheld, so that the run has no velocity error or lag.
+    fn scored(truth: &TruthSeries, mut run: TrackSeries, with_twists: bool) -> TrackSeries {
+        let opts = EvalOptions::default();
+        let truth_twists = twists(&truth.t_s, &truth.velocity_mps);
+        let est_twists = twists(&run.t_s, &run.velocity_mps);
+        let errors = estimate_errors(
+            &poses(&truth.t_s, &truth.position_m),
+            Some(&truth_twists),
+            &poses(&run.t_s, &run.position_m),
+            with_twists.then_some(est_twists.as_slice()),
+            &opts,
+        )
+        .unwrap();
+        (run.position_error_m, run.velocity_error_mps) = error_columns(&errors);
+        run.metrics = Some(errors.metrics(&opts));
+        run.mean_residual_px = finite_mean(&run.residual_rms_px);
+        run
+    }
+
+    /// A run at 400 Hz: the truth `lag_s` late, plus noise (position sigma in m, depth 3× larger; velocity sigma),
+    /// scored against `truth`.
     fn run(
         truth: &TruthSeries,
         label: &str,
@@ -1706,13 +1717,13 @@ mod tests {
         seed: u64,
     ) -> TrackSeries {
         let mut noise = Noise(seed);
-        let t_s: Vec<f64> = (0..800).map(|i| i as f64 / 400.0).collect();
+        let t_s: Vec<f64> = (0..800).map(|i| i as f64 * PERIOD_S).collect();
         let mut out = TrackSeries {
             label: label.to_string(),
             ..TrackSeries::default()
         };
         for &t in &t_s {
-            let (p, v) = truth.truth_at((t - lag_s).max(0.0));
+            let (p, v) = truth_at(truth, t - lag_s);
             out.position_m.push([
                 p[0] + pos_sigma * noise.normal(),
                 p[1] + pos_sigma * noise.normal(),
@@ -1724,19 +1735,21 @@ mod tests {
                 .push(residual * (1.0 + 0.2 * noise.normal()).abs());
         }
         out.t_s = t_s;
-        out
+        scored(truth, out, true)
     }
 
     fn example_runs(truth: &TruthSeries) -> Vec<TrackSeries> {
-        let mut default = run(truth, "kalman (default)", 0.0025, 0.0002, 0.01, 0.12, 7);
-        // A gap in the estimates must not break the figures.
+        let mut default = run(truth, "kalman (default)", PERIOD_S, 0.0002, 0.01, 0.12, 7);
+        // A gap in the estimates must not break the figures (the metrics were computed before it).
         default.position_m[300] = [f64::NAN; 3];
+        default.position_error_m[300] = [f64::NAN; 3];
         default.velocity_mps[301][1] = f64::INFINITY;
+        default.velocity_error_mps[301][1] = f64::INFINITY;
         default.residual_rms_px[302] = f64::NAN;
         let baseline = run(
             truth,
             "baseline (noisy, 10 ms lag)",
-            0.010,
+            4.0 * PERIOD_S,
             0.002,
             1.0,
             0.6,
@@ -1746,37 +1759,35 @@ mod tests {
     }
 
     #[test]
-    fn truth_is_interpolated_linearly_and_nan_outside() {
-        let truth = TruthSeries {
-            t_s: vec![0.0, 1.0, 3.0],
-            position_m: vec![[0.0; 3], [1.0, 2.0, 3.0], [3.0, 2.0, 1.0]],
-            velocity_mps: vec![[1.0; 3], [1.0; 3], [-1.0; 3]],
-        };
-        let (p, v) = truth.truth_at(2.0);
-        assert_eq!(p, [2.0, 2.0, 2.0]);
-        assert_eq!(v, [0.0; 3]);
-        assert_eq!(truth.truth_at(1.0).0, [1.0, 2.0, 3.0]);
-        assert_eq!(truth.truth_at(3.0).0, [3.0, 2.0, 1.0]);
-        assert!(truth.truth_at(-0.1).0[0].is_nan());
-        assert!(truth.truth_at(3.1).1[0].is_nan());
-        assert!(truth.truth_at(f64::NAN).0[0].is_nan());
-        assert!(TruthSeries::default().truth_at(0.0).0[0].is_nan());
+    fn mean_residual_skips_non_finite_values() {
+        assert_eq!(finite_mean(&[1.0, f64::NAN, 3.0, f64::INFINITY]), Some(2.0));
+        assert_eq!(finite_mean(&[f64::NAN]), None);
+        assert_eq!(finite_mean(&[]), None);
     }
 
     #[test]
-    fn delay_of_a_lagging_run_is_found() {
+    fn figure_7_shows_the_velocity_lag_of_eval() {
         let truth = circle_truth();
-        let r = run(&truth, "lagging", 0.0075, 0.0, 0.0, 0.1, 3);
-        let d = velocity_delay(&truth, &r.t_s, &r.velocity_mps).unwrap();
-        assert!((d.s - 0.0075).abs() < 0.6e-3, "{d:?}");
-        assert!(d.stderr_s < 0.5e-3, "{d:?}");
-        // 1 m/s of noise hides a 10 ms lag: the standard error says so.
-        let noisy = &example_runs(&truth)[1];
-        let d = velocity_delay(&truth, &noisy.t_s, &noisy.velocity_mps);
-        assert!(d.is_none_or(|d| d.stderr_s > DELAY_MAX_STDERR_S), "{d:?}");
-        let default = &example_runs(&truth)[0];
-        let d = velocity_delay(&truth, &default.t_s, &default.velocity_mps).unwrap();
-        assert!((d.s - 0.0025).abs() < 1e-3 && d.stderr_s < 1e-3, "{d:?}");
+        let lagging = run(&truth, "lagging", 2.0 * PERIOD_S, 0.0, 0.0, 0.1, 3);
+        let metrics = lagging.metrics.clone().unwrap();
+        assert_eq!(metrics.velocity_lag_samples, Some(2), "{metrics:?}");
+        let subsample = metrics.velocity_lag_subsample.unwrap();
+        let mut no_twists = run(&truth, "no twists", 0.0, 0.0002, 0.01, 0.1, 5);
+        no_twists.velocity_error_mps.clear();
+        let no_twists = scored(&truth, no_twists, false);
+        assert!(no_twists.velocity_error_mps.is_empty());
+        assert_eq!(
+            no_twists.metrics.as_ref().unwrap().velocity_lag_samples,
+            None
+        );
+
+        let dir = tempfile::tempdir().unwrap();
+        write_figures(dir.path(), "circle", &truth, &[lagging, no_twists]).unwrap();
+        let fig7 = std::fs::read_to_string(dir.path().join("fig7_velocity.svg")).unwrap();
+        let shown = format!("velocity lag: 2 samples (5.0 ms; sub-sample {subsample:.2})");
+        assert!(fig7.contains(&shown), "fig7 lacks '{shown}'");
+        assert!(fig7.contains("velocity lag: n/a"));
+        assert!(fig7.contains(&format!("lagging  ({} estimates)", metrics.count)));
     }
 
     #[test]
@@ -1833,9 +1844,19 @@ mod tests {
                 "{stem}.svg lacks the run legend"
             );
         }
+        // The numbers shown are eval's.
+        let m = runs[0].metrics.as_ref().unwrap();
+        let fig5 = std::fs::read_to_string(dir.path().join("fig5_trajectory.svg")).unwrap();
+        assert!(fig5.contains(&format!(
+            "kalman (default) (3-D position RMS error {} mm)",
+            num(m.position_rmse_mm)
+        )));
+        let fig6 = std::fs::read_to_string(dir.path().join("fig6_position.svg")).unwrap();
+        assert!(fig6.contains(&format!("3-D {} mm)", num(m.position_rmse_mm))));
         // The noisy baseline's velocity swamps the error axes unless they are clipped.
         let fig7 = std::fs::read_to_string(dir.path().join("fig7_velocity.svg")).unwrap();
         assert!(fig7.contains("points off-scale"));
+        assert!(fig7.contains(&format!("3-D {} mm/s)", num(m.velocity_rmse_mm_s.unwrap()))));
         // Keep a copy to look at when asked to.
         if let Some(keep) = std::env::var_os("ROITRACK_PLOT_KEEP") {
             write_figures(Path::new(&keep), "circle", &truth, &runs).unwrap();
@@ -1855,13 +1876,21 @@ mod tests {
             t_s: vec![0.5],
             position_m: vec![[0.001, 0.0, 0.5]],
             velocity_mps: vec![[0.0; 3]],
-            residual_rms_px: vec![],
+            ..TrackSeries::default()
         };
-        let paths =
-            write_figures(dir.path(), "static", &truth, std::slice::from_ref(&one)).unwrap();
+        let one = scored(&truth, one, true);
+        assert_eq!(one.metrics.as_ref().unwrap().count, 1);
+        assert_eq!(one.mean_residual_px, None);
+        let unscored = TrackSeries {
+            label: "no metrics".into(),
+            metrics: None,
+            ..one.clone()
+        };
+        let runs = [one, unscored];
+        let paths = write_figures(dir.path(), "static", &truth, &runs).unwrap();
         assert!(paths.iter().all(|p| p.exists()));
         if let Some(keep) = std::env::var_os("ROITRACK_PLOT_KEEP") {
-            write_figures(&Path::new(&keep).join("static"), "static", &truth, &[one]).unwrap();
+            write_figures(&Path::new(&keep).join("static"), "static", &truth, &runs).unwrap();
         }
     }
 
@@ -1887,18 +1916,43 @@ mod tests {
             t_s: vec![0.0, 0.1],
             position_m: vec![[f64::NAN; 3]; 2],
             velocity_mps: vec![[0.0; 3]; 2],
-            residual_rms_px: vec![],
+            position_error_m: vec![[f64::NAN; 3]; 2],
+            ..TrackSeries::default()
         };
         assert!(matches!(
             write_figures(dir.path(), "s", &truth, &[nan_run]),
             Err(PlotError::Empty { .. })
         ));
-        let mut short = example_runs(&truth).remove(0);
-        short.velocity_mps.pop();
-        assert!(matches!(
-            write_figures(dir.path(), "s", &truth, &[short]),
-            Err(PlotError::Invalid { .. })
-        ));
+        let good = example_runs(&truth).remove(0);
+        let broken: [fn(&mut TrackSeries); 5] = [
+            |r| {
+                r.velocity_mps.pop();
+            },
+            |r| {
+                r.position_error_m.pop();
+            },
+            |r| r.position_error_m.clear(),
+            |r| {
+                r.velocity_error_mps.pop();
+            },
+            |r| r.metrics.as_mut().unwrap().count += 1,
+        ];
+        for (k, breaking) in broken.iter().enumerate() {
+            let mut run = good.clone();
+            breaking(&mut run);
+            assert!(
+                matches!(
+                    write_figures(dir.path(), "s", &truth, &[run]),
+                    Err(PlotError::Invalid { .. })
+                ),
+                "case {k}"
+            );
+        }
+        // Velocity errors may be absent (no twists), and so may the metrics.
+        let mut without = good.clone();
+        without.velocity_error_mps.clear();
+        without.metrics = None;
         assert!(std::fs::read_dir(dir.path()).unwrap().next().is_none());
+        write_figures(&dir.path().join("ok"), "s", &truth, &[without]).unwrap();
     }
 }

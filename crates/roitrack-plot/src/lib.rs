@@ -28,12 +28,16 @@ fn register_font() {
     });
 }
 
+/// Why a chart or figure was not written.
 #[derive(Debug, Error)]
 pub enum PlotError {
+    /// Drawing or writing the file at `path` failed.
     #[error("cannot draw {path}: {message}")]
     Draw { path: PathBuf, message: String },
+    /// There is no finite value to draw in the chart or figure `title`.
     #[error("nothing to plot in {title}: every series is empty or not finite")]
     Empty { title: String },
+    /// The input `what` is inconsistent (e.g. vectors of different lengths), as `message` says.
     #[error("invalid {what}: {message}")]
     Invalid { what: String, message: String },
 }
@@ -41,22 +45,29 @@ pub enum PlotError {
 /// How a series is drawn.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Style {
+    /// Points joined by a line.
     Line,
+    /// Points as dots.
     Points,
+    /// Points as dots joined by a line.
     LinePoints,
 }
 
 /// One named series of (x, y) points, optionally labelled point by point.
 #[derive(Debug, Clone)]
 pub struct Series {
+    /// Legend text.
     pub name: String,
+    /// The (x, y) points, in drawing order; non-finite ones are skipped.
     pub points: Vec<(f64, f64)>,
     /// Text written next to each point (same length as `points`, or empty).
     pub point_labels: Vec<String>,
+    /// How the points are drawn.
     pub style: Style,
 }
 
 impl Series {
+    /// A series without point labels.
     pub fn new(name: impl Into<String>, points: Vec<(f64, f64)>, style: Style) -> Self {
         Self {
             name: name.into(),
@@ -66,6 +77,7 @@ impl Series {
         }
     }
 
+    /// The series with `labels` written next to its points (one per point).
     pub fn with_labels(mut self, labels: Vec<String>) -> Self {
         self.point_labels = labels;
         self
@@ -75,10 +87,15 @@ impl Series {
 /// A chart: title, axis labels and series.
 #[derive(Debug, Clone)]
 pub struct Chart {
+    /// Caption above the plot.
     pub title: String,
+    /// Description of the x axis.
     pub x_label: String,
+    /// Description of the y axis.
     pub y_label: String,
+    /// The series, drawn in order with the colours of a fixed palette.
     pub series: Vec<Series>,
+    /// A logarithmic y axis, for positive values.
     pub log_y: bool,
 }
 

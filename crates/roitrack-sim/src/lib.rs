@@ -3,13 +3,17 @@
 //! Ground-truth motions ([`scenario`]) and a measurement-level simulator of a camera that reads one ROI at a time
 //! ([`measurements`]): every centroid is the projection of the true pose at its own exposure-midpoint time, with
 //! Gaussian noise, dropped ROIs and outliers as options, and faults (occlusions, time gaps, bursts of lost ROIs, a
-//! sudden jump of the target, blobs leaving the image).
+//! sudden jump of the target, blobs leaving the image); and the ROI images of a run, rendered by the simulated camera
+//! ([`rois`]). A scenario's motion can be seen by any camera and carry any target ([`Scenario::with_camera`],
+//! [`Scenario::with_target`]).
 
 pub mod measurements;
+pub mod rois;
 pub mod scenario;
 
 pub use measurements::{
     Excursion, Jump, Occlusion, RoiBurst, SimError, SimulatedRun, SimulationOptions, TimeGap,
     simulate,
 };
+pub use rois::{RenderError, render_roi_images};
 pub use scenario::{Scenario, ScenarioKind, bench_rotation};

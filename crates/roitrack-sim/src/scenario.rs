@@ -119,7 +119,18 @@ enum Motion {
     },
 }
 
-/// A scenario: the canonical camera and target, and the true motion over `[0, duration_s]`.
+/// A scenario: a camera, a target (the canonical ones unless replaced), and the true motion of the target's origin
+/// over `[0, duration_s]`.
+///
+/// ```
+/// use roitrack_core::{CameraModel, Target};
+/// use roitrack_sim::{Scenario, ScenarioKind};
+///
+/// // The orthoglide motion seen through a distorting wide-angle lens.
+/// let scenario = Scenario::new(ScenarioKind::Orthoglide, 1).with_camera(CameraModel::wide_angle_example());
+/// assert!(scenario.min_image_margin_px() > 0.0);
+/// assert_eq!(scenario.target, Target::grid4x4());
+/// ```
 #[derive(Debug, Clone)]
 pub struct Scenario {
     pub kind: ScenarioKind,
@@ -178,6 +189,17 @@ impl Scenario {
             duration_s,
             motion,
         }
+    }
+
+    /// The same motion seen by another camera. The motions are those of the canonical scene (the target about 0.6 m in
+    /// front of the camera): check [`Self::min_image_margin_px`] that the blobs stay in the new camera's image.
+    pub fn with_camera(self, camera: CameraModel) -> Self {
+        Self { camera, ..self }
+    }
+
+    /// The same motion carrying another target (its origin follows the motion).
+    pub fn with_target(self, target: Target) -> Self {
+        Self { target, ..self }
     }
 
     /// True pose and instantaneous twist at time `t_s`.

@@ -41,13 +41,8 @@ use std::time::Duration;
 
 use anyhow::Result;
 use clap::Args;
-use roitrack_bench::{HotPaths, Item, Timing, quantile, time_all};
-use roitrack_core::estimator::TrackerConfig;
-use roitrack_core::roi_order::bit_reversed_indices;
-use roitrack_image::{RoiRenderer, SensorModel};
-use roitrack_pipeline::cameras::ReplayCamera;
-use roitrack_pipeline::realtime::{LoopConfig, LoopReport, run_loop};
-use roitrack_sim::{Scenario, ScenarioKind};
+use roitrack::bench::loop_bench::{LoopBench, LoopFigures, PACED_HZ};
+use roitrack::bench::{HotPaths, Item, Timing, time_all};
 
 /// Time the hot paths (median, p99) and the real-time loop (throughput, latency).
 #[derive(Debug, Args)]
@@ -95,74 +90,6 @@ fn json_number(x: f64, decimals: usize) -> String {
     }
 }
 
-struct LoopFigures {
-    rois_per_s: f64,
-    latency_p50_us: f64,
-    latency_p99_us: f64,
-    dropped: usize,
-    late: usize,
-    rejected: usize,
-}
-
-/// Runs the loop `repeats` times; `paced_hz` paces the camera at that trigger rate, otherwise it runs free.
-fn measure(
-    replay: &ReplayCamera,
-    scenario: &Scenario,
-    every: usize,
-    paced_hz: Option<f64>,
-    args: &BenchArgs,
-) -> Result<LoopFigures> {
-    let mut best: Option<LoopReport> = None;
-    let mut p50s = Vec::new();
-    let mut p99s = Vec::new();
-    for _ in 0..args.repeats.max(1) {
-        let config = LoopConfig {
-            roi_slots: replay.len() + 1,
-            t_start_s: START_S,
-            full_frame_slots: 1,
-            paced: paced_hz.is_some(),
-            rate_hz: paced_hz.unwrap_or(4000.0),
-            ..LoopConfig::default()
-        };
-        let tracker = TrackerConfig {
-            every,
-            ..TrackerConfig::default()
-        };
-        let report = run_loop(
-            replay.rewound_copy(),
-            &scenario.camera,
-            &scenario.target,
-            tracker,
-            &config,
-        )?;
-        let mut latencies = report.latencies_us.clone();
-        latencies.sort_by(f64::total_cmp);
-        p50s.push(quantile(&latencies, 0.5));
-        p99s.push(quantile(&latencies, 0.99));
-        if best
-            .as_ref()
-            .is_none_or(|b| report.rois_per_s() > b.rois_per_s())
-        {
-            best = Some(report);
-        }
-    }
-    let best = best.expect("at least one run");
-    p50s.sort_by(f64::total_cmp);
-    p99s.sort_by(f64::total_cmp);
-    Ok(LoopFigures {
-        rois_per_s: best.rois_per_s(),
-        latency_p50_us: quantile(&p50s, 0.5),
-        latency_p99_us: quantile(&p99s, 0.5),
-        dropped: best.dropped,
-        late: best.late,
-        rejected: best.rejections.total(),
-    })
-}
-
-const START_S: f64 = 0.2;
-/// Trigger rate of the latency measurement (Hz).
-const PACED_HZ: f64 = 20_000.0;
-
 pub fn run(args: &BenchArgs) -> Result<()> {
     // The hot paths first, on a quiet machine (before the loop's two threads have run).
     let item_budget = args.item_budget();
@@ -171,28 +98,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let gauss_newton_iterations = hot.gauss_newton_solve(32).report.iterations;
     let static_pose_iterations = hot.static_pose().map_or(0, |fit| fit.iterations);
 
-    let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
-    let renderer = RoiRenderer::new(
-        scenario.camera.clone(),
-        scenario.target.clone(),
-        SensorModel::default(),
-    )?;
-    let truth = |t: f64| scenario.state_at(t);
-    // ROI k is exposed at slot k + 1 (slot 0 is the full frame), in the scheduler's bit-reversed order.
-    let replay = ReplayCamera::prerender(
-        &renderer,
-        &truth,
-        &bit_reversed_indices(scenario.target.len()),
-        32,
-        START_S + 1.0 / 4000.0,
-        4000.0,
-        args.rois,
-        1,
-    );
-    let k10 = measure(&replay, &scenario, 10, None, args)?;
-    let k1 = measure(&replay, &scenario, 1, None, args)?;
+    let bench = LoopBench::new(args.rois)?;
+    let k10 = bench.measure(10, None, args.repeats)?;
+    let k1 = bench.measure(1, None, args.repeats)?;
     // Latency without queueing: the camera paced at 20 kHz (5x the paper), below the loop's capacity.
-    let paced = measure(&replay, &scenario, 10, Some(PACED_HZ), args)?;
+    let paced = bench.measure(10, Some(PACED_HZ), args.repeats)?;
     if args.json {
         let mut fields: Vec<(String, String)> = Vec::new();
         for (item, t) in &timings {
@@ -221,7 +131,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         field("loop_k1_dropped", k1.dropped.to_string());
         field("loop_k10_rejected", k10.rejected.to_string());
         field("loop_k1_rejected", k1.rejected.to_string());
-        field("rois_per_run", replay.len().to_string());
+        field("rois_per_run", bench.rois().to_string());
         let body: Vec<String> = fields
             .iter()
             .map(|(key, value)| format!("\"{key}\":{value}"))
@@ -235,30 +145,38 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             static_pose_iterations,
         );
         println!();
-        println!(
-            "real-time loop, free-running on {} pre-rendered 32x32 ROIs (orthoglide), two threads:",
-            replay.len()
-        );
-        println!(
-            "{:<34} {:>10} {:>15} {:>15} {:>8} {:>5} {:>9}",
-            "", "ROIs/s", "latency p50 us", "latency p99 us", "dropped", "late", "rejected"
-        );
-        let paced_name = format!("paced {} kHz, estimate every 10", PACED_HZ / 1e3);
-        for (name, f) in [
-            ("free, estimate every 10 ROIs", &k10),
-            ("free, estimate every ROI", &k1),
-            (paced_name.as_str(), &paced),
-        ] {
-            println!(
-                "{name:<34} {:>10.0} {:>15.2} {:>15.2} {:>8} {:>5} {:>9}",
-                f.rois_per_s, f.latency_p50_us, f.latency_p99_us, f.dropped, f.late, f.rejected
-            );
-        }
-        println!(
-            "Free-running latencies include queueing (the camera keeps up to 16 ROIs queued); the paced run's do not."
+        print_loop(
+            &bench,
+            &[
+                ("free, estimate every 10 ROIs", &k10),
+                ("free, estimate every ROI", &k1),
+            ],
+            &paced,
         );
     }
     Ok(())
+}
+
+/// The loop table.
+fn print_loop(bench: &LoopBench, free: &[(&str, &LoopFigures)], paced: &LoopFigures) {
+    println!(
+        "real-time loop, free-running on {} pre-rendered 32x32 ROIs (orthoglide), two threads:",
+        bench.rois()
+    );
+    println!(
+        "{:<34} {:>10} {:>15} {:>15} {:>8} {:>5} {:>9}",
+        "", "ROIs/s", "latency p50 us", "latency p99 us", "dropped", "late", "rejected"
+    );
+    let paced_name = format!("paced {} kHz, estimate every 10", PACED_HZ / 1e3);
+    for (name, f) in free.iter().copied().chain([(paced_name.as_str(), paced)]) {
+        println!(
+            "{name:<34} {:>10.0} {:>15.2} {:>15.2} {:>8} {:>5} {:>9}",
+            f.rois_per_s, f.latency_p50_us, f.latency_p99_us, f.dropped, f.late, f.rejected
+        );
+    }
+    println!(
+        "Free-running latencies include queueing (the camera keeps up to 16 ROIs queued); the paced run's do not."
+    );
 }
 
 /// The hot-path table.

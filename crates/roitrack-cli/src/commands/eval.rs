@@ -1,10 +1,10 @@
-//! `roitrack eval`: score estimated poses and twists against ground truth (SPEC section 9).
+//! `roitrack eval`: score estimated poses and twists against ground truth (see [`roitrack::eval`]).
 
 use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
-use roitrack_eval::{EvalOptions, evaluate};
+use roitrack::eval::{EvalOptions, evaluate};
 
 use super::simulate::{TRUTH_POSES_FILE, TRUTH_TWISTS_FILE};
 
@@ -27,14 +27,14 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: &EvalArgs) -> Result<()> {
-    let truth_poses = roitrack_formats::read_tum(args.truth.join(TRUTH_POSES_FILE))?;
-    let estimated_poses = roitrack_formats::read_tum(&args.poses)?;
+    let truth_poses = roitrack::formats::read_tum(args.truth.join(TRUTH_POSES_FILE))?;
+    let estimated_poses = roitrack::formats::read_tum(&args.poses)?;
     let (truth_twists, estimated_twists) = match &args.twists {
         Some(path) => (
-            Some(roitrack_formats::read_twists_csv(
+            Some(roitrack::formats::read_twists_csv(
                 args.truth.join(TRUTH_TWISTS_FILE),
             )?),
-            Some(roitrack_formats::read_twists_csv(path)?),
+            Some(roitrack::formats::read_twists_csv(path)?),
         ),
         None => (None, None),
     };

@@ -1,108 +1,27 @@
-//! `roitrack simulate`: write a scenario's camera, target, measurements and ground truth.
+//! `roitrack simulate`: write a scenario's camera, target, measurements and ground truth (and optionally a recording
+//! of rendered ROIs).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use nalgebra::Vector3;
-use roitrack_core::RoiOrder;
-use roitrack_sim::{
-    Excursion, Jump, Occlusion, RoiBurst, Scenario, ScenarioKind, SimulatedRun, SimulationOptions,
-    TimeGap, simulate,
+use roitrack::image::{ReflectionFault, SensorModel};
+use roitrack::math::RoiOrder;
+use roitrack::nalgebra::Vector3;
+use roitrack::sim::{
+    Excursion, Jump, Occlusion, RoiBurst, Scenario, SimulatedRun, SimulationOptions, TimeGap,
+    render_roi_images, simulate,
 };
 
-/// File names inside a simulation folder (SPEC section 8 formats).
+use crate::args::ScenarioArg;
+
+/// File names inside a simulation folder.
 pub const CAMERA_FILE: &str = "camera.yaml";
 pub const TARGET_FILE: &str = "target.csv";
 pub const MEASUREMENTS_FILE: &str = "measurements.csv";
 pub const TRUTH_POSES_FILE: &str = "gt_poses.tum";
 pub const TRUTH_TWISTS_FILE: &str = "gt_twists.csv";
 pub const ROIS_FILE: &str = "rois.bin";
-
-/// Renders a 40 x 40 ROI for each measurement of `run` (same time and point, the truth of `options`, jump included),
-/// with a reflection in a fraction of them if asked, and writes the recording.
-pub fn write_roi_recording(
-    scenario: &Scenario,
-    options: &SimulationOptions,
-    run: &SimulatedRun,
-    reflections: Option<&roitrack_image::ReflectionFault>,
-    path: &Path,
-) -> Result<()> {
-    let seed = options.seed;
-    use rand::{Rng, SeedableRng};
-    use roitrack_image::{RenderScratch, Roi, RoiRenderer, SensorModel};
-    const SIZE: u32 = 40;
-    let sensor = SensorModel::default();
-    let bit_depth = sensor.bit_depth as u8;
-    let renderer = RoiRenderer::new(run.camera.clone(), run.target.clone(), sensor)?;
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x0005_1f0c_a11e);
-    // The reflections' own generator: the ROIs are the same with and without them.
-    let mut fault_rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_FA17);
-    let mut scratch = RenderScratch::new();
-    let truth = |t: f64| options.truth_at(scenario, t);
-    let mut writer = roitrack_formats::RoiRecordingWriter::create(path)?;
-    for m in &run.measurements {
-        let index = run
-            .target
-            .index_of(m.id)
-            .context("measurement of an unknown point")?;
-        let centre = renderer
-            .disk_image_centre_px(&truth(m.t_s), index)
-            .context("blob not visible")?;
-        let (du, dv): (f64, f64) = (rng.random_range(-4.0..4.0), rng.random_range(-4.0..4.0));
-        let roi = Roi::centred(
-            centre.x + du,
-            centre.y + dv,
-            SIZE,
-            run.camera.width_px,
-            run.camera.height_px,
-        )
-        .context("ROI larger than the sensor")?;
-        let mut pixels = vec![0u16; roi.len()];
-        renderer.render_roi_with_scratch(&truth, &roi, m.t_s, &mut rng, &mut scratch, &mut pixels);
-        if let Some(fault) = reflections
-            && fault_rng.random::<f64>() < fault.fraction
-        {
-            fault.add_spot(
-                &mut fault_rng,
-                &roi,
-                &mut pixels,
-                renderer.sensor().max_dn(),
-            );
-        }
-        writer.write(&roitrack_formats::RoiRecord {
-            t_s: m.t_s,
-            id: m.id,
-            x0: roi.x0,
-            y0: roi.y0,
-            width: roi.width,
-            height: roi.height,
-            bit_depth,
-            pixels,
-        })?;
-    }
-    writer.finish()?;
-    Ok(())
-}
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ScenarioArg {
-    Static,
-    Orthoglide,
-    Spin,
-    Random,
-}
-
-impl From<ScenarioArg> for ScenarioKind {
-    fn from(s: ScenarioArg) -> Self {
-        match s {
-            ScenarioArg::Static => ScenarioKind::Static,
-            ScenarioArg::Orthoglide => ScenarioKind::Orthoglide,
-            ScenarioArg::Spin => ScenarioKind::Spin,
-            ScenarioArg::Random => ScenarioKind::Random,
-        }
-    }
-}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum OrderArg {
@@ -313,19 +232,21 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let run = simulate(&scenario, &options).context("simulation failed")?;
     write_run(&run, &args.out)?;
     if args.rois {
-        let reflections = args
-            .reflections
-            .map(|fraction| roitrack_image::ReflectionFault {
-                fraction,
-                ..Default::default()
-            });
-        write_roi_recording(
+        let reflections = args.reflections.map(|fraction| ReflectionFault {
+            fraction,
+            ..Default::default()
+        });
+        let mut writer = roitrack::formats::RoiRecordingWriter::create(args.out.join(ROIS_FILE))?;
+        for image in render_roi_images(
             &scenario,
             &options,
             &run,
-            reflections.as_ref(),
-            &args.out.join(ROIS_FILE),
-        )?;
+            SensorModel::default(),
+            reflections,
+        )? {
+            writer.write(&image?)?;
+        }
+        writer.finish()?;
     }
     eprintln!(
         "roitrack: {} scenario: {} measurements over {:.3} s written to {}",
@@ -341,14 +262,10 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
 pub fn write_run(run: &SimulatedRun, dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir)
         .with_context(|| format!("cannot create folder {}", dir.display()))?;
-    roitrack_formats::write_camera_yaml(dir.join(CAMERA_FILE), &run.camera)?;
-    roitrack_formats::write_target_csv(dir.join(TARGET_FILE), &run.target)?;
-    let mut writer = roitrack_formats::MeasurementWriter::create(dir.join(MEASUREMENTS_FILE))?;
-    for m in &run.measurements {
-        writer.write(m)?;
-    }
-    writer.finish()?;
-    roitrack_formats::write_tum(dir.join(TRUTH_POSES_FILE), &run.truth_poses)?;
-    roitrack_formats::write_twists_csv(dir.join(TRUTH_TWISTS_FILE), &run.truth_twists)?;
+    roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), &run.camera)?;
+    roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &run.target)?;
+    roitrack::formats::write_measurements_csv(dir.join(MEASUREMENTS_FILE), &run.measurements)?;
+    roitrack::formats::write_tum(dir.join(TRUTH_POSES_FILE), &run.truth_poses)?;
+    roitrack::formats::write_twists_csv(dir.join(TRUTH_TWISTS_FILE), &run.truth_twists)?;
     Ok(())
 }

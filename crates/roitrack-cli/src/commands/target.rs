@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::{Args, ValueEnum};
-use roitrack_core::{CameraModel, Target};
+use roitrack::{CameraModel, Target};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum BundledTarget {
@@ -30,9 +30,9 @@ pub fn run(args: &TargetArgs) -> Result<()> {
     let target = match args.name {
         BundledTarget::Grid4x4 => Target::grid4x4(),
     };
-    roitrack_formats::write_target_csv(&args.out, &target)?;
+    roitrack::formats::write_target_csv(&args.out, &target)?;
     if let Some(path) = &args.camera_out {
-        roitrack_formats::write_camera_yaml(path, &CameraModel::canonical())?;
+        roitrack::formats::write_camera_yaml(path, &CameraModel::canonical())?;
     }
     Ok(())
 }

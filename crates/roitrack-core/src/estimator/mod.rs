@@ -356,7 +356,8 @@ impl StatusCounts {
         }
     }
 
-    fn count(&mut self, status: TrackStatus) {
+    /// Counts one more estimate with `status`.
+    pub fn add(&mut self, status: TrackStatus) {
         *match status {
             TrackStatus::Converging => &mut self.converging,
             TrackStatus::Tracking => &mut self.tracking,
@@ -369,6 +370,15 @@ impl StatusCounts {
     /// Every estimate counted.
     pub fn total(&self) -> usize {
         TrackStatus::ALL.iter().map(|&s| self.get(s)).sum()
+    }
+
+    /// The statuses of `estimates`, counted.
+    pub fn of(estimates: &[Estimate]) -> Self {
+        let mut counts = Self::default();
+        for e in estimates {
+            counts.add(e.status);
+        }
+        counts
     }
 }
 
@@ -389,7 +399,7 @@ pub struct EstimatorReport {
 
 impl EstimatorReport {
     fn count(&mut self, status: TrackStatus) {
-        self.estimates.count(status);
+        self.estimates.add(status);
     }
 }
 
@@ -543,7 +553,7 @@ pub enum StreamError<E> {
 /// let mut estimates = Vec::new();
 /// let result = track(
 ///     &mut tracker,
-///     measurements.iter().map(|m| Ok::<_, std::io::Error>(*m)),
+///     measurements.iter().map(|m| Ok::<_, std::convert::Infallible>(*m)),
 ///     |e| Ok(estimates.push(*e)),
 /// );
 /// // Point 99 is not in the target: refused, with its place in the stream.

@@ -1,0 +1,148 @@
+//! Command-line values shared by several commands, and their translation into the library's types.
+
+use clap::{Args, ValueEnum};
+use roitrack::math::JacobianKind;
+use roitrack::math::estimator::RobustLoss;
+use roitrack::pipeline::ScheduleOrder;
+use roitrack::sim::ScenarioKind;
+use roitrack::{EstimatorConfig, KalmanTuning, TrackerConfig, VvsSettings, WindowMode};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ScenarioArg {
+    Static,
+    Orthoglide,
+    Spin,
+    Random,
+}
+
+impl From<ScenarioArg> for ScenarioKind {
+    fn from(s: ScenarioArg) -> Self {
+        match s {
+            ScenarioArg::Static => ScenarioKind::Static,
+            ScenarioArg::Orthoglide => ScenarioKind::Orthoglide,
+            ScenarioArg::Spin => ScenarioKind::Spin,
+            ScenarioArg::Random => ScenarioKind::Random,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ScheduleOrderArg {
+    Bitrev,
+    Rowmajor,
+    Active,
+}
+
+impl From<ScheduleOrderArg> for ScheduleOrder {
+    fn from(o: ScheduleOrderArg) -> Self {
+        match o {
+            ScheduleOrderArg::Bitrev => ScheduleOrder::BitReversed,
+            ScheduleOrderArg::Rowmajor => ScheduleOrder::RowMajor,
+            ScheduleOrderArg::Active => ScheduleOrder::Active,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum EstimatorArg {
+    /// Error-state Kalman filter, one update per centroid at its own time (default)
+    Kalman,
+    /// The paper's virtual visual servoing loop with the exact Jacobian
+    Exact,
+    /// The paper's virtual visual servoing loop with the paper's Jacobian (eqs. 17-24)
+    Paper,
+    /// Baseline: static PnP as if simultaneous, velocity by finite differences
+    Static,
+    /// Baseline: Levenberg-Marquardt of the 12 parameters on the window
+    Batch,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum RobustArg {
+    None,
+    Huber,
+    Tukey,
+}
+
+/// Estimator options shared by `track` and the commands that run the tracker.
+#[derive(Debug, Clone, Args)]
+pub struct EstimatorArgs {
+    /// Which estimator.
+    #[arg(long, value_enum, default_value = "kalman")]
+    pub estimator: EstimatorArg,
+    /// Gain λ of the VVS update δ = -λ L⁺ e (exact, paper).
+    #[arg(long, default_value_t = 1.0)]
+    pub gain: f64,
+    /// VVS iterations per control step (1 = the paper's scheme; more = Gauss-Newton).
+    #[arg(long, default_value_t = 1)]
+    pub iterations: usize,
+    /// Window: 0 = the newest measurement of each point (the paper), N = the last N measurements.
+    #[arg(long, default_value_t = 0)]
+    pub window: usize,
+    /// Control period k: one estimate every K measurements.
+    #[arg(long, default_value_t = 10)]
+    pub every: usize,
+    /// Centroid noise standard deviation (px), used by the Kalman filter and the covariances.
+    #[arg(long, default_value_t = 0.1)]
+    pub noise_px: f64,
+    /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise.
+    #[arg(long)]
+    pub accel_psd: Option<f64>,
+    /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz).
+    #[arg(long)]
+    pub angular_accel_psd: Option<f64>,
+    /// M-estimator against outliers: tukey (default), huber (window fits; the Kalman filter uses Huber either way)
+    /// or none (plain least squares, and no Huber weighting in the Kalman filter).
+    #[arg(long, value_enum, default_value = "tukey")]
+    pub robust: RobustArg,
+    /// Degeneracy gate: windows whose column-scaled Jacobian has a reciprocal condition number below this are not
+    /// used for an update (the estimate is flagged degenerate and the window widened).
+    #[arg(long)]
+    pub min_conditioning: Option<f64>,
+}
+
+impl EstimatorArgs {
+    pub fn config(&self) -> TrackerConfig {
+        let defaults = KalmanTuning::default();
+        let kalman = KalmanTuning {
+            linear_accel_psd: self.accel_psd.unwrap_or(defaults.linear_accel_psd),
+            angular_accel_psd: self.angular_accel_psd.unwrap_or(defaults.angular_accel_psd),
+            huber_sigma: if self.robust == RobustArg::None {
+                f64::INFINITY
+            } else {
+                defaults.huber_sigma
+            },
+            ..defaults
+        };
+        let vvs = |jacobian| VvsSettings {
+            jacobian,
+            gain: self.gain,
+            iterations: self.iterations,
+        };
+        let defaults = TrackerConfig::default();
+        TrackerConfig {
+            estimator: match self.estimator {
+                EstimatorArg::Kalman => EstimatorConfig::Kalman(kalman),
+                EstimatorArg::Exact => EstimatorConfig::Vvs(vvs(JacobianKind::Exact)),
+                EstimatorArg::Paper => EstimatorConfig::Vvs(vvs(JacobianKind::Paper)),
+                EstimatorArg::Static => EstimatorConfig::Static,
+                EstimatorArg::Batch => EstimatorConfig::Batch,
+            },
+            window: match self.window {
+                0 => WindowMode::NewestPerPoint,
+                n => WindowMode::Last(n),
+            },
+            every: self.every,
+            noise_px: self.noise_px,
+            min_inverse_condition: self
+                .min_conditioning
+                .unwrap_or(defaults.min_inverse_condition),
+            robust: match self.robust {
+                RobustArg::None => RobustLoss::None,
+                RobustArg::Huber => RobustLoss::Huber,
+                RobustArg::Tukey => RobustLoss::Tukey,
+            },
+            ..defaults
+        }
+    }
+}

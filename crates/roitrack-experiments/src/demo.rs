@@ -1,0 +1,325 @@
+//! The main job end to end from pixels: a simulated ROI camera renders each ROI the scheduler asks for, the
+//! acquisition thread centroids it and the estimation thread tracks it, joined by lock-free queues; the target is
+//! found in a first full frame with no prior. The same scenario is also tracked from ideal centroids with the image
+//! side's measured noise, to show what the image side costs.
+//!
+//! [`Demo::new`] simulates the scenario and measures the centroid noise; [`Demo::from_images`] and
+//! [`Demo::from_centroids`] run one estimator each way. The caller writes the files and shows the progress.
+
+use std::sync::atomic::AtomicUsize;
+
+use roitrack_core::JacobianKind;
+use roitrack_core::estimator::{
+    EstimatorConfig, KalmanTuning, TrackStatus, TrackerConfig, VvsSettings,
+};
+use roitrack_image::{
+    CentroidAccuracy, CentroidOptions, RoiRenderer, SensorModel, SimulatedCamera, centroid_accuracy,
+};
+use roitrack_pipeline::{LoopConfig, LoopReport, ScheduleOrder, run_loop_with_progress};
+use roitrack_plot::{TrackSeries, TruthSeries};
+use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simulate};
+
+use crate::ExperimentError;
+use crate::scoring::{Scored, score, track_and_score};
+
+/// ROIs rendered to measure the image side's centroid noise, and their side (px).
+const ACCURACY_ROIS: usize = 2000;
+const ACCURACY_ROI_SIZE_PX: u32 = 32;
+
+/// An estimator of the demo: its label, the stem of its files, and its configuration.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DemoEstimator {
+    pub label: &'static str,
+    pub stem: &'static str,
+    pub estimator: EstimatorConfig,
+}
+
+/// The estimators the demo compares: the default Kalman filter, the paper's loop (gain 0.5) and the static baseline.
+pub fn lineup() -> [DemoEstimator; 3] {
+    [
+        DemoEstimator {
+            label: "kalman (default)",
+            stem: "kalman",
+            estimator: EstimatorConfig::Kalman(KalmanTuning::default()),
+        },
+        DemoEstimator {
+            label: "paper, gain 0.5",
+            stem: "paper",
+            estimator: EstimatorConfig::Vvs(VvsSettings {
+                jacobian: JacobianKind::Paper,
+                gain: 0.5,
+                iterations: 1,
+            }),
+        },
+        DemoEstimator {
+            label: "static baseline",
+            stem: "static",
+            estimator: EstimatorConfig::Static,
+        },
+    ]
+}
+
+/// Where a run's measurements came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Source {
+    /// Rendered ROIs through the two-thread loop.
+    Images,
+    /// Ideal centroids with the image side's noise.
+    Centroids,
+}
+
+impl Source {
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Images => "images",
+            Self::Centroids => "centroids",
+        }
+    }
+}
+
+/// One estimator's run, scored.
+#[derive(Debug, Clone)]
+pub struct DemoRun {
+    pub estimator: DemoEstimator,
+    pub source: Source,
+    pub scored: Scored,
+    /// What the loop did, for a run from images.
+    pub loop_report: Option<LoopReport>,
+}
+
+impl DemoRun {
+    /// The loop's counts and latencies, for the table (empty for a run from centroids).
+    pub fn loop_notes(&self) -> String {
+        let Some(r) = &self.loop_report else {
+            return String::new();
+        };
+        format!(
+            "{} ROIs, {} rejected, {} dropped, {} init, latency p50/p99 {:.0}/{:.0} us",
+            r.rois,
+            r.rejections.total(),
+            r.dropped,
+            r.initialisations,
+            r.latency_quantile_us(0.5),
+            r.latency_quantile_us(0.99)
+        )
+    }
+
+    /// The run as a series of the figures.
+    pub fn track_series(&self) -> TrackSeries {
+        TrackSeries::from_estimates(
+            self.estimator.label,
+            &self.scored.estimates,
+            &self.scored.errors,
+            self.scored.metrics.clone(),
+        )
+    }
+}
+
+/// Options of the demo.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DemoOptions {
+    pub scenario: ScenarioKind,
+    /// Seed of the simulation (motion, pixel noise).
+    pub seed: u64,
+    /// Pace the camera at the ROI rate (real time) instead of running free.
+    pub paced: bool,
+    /// The order in which the scheduler reads the points.
+    pub order: ScheduleOrder,
+}
+
+impl Default for DemoOptions {
+    fn default() -> Self {
+        Self {
+            scenario: ScenarioKind::Orthoglide,
+            seed: 1,
+            paced: false,
+            order: ScheduleOrder::BitReversed,
+        }
+    }
+}
+
+/// A prepared demo: the scenario simulated with the image side's measured centroid noise.
+#[derive(Debug, Clone)]
+pub struct Demo {
+    pub options: DemoOptions,
+    pub scenario: Scenario,
+    pub simulation: SimulationOptions,
+    /// The ideal-centroid run with its ground truth (also the truth of the image runs).
+    pub run: SimulatedRun,
+    /// The centroid error of the image side on rendered ROIs.
+    pub accuracy: CentroidAccuracy,
+    renderer: RoiRenderer,
+}
+
+impl Demo {
+    /// Simulates the scenario; the ideal centroids get the image side's noise, measured on rendered ROIs, so that the
+    /// two runs of an estimator compare the image side with a perfect one of equal precision.
+    pub fn new(options: DemoOptions) -> Result<Self, ExperimentError> {
+        let scenario = Scenario::new(options.scenario, options.seed);
+        let renderer = RoiRenderer::new(
+            scenario.camera.clone(),
+            scenario.target.clone(),
+            SensorModel::default(),
+        )?;
+        let accuracy = centroid_accuracy(
+            &renderer,
+            &CentroidOptions::default(),
+            ACCURACY_ROI_SIZE_PX,
+            ACCURACY_ROIS,
+            options.seed,
+        );
+        let simulation = SimulationOptions {
+            seed: options.seed,
+            noise_px: image_noise_px(&accuracy),
+            ..SimulationOptions::default()
+        };
+        let run = simulate(&scenario, &simulation)?;
+        Ok(Self {
+            options,
+            scenario,
+            simulation,
+            run,
+            accuracy,
+            renderer,
+        })
+    }
+
+    /// ROI slots of a loop run (one per ROI time of the scenario).
+    pub fn slots(&self) -> usize {
+        self.run.truth_poses.len()
+    }
+
+    /// The tracker configuration of an estimator: told the image side's noise.
+    pub fn config(&self, estimator: &DemoEstimator) -> TrackerConfig {
+        TrackerConfig {
+            estimator: estimator.estimator,
+            noise_px: self.simulation.noise_px,
+            ..TrackerConfig::default()
+        }
+    }
+
+    /// Runs `estimator` from rendered ROIs through the two-thread loop, publishing the ROI slots done to `progress`.
+    pub fn from_images(
+        &self,
+        estimator: &DemoEstimator,
+        progress: Option<&AtomicUsize>,
+    ) -> Result<DemoRun, ExperimentError> {
+        let config = self.config(estimator);
+        let camera = SimulatedCamera::new(
+            self.renderer.clone(),
+            {
+                let s = self.scenario.clone();
+                move |t: f64| s.state_at(t)
+            },
+            self.options.seed,
+        );
+        let mut loop_config = LoopConfig {
+            rate_hz: self.simulation.rate_hz,
+            paced: self.options.paced,
+            roi_slots: self.slots(),
+            ..LoopConfig::default()
+        };
+        loop_config.scheduler.order = self.options.order;
+        loop_config.scheduler.noise_px = self.simulation.noise_px;
+        let report = run_loop_with_progress(
+            camera,
+            &self.scenario.camera,
+            &self.scenario.target,
+            config,
+            &loop_config,
+            progress,
+        )?;
+        let scored = score(&self.run, report.estimates.clone(), report.wall_s)?;
+        Ok(DemoRun {
+            estimator: *estimator,
+            source: Source::Images,
+            scored,
+            loop_report: Some(report),
+        })
+    }
+
+    /// Runs `estimator` on the ideal centroids.
+    pub fn from_centroids(&self, estimator: &DemoEstimator) -> Result<DemoRun, ExperimentError> {
+        Ok(DemoRun {
+            estimator: *estimator,
+            source: Source::Centroids,
+            scored: track_and_score(&self.run, self.config(estimator))?,
+            loop_report: None,
+        })
+    }
+
+    /// The true motion, for the figures.
+    pub fn truth_series(&self) -> TruthSeries {
+        TruthSeries {
+            t_s: self.run.truth_poses.iter().map(|p| p.t_s).collect(),
+            position_m: self
+                .run
+                .truth_poses
+                .iter()
+                .map(|p| p.cam_from_obj.translation.vector.into())
+                .collect(),
+            velocity_mps: self
+                .run
+                .truth_twists
+                .iter()
+                .map(|w| w.velocity_mps.into())
+                .collect(),
+        }
+    }
+}
+
+/// The centroid noise (px per axis) the trackers are told for rendered ROIs: the measured spread, at least 0.005 px.
+pub fn image_noise_px(accuracy: &CentroidAccuracy) -> f64 {
+    (0.5 * (accuracy.std_u_px.powi(2) + accuracy.std_v_px.powi(2)))
+        .sqrt()
+        .max(0.005)
+}
+
+/// The runs as a table with a header line.
+pub fn table(runs: &[DemoRun]) -> String {
+    let mut out = format!(
+        "{:<18} {:<9} {:>8} {:>15} {:>8} {:>9} {:>9} {:>12} {:>5} {:>8}  {}\n",
+        "estimator",
+        "from",
+        "pos mm",
+        "pos x/y mm",
+        "rot deg",
+        "vel mm/s",
+        "w deg/s",
+        "lag smp(ms)",
+        "degen",
+        "us/step",
+        "loop"
+    );
+    for r in runs {
+        let m = &r.scored.metrics;
+        out += &format!(
+            "{:<18} {:<9} {:>8.4} {:>7.4}/{:<7.4} {:>8.4} {:>9.2} {:>9.2} {:>5} ({:>4.1}) {:>5} {:>8.2}  {}\n",
+            r.estimator.label,
+            r.source.name(),
+            m.position_rmse_mm,
+            m.position_rmse_xyz_mm[0],
+            m.position_rmse_xyz_mm[1],
+            m.rotation_rmse_deg,
+            m.velocity_rmse_mm_s.unwrap_or(f64::NAN),
+            m.angular_velocity_rmse_deg_s.unwrap_or(f64::NAN),
+            m.velocity_lag_samples.unwrap_or(0),
+            m.velocity_lag_ms.unwrap_or(f64::NAN),
+            r.scored.count(TrackStatus::Degenerate),
+            r.scored.us_per_estimate(),
+            r.loop_notes()
+        );
+    }
+    out
+}
+
+/// One run as a JSON object: label, source, time per step and metrics.
+pub fn json(run: &DemoRun) -> String {
+    format!(
+        "{{\"estimator\":\"{}\",\"source\":\"{}\",\"us_per_estimate\":{},\"metrics\":{}}}",
+        run.estimator.label,
+        run.source.name(),
+        run.scored.us_per_estimate(),
+        run.scored.metrics.to_json()
+    )
+}

@@ -1,0 +1,50 @@
+//! # roitrack-experiments
+//!
+//! The experiments behind roitrack's tables and figures, each a library call on typed values (no files, no printing):
+//! the command line and the Python package only show what they return.
+//!
+//! - [`scoring`]: track a simulated run and score it against its ground truth, the building block of the others;
+//! - [`compare`]: every estimator and baseline on one scenario at the measurement level;
+//! - [`demo`]: the main job end to end from pixels (simulated ROI camera, centroids, two-thread loop), next to ideal
+//!   centroids of the same noise;
+//! - [`faults`]: the default estimator under faults (outliers, drops, occlusions, gaps, jumps, blobs leaving the
+//!   image, reflections in the ROIs): accuracy, recovery, flagged and unflagged wrong estimates;
+//! - [`tradeoff`]: velocity noise against velocity lag, for the paper's gain and the Kalman filter's process noise.
+//!
+//! Every metric comes from [`roitrack_eval`]; every estimator from [`roitrack_core::estimator`].
+//!
+//! ```
+//! use roitrack_experiments::compare::{compare, table};
+//! use roitrack_sim::ScenarioKind;
+//!
+//! let rows = compare(ScenarioKind::Static, 1, 0.1).unwrap();
+//! assert_eq!(rows.len(), 5);
+//! // The default estimator holds a still target to a fraction of a millimetre.
+//! assert!(rows[0].metrics.position_rmse_mm < 0.5);
+//! assert!(table(&rows).starts_with("estimator"));
+//! ```
+
+pub mod compare;
+pub mod demo;
+pub mod faults;
+pub mod scoring;
+pub mod tradeoff;
+
+use thiserror::Error;
+
+/// Why an experiment could not run.
+#[derive(Debug, Error)]
+pub enum ExperimentError {
+    #[error("simulation failed: {0}")]
+    Simulation(#[from] roitrack_sim::SimError),
+    #[error("rendering failed: {0}")]
+    Rendering(#[from] roitrack_sim::RenderError),
+    #[error("invalid sensor model: {0}")]
+    Sensor(#[from] roitrack_image::SensorError),
+    #[error("tracking failed: {0}")]
+    Tracking(#[from] roitrack_core::estimator::TrackAllError),
+    #[error("the real-time loop failed: {0}")]
+    Loop(#[from] roitrack_pipeline::PipelineError),
+    #[error("evaluation failed: {0}")]
+    Evaluation(#[from] roitrack_eval::EvalError),
+}

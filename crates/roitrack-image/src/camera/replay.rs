@@ -1,0 +1,135 @@
+//! A camera that plays back ROIs read earlier.
+
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use roitrack_core::MotionState;
+
+use super::{CameraError, RoiCamera, RoiTrigger};
+use crate::{Frame, RenderScratch, Roi, RoiImage, RoiRenderer};
+
+/// Replays recorded ROIs in order, whatever is requested (for throughput benchmarks, where rendering must not count,
+/// and for recorded camera data), then ends ([`CameraError::EndOfRecording`]). The schedule that recorded them must
+/// match the one that replays them: a request for another point than the recorded one is counted in
+/// [`ReplayCamera::mismatches`].
+///
+/// ```
+/// use roitrack_image::{CameraError, Frame, Roi, RoiCamera, RoiImage, RoiTrigger, ReplayCamera};
+///
+/// let mut recorded = RoiImage::default();
+/// recorded.set(0.5, 3, Roi::new(0, 0, 4, 4), 8);
+/// let mut camera = ReplayCamera::new(vec![recorded], Frame::new(8, 8, 8));
+/// let mut image = RoiImage::default();
+/// let trigger = RoiTrigger { point_id: 3, roi: Roi::new(0, 0, 4, 4), t_s: 0.5 };
+/// camera.grab_roi(&trigger, &mut image).unwrap();
+/// assert_eq!(image.t_s, 0.5);
+/// assert_eq!(camera.grab_roi(&trigger, &mut image), Err(CameraError::EndOfRecording));
+/// ```
+#[derive(Debug, Clone)]
+pub struct ReplayCamera {
+    rois: Vec<RoiImage>,
+    full_frame: Frame,
+    cursor: usize,
+    pub mismatches: usize,
+}
+
+impl ReplayCamera {
+    pub fn new(rois: Vec<RoiImage>, full_frame: Frame) -> Self {
+        Self {
+            rois,
+            full_frame,
+            cursor: 0,
+            mismatches: 0,
+        }
+    }
+
+    /// Renders `count` ROIs of side `size` at the true blob positions, cycling through the target point indices of
+    /// `order`, starting at `t_start_s`, plus one full frame at `t_start_s`.
+    #[allow(clippy::too_many_arguments)]
+    pub fn prerender(
+        renderer: &RoiRenderer,
+        truth: &impl Fn(f64) -> MotionState,
+        order: &[usize],
+        size: u32,
+        t_start_s: f64,
+        rate_hz: f64,
+        count: usize,
+        seed: u64,
+    ) -> Self {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let camera = renderer.camera().clone();
+        let mut scratch = RenderScratch::new();
+        let mut full_frame = Frame::default();
+        renderer.render_frame(truth, t_start_s, &mut rng, &mut scratch, &mut full_frame);
+        let bit_depth = renderer.sensor().bit_depth as u8;
+        let rois = (0..count)
+            .filter_map(|k| {
+                let t = t_start_s + k as f64 / rate_hz;
+                let point_index = order[k % order.len()];
+                let centre = renderer.disk_image_centre_px(&truth(t), point_index)?;
+                let roi =
+                    Roi::centred(centre.x, centre.y, size, camera.width_px, camera.height_px)?;
+                let mut image = RoiImage::default();
+                image.set(
+                    t,
+                    renderer.target().points()[point_index].id,
+                    roi,
+                    bit_depth,
+                );
+                renderer.render_roi_with_scratch(
+                    truth,
+                    &roi,
+                    t,
+                    &mut rng,
+                    &mut scratch,
+                    &mut image.pixels,
+                );
+                Some(image)
+            })
+            .collect();
+        Self::new(rois, full_frame)
+    }
+
+    /// Number of ROIs recorded.
+    pub fn len(&self) -> usize {
+        self.rois.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.rois.is_empty()
+    }
+
+    /// Starts the replay again from the first ROI.
+    pub fn rewind(&mut self) {
+        self.cursor = 0;
+        self.mismatches = 0;
+    }
+}
+
+impl RoiCamera for ReplayCamera {
+    fn grab_roi(&mut self, trigger: &RoiTrigger, image: &mut RoiImage) -> Result<(), CameraError> {
+        let recorded = self
+            .rois
+            .get(self.cursor)
+            .ok_or(CameraError::EndOfRecording)?;
+        self.cursor += 1;
+        if recorded.point_id != trigger.point_id {
+            self.mismatches += 1;
+        }
+        image.set(
+            recorded.t_s,
+            recorded.point_id,
+            recorded.roi,
+            recorded.bit_depth,
+        );
+        image.pixels.copy_from_slice(&recorded.pixels);
+        Ok(())
+    }
+
+    fn grab_full_frame(&mut self, t_s: f64, frame: &mut Frame) -> Result<(), CameraError> {
+        let recorded = &self.full_frame;
+        frame.resize(recorded.width, recorded.height, recorded.bit_depth);
+        frame.pixels.copy_from_slice(&recorded.pixels);
+        frame.t_s = t_s;
+        Ok(())
+    }
+}

@@ -1,0 +1,113 @@
+//! Rendered ROI recordings: the ROI images a camera would have read for a simulated run, for tracking from pixels
+//! offline (`roitrack simulate --rois`, then `roitrack track --rois`).
+
+use nalgebra::Vector2;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use roitrack_core::MotionState;
+use roitrack_image::{ReflectionFault, RenderScratch, Roi, RoiImage, RoiRenderer, SensorModel};
+use thiserror::Error;
+
+use crate::{Scenario, SimulatedRun, SimulationOptions};
+
+/// Side of the rendered ROIs (px).
+pub const RECORDED_ROI_SIZE_PX: u32 = 40;
+/// Largest offset (px, each axis) of a ROI's centre from its blob: a real scheduler places ROIs from a prediction.
+pub const RECORDED_ROI_OFFSET_PX: f64 = 4.0;
+
+/// Why a ROI could not be rendered.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum RenderError {
+    #[error("invalid sensor model: {0}")]
+    Sensor(#[from] roitrack_image::SensorError),
+    #[error("measurement at t = {t_s} s: point id {id} is not in the target")]
+    UnknownId { t_s: f64, id: u32 },
+    #[error("measurement at t = {t_s} s: the blob of point {id} is not visible")]
+    NotVisible { t_s: f64, id: u32 },
+    #[error("the camera's image is smaller than a {RECORDED_ROI_SIZE_PX} px ROI")]
+    SensorTooSmall,
+}
+
+/// The ROI image of every measurement of `run`: a [`RECORDED_ROI_SIZE_PX`] square placed on the blob with a random
+/// error of up to [`RECORDED_ROI_OFFSET_PX`] (as a real scheduler would), rendered by the simulated camera with
+/// `sensor` at the measurement's time and the truth of `options` (its jump and excursion included), with a
+/// reflection in a fraction of them if `reflections` is given. Deterministic for `options.seed`; the reflections have
+/// their own generator, so the ROIs are the same with and without them. Rendered one at a time, as iterated.
+///
+/// ```
+/// use roitrack_image::SensorModel;
+/// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, render_roi_images, simulate};
+///
+/// let scenario = Scenario::new(ScenarioKind::Static, 1);
+/// let options = SimulationOptions::default();
+/// let run = simulate(&scenario, &options).unwrap();
+/// let first: Vec<_> = render_roi_images(&scenario, &options, &run, SensorModel::default(), None)
+///     .unwrap()
+///     .take(3)
+///     .collect::<Result<_, _>>()
+///     .unwrap();
+/// assert_eq!(first.len(), 3);
+/// assert_eq!(first[0].point_id, run.measurements[0].id);
+/// assert_eq!(first[0].pixels.len(), 40 * 40);
+/// ```
+pub fn render_roi_images<'a>(
+    scenario: &'a Scenario,
+    options: &'a SimulationOptions,
+    run: &'a SimulatedRun,
+    sensor: SensorModel,
+    reflections: Option<ReflectionFault>,
+) -> Result<impl Iterator<Item = Result<RoiImage, RenderError>> + 'a, RenderError> {
+    let renderer = RoiRenderer::new(run.camera.clone(), run.target.clone(), sensor)?;
+    let bit_depth = sensor.bit_depth as u8;
+    let seed = options.seed;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x0005_1f0c_a11e);
+    let mut fault_rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5EED_FA17);
+    let mut scratch = RenderScratch::new();
+    let truth = move |t: f64| -> MotionState { options.truth_at(scenario, t) };
+    Ok(run.measurements.iter().map(move |m| {
+        let index = run.target.index_of(m.id).ok_or(RenderError::UnknownId {
+            t_s: m.t_s,
+            id: m.id,
+        })?;
+        let centre =
+            renderer
+                .disk_image_centre_px(&truth(m.t_s), index)
+                .ok_or(RenderError::NotVisible {
+                    t_s: m.t_s,
+                    id: m.id,
+                })?;
+        let offset = Vector2::new(
+            rng.random_range(-RECORDED_ROI_OFFSET_PX..RECORDED_ROI_OFFSET_PX),
+            rng.random_range(-RECORDED_ROI_OFFSET_PX..RECORDED_ROI_OFFSET_PX),
+        );
+        let roi = Roi::centred(
+            centre.x + offset.x,
+            centre.y + offset.y,
+            RECORDED_ROI_SIZE_PX,
+            run.camera.width_px,
+            run.camera.height_px,
+        )
+        .ok_or(RenderError::SensorTooSmall)?;
+        let mut image = RoiImage::with_capacity(roi.len());
+        image.set(m.t_s, m.id, roi, bit_depth);
+        renderer.render_roi_with_scratch(
+            &truth,
+            &roi,
+            m.t_s,
+            &mut rng,
+            &mut scratch,
+            &mut image.pixels,
+        );
+        if let Some(fault) = &reflections
+            && fault_rng.random::<f64>() < fault.fraction
+        {
+            fault.add_spot(
+                &mut fault_rng,
+                &roi,
+                &mut image.pixels,
+                renderer.sensor().max_dn(),
+            );
+        }
+        Ok(image)
+    }))
+}

@@ -1,0 +1,167 @@
+//! The architecture of docs/architecture.md, checked: which crate may depend on which, the pure math free of I/O and
+//! threads, and the command-line tool a thin shell (its sources at most 15 % of the workspace's).
+
+use std::collections::BTreeSet;
+use std::path::{Path, PathBuf};
+
+/// Each workspace crate and the roitrack crates it may depend on (docs/architecture.md).
+const ALLOWED: &[(&str, &[&str])] = &[
+    ("roitrack-core", &[]),
+    ("roitrack-image", &["roitrack-core"]),
+    ("roitrack-formats", &["roitrack-core", "roitrack-image"]),
+    ("roitrack-sim", &["roitrack-core", "roitrack-image"]),
+    ("roitrack-eval", &["roitrack-core"]),
+    ("roitrack-plot", &["roitrack-core", "roitrack-eval"]),
+    ("roitrack-pipeline", &["roitrack-core", "roitrack-image"]),
+    (
+        "roitrack-experiments",
+        &[
+            "roitrack-core",
+            "roitrack-image",
+            "roitrack-sim",
+            "roitrack-eval",
+            "roitrack-pipeline",
+            "roitrack-plot",
+        ],
+    ),
+    (
+        "roitrack-bench",
+        &[
+            "roitrack-core",
+            "roitrack-image",
+            "roitrack-sim",
+            "roitrack-pipeline",
+        ],
+    ),
+    (
+        "roitrack",
+        &[
+            "roitrack-core",
+            "roitrack-image",
+            "roitrack-sim",
+            "roitrack-eval",
+            "roitrack-formats",
+            "roitrack-pipeline",
+            "roitrack-plot",
+            "roitrack-experiments",
+            "roitrack-bench",
+        ],
+    ),
+    ("roitrack-cli", &["roitrack"]),
+];
+
+fn crates_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// The roitrack crates in the `[dependencies]` tables (not dev-dependencies) of a manifest.
+fn roitrack_dependencies(manifest: &str) -> BTreeSet<String> {
+    let mut deps = BTreeSet::new();
+    let mut in_dependencies = false;
+    for line in manifest.lines().map(str::trim) {
+        if line.starts_with('[') {
+            in_dependencies = line == "[dependencies]"
+                || (line.starts_with("[target.") && line.ends_with(".dependencies]"));
+            continue;
+        }
+        if !in_dependencies {
+            continue;
+        }
+        let name = line.split(['=', '.', ' ']).next().unwrap_or("");
+        if name == "roitrack" || name.starts_with("roitrack-") {
+            deps.insert(name.to_string());
+        }
+    }
+    deps
+}
+
+#[test]
+fn every_crate_depends_only_on_what_the_architecture_allows() {
+    let mut seen = BTreeSet::new();
+    for entry in std::fs::read_dir(crates_dir()).unwrap() {
+        let manifest_path = entry.unwrap().path().join("Cargo.toml");
+        let Ok(manifest) = std::fs::read_to_string(&manifest_path) else {
+            continue;
+        };
+        let name = manifest
+            .lines()
+            .find_map(|l| l.trim().strip_prefix("name = \""))
+            .and_then(|rest| rest.strip_suffix('"'))
+            .expect("a package name")
+            .to_string();
+        let (_, allowed) = ALLOWED
+            .iter()
+            .find(|(crate_name, _)| *crate_name == name)
+            .unwrap_or_else(|| panic!("{name} is not in docs/architecture.md's table"));
+        for dependency in roitrack_dependencies(&manifest) {
+            assert!(
+                allowed.contains(&dependency.as_str()),
+                "{name} depends on {dependency}, which docs/architecture.md does not allow"
+            );
+        }
+        seen.insert(name);
+    }
+    assert_eq!(seen.len(), ALLOWED.len(), "crates found: {seen:?}");
+}
+
+/// Every `.rs` file under `dir`, recursively.
+fn rust_files(dir: &Path) -> Vec<PathBuf> {
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            files.extend(rust_files(&path));
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            files.push(path);
+        }
+    }
+    files
+}
+
+#[test]
+fn the_pure_math_has_no_io_and_no_threads() {
+    let forbidden = [
+        "std::fs",
+        "std::io",
+        "std::net",
+        "std::thread",
+        "std::process",
+        "std::env",
+    ];
+    for file in rust_files(&crates_dir().join("roitrack-core/src")) {
+        let text = std::fs::read_to_string(&file).unwrap();
+        for path in forbidden {
+            assert!(
+                !text.contains(path),
+                "{} uses {path}: roitrack-core is the pure math, without I/O or threads",
+                file.display()
+            );
+        }
+    }
+}
+
+fn lines(files: &[PathBuf]) -> usize {
+    files
+        .iter()
+        .map(|f| std::fs::read_to_string(f).unwrap().lines().count())
+        .sum()
+}
+
+#[test]
+fn the_command_line_tool_is_a_thin_shell() {
+    let mut all = Vec::new();
+    for entry in std::fs::read_dir(crates_dir()).unwrap() {
+        let src = entry.unwrap().path().join("src");
+        if src.is_dir() {
+            all.extend(rust_files(&src));
+        }
+    }
+    let cli = rust_files(&crates_dir().join("roitrack-cli/src"));
+    let (cli_lines, all_lines) = (lines(&cli), lines(&all));
+    let share = cli_lines as f64 / all_lines as f64;
+    assert!(
+        share <= 0.15,
+        "the CLI's sources are {cli_lines} of the workspace's {all_lines} source lines ({:.1} %): move the work into the library",
+        100.0 * share
+    );
+}
