@@ -32,6 +32,13 @@ pub struct LoopFigures {
 }
 
 /// Pre-rendered ROIs of the orthoglide scenario and the scene they come from.
+///
+/// ```
+/// use roitrack_bench::loop_bench::LoopBench;
+/// let bench = LoopBench::new(400).unwrap();
+/// let figures = bench.measure(10, None, 1).unwrap();
+/// assert!(figures.rois_per_s > 0.0 && figures.dropped == 0);
+/// ```
 pub struct LoopBench {
     scenario: Scenario,
     replay: ReplayCamera,

@@ -65,6 +65,14 @@ pub fn resident_mib() -> f64 {
 }
 
 /// Tracks `minutes` of the repeated orthoglide motion at 4 kHz (seed 1, 0.1 px) with the default estimator.
+///
+/// ```
+/// // Six seconds: more than one repetition of the motion, in one (partial) slice.
+/// let report = roitrack_bench::soak::run(0.1).unwrap();
+/// assert_eq!((report.measurements, report.slices.len()), (24_000, 1));
+/// assert!(report.slices[0].position_rmse_mm < 0.5 && report.slices[0].lost == 0);
+/// assert!(report.to_table().contains("memory growth"));
+/// ```
 pub fn run(minutes: f64) -> Result<SoakReport, SoakError> {
     if !(minutes > 0.0 && minutes <= MAX_MINUTES) {
         return Err(SoakError::Length(minutes));

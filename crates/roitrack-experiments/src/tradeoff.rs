@@ -51,6 +51,19 @@ pub struct TradeoffPoint {
 
 /// Tracks the scenario (0.1 px, 4 kHz) with every gain of the paper's loop (1 iteration, its own Jacobian) and every
 /// process noise of the Kalman filter.
+///
+/// ```
+/// use roitrack_experiments::tradeoff::{Scheme, sweep};
+/// use roitrack_sim::ScenarioKind;
+///
+/// let points = sweep(ScenarioKind::Orthoglide, 1).unwrap();
+/// let lag = |scheme, value| {
+///     let p = points.iter().find(|p| p.scheme == scheme && p.value == value).unwrap();
+///     p.metrics.velocity_lag_subsample.unwrap()
+/// };
+/// // A lower gain smooths the paper's velocity, and delays it.
+/// assert!(lag(Scheme::Paper, 0.2) > lag(Scheme::Paper, 1.0));
+/// ```
 pub fn sweep(kind: ScenarioKind, seed: u64) -> Result<Vec<TradeoffPoint>, ExperimentError> {
     let scenario = Scenario::new(kind, seed);
     let run = simulate(

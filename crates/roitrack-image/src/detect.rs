@@ -97,6 +97,23 @@ fn frame_levels(pixels: &[u16], threshold: Threshold) -> Option<(f64, u16, f64)>
 /// outside `opts`' area limits. Each centroid is measured as by [`crate::measure_blob`] (weighted by
 /// `value - threshold`, or binary). Blobs come in the order of their first pixel (row-major).
 ///
+/// ```
+/// use roitrack_image::{CentroidOptions, detect_blobs};
+/// // Two bright 3 x 3 squares on a dark 32 x 16 frame.
+/// let (w, h) = (32u32, 16u32);
+/// let mut frame = vec![10u16; (w * h) as usize];
+/// for (ci, cj) in [(8usize, 8usize), (22, 6)] {
+///     for j in cj - 1..=cj + 1 {
+///         for i in ci - 1..=ci + 1 {
+///             frame[j * w as usize + i] = 200;
+///         }
+///     }
+/// }
+/// let blobs = detect_blobs(&frame, w, h, &CentroidOptions::default());
+/// assert_eq!(blobs.len(), 2);
+/// assert!((blobs[0].u_px - 22.0).abs() < 1e-9 && (blobs[0].v_px - 6.0).abs() < 1e-9);
+/// ```
+///
 /// # Panics
 /// If `pixels.len() != width * height`.
 pub fn detect_blobs(

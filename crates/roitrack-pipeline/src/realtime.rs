@@ -141,7 +141,27 @@ fn backoff(spins: &mut u32) {
     *spins = spins.saturating_add(1);
 }
 
-/// Runs the loop: `camera` on the acquisition thread, a [`Tracker`] on the estimation thread.
+/// Runs the loop: `camera` on the acquisition thread, a [`Tracker`] on the estimation thread. It starts with a full
+/// frame (the target found with no prior), then reads `config.roi_slots` ROI slots; a camera that ends early ends the
+/// run ([`LoopReport::stopped_by`]).
+///
+/// ```
+/// use roitrack_core::estimator::TrackerConfig;
+/// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
+/// use roitrack_pipeline::{LoopConfig, run_loop};
+/// use roitrack_sim::{Scenario, ScenarioKind};
+///
+/// let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
+/// let renderer =
+///     RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
+/// let truth = { let s = scenario.clone(); move |t: f64| s.state_at(t) };
+/// let camera = SimulatedCamera::new(renderer, truth, 1);
+/// let config = LoopConfig { roi_slots: 800, ..LoopConfig::default() };
+/// let report =
+///     run_loop(camera, &scenario.camera, &scenario.target, TrackerConfig::default(), &config).unwrap();
+/// assert_eq!(report.initialisations, 1);
+/// assert!(report.estimates.len() > 60 && report.stopped_by.is_none());
+/// ```
 pub fn run_loop<C: RoiCamera>(
     camera: C,
     camera_model: &CameraModel,

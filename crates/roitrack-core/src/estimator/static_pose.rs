@@ -361,6 +361,26 @@ pub fn refine_static_pose(
 
 /// The static pose from scratch: closed form (homography for planar targets, DLT otherwise) then refinement.
 /// Observation times are ignored (as if simultaneous); each point should appear once.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::estimator::{Observation, solve_static_pose};
+/// use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+///
+/// let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+/// let target = Target::grid4x4();
+/// // Seen from any side, with no prior.
+/// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.5, -0.3, 2.0), Vector3::new(-0.02, 0.01, 0.7));
+/// let obs: Vec<Observation> = (0..16)
+///     .map(|i| Observation {
+///         t_s: 0.0,
+///         point_index: i,
+///         ideal_px: model.project(&truth, &target.points()[i].point_in_obj_m, 0.0).unwrap(),
+///     })
+///     .collect();
+/// let fit = solve_static_pose(&model, &target, &obs).unwrap();
+/// assert!(fit.converged && (fit.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-9);
+/// ```
 pub fn solve_static_pose(
     model: &SpatioTemporalModel,
     target: &Target,
