@@ -1,0 +1,86 @@
+//! The integer first-order moments of a component ([`Moments`]) and their measurement over a component given as row
+//! masks: vectorised over a window of its columns where the CPU allows (in [`super::kernels`]), else a row at a time.
+//!
+//! The moments are integer sums, exact whatever the order they are added in: that is what lets every instruction set
+//! give the same centroid to the bit.
+
+use super::kernels::{self, Isa};
+
+/// Integer first-order moments of a component: pixel count, sums of i, j, value, value * i, value * j.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct Moments {
+    pub(crate) n: u64,
+    pub(crate) sum_i: u64,
+    pub(crate) sum_j: u64,
+    pub(crate) sum_p: u64,
+    pub(crate) sum_pi: u64,
+    pub(crate) sum_pj: u64,
+}
+
+/// The moments of the component `comp` (rows `lo..=hi`), a row at a time over its runs.
+fn scalar_moments(pixels: &[u16], w: usize, comp: &[u64], lo: usize, hi: usize) -> Moments {
+    let mut m = Moments::default();
+    for (j, &bits) in comp.iter().enumerate().take(hi + 1).skip(lo) {
+        if bits == 0 {
+            continue;
+        }
+        let first = bits.trailing_zeros() as usize;
+        let last = 63 - bits.leading_zeros() as usize;
+        let span = &pixels[j * w + first..=j * w + last];
+        let single_run = bits >> first == u64::MAX >> (63 - (last - first));
+        let (n, si, sp, spi) = if single_run {
+            // One run (always, for a convex blob): plain sums over it (u32 cannot overflow: 64 x 65535 x 63).
+            let n = (last - first + 1) as u64;
+            let (sp, spk) = span
+                .iter()
+                .enumerate()
+                .fold((0u32, 0u32), |(sp, spk), (k, &p)| {
+                    (sp + u32::from(p), spk + u32::from(p) * k as u32)
+                });
+            let (sp, spk) = (u64::from(sp), u64::from(spk));
+            (
+                n,
+                n * (first + last) as u64 / 2,
+                sp,
+                spk + first as u64 * sp,
+            )
+        } else {
+            let (mut n, mut si, mut sp, mut spi) = (0u64, 0u64, 0u64, 0u64);
+            for (k, &p) in span.iter().enumerate() {
+                let i = (first + k) as u64;
+                let m = (bits >> i) & 1;
+                let pm = u64::from(p) * m;
+                n += m;
+                si += m * i;
+                sp += pm;
+                spi += pm * i;
+            }
+            (n, si, sp, spi)
+        };
+        m.n += n;
+        m.sum_i += si;
+        m.sum_j += n * j as u64;
+        m.sum_p += sp;
+        m.sum_pi += spi;
+        m.sum_pj += sp * j as u64;
+    }
+    m
+}
+
+/// The moments of the component `comp` (rows `lo..=hi`, columns `cols` the union of its rows) of the above-threshold
+/// pixels `mask`: with SSE2 over a window of 8-pixel vectors holding its columns where the ROI is wide enough, else a
+/// row at a time.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn moments(
+    isa: Isa,
+    pixels: &[u16],
+    w: usize,
+    comp: &[u64],
+    mask: &[u64],
+    rows: (usize, usize),
+    cols: u64,
+    levels: (u16, u16),
+) -> Moments {
+    kernels::window_moments(isa, pixels, w, comp, mask, rows, cols, levels)
+        .unwrap_or_else(|| scalar_moments(pixels, w, comp, rows.0, rows.1))
+}
