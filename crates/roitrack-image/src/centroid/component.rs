@@ -125,6 +125,7 @@ fn grow_component(mask: &[u64], seed_i: usize, seed_j: usize, comp: &mut [u64]) 
 
 /// The component of the seed pixel `(seed_i, seed_j)` (its moments, first and last rows and union of columns) from
 /// the threshold mask of every row.
+#[inline]
 pub(super) fn component_moments(
     isa: Isa,
     pixels: &[u16],

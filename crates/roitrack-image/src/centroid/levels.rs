@@ -83,6 +83,7 @@ fn border_len(w: usize, h: usize) -> u32 {
 /// The levels of an ROI given its peak and the minimum, maximum and sum of its border pixels (from one vectorised
 /// pass: the rarer cases, a bright pixel on the border or a contrast that needs the border's noise, go through
 /// `BorderStats::at_most`).
+#[inline]
 pub(super) fn levels(
     pixels: &[u16],
     w: usize,

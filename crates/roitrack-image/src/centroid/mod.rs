@@ -12,14 +12,20 @@
 //! With the default options the blob must then pass a symmetry check ([`SymmetryCheck`], in [`crate::symmetry`]): a
 //! reflection merged with a blob pulls its moments by up to half a pixel, and is caught by the outline's asymmetry.
 //!
-//! The kernels take 8 pixels a vector with SSE2 (every x86_64 CPU) or 32 with AVX-512 where the CPU has it, a pixel
-//! at a time elsewhere. The moments are integer sums (exact), so every path gives the same centroid to the bit.
+//! The passes over the pixels take 8 pixels a vector with SSE2 (every x86_64 CPU) or 32 with AVX-512 where the CPU
+//! has it, a pixel at a time elsewhere; the vectorised ones are written once, generic over a trait of lane primitives
+//! that each instruction set implements. The moments are integer sums (exact), so every path gives the same centroid
+//! to the bit.
 //!
-//! This file holds the public API and [`measure_blob`]'s steps in order; each concern has its own file:
+//! This file holds the public API and [`measure_blob`]'s steps in order, so that the whole measurement reads in one
+//! place; each step's internals have a file by concern, to be read and tested on its own:
 //! - `levels.rs`: background, threshold and weight origin from the border's statistics and the peak;
 //! - `component.rs`: the component of the brightest pixel from the rows' masks (bit operations a row at a time);
-//! - `moments.rs`: the integer moments of a component, and their measurement a row at a time;
-//! - `kernels/`: the passes over the pixels, vectorised per instruction set, and the choice of instructions.
+//! - `moments.rs`: the integer moments of a component (`Moments`), and their measurement a row at a time;
+//! - `kernels/`: the passes over the pixels and the choice of instructions: `mod.rs` the choice (`Isa`) and the
+//!   calls, `lanes.rs` the trait of lane primitives, `scan.rs` the generic peak, border statistics and row masks,
+//!   `walk.rs` the generic moment sums (the one-pass walk of a simple component, the window moments), `sse2.rs` and
+//!   `avx512.rs` the primitives of each instruction set, `portable.rs` the pixel-at-a-time kernels (the reference).
 
 mod component;
 mod kernels;

@@ -8,13 +8,13 @@ use super::kernels::{self, Isa};
 
 /// Integer first-order moments of a component: pixel count, sums of i, j, value, value * i, value * j.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
-pub(crate) struct Moments {
-    pub(crate) n: u64,
-    pub(crate) sum_i: u64,
-    pub(crate) sum_j: u64,
-    pub(crate) sum_p: u64,
-    pub(crate) sum_pi: u64,
-    pub(crate) sum_pj: u64,
+pub(super) struct Moments {
+    pub(super) n: u64,
+    pub(super) sum_i: u64,
+    pub(super) sum_j: u64,
+    pub(super) sum_p: u64,
+    pub(super) sum_pi: u64,
+    pub(super) sum_pj: u64,
 }
 
 /// The moments of the component `comp` (rows `lo..=hi`), a row at a time over its runs.

@@ -1,24 +1,64 @@
-//! AVX-512 kernels (F and BW, with BMI1, LZCNT and POPCNT), for the CPUs that have them (see [`super::Isa`]): 32 pixels
-//! a register, loaded under a mask at any width, and comparisons that give each row's above-threshold mask directly.
-//! Each is a `#[target_feature]` function, in which the intrinsics are safe to call (only the loads and gathers, which
-//! take raw pointers, need `unsafe`); callers' `unsafe` blocks assert the CPU's features.
+//! The lane primitives with AVX-512 ([`Avx512`]: F and BW, with BMI1, LZCNT and POPCNT), for the CPUs that have them
+//! (see [`super::Isa`]): 32 pixels a register, and the kernels' entry points for AVX-512.
+//!
+//! Loads under a mask read the last pixels of a slice at any width, the other lanes 0; comparisons give masks
+//! directly; the border's pixel pairs are gathered 16 at a time. The primitives are `#[target_feature]` functions, in
+//! which the intrinsics are safe to call (only the loads and gathers, which take raw pointers, need `unsafe`); the
+//! trait's methods call them, asserting the CPU's features by the token.
 
 use std::arch::x86_64::*;
 
-use crate::centroid::component::{dilate, single_run};
-use crate::centroid::moments::Moments;
+use super::lanes::{Lanes, entry_points};
 
-/// Whether the CPU runs these kernels (std caches the answer).
-pub(super) fn available() -> bool {
-    is_x86_feature_detected!("avx512f")
-        && is_x86_feature_detected!("avx512bw")
-        && is_x86_feature_detected!("bmi1")
-        && is_x86_feature_detected!("lzcnt")
-        && is_x86_feature_detected!("popcnt")
+/// The AVX-512 token: exists only where the CPU has AVX-512 F and BW, BMI1, LZCNT and POPCNT.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Avx512(());
+
+impl Avx512 {
+    /// Whether the CPU runs these kernels (std caches the answer).
+    pub(super) fn available() -> bool {
+        is_x86_feature_detected!("avx512f")
+            && is_x86_feature_detected!("avx512bw")
+            && is_x86_feature_detected!("bmi1")
+            && is_x86_feature_detected!("lzcnt")
+            && is_x86_feature_detected!("popcnt")
+    }
+
+    /// The token.
+    ///
+    /// # Safety
+    /// Only where [`Avx512::available`].
+    pub(super) unsafe fn new_unchecked() -> Self {
+        debug_assert!(Self::available());
+        Self(())
+    }
+}
+
+entry_points!(
+    Avx512,
+    "avx512f,avx512bw,bmi1,lzcnt,popcnt",
+    peak,
+    border_min_max_sum,
+    simple_component
+);
+
+/// The last pixels `start..end` of a slice, in lanes `0..end - start` (`keep`).
+#[derive(Clone, Copy)]
+pub(super) struct Span {
+    start: usize,
+    end: usize,
+    keep: u32,
+}
+
+/// Running minimum, maximum and sum (in 32-bit lanes) of vectors of pixels.
+pub(super) struct MinMaxSum {
+    min: __m512i,
+    max: __m512i,
+    sum: __m512i,
 }
 
 /// The lowest `n` bits (`n <= 32`).
-#[inline]
+#[inline(always)]
 fn low_bits(n: usize) -> u32 {
     ((1u64 << n) - 1) as u32
 }
@@ -34,7 +74,7 @@ fn load32(px: &[u16; 32]) -> __m512i {
 /// The first `min(32, px.len())` pixels of `px`, the other lanes 0.
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
-fn load(px: &[u16]) -> __m512i {
+fn load_part(px: &[u16]) -> __m512i {
     // SAFETY: only the lanes in bounds are read (the others, masked off, are neither read nor fault), at any
     // alignment.
     unsafe { _mm512_maskz_loadu_epi16(low_bits(px.len().min(32)), px.as_ptr().cast()) }
@@ -69,12 +109,34 @@ fn widen(v: __m512i) -> (__m512i, __m512i) {
     )
 }
 
-/// Sum of the 32 unsigned 16-bit lanes (the callers' sums fit 31 bits).
+/// `acc` plus the 32 lanes of `v`, widened: lanes `l` and `l + 16` into 32-bit lane `l`.
 #[inline]
 #[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
-fn hsum(v: __m512i) -> u64 {
+fn sum_add(acc: __m512i, v: __m512i) -> __m512i {
     let (lo, hi) = widen(v);
-    _mm512_reduce_add_epi32(_mm512_add_epi32(lo, hi)) as u32 as u64
+    _mm512_add_epi32(acc, _mm512_add_epi32(lo, hi))
+}
+
+/// `acc` plus the 32 lanes of `v` times their columns (`cols.0` for lanes 0-15, `cols.1` for 16-31), in 32 bits.
+#[inline]
+#[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
+fn sum_weighted(acc: __m512i, v: __m512i, (col_lo, col_hi): (__m512i, __m512i)) -> __m512i {
+    let (lo, hi) = widen(v);
+    _mm512_add_epi32(
+        acc,
+        _mm512_add_epi32(
+            _mm512_mullo_epi32(lo, col_lo),
+            _mm512_mullo_epi32(hi, col_hi),
+        ),
+    )
+}
+
+/// The columns `offset..offset + 32` in two vectors of 16 32-bit lanes.
+#[inline]
+#[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
+fn cols(offset: usize) -> (__m512i, __m512i) {
+    let col = _mm512_add_epi32(lane_index32(), _mm512_set1_epi32(offset as i32));
+    (col, _mm512_add_epi32(col, _mm512_set1_epi32(16)))
 }
 
 /// 0 to 15 (32-bit lanes).
@@ -84,264 +146,228 @@ fn lane_index32() -> __m512i {
     _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15)
 }
 
-/// The largest pixel and the index of its first occurrence (`px` not empty).
+/// Adds the lanes `lanes` of `v` to the minimum, and all to the maximum and sum (the others are 0).
+#[inline]
 #[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
-pub(super) fn peak(px: &[u16]) -> (u16, usize) {
-    let mut chunks = px.chunks_exact(32);
-    let mut m = _mm512_setzero_si512();
-    for c in chunks.by_ref() {
-        m = _mm512_max_epu16(m, load32(c.try_into().expect("32 pixels")));
-    }
-    let rest = chunks.remainder();
-    let peak = hmax(_mm512_max_epu16(m, load(rest)));
-    let v = _mm512_set1_epi16(peak as i16);
-    for (c, chunk) in px.chunks_exact(32).enumerate() {
-        let eq = _mm512_cmpeq_epi16_mask(load32(chunk.try_into().expect("32 pixels")), v);
-        if eq != 0 {
-            return (peak, 32 * c + eq.trailing_zeros() as usize);
-        }
-    }
-    let eq = _mm512_cmpeq_epi16_mask(load(rest), v) & low_bits(rest.len());
-    let at = if eq == 0 {
-        0
-    } else {
-        px.len() - rest.len() + eq.trailing_zeros() as usize
-    };
-    (peak, at)
+fn mms_add(acc: &mut MinMaxSum, v: __m512i, lanes: u32) {
+    acc.min = _mm512_mask_min_epu16(acc.min, lanes, acc.min, v);
+    acc.max = _mm512_max_epu16(acc.max, v);
+    acc.sum = sum_add(acc.sum, v);
 }
 
-/// Minimum, maximum and sum of the border pixels of a row-major `w` x `h` image (`w, h >= 2`): the top row but
-/// its last pixel, the bottom row but its first, and the (last, first) pixel pairs of consecutive rows, which are
-/// adjacent in memory (gathered 16 pairs at a time).
+/// Pixel pairs `pairs[j * w..j * w + 2]` for `j` in `first..first + n` (`0 < n <= 16`), gathered into lanes
+/// `0..2 * n`, the others 0.
+#[inline]
 #[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
-pub(super) fn border_min_max_sum(px: &[u16], w: usize, h: usize) -> (u16, u16, u64) {
-    let z = _mm512_setzero_si512();
-    let (mut min, mut max, mut sum) = (_mm512_set1_epi16(-1), z, z);
-    let mut add = |v: __m512i, lanes: u32| {
-        min = _mm512_mask_min_epu16(min, lanes, min, v);
-        max = _mm512_max_epu16(max, v);
-        let (lo, hi) = widen(v);
-        sum = _mm512_add_epi32(sum, _mm512_add_epi32(lo, hi));
-    };
-    for seg in [&px[..w - 1], &px[(h - 1) * w + 1..h * w]] {
-        for part in seg.chunks(32) {
-            add(load(part), low_bits(part.len()));
-        }
-    }
-    // Pair j (rows j and j + 1) at `j * w` in `pairs`.
-    let pairs = &px[w - 1..(h - 1) * w + 1];
+fn pairs(pairs: &[u16], w: usize, first: usize, n: usize) -> __m512i {
+    assert!(0 < n && n <= 16 && (first + n - 1) * w + 2 <= pairs.len());
     let step = _mm512_mullo_epi32(lane_index32(), _mm512_set1_epi32(w as i32));
-    for first in (0..h - 1).step_by(16) {
-        let n = (h - 1 - first).min(16);
-        let offsets = _mm512_add_epi32(step, _mm512_set1_epi32((first * w) as i32));
-        // SAFETY: pair j is `pairs[j * w..j * w + 2]`, in bounds for j < h - 1; the lanes past `n` pairs are
-        // masked off (not read).
-        let v = unsafe {
-            _mm512_mask_i32gather_epi32(
-                z,
-                low_bits(n) as __mmask16,
-                offsets,
-                pairs.as_ptr().cast(),
-                2,
-            )
-        };
-        add(v, low_bits(2 * n));
-    }
-    (
-        hmin(min),
-        hmax(max),
-        _mm512_reduce_add_epi32(sum) as u32 as u64,
-    )
-}
-
-/// One pass over the rows of a simple component: see [`simple_component`]. Rows are `N` registers of 32 pixels
-/// (`32 * (N - 1) < w <= 32 * N`).
-struct Walk<'a, const N: usize> {
-    px: &'a [u16],
-    w: usize,
-    h: usize,
-    /// The threshold, broadcast.
-    t: __m512i,
-    /// Lanes of each register inside the row.
-    lanes: [u32; N],
-    /// Rows of 16-bit sums that cannot overflow (at least 1).
-    block: usize,
-    /// Integer sums: count, twice the sum of i, sum of j, and of `v = value - threshold` unweighted and weighted by
-    /// i and by j.
-    n: u64,
-    sum_i2: u64,
-    sum_j: u64,
-    sum_v: u64,
-    sum_iv: u64,
-    sum_jv: u64,
-}
-
-impl<const N: usize> Walk<'_, N> {
-    /// Row `j`'s above-threshold mask and its `value -sat threshold` (0 at or below the threshold and past the
-    /// row's end).
-    #[inline]
-    #[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
-    fn classify(&self, j: usize) -> (u64, [__m512i; N]) {
-        let row = &self.px[j * self.w..(j + 1) * self.w];
-        let mut v = [_mm512_setzero_si512(); N];
-        let mut mask = 0;
-        for (k, (v, &lanes)) in v.iter_mut().zip(&self.lanes).enumerate() {
-            // SAFETY: the lanes of `lanes` are pixels `32 * k..w` of the row; the others, masked off, are neither
-            // read nor fault.
-            let p = unsafe {
-                _mm512_maskz_loadu_epi16(lanes, row.as_ptr().wrapping_add(32 * k).cast())
-            };
-            *v = _mm512_subs_epu16(p, self.t);
-            mask |= u64::from(_mm512_test_epi16_mask(*v, *v)) << (32 * k);
-        }
-        (mask, v)
-    }
-
-    /// Folds the 16-bit sums `a` (of `v` per lane over a block of rows, `last` the block's last row walked) and
-    /// `b` (running sums of `a`) into the totals and clears them. Walking down, row j counts `last + 1 - j`
-    /// times in `b`; walking up, `j + 1 - last` times.
-    #[inline]
-    #[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
-    fn fold<const DOWN: bool>(&mut self, a: &mut [__m512i; N], b: &mut [__m512i; N], last: usize) {
-        let (mut sa, mut sb, mut sia) = (0, 0, 0);
-        for k in 0..N {
-            let (lo, hi) = widen(a[k]);
-            let col = _mm512_add_epi32(lane_index32(), _mm512_set1_epi32(32 * k as i32));
-            let col_hi = _mm512_add_epi32(col, _mm512_set1_epi32(16));
-            sa += _mm512_reduce_add_epi32(_mm512_add_epi32(lo, hi)) as u32 as u64;
-            sia += _mm512_reduce_add_epi32(_mm512_add_epi32(
-                _mm512_mullo_epi32(lo, col),
-                _mm512_mullo_epi32(hi, col_hi),
-            )) as u32 as u64;
-            sb += hsum(b[k]);
-            a[k] = _mm512_setzero_si512();
-            b[k] = _mm512_setzero_si512();
-        }
-        let last = last as u64;
-        self.sum_v += sa;
-        self.sum_iv += sia;
-        self.sum_jv += if DOWN {
-            (last + 1) * sa - sb
-        } else {
-            sb + last * sa - sa
-        };
-    }
-
-    /// Takes the rows from `start` on, downwards (`DOWN`, to the last row at most) or upwards (to row 0), while
-    /// they continue the simple component, `prev` being the mask of the row before `start` (or of `start`
-    /// itself), `union` the union of their masks. Returns the number of rows taken, or `None` if the component
-    /// is not simple.
-    #[inline]
-    #[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
-    fn rows<const DOWN: bool>(
-        &mut self,
-        start: usize,
-        mut prev: u64,
-        union: &mut u64,
-    ) -> Option<usize> {
-        let z = _mm512_setzero_si512();
-        let (mut a, mut b) = ([z; N], [z; N]);
-        let (mut n, mut sum_i2, mut sum_j) = (0u64, 0u64, 0u64);
-        let mut left = self.block;
-        // Rows `start..end` (down) or `end + 1..=start` (up, `end` wrapping below 0) are taken.
-        let mut end = start;
-        loop {
-            let (mask, v) = self.classify(end);
-            if mask == 0 {
-                break;
-            }
-            if !single_run(mask) || dilate(prev) & mask == 0 {
-                return None;
-            }
-            let count = u64::from(mask.count_ones());
-            let ends = u64::from(mask.trailing_zeros()) + u64::from(63 - mask.leading_zeros());
-            n += count;
-            sum_i2 += count * ends;
-            sum_j += count * end as u64;
-            *union |= mask;
-            for k in 0..N {
-                a[k] = _mm512_add_epi16(a[k], v[k]);
-                b[k] = _mm512_add_epi16(b[k], a[k]);
-            }
-            prev = mask;
-            left -= 1;
-            if left == 0 {
-                self.fold::<DOWN>(&mut a, &mut b, end);
-                left = self.block;
-            }
-            if DOWN {
-                end += 1;
-                if end == self.h {
-                    break;
-                }
-            } else {
-                end = end.wrapping_sub(1);
-                if end == usize::MAX {
-                    break;
-                }
-            }
-        }
-        let taken = if DOWN {
-            end - start
-        } else {
-            start.wrapping_sub(end)
-        };
-        if left != self.block {
-            let last = if DOWN { end - 1 } else { end.wrapping_add(1) };
-            self.fold::<DOWN>(&mut a, &mut b, last);
-        }
-        self.n += n;
-        self.sum_i2 += sum_i2;
-        self.sum_j += sum_j;
-        Some(taken)
+    let offsets = _mm512_add_epi32(step, _mm512_set1_epi32((first * w) as i32));
+    // SAFETY: pair j is `pairs[j * w..j * w + 2]`, in bounds for j < first + n (asserted); the lanes past `n` pairs
+    // are masked off (not read).
+    unsafe {
+        _mm512_mask_i32gather_epi32(
+            _mm512_setzero_si512(),
+            low_bits(n) as __mmask16,
+            offsets,
+            pairs.as_ptr().cast(),
+            2,
+        )
     }
 }
 
-/// As `sse2::simple_component`, for `32 * (N - 1) < w <= 32 * N`.
-#[target_feature(enable = "avx512f,avx512bw,bmi1,lzcnt,popcnt")]
-pub(super) fn simple_component<const N: usize>(
-    px: &[u16],
-    (w, h): (usize, usize),
-    seed_j: usize,
-    threshold: u16,
-    peak: u16,
-) -> Option<(Moments, (usize, usize), u64)> {
-    assert!(32 * (N - 1) < w && w <= 32 * N && px.len() == w * h);
-    let mut lanes = [0; N];
-    for (k, l) in lanes.iter_mut().enumerate() {
-        *l = low_bits((w - 32 * k).min(32));
+impl Lanes for Avx512 {
+    const WIDTH: usize = 32;
+    const MIN_PIXELS: usize = 1;
+    type V = __m512i;
+    type Keep = u32;
+    type Span = Span;
+    /// Sixteen 32-bit lanes.
+    type Sum = __m512i;
+    /// The columns of lanes 0-15 and 16-31, in 32-bit lanes.
+    type Cols = (__m512i, __m512i);
+    type MinMaxSum = MinMaxSum;
+
+    #[inline(always)]
+    fn zero(self) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { _mm512_setzero_si512() }
     }
-    let mut walk = Walk {
-        px,
-        w,
-        h,
-        t: _mm512_set1_epi16(threshold as i16),
-        lanes,
-        block: super::block_rows(u64::from(peak - threshold), h as u64) as usize,
-        n: 0,
-        sum_i2: 0,
-        sum_j: 0,
-        sum_v: 0,
-        sum_iv: 0,
-        sum_jv: 0,
-    };
-    let seed_mask = walk.classify(seed_j).0;
-    let mut union = 0;
-    let down = walk.rows::<true>(seed_j, seed_mask, &mut union)?;
-    let up = if seed_j > 0 {
-        walk.rows::<false>(seed_j - 1, seed_mask, &mut union)?
-    } else {
-        0
-    };
-    let t = u64::from(threshold);
-    let sum_i = walk.sum_i2 / 2;
-    let moments = Moments {
-        n: walk.n,
-        sum_i,
-        sum_j: walk.sum_j,
-        sum_p: walk.sum_v + t * walk.n,
-        sum_pi: walk.sum_iv + t * sum_i,
-        sum_pj: walk.sum_jv + t * walk.sum_j,
-    };
-    Some((moments, (seed_j - up, seed_j + down - 1), union))
+
+    #[inline(always)]
+    fn splat(self, x: u16) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { _mm512_set1_epi16(x as i16) }
+    }
+
+    #[inline(always)]
+    fn load(self, px: &[u16], k: usize) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { load32(px[k..k + 32].try_into().expect("32 pixels")) }
+    }
+
+    #[inline(always)]
+    fn span(self, start: usize, end: usize) -> Span {
+        Span {
+            start,
+            end,
+            keep: low_bits(end - start),
+        }
+    }
+
+    #[inline(always)]
+    fn span_offset(self, span: Span) -> usize {
+        span.start
+    }
+
+    #[inline(always)]
+    fn span_keep(self, span: Span) -> u32 {
+        span.keep
+    }
+
+    /// The lanes outside the span are 0.
+    #[inline(always)]
+    fn load_span(self, px: &[u16], span: Span) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { load_part(&px[span.start..span.end]) }
+    }
+
+    #[inline(always)]
+    fn excess_span(self, px: &[u16], span: Span, t: __m512i) -> __m512i {
+        // 0 -sat t is 0 outside the span.
+        self.sub_sat(self.load_span(px, span), t)
+    }
+
+    #[inline(always)]
+    fn first_lanes(self, n: usize) -> u32 {
+        low_bits(n)
+    }
+
+    #[inline(always)]
+    fn keep_bits(self, keep: u32) -> u64 {
+        u64::from(keep)
+    }
+
+    #[inline(always)]
+    fn add(self, a: __m512i, b: __m512i) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { _mm512_add_epi16(a, b) }
+    }
+
+    #[inline(always)]
+    fn sub_sat(self, a: __m512i, b: __m512i) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { _mm512_subs_epu16(a, b) }
+    }
+
+    #[inline(always)]
+    fn max(self, a: __m512i, b: __m512i) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { _mm512_max_epu16(a, b) }
+    }
+
+    #[inline(always)]
+    fn hmax(self, v: __m512i) -> u16 {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { hmax(v) }
+    }
+
+    #[inline(always)]
+    fn eq_bits(self, a: __m512i, b: __m512i) -> u64 {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { u64::from(_mm512_cmpeq_epi16_mask(a, b)) }
+    }
+
+    #[inline(always)]
+    fn nonzero_bits(self, v: __m512i) -> u64 {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { u64::from(_mm512_test_epi16_mask(v, v)) }
+    }
+
+    #[inline(always)]
+    fn nonzero_bits2(self, a: __m512i, b: __m512i) -> u64 {
+        self.nonzero_bits(a) | self.nonzero_bits(b) << 32
+    }
+
+    #[inline(always)]
+    fn select(self, v: __m512i, bits: u64) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { _mm512_maskz_mov_epi16(bits as u32, v) }
+    }
+
+    #[inline(always)]
+    fn count_zeros(self, zeros: __m512i, v: __m512i) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe {
+            let zero = _mm512_cmpeq_epi16_mask(v, _mm512_setzero_si512());
+            _mm512_mask_add_epi16(zeros, zero, zeros, _mm512_set1_epi16(1))
+        }
+    }
+
+    #[inline(always)]
+    fn sum_zero(self) -> __m512i {
+        self.zero()
+    }
+
+    #[inline(always)]
+    fn sum_add(self, acc: __m512i, v: __m512i) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { sum_add(acc, v) }
+    }
+
+    #[inline(always)]
+    fn cols(self, offset: usize) -> (__m512i, __m512i) {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { cols(offset) }
+    }
+
+    #[inline(always)]
+    fn sum_weighted(self, acc: __m512i, v: __m512i, cols: (__m512i, __m512i)) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { sum_weighted(acc, v, cols) }
+    }
+
+    #[inline(always)]
+    fn hsum(self, acc: __m512i) -> u64 {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { u64::from(_mm512_reduce_add_epi32(acc) as u32) }
+    }
+
+    #[inline(always)]
+    fn min_max_sum(self) -> MinMaxSum {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe {
+            MinMaxSum {
+                min: _mm512_set1_epi16(-1),
+                max: _mm512_setzero_si512(),
+                sum: _mm512_setzero_si512(),
+            }
+        }
+    }
+
+    #[inline(always)]
+    fn mms_add(self, acc: &mut MinMaxSum, v: __m512i) {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { mms_add(acc, v, u32::MAX) }
+    }
+
+    /// The lanes outside `keep` are 0 (masked loads and gathers): left out of the minimum, harmless for the maximum
+    /// and the sum.
+    #[inline(always)]
+    fn mms_add_kept(self, acc: &mut MinMaxSum, v: __m512i, keep: u32, _count: u64) {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { mms_add(acc, v, keep) }
+    }
+
+    #[inline(always)]
+    fn mms_finish(self, acc: &MinMaxSum) -> (u16, u16, u64) {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { (hmin(acc.min), hmax(acc.max), self.hsum(acc.sum)) }
+    }
+
+    #[inline(always)]
+    fn pairs(self, px: &[u16], w: usize, first: usize, n: usize) -> __m512i {
+        // SAFETY: `self` exists only where the CPU has the features.
+        unsafe { pairs(px, w, first, n) }
+    }
 }

@@ -2,37 +2,38 @@
 //! minimum, maximum and sum, the rows' above-threshold masks, the moments over a window of columns, and the one-pass
 //! walk that finds and measures a simple (convex) component.
 //!
-//! Each function here takes the [`Isa`] found once per call of [`super::measure_blob`] and runs the SSE2 kernels
-//! ([`sse2`]: every x86_64 CPU), the AVX-512 ones ([`avx512`]: where the CPU has them) or the portable ones
-//! ([`portable`]: elsewhere, and for ROIs too narrow for a vector). All give the same results, to the bit.
+//! The vectorised kernels are written once, generic over the lane primitives of [`lanes::Lanes`]: those that scan
+//! pixels in `scan.rs`, those that sum moments in `walk.rs`. Each instruction set implements the primitives and
+//! instantiates the kernels inside its own `#[target_feature]` entry points: SSE2 (`sse2.rs`, every x86_64 CPU, 8
+//! pixels a vector) and AVX-512 (`avx512.rs`, where the CPU has it, 32). `portable.rs` takes a pixel at a time, on
+//! other CPUs and for ROIs too narrow for a vector; it is also the reference the others are tested against.
+//!
+//! Each function here takes the [`Isa`] found once per call of [`super::measure_blob`] and runs the kernel of that
+//! instruction set. All give the same results, to the bit. AVX-512 CPUs make the row masks and the window moments
+//! with SSE2 (as they did before the kernels were generic).
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
+#[cfg(target_arch = "x86_64")]
+mod lanes;
 mod portable;
 #[cfg(target_arch = "x86_64")]
+mod scan;
+#[cfg(target_arch = "x86_64")]
 mod sse2;
+#[cfg(target_arch = "x86_64")]
+mod walk;
 
+#[cfg(target_arch = "x86_64")]
+use self::{avx512::Avx512, lanes::Lanes, sse2::Sse2};
 use super::moments::Moments;
 
-/// Rows of 16-bit sums of values up to `d` and of their running sums that cannot overflow: the largest
-/// `m <= rows` with `d * m * (m + 1) / 2 <= 65535` (at least 1).
-#[cfg(target_arch = "x86_64")]
-fn block_rows(d: u64, rows: u64) -> u64 {
-    let fits = |m: u64| d * m * (m + 1) / 2 <= u64::from(u16::MAX);
-    if fits(rows) {
-        return rows;
-    }
-    let mut m = ((2.0 * 65535.0 / d.max(1) as f64).sqrt() as u64).clamp(1, rows);
-    while m > 1 && !fits(m) {
-        m -= 1;
-    }
-    while m < rows && fits(m + 1) {
-        m += 1;
-    }
-    m
-}
+/// A component found in one pass: its moments, first and last rows, and union of columns.
+pub(super) type Found = (Moments, (usize, usize), u64);
 
 /// The instructions the kernels use. All give the same results, to the bit (integer sums).
+///
+/// `Isa::Avx512` only where the CPU has the features ([`Isa::detect`]): the AVX-512 kernels rely on it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[cfg_attr(not(target_arch = "x86_64"), allow(dead_code))]
 pub(super) enum Isa {
@@ -48,7 +49,7 @@ impl Isa {
     /// The best the CPU runs.
     #[cfg(target_arch = "x86_64")]
     pub(super) fn detect() -> Self {
-        if avx512::available() {
+        if Avx512::available() {
             Self::Avx512
         } else {
             Self::Sse2
@@ -62,33 +63,43 @@ impl Isa {
     }
 }
 
+/// The AVX-512 token of `Isa::Avx512`.
+#[cfg(target_arch = "x86_64")]
+#[inline]
+fn avx512_token() -> Avx512 {
+    // SAFETY: called only for `Isa::Avx512`, which is only where the CPU has the features.
+    unsafe { Avx512::new_unchecked() }
+}
+
 /// The largest pixel and the index of its first occurrence (row-major).
+#[inline]
 pub(super) fn peak(isa: Isa, pixels: &[u16]) -> (u16, usize) {
     match isa {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `Isa::Avx512` only where the CPU has the features.
-        Isa::Avx512 => unsafe { avx512::peak(pixels) },
+        Isa::Avx512 if pixels.len() >= Avx512::MIN_PIXELS => avx512_token().peak(pixels),
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: SSE2 is part of the x86_64 baseline.
-        Isa::Sse2 if pixels.len() >= 8 => unsafe { sse2::peak(pixels) },
+        Isa::Sse2 if pixels.len() >= Sse2::MIN_PIXELS => Sse2::new().peak(pixels),
         _ => portable::peak(pixels),
     }
 }
 
-/// Minimum, maximum and sum of the border pixels of a row-major `w` x `h` image.
+/// Minimum, maximum and sum of the border pixels of a row-major `w` x `h` image (vectorised where the top and bottom
+/// rows but a pixel, `w - 1`, fill a span).
+#[inline]
 pub(super) fn border_min_max_sum(isa: Isa, pixels: &[u16], w: usize, h: usize) -> (u16, u16, u64) {
     match isa {
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: `Isa::Avx512` only where the CPU has the features.
-        Isa::Avx512 if w > 1 && h > 1 => unsafe { avx512::border_min_max_sum(pixels, w, h) },
+        Isa::Avx512 if w > Avx512::MIN_PIXELS && h > 1 => {
+            avx512_token().border_min_max_sum(pixels, w, h)
+        }
         #[cfg(target_arch = "x86_64")]
-        // SAFETY: SSE2 is part of the x86_64 baseline.
-        Isa::Sse2 if w > 8 && h > 1 => unsafe { sse2::border_min_max_sum(pixels, w, h) },
+        Isa::Sse2 if w > Sse2::MIN_PIXELS && h > 1 => Sse2::new().border_min_max_sum(pixels, w, h),
         _ => portable::border_min_max_sum(pixels, w, h),
     }
 }
 
 /// `rows[j]` bit i set where pixel (i, j) of the row-major `w`-wide `pixels` is above `threshold`.
+#[inline]
 pub(in crate::centroid) fn row_masks(
     isa: Isa,
     pixels: &[u16],
@@ -97,9 +108,8 @@ pub(in crate::centroid) fn row_masks(
     rows: &mut [u64],
 ) {
     #[cfg(target_arch = "x86_64")]
-    if isa != Isa::Portable && w >= 8 {
-        // SAFETY: SSE2 is part of the x86_64 baseline.
-        return unsafe { sse2::row_masks(pixels, w, threshold, rows) };
+    if isa != Isa::Portable && w >= Sse2::MIN_PIXELS {
+        return Sse2::new().row_masks(pixels, w, threshold, rows);
     }
     let _ = isa;
     portable::row_masks(pixels, w, threshold, rows);
@@ -109,6 +119,7 @@ pub(in crate::centroid) fn row_masks(
 /// pixels `mask`, with SSE2 over a window of 8-pixel vectors holding its columns; `None` where the ROI is too narrow
 /// for the window (or without vectors).
 #[allow(clippy::too_many_arguments)]
+#[inline]
 pub(super) fn window_moments(
     isa: Isa,
     pixels: &[u16],
@@ -117,67 +128,65 @@ pub(super) fn window_moments(
     mask: &[u64],
     rows: (usize, usize),
     cols: u64,
-    (threshold, peak): (u16, u16),
+    levels: (u16, u16),
 ) -> Option<Moments> {
     #[cfg(target_arch = "x86_64")]
     if isa != Isa::Portable {
         let first = cols.trailing_zeros() as usize;
         let last = 63 - cols.leading_zeros() as usize;
-        let vectors = (last - first) / 8 + 1;
-        if 8 * vectors <= w {
-            let s = first.min(w - 8 * vectors);
+        let vectors = (last - first) / Sse2::WIDTH + 1;
+        if Sse2::WIDTH * vectors <= w {
+            let s = first.min(w - Sse2::WIDTH * vectors);
+            let sse2 = Sse2::new();
             macro_rules! window {
                 ($n:literal) => {
-                    sse2::window_moments::<$n>(pixels, w, comp, mask, rows, s, threshold, peak)
+                    sse2.window_moments::<$n>(pixels, w, comp, mask, rows, s, levels)
                 };
             }
-            // SAFETY: SSE2 is part of the x86_64 baseline.
-            return Some(unsafe {
-                match vectors {
-                    1 => window!(1),
-                    2 => window!(2),
-                    3 => window!(3),
-                    4 => window!(4),
-                    5 => window!(5),
-                    6 => window!(6),
-                    7 => window!(7),
-                    _ => window!(8),
-                }
+            return Some(match vectors {
+                1 => window!(1),
+                2 => window!(2),
+                3 => window!(3),
+                4 => window!(4),
+                5 => window!(5),
+                6 => window!(6),
+                7 => window!(7),
+                _ => window!(8),
             });
         }
     }
-    let _ = (isa, pixels, w, comp, mask, rows, cols, threshold, peak);
+    let _ = (isa, pixels, w, comp, mask, rows, cols, levels);
     None
 }
 
 /// The seed's component (its moments, first and last rows and union of columns) when it is simple, found and
-/// measured in one pass over its rows (see `sse2::simple_component`); `None` when it is not (or without
-/// vectors, or the ROI is narrower than 8 pixels).
+/// measured in one pass over its rows (see `walk::simple_component`); `None` when it is not (or without vectors, or
+/// the ROI is narrower than a vector where that matters: SSE2).
 #[cfg(target_arch = "x86_64")]
+#[inline]
 pub(super) fn walk_simple(
     isa: Isa,
     pixels: &[u16],
     (w, h): (usize, usize),
     seed_j: usize,
-    (threshold, peak): (u16, u16),
-) -> Option<(Moments, (usize, usize), u64)> {
+    levels: (u16, u16),
+) -> Option<Found> {
     macro_rules! walk {
-        ($isa:ident, $n:literal) => {
-            $isa::simple_component::<$n>(pixels, (w, h), seed_j, threshold, peak)
+        ($lanes:expr, $n:literal) => {
+            $lanes.simple_component::<$n>(pixels, (w, h), seed_j, levels)
         };
     }
     match isa {
-        // SAFETY: `Isa::Avx512` only where the CPU has the features.
-        Isa::Avx512 => unsafe {
-            if w <= 32 {
-                walk!(avx512, 1)
-            } else {
-                walk!(avx512, 2)
+        Isa::Avx512 if w >= Avx512::MIN_PIXELS => {
+            let avx512 = avx512_token();
+            match w.div_ceil(Avx512::WIDTH) {
+                1 => walk!(avx512, 1),
+                _ => walk!(avx512, 2),
             }
-        },
-        // SAFETY: SSE2 is part of the x86_64 baseline.
-        Isa::Sse2 if w >= 8 => unsafe {
-            match w.div_ceil(8) {
+        }
+        Isa::Sse2 if w >= Sse2::MIN_PIXELS => {
+            let sse2 = Sse2::new();
+            match w.div_ceil(Sse2::WIDTH) {
                 1 => walk!(sse2, 1),
                 2 => walk!(sse2, 2),
                 3 => walk!(sse2, 3),
@@ -187,7 +196,7 @@ pub(super) fn walk_simple(
                 7 => walk!(sse2, 7),
                 _ => walk!(sse2, 8),
             }
-        },
+        }
         _ => None,
     }
 }
@@ -200,6 +209,6 @@ pub(super) fn walk_simple(
     _size: (usize, usize),
     _seed_j: usize,
     _levels: (u16, u16),
-) -> Option<(Moments, (usize, usize), u64)> {
+) -> Option<Found> {
     None
 }
