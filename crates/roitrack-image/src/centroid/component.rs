@@ -44,7 +44,7 @@ pub(super) fn single_run(m: u64) -> bool {
 /// The first and last rows of the seed's component when the non-empty rows of `mask` around the seed's (row
 /// `seed_j`) are single runs each touching the next (a convex blob's, nearly always): that component is then these
 /// rows' masks whole. `None` otherwise (then see [`grow_component`]).
-fn simple_rows(mask: &[u64], seed_j: usize) -> Option<(usize, usize)> {
+pub(super) fn simple_rows(mask: &[u64], seed_j: usize) -> Option<(usize, usize)> {
     if !single_run(mask[seed_j]) {
         return None;
     }
@@ -75,7 +75,12 @@ fn simple_rows(mask: &[u64], seed_j: usize) -> Option<(usize, usize)> {
 
 /// The 8-connected component of `mask` (one `u64` per row) containing bit `seed_i` of row `seed_j`, into `comp`
 /// (zeroed on entry). Returns its first and last rows.
-fn grow_component(mask: &[u64], seed_i: usize, seed_j: usize, comp: &mut [u64]) -> (usize, usize) {
+pub(super) fn grow_component(
+    mask: &[u64],
+    seed_i: usize,
+    seed_j: usize,
+    comp: &mut [u64],
+) -> (usize, usize) {
     let h = mask.len();
     comp[seed_j] = run_fill(mask[seed_j], 1u64 << seed_i);
     let (mut lo, mut hi) = (seed_j, seed_j);

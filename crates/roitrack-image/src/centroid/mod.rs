@@ -25,12 +25,15 @@
 //! - `kernels/`: the passes over the pixels and the choice of instructions: `mod.rs` the choice (`Isa`) and the
 //!   calls, `lanes.rs` the trait of lane primitives, `scan.rs` the generic peak, border statistics and row masks,
 //!   `walk.rs` the generic moment sums (the one-pass walk of a simple component, the window moments), `sse2.rs` and
-//!   `avx512.rs` the primitives of each instruction set, `portable.rs` the pixel-at-a-time kernels (the reference).
+//!   `avx512.rs` the primitives of each instruction set, `portable.rs` the pixel-at-a-time kernels (the reference);
+//! - `test_rois.rs` (tests only): synthetic and rendered ROIs of any size, for the comparisons of instruction sets.
 
 mod component;
 mod kernels;
 mod levels;
 mod moments;
+#[cfg(test)]
+mod test_rois;
 
 use thiserror::Error;
 
@@ -512,5 +515,57 @@ mod tests {
             }
         }
         assert!(measured > 1500, "{measured}");
+    }
+
+    /// As [`instruction_sets_agree`], on a synthetic and a rendered ROI of every size from 1 x 1 to 64 x 64, each
+    /// with the default options, binary moments, a fixed threshold and no symmetry check.
+    #[test]
+    fn instruction_sets_agree_at_every_size() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(23);
+        let scene = test_rois::Scene::new();
+        let isas: Vec<Isa> = [Isa::Avx512, Isa::Sse2, Isa::Portable]
+            .into_iter()
+            .filter(|&isa| isa != Isa::Avx512 || Isa::detect() == Isa::Avx512)
+            .collect();
+        let mut measured = 0;
+        for w in 1..=64 {
+            for h in 1..=64 {
+                let kind = w * 64 + h;
+                let synthetic = (
+                    test_rois::synthetic(&mut rng, w, h, kind),
+                    Roi::new(100, 200, w as u32, h as u32),
+                );
+                let rendered = scene.rendered(&mut rng, w as u32, h as u32, kind);
+                for (pixels, roi) in [synthetic, rendered] {
+                    let top = *pixels.iter().max().unwrap();
+                    for opts in [
+                        CentroidOptions::default(),
+                        CentroidOptions::binary(),
+                        CentroidOptions {
+                            threshold: Threshold::Fixed(
+                                (rng.random_range(0.1..1.0) * f64::from(top)) as u16,
+                            ),
+                            min_area_px: 1,
+                            ..Default::default()
+                        },
+                        CentroidOptions {
+                            symmetry: None,
+                            ..Default::default()
+                        },
+                    ] {
+                        let results: Vec<_> = isas
+                            .iter()
+                            .map(|&isa| measure_blob_with(isa, &pixels, &roi, &opts))
+                            .collect();
+                        for (isa, r) in isas.iter().zip(&results) {
+                            assert_eq!(*r, results[0], "{w}x{h} {opts:?} {isa:?} {pixels:?}");
+                        }
+                        measured += usize::from(results[0].is_ok());
+                    }
+                }
+            }
+        }
+        assert!(measured > 6_000, "{measured}");
     }
 }

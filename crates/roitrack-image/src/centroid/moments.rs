@@ -18,7 +18,13 @@ pub(super) struct Moments {
 }
 
 /// The moments of the component `comp` (rows `lo..=hi`), a row at a time over its runs.
-fn scalar_moments(pixels: &[u16], w: usize, comp: &[u64], lo: usize, hi: usize) -> Moments {
+pub(super) fn scalar_moments(
+    pixels: &[u16],
+    w: usize,
+    comp: &[u64],
+    lo: usize,
+    hi: usize,
+) -> Moments {
     let mut m = Moments::default();
     for (j, &bits) in comp.iter().enumerate().take(hi + 1).skip(lo) {
         if bits == 0 {

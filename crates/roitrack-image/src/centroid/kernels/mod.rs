@@ -7,6 +7,8 @@
 //! instantiates the kernels inside its own `#[target_feature]` entry points: SSE2 (`sse2.rs`, every x86_64 CPU, 8
 //! pixels a vector) and AVX-512 (`avx512.rs`, where the CPU has it, 32). `portable.rs` takes a pixel at a time, on
 //! other CPUs and for ROIs too narrow for a vector; it is also the reference the others are tested against.
+//! `emulated.rs` (tests only) implements the primitives in plain arrays, with AVX-512's width and semantics, so that
+//! the generic kernels' 32-lane instantiation is tested on any CPU.
 //!
 //! Each function here takes the [`Isa`] found once per call of [`super::measure_blob`] and runs the kernel of that
 //! instruction set. All give the same results, to the bit. AVX-512 CPUs make the row masks and the window moments
@@ -14,14 +16,16 @@
 
 #[cfg(target_arch = "x86_64")]
 mod avx512;
-#[cfg(target_arch = "x86_64")]
+#[cfg(test)]
+mod emulated;
+#[cfg(any(target_arch = "x86_64", test))]
 mod lanes;
 mod portable;
-#[cfg(target_arch = "x86_64")]
+#[cfg(any(target_arch = "x86_64", test))]
 mod scan;
 #[cfg(target_arch = "x86_64")]
 mod sse2;
-#[cfg(target_arch = "x86_64")]
+#[cfg(any(target_arch = "x86_64", test))]
 mod walk;
 
 #[cfg(target_arch = "x86_64")]
@@ -211,4 +215,166 @@ pub(super) fn walk_simple(
     _levels: (u16, u16),
 ) -> Option<Found> {
     None
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::{Rng, SeedableRng};
+
+    use super::emulated::Emulated;
+    use super::*;
+    use crate::centroid::component::{grow_component, simple_rows};
+    use crate::centroid::moments::scalar_moments;
+    use crate::centroid::test_rois::{Scene, synthetic};
+
+    /// The instruction sets the CPU runs, but the portable one.
+    fn vector_isas() -> Vec<Isa> {
+        [Isa::Avx512, Isa::Sse2]
+            .into_iter()
+            .filter(|&isa| isa != Isa::Avx512 || Isa::detect() == Isa::Avx512)
+            .filter(|_| Isa::detect() != Isa::Portable)
+            .collect()
+    }
+
+    /// Checks every kernel on the `w` x `h` `pixels`, for each instruction set of `isas` and the emulated 32-lane
+    /// one, against the portable kernels (the walk and the window moments at a few thresholds, from the peak).
+    /// Returns the number of simple components the walks measured.
+    fn check(isas: &[Isa], pixels: &[u16], (w, h): (usize, usize), rng: &mut impl Rng) -> usize {
+        let case = format!("{w}x{h} {pixels:?}");
+        let (peak, seed) = portable::peak(pixels);
+        for &isa in isas {
+            assert_eq!(super::peak(isa, pixels), (peak, seed), "{isa:?} {case}");
+        }
+        assert_eq!(scan::peak(Emulated, pixels), (peak, seed), "{case}");
+
+        let border = portable::border_min_max_sum(pixels, w, h);
+        for &isa in isas {
+            let found = super::border_min_max_sum(isa, pixels, w, h);
+            assert_eq!(found, border, "{isa:?} {case}");
+        }
+        if w > 1 && h > 1 {
+            let found = scan::border_min_max_sum(Emulated, pixels, w, h);
+            assert_eq!(found, border, "{case}");
+        }
+
+        if peak == 0 {
+            return 0;
+        }
+        let (seed_i, seed_j) = (seed % w, seed / w);
+        let mut simple = 0;
+        for threshold in [
+            0,
+            border.0.min(peak - 1),
+            peak / 2,
+            rng.random_range(0..peak),
+            peak - 1,
+        ] {
+            let levels = (threshold, peak);
+            let case = format!("threshold {threshold}, {case}");
+            let mut mask = vec![0u64; h];
+            portable::row_masks(pixels, w, threshold, &mut mask);
+            for &isa in isas {
+                let mut found = vec![u64::MAX; h];
+                super::row_masks(isa, pixels, w, threshold, &mut found);
+                assert_eq!(found, mask, "{isa:?} {case}");
+            }
+            let mut found = vec![u64::MAX; h];
+            scan::row_masks(Emulated, pixels, w, threshold, &mut found);
+            assert_eq!(found, mask, "{case}");
+
+            // The walk finds the simple component, or none.
+            let walked = simple_rows(&mask, seed_j).map(|(lo, hi)| {
+                let union = mask[lo..=hi].iter().fold(0, |acc, &m| acc | m);
+                (scalar_moments(pixels, w, &mask, lo, hi), (lo, hi), union)
+            });
+            simple += usize::from(walked.is_some());
+            for &isa in isas {
+                if isa == Isa::Sse2 && w < 8 {
+                    continue;
+                }
+                let found = walk_simple(isa, pixels, (w, h), seed_j, levels);
+                assert_eq!(found, walked, "{isa:?} {case}");
+            }
+            let found = match w.div_ceil(32) {
+                1 => {
+                    walk::simple_component::<Emulated, 1>(Emulated, pixels, (w, h), seed_j, levels)
+                }
+                _ => {
+                    walk::simple_component::<Emulated, 2>(Emulated, pixels, (w, h), seed_j, levels)
+                }
+            };
+            assert_eq!(found, walked, "{case}");
+
+            // The window moments of the seed's component, grown.
+            let mut comp = vec![0u64; h];
+            let (lo, hi) = grow_component(&mask, seed_i, seed_j, &mut comp);
+            let cols = comp.iter().fold(0, |acc, &c| acc | c);
+            let moments = scalar_moments(pixels, w, &comp, lo, hi);
+            for &isa in isas {
+                let found = window_moments(isa, pixels, w, &comp, &mask, (lo, hi), cols, levels);
+                assert!(found.is_none_or(|m| m == moments), "{isa:?} {case}");
+            }
+            let (first, last) = (
+                cols.trailing_zeros() as usize,
+                63 - cols.leading_zeros() as usize,
+            );
+            let vectors = (last - first) / 32 + 1;
+            if 32 * vectors <= w {
+                let s = first.min(w - 32 * vectors);
+                let args = (
+                    pixels,
+                    w,
+                    comp.as_slice(),
+                    mask.as_slice(),
+                    (lo, hi),
+                    s,
+                    levels,
+                );
+                let found = match vectors {
+                    1 => walk::window_moments::<Emulated, 1>(
+                        Emulated, args.0, args.1, args.2, args.3, args.4, args.5, args.6,
+                    ),
+                    _ => walk::window_moments::<Emulated, 2>(
+                        Emulated, args.0, args.1, args.2, args.3, args.4, args.5, args.6,
+                    ),
+                };
+                assert_eq!(found, moments, "{case}");
+            }
+        }
+        simple
+    }
+
+    /// Every kernel of every instruction set the CPU runs (and of the emulated 32-lane one, AVX-512's semantics)
+    /// gives the portable kernel's results, to the bit, on synthetic and rendered ROIs of every size from 1 x 1 to
+    /// 64 x 64.
+    #[test]
+    fn kernels_agree_with_the_portable_ones_at_every_size() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(17);
+        let scene = Scene::new();
+        let isas = vector_isas();
+        let mut simple = 0;
+        for w in 1..=64 {
+            for h in 1..=64 {
+                let kind = w * 64 + h;
+                let pixels = synthetic(&mut rng, w, h, kind);
+                simple += check(&isas, &pixels, (w, h), &mut rng);
+                let (pixels, _) = scene.rendered(&mut rng, w as u32, h as u32, kind);
+                simple += check(&isas, &pixels, (w, h), &mut rng);
+            }
+        }
+        assert!(simple > 10_000, "{simple}");
+    }
+
+    #[test]
+    fn block_rows_is_the_longest_block_that_fits() {
+        for d in [0, 1, 2, 7, 100, 1000, 30_000, 65_535] {
+            for rows in 1..=64 {
+                let m = walk::block_rows(d, rows);
+                let fits = |m: u64| d * m * (m + 1) / 2 <= 65_535;
+                assert!((1..=rows).contains(&m), "{d} {rows}: {m}");
+                assert!(m == 1 || fits(m), "{d} {rows}: {m}");
+                assert!(m == rows || !fits(m + 1), "{d} {rows}: {m}");
+            }
+        }
+    }
 }
