@@ -109,3 +109,8 @@ pub use roitrack_core::{
     TwistSample,
 };
 pub use roitrack_image::{Frame, RoiCamera, RoiImage};
+
+/// The README's Rust examples, compiled by `cargo test --doc` so that they stay true.
+#[cfg(doctest)]
+#[doc = include_str!("../../../README.md")]
+pub struct ReadmeExamples;
