@@ -55,6 +55,8 @@ impl LoopBench {
             SensorModel::default(),
         )?;
         let truth = |t: f64| scenario.state_at(t);
+        // Replayed at the rate of each run (4 kHz free-running, 20 kHz paced): the ROIs are stamped with the slots'
+        // times, as a live camera triggered at that rate would stamp them.
         let replay = ReplayCamera::prerender(
             &renderer,
             &truth,
@@ -64,7 +66,8 @@ impl LoopBench {
             4000.0,
             rois,
             1,
-        );
+        )
+        .with_trigger_times();
         Ok(Self { scenario, replay })
     }
 

@@ -29,6 +29,8 @@ pub struct ReplayCamera {
     rois: Vec<RoiImage>,
     full_frame: Frame,
     cursor: usize,
+    /// Stamp each ROI with the time it was asked for instead of its recorded time.
+    trigger_times: bool,
     pub mismatches: usize,
 }
 
@@ -38,8 +40,16 @@ impl ReplayCamera {
             rois,
             full_frame,
             cursor: 0,
+            trigger_times: false,
             mismatches: 0,
         }
+    }
+
+    /// The same replay, each ROI taken as exposed when it is asked for (its trigger time) rather than when it was
+    /// recorded: for benchmarks that replay the same pixels at another rate, as a live camera would expose them.
+    pub fn with_trigger_times(mut self) -> Self {
+        self.trigger_times = true;
+        self
     }
 
     /// Renders `count` ROIs of side `size` at the true blob positions, cycling through the target point indices of
@@ -115,12 +125,12 @@ impl RoiCamera for ReplayCamera {
         if recorded.point_id != trigger.point_id {
             self.mismatches += 1;
         }
-        image.set(
-            recorded.t_s,
-            recorded.point_id,
-            recorded.roi,
-            recorded.bit_depth,
-        );
+        let t_s = if self.trigger_times {
+            trigger.t_s
+        } else {
+            recorded.t_s
+        };
+        image.set(t_s, recorded.point_id, recorded.roi, recorded.bit_depth);
         image.pixels.copy_from_slice(&recorded.pixels);
         Ok(())
     }
