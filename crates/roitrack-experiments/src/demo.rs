@@ -167,18 +167,7 @@ impl Demo {
     /// two runs of an estimator compare the image side with a perfect one of equal precision.
     pub fn new(options: DemoOptions) -> Result<Self, ExperimentError> {
         let scenario = Scenario::new(options.scenario, options.seed);
-        let renderer = RoiRenderer::new(
-            scenario.camera.clone(),
-            scenario.target.clone(),
-            SensorModel::default(),
-        )?;
-        let accuracy = centroid_accuracy(
-            &renderer,
-            &CentroidOptions::default(),
-            ACCURACY_ROI_SIZE_PX,
-            ACCURACY_ROIS,
-            options.seed,
-        );
+        let (renderer, accuracy) = image_side(&scenario, ACCURACY_ROIS, options.seed)?;
         let simulation = SimulationOptions {
             seed: options.seed,
             noise_px: image_noise_px(&accuracy),
@@ -277,6 +266,28 @@ impl Demo {
                 .collect(),
         }
     }
+}
+
+/// The simulated camera of a scenario (default sensor) and the accuracy of the default centroid on `rois` of its
+/// rendered 32 x 32 ROIs.
+pub fn image_side(
+    scenario: &Scenario,
+    rois: usize,
+    seed: u64,
+) -> Result<(RoiRenderer, CentroidAccuracy), ExperimentError> {
+    let renderer = RoiRenderer::new(
+        scenario.camera.clone(),
+        scenario.target.clone(),
+        SensorModel::default(),
+    )?;
+    let accuracy = centroid_accuracy(
+        &renderer,
+        &CentroidOptions::default(),
+        ACCURACY_ROI_SIZE_PX,
+        rois,
+        seed,
+    );
+    Ok((renderer, accuracy))
 }
 
 /// The centroid noise (px per axis) the trackers are told for rendered ROIs: the measured spread, at least 0.005 px.

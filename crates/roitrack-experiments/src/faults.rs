@@ -14,9 +14,7 @@
 
 use nalgebra::Vector3;
 use roitrack_core::estimator::{Estimate, TrackStatus, TrackerConfig};
-use roitrack_image::{
-    CentroidOptions, ReflectionFault, RoiRenderer, SensorModel, SimulatedCamera, centroid_accuracy,
-};
+use roitrack_image::{ReflectionFault, SimulatedCamera};
 use roitrack_pipeline::{LoopConfig, run_loop_with_progress};
 use roitrack_sim::{
     Excursion, Jump, Occlusion, RoiBurst, Scenario, ScenarioKind, SimulationOptions, TimeGap,
@@ -24,7 +22,7 @@ use roitrack_sim::{
 };
 
 use crate::ExperimentError;
-use crate::demo::image_noise_px;
+use crate::demo::{image_noise_px, image_side};
 use crate::scoring::{score, track_and_score};
 
 /// The position error must stay within this many clean position RMSEs ...
@@ -277,18 +275,7 @@ fn run_case(scenario: &Scenario, case: &Case) -> Result<(FaultRow, Vec<Point>), 
     let scored = match case.source {
         Source::Measurements => track_and_score(&data, config)?,
         Source::Images(reflections) => {
-            let renderer = RoiRenderer::new(
-                scenario.camera.clone(),
-                scenario.target.clone(),
-                SensorModel::default(),
-            )?;
-            let accuracy = centroid_accuracy(
-                &renderer,
-                &CentroidOptions::default(),
-                32,
-                500,
-                case.options.seed,
-            );
+            let (renderer, accuracy) = image_side(scenario, 500, case.options.seed)?;
             config.noise_px = image_noise_px(&accuracy);
             let truth = {
                 let s = scenario.clone();

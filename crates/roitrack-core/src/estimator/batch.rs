@@ -74,11 +74,7 @@ impl BatchEstimator {
         target: Target,
         config: TrackerConfig,
     ) -> Result<Self, ConfigError> {
-        let config = TrackerConfig {
-            estimator: EstimatorConfig::Batch,
-            ..config
-        };
-        Track::new(camera, target, config, BatchLaw).map(Self)
+        Track::new(camera, target, config, EstimatorConfig::Batch, BatchLaw).map(Self)
     }
 }
 

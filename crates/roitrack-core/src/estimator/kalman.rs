@@ -329,11 +329,14 @@ impl KalmanEstimator {
         config: TrackerConfig,
         tuning: KalmanTuning,
     ) -> Result<Self, ConfigError> {
-        let config = TrackerConfig {
-            estimator: EstimatorConfig::Kalman(tuning),
-            ..config
-        };
-        Track::new(camera, target, config, KalmanLaw::new(tuning)).map(Self)
+        Track::new(
+            camera,
+            target,
+            config,
+            EstimatorConfig::Kalman(tuning),
+            KalmanLaw::new(tuning),
+        )
+        .map(Self)
     }
 }
 

@@ -430,7 +430,7 @@ pub trait Estimator: Send + std::fmt::Debug {
     fn report(&self) -> EstimatorReport;
 }
 
-/// Implements [`Estimator`] for a newtype around a [`track::Track`].
+/// Implements [`Estimator`] for a newtype around an estimator (a [`track::Track`], or a boxed [`Estimator`]).
 macro_rules! delegate_estimator {
     ($name:ident) => {
         impl Estimator for $name {
@@ -444,7 +444,7 @@ macro_rules! delegate_estimator {
                 &mut self,
                 t_s: f64,
                 state: MotionState,
-                covariance: Option<super::Matrix12>,
+                covariance: Option<$crate::estimator::Matrix12>,
             ) {
                 self.0.start_from(t_s, state, covariance)
             }
@@ -499,29 +499,7 @@ impl Tracker {
     }
 }
 
-impl Estimator for Tracker {
-    fn push(&mut self, m: &Measurement) -> Result<Option<Estimate>, TrackError> {
-        self.0.push(m)
-    }
-    fn reset(&mut self) {
-        self.0.reset()
-    }
-    fn start_from(&mut self, t_s: f64, state: MotionState, covariance: Option<Matrix12>) {
-        self.0.start_from(t_s, state, covariance)
-    }
-    fn state(&self) -> Option<(f64, MotionState)> {
-        self.0.state()
-    }
-    fn config(&self) -> &TrackerConfig {
-        self.0.config()
-    }
-    fn target(&self) -> &Target {
-        self.0.target()
-    }
-    fn report(&self) -> EstimatorReport {
-        self.0.report()
-    }
-}
+delegate_estimator!(Tracker);
 
 /// Why [`track`] stopped: a measurement could not be read, was refused, or an estimate could not be handed on.
 #[derive(Debug, Error)]

@@ -90,11 +90,14 @@ impl StaticEstimator {
         target: Target,
         config: TrackerConfig,
     ) -> Result<Self, ConfigError> {
-        let config = TrackerConfig {
-            estimator: EstimatorConfig::Static,
-            ..config
-        };
-        Track::new(camera, target, config, StaticLaw { previous: None }).map(Self)
+        Track::new(
+            camera,
+            target,
+            config,
+            EstimatorConfig::Static,
+            StaticLaw { previous: None },
+        )
+        .map(Self)
     }
 }
 

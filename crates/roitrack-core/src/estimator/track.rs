@@ -12,8 +12,8 @@ use nalgebra::{SMatrix, Vector2};
 use super::problem::{Observation, ResidualFigures, WindowProblem};
 use super::window::ObservationWindow;
 use super::{
-    ConfigError, Estimate, EstimatorReport, Matrix12, TrackError, TrackStatus, TrackerConfig,
-    WindowMode, static_pose::solve_static_pose,
+    ConfigError, Estimate, EstimatorConfig, EstimatorReport, Matrix12, TrackError, TrackStatus,
+    TrackerConfig, WindowMode, static_pose::solve_static_pose,
 };
 use crate::solver::NormalEquations;
 use crate::{CameraModel, Measurement, MotionState, SpatioTemporalModel, Target};
@@ -254,13 +254,19 @@ pub(crate) struct Track<L> {
 }
 
 impl<L: Law> Track<L> {
-    /// Checks the configuration and builds the estimator.
+    /// Checks the configuration and builds the estimator: `config`'s common options with `estimator`, the settings
+    /// of `law`.
     pub fn new(
         camera: CameraModel,
         target: Target,
         config: TrackerConfig,
+        estimator: EstimatorConfig,
         law: L,
     ) -> Result<Self, ConfigError> {
+        let config = TrackerConfig {
+            estimator,
+            ..config
+        };
         config.validate()?;
         Ok(Self {
             core: TrackCore::new(camera, target, config),

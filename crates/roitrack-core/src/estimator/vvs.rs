@@ -123,11 +123,14 @@ impl VvsEstimator {
         config: TrackerConfig,
         settings: VvsSettings,
     ) -> Result<Self, ConfigError> {
-        let config = TrackerConfig {
-            estimator: EstimatorConfig::Vvs(settings),
-            ..config
-        };
-        Track::new(camera, target, config, VvsLaw { settings }).map(Self)
+        Track::new(
+            camera,
+            target,
+            config,
+            EstimatorConfig::Vvs(settings),
+            VvsLaw { settings },
+        )
+        .map(Self)
     }
 }
 

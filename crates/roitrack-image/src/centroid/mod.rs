@@ -446,17 +446,35 @@ mod tests {
         );
     }
 
+    /// The instruction sets this CPU runs, and the portable code.
+    fn isas() -> Vec<Isa> {
+        [Isa::Avx512, Isa::Sse2, Isa::Portable]
+            .into_iter()
+            .filter(|&isa| isa != Isa::Avx512 || Isa::detect() == Isa::Avx512)
+            .collect()
+    }
+
+    /// Measures the ROI with every instruction set of `isas` and asserts the results are equal, to the bit; returns
+    /// whether a blob was measured.
+    fn assert_isas_agree(isas: &[Isa], pixels: &[u16], roi: &Roi, opts: &CentroidOptions) -> bool {
+        let results: Vec<_> = isas
+            .iter()
+            .map(|&isa| measure_blob_with(isa, pixels, roi, opts))
+            .collect();
+        for (isa, r) in isas.iter().zip(&results) {
+            assert_eq!(*r, results[0], "{roi:?} {opts:?} {isa:?} {pixels:?}");
+        }
+        results[0].is_ok()
+    }
+
     /// The vectorised kernels (those the CPU runs) and the portable code give the same results, to the bit, on
-    /// random ROIs of every size holding disks, rings and diagonal lines (simple components and not), noise, 8 to
+    /// random ROIs of random sizes holding disks, rings and diagonal lines (simple components and not), noise, 8 to
     /// 16-bit pixels, and fixed or automatic thresholds.
     #[test]
     fn instruction_sets_agree() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let isas: Vec<Isa> = [Isa::Avx512, Isa::Sse2, Isa::Portable]
-            .into_iter()
-            .filter(|&isa| isa != Isa::Avx512 || Isa::detect() == Isa::Avx512)
-            .collect();
+        let isas = isas();
         let mut measured = 0;
         for case in 0..3000 {
             let (w, h) = if case % 3 == 0 {
@@ -464,35 +482,7 @@ mod tests {
             } else {
                 (rng.random_range(6..=40usize), rng.random_range(6..=40usize))
             };
-            let max = f64::from((1u32 << [8, 8, 10, 12, 16][case % 5]) - 1);
-            let background = rng.random_range(0.0..0.2) * max;
-            let noise = rng.random_range(0.0..0.02) * max;
-            let mut image: Vec<f64> = (0..w * h)
-                .map(|_| background + noise * rng.random_range(-1.0..1.0))
-                .collect();
-            for _ in 0..rng.random_range(1..4) {
-                let r = rng.random_range(0.3..(w.min(h) as f64 / 2.0).max(0.6));
-                let (cx, cy) = (
-                    rng.random_range(-1.0..w as f64 + 1.0),
-                    rng.random_range(-1.0..h as f64 + 1.0),
-                );
-                let (amplitude, kind) =
-                    (rng.random_range(0.05..1.0) * (max - background), case % 4);
-                for (k, p) in image.iter_mut().enumerate() {
-                    let (dx, dy) = ((k % w) as f64 - cx, (k / w) as f64 - cy);
-                    let d = dx.hypot(dy);
-                    *p += amplitude
-                        * match kind {
-                            0 | 1 => (1.0 - (d / r).powi(2)).max(0.0),
-                            2 => f64::from(u8::from((d - r).abs() < 1.0)),
-                            _ => f64::from(u8::from((dx - dy).abs() < 0.8 && d < r)),
-                        };
-                }
-            }
-            let pixels: Vec<u16> = image
-                .iter()
-                .map(|&p| p.round().clamp(0.0, max) as u16)
-                .collect();
+            let pixels = test_rois::synthetic(&mut rng, w, h, case);
             let roi = Roi::new(100, 200, w as u32, h as u32);
             let top = f64::from(*pixels.iter().max().unwrap());
             for opts in [
@@ -504,14 +494,7 @@ mod tests {
                     ..Default::default()
                 },
             ] {
-                let results: Vec<_> = isas
-                    .iter()
-                    .map(|&isa| measure_blob_with(isa, &pixels, &roi, &opts))
-                    .collect();
-                for (isa, r) in isas.iter().zip(&results) {
-                    assert_eq!(*r, results[0], "case {case}: {w}x{h} {opts:?} {isa:?}");
-                }
-                measured += usize::from(results[0].is_ok());
+                measured += usize::from(assert_isas_agree(&isas, &pixels, &roi, &opts));
             }
         }
         assert!(measured > 1500, "{measured}");
@@ -524,10 +507,7 @@ mod tests {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(23);
         let scene = test_rois::Scene::new();
-        let isas: Vec<Isa> = [Isa::Avx512, Isa::Sse2, Isa::Portable]
-            .into_iter()
-            .filter(|&isa| isa != Isa::Avx512 || Isa::detect() == Isa::Avx512)
-            .collect();
+        let isas = isas();
         let mut measured = 0;
         for w in 1..=64 {
             for h in 1..=64 {
@@ -554,14 +534,7 @@ mod tests {
                             ..Default::default()
                         },
                     ] {
-                        let results: Vec<_> = isas
-                            .iter()
-                            .map(|&isa| measure_blob_with(isa, &pixels, &roi, &opts))
-                            .collect();
-                        for (isa, r) in isas.iter().zip(&results) {
-                            assert_eq!(*r, results[0], "{w}x{h} {opts:?} {isa:?} {pixels:?}");
-                        }
-                        measured += usize::from(results[0].is_ok());
+                        measured += usize::from(assert_isas_agree(&isas, &pixels, &roi, &opts));
                     }
                 }
             }
