@@ -4,7 +4,7 @@
 
 use roitrack_core::estimator::TrackerConfig;
 use roitrack_core::roi_order::bit_reversed_indices;
-use roitrack_core::stats::quantile;
+use roitrack_core::stats::{quantile, sorted};
 use roitrack_image::{ReplayCamera, RoiRenderer, SensorModel};
 use roitrack_pipeline::{LoopConfig, LoopReport, PipelineError, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};
@@ -103,7 +103,7 @@ impl LoopBench {
             let mut camera = self.replay.clone();
             camera.rewind();
             let report = run_loop(
-                camera,
+                &mut camera,
                 &self.scenario.camera,
                 &self.scenario.target,
                 tracker,
@@ -119,12 +119,10 @@ impl LoopBench {
             }
         }
         let best = best.expect("at least one run");
-        p50s.sort_by(f64::total_cmp);
-        p99s.sort_by(f64::total_cmp);
         Ok(LoopFigures {
             rois_per_s: best.rois_per_s(),
-            latency_p50_us: quantile(&p50s, 0.5),
-            latency_p99_us: quantile(&p99s, 0.5),
+            latency_p50_us: quantile(&sorted(&p50s), 0.5),
+            latency_p99_us: quantile(&sorted(&p99s), 0.5),
             dropped: best.dropped,
             late: best.late,
             rejected: best.rejections.total(),

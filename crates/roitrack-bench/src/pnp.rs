@@ -239,6 +239,19 @@ pub struct PnpReport {
 
 /// Solves every instance once (accuracy), then times every instance in turn, `repeats` times over, each solve on its
 /// own.
+///
+/// ```
+/// use roitrack_bench::pnp::{PnpProblem, run};
+/// let text = r#"{"format": "roitrack-pnp-problem/1",
+///   "intrinsics": {"fx_px": 1500, "fy_px": 1500, "cx_px": 512, "cy_px": 512},
+///   "model_points": [{"id": 0, "xyz_m": [0, 0, 0]}, {"id": 1, "xyz_m": [0.02, 0, 0]},
+///                    {"id": 2, "xyz_m": [0, 0.02, 0]}, {"id": 3, "xyz_m": [0.02, 0.02, 0]}],
+///   "instances": [{"cam_r_obj": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "cam_t_obj_m": [0, 0, 0.5],
+///                  "pixels": [[512, 512], [572, 512], [512, 572], [572, 572]]}]}"#;
+/// let report = run(&PnpProblem::from_json(text).unwrap(), 3);
+/// assert_eq!((report.times_us.len(), report.failures()), (3, 0));
+/// assert!(report.solved[0].position_error_mm < 1e-6);
+/// ```
 pub fn run(problem: &PnpProblem, repeats: usize) -> PnpReport {
     let PnpProblem {
         model,

@@ -82,13 +82,14 @@ impl TimeModel {
         Ok(())
     }
 
-    /// The mid-exposure time (s) of a blob centred on row `v_px` of a readout (an ROI, or a frame) whose timestamp
-    /// is `t_s`: the ROI's or the frame's mid-exposure time (for a rolling shutter, that of row 0).
+    /// The mid-exposure time (s) of a blob centred `rows` rows below the first row of a readout (an ROI, or a frame)
+    /// whose timestamp `t_s` is the mid-exposure time of that first row: `t_s` but for a rolling shutter, `t_s + rows *
+    /// line_delay_s`. For a frame, `rows` is the blob's row `v_px`; for an ROI whose first row is `y0`, `v_px - y0`.
     #[inline]
-    pub fn blob_time_s(&self, t_s: f64, v_px: f64) -> f64 {
+    pub fn blob_time_s(&self, t_s: f64, rows: f64) -> f64 {
         match self.readout {
             Readout::SequentialRois | Readout::GlobalShutter => t_s,
-            Readout::RollingShutter { line_delay_s } => t_s + v_px * line_delay_s,
+            Readout::RollingShutter { line_delay_s } => t_s + rows * line_delay_s,
         }
     }
 

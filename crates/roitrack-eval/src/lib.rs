@@ -258,6 +258,18 @@ pub fn evaluate(
 }
 
 /// [`estimate_errors`] of a tracker's estimates (their poses and twists).
+///
+/// ```
+/// use roitrack_core::estimator::{TrackerConfig, track_all};
+/// use roitrack_eval::{EvalOptions, estimate_errors_of};
+/// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
+///
+/// let run = simulate(&Scenario::new(ScenarioKind::Static, 1), &SimulationOptions::default()).unwrap();
+/// let (estimates, _) = track_all(&run.camera, &run.target, TrackerConfig::default(), &run.measurements).unwrap();
+/// let errors = estimate_errors_of(&run.truth_poses, &run.truth_twists, &estimates, &EvalOptions::default()).unwrap();
+/// assert_eq!(errors.position_m.len(), estimates.len());
+/// assert!(errors.position_m.iter().all(|e| e.norm() < 2e-3));
+/// ```
 pub fn estimate_errors_of(
     truth_poses: &[PoseSample],
     truth_twists: &[TwistSample],
@@ -290,6 +302,25 @@ pub fn evaluate_estimates(
 }
 
 /// The poses and twists of estimates, as written to files.
+///
+/// ```
+/// use roitrack_core::estimator::{Estimate, TrackStatus};
+/// use roitrack_core::MotionState;
+/// use roitrack_eval::samples_of;
+/// let e = Estimate {
+///     t_ref_s: 0.5,
+///     state: MotionState::at_rest(Default::default(), nalgebra::Vector3::new(0.0, 0.0, 0.6)),
+///     residual_rms_px: 0.1,
+///     inverse_condition: 0.2,
+///     measurements_used: 16,
+///     iterations: 1,
+///     status: TrackStatus::Tracking,
+///     covariance: None,
+/// };
+/// let (poses, twists) = samples_of(&[e]);
+/// assert_eq!((poses[0].t_s, twists[0].t_s), (0.5, 0.5));
+/// assert_eq!(poses[0].cam_from_obj.translation.vector.z, 0.6);
+/// ```
 pub fn samples_of(estimates: &[Estimate]) -> (Vec<PoseSample>, Vec<TwistSample>) {
     estimates
         .iter()

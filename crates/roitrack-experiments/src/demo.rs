@@ -205,7 +205,7 @@ impl Demo {
         progress: Option<&AtomicUsize>,
     ) -> Result<DemoRun, ExperimentError> {
         let config = self.config(estimator);
-        let camera = SimulatedCamera::new(
+        let mut camera = SimulatedCamera::new(
             self.renderer.clone(),
             {
                 let s = self.scenario.clone();
@@ -220,9 +220,8 @@ impl Demo {
             ..LoopConfig::default()
         };
         loop_config.scheduler.order = self.options.order;
-        loop_config.scheduler.noise_px = self.simulation.noise_px;
         let report = run_loop_with_progress(
-            camera,
+            &mut camera,
             &self.scenario.camera,
             &self.scenario.target,
             config,
@@ -270,7 +269,7 @@ impl Demo {
 
 /// The simulated camera of a scenario (default sensor) and the accuracy of the default centroid on `rois` of its
 /// rendered 32 x 32 ROIs.
-pub fn image_side(
+pub(crate) fn image_side(
     scenario: &Scenario,
     rois: usize,
     seed: u64,

@@ -286,14 +286,13 @@ fn run_case(scenario: &Scenario, case: &Case) -> Result<(FaultRow, Vec<Point>), 
             if let Some(fault) = reflections {
                 camera = camera.with_reflections(fault);
             }
-            let mut loop_config = LoopConfig {
+            let loop_config = LoopConfig {
                 rate_hz: case.options.rate_hz,
                 roi_slots: data.truth_poses.len(),
                 ..LoopConfig::default()
             };
-            loop_config.scheduler.noise_px = config.noise_px;
             let report = run_loop_with_progress(
-                camera,
+                &mut camera,
                 &scenario.camera,
                 &scenario.target,
                 config,
@@ -343,6 +342,17 @@ fn run_case(scenario: &Scenario, case: &Case) -> Result<(FaultRow, Vec<Point>), 
 }
 
 /// Every row of the table for one scenario; the first case of each source is its clean run (it sets the thresholds).
+/// `quick`: four measurement rows only.
+///
+/// ```
+/// use roitrack_experiments::faults::scenario_rows;
+/// use roitrack_sim::ScenarioKind;
+///
+/// let rows = scenario_rows(ScenarioKind::Orthoglide, true).unwrap();
+/// assert_eq!(rows[0].fault, "clean");
+/// // No fault leaves a wrong estimate presented as valid.
+/// assert!(rows.iter().all(|r| r.unflagged_wrong == 0 && r.recovered), "{rows:?}");
+/// ```
 pub fn scenario_rows(kind: ScenarioKind, quick: bool) -> Result<Vec<FaultRow>, ExperimentError> {
     let scenario = Scenario::new(kind, 1);
     let cases = cases(&scenario, quick);

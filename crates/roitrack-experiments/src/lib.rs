@@ -1,7 +1,7 @@
 //! # roitrack-experiments
 //!
 //! The experiments behind roitrack's tables and figures, each a library call on typed values (no files, no printing):
-//! the command line and the Python package only show what they return.
+//! the command line (and, to come, the Python package) only shows what they return.
 //!
 //! - [`scoring`]: track a simulated run and score it against its ground truth, the building block of the others;
 //! - [`compare`]: every estimator and baseline on one scenario at the measurement level;

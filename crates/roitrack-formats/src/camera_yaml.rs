@@ -32,6 +32,19 @@ use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Unexpec
 use crate::{AtomicFile, FormatError};
 
 /// Reads a ROS camera_info YAML file (see [`parse_camera_yaml`]).
+///
+/// ```
+/// use roitrack_core::CameraModel;
+/// use roitrack_formats::{read_camera_yaml, write_camera_yaml};
+///
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("camera.yaml");
+/// write_camera_yaml(&path, &CameraModel::wide_angle_example()).unwrap();
+/// assert_eq!(read_camera_yaml(&path).unwrap(), CameraModel::wide_angle_example());
+/// // Errors name the file.
+/// let missing = read_camera_yaml(dir.path().join("nope.yaml")).unwrap_err();
+/// assert!(missing.to_string().contains("nope.yaml"));
+/// ```
 pub fn read_camera_yaml(path: impl AsRef<Path>) -> Result<CameraModel, FormatError> {
     let path = path.as_ref();
     let text =
@@ -298,7 +311,7 @@ fn camera_error(error: &CameraError, path: &Path) -> FormatError {
         CameraError::EmptyImage { width_px: 0, .. } => "image_width",
         CameraError::EmptyImage { .. } => "image_height",
         CameraError::UndistortionDiverged { .. } => "distortion_coefficients",
-        // A camera_info file carries no time model: the camera's timing comes from the command line.
+        // A camera_info file carries no time model: a camera read from one has the default (sequential ROIs).
         CameraError::TimeModel(_) => "time model",
     };
     FormatError::new(path, error.to_string()).with_field(field)

@@ -265,7 +265,7 @@ fn main() {
     let start = Instant::now();
     let blobs = detect_blobs(&frame, 1024, 1024, &CentroidOptions::default());
     println!(
-        "render_full_frame 1024x1024: {render_ms:.1} ms; detect_blobs: {:.2} ms ({} blobs)",
+        "render_frame 1024x1024: {render_ms:.1} ms; detect_blobs: {:.2} ms ({} blobs)",
         start.elapsed().as_secs_f64() * 1e3,
         blobs.len()
     );

@@ -36,7 +36,7 @@ pub use accuracy::{
     CentroidAccuracy, ReflectionAccuracy, bench_rotation, bench_state, centroid_accuracy,
     reflection_accuracy,
 };
-pub use camera::{CameraError, ReplayCamera, RoiCamera, RoiTrigger, SimulatedCamera};
+pub use camera::{GrabError, ReplayCamera, RoiCamera, RoiTrigger, SimulatedCamera};
 pub use centroid::{
     BlobRejection, Centroid, CentroidOptions, MAX_ROI_HEIGHT, MAX_ROI_WIDTH, SymmetryCheck,
     Threshold, measure_blob,

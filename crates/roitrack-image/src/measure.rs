@@ -8,8 +8,9 @@ use crate::{
 };
 
 /// The centroid of an ROI image's blob as a measurement of its target point, timed by the camera's time model (a
-/// rolling-shutter ROI's blob is at its own row's time); a blob the centroid rejects, or an ROI too large for it, is
-/// a rejection.
+/// rolling-shutter ROI's blob is at its own row's time, counted from the ROI's first row); a blob the centroid
+/// rejects, an ROI too large for it, or an image whose pixel buffer does not match its ROI (nothing to measure) is a
+/// rejection.
 ///
 /// ```
 /// use roitrack_core::TimeModel;
@@ -33,6 +34,9 @@ pub fn measure_roi(
     time: &TimeModel,
 ) -> Result<Measurement, BlobRejection> {
     let roi = &image.roi;
+    if !image.is_consistent() {
+        return Err(BlobRejection::Absent);
+    }
     if roi.width > MAX_ROI_WIDTH || roi.height > MAX_ROI_HEIGHT {
         return Err(BlobRejection::TooLarge {
             area_px: roi.width * roi.height,
@@ -40,7 +44,7 @@ pub fn measure_roi(
     }
     let c = measure_blob(&image.pixels, roi, options)?;
     Ok(Measurement {
-        t_s: time.blob_time_s(image.t_s, c.v_px),
+        t_s: time.blob_time_s(image.t_s, c.v_px - f64::from(roi.y0)),
         id: image.point_id,
         u_px: c.u_px,
         v_px: c.v_px,

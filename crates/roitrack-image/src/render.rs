@@ -206,13 +206,14 @@ pub struct RoiRenderer {
 }
 
 impl RoiRenderer {
-    /// A renderer; refuses an invalid sensor (see [`SensorModel::validate`]).
+    /// A renderer; refuses an invalid sensor (see [`SensorModel::validate`]) or time model (the camera's exposure).
     pub fn new(
         camera: CameraModel,
         target: Target,
         sensor: SensorModel,
     ) -> Result<Self, SensorError> {
         sensor.validate()?;
+        camera.time.validate()?;
         let orientation = if target.is_planar() {
             let (e1_obj, e2_obj) = plane_axes(&target);
             DiskOrientation::InTargetPlane { e1_obj, e2_obj }
@@ -333,26 +334,46 @@ impl RoiRenderer {
         let (width, height) = (self.camera.width_px, self.camera.height_px);
         frame.resize(width, height, self.sensor.bit_depth as u8);
         frame.t_s = t_s;
+        let roi = Roi::full(width, height);
+        self.render_readout(state_at, &roi, t_s, rng, scratch, &mut frame.pixels);
+    }
+
+    /// Renders `roi` as the camera reads it: every row exposed around `t_s`, but for a rolling shutter, whose row
+    /// `y0 + k` is exposed around `t_s + k * line_delay_s` (rendered row by row). What [`crate::SimulatedCamera`]
+    /// grabs; without a rolling shutter it is [`Self::render_roi_with_scratch`].
+    ///
+    /// # Panics
+    /// If `out.len() != roi.len()`.
+    pub fn render_readout(
+        &self,
+        state_at: &impl Fn(f64) -> MotionState,
+        roi: &Roi,
+        t_s: f64,
+        rng: &mut impl Rng,
+        scratch: &mut RenderScratch,
+        out: &mut [u16],
+    ) {
         let time = self.camera.time;
         if !time.is_rolling() {
-            let area = Area {
-                x0: 0,
-                y0: 0,
-                width: width as usize,
-                height: height as usize,
-            };
-            self.render_area(state_at, area, t_s, rng, scratch, &mut frame.pixels);
+            self.render_roi_with_scratch(state_at, roi, t_s, rng, scratch, out);
             return;
         }
-        for (row, out) in frame.pixels.chunks_exact_mut(width as usize).enumerate() {
+        assert_eq!(out.len(), roi.len(), "output buffer length");
+        for (k, row) in out.chunks_exact_mut(roi.width as usize).enumerate() {
             let area = Area {
-                x0: 0,
-                y0: row as i64,
-                width: width as usize,
+                x0: i64::from(roi.x0),
+                y0: i64::from(roi.y0) + k as i64,
+                width: roi.width as usize,
                 height: 1,
             };
-            let t_row_s = time.blob_time_s(t_s, row as f64);
-            self.render_area(state_at, area, t_row_s, rng, scratch, out);
+            self.render_area(
+                state_at,
+                area,
+                time.blob_time_s(t_s, k as f64),
+                rng,
+                scratch,
+                row,
+            );
         }
     }
 

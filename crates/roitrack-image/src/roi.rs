@@ -140,7 +140,8 @@ impl Roi {
 /// ```
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct RoiImage {
-    /// Mid-exposure time of the ROI (s).
+    /// Mid-exposure time of the ROI's first row (s): of every row, but for a rolling shutter, whose row `y0 + k` is
+    /// exposed `k` line delays later (see [`roitrack_core::TimeModel`]).
     pub t_s: f64,
     /// Id of the target point the ROI was placed on.
     pub point_id: u32,
@@ -153,6 +154,11 @@ pub struct RoiImage {
 }
 
 impl RoiImage {
+    /// Whether the pixel buffer holds the ROI's pixels (one value per pixel, at least one pixel).
+    pub fn is_consistent(&self) -> bool {
+        !self.roi.is_empty() && self.pixels.len() == self.roi.len()
+    }
+
     /// An empty image whose pixel buffer holds `capacity` values without growing: grabbing ROIs up to that size into
     /// it never allocates.
     pub fn with_capacity(capacity: usize) -> Self {

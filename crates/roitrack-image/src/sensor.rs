@@ -19,6 +19,8 @@ pub enum SensorError {
     Zero { field: &'static str },
     #[error("supersampling must be at most {max} sub-rows, got {value}")]
     Supersampling { value: u32, max: u32 },
+    #[error("the camera's time model: {0}")]
+    TimeModel(#[from] roitrack_core::time::TimeModelError),
 }
 
 /// Below this expected count (electrons) shot noise is drawn from a Poisson law; above it from the normal

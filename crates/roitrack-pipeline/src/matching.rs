@@ -179,7 +179,7 @@ fn plane_coordinates(target: &Target) -> Option<(Vec<Vector2<f64>>, Vector3<f64>
 /// Indices of the convex hull vertices in counter-clockwise order (in the coordinates' own sense). Points within 3 %
 /// of the point spread of the line through their neighbours count as collinear (noise on an edge's blobs must not make
 /// them corners) and are excluded.
-pub fn convex_hull(points: &[Vector2<f64>]) -> Vec<usize> {
+pub(crate) fn convex_hull(points: &[Vector2<f64>]) -> Vec<usize> {
     let n = points.len();
     if n < 3 {
         return (0..n).collect();
@@ -223,7 +223,8 @@ pub fn convex_hull(points: &[Vector2<f64>]) -> Vec<usize> {
     hull
 }
 
-/// Matches blobs to the target's points and solves the static pose. Blobs may include extra ones (reflections);
+/// Matches blobs to the target's points and solves the static pose ([`find_target`] detects the blobs of a frame and
+/// calls it, with an example). Blobs may include extra ones (reflections);
 /// every model point should be visible.
 pub fn match_full_frame(
     camera: &CameraModel,

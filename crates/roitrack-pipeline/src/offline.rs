@@ -36,19 +36,19 @@ pub struct RoiTrackReport {
 ///     &CentroidOptions::default(),
 ///     &TimeModel::default(),
 ///     [Ok::<_, std::io::Error>(dark)],
-///     |_estimate| Ok(()),
+///     |_estimate| Ok::<_, std::io::Error>(()),
 /// )
 /// .unwrap();
 /// // A dark ROI holds no blob.
 /// assert_eq!((report.rois, report.rejections.absent, report.estimator.measurements), (1, 1, 0));
 /// ```
-pub fn track_rois<E>(
+pub fn track_rois<S, K>(
     estimator: &mut dyn Estimator,
     options: &CentroidOptions,
     time: &TimeModel,
-    images: impl IntoIterator<Item = Result<RoiImage, E>>,
-    mut sink: impl FnMut(&Estimate) -> Result<(), E>,
-) -> Result<RoiTrackReport, StreamError<E>> {
+    images: impl IntoIterator<Item = Result<RoiImage, S>>,
+    mut sink: impl FnMut(&Estimate) -> Result<(), K>,
+) -> Result<RoiTrackReport, StreamError<S, K>> {
     let mut report = RoiTrackReport::default();
     for (index, image) in images.into_iter().enumerate() {
         let image = image.map_err(StreamError::Source)?;

@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use roitrack_core::estimator::{Estimate, Estimator, Matrix12, Tracker, TrackerConfig};
 use roitrack_core::{CameraModel, Measurement, MotionState, Target};
 use roitrack_image::{
-    CameraError, CentroidOptions, Frame, RejectionCounts, RoiCamera, RoiImage, RoiTrigger,
+    CentroidOptions, Frame, GrabError, RejectionCounts, RoiCamera, RoiImage, RoiTrigger,
     measure_roi,
 };
 use thiserror::Error;
@@ -41,6 +41,44 @@ pub struct LoopConfig {
     pub max_queued: usize,
     pub scheduler: SchedulerConfig,
     pub centroid: CentroidOptions,
+}
+
+impl LoopConfig {
+    /// Refuses a rate that is not positive and finite, and queues or ROI sizes that cannot work.
+    pub fn validate(&self) -> Result<(), PipelineError> {
+        let check = |field, value: f64, expected, ok: bool| {
+            if ok && value.is_finite() {
+                Ok(())
+            } else {
+                Err(PipelineError::LoopConfig {
+                    field,
+                    expected,
+                    value,
+                })
+            }
+        };
+        check("rate_hz", self.rate_hz, "positive", self.rate_hz > 0.0)?;
+        check("t_start_s", self.t_start_s, "finite", true)?;
+        check(
+            "queue_capacity",
+            self.queue_capacity as f64,
+            "at least 2",
+            self.queue_capacity >= 2,
+        )?;
+        let s = &self.scheduler;
+        check(
+            "scheduler.max_size_px",
+            f64::from(s.max_size_px),
+            "in [min_size_px, 64]",
+            s.max_size_px >= s.min_size_px && s.max_size_px <= roitrack_image::MAX_ROI_WIDTH,
+        )?;
+        check(
+            "scheduler.min_size_px",
+            f64::from(s.min_size_px),
+            "at least 1",
+            s.min_size_px >= 1,
+        )
+    }
 }
 
 impl Default for LoopConfig {
@@ -82,7 +120,7 @@ pub struct LoopReport {
     /// Grabs that failed but may be retried (timeouts, dropped buffers).
     pub camera_errors: usize,
     /// The camera's end, if it ended the run before its last slot (disconnected, end of a recording).
-    pub stopped_by: Option<CameraError>,
+    pub stopped_by: Option<GrabError>,
     /// Wall time of the whole run (s).
     pub wall_s: f64,
 }
@@ -95,9 +133,7 @@ impl LoopReport {
 
     /// The `q` quantile (nearest rank, 0 to 1) of the ROI-to-estimate latencies (µs); NaN without estimates.
     pub fn latency_quantile_us(&self, q: f64) -> f64 {
-        let mut sorted = self.latencies_us.clone();
-        sorted.sort_by(f64::total_cmp);
-        roitrack_core::stats::quantile(&sorted, q)
+        roitrack_core::stats::quantile(&roitrack_core::stats::sorted(&self.latencies_us), q)
     }
 }
 
@@ -105,6 +141,14 @@ impl LoopReport {
 pub enum PipelineError {
     #[error("invalid tracker options: {0}")]
     Config(#[from] roitrack_core::estimator::ConfigError),
+    #[error("invalid loop option: {field} must be {expected}, got {value}")]
+    LoopConfig {
+        field: &'static str,
+        expected: &'static str,
+        value: f64,
+    },
+    #[error("the camera's time model: {0}")]
+    TimeModel(#[from] roitrack_core::time::TimeModelError),
     #[error("the estimation thread panicked")]
     EstimatorPanicked,
 }
@@ -141,9 +185,10 @@ fn backoff(spins: &mut u32) {
     *spins = spins.saturating_add(1);
 }
 
-/// Runs the loop: `camera` on the acquisition thread, a [`Tracker`] on the estimation thread. It starts with a full
-/// frame (the target found with no prior), then reads `config.roi_slots` ROI slots; a camera that ends early ends the
-/// run ([`LoopReport::stopped_by`]).
+/// Runs the loop: `camera` on the acquisition thread (the calling one), a [`Tracker`] on the estimation thread. It
+/// starts with a full frame (the target found with no prior), then reads `config.roi_slots` ROI slots; a camera that
+/// ends early ends the run ([`LoopReport::stopped_by`]). The camera is borrowed: it is the caller's again after the
+/// run.
 ///
 /// ```
 /// use roitrack_core::estimator::TrackerConfig;
@@ -155,15 +200,15 @@ fn backoff(spins: &mut u32) {
 /// let renderer =
 ///     RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
 /// let truth = { let s = scenario.clone(); move |t: f64| s.state_at(t) };
-/// let camera = SimulatedCamera::new(renderer, truth, 1);
+/// let mut camera = SimulatedCamera::new(renderer, truth, 1);
 /// let config = LoopConfig { roi_slots: 800, ..LoopConfig::default() };
 /// let report =
-///     run_loop(camera, &scenario.camera, &scenario.target, TrackerConfig::default(), &config).unwrap();
+///     run_loop(&mut camera, &scenario.camera, &scenario.target, TrackerConfig::default(), &config).unwrap();
 /// assert_eq!(report.initialisations, 1);
 /// assert!(report.estimates.len() > 60 && report.stopped_by.is_none());
 /// ```
 pub fn run_loop<C: RoiCamera>(
-    camera: C,
+    camera: &mut C,
     camera_model: &CameraModel,
     target: &Target,
     tracker_config: TrackerConfig,
@@ -173,14 +218,35 @@ pub fn run_loop<C: RoiCamera>(
 }
 
 /// [`run_loop`], publishing the number of ROI slots done to `progress` (every 256 slots) for a progress display.
+///
+/// ```
+/// use std::sync::atomic::{AtomicUsize, Ordering};
+/// use roitrack_core::estimator::TrackerConfig;
+/// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
+/// use roitrack_pipeline::{LoopConfig, run_loop_with_progress};
+/// use roitrack_sim::{Scenario, ScenarioKind};
+///
+/// let scenario = Scenario::new(ScenarioKind::Static, 1);
+/// let renderer =
+///     RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
+/// let mut camera = SimulatedCamera::new(renderer, move |t: f64| scenario.state_at(t), 1);
+/// let config = LoopConfig { roi_slots: 600, ..LoopConfig::default() };
+/// let done = AtomicUsize::new(0);
+/// let model = roitrack_core::CameraModel::canonical();
+/// let target = roitrack_core::Target::grid4x4();
+/// run_loop_with_progress(&mut camera, &model, &target, TrackerConfig::default(), &config, Some(&done)).unwrap();
+/// assert_eq!(done.load(Ordering::Relaxed), 512);
+/// ```
 pub fn run_loop_with_progress<C: RoiCamera>(
-    mut camera: C,
+    camera: &mut C,
     camera_model: &CameraModel,
     target: &Target,
     tracker_config: TrackerConfig,
     config: &LoopConfig,
     progress: Option<&std::sync::atomic::AtomicUsize>,
 ) -> Result<LoopReport, PipelineError> {
+    config.validate()?;
+    camera_model.time.validate()?;
     let mut tracker = Tracker::new(camera_model.clone(), target.clone(), tracker_config)?;
     let (mut measurement_tx, mut measurement_rx) =
         rtrb::RingBuffer::<Event>::new(config.queue_capacity.max(2));
@@ -232,8 +298,12 @@ pub fn run_loop_with_progress<C: RoiCamera>(
         });
 
         // The acquisition side runs on this thread.
-        let mut scheduler =
-            RoiScheduler::new(camera_model.clone(), target.clone(), config.scheduler);
+        let mut scheduler = RoiScheduler::new(
+            camera_model.clone(),
+            target.clone(),
+            config.scheduler,
+            tracker_config.noise_px,
+        );
         let max_side = config.scheduler.max_size_px as usize;
         let mut image = RoiImage::with_capacity(max_side * max_side);
         let mut frame = Frame::default();
@@ -273,7 +343,21 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                 }
             }
             if predictor.is_none() || scheduler.needs_reinitialisation() {
-                if let Err(e) = camera.grab_full_frame(t_s, &mut frame) {
+                let grabbed = camera.grab_full_frame(t_s, &mut frame).and_then(|()| {
+                    if (frame.width, frame.height)
+                        == (camera_model.width_px, camera_model.height_px)
+                    {
+                        Ok(())
+                    } else {
+                        Err(GrabError::FrameSize {
+                            width: frame.width,
+                            height: frame.height,
+                            expected_width: camera_model.width_px,
+                            expected_height: camera_model.height_px,
+                        })
+                    }
+                });
+                if let Err(e) = grabbed {
                     if !e.is_transient() {
                         report.stopped_by = Some(e);
                         break;
@@ -284,16 +368,19 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                 }
                 match find_target(camera_model, target, &frame, &config.centroid) {
                     Ok(found) => {
+                        // The frame's own time, not the pose's (a rolling shutter's middle row, later): the next
+                        // ROI slots must not come before the restart.
+                        let restart_s = frame.t_s;
                         predictor = Some(Predictor {
-                            t_ref_s: found.t_s,
+                            t_ref_s: restart_s,
                             state: found.state,
                             covariance: Some(full_frame_covariance()),
                         });
-                        restart_t_s = found.t_s;
+                        restart_t_s = restart_s;
                         scheduler.reset();
                         let mut spins = 0;
                         let mut event = Event::Restart {
-                            t_s: found.t_s,
+                            t_s: restart_s,
                             state: found.state,
                         };
                         loop {
@@ -329,20 +416,40 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                 roi: request.roi,
                 t_s,
             };
-            if let Err(e) = camera.grab_roi(&trigger, &mut image) {
+            let grab = camera.grab_roi(&trigger, &mut image).and_then(|()| {
+                if image.is_consistent() {
+                    Ok(())
+                } else {
+                    Err(GrabError::Dropped {
+                        reason: format!(
+                            "{} pixel values for a {} x {} ROI",
+                            image.pixels.len(),
+                            image.roi.width,
+                            image.roi.height
+                        ),
+                    })
+                }
+            });
+            if let Err(e) = grab {
                 if !e.is_transient() {
                     report.stopped_by = Some(e);
                     break;
                 }
+                // A point whose ROIs keep failing counts as lost, so the camera side re-initialises.
+                scheduler.report(request.point_index, false);
                 report.camera_errors += 1;
                 slot += 1;
                 continue;
             }
             let grabbed = Instant::now();
             report.rois += 1;
+            // The point the camera says it read (a replay may not follow the schedule).
+            let point_index = target
+                .index_of(image.point_id)
+                .unwrap_or(request.point_index);
             match measure_roi(&image, &config.centroid, &camera_model.time) {
                 Ok(m) => {
-                    scheduler.report(request.point_index, true);
+                    scheduler.report(point_index, true);
                     if measurement_tx
                         .push(Event::Measurement { m, grabbed })
                         .is_err()
@@ -353,7 +460,7 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                     }
                 }
                 Err(r) => {
-                    scheduler.report(request.point_index, false);
+                    scheduler.report(point_index, false);
                     report.rejections.count(&r);
                 }
             }
@@ -392,5 +499,5 @@ struct Counters {
     initialisations: usize,
     failed_initialisations: usize,
     camera_errors: usize,
-    stopped_by: Option<CameraError>,
+    stopped_by: Option<GrabError>,
 }

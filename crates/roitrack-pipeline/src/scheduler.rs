@@ -46,8 +46,6 @@ pub struct SchedulerConfig {
     pub sigma_margin: f64,
     /// Extra margin on each side for the optical blur and the blob's edge (px).
     pub blur_margin_px: f64,
-    /// Centroid noise (px) for the information gain of the active order.
-    pub noise_px: f64,
     /// Consecutive misses after which a point counts as lost.
     pub misses_for_lost: u32,
     /// Lost points at which the camera side re-initialises from a full frame.
@@ -69,7 +67,6 @@ impl Default for SchedulerConfig {
             max_size_px: 64,
             sigma_margin: 4.0,
             blur_margin_px: 3.0,
-            noise_px: 0.1,
             misses_for_lost: 2,
             lost_points_for_reinit: 4,
             default_diameter_m: 0.006,
@@ -97,6 +94,8 @@ pub struct RoiScheduler {
     target: Target,
     model: SpatioTemporalModel,
     config: SchedulerConfig,
+    /// Centroid noise (px): the information gain of the active order weighs the prediction's spread against it.
+    noise_px: f64,
     cycle: Vec<usize>,
     slot: usize,
     misses: Vec<u32>,
@@ -105,7 +104,14 @@ pub struct RoiScheduler {
 }
 
 impl RoiScheduler {
-    pub fn new(camera: CameraModel, target: Target, config: SchedulerConfig) -> Self {
+    /// A scheduler for `camera` and `target`; `noise_px` is the centroid noise the estimator assumes (that of its
+    /// [`roitrack_core::estimator::TrackerConfig`]), which the active order weighs the prediction's spread against.
+    pub fn new(
+        camera: CameraModel,
+        target: Target,
+        config: SchedulerConfig,
+        noise_px: f64,
+    ) -> Self {
         let n = target.len();
         let cycle = match config.order {
             ScheduleOrder::RowMajor => (0..n).collect(),
@@ -117,6 +123,7 @@ impl RoiScheduler {
             misses: vec![0; n],
             target,
             config,
+            noise_px,
             cycle,
             slot: 0,
             local_covariance: None,
@@ -172,7 +179,7 @@ impl RoiScheduler {
                 let Some(h) = self.jacobian(predictor, i, d_s) else {
                     continue;
                 };
-                let s = h * p * h.transpose() / (self.config.noise_px * self.config.noise_px);
+                let s = h * p * h.transpose() / (self.noise_px * self.noise_px);
                 let gain = (Matrix2::identity() + s).determinant().ln();
                 // A lost point still gets tried now and then: its gain keeps growing as the state drifts.
                 let gain = gain / (1.0 + self.misses[i] as f64);
@@ -182,7 +189,7 @@ impl RoiScheduler {
             }
             let (i, _) = best?;
             if let Some(h) = self.jacobian(predictor, i, d_s) {
-                let sigma2 = self.config.noise_px * self.config.noise_px;
+                let sigma2 = self.noise_px * self.noise_px;
                 let ph_t: SMatrix<f64, 12, 2> = p * h.transpose();
                 let s = h * ph_t + Matrix2::identity() * sigma2;
                 if let Some(s_inv) = s.try_inverse() {
@@ -291,6 +298,7 @@ mod tests {
             camera.clone(),
             Target::grid4x4(),
             SchedulerConfig::default(),
+            0.1,
         );
         let p = predictor(None);
         let r = s.next(&p, 0.004).unwrap();
@@ -321,6 +329,7 @@ mod tests {
             CameraModel::canonical(),
             Target::grid4x4(),
             SchedulerConfig::default(),
+            0.1,
         );
         let small = s.request(&predictor(None), 5, 0.0).unwrap().roi.width;
         let cov = Matrix12::identity() * 1e-6; // 1 mm, 1 mrad, 1 mm/s
@@ -341,7 +350,7 @@ mod tests {
             order: ScheduleOrder::Active,
             ..Default::default()
         };
-        let mut s = RoiScheduler::new(CameraModel::canonical(), Target::grid4x4(), config);
+        let mut s = RoiScheduler::new(CameraModel::canonical(), Target::grid4x4(), config, 0.1);
         let p = predictor(Some(Matrix12::identity() * 1e-6));
         let chosen: Vec<usize> = (0..16)
             .map(|k| s.next(&p, k as f64 * 250e-6).unwrap().point_index)

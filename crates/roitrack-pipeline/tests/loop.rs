@@ -25,7 +25,7 @@ fn tracks_orthoglide_from_rendered_rois() {
         let s = scenario.clone();
         move |t: f64| s.state_at(t)
     };
-    let camera = SimulatedCamera::new(renderer, truth, 7);
+    let mut camera = SimulatedCamera::new(renderer, truth, 7);
     // 0.3 s from the start of the first line (0.25 s): the target is at rest, then accelerates.
     let config = LoopConfig {
         roi_slots: 2400,
@@ -33,7 +33,7 @@ fn tracks_orthoglide_from_rendered_rois() {
         ..Default::default()
     };
     let report = run_loop(
-        camera,
+        &mut camera,
         &scenario.camera,
         &scenario.target,
         TrackerConfig::default(),
@@ -114,4 +114,127 @@ fn reflections_add_a_spot_that_moves_the_centroid_and_nothing_else() {
             assert!(moved > 0.2, "ROI {k}: the centroid moved {moved} px");
         }
     }
+}
+
+/// A camera that fails now and then, then goes away: the loop counts the transient failures, stops at the end, and
+/// keeps every estimate made until then.
+struct Flaky<C> {
+    inner: C,
+    grabs: usize,
+    disconnect_after: usize,
+}
+
+impl<C: roitrack_image::RoiCamera> roitrack_image::RoiCamera for Flaky<C> {
+    fn grab_roi(
+        &mut self,
+        trigger: &roitrack_image::RoiTrigger,
+        image: &mut roitrack_image::RoiImage,
+    ) -> Result<(), roitrack_image::GrabError> {
+        self.grabs += 1;
+        if self.grabs > self.disconnect_after {
+            return Err(roitrack_image::GrabError::Disconnected {
+                reason: "unplugged".to_string(),
+            });
+        }
+        if self.grabs.is_multiple_of(50) {
+            return Err(roitrack_image::GrabError::Timeout { timeout_s: 0.01 });
+        }
+        self.inner.grab_roi(trigger, image)
+    }
+
+    fn grab_full_frame(
+        &mut self,
+        t_s: f64,
+        frame: &mut roitrack_image::Frame,
+    ) -> Result<(), roitrack_image::GrabError> {
+        self.inner.grab_full_frame(t_s, frame)
+    }
+}
+
+#[test]
+fn a_failing_camera_is_survived_and_its_end_keeps_the_estimates() {
+    let (scenario, renderer) = orthoglide_with_renderer();
+    let truth = move |t: f64| scenario.state_at(t);
+    let mut camera = Flaky {
+        inner: SimulatedCamera::new(renderer, truth, 5),
+        grabs: 0,
+        disconnect_after: 1500,
+    };
+    let (scenario, _) = orthoglide_with_renderer();
+    let config = LoopConfig {
+        roi_slots: 4000,
+        ..Default::default()
+    };
+    let report = run_loop(
+        &mut camera,
+        &scenario.camera,
+        &scenario.target,
+        TrackerConfig::default(),
+        &config,
+    )
+    .unwrap();
+    assert_eq!(report.camera_errors, 30, "{report:?}");
+    assert!(matches!(
+        report.stopped_by,
+        Some(roitrack_image::GrabError::Disconnected { .. })
+    ));
+    // Every ROI read before the end was measured and tracked.
+    assert_eq!(report.rois, 1470);
+    assert!(report.estimates.len() >= 140, "{}", report.estimates.len());
+    assert!(
+        report
+            .estimates
+            .iter()
+            .skip(10)
+            .all(|e| e.status == TrackStatus::Tracking || e.status == TrackStatus::Disputed)
+    );
+    // The camera is the caller's again.
+    assert_eq!(camera.grabs, 1501);
+}
+
+#[test]
+fn invalid_loop_options_and_wrong_frames_are_refused() {
+    let (scenario, renderer) = orthoglide_with_renderer();
+    let truth = {
+        let s = scenario.clone();
+        move |t: f64| s.state_at(t)
+    };
+    let mut camera = SimulatedCamera::new(renderer, truth, 5);
+    let bad = LoopConfig {
+        rate_hz: 0.0,
+        ..Default::default()
+    };
+    let error = run_loop(
+        &mut camera,
+        &scenario.camera,
+        &scenario.target,
+        TrackerConfig::default(),
+        &bad,
+    )
+    .unwrap_err();
+    assert!(error.to_string().contains("rate_hz"), "{error}");
+    // A camera model of another size than the camera's frames: the run stops at once, saying so.
+    let mut small = scenario.camera.clone();
+    small.width_px = 640;
+    let report = run_loop(
+        &mut camera,
+        &small,
+        &scenario.target,
+        TrackerConfig::default(),
+        &LoopConfig::default(),
+    )
+    .unwrap();
+    assert!(
+        matches!(
+            report.stopped_by,
+            Some(roitrack_image::GrabError::FrameSize {
+                width: 1024,
+                expected_width: 640,
+                ..
+            })
+        ),
+        "{:?}",
+        report.stopped_by
+    );
+    assert!(report.estimates.is_empty());
 }

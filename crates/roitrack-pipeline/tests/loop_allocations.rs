@@ -75,8 +75,14 @@ fn steady_state_loop_does_not_allocate() {
                 ..Default::default()
             };
             let before = ALLOCATIONS.load(Ordering::SeqCst);
-            let report =
-                run_loop(camera, &scenario.camera, &scenario.target, tracker, &config).unwrap();
+            let report = run_loop(
+                &mut camera,
+                &scenario.camera,
+                &scenario.target,
+                tracker,
+                &config,
+            )
+            .unwrap();
             let allocations = ALLOCATIONS.load(Ordering::SeqCst) - before;
             assert!(
                 report.estimates.len() > slots / 10 - 5,

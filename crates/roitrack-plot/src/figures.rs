@@ -145,7 +145,15 @@ pub struct TruthSeries {
 ///
 /// Fails with [`PlotError::Invalid`] when the truth's or a run's vectors disagree in length (or a run's metrics
 /// count other estimates than its times), with [`PlotError::Empty`] when there is no run or nothing finite to draw,
-/// and with [`PlotError::Draw`] when a file cannot be written.
+/// and with [`PlotError::Draw`] when a file cannot be written. [`TrackSeries::from_estimates`] shows a complete use.
+///
+/// ```
+/// use roitrack_plot::{PlotError, TruthSeries, write_figures};
+/// let truth = TruthSeries { t_s: vec![0.0, 1.0], position_m: vec![[0.0; 3]; 2], velocity_mps: vec![[0.0; 3]; 2] };
+/// let dir = tempfile::tempdir().unwrap();
+/// // No run: nothing to compare with the truth.
+/// assert!(matches!(write_figures(dir.path(), "empty", &truth, &[]), Err(PlotError::Empty { .. })));
+/// ```
 pub fn write_figures(
     dir: &Path,
     scenario: &str,

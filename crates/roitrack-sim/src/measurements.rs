@@ -202,7 +202,9 @@ fn check_option(
 }
 
 /// Samples `scenario` one ROI at a time: every measurement is the projection of the true pose at its own time (the
-/// ROI's exposure middle) plus noise, with the faults of `opts`; the ground truth comes at every ROI time.
+/// ROI's exposure middle) plus noise, with the faults of `opts`; the ground truth comes at every ROI time. This is a
+/// camera reading one ROI at a time whatever the camera model's time model says (for frames of a rolling or global
+/// shutter, render them: [`roitrack_image::RoiRenderer::render_frame`]).
 ///
 /// ```
 /// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};

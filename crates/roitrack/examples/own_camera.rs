@@ -8,9 +8,10 @@
 //!
 //! The camera here draws each blob as a Gaussian spot where a known motion puts it: a stand-in for a real camera
 //! driver. Replace `grab_roi` and `grab_full_frame` with calls to your camera's SDK (set the ROI's offset and size,
-//! trigger, read the buffer and its timestamp) and keep the rest.
+//! trigger, read the buffer and its timestamp, converted to the loop's clock: that of the trigger times) and keep the
+//! rest.
 
-use roitrack::image::{CameraError, RoiTrigger};
+use roitrack::image::{GrabError, RoiTrigger};
 use roitrack::nalgebra::{Rotation3, Vector2, Vector3};
 use roitrack::pipeline::{LoopConfig, run_loop};
 use roitrack::{
@@ -73,10 +74,10 @@ impl RoiCamera for SpotCamera {
         &mut self,
         trigger: &RoiTrigger,
         image: &mut RoiImage,
-    ) -> std::result::Result<(), CameraError> {
+    ) -> std::result::Result<(), GrabError> {
         let roi = trigger.roi;
         if !roi.fits_in(self.camera.width_px, self.camera.height_px) {
-            return Err(CameraError::InvalidRoi {
+            return Err(GrabError::InvalidRoi {
                 roi,
                 reason: "off the sensor".to_string(),
             });
@@ -95,7 +96,7 @@ impl RoiCamera for SpotCamera {
         &mut self,
         t_s: f64,
         frame: &mut Frame,
-    ) -> std::result::Result<(), CameraError> {
+    ) -> std::result::Result<(), GrabError> {
         frame.resize(self.camera.width_px, self.camera.height_px, 8);
         frame.t_s = t_s;
         let spots = self.spots(t_s);
@@ -109,7 +110,7 @@ impl RoiCamera for SpotCamera {
 
 fn main() -> Result<()> {
     let (camera, target) = (CameraModel::canonical(), Target::grid4x4());
-    let spot_camera = SpotCamera {
+    let mut spot_camera = SpotCamera {
         camera: camera.clone(),
         target: target.clone(),
     };
@@ -119,7 +120,7 @@ fn main() -> Result<()> {
         ..LoopConfig::default()
     };
     let report = run_loop(
-        spot_camera,
+        &mut spot_camera,
         &camera,
         &target,
         TrackerConfig::default(),

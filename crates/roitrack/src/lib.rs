@@ -3,19 +3,19 @@
 //! roitrack tracks the 3-D pose **and** velocity (12 degrees of freedom) of a rigid target carrying small blobs, from
 //! a camera whose every blob measurement has its own timestamp: a camera that reads one small region of interest (ROI)
 //! at a time, or a rolling-shutter camera whose rows are read one after another. This crate is the whole library behind
-//! one name; the `roitrack` command-line tool and the Python package are thin shells over it.
+//! one name; the `roitrack` command-line tool is a thin shell over it (and so will be the Python package).
 //!
 //! ## The data flow
 //!
 //! ```text
 //!  camera model ─┐                      ┌─ ROI camera (RoiCamera) ── RoiImage ── centroid ─┐
-//!  (CameraModel, │   full frame (Frame) │                                                  │  Measurement
+//!  (CameraModel, │   full frame (Frame) │                             (timed by TimeModel) │  Measurement
 //!   TimeModel)   ├── find_target ───────┤   or a recording, or your own measurements ──────┼─ (t, id, u, v)
 //!  target ───────┘   (first pose)       └─ ROI scheduler (where to read next) ◄──┐         │
 //!  (Target)                                                                       │         ▼
 //!                                                                     Estimate ◄── Estimator (Kalman, VVS, batch,
-//!                                                                  (pose, twist,    static) ── one solver, one
-//!                                                                   status, cov.)   time model
+//!                                                                  (pose, twist,    static), one least-squares
+//!                                                                   status, cov.)   solver
 //! ```
 //!
 //! 1. **Camera and target in.** A [`CameraModel`] (pinhole with skew, plumb_bob distortion, and its [`TimeModel`]:
@@ -30,8 +30,8 @@
 //!    visual servoing loop, or the batch and static baselines.
 //! 4. **Estimates out.** Each [`Estimate`] carries the pose (camera_T_object) and the twist (velocity of the object
 //!    origin and angular velocity, both in the camera frame) at its time, a status (only `converging` and `tracking`
-//!    are vouched for), the residual, a conditioning figure and a covariance. Write them with
-//!    [`formats::EstimateWriter`], score them against ground truth with [`eval`], plot them with [`plot`].
+//!    are vouched for), the residual, a conditioning figure and, where the estimator has one, a covariance. Write them
+//!    with [`formats::EstimateWriter`], score them against ground truth with [`eval`], plot them with `plot`.
 //!
 //! ```
 //! use roitrack::{Estimator, Measurement, TrackStatus, Tracker, TrackerConfig};
@@ -81,28 +81,31 @@
 //! | [`sim`] | `roitrack-sim` | scenario motions with ground truth, the measurement simulator, rendered ROI recordings |
 //! | [`eval`] | `roitrack-eval` | every accuracy metric, the velocity lag included |
 //! | [`formats`] | `roitrack-formats` | the files: camera YAML, target CSV, measurements CSV, TUM poses, twists, diagnostics, ROI recordings |
-//! | [`plot`] | `roitrack-plot` | charts and the figures of a run |
-//! | [`experiments`] | `roitrack-experiments` | the demo, the estimator comparison, the fault table, the lag trade-off |
-//! | [`bench`] | `roitrack-bench` | the hot-path, loop, soak and PnP benchmarks |
+//! | `plot` | `roitrack-plot` | charts and the figures of a run (feature `plot`, on by default) |
+//! | `experiments` | `roitrack-experiments` | the demo, the estimator comparison, the fault table, the lag trade-off (feature `experiments`, on by default) |
+//! | `bench` | `roitrack-bench` | the hot-path, loop, soak and PnP benchmarks (feature `bench`) |
 //!
 //! The programs in `examples/` show the main uses end to end: `track_recording` (files in, estimates out),
 //! `simulate_and_evaluate` (your own camera and target, ground truth, metrics), `own_camera` (the real-time loop on a
 //! camera of your own) and `find_target` (the target in a full frame, no prior).
 
 pub use nalgebra;
+#[cfg(feature = "bench")]
 pub use roitrack_bench as bench;
 pub use roitrack_core as math;
 pub use roitrack_eval as eval;
+#[cfg(feature = "experiments")]
 pub use roitrack_experiments as experiments;
 pub use roitrack_formats as formats;
 pub use roitrack_image as image;
 pub use roitrack_pipeline as pipeline;
+#[cfg(feature = "plot")]
 pub use roitrack_plot as plot;
 pub use roitrack_sim as sim;
 
 pub use roitrack_core::estimator::{
-    Estimate, Estimator, EstimatorConfig, EstimatorReport, KalmanTuning, TrackStatus, Tracker,
-    TrackerConfig, VvsSettings, WindowMode, track, track_all,
+    ConfigError, Estimate, Estimator, EstimatorConfig, EstimatorReport, KalmanTuning, StreamError,
+    TrackError, TrackStatus, Tracker, TrackerConfig, VvsSettings, WindowMode, track, track_all,
 };
 pub use roitrack_core::{
     CameraModel, Measurement, MotionState, PoseSample, Readout, Target, TargetPoint, TimeModel,

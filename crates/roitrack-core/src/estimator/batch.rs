@@ -4,7 +4,6 @@
 
 use super::problem::ResidualFigures;
 use super::track::{Law, Step, Track, TrackCore};
-use super::vvs::window_fit_disputes;
 use super::{
     ConfigError, Estimate, Estimator, EstimatorConfig, EstimatorReport, TrackError, TrackStatus,
     TrackerConfig,
@@ -23,12 +22,10 @@ impl Law for BatchLaw {
     fn control_step(&mut self, core: &mut TrackCore, t_new_s: f64) -> Step {
         let predicted = core.state.predicted(t_new_s - core.t_ref_s);
         core.t_ref_s = t_new_s;
-        let fit = core.window_problem(t_new_s).fit_robustly(
-            predicted,
-            MAX_ITERATIONS,
-            core.config.robust,
-            core.robust_scale_floor_px(),
-        );
+        let fit = core
+            .window_problem(t_new_s)
+            .with_loss(core.config.robust, 1.0)
+            .fit_robustly(predicted, MAX_ITERATIONS);
         let ne = fit.normal_equations;
         let inverse_condition = ne.fast_inverse_condition();
         let status = if core.is_degenerate(inverse_condition) || !fit.params.is_finite() {
@@ -49,7 +46,7 @@ impl Law for BatchLaw {
 
     /// The newest measurement beyond Tukey's c at the window's robust scale: it weighed nothing.
     fn is_disputed(&self, core: &TrackCore, residuals: &ResidualFigures) -> bool {
-        window_fit_disputes(core, residuals)
+        core.newest_beyond_robust_scale(residuals)
     }
 }
 

@@ -62,7 +62,7 @@ use thiserror::Error;
 use crate::{CameraModel, Measurement, MotionState, Target};
 pub use batch::BatchEstimator;
 pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12};
-pub use problem::{Observation, ResidualFigures, RobustLoss, WindowProblem, scale_from_median_px};
+pub use problem::{Observation, RobustLoss, WindowProblem};
 pub use static_baseline::StaticEstimator;
 pub use static_pose::{InitError, PoseFit, refine_static_pose, solve_static_pose};
 pub use vvs::{VvsEstimator, VvsSettings};
@@ -501,12 +501,13 @@ impl Tracker {
 
 delegate_estimator!(Tracker);
 
-/// Why [`track`] stopped: a measurement could not be read, was refused, or an estimate could not be handed on.
+/// Why [`track`] stopped: a measurement could not be read (`S`), was refused, or an estimate could not be handed on
+/// (`K`).
 #[derive(Debug, Error)]
-pub enum StreamError<E> {
+pub enum StreamError<S, K = S> {
     /// The source of measurements failed (a file that cannot be read, say).
     #[error(transparent)]
-    Source(E),
+    Source(S),
     /// The estimator refused measurement number `index` (0-based) of the stream.
     #[error("measurement {index}: {source}")]
     Refused {
@@ -514,9 +515,9 @@ pub enum StreamError<E> {
         #[source]
         source: TrackError,
     },
-    /// The sink of estimates failed.
+    /// The sink of estimates failed (a file that cannot be written, say).
     #[error(transparent)]
-    Sink(E),
+    Sink(K),
 }
 
 /// Runs `estimator` over a stream of measurements (times not decreasing), handing every estimate to `sink` as it
@@ -532,17 +533,17 @@ pub enum StreamError<E> {
 /// let result = track(
 ///     &mut tracker,
 ///     measurements.iter().map(|m| Ok::<_, std::convert::Infallible>(*m)),
-///     |e| Ok(estimates.push(*e)),
+///     |e| Ok::<_, std::convert::Infallible>(estimates.push(*e)),
 /// );
 /// // Point 99 is not in the target: refused, with its place in the stream.
 /// let error = result.unwrap_err().to_string();
 /// assert!(error.starts_with("measurement 0: ") && error.contains("id 99"), "{error}");
 /// ```
-pub fn track<E>(
+pub fn track<S, K>(
     estimator: &mut dyn Estimator,
-    measurements: impl IntoIterator<Item = Result<Measurement, E>>,
-    mut sink: impl FnMut(&Estimate) -> Result<(), E>,
-) -> Result<EstimatorReport, StreamError<E>> {
+    measurements: impl IntoIterator<Item = Result<Measurement, S>>,
+    mut sink: impl FnMut(&Estimate) -> Result<(), K>,
+) -> Result<EstimatorReport, StreamError<S, K>> {
     for (index, m) in measurements.into_iter().enumerate() {
         let m = m.map_err(StreamError::Source)?;
         if let Some(estimate) = estimator
@@ -580,7 +581,7 @@ pub fn track_all(
             .map(|m| Ok::<_, std::convert::Infallible>(*m)),
         |e| {
             estimates.push(*e);
-            Ok(())
+            Ok::<_, std::convert::Infallible>(())
         },
     )
     .map_err(|e| match e {

@@ -83,19 +83,13 @@ const MEDIAN_NORM_PER_SIGMA: f64 = 1.1774;
 
 /// The robust scale (px per axis) for a median residual norm: `median / 1.1774` (the median norm of a 2-D Gaussian
 /// residual of unit standard deviation per axis), never below `floor_px`.
-///
-/// ```
-/// use roitrack_core::estimator::scale_from_median_px;
-/// assert!((scale_from_median_px(1.1774, 0.1) - 1.0).abs() < 1e-12);
-/// assert_eq!(scale_from_median_px(0.0, 0.1), 0.1);
-/// ```
-pub fn scale_from_median_px(median_px: f64, floor_px: f64) -> f64 {
+pub(crate) fn scale_from_median_px(median_px: f64, floor_px: f64) -> f64 {
     (median_px / MEDIAN_NORM_PER_SIGMA).max(floor_px)
 }
 
 /// Residual figures of a window at a state (px).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ResidualFigures {
+pub(crate) struct ResidualFigures {
     /// RMS per coordinate.
     pub rms_px: f64,
     /// Median residual norm (of the first 128 observations).
@@ -238,7 +232,7 @@ impl<'a> WindowProblem<'a> {
     }
 
     /// RMS, median and newest residual of the window at `state`; all infinite if a point does not project.
-    pub fn residual_figures(&self, state: &MotionState) -> ResidualFigures {
+    pub(crate) fn residual_figures(&self, state: &MotionState) -> ResidualFigures {
         const MAX: usize = 128;
         let mut norms = [0.0f64; MAX];
         let (mut sum, mut count) = (0.0, 0usize);
@@ -281,34 +275,33 @@ impl<'a> WindowProblem<'a> {
         }
     }
 
-    /// Levenberg-Marquardt to convergence (or `max_iterations`): least squares first, then, with a robust loss, two
-    /// robust rounds, each at the scale of the previous fit's residuals (never below `scale_floor_px`). From a rough
-    /// start (a static pose of a moving target, a prediction across a fast rotation) the residuals are large for every
-    /// point and a robust loss would discard the good ones: the least-squares fit comes first. The second robust round,
-    /// with the scale of the cleaner first, rejects what the first (started from a fit pulled by the outliers) kept.
-    /// The solution's iterations add up over the rounds.
+    /// Levenberg-Marquardt to convergence (or `max_iterations` a round) with the problem's loss: least squares first,
+    /// then, with a robust loss, two robust rounds, each at the scale of the previous fit's residuals (never below
+    /// [`Self::scale_floor_px`]). From a rough start (a static pose of a moving target, a prediction across a fast
+    /// rotation) the residuals are large for every point and a robust loss would discard the good ones: the
+    /// least-squares fit comes first. The second robust round, with the scale of the cleaner first, rejects what the
+    /// first (started from a fit pulled by the outliers) kept. The report's iterations and steps add up over the
+    /// rounds; its initial cost is that of the first round, its final cost and stop those of the last.
     pub fn fit_robustly(
         &self,
         initial: MotionState,
         max_iterations: usize,
-        loss: RobustLoss,
-        scale_floor_px: f64,
     ) -> Solution<MotionState, 12> {
         let options = SolverOptions::levenberg_marquardt(max_iterations);
         let mut plain = self.with_loss(RobustLoss::None, 1.0);
         let mut fit = solver::solve(&mut plain, initial, &options);
-        if loss == RobustLoss::None {
+        if self.loss == RobustLoss::None {
             return fit;
         }
         for _ in 0..2 {
-            let scale_px = self.robust_scale_px(&fit.params, scale_floor_px);
-            let mut robust = self.with_loss(loss, scale_px);
+            let scale_px = self.robust_scale_px(&fit.params, self.scale_floor_px);
+            let mut robust = self.with_loss(self.loss, scale_px);
             let next = solver::solve(&mut robust, fit.params, &options);
-            let iterations = fit.report.iterations + next.report.iterations;
-            let steps_applied = fit.report.steps_applied + next.report.steps_applied;
+            let report = fit.report;
             fit = next;
-            fit.report.iterations = iterations;
-            fit.report.steps_applied = steps_applied;
+            fit.report.iterations += report.iterations;
+            fit.report.steps_applied += report.steps_applied;
+            fit.report.initial_cost_px2 = report.initial_cost_px2;
         }
         fit
     }

@@ -9,11 +9,11 @@
 
 use nalgebra::{SMatrix, Vector2};
 
-use super::problem::{Observation, ResidualFigures, WindowProblem};
+use super::problem::{Observation, ResidualFigures, WindowProblem, scale_from_median_px};
 use super::window::ObservationWindow;
 use super::{
-    ConfigError, Estimate, EstimatorConfig, EstimatorReport, Matrix12, TrackError, TrackStatus,
-    TrackerConfig, WindowMode, static_pose::solve_static_pose,
+    ConfigError, Estimate, EstimatorConfig, EstimatorReport, Matrix12, RobustLoss, TrackError,
+    TrackStatus, TrackerConfig, WindowMode, static_pose::solve_static_pose,
 };
 use crate::solver::NormalEquations;
 use crate::{CameraModel, Measurement, MotionState, SpatioTemporalModel, Target};
@@ -162,6 +162,13 @@ impl TrackCore {
             return None;
         }
         ne.covariance(self.config.noise_px)
+    }
+
+    /// Whether the newest measurement lies beyond Tukey's c at the window's robust scale (see
+    /// [`super::problem::scale_from_median_px`]): a robust window fit gave it no weight.
+    pub fn newest_beyond_robust_scale(&self, residuals: &ResidualFigures) -> bool {
+        let scale_px = scale_from_median_px(residuals.median_px, self.robust_scale_floor_px());
+        residuals.newest_px > RobustLoss::TUKEY_C * scale_px
     }
 
     /// Whether a window with this conditioning is degenerate.
@@ -367,13 +374,10 @@ impl<L: Law> Track<L> {
         let pose = solve_static_pose(&core.model, &core.target, &core.scratch).ok()?;
         let t_ref_s = core.window.last(1).next()?.t_s;
         core.fill_scratch(WindowMode::Last(init_len));
-        let problem = core.window_problem(t_ref_s);
-        let fit = problem.fit_robustly(
-            pose.state,
-            INIT_MAX_ITERATIONS,
-            core.config.robust,
-            core.robust_scale_floor_px(),
-        );
+        let problem = core
+            .window_problem(t_ref_s)
+            .with_loss(core.config.robust, 1.0);
+        let fit = problem.fit_robustly(pose.state, INIT_MAX_ITERATIONS);
         let (state, ne) = (fit.params, fit.normal_equations);
         let inverse_condition = ne.fast_inverse_condition();
         let well_posed = !core.is_degenerate(inverse_condition);

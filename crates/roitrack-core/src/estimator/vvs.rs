@@ -7,8 +7,8 @@
 use super::problem::ResidualFigures;
 use super::track::{Law, Step, Track, TrackCore};
 use super::{
-    ConfigError, Estimate, Estimator, EstimatorConfig, EstimatorReport, RobustLoss, TrackError,
-    TrackStatus, TrackerConfig,
+    ConfigError, Estimate, Estimator, EstimatorConfig, EstimatorReport, TrackError, TrackStatus,
+    TrackerConfig,
 };
 use crate::solver::{self, SolverOptions, StopReason};
 use crate::{CameraModel, JacobianKind, Measurement, MotionState, Target};
@@ -85,15 +85,8 @@ impl Law for VvsLaw {
 
     /// The newest measurement beyond Tukey's c at the window's robust scale: it weighed nothing.
     fn is_disputed(&self, core: &TrackCore, residuals: &ResidualFigures) -> bool {
-        window_fit_disputes(core, residuals)
+        core.newest_beyond_robust_scale(residuals)
     }
-}
-
-/// Whether the newest measurement lies beyond Tukey's c at the window's robust scale (see
-/// [`super::scale_from_median_px`]): a robust window fit gave it no weight.
-pub(super) fn window_fit_disputes(core: &TrackCore, residuals: &ResidualFigures) -> bool {
-    let scale_px = super::scale_from_median_px(residuals.median_px, core.robust_scale_floor_px());
-    residuals.newest_px > RobustLoss::TUKEY_C * scale_px
 }
 
 /// The paper's virtual visual servoing loop (see the [module documentation](self)).

@@ -1,5 +1,5 @@
 //! Cameras that read one ROI at a time: the trait the real-time loop drives ([`RoiCamera`]), what can go wrong
-//! ([`CameraError`]), and two cameras of roitrack's own: [`SimulatedCamera`], which renders the true motion, and
+//! ([`GrabError`]), and two cameras of roitrack's own: [`SimulatedCamera`], which renders the true motion, and
 //! [`ReplayCamera`], which plays back ROIs read earlier.
 //!
 //! Grabbing is fallible, because real cameras time out, drop buffers and disconnect, and it fills buffers the caller
@@ -17,6 +17,10 @@ use crate::{Frame, Roi, RoiImage};
 
 /// What the loop asks a camera for: expose `roi` (placed on target point `point_id`) around time `t_s`.
 ///
+/// Times are on the loop's clock (that of its trigger times, [`crate::RoiImage::t_s`] and the estimates): a camera
+/// whose images carry timestamps of its own clock converts them to the loop's, e.g. from the offset it measures
+/// between the two.
+///
 /// ```
 /// use roitrack_image::{Roi, RoiTrigger};
 /// let trigger = RoiTrigger { point_id: 3, roi: Roi::new(100, 100, 24, 24), t_s: 0.25 };
@@ -33,7 +37,7 @@ pub struct RoiTrigger {
 /// Why a grab gave no image.
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
-pub enum CameraError {
+pub enum GrabError {
     /// No image within the camera's timeout: the grab may be retried.
     #[error("the camera gave no image within {timeout_s} s")]
     Timeout { timeout_s: f64 },
@@ -49,9 +53,20 @@ pub enum CameraError {
     /// A replayed recording has no more images.
     #[error("the recording has no more images")]
     EndOfRecording,
+    /// The camera's frames are not the size its camera model says: the calibration is of another camera, or of
+    /// another mode.
+    #[error(
+        "the camera delivered a {width} x {height} frame, its camera model is {expected_width} x {expected_height}"
+    )]
+    FrameSize {
+        width: u32,
+        height: u32,
+        expected_width: u32,
+        expected_height: u32,
+    },
 }
 
-impl CameraError {
+impl GrabError {
     /// Whether later grabs may succeed (a timeout, a dropped buffer, a bad ROI request), as opposed to the end of
     /// the camera (disconnected, end of recording).
     pub fn is_transient(&self) -> bool {
@@ -68,17 +83,17 @@ impl CameraError {
 /// and tracks. See `examples/own_camera.rs` of the `roitrack` crate for a complete one.
 ///
 /// ```
-/// use roitrack_image::{CameraError, Frame, Roi, RoiCamera, RoiImage, RoiTrigger};
+/// use roitrack_image::{GrabError, Frame, Roi, RoiCamera, RoiImage, RoiTrigger};
 ///
 /// /// A camera that sees a black scene.
 /// struct Dark;
 /// impl RoiCamera for Dark {
-///     fn grab_roi(&mut self, trigger: &RoiTrigger, image: &mut RoiImage) -> Result<(), CameraError> {
+///     fn grab_roi(&mut self, trigger: &RoiTrigger, image: &mut RoiImage) -> Result<(), GrabError> {
 ///         image.set(trigger.t_s, trigger.point_id, trigger.roi, 8);
 ///         image.pixels.fill(0);
 ///         Ok(())
 ///     }
-///     fn grab_full_frame(&mut self, t_s: f64, frame: &mut Frame) -> Result<(), CameraError> {
+///     fn grab_full_frame(&mut self, t_s: f64, frame: &mut Frame) -> Result<(), GrabError> {
 ///         frame.resize(640, 480, 8);
 ///         frame.t_s = t_s;
 ///         frame.pixels.fill(0);
@@ -92,10 +107,10 @@ impl CameraError {
 /// ```
 pub trait RoiCamera: Send {
     /// Exposes and reads the ROI of `trigger`; fills `image` with its pixels, the ROI actually read (a camera may
-    /// move it onto its increments) and the actual mid-exposure time. The pixel buffer is reused: within its capacity
-    /// this must not allocate.
-    fn grab_roi(&mut self, trigger: &RoiTrigger, image: &mut RoiImage) -> Result<(), CameraError>;
+    /// move it onto its increments) and the actual mid-exposure time of its first row, on the loop's clock (see
+    /// [`RoiTrigger`]). The pixel buffer is reused: within its capacity this must not allocate.
+    fn grab_roi(&mut self, trigger: &RoiTrigger, image: &mut RoiImage) -> Result<(), GrabError>;
 
     /// Reads a full frame exposed around `t_s` into `frame` (resized to the sensor; its buffer is reused).
-    fn grab_full_frame(&mut self, t_s: f64, frame: &mut Frame) -> Result<(), CameraError>;
+    fn grab_full_frame(&mut self, t_s: f64, frame: &mut Frame) -> Result<(), GrabError>;
 }

@@ -4,16 +4,17 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::MotionState;
 
-use super::{CameraError, RoiCamera, RoiTrigger};
+use super::{GrabError, RoiCamera, RoiTrigger};
 use crate::{Frame, RenderScratch, Roi, RoiImage, RoiRenderer};
 
 /// Replays recorded ROIs in order, whatever is requested (for throughput benchmarks, where rendering must not count,
-/// and for recorded camera data), then ends ([`CameraError::EndOfRecording`]). The schedule that recorded them must
-/// match the one that replays them: a request for another point than the recorded one is counted in
-/// [`ReplayCamera::mismatches`].
+/// and for recorded camera data), each with its recorded time (or, [`ReplayCamera::with_trigger_times`], the time it
+/// is asked for), then ends ([`GrabError::EndOfRecording`]); its full frame comes with the time it is asked for. The
+/// schedule that recorded the ROIs must match the one that replays them: a request for another point than the
+/// recorded one is counted in [`ReplayCamera::mismatches`].
 ///
 /// ```
-/// use roitrack_image::{CameraError, Frame, Roi, RoiCamera, RoiImage, RoiTrigger, ReplayCamera};
+/// use roitrack_image::{GrabError, Frame, Roi, RoiCamera, RoiImage, RoiTrigger, ReplayCamera};
 ///
 /// let mut recorded = RoiImage::default();
 /// recorded.set(0.5, 3, Roi::new(0, 0, 4, 4), 8);
@@ -22,7 +23,7 @@ use crate::{Frame, RenderScratch, Roi, RoiImage, RoiRenderer};
 /// let trigger = RoiTrigger { point_id: 3, roi: Roi::new(0, 0, 4, 4), t_s: 0.5 };
 /// camera.grab_roi(&trigger, &mut image).unwrap();
 /// assert_eq!(image.t_s, 0.5);
-/// assert_eq!(camera.grab_roi(&trigger, &mut image), Err(CameraError::EndOfRecording));
+/// assert_eq!(camera.grab_roi(&trigger, &mut image), Err(GrabError::EndOfRecording));
 /// ```
 #[derive(Debug, Clone)]
 pub struct ReplayCamera {
@@ -116,11 +117,11 @@ impl ReplayCamera {
 }
 
 impl RoiCamera for ReplayCamera {
-    fn grab_roi(&mut self, trigger: &RoiTrigger, image: &mut RoiImage) -> Result<(), CameraError> {
+    fn grab_roi(&mut self, trigger: &RoiTrigger, image: &mut RoiImage) -> Result<(), GrabError> {
         let recorded = self
             .rois
             .get(self.cursor)
-            .ok_or(CameraError::EndOfRecording)?;
+            .ok_or(GrabError::EndOfRecording)?;
         self.cursor += 1;
         if recorded.point_id != trigger.point_id {
             self.mismatches += 1;
@@ -135,7 +136,7 @@ impl RoiCamera for ReplayCamera {
         Ok(())
     }
 
-    fn grab_full_frame(&mut self, t_s: f64, frame: &mut Frame) -> Result<(), CameraError> {
+    fn grab_full_frame(&mut self, t_s: f64, frame: &mut Frame) -> Result<(), GrabError> {
         let recorded = &self.full_frame;
         frame.resize(recorded.width, recorded.height, recorded.bit_depth);
         frame.pixels.copy_from_slice(&recorded.pixels);

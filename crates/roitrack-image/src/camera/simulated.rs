@@ -4,11 +4,12 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::MotionState;
 
-use super::{CameraError, RoiCamera, RoiTrigger};
+use super::{GrabError, RoiCamera, RoiTrigger};
 use crate::{Frame, ReflectionFault, RenderScratch, RoiImage, RoiRenderer};
 
-/// A simulated camera: renders each requested ROI from the true motion `truth(t)` (pixels, noise, blur, exposure from
-/// the camera's time model), deterministic per seed, with optional reflections. It never fails.
+/// A simulated camera: renders each requested ROI from the true motion `truth(t)` (pixels, noise, blur, and the
+/// exposure and readout of the camera's time model), exposed when it is triggered, deterministic per seed, with
+/// optional reflections. It never fails.
 ///
 /// ```
 /// use rand::SeedableRng;
@@ -58,10 +59,10 @@ impl<F: Fn(f64) -> MotionState + Send> SimulatedCamera<F> {
 }
 
 impl<F: Fn(f64) -> MotionState + Send> RoiCamera for SimulatedCamera<F> {
-    fn grab_roi(&mut self, trigger: &RoiTrigger, image: &mut RoiImage) -> Result<(), CameraError> {
+    fn grab_roi(&mut self, trigger: &RoiTrigger, image: &mut RoiImage) -> Result<(), GrabError> {
         let bit_depth = self.renderer.sensor().bit_depth as u8;
         image.set(trigger.t_s, trigger.point_id, trigger.roi, bit_depth);
-        self.renderer.render_roi_with_scratch(
+        self.renderer.render_readout(
             &self.truth,
             &trigger.roi,
             trigger.t_s,
@@ -78,7 +79,7 @@ impl<F: Fn(f64) -> MotionState + Send> RoiCamera for SimulatedCamera<F> {
         Ok(())
     }
 
-    fn grab_full_frame(&mut self, t_s: f64, frame: &mut Frame) -> Result<(), CameraError> {
+    fn grab_full_frame(&mut self, t_s: f64, frame: &mut Frame) -> Result<(), GrabError> {
         self.renderer
             .render_frame(&self.truth, t_s, &mut self.rng, &mut self.scratch, frame);
         Ok(())

@@ -191,6 +191,25 @@ pub enum BlobRejection {
 /// [`BlobRejection::TouchesBorder`] (the component reaches the ROI's outer rows or columns), the area limits, then
 /// [`BlobRejection::Asymmetric`] (with [`CentroidOptions::symmetry`], the default: something merged with the blob).
 ///
+/// ```
+/// use roitrack_image::{BlobRejection, CentroidOptions, Roi, measure_blob};
+///
+/// // A 3 x 3 blob of value 200 on a dark 9 x 9 ROI whose top-left pixel is (100, 40).
+/// let roi = Roi::new(100, 40, 9, 9);
+/// let mut pixels = vec![10u16; roi.len()];
+/// for j in 4..7 {
+///     for i in 2..5 {
+///         pixels[j * 9 + i] = 200;
+///     }
+/// }
+/// let c = measure_blob(&pixels, &roi, &CentroidOptions::default()).unwrap();
+/// assert!((c.u_px - 103.0).abs() < 1e-9 && (c.v_px - 45.0).abs() < 1e-9);
+/// assert_eq!(c.area_px, 9);
+/// // Nothing stands out of a flat ROI.
+/// let flat = vec![10u16; roi.len()];
+/// assert_eq!(measure_blob(&flat, &roi, &CentroidOptions::default()), Err(BlobRejection::Absent));
+/// ```
+///
 /// # Panics
 /// If `pixels.len() != roi.len()`, or the ROI is empty or larger than [`MAX_ROI_WIDTH`] x [`MAX_ROI_HEIGHT`].
 pub fn measure_blob(
