@@ -545,10 +545,8 @@ impl RoiRenderer {
         };
         let mid = pose(t_mid_s);
         let ends = (exposure_s > 0.0).then(|| {
-            (
-                pose(t_mid_s - 0.5 * exposure_s),
-                pose(t_mid_s + 0.5 * exposure_s),
-            )
+            let (start_s, end_s) = self.camera.time.exposure_interval_s(t_mid_s);
+            (pose(start_s), pose(end_s))
         });
         // 1. Blobs that may reach the area, and the number of time samples their motion needs.
         scratch.relevant.clear();

@@ -136,7 +136,7 @@ impl Roi {
 /// let mut image = RoiImage::with_capacity(64 * 64);
 /// image.set(2.5e-3, 7, Roi::new(100, 200, 24, 24), 8);
 /// assert_eq!(image.pixels.len(), 24 * 24);
-/// assert_eq!(image.max_value(), 255);
+/// assert!(image.is_consistent());
 /// ```
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct RoiImage {
@@ -176,11 +176,6 @@ impl RoiImage {
         self.roi = roi;
         self.bit_depth = bit_depth;
         self.pixels.resize(roi.len(), 0);
-    }
-
-    /// The largest value a pixel can have at this bit depth.
-    pub fn max_value(&self) -> u16 {
-        ((1u32 << self.bit_depth.clamp(1, 16)) - 1) as u16
     }
 }
 

@@ -18,7 +18,7 @@ use roitrack_image::{
 };
 use thiserror::Error;
 
-use crate::matching::find_target;
+use crate::matching::{MatchError, find_target};
 use crate::scheduler::{Predictor, RoiScheduler, SchedulerConfig};
 
 /// Options of the loop.
@@ -343,21 +343,7 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                 }
             }
             if predictor.is_none() || scheduler.needs_reinitialisation() {
-                let grabbed = camera.grab_full_frame(t_s, &mut frame).and_then(|()| {
-                    if (frame.width, frame.height)
-                        == (camera_model.width_px, camera_model.height_px)
-                    {
-                        Ok(())
-                    } else {
-                        Err(GrabError::FrameSize {
-                            width: frame.width,
-                            height: frame.height,
-                            expected_width: camera_model.width_px,
-                            expected_height: camera_model.height_px,
-                        })
-                    }
-                });
-                if let Err(e) = grabbed {
+                if let Err(e) = camera.grab_full_frame(t_s, &mut frame) {
                     if !e.is_transient() {
                         report.stopped_by = Some(e);
                         break;
@@ -393,6 +379,21 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                             }
                         }
                         report.initialisations += 1;
+                    }
+                    // Frames of another size than the camera model's will never match it: stop, saying so.
+                    Err(MatchError::FrameSize {
+                        frame_width,
+                        frame_height,
+                        camera_width,
+                        camera_height,
+                    }) => {
+                        report.stopped_by = Some(GrabError::FrameSize {
+                            width: frame_width,
+                            height: frame_height,
+                            expected_width: camera_width,
+                            expected_height: camera_height,
+                        });
+                        break;
                     }
                     Err(_) => {
                         predictor = None;
@@ -444,9 +445,13 @@ pub fn run_loop_with_progress<C: RoiCamera>(
             let grabbed = Instant::now();
             report.rois += 1;
             // The point the camera says it read (a replay may not follow the schedule).
-            let point_index = target
-                .index_of(image.point_id)
-                .unwrap_or(request.point_index);
+            let point_index = if image.point_id == trigger.point_id {
+                request.point_index
+            } else {
+                target
+                    .index_of(image.point_id)
+                    .unwrap_or(request.point_index)
+            };
             match measure_roi(&image, &config.centroid, &camera_model.time) {
                 Ok(m) => {
                     scheduler.report(point_index, true);

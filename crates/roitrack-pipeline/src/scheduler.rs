@@ -231,12 +231,12 @@ impl RoiScheduler {
             * point.diameter_m.unwrap_or(self.config.default_diameter_m)
             / projected.point_in_cam_m.z;
         // Image motion over the exposure (the camera's), from the twist.
-        let half = 0.5 * self.camera.time.exposure_s;
+        let (start_s, end_s) = self.camera.time.exposure_interval_s(d_s);
         let smear_px = match (
             self.model
-                .project(&predictor.state, &point.point_in_obj_m, d_s - half),
+                .project(&predictor.state, &point.point_in_obj_m, start_s),
             self.model
-                .project(&predictor.state, &point.point_in_obj_m, d_s + half),
+                .project(&predictor.state, &point.point_in_obj_m, end_s),
         ) {
             (Some(a), Some(b)) => (b - a).norm(),
             _ => 0.0,

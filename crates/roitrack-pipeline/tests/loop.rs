@@ -18,14 +18,24 @@ fn orthoglide_with_renderer() -> (Scenario, RoiRenderer) {
     (scenario, renderer)
 }
 
-#[test]
-fn tracks_orthoglide_from_rendered_rois() {
+/// The orthoglide scenario and a simulated camera rendering its true motion (noise seeded by `seed`).
+fn orthoglide_camera(
+    seed: u64,
+) -> (
+    Scenario,
+    SimulatedCamera<impl Fn(f64) -> roitrack_core::MotionState + Send>,
+) {
     let (scenario, renderer) = orthoglide_with_renderer();
     let truth = {
         let s = scenario.clone();
         move |t: f64| s.state_at(t)
     };
-    let mut camera = SimulatedCamera::new(renderer, truth, 7);
+    (scenario, SimulatedCamera::new(renderer, truth, seed))
+}
+
+#[test]
+fn tracks_orthoglide_from_rendered_rois() {
+    let (scenario, mut camera) = orthoglide_camera(7);
     // 0.3 s from the start of the first line (0.25 s): the target is at rest, then accelerates.
     let config = LoopConfig {
         roi_slots: 2400,
@@ -153,14 +163,12 @@ impl<C: roitrack_image::RoiCamera> roitrack_image::RoiCamera for Flaky<C> {
 
 #[test]
 fn a_failing_camera_is_survived_and_its_end_keeps_the_estimates() {
-    let (scenario, renderer) = orthoglide_with_renderer();
-    let truth = move |t: f64| scenario.state_at(t);
+    let (scenario, inner) = orthoglide_camera(5);
     let mut camera = Flaky {
-        inner: SimulatedCamera::new(renderer, truth, 5),
+        inner,
         grabs: 0,
         disconnect_after: 1500,
     };
-    let (scenario, _) = orthoglide_with_renderer();
     let config = LoopConfig {
         roi_slots: 4000,
         ..Default::default()
@@ -194,12 +202,7 @@ fn a_failing_camera_is_survived_and_its_end_keeps_the_estimates() {
 
 #[test]
 fn invalid_loop_options_and_wrong_frames_are_refused() {
-    let (scenario, renderer) = orthoglide_with_renderer();
-    let truth = {
-        let s = scenario.clone();
-        move |t: f64| s.state_at(t)
-    };
-    let mut camera = SimulatedCamera::new(renderer, truth, 5);
+    let (scenario, mut camera) = orthoglide_camera(5);
     let bad = LoopConfig {
         rate_hz: 0.0,
         ..Default::default()

@@ -51,11 +51,6 @@ impl<F: Fn(f64) -> MotionState + Send> SimulatedCamera<F> {
         self.reflections = Some(fault);
         self
     }
-
-    /// The renderer behind the camera.
-    pub fn renderer(&self) -> &RoiRenderer {
-        &self.renderer
-    }
 }
 
 impl<F: Fn(f64) -> MotionState + Send> RoiCamera for SimulatedCamera<F> {
