@@ -12,6 +12,7 @@
 //! | ROI recordings ([`roitrack_image::RoiImage`]s): binary, see [`RoiRecordingReader`] | [`RoiRecordingReader`] (streaming) | [`RoiRecordingWriter`] |
 //! | twists: CSV `t,vx,vy,vz,wx,wy,wz` (camera frame) | [`read_twists_csv`], [`parse_twists_csv`] | [`TwistWriter`], [`write_twists_csv`] |
 //! | estimates: poses, twists and diagnostics CSV together | | [`EstimateWriter`] |
+//! | full frames ([`roitrack_image::Frame`]): PNG, JPEG, PGM/PPM, TIFF, 8 or 16 bits, colour made grey | [`read_frame`], [`decode_frame`] | |
 //!
 //! Every reader refuses non-finite numbers and times out of order; every writer refuses what the reader would refuse
 //! and writes numbers with full round-trip precision (the shortest decimal that reads back to the same `f64`).
@@ -49,6 +50,7 @@ mod camera_yaml;
 mod csv_util;
 mod error;
 mod estimates;
+mod image_file;
 mod measurements;
 mod roi_recording;
 mod row_writer;
@@ -60,6 +62,7 @@ pub use atomic::AtomicFile;
 pub use camera_yaml::{camera_yaml_string, parse_camera_yaml, read_camera_yaml, write_camera_yaml};
 pub use error::FormatError;
 pub use estimates::{DIAGNOSTICS_HEADER, EstimateWriter};
+pub use image_file::{FRAME_IMAGE_FORMATS, check_frame_size, decode_frame, read_frame};
 pub use measurements::{
     MeasurementReader, MeasurementWriter, read_measurements_csv, write_measurements_csv,
 };
