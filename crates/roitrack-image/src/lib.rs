@@ -13,6 +13,8 @@
 //!   pixel, first-order moments, a symmetry check against merged reflections ([`symmetry`]), allocation-free;
 //! - [`measure`]: an ROI image's centroid as a timed measurement ([`measure_roi`]) and the tally of rejections;
 //! - [`detect`]: blob detection in a full frame ([`detect_blobs`]) for initialisation;
+//! - [`photo`]: blob detection in photographs ([`detect_photo_blobs`]): dark or bright blobs under uneven light, shape
+//!   filters, grey-level sub-pixel centres;
 //! - [`reflection`]: a simulated reflection, a second bright spot in an ROI ([`ReflectionFault`]);
 //! - [`accuracy`]: the centroid's bias and spread against the truth ([`centroid_accuracy`]).
 //!
@@ -26,6 +28,7 @@ pub mod centroid;
 pub mod detect;
 pub mod frame;
 pub mod measure;
+pub mod photo;
 pub mod reflection;
 pub mod render;
 pub mod roi;
@@ -44,6 +47,7 @@ pub use centroid::{
 pub use detect::detect_blobs;
 pub use frame::Frame;
 pub use measure::{RejectionCounts, measure_roi};
+pub use photo::{PhotoBlob, PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs};
 pub use reflection::ReflectionFault;
 pub use render::{DEFAULT_BLOB_DIAMETER_M, DiskOrientation, RenderScratch, RoiRenderer};
 pub use roi::{Roi, RoiImage};

@@ -1,0 +1,329 @@
+//! Blob detection in photographs: dark or bright blobs of any size under uneven light, with shape filters and
+//! sub-pixel grey-level centres ([`detect_photo_blobs`]).
+//!
+//! One threshold cannot serve a photograph: light falls off towards the corners, a shadow crosses the target, the sun
+//! brightens one side. So the image is thresholded at many levels spread between its dark and bright ends (as
+//! OpenCV's `SimpleBlobDetector` does); a blob is a connected component (8-connectivity) that passes the shape filters
+//! at one level, and the same blob seen at several levels (nested components with nearly the same centre) is one
+//! detection. In a shadow it is found at the low levels, in full light at the high ones. The shape filters ask what a
+//! circle's image is at any viewing angle, an ellipse: the inertia ratio (minor over major second moment) bounds the
+//! foreshortening, the area against that of the ellipse with the same second moments rejects rings, crosses and
+//! merged pairs, one run of pixels per row rejects what is not convex, and a component touching the image border is
+//! cut and refused. The centre is then measured again from the grey levels (the `centre` module): background-
+//! corrected moments in an elliptical window, the area centroid of the blob's image.
+//!
+//! Dark blobs are found as bright blobs of the inverted image, so everything downstream sees one polarity.
+
+mod centre;
+mod components;
+
+use centre::{Ellipse, grey_centre};
+use components::{Component, Labeller};
+
+/// Whether the blobs are brighter or darker than what surrounds them.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Polarity {
+    /// Bright blobs on a darker background (LEDs, retro-reflective markers, white dots on black).
+    Bright,
+    /// Dark blobs on a lighter background (printed circles on paper).
+    Dark,
+}
+
+impl Polarity {
+    /// `"bright"` or `"dark"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Bright => "bright",
+            Self::Dark => "dark",
+        }
+    }
+}
+
+/// Settings of [`detect_photo_blobs`]. The defaults suit photographs of printed circles and of bright markers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhotoBlobOptions {
+    /// Smallest blob area (px at the threshold that finds it): below, a centre is too noisy to be worth matching.
+    pub min_area_px: f64,
+    /// Largest blob area as a fraction of the image's area.
+    pub max_area_fraction: f64,
+    /// Smallest ratio of the minor to the major second moment (the square of the ellipse's axis ratio): 0.04 allows
+    /// circles seen 78° off their axis.
+    pub min_inertia_ratio: f64,
+    /// Bounds of the area over the area of the ellipse with the same second moments (1 for an ellipse).
+    pub ellipse_fill_range: (f64, f64),
+    /// Most horizontal runs per row (1 for a convex shape; pixel noise on the outline adds a few).
+    pub max_runs_per_row: f64,
+    /// Number of threshold levels between the image's dark and bright ends.
+    pub levels: usize,
+    /// Levels a blob must be found at to count (a blob found at one level only is a noise-level feature).
+    pub min_levels: usize,
+    /// Smallest contrast of a blob against its background, as a fraction of the image's dynamic range (its 1st to
+    /// 99th percentile).
+    pub min_contrast_fraction: f64,
+}
+
+impl Default for PhotoBlobOptions {
+    fn default() -> Self {
+        Self {
+            min_area_px: 7.0,
+            max_area_fraction: 0.25,
+            min_inertia_ratio: 0.04,
+            ellipse_fill_range: (0.8, 1.15),
+            max_runs_per_row: 1.25,
+            levels: 12,
+            min_levels: 2,
+            min_contrast_fraction: 0.08,
+        }
+    }
+}
+
+/// A blob found in a photograph.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhotoBlob {
+    /// Sub-pixel centre (raw pixels): the area centroid of the blob's image, from grey levels.
+    pub u_px: f64,
+    pub v_px: f64,
+    /// Area (px²) of the ellipse the blob's second moments describe, at the threshold midway through the levels
+    /// that found it.
+    pub area_px: f64,
+    /// Semi-axes of that ellipse (px) and the angle of its major axis from the u axis (rad).
+    pub semi_major_px: f64,
+    pub semi_minor_px: f64,
+    pub angle_rad: f64,
+    /// How far the blob stands from its local background (DN).
+    pub contrast: f64,
+    /// Threshold levels at which it was found.
+    pub levels: u32,
+}
+
+impl PhotoBlob {
+    /// Diameter of the circle of the same area (px).
+    pub fn diameter_px(&self) -> f64 {
+        2.0 * (self.area_px / std::f64::consts::PI).sqrt()
+    }
+}
+
+/// One blob seen at one or more levels.
+#[derive(Debug, Clone)]
+struct Group {
+    u_px: f64,
+    v_px: f64,
+    radius_px: f64,
+    /// The components that make it, by increasing threshold.
+    members: Vec<Component>,
+}
+
+/// Reused buffers of [`detect_photo_blobs`] (hold one per thread to detect frame after frame without allocating).
+#[derive(Debug, Default)]
+pub struct PhotoScratch {
+    inverted: Vec<u16>,
+    labeller: Labeller,
+    ring: Vec<(f64, f64, f64)>,
+}
+
+/// Detects the blobs of one polarity in a row-major `width` x `height` photograph of `bit_depth`-bit values
+/// (see the module's documentation for how). Blobs come sorted by decreasing contrast.
+///
+/// ```
+/// use roitrack_image::photo::{PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs};
+/// // A dark disk of radius 6 px at (30.3, 20.6) on a light background that brightens to the right.
+/// let (w, h) = (64usize, 40usize);
+/// let mut image = vec![0u16; w * h];
+/// for j in 0..h {
+///     for i in 0..w {
+///         let mut ink = 0.0;
+///         for s in 0..64 {
+///             let (x, y) = (i as f64 - 0.5 + ((s % 8) as f64 + 0.5) / 8.0, j as f64 - 0.5 + ((s / 8) as f64 + 0.5) / 8.0);
+///             if (x - 30.3).powi(2) + (y - 20.6).powi(2) < 36.0 { ink += 1.0 / 64.0; }
+///         }
+///         let light = 150.0 + i as f64;
+///         image[j * w + i] = (light * (1.0 - 0.8 * ink)) as u16;
+///     }
+/// }
+/// let blobs = detect_photo_blobs(&image, w as u32, h as u32, 8, Polarity::Dark, &PhotoBlobOptions::default(),
+///     &mut PhotoScratch::default());
+/// assert_eq!(blobs.len(), 1);
+/// assert!((blobs[0].u_px - 30.3).abs() < 0.05 && (blobs[0].v_px - 20.6).abs() < 0.05);
+/// assert!((blobs[0].diameter_px() - 12.0).abs() < 1.0);
+/// ```
+///
+/// # Panics
+/// If `pixels.len() != width * height`.
+pub fn detect_photo_blobs(
+    pixels: &[u16],
+    width: u32,
+    height: u32,
+    bit_depth: u8,
+    polarity: Polarity,
+    options: &PhotoBlobOptions,
+    scratch: &mut PhotoScratch,
+) -> Vec<PhotoBlob> {
+    let (w, h) = (width as usize, height as usize);
+    assert_eq!(pixels.len(), w * h, "pixel buffer length");
+    if w < 3 || h < 3 {
+        return Vec::new();
+    }
+    let full_scale = ((1u32 << bit_depth.clamp(1, 16)) - 1) as u16;
+    let image: &[u16] = match polarity {
+        Polarity::Bright => pixels,
+        Polarity::Dark => {
+            scratch.inverted.clear();
+            scratch
+                .inverted
+                .extend(pixels.iter().map(|&p| full_scale.saturating_sub(p)));
+            &scratch.inverted
+        }
+    };
+    let (low, high) = percentiles(image, full_scale, 0.01, 0.99);
+    let range = f64::from(high.saturating_sub(low));
+    if range < 4.0 {
+        return Vec::new();
+    }
+    let max_area = options.max_area_fraction * (w * h) as f64;
+    let levels = options.levels.max(1);
+    let mut groups: Vec<Group> = Vec::new();
+    let mut grid = CellGrid::new(w, h);
+    for k in 0..levels {
+        let threshold = f64::from(low) + range * (k as f64 + 1.0) / (levels as f64 + 1.0);
+        scratch
+            .labeller
+            .components(image, w, h, threshold as u16, |c| {
+                if passes_shape(c, options, max_area) {
+                    add_to_group(&mut groups, &mut grid, c);
+                }
+            });
+    }
+    let min_contrast = options.min_contrast_fraction * range;
+    let mut blobs: Vec<PhotoBlob> = groups
+        .iter()
+        .filter(|g| g.members.len() >= options.min_levels)
+        .filter_map(|g| {
+            // The middle level: its threshold sits halfway up the blob's edge, so its area is the blob's.
+            let c = &g.members[g.members.len() / 2];
+            let (cu, cv) = c.centre();
+            let shape = Ellipse::from_moments(cu, cv, c.covariance());
+            let light = (polarity == Polarity::Dark).then_some(full_scale);
+            let grey = grey_centre(image, w, h, &shape, light, &mut scratch.ring)?;
+            (grey.contrast >= min_contrast).then(|| PhotoBlob {
+                u_px: grey.u_px,
+                v_px: grey.v_px,
+                area_px: std::f64::consts::PI * shape.semi_major_px * shape.semi_minor_px,
+                semi_major_px: shape.semi_major_px,
+                semi_minor_px: shape.semi_minor_px,
+                angle_rad: shape.angle_rad,
+                contrast: grey.contrast,
+                levels: g.members.len() as u32,
+            })
+        })
+        .collect();
+    blobs.sort_by(|a, b| b.contrast.total_cmp(&a.contrast));
+    blobs
+}
+
+/// The values below which fractions `lo` and `hi` of the pixels lie.
+fn percentiles(image: &[u16], full_scale: u16, lo: f64, hi: f64) -> (u16, u16) {
+    let mut histogram = vec![0u32; usize::from(full_scale) + 1];
+    for &p in image {
+        histogram[usize::from(p.min(full_scale))] += 1;
+    }
+    let at = |fraction: f64| {
+        let rank = (fraction * image.len() as f64).ceil().max(1.0) as u64;
+        let mut seen = 0u64;
+        histogram
+            .iter()
+            .position(|&c| {
+                seen += u64::from(c);
+                seen >= rank
+            })
+            .unwrap_or(0) as u16
+    };
+    (at(lo), at(hi))
+}
+
+fn passes_shape(c: &Component, options: &PhotoBlobOptions, max_area: f64) -> bool {
+    let n = c.n as f64;
+    if c.touches_border || n < options.min_area_px || n > max_area {
+        return false;
+    }
+    let rows = f64::from(c.row_max - c.row_min + 1);
+    if f64::from(c.runs) > options.max_runs_per_row * rows {
+        return false;
+    }
+    let (uu, vv, uv) = c.covariance();
+    let mean = 0.5 * (uu + vv);
+    let spread = (0.25 * (uu - vv).powi(2) + uv * uv).sqrt();
+    let (l1, l2) = (mean + spread, mean - spread);
+    if l2 <= 0.0 || l2 < options.min_inertia_ratio * l1 {
+        return false;
+    }
+    let fill = n / (4.0 * std::f64::consts::PI * (l1 * l2).sqrt());
+    (options.ellipse_fill_range.0..=options.ellipse_fill_range.1).contains(&fill)
+}
+
+/// Groups' indices by 8 x 8 px cell of their centre, to find the group of a component in constant time.
+#[derive(Debug)]
+struct CellGrid {
+    cols: usize,
+    rows: usize,
+    cells: Vec<Vec<u32>>,
+}
+
+const CELL_PX: f64 = 8.0;
+
+impl CellGrid {
+    fn new(width: usize, height: usize) -> Self {
+        let cols = width.div_ceil(CELL_PX as usize);
+        let rows = height.div_ceil(CELL_PX as usize);
+        Self {
+            cols,
+            rows,
+            cells: vec![Vec::new(); cols * rows],
+        }
+    }
+
+    fn cell(&self, u: f64, v: f64) -> (usize, usize) {
+        (
+            ((u / CELL_PX).max(0.0) as usize).min(self.cols - 1),
+            ((v / CELL_PX).max(0.0) as usize).min(self.rows - 1),
+        )
+    }
+}
+
+/// Adds a component to the group whose centre is within half the smaller radius of its own, or starts a group.
+fn add_to_group(groups: &mut Vec<Group>, grid: &mut CellGrid, c: &Component) {
+    let (u, v) = c.centre();
+    let radius = (c.n as f64 / std::f64::consts::PI).sqrt();
+    let reach = (0.5 * radius / CELL_PX).ceil() as usize;
+    let (ci, cj) = grid.cell(u, v);
+    let mut best: Option<(usize, f64)> = None;
+    for gj in cj.saturating_sub(reach)..=(cj + reach).min(grid.rows - 1) {
+        for gi in ci.saturating_sub(reach)..=(ci + reach).min(grid.cols - 1) {
+            for &g in &grid.cells[gj * grid.cols + gi] {
+                let group = &groups[g as usize];
+                let d = (group.u_px - u).hypot(group.v_px - v);
+                if d < 0.5 * group.radius_px.min(radius) && best.is_none_or(|(_, bd)| d < bd) {
+                    best = Some((g as usize, d));
+                }
+            }
+        }
+    }
+    match best {
+        Some((g, _)) => {
+            let group = &mut groups[g];
+            group.members.push(*c);
+            // Follow the latest level: a blob's centre drifts a little as the threshold climbs its edge.
+            group.u_px = u;
+            group.v_px = v;
+            group.radius_px = radius;
+        }
+        None => {
+            grid.cells[cj * grid.cols + ci].push(groups.len() as u32);
+            groups.push(Group {
+                u_px: u,
+                v_px: v,
+                radius_px: radius,
+                members: vec![*c],
+            });
+        }
+    }
+}
