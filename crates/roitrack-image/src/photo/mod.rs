@@ -204,7 +204,7 @@ pub fn detect_photo_blobs(
             let shape = Ellipse::from_moments(cu, cv, c.covariance());
             let light = (polarity == Polarity::Dark).then_some(full_scale);
             let grey = grey_centre(image, w, h, &shape, light, &mut scratch.ring)?;
-            (grey.contrast >= min_contrast).then(|| PhotoBlob {
+            (grey.contrast >= min_contrast).then_some(PhotoBlob {
                 u_px: grey.u_px,
                 v_px: grey.v_px,
                 area_px: std::f64::consts::PI * shape.semi_major_px * shape.semi_minor_px,
