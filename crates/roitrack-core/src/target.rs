@@ -24,6 +24,90 @@ pub enum TargetError {
         "the target points are collinear (spread across the line {spread_m:.3e} m): the pose about that line is unobservable"
     )]
     Collinear { spread_m: f64 },
+    #[error("circle grid: {0}")]
+    CircleGrid(CircleGridError),
+}
+
+/// Why a [`CircleGrid`] specification cannot make a target (see [`Target::circle_grid`]).
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum CircleGridError {
+    #[error("a grid needs at least 1 row and 1 column, got {rows} x {cols}")]
+    NoRowsOrColumns { rows: u32, cols: u32 },
+    #[error("{field} must be a finite positive length, got {value} m")]
+    NotPositiveLength { field: &'static str, value: f64 },
+    #[error(
+        "the diameter ({diameter_m} m) must be smaller than the spacing ({spacing_m} m), or neighbouring circles touch"
+    )]
+    Overlapping { diameter_m: f64, spacing_m: f64 },
+    #[error("{count} circles is more than the {max} a grid may have")]
+    TooManyPoints { count: u64, max: u64 },
+}
+
+/// The arrangement of a [`CircleGrid`]'s circles; `S` is its `spacing_m`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum GridLayout {
+    /// A circle at every row and column: `(x, y) = (col S, row S)`.
+    Square,
+    /// A circle where `row + col` is even, at `(x, y) = (col S / 2, row S sin 60°)`: each row is shifted by half a
+    /// spacing against the next, and every circle's six neighbours are `S` away (equilateral triangles).
+    Hexagonal,
+}
+
+/// A planar grid of equal circles: `rows` x `cols` positions `spacing_m` apart, `layout` saying which positions hold
+/// a circle (see [`Target::circle_grid`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CircleGrid {
+    /// Number of rows (along y), at least 1.
+    pub rows: u32,
+    /// Number of columns (along x), at least 1.
+    pub cols: u32,
+    /// Distance between the centres of neighbouring circles (m), in both layouts.
+    pub spacing_m: f64,
+    /// Diameter of every circle (m), smaller than the spacing.
+    pub diameter_m: f64,
+    pub layout: GridLayout,
+}
+
+/// Most circles a [`CircleGrid`] may have (far more than any printed target; keeps a typo from exhausting memory).
+pub const MAX_GRID_POINTS: u64 = 1_000_000;
+
+impl CircleGrid {
+    /// How many circles the grid has.
+    pub fn count(&self) -> u64 {
+        let (rows, cols) = (u64::from(self.rows), u64::from(self.cols));
+        match self.layout {
+            GridLayout::Square => rows * cols,
+            // Even rows hold the even columns, odd rows the odd ones.
+            GridLayout::Hexagonal => rows.div_ceil(2) * cols.div_ceil(2) + (rows / 2) * (cols / 2),
+        }
+    }
+
+    fn validate(&self) -> Result<(), CircleGridError> {
+        if self.rows == 0 || self.cols == 0 {
+            return Err(CircleGridError::NoRowsOrColumns {
+                rows: self.rows,
+                cols: self.cols,
+            });
+        }
+        for (field, value) in [("spacing", self.spacing_m), ("diameter", self.diameter_m)] {
+            if !(value.is_finite() && value > 0.0) {
+                return Err(CircleGridError::NotPositiveLength { field, value });
+            }
+        }
+        if self.diameter_m >= self.spacing_m {
+            return Err(CircleGridError::Overlapping {
+                diameter_m: self.diameter_m,
+                spacing_m: self.spacing_m,
+            });
+        }
+        if self.count() > MAX_GRID_POINTS {
+            return Err(CircleGridError::TooManyPoints {
+                count: self.count(),
+                max: MAX_GRID_POINTS,
+            });
+        }
+        Ok(())
+    }
 }
 
 /// One model point: its id (as in the measurements) and position in the object frame.
@@ -145,6 +229,60 @@ impl Target {
         Self::new(points).expect("grid4x4 is a valid target")
     }
 
+    /// A planar grid of equal circles in the plane z = 0, every point with the grid's diameter (so no key blob).
+    ///
+    /// Id 0 is the circle at row 0, column 0, at the origin; the ids then run row by row (row 0 first), and within a
+    /// row by increasing column, over the positions that hold a circle. With `S` the spacing:
+    ///
+    /// - [`GridLayout::Square`]: every position; circle `id = row * cols + col` at `(col S, row S, 0)`.
+    /// - [`GridLayout::Hexagonal`]: the positions where `row + col` is even (row 0 holds columns 0, 2, 4, ..., row 1
+    ///   columns 1, 3, 5, ...), at `(col S / 2, row S sin 60°, 0)`; neighbouring centres are `S` apart.
+    ///
+    /// Refuses (as [`TargetError::CircleGrid`]) no rows or columns, a spacing or diameter that is not a finite
+    /// positive length, a diameter not smaller than the spacing and more than [`MAX_GRID_POINTS`] circles; and, as
+    /// [`Target::new`] does, fewer than 4 circles and circles all on one line (a single row, say).
+    ///
+    /// ```
+    /// use roitrack_core::Target;
+    /// use roitrack_core::target::{CircleGrid, GridLayout};
+    ///
+    /// // 24 rows x 28 columns, hexagonal: 14 circles a row, 336 in all, 12 mm between neighbours.
+    /// let spec = CircleGrid { rows: 24, cols: 28, spacing_m: 0.012, diameter_m: 0.006, layout: GridLayout::Hexagonal };
+    /// let target = Target::circle_grid(&spec)?;
+    /// assert_eq!(target.len(), 336);
+    /// let p = |id| target.points()[target.index_of(id).unwrap()].point_in_obj_m;
+    /// assert_eq!(p(0).as_slice(), &[0.0, 0.0, 0.0]); // row 0, column 0
+    /// assert!((p(14).x - 0.006).abs() < 1e-12); // row 1 starts at column 1
+    /// // The last circle: row 23, column 27, at (27 S / 2, 23 S sin 60°) = (0.162, 0.2390) m.
+    /// assert!((p(335).x - 0.162).abs() < 1e-12 && (p(335).y - 0.2390).abs() < 1e-4);
+    /// # Ok::<(), roitrack_core::TargetError>(())
+    /// ```
+    pub fn circle_grid(spec: &CircleGrid) -> Result<Self, TargetError> {
+        spec.validate().map_err(TargetError::CircleGrid)?;
+        let s = spec.spacing_m;
+        let row_pitch = match spec.layout {
+            GridLayout::Square => s,
+            GridLayout::Hexagonal => s * 60f64.to_radians().sin(),
+        };
+        let mut points = Vec::with_capacity(spec.count() as usize);
+        for row in 0..spec.rows {
+            for col in 0..spec.cols {
+                let x = match spec.layout {
+                    GridLayout::Square => f64::from(col) * s,
+                    GridLayout::Hexagonal if (row + col) % 2 == 0 => f64::from(col) * s / 2.0,
+                    GridLayout::Hexagonal => continue,
+                };
+                points.push(TargetPoint {
+                    // At most MAX_GRID_POINTS points: the id fits.
+                    id: points.len() as u32,
+                    point_in_obj_m: Vector3::new(x, f64::from(row) * row_pitch, 0.0),
+                    diameter_m: Some(spec.diameter_m),
+                });
+            }
+        }
+        Self::new(points)
+    }
+
     pub fn points(&self) -> &[TargetPoint] {
         &self.points
     }
@@ -249,6 +387,173 @@ mod tests {
         assert!((p6.point_in_obj_m - Vector3::new(0.01, -0.01, 0.0)).norm() < 1e-15);
         assert_eq!(t.key_point().unwrap().id, 0);
         assert_eq!(t.key_point().unwrap().diameter_m, Some(0.009));
+    }
+
+    fn grid(rows: u32, cols: u32, layout: GridLayout) -> CircleGrid {
+        CircleGrid {
+            rows,
+            cols,
+            spacing_m: 0.012,
+            diameter_m: 0.006,
+            layout,
+        }
+    }
+
+    fn position(t: &Target, id: u32) -> Vector3<f64> {
+        t.points()[t.index_of(id).unwrap()].point_in_obj_m
+    }
+
+    #[test]
+    fn hexagonal_grid_of_336_circles() {
+        let t = Target::circle_grid(&grid(24, 28, GridLayout::Hexagonal)).unwrap();
+        assert_eq!(t.len(), 336);
+        assert!(t.is_planar());
+        assert!(t.key_point().is_none());
+        // Ids in order, row by row.
+        let ids: Vec<u32> = t.points().iter().map(|p| p.id).collect();
+        assert_eq!(ids, (0..336).collect::<Vec<_>>());
+        let h = 0.012 * 3f64.sqrt() / 2.0;
+        // Row 0: columns 0, 2, ..., 26 are ids 0-13.
+        for k in 0..14u32 {
+            let expected = Vector3::new(f64::from(2 * k) * 0.006, 0.0, 0.0);
+            assert!((position(&t, k) - expected).norm() < 1e-15, "id {k}");
+        }
+        // Row 1: columns 1, 3, ..., 27 are ids 14-27.
+        for k in 0..14u32 {
+            let expected = Vector3::new(f64::from(2 * k + 1) * 0.006, h, 0.0);
+            assert!(
+                (position(&t, 14 + k) - expected).norm() < 1e-15,
+                "id {}",
+                14 + k
+            );
+        }
+        let last = position(&t, 335);
+        assert!((last - Vector3::new(0.162, 23.0 * h, 0.0)).norm() < 1e-15);
+        assert!((last.y - 0.2390).abs() < 1e-4);
+        assert!(
+            t.points()
+                .iter()
+                .all(|p| p.diameter_m == Some(0.006) && p.point_in_obj_m.z == 0.0)
+        );
+    }
+
+    #[test]
+    fn square_grid_6x6() {
+        let t = Target::circle_grid(&grid(6, 6, GridLayout::Square)).unwrap();
+        assert_eq!(t.len(), 36);
+        for row in 0..6u32 {
+            for col in 0..6u32 {
+                let expected = Vector3::new(f64::from(col) * 0.012, f64::from(row) * 0.012, 0.0);
+                assert!((position(&t, row * 6 + col) - expected).norm() < 1e-15);
+            }
+        }
+        assert_eq!(position(&t, 0), Vector3::zeros());
+    }
+
+    /// Every circle's nearest neighbours are exactly one spacing away: 4 inside a square grid, 6 inside a hexagonal
+    /// one, and none closer.
+    #[test]
+    fn neighbours_are_one_spacing_apart_in_both_layouts() {
+        for (layout, inner_neighbours) in [(GridLayout::Square, 4), (GridLayout::Hexagonal, 6)] {
+            let t = Target::circle_grid(&grid(7, 9, layout)).unwrap();
+            let mut with_all = 0;
+            for a in t.points() {
+                let distances: Vec<f64> = t
+                    .points()
+                    .iter()
+                    .filter(|b| b.id != a.id)
+                    .map(|b| (b.point_in_obj_m - a.point_in_obj_m).norm())
+                    .collect();
+                let nearest = distances.iter().copied().fold(f64::INFINITY, f64::min);
+                assert!((nearest - 0.012).abs() < 1e-12, "{layout:?} id {}", a.id);
+                let neighbours = distances
+                    .iter()
+                    .filter(|&&d| (d - 0.012).abs() < 1e-12)
+                    .count();
+                assert!(neighbours <= inner_neighbours);
+                with_all += usize::from(neighbours == inner_neighbours);
+            }
+            assert!(with_all > 0, "{layout:?}");
+        }
+        let t = Target::circle_grid(&grid(7, 9, GridLayout::Hexagonal)).unwrap();
+        assert_eq!(t.len() as u64, grid(7, 9, GridLayout::Hexagonal).count());
+        assert_eq!(t.len(), 4 * 5 + 3 * 4);
+    }
+
+    #[test]
+    fn refuses_bad_grids() {
+        let err = |spec: CircleGrid| Target::circle_grid(&spec).unwrap_err();
+        assert_eq!(
+            err(grid(0, 5, GridLayout::Square)),
+            TargetError::CircleGrid(CircleGridError::NoRowsOrColumns { rows: 0, cols: 5 })
+        );
+        for (spacing_m, diameter_m, field) in [
+            (0.0, 0.001, "spacing"),
+            (f64::NAN, 0.001, "spacing"),
+            (f64::INFINITY, 0.001, "spacing"),
+            (0.01, -0.001, "diameter"),
+            (0.01, 0.0, "diameter"),
+        ] {
+            let e = err(CircleGrid {
+                spacing_m,
+                diameter_m,
+                ..grid(4, 4, GridLayout::Square)
+            });
+            assert!(
+                matches!(e, TargetError::CircleGrid(CircleGridError::NotPositiveLength { field: f, .. }) if f == field),
+                "{e}"
+            );
+        }
+        let e = err(CircleGrid {
+            diameter_m: 0.012,
+            ..grid(4, 4, GridLayout::Square)
+        });
+        assert!(matches!(
+            e,
+            TargetError::CircleGrid(CircleGridError::Overlapping { .. })
+        ));
+        assert!(
+            e.to_string().starts_with("circle grid: the diameter"),
+            "{e}"
+        );
+        assert!(matches!(
+            err(grid(100_000, 100_000, GridLayout::Square)),
+            TargetError::CircleGrid(CircleGridError::TooManyPoints { .. })
+        ));
+        assert!(matches!(
+            err(grid(u32::MAX, u32::MAX, GridLayout::Hexagonal)),
+            TargetError::CircleGrid(CircleGridError::TooManyPoints { .. })
+        ));
+        // Fewer than 4 circles, and a single line of them.
+        assert!(matches!(
+            err(grid(1, 3, GridLayout::Square)),
+            TargetError::TooFewPoints { actual: 3, .. }
+        ));
+        assert!(matches!(
+            err(grid(2, 3, GridLayout::Hexagonal)),
+            TargetError::TooFewPoints { actual: 3, .. }
+        ));
+        assert!(matches!(
+            err(grid(1, 10, GridLayout::Square)),
+            TargetError::Collinear { .. }
+        ));
+        assert!(matches!(
+            err(grid(9, 1, GridLayout::Hexagonal)),
+            TargetError::Collinear { .. }
+        ));
+        // The smallest grids that are targets.
+        assert_eq!(
+            Target::circle_grid(&grid(2, 2, GridLayout::Square))
+                .unwrap()
+                .len(),
+            4
+        );
+        assert_eq!(
+            Target::circle_grid(&grid(3, 3, GridLayout::Hexagonal))
+                .unwrap()
+                .len(),
+            5
+        );
     }
 
     #[test]

@@ -84,9 +84,9 @@ fn target_error(error: TargetError, path: &Path, line_of_id: &HashMap<u32, u64>)
         TargetError::DuplicateId { id } => FormatError::new(path, message)
             .with_line(line_of_id.get(&id).copied())
             .with_field("id"),
-        TargetError::TooFewPoints { .. } | TargetError::Collinear { .. } => {
-            FormatError::new(path, message)
-        }
+        TargetError::TooFewPoints { .. }
+        | TargetError::Collinear { .. }
+        | TargetError::CircleGrid(_) => FormatError::new(path, message),
     }
 }
 
