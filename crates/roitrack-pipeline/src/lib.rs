@@ -5,11 +5,13 @@
 //! threads, acquisition and estimation, joined by lock-free single-producer single-consumer queues ([`realtime`]),
 //! driving any [`roitrack_image::RoiCamera`]; and the same tracking offline, from recorded ROI images ([`offline`]).
 
+pub mod identify;
 pub mod matching;
 pub mod offline;
 pub mod realtime;
 pub mod scheduler;
 
+pub use identify::{Identification, identify};
 pub use matching::{MatchError, TargetDetection, find_target, match_full_frame};
 pub use offline::{RoiTrackReport, track_rois};
 pub use realtime::{LoopConfig, LoopReport, PipelineError, run_loop, run_loop_with_progress};

@@ -1,16 +1,7 @@
-//! Initialisation from a full frame: match detected blobs to the target's model points with no prior, then solve the
-//! static pose.
-//!
-//! For a planar target the convex hull is preserved by perspective (all points in front of the camera), so the hull
-//! vertices of the image blobs correspond to the hull vertices of the model, in the same cyclic order (reversed if the
-//! target is seen from its back). The key blob (the target's unique largest diameter, matched to the largest blob)
-//! fixes the cyclic shift; without one every shift is tried and an ambiguous best is refused. Each hypothesis gives a
-//! pose from the hull correspondences; the model points projected with it are matched to their nearest blobs, and the
-//! hypothesis matching most blobs with the smallest residual wins.
+//! Initialisation from a full frame: detect the blobs, identify the target among them with no prior
+//! ([`crate::identify`]), and time each matched blob by the camera's time model.
 
-use nalgebra::{Vector2, Vector3};
-use roitrack_core::estimator::{Observation, solve_static_pose};
-use roitrack_core::{CameraModel, Measurement, MotionState, SpatioTemporalModel, Target};
+use roitrack_core::{CameraModel, Measurement, MotionState, Target};
 use roitrack_image::{CentroidOptions, Frame, detect_blobs};
 use thiserror::Error;
 
@@ -59,6 +50,11 @@ pub enum MatchError {
          the target file"
     )]
     Ambiguous,
+    #[error(
+        "the view does not tell which part of the target it shows: several placements of the target fit the blobs \
+         equally well (show more of the target, with at least one of its edges)"
+    )]
+    PartialView,
     #[error("a blob could not be undistorted: {0}")]
     Undistortion(#[from] roitrack_core::CameraError),
     #[error(
@@ -164,303 +160,23 @@ pub struct FullFrameMatch {
     pub residual_rms_px: f64,
 }
 
-/// Residual (px) above which a hypothesis is not a fit.
-const MAX_FIT_RESIDUAL_PX: f64 = 2.0;
-
-/// Points of a planar target in its own plane, and the plane's front normal (object frame, see
-/// [`match_full_frame`]); `None` for a non-planar target.
-fn plane_coordinates(target: &Target) -> Option<(Vec<Vector2<f64>>, Vector3<f64>)> {
-    let plane = target.plane()?;
-    let normal: Vector3<f64> = plane.obj_r_plane.column(2).into_owned();
-    let front = if normal.z > 0.0 { -normal } else { normal };
-    Some((plane.points_in_plane_m.clone(), front))
-}
-
-/// Indices of the convex hull vertices in counter-clockwise order (in the coordinates' own sense). Points within 3 %
-/// of the point spread of the line through their neighbours count as collinear (noise on an edge's blobs must not make
-/// them corners) and are excluded.
-pub(crate) fn convex_hull(points: &[Vector2<f64>]) -> Vec<usize> {
-    let n = points.len();
-    if n < 3 {
-        return (0..n).collect();
-    }
-    let spread = points
-        .iter()
-        .map(|p| (p - points[0]).norm())
-        .fold(0.0, f64::max)
-        .max(1e-300);
-    let tolerance = 0.03 * spread;
-    let mut idx: Vec<usize> = (0..n).collect();
-    idx.sort_by(|&a, &b| {
-        points[a]
-            .x
-            .total_cmp(&points[b].x)
-            .then(points[a].y.total_cmp(&points[b].y))
-    });
-    let cross = |o: usize, a: usize, b: usize| {
-        let (oa, ob) = (points[a] - points[o], points[b] - points[o]);
-        oa.x * ob.y - oa.y * ob.x
-    };
-    let mut hull: Vec<usize> = Vec::with_capacity(2 * n);
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &usize>> = if pass == 0 {
-            Box::new(idx.iter())
-        } else {
-            Box::new(idx.iter().rev())
-        };
-        for &i in iter {
-            while hull.len() >= start + 2 && {
-                let o = hull[hull.len() - 2];
-                cross(o, hull[hull.len() - 1], i) <= tolerance * (points[i] - points[o]).norm()
-            } {
-                hull.pop();
-            }
-            hull.push(i);
-        }
-        hull.pop();
-    }
-    hull
-}
-
 /// Matches blobs to the target's points and solves the static pose ([`find_target`] detects the blobs of a frame and
-/// calls it, with an example). Blobs may include extra ones (reflections);
-/// every model point should be visible.
+/// calls it, with an example): [`crate::identify::identify`], refusing a labelling that the target's symmetry leaves
+/// undecided ([`MatchError::Ambiguous`]), since tracking needs each point's true identity.
 pub fn match_full_frame(
     camera: &CameraModel,
     target: &Target,
     blobs: &[DetectedBlob],
 ) -> Result<FullFrameMatch, MatchError> {
-    let n = target.len();
-    let required = n.max(4);
-    if blobs.len() < required {
-        return Err(MatchError::TooFewBlobs {
-            found: blobs.len(),
-            expected: n,
-            required,
-        });
-    }
-    let Some((plane, front)) = plane_coordinates(target) else {
-        return Err(MatchError::NotPlanar);
-    };
-    let model = SpatioTemporalModel::new(camera.intrinsics);
-    let ideal: Vec<Vector2<f64>> = blobs
-        .iter()
-        .map(|b| camera.undistort_pixel(&Vector2::new(b.u_px, b.v_px)))
-        .collect::<Result<_, _>>()?;
-    let centre = target
-        .points()
-        .iter()
-        .map(|p| p.point_in_obj_m)
-        .sum::<Vector3<f64>>()
-        / n as f64;
-    let model_hull = convex_hull(&plane);
-    let image_hull = convex_hull(&ideal);
-    let m = model_hull.len();
-    // Extra blobs (reflections) may add hull corners: try every subset of the image hull of the model's size, in
-    // hull order. More than MAX_EXTRA_CORNERS extra corners is not a view of this target.
-    if m < 4 || image_hull.len() < m || image_hull.len() > m + MAX_EXTRA_CORNERS {
-        return Err(MatchError::HullMismatch {
-            image: image_hull.len(),
-            model: m,
-        });
-    }
-    let key_point = target.key_point().and_then(|k| target.index_of(k.id));
-    let mut hypotheses: Vec<Hypothesis> = Vec::new();
-    for subset in combinations(image_hull.len(), m) {
-        let corners: Vec<usize> = subset.iter().map(|&k| image_hull[k]).collect();
-        for reversed in [false, true] {
-            for shift in 0..m {
-                let corner = |k: usize| {
-                    let j = (k + shift) % m;
-                    corners[if reversed { (m - j) % m } else { j }]
-                };
-                let obs: Vec<Observation> = (0..m)
-                    .map(|k| Observation {
-                        t_s: 0.0,
-                        point_index: model_hull[k],
-                        ideal_px: ideal[corner(k)],
-                    })
-                    .collect();
-                let Ok(fit) = solve_static_pose(&model, target, &obs) else {
-                    continue;
-                };
-                // The blobs are seen from the front: a mirror hypothesis (the target seen from its back) fits a
-                // symmetric target equally well and is refused here.
-                let camera_in_obj = fit.state.cam_r_obj.inverse() * (-fit.state.cam_t_obj_m);
-                if fit.state.cam_t_obj_m.z <= 0.0
-                    || (front.z != 0.0 && (camera_in_obj - centre).dot(&front) <= 0.0)
-                {
-                    continue;
-                }
-                hypotheses.push(score_hypothesis(
-                    &model, target, &ideal, blobs, key_point, fit.state,
-                ));
-            }
-        }
-    }
-    // Most points matched, then the key blob on the largest blob, then the smallest residual.
-    hypotheses.sort_by(|a, b| {
-        b.matched
-            .cmp(&a.matched)
-            .then(b.key_consistent.cmp(&a.key_consistent))
-            .then(a.residual_px.total_cmp(&b.residual_px))
-    });
-    let Some(best) = hypotheses.first().cloned() else {
-        return Err(MatchError::NoFit {
-            residual_px: f64::INFINITY,
-            matched: 0,
-            expected: n,
-        });
-    };
-    if best.matched < n {
-        return Err(MatchError::NoFit {
-            residual_px: best.residual_px,
-            matched: best.matched,
-            expected: n,
-        });
-    }
-    // A different hypothesis that is as good in every respect means the target's symmetry is unbroken.
-    let mut best_pairs = best.pairs.clone();
-    best_pairs.sort_unstable();
-    let rival = hypotheses.iter().skip(1).any(|h| {
-        let mut p = h.pairs.clone();
-        p.sort_unstable();
-        h.matched == best.matched
-            && h.key_consistent == best.key_consistent
-            && h.residual_px < 3.0 * best.residual_px.max(0.05)
-            && p != best_pairs
-    });
-    if rival {
+    let found = crate::identify::identify(camera, target, blobs)?;
+    if found.ambiguous {
         return Err(MatchError::Ambiguous);
     }
-    let (pairs, matched) = (best.pairs, best.matched);
-    let obs: Vec<Observation> = pairs
-        .iter()
-        .map(|&(point_index, blob)| Observation {
-            t_s: 0.0,
-            point_index,
-            ideal_px: ideal[blob],
-        })
-        .collect();
-    let fit = solve_static_pose(&model, target, &obs).map_err(|_| MatchError::NoFit {
-        residual_px: f64::INFINITY,
-        matched,
-        expected: n,
-    })?;
-    if fit.residual_rms_px > MAX_FIT_RESIDUAL_PX {
-        return Err(MatchError::NoFit {
-            residual_px: fit.residual_rms_px,
-            matched,
-            expected: n,
-        });
-    }
     Ok(FullFrameMatch {
-        state: fit.state,
-        pairs,
-        residual_rms_px: fit.residual_rms_px,
+        state: found.state,
+        pairs: found.pairs,
+        residual_rms_px: found.residual_rms_px,
     })
-}
-
-/// Extra hull corners tolerated (from reflections or stray blobs outside the target).
-const MAX_EXTRA_CORNERS: usize = 3;
-
-/// A match hypothesis and how well it explains the blobs.
-#[derive(Debug, Clone)]
-struct Hypothesis {
-    /// (model point index, blob index)
-    pairs: Vec<(usize, usize)>,
-    matched: usize,
-    /// The key model point is paired with the largest of the paired blobs.
-    key_consistent: bool,
-    residual_px: f64,
-}
-
-/// All `k`-subsets of `0..n`, each in increasing order.
-fn combinations(n: usize, k: usize) -> Vec<Vec<usize>> {
-    let mut out = Vec::new();
-    let mut current = Vec::with_capacity(k);
-    fn recurse(
-        start: usize,
-        n: usize,
-        k: usize,
-        current: &mut Vec<usize>,
-        out: &mut Vec<Vec<usize>>,
-    ) {
-        if current.len() == k {
-            out.push(current.clone());
-            return;
-        }
-        for i in start..n {
-            current.push(i);
-            recurse(i + 1, n, k, current, out);
-            current.pop();
-        }
-    }
-    recurse(0, n, k, &mut current, &mut out);
-    out
-}
-
-/// Projects every model point with a hypothesised pose and pairs it with the nearest unused blob within a gate of a
-/// third of the smallest projected point spacing.
-fn score_hypothesis(
-    model: &SpatioTemporalModel,
-    target: &Target,
-    ideal: &[Vector2<f64>],
-    blobs: &[DetectedBlob],
-    key_point: Option<usize>,
-    state: MotionState,
-) -> Hypothesis {
-    let projected: Vec<Option<Vector2<f64>>> = target
-        .points()
-        .iter()
-        .map(|p| model.project(&state, &p.point_in_obj_m, 0.0))
-        .collect();
-    let mut spacing = f64::INFINITY;
-    for (i, a) in projected.iter().enumerate() {
-        for b in projected.iter().skip(i + 1) {
-            if let (Some(a), Some(b)) = (a, b) {
-                spacing = spacing.min((a - b).norm());
-            }
-        }
-    }
-    let gate = spacing / 3.0;
-    let mut used = vec![false; ideal.len()];
-    let mut pairs = Vec::with_capacity(projected.len());
-    let mut sum = 0.0;
-    for (i, p) in projected.iter().enumerate() {
-        let Some(p) = p else { continue };
-        let best = (0..ideal.len())
-            .filter(|&b| !used[b])
-            .map(|b| (b, (ideal[b] - p).norm()))
-            .min_by(|a, b| a.1.total_cmp(&b.1));
-        if let Some((b, d)) = best
-            && d < gate
-        {
-            used[b] = true;
-            pairs.push((i, b));
-            sum += d * d;
-        }
-    }
-    let matched = pairs.len();
-    let residual_px = if matched == 0 {
-        f64::INFINITY
-    } else {
-        (sum / (2 * matched) as f64).sqrt()
-    };
-    let key_consistent = key_point.is_some_and(|key| {
-        let largest = pairs
-            .iter()
-            .max_by(|a, b| blobs[a.1].area_px.total_cmp(&blobs[b.1].area_px))
-            .map(|p| p.0);
-        largest == Some(key)
-    });
-    Hypothesis {
-        pairs,
-        matched,
-        key_consistent,
-        residual_px,
-    }
 }
 
 #[cfg(test)]
@@ -551,9 +267,14 @@ mod tests {
         });
         let m = match_full_frame(&camera, &target, &b);
         assert!(m.is_ok(), "{m:?}");
+        // Ten of sixteen blobs: six points predicted in view have none.
         let few = &b[..10];
         assert!(matches!(
             match_full_frame(&camera, &target, few),
+            Err(MatchError::NoFit { .. })
+        ));
+        assert!(matches!(
+            match_full_frame(&camera, &target, &b[..3]),
             Err(MatchError::TooFewBlobs { .. })
         ));
     }
@@ -575,14 +296,5 @@ mod tests {
             match_full_frame(&camera, &target, &b),
             Err(MatchError::Ambiguous)
         );
-    }
-
-    #[test]
-    fn hull_of_a_grid_is_its_four_corners() {
-        let (plane, front) = plane_coordinates(&Target::grid4x4()).unwrap();
-        assert_eq!(front, Vector3::new(0.0, 0.0, -1.0));
-        let mut hull = convex_hull(&plane);
-        hull.sort_unstable();
-        assert_eq!(hull, vec![0, 3, 12, 15]);
     }
 }

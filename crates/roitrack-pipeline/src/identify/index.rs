@@ -1,0 +1,175 @@
+//! A uniform grid over points in the image, for nearest-neighbour queries among a few hundred blobs.
+
+use nalgebra::Vector2;
+
+/// Points bucketed by square cells.
+#[derive(Debug, Clone)]
+pub(crate) struct PointIndex {
+    origin: Vector2<f64>,
+    cell: f64,
+    cols: usize,
+    rows: usize,
+    /// Start of each cell's entries in `entries` (`cols * rows + 1` offsets).
+    starts: Vec<u32>,
+    entries: Vec<u32>,
+    points: Vec<Vector2<f64>>,
+}
+
+impl PointIndex {
+    /// Indexes `points` with cells of `cell` (chosen near the typical spacing).
+    pub fn new(points: &[Vector2<f64>], cell: f64) -> Self {
+        let finite = points.iter().filter(|p| p.x.is_finite() && p.y.is_finite());
+        let (mut lo, mut hi) = (
+            Vector2::repeat(f64::INFINITY),
+            Vector2::repeat(f64::NEG_INFINITY),
+        );
+        for p in finite {
+            lo = lo.inf(p);
+            hi = hi.sup(p);
+        }
+        if !lo.x.is_finite() {
+            lo = Vector2::zeros();
+            hi = Vector2::zeros();
+        }
+        let cell = cell.max(1e-9);
+        let cols = (((hi.x - lo.x) / cell) as usize + 1).min(4096);
+        let rows = (((hi.y - lo.y) / cell) as usize + 1).min(4096);
+        let cell = cell
+            .max((hi.x - lo.x) / cols as f64)
+            .max((hi.y - lo.y) / rows as f64);
+        let mut index = Self {
+            origin: lo,
+            cell,
+            cols,
+            rows,
+            starts: vec![0; cols * rows + 1],
+            entries: Vec::with_capacity(points.len()),
+            points: points.to_vec(),
+        };
+        let cells: Vec<Option<usize>> = points.iter().map(|p| index.cell_of(p)).collect();
+        for c in cells.iter().flatten() {
+            index.starts[c + 1] += 1;
+        }
+        for k in 1..index.starts.len() {
+            index.starts[k] += index.starts[k - 1];
+        }
+        let mut fill = index.starts.clone();
+        index.entries.resize(index.starts[cols * rows] as usize, 0);
+        for (i, c) in cells.iter().enumerate() {
+            if let Some(c) = c {
+                index.entries[fill[*c] as usize] = i as u32;
+                fill[*c] += 1;
+            }
+        }
+        index
+    }
+
+    fn cell_of(&self, p: &Vector2<f64>) -> Option<usize> {
+        if !(p.x.is_finite() && p.y.is_finite()) {
+            return None;
+        }
+        let i = ((p.x - self.origin.x) / self.cell).floor();
+        let j = ((p.y - self.origin.y) / self.cell).floor();
+        (i >= 0.0 && j >= 0.0 && (i as usize) < self.cols && (j as usize) < self.rows)
+            .then(|| j as usize * self.cols + i as usize)
+    }
+
+    /// Calls `f(index, distance)` for every point within `radius` of `p`.
+    pub fn within(&self, p: &Vector2<f64>, radius: f64, mut f: impl FnMut(usize, f64)) {
+        if !(p.x.is_finite() && p.y.is_finite() && radius.is_finite()) {
+            return;
+        }
+        let lo_i = ((p.x - radius - self.origin.x) / self.cell)
+            .floor()
+            .max(0.0) as usize;
+        let lo_j = ((p.y - radius - self.origin.y) / self.cell)
+            .floor()
+            .max(0.0) as usize;
+        let hi_i = ((p.x + radius - self.origin.x) / self.cell).floor();
+        let hi_j = ((p.y + radius - self.origin.y) / self.cell).floor();
+        if hi_i < 0.0 || hi_j < 0.0 {
+            return;
+        }
+        let hi_i = (hi_i as usize).min(self.cols - 1);
+        let hi_j = (hi_j as usize).min(self.rows - 1);
+        for j in lo_j..=hi_j {
+            for i in lo_i..=hi_i {
+                let c = j * self.cols + i;
+                for &e in &self.entries[self.starts[c] as usize..self.starts[c + 1] as usize] {
+                    let d = (self.points[e as usize] - p).norm();
+                    if d <= radius {
+                        f(e as usize, d);
+                    }
+                }
+            }
+        }
+    }
+
+    /// The nearest point within `radius` of `p` that `accept` allows.
+    pub fn nearest(
+        &self,
+        p: &Vector2<f64>,
+        radius: f64,
+        mut accept: impl FnMut(usize) -> bool,
+    ) -> Option<(usize, f64)> {
+        let mut best: Option<(usize, f64)> = None;
+        self.within(p, radius, |i, d| {
+            if best.is_none_or(|(_, bd)| d < bd) && accept(i) {
+                best = Some((i, d));
+            }
+        });
+        best
+    }
+
+    /// Up to `k` nearest points to point `i` (itself excluded) within `radius`, nearest first.
+    pub fn neighbours(&self, i: usize, k: usize, radius: f64) -> Vec<(usize, f64)> {
+        let mut found = Vec::new();
+        self.within(&self.points[i], radius, |j, d| {
+            if j != i {
+                found.push((j, d));
+            }
+        });
+        found.sort_by(|a, b| a.1.total_cmp(&b.1));
+        found.truncate(k);
+        found
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn nearest_and_neighbours_agree_with_brute_force() {
+        let points: Vec<Vector2<f64>> = (0..200)
+            .map(|k| {
+                let x = ((k * 7919) % 613) as f64 * 1.03;
+                let y = ((k * 104_729) % 457) as f64 * 0.97;
+                Vector2::new(x, y)
+            })
+            .collect();
+        let index = PointIndex::new(&points, 25.0);
+        for q in [
+            Vector2::new(100.0, 200.0),
+            Vector2::new(-5.0, 3.0),
+            Vector2::new(600.0, 440.0),
+        ] {
+            let brute = points
+                .iter()
+                .enumerate()
+                .map(|(i, p)| (i, (p - q).norm()))
+                .filter(|&(_, d)| d <= 60.0)
+                .min_by(|a, b| a.1.total_cmp(&b.1));
+            assert_eq!(index.nearest(&q, 60.0, |_| true), brute);
+        }
+        let n = index.neighbours(5, 4, 1e9);
+        let mut brute: Vec<(usize, f64)> = points
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| i != 5)
+            .map(|(i, p)| (i, (p - points[5]).norm()))
+            .collect();
+        brute.sort_by(|a, b| a.1.total_cmp(&b.1));
+        assert_eq!(n, brute[..4].to_vec());
+    }
+}

@@ -1,0 +1,342 @@
+//! Hypotheses for grid targets: the target's points on a lattice, the image's blobs grown into a lattice of their
+//! own from a seed and its neighbours, and every way of laying the one on the other.
+//!
+//! A square or hexagonal grid of circles is a lattice: every point is `o + i a + j b` for integers i, j. In the image
+//! the lattice is seen through a homography, which is locally affine: from a seed blob and two neighbours the
+//! positions of the next lattice points are predicted by an affine map fitted to the blobs already labelled nearby,
+//! and the blob found there (of a size like its neighbour's) gets the next label. Clutter is not where a lattice
+//! point is predicted, so it stays out; a missing blob leaves a hole the growth goes around. The image labels
+//! (m, n) relate to the target's (i, j) by an integer map of determinant ±1 and a shift; every map with entries in
+//! -1..1 and every shift that lays most labelled blobs on target points is a hypothesis, to be verified by a pose.
+
+use std::collections::VecDeque;
+
+use nalgebra::{Matrix2, Vector2};
+
+use super::index::PointIndex;
+
+/// A target whose points lie on a lattice: `plane_m[p] = origin + i a + j b`.
+#[derive(Debug, Clone)]
+pub(crate) struct TargetLattice {
+    /// Each point's integer coordinates.
+    pub coords: Vec<(i32, i32)>,
+    lo: (i32, i32),
+    hi: (i32, i32),
+    /// `cell[(j - lo.1) * width + (i - lo.0)]`: the point at (i, j), if any.
+    cell: Vec<Option<u32>>,
+}
+
+impl TargetLattice {
+    /// The lattice of the target's in-plane points, if they are on one (to 2 % of the shortest spacing).
+    pub fn of(plane_m: &[Vector2<f64>]) -> Option<Self> {
+        let n = plane_m.len();
+        if n < 4 {
+            return None;
+        }
+        let mut a: Option<Vector2<f64>> = None;
+        for (k, p) in plane_m.iter().enumerate() {
+            for q in &plane_m[k + 1..] {
+                let d = q - p;
+                if a.is_none_or(|a| d.norm() < a.norm()) && d.norm() > 0.0 {
+                    a = Some(d);
+                }
+            }
+        }
+        let a = a?;
+        let mut b: Option<Vector2<f64>> = None;
+        for (k, p) in plane_m.iter().enumerate() {
+            for q in &plane_m[k + 1..] {
+                let d = q - p;
+                let sin = (a.x * d.y - a.y * d.x).abs() / (a.norm() * d.norm());
+                if sin > 0.2 && b.is_none_or(|b| d.norm() < b.norm()) {
+                    b = Some(d);
+                }
+            }
+        }
+        let b = b?;
+        let basis = Matrix2::from_columns(&[a, b]);
+        let inverse = basis.try_inverse()?;
+        let origin = plane_m[0];
+        let mut coords = Vec::with_capacity(n);
+        for p in plane_m {
+            let c = inverse * (p - origin);
+            let (i, j) = (c.x.round(), c.y.round());
+            if (c.x - i).abs() > 0.02 || (c.y - j).abs() > 0.02 {
+                return None;
+            }
+            coords.push((i as i32, j as i32));
+        }
+        let lo = coords
+            .iter()
+            .fold((i32::MAX, i32::MAX), |l, c| (l.0.min(c.0), l.1.min(c.1)));
+        let hi = coords
+            .iter()
+            .fold((i32::MIN, i32::MIN), |h, c| (h.0.max(c.0), h.1.max(c.1)));
+        let width = (hi.0 - lo.0 + 1) as usize;
+        let height = (hi.1 - lo.1 + 1) as usize;
+        if width * height > 1 << 20 {
+            return None;
+        }
+        let mut cell = vec![None; width * height];
+        for (k, c) in coords.iter().enumerate() {
+            let slot = &mut cell[(c.1 - lo.1) as usize * width + (c.0 - lo.0) as usize];
+            if slot.is_some() {
+                return None;
+            }
+            *slot = Some(k as u32);
+        }
+        Some(Self {
+            coords,
+            lo,
+            hi,
+            cell,
+        })
+    }
+
+    /// The point at lattice coordinates (i, j).
+    pub fn point_at(&self, i: i32, j: i32) -> Option<usize> {
+        if i < self.lo.0 || j < self.lo.1 || i > self.hi.0 || j > self.hi.1 {
+            return None;
+        }
+        let width = (self.hi.0 - self.lo.0 + 1) as usize;
+        self.cell[(j - self.lo.1) as usize * width + (i - self.lo.0) as usize].map(|p| p as usize)
+    }
+}
+
+/// Blobs labelled with integer coordinates by growing from a seed.
+#[derive(Debug, Clone)]
+pub(crate) struct GrownLattice {
+    /// (m, n, blob index)
+    pub nodes: Vec<(i32, i32, usize)>,
+}
+
+/// Grows an image lattice from `seed` with first steps towards blobs `first` and `second` (positions `ideal`, areas
+/// `areas`). Blobs marked in `taken` are not used.
+pub(crate) fn grow(
+    ideal: &[Vector2<f64>],
+    areas: &[f64],
+    index: &PointIndex,
+    taken: &[bool],
+    seed: usize,
+    first: usize,
+    second: usize,
+) -> GrownLattice {
+    use std::collections::HashMap;
+    let mut at: HashMap<(i32, i32), usize> = HashMap::new();
+    let mut used = taken.to_vec();
+    let mut nodes = vec![(0, 0, seed), (1, 0, first), (0, 1, second)];
+    for &(m, n, b) in &nodes {
+        at.insert((m, n), b);
+        used[b] = true;
+    }
+    let mut queue: VecDeque<(i32, i32)> = nodes.iter().map(|&(m, n, _)| (m, n)).collect();
+    let mut support: Vec<(f64, f64, Vector2<f64>)> = Vec::with_capacity(25);
+    while let Some((m, n)) = queue.pop_front() {
+        let from = at[&(m, n)];
+        for (dm, dn) in [
+            (1, 0),
+            (-1, 0),
+            (0, 1),
+            (0, -1),
+            (1, 1),
+            (-1, -1),
+            (1, -1),
+            (-1, 1),
+        ] {
+            let (tm, tn) = (m + dm, n + dn);
+            if at.contains_key(&(tm, tn)) {
+                continue;
+            }
+            // A local affine map from the labelled blobs around the target node.
+            support.clear();
+            for sm in tm - 2..=tm + 2 {
+                for sn in tn - 2..=tn + 2 {
+                    if let Some(&b) = at.get(&(sm, sn)) {
+                        support.push((f64::from(sm - tm), f64::from(sn - tn), ideal[b]));
+                    }
+                }
+            }
+            let Some((predicted, step)) = affine_prediction(&support) else {
+                continue;
+            };
+            let gate = 0.3 * step;
+            let area = areas[from];
+            let found = index.nearest(&predicted, gate, |b| {
+                !used[b] && areas[b] < 2.5 * area && areas[b] > area / 2.5
+            });
+            if let Some((b, _)) = found {
+                used[b] = true;
+                at.insert((tm, tn), b);
+                nodes.push((tm, tn, b));
+                queue.push_back((tm, tn));
+            }
+        }
+    }
+    GrownLattice { nodes }
+}
+
+/// The position at the origin of an affine map (lattice offset -> image) fitted to `support`, and the map's shorter
+/// step; `None` without three non-collinear supports.
+fn affine_prediction(support: &[(f64, f64, Vector2<f64>)]) -> Option<(Vector2<f64>, f64)> {
+    if support.len() < 3 {
+        return None;
+    }
+    // Least squares of x = c + A (m, n): normal equations in (1, m, n).
+    let mut ata = nalgebra::Matrix3::<f64>::zeros();
+    let mut atx = nalgebra::Matrix3x2::<f64>::zeros();
+    for &(m, n, x) in support {
+        let a = nalgebra::Vector3::new(1.0, m, n);
+        ata += a * a.transpose();
+        atx += a * x.transpose();
+    }
+    let decomposition = ata.cholesky()?;
+    // Collinear supports make the normal matrix nearly singular.
+    let diagonal_min = decomposition.l().diagonal().min();
+    if diagonal_min < 0.3 {
+        return None;
+    }
+    let solution = decomposition.solve(&atx);
+    let c = Vector2::new(solution[(0, 0)], solution[(0, 1)]);
+    let a1 = Vector2::new(solution[(1, 0)], solution[(1, 1)]);
+    let a2 = Vector2::new(solution[(2, 0)], solution[(2, 1)]);
+    Some((c, a1.norm().min(a2.norm())))
+}
+
+/// Integer 2 x 2 maps with entries in -1..=1 and determinant ±1.
+fn unimodular_maps() -> Vec<[i32; 4]> {
+    let mut maps = Vec::new();
+    for a in -1i32..=1 {
+        for b in -1..=1 {
+            for c in -1..=1 {
+                for d in -1..=1 {
+                    if (a * d - b * c).abs() == 1 {
+                        maps.push([a, b, c, d]);
+                    }
+                }
+            }
+        }
+    }
+    maps
+}
+
+/// Every (map, shift) that lays at least `min_fraction` of the grown nodes on target points: the correspondences
+/// (target point, blob) of each.
+pub(crate) fn placements(
+    lattice: &TargetLattice,
+    grown: &GrownLattice,
+    min_fraction: f64,
+) -> Vec<Vec<(usize, usize)>> {
+    let nodes = &grown.nodes;
+    let allowed_misses = ((1.0 - min_fraction) * nodes.len() as f64).floor() as usize;
+    let mut out = Vec::new();
+    for map in unimodular_maps() {
+        let mapped: Vec<(i32, i32)> = nodes
+            .iter()
+            .map(|&(m, n, _)| (map[0] * m + map[1] * n, map[2] * m + map[3] * n))
+            .collect();
+        let lo = mapped
+            .iter()
+            .fold((i32::MAX, i32::MAX), |l, c| (l.0.min(c.0), l.1.min(c.1)));
+        let hi = mapped
+            .iter()
+            .fold((i32::MIN, i32::MIN), |h, c| (h.0.max(c.0), h.1.max(c.1)));
+        // Shifts that keep the nodes' box within the target's, give or take the misses allowed.
+        let slack = allowed_misses.min(3) as i32;
+        for ti in (lattice.lo.0 - lo.0 - slack)..=(lattice.hi.0 - hi.0 + slack) {
+            'shift: for tj in (lattice.lo.1 - lo.1 - slack)..=(lattice.hi.1 - hi.1 + slack) {
+                let mut pairs = Vec::with_capacity(nodes.len());
+                let mut misses = 0;
+                for (k, &(i, j)) in mapped.iter().enumerate() {
+                    match lattice.point_at(i + ti, j + tj) {
+                        Some(p) => pairs.push((p, nodes[k].2)),
+                        None => {
+                            misses += 1;
+                            if misses > allowed_misses {
+                                continue 'shift;
+                            }
+                        }
+                    }
+                }
+                if pairs.len() >= 4 {
+                    out.push(pairs);
+                }
+            }
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn hexagonal(rows: i32, cols: i32, s: f64) -> Vec<Vector2<f64>> {
+        let mut p = Vec::new();
+        for r in 0..rows {
+            for c in 0..cols {
+                if (r + c) % 2 == 0 {
+                    p.push(Vector2::new(
+                        f64::from(c) * s / 2.0,
+                        f64::from(r) * s * 60f64.to_radians().sin(),
+                    ));
+                }
+            }
+        }
+        p
+    }
+
+    #[test]
+    fn square_and_hexagonal_grids_are_lattices_and_random_points_are_not() {
+        let square: Vec<Vector2<f64>> = (0..12)
+            .map(|k| Vector2::new(f64::from(k % 4) * 0.02, f64::from(k / 4) * 0.02))
+            .collect();
+        let l = TargetLattice::of(&square).unwrap();
+        assert_eq!(l.point_at(l.coords[5].0, l.coords[5].1), Some(5));
+        let hex = hexagonal(6, 8, 0.012);
+        let l = TargetLattice::of(&hex).unwrap();
+        assert_eq!(l.coords.len(), 24);
+        let random = vec![
+            Vector2::new(0.0, 0.0),
+            Vector2::new(0.031, 0.0),
+            Vector2::new(0.0, 0.017),
+            Vector2::new(0.043, 0.029),
+        ];
+        assert!(TargetLattice::of(&random).is_none());
+    }
+
+    #[test]
+    fn growth_labels_a_sheared_grid_with_clutter_and_a_hole() {
+        // A 7 x 5 grid seen through an affine map, a missing blob, clutter between and around.
+        let map = Matrix2::new(21.0, 6.0, -4.0, 18.0);
+        let mut ideal = Vec::new();
+        for j in 0..5 {
+            for i in 0..7 {
+                if (i, j) != (3, 2) {
+                    ideal.push(
+                        map * Vector2::new(f64::from(i), f64::from(j)) + Vector2::new(100.0, 80.0),
+                    );
+                }
+            }
+        }
+        let grid_blobs = ideal.len();
+        ideal.push(Vector2::new(100.0 + 10.5, 80.0 - 2.0));
+        ideal.push(Vector2::new(30.0, 30.0));
+        ideal.push(Vector2::new(100.0 + 21.0 * 8.0, 80.0 - 4.0 * 8.0));
+        let areas = vec![50.0; ideal.len()];
+        let index = PointIndex::new(&ideal, 20.0);
+        let grown = grow(&ideal, &areas, &index, &vec![false; ideal.len()], 0, 1, 7);
+        assert_eq!(grown.nodes.len(), grid_blobs);
+        assert!(grown.nodes.iter().all(|&(_, _, b)| b < grid_blobs));
+        let target: Vec<Vector2<f64>> = (0..35)
+            .map(|k| Vector2::new(f64::from(k % 7), f64::from(k / 7)))
+            .collect();
+        let lattice = TargetLattice::of(&target).unwrap();
+        let placed = placements(&lattice, &grown, 0.95);
+        // The identity and the half turn lay every node on the target.
+        assert!(placed.iter().any(|pairs| pairs.iter().all(|&(p, b)| {
+            let k = if p >= 17 { p - 1 } else { p };
+            k == b
+        })));
+        assert!(placed.iter().all(|pairs| pairs.len() == grid_blobs));
+    }
+}

@@ -1,0 +1,607 @@
+//! Which blob is which target point, with no prior: hypothesise correspondences, verify each with a pose.
+//!
+//! Hypotheses come from the target's structure. A grid (square or hexagonal: the points on a lattice) is matched by
+//! growing a lattice through the blobs from a seed and laying it on the target's lattice every way the lattice allows
+//! ([`lattice`]); any other planar layout by triples of neighbouring points mapped onto triples of neighbouring blobs
+//! ([`sparse`]). Neither needs every point to be seen nor the blobs to be only the target's.
+//!
+//! Every hypothesis is verified the same way: the static pose from its correspondences (intrinsics and distortion
+//! known), then the projection of every target point with that pose. A point projected well inside the image must
+//! have a blob there (within a quarter of the projected spacing) of the size the pose predicts from its diameter; the
+//! correspondences grow to all such blobs and the pose is solved again. A hypothesis is accepted when its
+//! reprojection residual is at the level of centroid noise, nearly every point it predicts in view is found, and the
+//! sizes agree. The best accepted hypothesis wins; another one as good with a different labelling is either the
+//! target's own symmetry (a rigid motion of the target onto itself, such as a half turn of a grid without a marked
+//! point): then the labelling is ambiguous and a canonical one is returned, flagged; or it is not, and nothing is
+//! returned, since the view cannot tell which part of the target it shows.
+//!
+//! Which side: a printed target is seen from its front, the side of -z in its frame when its plane is z = 0 (OpenCV's
+//! convention for calibration boards: x to the right, y down, z into the board). A hypothesis that sees the target
+//! from its back is kept, but loses to one as good from the front: a layout that is its own mirror image (a square
+//! grid) fits both ways, with labels mirrored, and the front's is taken; a layout that is not (a hexagonal grid of
+//! an even number of columns, a target file written with y up) fits from one side only, and that side is taken.
+//!
+//! Canonical labelling of a symmetric target: among the equally good labellings, the one that projects the point of
+//! the lowest id nearest the image's top-left corner (smallest u + v).
+//!
+//! The centre of a disk's image is not the image of the disk's centre: under perspective the nearer half of the disk
+//! looks larger, and the area centroid of the projected ellipse is displaced towards it. Once the pose is known, each
+//! matched blob's centre is corrected by that displacement (computed from the pose and the disk's diameter, by the
+//! area centroid of the projected outline) and the pose solved again.
+
+pub(crate) mod index;
+pub(crate) mod lattice;
+pub(crate) mod sparse;
+
+use nalgebra::{Vector2, Vector3};
+use roitrack_core::estimator::{Observation, solve_static_pose};
+use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+
+use crate::matching::{DetectedBlob, MatchError};
+use index::PointIndex;
+use lattice::{TargetLattice, grow, placements};
+use sparse::{PlanarModel, triple_hypotheses};
+
+/// Largest RMS reprojection residual (px, per coordinate) of an accepted identification: a few times the centroid
+/// noise of real photographs (0.1 to 0.35 px), well below what a wrong labelling leaves (a pixel or more).
+pub const MAX_IDENTIFY_RESIDUAL_PX: f64 = 1.0;
+
+/// The target identified among the blobs ([`identify`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Identification {
+    /// The static pose (velocity zero).
+    pub state: MotionState,
+    /// (target point index, blob index), by point index.
+    pub pairs: Vec<(usize, usize)>,
+    /// For each pair, the blob's centre corrected for the perspective displacement of a disk's centre (raw px): the
+    /// image of the target point's centre as measured.
+    pub centres_px: Vec<Vector2<f64>>,
+    /// RMS reprojection residual (px, per coordinate) of the pose with the corrected centres.
+    pub residual_rms_px: f64,
+    /// The target's symmetry leaves the labelling undecided: this is the canonical one (see the module's docs).
+    pub ambiguous: bool,
+    /// Target points predicted well inside the image that had no blob.
+    pub missing: usize,
+    /// Hypotheses verified.
+    pub hypotheses: usize,
+}
+
+/// A verified hypothesis.
+#[derive(Debug, Clone)]
+struct Verified {
+    state: MotionState,
+    pairs: Vec<(usize, usize)>,
+    residual_px: f64,
+    visible: usize,
+    missing: usize,
+    size_mismatches: usize,
+    /// The pose sees the target from its back (+z of the object frame).
+    from_back: bool,
+}
+
+impl Verified {
+    fn accepted(&self, min_matched: usize) -> bool {
+        let matched = self.pairs.len();
+        matched >= min_matched
+            && self.residual_px <= MAX_IDENTIFY_RESIDUAL_PX
+            && self.missing as f64 <= 0.15 * self.visible as f64
+            && self.size_mismatches as f64 <= 0.1 * matched as f64
+    }
+
+    /// Better first: more points, fewer missing, fewer sizes wrong, smaller residual.
+    fn rank(&self, other: &Self) -> std::cmp::Ordering {
+        other
+            .pairs
+            .len()
+            .cmp(&self.pairs.len())
+            .then(self.missing.cmp(&other.missing))
+            .then(self.size_mismatches.cmp(&other.size_mismatches))
+            .then(self.from_back.cmp(&other.from_back))
+            .then(self.residual_px.total_cmp(&other.residual_px))
+    }
+}
+
+/// Everything the verification needs, computed once.
+struct Verifier<'a> {
+    camera: &'a CameraModel,
+    target: &'a Target,
+    model: SpatioTemporalModel,
+    ideal: &'a [Vector2<f64>],
+    areas_px: &'a [f64],
+    index: &'a PointIndex,
+    /// For each target point, its nearest other point (for the projected spacing).
+    nearest_point: Vec<usize>,
+    front_normal: Option<Vector3<f64>>,
+    centre_m: Vector3<f64>,
+}
+
+impl Verifier<'_> {
+    /// The static pose, its residual, and whether it sees the target from its back.
+    fn pose(
+        &self,
+        pairs: &[(usize, usize)],
+        centres: &[Vector2<f64>],
+    ) -> Option<(MotionState, f64, bool)> {
+        let obs: Vec<Observation> = pairs
+            .iter()
+            .zip(centres)
+            .map(|(&(point_index, _), c)| Observation {
+                t_s: 0.0,
+                point_index,
+                ideal_px: *c,
+            })
+            .collect();
+        let fit = solve_static_pose(&self.model, self.target, &obs).ok()?;
+        let state = fit.state;
+        if state.cam_t_obj_m.z <= 0.0 || !state.cam_t_obj_m.iter().all(|x| x.is_finite()) {
+            return None;
+        }
+        let from_back = self.front_normal.is_some_and(|front| {
+            let camera_in_obj = state.cam_r_obj.inverse() * (-state.cam_t_obj_m);
+            (camera_in_obj - self.centre_m).dot(&front) <= 0.0
+        });
+        Some((state, fit.residual_rms_px, from_back))
+    }
+
+    /// Verifies a hypothesis: pose, then every point projected, matched, the pose solved again.
+    fn verify(&self, pairs: &[(usize, usize)]) -> Option<Verified> {
+        let centres: Vec<Vector2<f64>> = pairs.iter().map(|&(_, b)| self.ideal[b]).collect();
+        let (mut state, _, _) = self.pose(pairs, &centres)?;
+        let mut result = None;
+        for _ in 0..2 {
+            let verified = self.project_and_match(&state)?;
+            let centres: Vec<Vector2<f64>> =
+                verified.pairs.iter().map(|&(_, b)| self.ideal[b]).collect();
+            let (refitted, residual_px, from_back) = self.pose(&verified.pairs, &centres)?;
+            state = refitted;
+            result = Some(Verified {
+                state,
+                residual_px,
+                from_back,
+                ..verified
+            });
+        }
+        result
+    }
+
+    /// Matches every target point the pose projects well inside the image to the nearest unused blob within a
+    /// quarter of its projected spacing, checking its size.
+    fn project_and_match(&self, state: &MotionState) -> Option<Verified> {
+        let points = self.target.points();
+        let mut projected: Vec<Option<(Vector2<f64>, f64)>> = Vec::with_capacity(points.len());
+        for p in points {
+            let in_cam = state.point_in_cam_at(&p.point_in_obj_m, 0.0);
+            projected.push(
+                self.model
+                    .project(state, &p.point_in_obj_m, 0.0)
+                    .map(|ideal| (ideal, in_cam.z)),
+            );
+        }
+        let focal = self
+            .camera
+            .intrinsics
+            .fx_px
+            .max(self.camera.intrinsics.fy_px);
+        let mut used = vec![false; self.ideal.len()];
+        let mut pairs = Vec::new();
+        let (mut visible, mut missing, mut size_mismatches) = (0, 0, 0);
+        for (i, p) in points.iter().enumerate() {
+            let Some((ideal, depth)) = projected[i] else {
+                continue;
+            };
+            let Some((neighbour, _)) = projected[self.nearest_point[i]] else {
+                continue;
+            };
+            let spacing = (neighbour - ideal).norm();
+            let radius_px = p.diameter_m.map_or(0.0, |d| 0.5 * focal * d / depth);
+            let raw = self.camera.distort_pixel(&ideal);
+            let margin = radius_px + 2.0;
+            let inside = raw.x >= margin
+                && raw.y >= margin
+                && raw.x <= f64::from(self.camera.width_px) - 1.0 - margin
+                && raw.y <= f64::from(self.camera.height_px) - 1.0 - margin;
+            let found = self
+                .index
+                .nearest(&ideal, (0.25 * spacing).max(1.5), |b| !used[b]);
+            match found {
+                Some((b, _)) => {
+                    if inside {
+                        visible += 1;
+                    }
+                    if let Some(d) = p.diameter_m {
+                        // The disk's area foreshortened by its tilt to the line of sight.
+                        let normal = self.front_normal.map_or(1.0, |n| {
+                            let ray = state.point_in_cam_at(&p.point_in_obj_m, 0.0).normalize();
+                            (state.cam_r_obj * n).dot(&ray).abs()
+                        });
+                        let expected =
+                            std::f64::consts::FRAC_PI_4 * (focal * d / depth).powi(2) * normal;
+                        let ratio = self.areas_px[b] / expected;
+                        if !(0.5..=2.0).contains(&ratio) {
+                            size_mismatches += 1;
+                        }
+                    }
+                    used[b] = true;
+                    pairs.push((i, b));
+                }
+                None if inside => {
+                    visible += 1;
+                    missing += 1;
+                }
+                None => {}
+            }
+        }
+        (pairs.len() >= 4).then_some(Verified {
+            state: *state,
+            pairs,
+            residual_px: f64::INFINITY,
+            visible,
+            missing,
+            size_mismatches,
+            from_back: false,
+        })
+    }
+}
+
+/// Points of a planar target in its plane and its front normal (object frame); `None` if not planar.
+fn plane_and_front(target: &Target) -> Option<(Vec<Vector2<f64>>, Vector3<f64>)> {
+    let plane = target.plane()?;
+    let normal: Vector3<f64> = plane.obj_r_plane.column(2).into_owned();
+    // The front is the side of negative z in the object frame (a board's printed side faces the camera that sees
+    // its x axis to the right and y axis down).
+    let front = if normal.z > 0.0 { -normal } else { normal };
+    Some((plane.points_in_plane_m.clone(), front))
+}
+
+/// Is `to` the same labelling as `from` up to a rigid motion of the target onto itself (points onto points of the
+/// same diameter)?
+fn related_by_symmetry(target: &Target, from: &Verified, to: &Verified) -> bool {
+    // The motion that takes each point of `from` to the point `to` gives the same blob: compose the two poses.
+    let motion_r = to.state.cam_r_obj.inverse() * from.state.cam_r_obj;
+    let motion_t = to.state.cam_r_obj.inverse() * (from.state.cam_t_obj_m - to.state.cam_t_obj_m);
+    let points = target.points();
+    let spread = target.principal_spreads_m()[0].max(1e-9);
+    points.iter().all(|p| {
+        let moved = motion_r * p.point_in_obj_m + motion_t;
+        points.iter().any(|q| {
+            (q.point_in_obj_m - moved).norm() < 0.02 * spread
+                && match (p.diameter_m, q.diameter_m) {
+                    (Some(a), Some(b)) => (a - b).abs() <= 1e-3 * a.max(b),
+                    (None, None) => true,
+                    _ => false,
+                }
+        })
+    })
+}
+
+/// The centre of a disk's image minus the image of its centre (raw px): the area centroid of the projected outline
+/// (distortion included) against the projected centre. `None` if the disk is not wholly in front of the camera.
+pub fn disk_centre_displacement_px(
+    camera: &CameraModel,
+    state: &MotionState,
+    centre_in_obj_m: &Vector3<f64>,
+    normal_in_obj: &Vector3<f64>,
+    diameter_m: f64,
+) -> Option<Vector2<f64>> {
+    const SAMPLES: usize = 48;
+    let axis_u = normal_in_obj
+        .cross(&Vector3::x())
+        .try_normalize(1e-9)
+        .or_else(|| normal_in_obj.cross(&Vector3::y()).try_normalize(1e-9))?;
+    let axis_v = normal_in_obj.cross(&axis_u);
+    let r = 0.5 * diameter_m;
+    let mut outline = [Vector2::zeros(); SAMPLES];
+    for (k, o) in outline.iter_mut().enumerate() {
+        let phi = std::f64::consts::TAU * k as f64 / SAMPLES as f64;
+        let p = centre_in_obj_m + r * (phi.cos() * axis_u + phi.sin() * axis_v);
+        *o = camera.raw_pixel_from_cam(&state.point_in_cam_at(&p, 0.0))?;
+    }
+    let centre = camera.raw_pixel_from_cam(&state.point_in_cam_at(centre_in_obj_m, 0.0))?;
+    // Area centroid of the polygon (shoelace), relative to the centre for precision.
+    let (mut area2, mut cx, mut cy) = (0.0, 0.0, 0.0);
+    for k in 0..SAMPLES {
+        let (a, b) = (outline[k] - centre, outline[(k + 1) % SAMPLES] - centre);
+        let cross = a.x * b.y - b.x * a.y;
+        area2 += cross;
+        cx += (a.x + b.x) * cross;
+        cy += (a.y + b.y) * cross;
+    }
+    if area2.abs() < 1e-12 {
+        return None;
+    }
+    Some(Vector2::new(cx, cy) / (3.0 * area2))
+}
+
+/// Identifies the target among `blobs` (raw pixel centres and areas) with no prior; see the module's documentation.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::{CameraModel, MotionState, Target};
+/// use roitrack_pipeline::identify::identify;
+/// use roitrack_pipeline::matching::DetectedBlob;
+///
+/// let (camera, target) = (CameraModel::canonical(), Target::grid4x4());
+/// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.3, -0.2, 2.5), Vector3::new(0.01, 0.0, 0.6));
+/// let mut blobs: Vec<DetectedBlob> = target.points().iter().map(|p| {
+///     let px = camera.raw_pixel_from_cam(&truth.point_in_cam_at(&p.point_in_obj_m, 0.0)).unwrap();
+///     let d_px = 1500.0 * p.diameter_m.unwrap() / 0.6;
+///     DetectedBlob { u_px: px.x, v_px: px.y, area_px: std::f64::consts::FRAC_PI_4 * d_px * d_px }
+/// }).collect();
+/// blobs.push(DetectedBlob { u_px: 100.0, v_px: 900.0, area_px: 200.0 }); // clutter
+/// let found = identify(&camera, &target, &blobs).unwrap();
+/// assert!(!found.ambiguous && found.pairs.len() == 16);
+/// assert!((found.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-3);
+/// ```
+pub fn identify(
+    camera: &CameraModel,
+    target: &Target,
+    blobs: &[DetectedBlob],
+) -> Result<Identification, MatchError> {
+    let n = target.len();
+    let Some((plane, front)) = plane_and_front(target) else {
+        return Err(MatchError::NotPlanar);
+    };
+    let min_matched = n.min(6).max(4);
+    if blobs.len() < min_matched {
+        return Err(MatchError::TooFewBlobs {
+            found: blobs.len(),
+            expected: n,
+            required: min_matched,
+        });
+    }
+    let ideal: Vec<Vector2<f64>> = blobs
+        .iter()
+        .map(|b| {
+            camera
+                .undistort_pixel(&Vector2::new(b.u_px, b.v_px))
+                .unwrap_or(Vector2::repeat(f64::NAN))
+        })
+        .collect();
+    let areas_px: Vec<f64> = blobs.iter().map(|b| b.area_px).collect();
+    let typical_px = {
+        let mut d: Vec<f64> = areas_px.iter().map(|a| a.sqrt()).collect();
+        d.sort_by(f64::total_cmp);
+        d[d.len() / 2].max(4.0)
+    };
+    let index = PointIndex::new(&ideal, 2.0 * typical_px);
+    let points = target.points();
+    let nearest_point: Vec<usize> = (0..n)
+        .map(|i| {
+            (0..n)
+                .filter(|&j| j != i)
+                .min_by(|&a, &b| {
+                    (points[a].point_in_obj_m - points[i].point_in_obj_m)
+                        .norm()
+                        .total_cmp(&(points[b].point_in_obj_m - points[i].point_in_obj_m).norm())
+                })
+                .unwrap_or(0)
+        })
+        .collect();
+    let centre_m = points
+        .iter()
+        .map(|p| p.point_in_obj_m)
+        .sum::<Vector3<f64>>()
+        / n as f64;
+    let verifier = Verifier {
+        camera,
+        target,
+        model: SpatioTemporalModel::new(camera.intrinsics),
+        ideal: &ideal,
+        areas_px: &areas_px,
+        index: &index,
+        nearest_point,
+        front_normal: Some(front),
+        centre_m,
+    };
+    let hypothesis_groups: Vec<Vec<Vec<(usize, usize)>>> = match TargetLattice::of(&plane) {
+        Some(lattice) => lattice_hypotheses(&lattice, &ideal, &areas_px, &index),
+        None => {
+            let diameters: Vec<Option<f64>> = points.iter().map(|p| p.diameter_m).collect();
+            let model = PlanarModel {
+                plane_m: &plane,
+                diameters_m: &diameters,
+            };
+            vec![triple_hypotheses(
+                &model,
+                &ideal,
+                &areas_px,
+                &index,
+                min_matched,
+            )]
+        }
+    };
+    // Groups in order of promise (the largest grown lattice first): stop at the first that gives an accepted fit.
+    let mut verified: Vec<Verified> = Vec::new();
+    let mut tried = 0;
+    for group in &hypothesis_groups {
+        tried += group.len();
+        verified.extend(group.iter().filter_map(|pairs| verifier.verify(pairs)));
+        if verified.iter().any(|v| v.accepted(min_matched)) {
+            break;
+        }
+    }
+    verified.sort_by(Verified::rank);
+    let Some(best) = verified.iter().find(|v| v.accepted(min_matched)).cloned() else {
+        let best = verified.first();
+        return Err(MatchError::NoFit {
+            residual_px: best.map_or(f64::INFINITY, |b| b.residual_px),
+            matched: best.map_or(0, |b| b.pairs.len()),
+            expected: n,
+        });
+    };
+    let mut best_pairs = best.pairs.clone();
+    best_pairs.sort_unstable();
+    let mut equals: Vec<&Verified> = vec![&best];
+    for v in verified.iter().filter(|v| v.accepted(min_matched)) {
+        let mut pairs = v.pairs.clone();
+        pairs.sort_unstable();
+        let as_good = v.from_back == best.from_back
+            && v.pairs.len() == best.pairs.len()
+            && v.missing == best.missing
+            && v.size_mismatches == best.size_mismatches
+            && v.residual_px < 1.5 * best.residual_px + 0.05;
+        if pairs != best_pairs
+            && as_good
+            && equals.iter().all(|e| {
+                let mut p = e.pairs.clone();
+                p.sort_unstable();
+                p != pairs
+            })
+        {
+            if !related_by_symmetry(target, &best, v) {
+                return Err(MatchError::PartialView);
+            }
+            equals.push(v);
+        }
+    }
+    let ambiguous = equals.len() > 1;
+    // The canonical labelling: the lowest id projected nearest the top-left corner.
+    let lowest = (0..n).min_by_key(|&i| points[i].id).unwrap_or(0);
+    let chosen = equals
+        .iter()
+        .min_by(|a, b| {
+            let corner = |v: &Verified| {
+                camera
+                    .raw_pixel_from_cam(
+                        &v.state.point_in_cam_at(&points[lowest].point_in_obj_m, 0.0),
+                    )
+                    .map_or(f64::INFINITY, |p| p.x + p.y)
+            };
+            corner(a).total_cmp(&corner(b))
+        })
+        .copied()
+        .unwrap_or(&best)
+        .clone();
+    Ok(finish(&verifier, chosen, ambiguous, tried))
+}
+
+/// Corrects the matched centres for the perspective displacement of a disk's centre and solves the pose again.
+fn finish(
+    verifier: &Verifier,
+    chosen: Verified,
+    ambiguous: bool,
+    hypotheses: usize,
+) -> Identification {
+    let camera = verifier.camera;
+    let points = verifier.target.points();
+    let mut pairs = chosen.pairs.clone();
+    pairs.sort_unstable();
+    let raw: Vec<Vector2<f64>> = pairs
+        .iter()
+        .map(|&(_, b)| camera.distort_pixel(&verifier.ideal[b]))
+        .collect();
+    let mut state = chosen.state;
+    let mut residual = chosen.residual_px;
+    let mut centres = raw.clone();
+    if let Some(front) = verifier.front_normal {
+        for _ in 0..2 {
+            let corrected: Vec<Vector2<f64>> = pairs
+                .iter()
+                .zip(&raw)
+                .map(|(&(p, _), r)| {
+                    let point = &points[p];
+                    point
+                        .diameter_m
+                        .and_then(|d| {
+                            disk_centre_displacement_px(
+                                camera,
+                                &state,
+                                &point.point_in_obj_m,
+                                &front,
+                                d,
+                            )
+                        })
+                        .map_or(*r, |shift| r - shift)
+                })
+                .collect();
+            let ideal: Option<Vec<Vector2<f64>>> = corrected
+                .iter()
+                .map(|c| camera.undistort_pixel(c).ok())
+                .collect();
+            let Some(ideal) = ideal else { break };
+            let Some((refitted, refitted_residual, _)) = verifier.pose(&pairs, &ideal) else {
+                break;
+            };
+            state = refitted;
+            residual = refitted_residual;
+            centres = corrected;
+        }
+    }
+    Identification {
+        state,
+        pairs,
+        centres_px: centres,
+        residual_rms_px: residual,
+        ambiguous,
+        missing: chosen.missing,
+        hypotheses,
+    }
+}
+
+/// The lattice hypotheses: growth from a few seeds (each blob in one grown lattice at most), each lattice laid on the
+/// target's every way; one group of hypotheses per grown lattice, the largest first.
+fn lattice_hypotheses(
+    lattice: &TargetLattice,
+    ideal: &[Vector2<f64>],
+    areas_px: &[f64],
+    index: &PointIndex,
+) -> Vec<Vec<Vec<(usize, usize)>>> {
+    const SEEDS: usize = 12;
+    let mut grown_sets: Vec<lattice::GrownLattice> = Vec::new();
+    let mut covered = vec![false; ideal.len()];
+    // Seeds: blobs whose neighbours are alike in size, tried from the most regular; a blob already in a grown
+    // lattice is not a new seed.
+    let mut order: Vec<(usize, f64)> = (0..ideal.len())
+        .filter(|&b| ideal[b].x.is_finite())
+        .filter_map(|b| {
+            let near = index.neighbours(b, 4, 1e6);
+            if near.len() < 2 {
+                return None;
+            }
+            let alike = near
+                .iter()
+                .filter(|&&(o, _)| {
+                    areas_px[o] < 1.5 * areas_px[b] && areas_px[o] > areas_px[b] / 1.5
+                })
+                .count();
+            let spread = near[near.len() - 1].1 / near[0].1.max(1e-9);
+            Some((b, alike as f64 - 0.5 * spread))
+        })
+        .collect();
+    order.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let mut attempts = 0;
+    for &(seed, _) in &order {
+        if attempts >= SEEDS {
+            break;
+        }
+        if covered[seed] {
+            continue;
+        }
+        attempts += 1;
+        let near = index.neighbours(seed, 6, 1e6);
+        let Some(&(first, d1)) = near.first() else {
+            continue;
+        };
+        let e1 = ideal[first] - ideal[seed];
+        let second = near.iter().skip(1).find(|&&(o, d)| {
+            let e2 = ideal[o] - ideal[seed];
+            (e1.x * e2.y - e1.y * e2.x).abs() > 0.5 * d1 * d
+        });
+        let Some(&(second, _)) = second else { continue };
+        if covered[first] || covered[second] {
+            continue;
+        }
+        let grown = grow(ideal, areas_px, index, &covered, seed, first, second);
+        for &(_, _, b) in &grown.nodes {
+            covered[b] = true;
+        }
+        grown_sets.push(grown);
+    }
+    grown_sets.sort_by_key(|g| std::cmp::Reverse(g.nodes.len()));
+    grown_sets
+        .iter()
+        .take(3)
+        .filter(|g| g.nodes.len() >= 4)
+        .map(|g| placements(lattice, g, 0.9))
+        .collect()
+}
