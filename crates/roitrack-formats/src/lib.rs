@@ -13,6 +13,7 @@
 //! | twists: CSV `t,vx,vy,vz,wx,wy,wz` (camera frame) | [`read_twists_csv`], [`parse_twists_csv`] | [`TwistWriter`], [`write_twists_csv`] |
 //! | estimates: poses, twists and diagnostics CSV together | | [`EstimateWriter`] |
 //! | full frames ([`roitrack_image::Frame`]): PNG, JPEG, PGM/PPM, TIFF, 8 or 16 bits, colour made grey | [`read_frame`], [`decode_frame`] | |
+//! | detection overlays: a frame as an RGB PNG with marks and ids drawn on it | | [`write_overlay_png`] |
 //!
 //! Every reader refuses non-finite numbers and times out of order; every writer refuses what the reader would refuse
 //! and writes numbers with full round-trip precision (the shortest decimal that reads back to the same `f64`).
@@ -52,6 +53,7 @@ mod error;
 mod estimates;
 mod image_file;
 mod measurements;
+mod overlay;
 mod roi_recording;
 mod row_writer;
 mod target_csv;
@@ -66,6 +68,7 @@ pub use image_file::{FRAME_IMAGE_FORMATS, check_frame_size, decode_frame, read_f
 pub use measurements::{
     MeasurementReader, MeasurementWriter, read_measurements_csv, write_measurements_csv,
 };
+pub use overlay::{MarkKind, OverlayMark, write_overlay_png};
 pub use roi_recording::{
     MAX_ROI_SIDE_PX, ROI_RECORDING_MAGIC, RoiRecordingReader, RoiRecordingWriter,
 };
