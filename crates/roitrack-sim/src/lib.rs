@@ -4,16 +4,22 @@
 //! ([`measurements`]): every centroid is the projection of the true pose at its own exposure-midpoint time, with
 //! Gaussian noise, dropped ROIs and outliers as options, and faults (occlusions, time gaps, bursts of lost ROIs, a
 //! sudden jump of the target, blobs leaving the image); and the ROI images of a run, rendered by the simulated camera
-//! ([`rois`]). A scenario's motion can be seen by any camera and carry any target ([`Scenario::with_camera`],
-//! [`Scenario::with_target`]).
+//! ([`rois`]); and synthetic photographs of planar circle targets in cluttered, unevenly lit scenes, with the true
+//! circle centres ([`photo`]). A scenario's motion can be seen by any camera and carry any target
+//! ([`Scenario::with_camera`], [`Scenario::with_target`]).
 
 pub mod measurements;
+pub mod photo;
 pub mod rois;
 pub mod scenario;
 
 pub use measurements::{
     Excursion, Jump, Occlusion, RoiBurst, SimError, SimulatedRun, SimulationOptions, TimeGap,
     simulate,
+};
+pub use photo::{
+    Background, CircleShade, Clutter, Glare, Illumination, PhotoError, PhotoPoint, PhotoScene,
+    RenderedPhoto, Shadow, render_photo,
 };
 pub use rois::{RenderError, render_roi_images};
 pub use scenario::{Scenario, ScenarioKind, bench_rotation};
