@@ -1,18 +1,23 @@
 //! # roitrack-pipeline
 //!
 //! The system end to end, around the pure estimator: finding the target in a full frame with no prior
-//! ([`matching`], [`find_target`]), the placement of each next ROI ([`scheduler`]), and the real-time loop of two
+//! ([`matching`], [`find_target`]) or in a photograph ([`photo`], [`detect_target`]: either polarity, clutter, partial
+//! views, symmetric and hexagonal grids, by hypothesis and verification in [`identify`]), the placement of each next ROI ([`scheduler`]), and the real-time loop of two
 //! threads, acquisition and estimation, joined by lock-free single-producer single-consumer queues ([`realtime`]),
 //! driving any [`roitrack_image::RoiCamera`]; and the same tracking offline, from recorded ROI images ([`offline`]).
 
 pub mod identify;
 pub mod matching;
 pub mod offline;
+pub mod photo;
 pub mod realtime;
 pub mod scheduler;
 
 pub use identify::{Identification, identify};
 pub use matching::{MatchError, TargetDetection, find_target, match_full_frame};
 pub use offline::{RoiTrackReport, track_rois};
+pub use photo::{
+    PhotoDetection, PhotoError, PhotoOptions, PhotoPoint, PolarityChoice, detect_target,
+};
 pub use realtime::{LoopConfig, LoopReport, PipelineError, run_loop, run_loop_with_progress};
 pub use scheduler::{Predictor, RoiRequest, RoiScheduler, ScheduleOrder, SchedulerConfig};

@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod compare;
 pub mod demo;
+pub mod detect;
 pub mod eval;
 pub mod faults;
 pub mod pnp_bench;

@@ -57,8 +57,8 @@ pub struct PhotoBlobOptions {
     pub levels: usize,
     /// Levels a blob must be found at to count (a blob found at one level only is a noise-level feature).
     pub min_levels: usize,
-    /// Smallest contrast of a blob against its background, as a fraction of the image's dynamic range (its 1st to
-    /// 99th percentile).
+    /// Smallest contrast of a blob against its background, as a fraction of the image's dynamic range (its 1st
+    /// percentile to its maximum).
     pub min_contrast_fraction: f64,
 }
 
@@ -174,7 +174,8 @@ pub fn detect_photo_blobs(
             &scratch.inverted
         }
     };
-    let (low, high) = percentiles(image, full_scale, 0.01, 0.99);
+    // The top of the range is the brightest pixel: small blobs can be far fewer than 1 % of the pixels.
+    let (low, high) = percentiles(image, full_scale, 0.01, 1.0);
     let range = f64::from(high.saturating_sub(low));
     if range < 4.0 {
         return Vec::new();

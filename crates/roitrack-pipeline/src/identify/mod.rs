@@ -341,7 +341,7 @@ pub fn identify(
     let Some((plane, front)) = plane_and_front(target) else {
         return Err(MatchError::NotPlanar);
     };
-    let min_matched = n.min(6).max(4);
+    let min_matched = n.clamp(4, 6);
     if blobs.len() < min_matched {
         return Err(MatchError::TooFewBlobs {
             found: blobs.len(),

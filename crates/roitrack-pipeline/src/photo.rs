@@ -1,0 +1,241 @@
+//! The target in a photograph: blobs of either polarity ([`roitrack_image::photo`]), identified with no prior
+//! ([`crate::identify`]), the pose, each point's centre.
+
+use nalgebra::{UnitQuaternion, Vector2};
+use roitrack_core::{CameraModel, MotionState, Target};
+use roitrack_image::{
+    Frame, PhotoBlob, PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs,
+};
+
+use crate::identify::{Identification, identify};
+use crate::matching::{DetectedBlob, MatchError};
+
+/// Which blobs to look for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum PolarityChoice {
+    /// Both, per image: the polarity whose blobs identify the target (the one with more points if both do).
+    #[default]
+    Auto,
+    /// Bright blobs on a darker background.
+    Bright,
+    /// Dark blobs on a lighter background.
+    Dark,
+}
+
+/// Settings of [`detect_target`].
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PhotoOptions {
+    pub polarity: PolarityChoice,
+    pub blobs: PhotoBlobOptions,
+}
+
+/// One identified target point in a photograph.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PhotoPoint {
+    /// The point's id, as in the target file.
+    pub id: u32,
+    /// Its centre (raw, distorted pixels), corrected for the perspective displacement of a disk's centre.
+    pub centre_px: Vector2<f64>,
+    /// Index of its blob in [`PhotoDetection::blobs`].
+    pub blob: usize,
+}
+
+/// The target found in a photograph ([`detect_target`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PhotoDetection {
+    /// The polarity used (decided per image with [`PolarityChoice::Auto`]).
+    pub polarity: Polarity,
+    /// The pose of the target in the camera frame (velocity zero).
+    pub state: MotionState,
+    /// The identified points, by increasing id.
+    pub points: Vec<PhotoPoint>,
+    /// The target's symmetry leaves the labelling undecided; the labelling is the canonical one
+    /// ([`crate::identify`]).
+    pub ambiguous: bool,
+    /// Root mean square of the reprojection distance (px): sqrt(mean |projection - centre|²), as OpenCV's
+    /// calibration reports it (√2 times the per-coordinate RMS).
+    pub reprojection_rms_px: f64,
+    /// Target points predicted well inside the image that had no blob.
+    pub missing: usize,
+    /// Every candidate blob of the polarity used, matched or not.
+    pub blobs: Vec<PhotoBlob>,
+}
+
+impl PhotoDetection {
+    /// The orientation as a unit quaternion (object to camera).
+    pub fn cam_q_obj(&self) -> UnitQuaternion<f64> {
+        UnitQuaternion::from_rotation_matrix(&self.state.cam_r_obj)
+    }
+}
+
+/// Why the target was not found in a photograph.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PhotoError {
+    #[error(
+        "the image is {image_width} x {image_height} px, the camera's {camera_width} x {camera_height} px"
+    )]
+    ImageSize {
+        image_width: u32,
+        image_height: u32,
+        camera_width: u32,
+        camera_height: u32,
+    },
+    #[error("{polarity} blobs: {source}")]
+    NotFound {
+        polarity: &'static str,
+        /// Candidate blobs of that polarity.
+        blobs: usize,
+        source: MatchError,
+    },
+    #[error(
+        "neither polarity: dark blobs ({dark_blobs}): {dark}; bright blobs ({bright_blobs}): {bright}"
+    )]
+    NotFoundEither {
+        dark_blobs: usize,
+        dark: MatchError,
+        bright_blobs: usize,
+        bright: MatchError,
+    },
+}
+
+/// Finds, identifies and measures the target in a photograph: blob detection ([`detect_photo_blobs`]) in the
+/// polarity asked for or, with [`PolarityChoice::Auto`], in both; identification ([`identify`]); the pose.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::{CameraModel, MotionState, Target};
+/// use roitrack_image::{Frame, RenderScratch, RoiRenderer, SensorModel, Polarity};
+/// use roitrack_pipeline::photo::{PhotoOptions, detect_target};
+/// use rand::SeedableRng;
+///
+/// // A rendered frame of bright blobs; `Auto` finds them bright.
+/// let (camera, target) = (CameraModel::canonical(), Target::grid4x4());
+/// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.2, -0.1, 0.4), Vector3::new(0.01, 0.0, 0.6));
+/// let renderer = RoiRenderer::new(camera.clone(), target.clone(), SensorModel::default()).unwrap();
+/// let mut frame = Frame::default();
+/// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+/// renderer.render_frame(&|_t| truth, 0.0, &mut rng, &mut RenderScratch::new(), &mut frame);
+/// let found = detect_target(&camera, &target, &frame, &PhotoOptions::default()).unwrap();
+/// assert_eq!(found.polarity, Polarity::Bright);
+/// assert_eq!(found.points.len(), 16);
+/// assert!((found.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-3);
+/// ```
+pub fn detect_target(
+    camera: &CameraModel,
+    target: &Target,
+    frame: &Frame,
+    options: &PhotoOptions,
+) -> Result<PhotoDetection, PhotoError> {
+    if (frame.width, frame.height) != (camera.width_px, camera.height_px) {
+        return Err(PhotoError::ImageSize {
+            image_width: frame.width,
+            image_height: frame.height,
+            camera_width: camera.width_px,
+            camera_height: camera.height_px,
+        });
+    }
+    let mut scratch = PhotoScratch::default();
+    let mut attempt = |polarity: Polarity| {
+        let blobs = detect_photo_blobs(
+            &frame.pixels,
+            frame.width,
+            frame.height,
+            frame.bit_depth,
+            polarity,
+            &options.blobs,
+            &mut scratch,
+        );
+        let detected: Vec<DetectedBlob> = blobs
+            .iter()
+            .map(|b| DetectedBlob {
+                u_px: b.u_px,
+                v_px: b.v_px,
+                area_px: b.area_px,
+            })
+            .collect();
+        let result = identify(camera, target, &detected);
+        (polarity, blobs, result)
+    };
+    let (polarity, blobs, found) = match options.polarity {
+        PolarityChoice::Bright | PolarityChoice::Dark => {
+            let polarity = if options.polarity == PolarityChoice::Bright {
+                Polarity::Bright
+            } else {
+                Polarity::Dark
+            };
+            let (polarity, blobs, result) = attempt(polarity);
+            match result {
+                Ok(found) => (polarity, blobs, found),
+                Err(source) => {
+                    return Err(PhotoError::NotFound {
+                        polarity: polarity.name(),
+                        blobs: blobs.len(),
+                        source,
+                    });
+                }
+            }
+        }
+        PolarityChoice::Auto => {
+            let dark = attempt(Polarity::Dark);
+            let bright = attempt(Polarity::Bright);
+            match (dark, bright) {
+                ((p, b, Ok(d)), (_, _, Err(_))) | ((_, _, Err(_)), (p, b, Ok(d))) => (p, b, d),
+                ((pd, bd, Ok(d)), (pb, bb, Ok(b))) => {
+                    if b.pairs.len() > d.pairs.len() {
+                        (pb, bb, b)
+                    } else {
+                        (pd, bd, d)
+                    }
+                }
+                ((_, bd, Err(dark)), (_, bb, Err(bright))) => {
+                    return Err(PhotoError::NotFoundEither {
+                        dark_blobs: bd.len(),
+                        dark,
+                        bright_blobs: bb.len(),
+                        bright,
+                    });
+                }
+            }
+        }
+    };
+    Ok(finish(camera, target, polarity, blobs, found))
+}
+
+fn finish(
+    camera: &CameraModel,
+    target: &Target,
+    polarity: Polarity,
+    blobs: Vec<PhotoBlob>,
+    found: Identification,
+) -> PhotoDetection {
+    let points = target.points();
+    let mut sum = 0.0;
+    let detected: Vec<PhotoPoint> = found
+        .pairs
+        .iter()
+        .zip(&found.centres_px)
+        .map(|(&(p, b), centre)| {
+            if let Some(projected) = camera
+                .raw_pixel_from_cam(&found.state.point_in_cam_at(&points[p].point_in_obj_m, 0.0))
+            {
+                sum += (projected - centre).norm_squared();
+            }
+            PhotoPoint {
+                id: points[p].id,
+                centre_px: *centre,
+                blob: b,
+            }
+        })
+        .collect();
+    let mut detected = detected;
+    detected.sort_by_key(|p| p.id);
+    PhotoDetection {
+        polarity,
+        state: found.state,
+        reprojection_rms_px: (sum / detected.len().max(1) as f64).sqrt(),
+        points: detected,
+        ambiguous: found.ambiguous,
+        missing: found.missing,
+        blobs,
+    }
+}
