@@ -174,7 +174,8 @@ pub(crate) fn grey_centre(
     let outer = shape.grown(margin_px + ring_px);
     let mut centre = (shape.u_px, shape.v_px);
     let mut result = None;
-    for _ in 0..3 {
+    // The threshold's centre, then once recentred: the second window moves by hundredths of a pixel.
+    for _ in 0..2 {
         let (u0, v0) = centre;
         let (i_lo, i_hi) = ((u0 - reach).floor(), (u0 + reach).ceil());
         let (j_lo, j_hi) = ((v0 - reach).floor(), (v0 + reach).ceil());

@@ -72,6 +72,74 @@ pub(crate) struct Labeller {
     parts: Vec<Component>,
     parent: Vec<u32>,
     totals: Vec<Option<Component>>,
+    mask: Vec<u64>,
+}
+
+/// Sets bit `b` of `mask[w]` when `row[64 w + b] > threshold`.
+fn row_mask(row: &[u16], threshold: u16, mask: &mut [u64]) {
+    for (word, chunk) in mask.iter_mut().zip(row.chunks(64)) {
+        *word = match <&[u16; 64]>::try_from(chunk) {
+            Ok(full) => mask_of_64(full, threshold),
+            Err(_) => chunk
+                .iter()
+                .enumerate()
+                .fold(0, |bits, (b, &p)| bits | (u64::from(p > threshold) << b)),
+        };
+    }
+}
+
+/// The mask of 64 pixels: SSE2 (every x86_64 CPU) compares 8 a time and packs the results into bits, about ten times
+/// faster than the compiler's vectorisation of the scalar loop, which is where most of the detector's time went.
+#[cfg(target_arch = "x86_64")]
+fn mask_of_64(pixels: &[u16; 64], threshold: u16) -> u64 {
+    use std::arch::x86_64::{
+        __m128i, _mm_cmpgt_epi16, _mm_loadu_si128, _mm_movemask_epi8, _mm_packs_epi16,
+        _mm_set1_epi16, _mm_xor_si128,
+    };
+    // SAFETY: SSE2 is part of the x86_64 baseline; the loads read 16 bytes at offsets 0..=112 of a 128-byte array.
+    unsafe {
+        // Unsigned comparison with the signed instruction: flip the sign bits of both sides.
+        let bias = _mm_set1_epi16(i16::MIN);
+        let limit = _mm_xor_si128(_mm_set1_epi16(threshold as i16), bias);
+        let base = pixels.as_ptr().cast::<__m128i>();
+        let mut bits = 0u64;
+        for k in 0..4 {
+            let low = _mm_xor_si128(_mm_loadu_si128(base.add(2 * k)), bias);
+            let high = _mm_xor_si128(_mm_loadu_si128(base.add(2 * k + 1)), bias);
+            let packed = _mm_packs_epi16(_mm_cmpgt_epi16(low, limit), _mm_cmpgt_epi16(high, limit));
+            bits |= u64::from(_mm_movemask_epi8(packed) as u16) << (16 * k);
+        }
+        bits
+    }
+}
+
+#[cfg(not(target_arch = "x86_64"))]
+fn mask_of_64(pixels: &[u16; 64], threshold: u16) -> u64 {
+    pixels
+        .iter()
+        .enumerate()
+        .fold(0, |bits, (b, &p)| bits | (u64::from(p > threshold) << b))
+}
+
+/// The first pixel at or after `from` whose mask bit is `set` (the mask of a row of `width` pixels).
+fn next_bit(mask: &[u64], from: usize, set: bool, width: usize) -> Option<usize> {
+    let mut word = from / 64;
+    if word >= mask.len() {
+        return None;
+    }
+    let flip = if set { 0 } else { u64::MAX };
+    let mut bits = (mask[word] ^ flip) & (u64::MAX << (from % 64));
+    loop {
+        if bits != 0 {
+            let found = word * 64 + bits.trailing_zeros() as usize;
+            return (found < width).then_some(found);
+        }
+        word += 1;
+        if word >= mask.len() {
+            return None;
+        }
+        bits = mask[word] ^ flip;
+    }
 }
 
 impl Labeller {
@@ -89,20 +157,19 @@ impl Labeller {
         self.parts.clear();
         self.parent.clear();
         let mut previous_row = 0..0;
+        let words = width.div_ceil(64);
+        self.mask.resize(words, 0);
         for (j, row) in pixels.chunks_exact(width.max(1)).take(height).enumerate() {
             let row_start = self.runs.len();
+            // The row's above-threshold mask, 64 pixels a word; runs are then read from the words a run at a time,
+            // not a pixel at a time.
+            row_mask(row, threshold, &mut self.mask);
             let mut i = 0;
             while i < width {
-                // Skip the background quickly: most pixels of a photograph are below any one threshold.
-                match row[i..].iter().position(|&p| p > threshold) {
-                    Some(k) => i += k,
-                    None => break,
-                }
-                let start = i;
-                let end = row[i..]
-                    .iter()
-                    .position(|&p| p <= threshold)
-                    .map_or(width, |k| i + k);
+                let Some(start) = next_bit(&self.mask, i, true, width) else {
+                    break;
+                };
+                let end = next_bit(&self.mask, start, false, width).unwrap_or(width);
                 i = end;
                 let (s, e) = (start as u64, end as u64);
                 let n = e - s;
@@ -172,6 +239,22 @@ impl Labeller {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn row_masks_agree_with_a_pixel_at_a_time() {
+        let row: Vec<u16> = (0..150u32).map(|k| ((k * 7919) % 65_536) as u16).collect();
+        for threshold in [0u16, 1, 200, 32_767, 32_768, 40_000, 65_535] {
+            let mut mask = vec![0u64; 3];
+            row_mask(&row, threshold, &mut mask);
+            for (k, &p) in row.iter().enumerate() {
+                assert_eq!(
+                    mask[k / 64] >> (k % 64) & 1 == 1,
+                    p > threshold,
+                    "pixel {k} threshold {threshold}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn moments_of_a_rectangle_and_a_ring() {
