@@ -13,7 +13,8 @@ use crate::matching::{DetectedBlob, MatchError};
 /// Which blobs to look for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PolarityChoice {
-    /// Both, per image: the polarity whose blobs identify the target (the one with more points if both do).
+    /// Both, per image: the likelier first (dark blobs when most of the image is brighter than halfway up its range),
+    /// the other if the first does not identify the target.
     #[default]
     Auto,
     /// Bright blobs on a darker background.
@@ -176,29 +177,62 @@ pub fn detect_target(
             }
         }
         PolarityChoice::Auto => {
-            let dark = attempt(Polarity::Dark);
-            let bright = attempt(Polarity::Bright);
-            match (dark, bright) {
-                ((p, b, Ok(d)), (_, _, Err(_))) | ((_, _, Err(_)), (p, b, Ok(d))) => (p, b, d),
-                ((pd, bd, Ok(d)), (pb, bb, Ok(b))) => {
-                    if b.pairs.len() > d.pairs.len() {
-                        (pb, bb, b)
-                    } else {
-                        (pd, bd, d)
+            // The likelier polarity first: a photograph mostly brighter than halfway up its range is a printed
+            // target on paper (dark blobs), a mostly dark one a scene of bright markers. The other is tried only
+            // when the first does not identify the target.
+            let first = likely_polarity(frame);
+            let second = match first {
+                Polarity::Dark => Polarity::Bright,
+                Polarity::Bright => Polarity::Dark,
+            };
+            match attempt(first) {
+                (p, b, Ok(found)) => (p, b, found),
+                (_, first_blobs, Err(first_error)) => match attempt(second) {
+                    (p, b, Ok(found)) => (p, b, found),
+                    (_, second_blobs, Err(second_error)) => {
+                        let ((dark_blobs, dark), (bright_blobs, bright)) = match first {
+                            Polarity::Dark => (
+                                (first_blobs.len(), first_error),
+                                (second_blobs.len(), second_error),
+                            ),
+                            Polarity::Bright => (
+                                (second_blobs.len(), second_error),
+                                (first_blobs.len(), first_error),
+                            ),
+                        };
+                        return Err(PhotoError::NotFoundEither {
+                            dark_blobs,
+                            dark,
+                            bright_blobs,
+                            bright,
+                        });
                     }
-                }
-                ((_, bd, Err(dark)), (_, bb, Err(bright))) => {
-                    return Err(PhotoError::NotFoundEither {
-                        dark_blobs: bd.len(),
-                        dark,
-                        bright_blobs: bb.len(),
-                        bright,
-                    });
-                }
+                },
             }
         }
     };
     Ok(finish(camera, target, polarity, blobs, found))
+}
+
+/// Dark blobs if the frame's median is above the middle of its range, else bright.
+fn likely_polarity(frame: &Frame) -> Polarity {
+    // A sparse sample is enough for a median.
+    let step = (frame.pixels.len() / 4096).max(1);
+    let mut sample: Vec<u16> = frame.pixels.iter().step_by(step).copied().collect();
+    if sample.is_empty() {
+        return Polarity::Dark;
+    }
+    let (lo, hi) = (
+        sample.iter().copied().min().unwrap_or(0),
+        sample.iter().copied().max().unwrap_or(0),
+    );
+    let middle = sample.len() / 2;
+    let median = *sample.select_nth_unstable(middle).1;
+    if f64::from(median) > 0.5 * (f64::from(lo) + f64::from(hi)) {
+        Polarity::Dark
+    } else {
+        Polarity::Bright
+    }
 }
 
 fn finish(

@@ -70,7 +70,7 @@ impl Default for PhotoBlobOptions {
             min_inertia_ratio: 0.04,
             ellipse_fill_range: (0.8, 1.15),
             max_runs_per_row: 1.25,
-            levels: 12,
+            levels: 8,
             min_levels: 2,
             min_contrast_fraction: 0.08,
         }
