@@ -129,7 +129,8 @@ pub(super) fn grow_component(
 }
 
 /// The component of the seed pixel `(seed_i, seed_j)` (its moments, first and last rows and union of columns) from
-/// the threshold mask of every row.
+/// the threshold mask of every row; `true` last when it is not simple (not every above-threshold pixel of its rows is
+/// its own: see [`component_rows`]).
 #[inline]
 pub(super) fn component_moments(
     isa: Isa,
@@ -137,16 +138,16 @@ pub(super) fn component_moments(
     (w, h): (usize, usize),
     (seed_i, seed_j): (usize, usize),
     levels: (u16, u16),
-) -> (Moments, (usize, usize), u64) {
+) -> (Moments, (usize, usize), u64, bool) {
     let mut mask_rows = [0u64; MAX_ROI_HEIGHT as usize];
     kernels::row_masks(isa, pixels, w, levels.0, &mut mask_rows[..h]);
     let mask = &mask_rows[..h];
     let mut comp_rows = [0u64; MAX_ROI_HEIGHT as usize];
-    let (comp, lo, hi) = match simple_rows(mask, seed_j) {
-        Some((lo, hi)) => (mask, lo, hi),
+    let (comp, lo, hi, grown) = match simple_rows(mask, seed_j) {
+        Some((lo, hi)) => (mask, lo, hi, false),
         None => {
             let (lo, hi) = grow_component(mask, seed_i, seed_j, &mut comp_rows[..h]);
-            (&comp_rows[..h], lo, hi)
+            (&comp_rows[..h], lo, hi, true)
         }
     };
     let cols = comp[lo..=hi].iter().fold(0, |acc, &c| acc | c);
@@ -154,7 +155,22 @@ pub(super) fn component_moments(
         moments(isa, pixels, w, comp, mask, (lo, hi), cols, levels),
         (lo, hi),
         cols,
+        grown,
     )
+}
+
+/// The rows of the component of the seed pixel (bit i column i) into `comp` (`h` rows, zeroed on entry).
+pub(super) fn component_rows(
+    isa: Isa,
+    pixels: &[u16],
+    (w, h): (usize, usize),
+    (seed_i, seed_j): (usize, usize),
+    threshold: u16,
+    comp: &mut [u64],
+) {
+    let mut mask_rows = [0u64; MAX_ROI_HEIGHT as usize];
+    kernels::row_masks(isa, pixels, w, threshold, &mut mask_rows[..h]);
+    grow_component(&mask_rows[..h], seed_i, seed_j, comp);
 }
 
 #[cfg(test)]

@@ -16,6 +16,9 @@ pub(super) struct Levels {
     pub(super) background: f64,
     pub(super) threshold: u16,
     pub(super) weight_origin: f64,
+    /// Range (maximum less minimum) of the border pixels that set the background (DN): twice a bound on their
+    /// standard deviation.
+    pub(super) noise_range: f64,
 }
 
 /// Statistics of the border pixels at or below a cut.
@@ -113,6 +116,7 @@ pub(super) fn levels(
                 background: below.mean_sigma().map_or(f64::from(t), |(mean, _)| mean),
                 threshold: t,
                 weight_origin: f64::from(t),
+                noise_range: f64::from(below.max.saturating_sub(below.min)),
             })
         }
         Threshold::Auto => {
@@ -148,6 +152,7 @@ pub(super) fn levels(
                 // `as` truncates, which for the positive level is the floor (and saves a libm call).
                 threshold: level as u16,
                 weight_origin: level,
+                noise_range: range,
             })
         }
     }

@@ -90,3 +90,74 @@ pub(super) fn moments(
     kernels::window_moments(isa, pixels, w, comp, mask, rows, cols, levels)
         .unwrap_or_else(|| scalar_moments(pixels, w, comp, rows.0, rows.1))
 }
+
+/// Sums over a component of its weights `v = value - threshold` times `x^p y^q` (p + q <= 3), (x, y) the pixel's
+/// column and row relative to an origin: what the shape check ([`crate::symmetry`]) needs, exact integers (so that
+/// every instruction set gives the same check to the bit).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub(crate) struct ShapeSums {
+    /// In the order 00, 10, 01, 20, 11, 02, 30, 21, 12, 03 (`s[k]` for `x^p y^q`).
+    pub(crate) s: [u64; 10],
+}
+
+impl ShapeSums {
+    /// From sums that are non-negative (they are, over pixels right of and below the origin).
+    pub(super) fn from_i64(s: [i64; 10]) -> Self {
+        Self {
+            s: s.map(|x| x as u64),
+        }
+    }
+
+    /// The same sums with the origin moved `dx` columns right (the pixels stay right of it).
+    pub(super) fn shifted(&self, dx: u64) -> Self {
+        // Every term stays below 2^53: the sums of the d-th power are below 2^32 * 64^(3-d) * 4096, times d^k.
+        let [s00, s10, s01, s20, s11, s02, s30, s21, s12, s03] = self.s.map(|x| x as i64);
+        let d = dx as i64;
+        Self::from_i64([
+            s00,
+            s10 - d * s00,
+            s01,
+            s20 - 2 * d * s10 + d * d * s00,
+            s11 - d * s01,
+            s02,
+            s30 - 3 * d * s20 + 3 * d * d * s10 - d * d * d * s00,
+            s21 - 2 * d * s11 + d * d * s01,
+            s12 - d * s02,
+            s03,
+        ])
+    }
+}
+
+/// The [`ShapeSums`] of the component of rows `lo..=hi` and columns `first..=last`, x from `first`, y from `lo`, a
+/// pixel at a time: of the pixels of `comp` (bit i column i), or with `None` of every above-threshold pixel of those
+/// rows and columns (a simple component's).
+pub(super) fn scalar_shape_sums(
+    pixels: &[u16],
+    w: usize,
+    comp: Option<&[u64]>,
+    (lo, hi): (usize, usize),
+    (first, last): (usize, usize),
+    threshold: u16,
+) -> ShapeSums {
+    let mut s = [0u64; 10];
+    for j in lo..=hi {
+        let y = (j - lo) as u64;
+        let bits = comp.map_or(u64::MAX, |c| c[j]);
+        for i in first..=last {
+            let v = u64::from(pixels[j * w + i].saturating_sub(threshold)) * ((bits >> i) & 1);
+            let x = (i - first) as u64;
+            let (vx, vy) = (v * x, v * y);
+            s[0] += v;
+            s[1] += vx;
+            s[2] += vy;
+            s[3] += vx * x;
+            s[4] += vx * y;
+            s[5] += vy * y;
+            s[6] += vx * x * x;
+            s[7] += vx * x * y;
+            s[8] += vx * y * y;
+            s[9] += vy * y * y;
+        }
+    }
+    ShapeSums { s }
+}

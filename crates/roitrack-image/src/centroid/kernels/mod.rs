@@ -24,13 +24,15 @@ mod portable;
 #[cfg(any(target_arch = "x86_64", test))]
 mod scan;
 #[cfg(target_arch = "x86_64")]
+mod shape;
+#[cfg(target_arch = "x86_64")]
 mod sse2;
 #[cfg(any(target_arch = "x86_64", test))]
 mod walk;
 
 #[cfg(target_arch = "x86_64")]
 use self::{avx512::Avx512, lanes::Lanes, sse2::Sse2};
-use super::moments::Moments;
+use super::moments::{Moments, ShapeSums, scalar_shape_sums};
 
 /// A component found in one pass: its moments, first and last rows, and union of columns.
 pub(super) type Found = (Moments, (usize, usize), u64);
@@ -161,6 +163,39 @@ pub(super) fn window_moments(
     }
     let _ = (isa, pixels, w, comp, mask, rows, cols, levels);
     None
+}
+
+/// The [`ShapeSums`] of the component of rows `rows` and columns `cols` (their union), x from its first column, y
+/// from its first row: of the pixels of `comp`, or with `None` of every above-threshold pixel of those rows (a simple
+/// component's). With SSE2 over a window of up to 4 vectors holding its columns (see `shape.rs`) where the ROI, the
+/// component and its values allow, else a pixel at a time; the same integers either way.
+#[inline]
+pub(super) fn shape_sums(
+    isa: Isa,
+    pixels: &[u16],
+    w: usize,
+    comp: Option<&[u64]>,
+    rows: (usize, usize),
+    cols: u64,
+    (threshold, peak): (u16, u16),
+) -> ShapeSums {
+    let first = cols.trailing_zeros() as usize;
+    let last = 63 - cols.leading_zeros() as usize;
+    #[cfg(target_arch = "x86_64")]
+    if isa != Isa::Portable {
+        let vectors = (last - first) / 8 + 1;
+        if 8 * vectors <= w {
+            let s = first.min(w - 8 * vectors);
+            let vmax = peak - threshold;
+            if let Some(sums) =
+                shape::shape_sums(pixels, w, comp, rows, s, vectors, threshold, vmax)
+            {
+                return sums.shifted((first - s) as u64);
+            }
+        }
+    }
+    let _ = (isa, peak);
+    scalar_shape_sums(pixels, w, comp, rows, (first, last), threshold)
 }
 
 /// The seed's component (its moments, first and last rows and union of columns) when it is simple, found and
@@ -305,11 +340,34 @@ mod tests {
             };
             assert_eq!(found, walked, "{case}");
 
+            // The shape sums of the simple component, the whole rows' above-threshold pixels.
+            if let Some((_, (lo, hi), union)) = walked {
+                let first = union.trailing_zeros() as usize;
+                let last = 63 - union.leading_zeros() as usize;
+                let expected =
+                    scalar_shape_sums(pixels, w, None, (lo, hi), (first, last), threshold);
+                for &isa in isas {
+                    let found = shape_sums(isa, pixels, w, None, (lo, hi), union, levels);
+                    assert_eq!(found, expected, "{isa:?} {case}");
+                }
+            }
+
             // The window moments of the seed's component, grown.
             let mut comp = vec![0u64; h];
             let (lo, hi) = grow_component(&mask, seed_i, seed_j, &mut comp);
             let cols = comp.iter().fold(0, |acc, &c| acc | c);
             let moments = scalar_moments(pixels, w, &comp, lo, hi);
+            // Its shape sums.
+            let (first, last) = (
+                cols.trailing_zeros() as usize,
+                63 - cols.leading_zeros() as usize,
+            );
+            let expected =
+                scalar_shape_sums(pixels, w, Some(&comp), (lo, hi), (first, last), threshold);
+            for &isa in isas {
+                let found = shape_sums(isa, pixels, w, Some(&comp), (lo, hi), cols, levels);
+                assert_eq!(found, expected, "{isa:?} {case}");
+            }
             for &isa in isas {
                 let found = window_moments(isa, pixels, w, &comp, &mask, (lo, hi), cols, levels);
                 assert!(found.is_none_or(|m| m == moments), "{isa:?} {case}");

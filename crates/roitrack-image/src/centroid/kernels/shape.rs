@@ -1,0 +1,202 @@
+//! The second- and third-order moment sums of a component for the shape check ([`crate::symmetry`]), with SSE2:
+//! per row, the sums of `v`, `v i`, `v i²` and `v i³` over a window of up to 4 vectors (32 columns) holding the
+//! component (`_mm_madd_epi16` against the columns' powers), then the rows' powers from running sums of those sums
+//! (4-lane 32-bit vectors, a few additions a row), folded into exact totals at the end of blocks of rows short
+//! enough not to overflow. Integer sums: the same as the portable ones to the bit.
+
+use std::arch::x86_64::*;
+
+use crate::centroid::moments::ShapeSums;
+
+/// Widest window (vectors of 8 columns): the cube of a column, below 32, fits a signed 16-bit lane.
+pub(super) const MAX_VECTORS: usize = 4;
+
+/// Column `i` to the power `p`, for the columns 0 to 31 of a window.
+const fn powers(p: u32) -> [i16; 32] {
+    let mut out = [0i16; 32];
+    let mut i = 0;
+    while i < 32 {
+        out[i] = (i as i16).pow(p);
+        i += 1;
+    }
+    out
+}
+static POWERS: [[i16; 32]; 4] = [powers(0), powers(1), powers(2), powers(3)];
+
+/// Sum of `i^p` for `i` in `0..n` (`p <= 3`).
+fn power_sum(n: u64, p: usize) -> u64 {
+    let m = n.saturating_sub(1);
+    match p {
+        0 => n,
+        1 => n * m / 2,
+        2 => m * n * (2 * n - 1) / 6,
+        _ => (n * m / 2) * (n * m / 2),
+    }
+}
+
+/// `C(n + k - 1, k)`: the weight of a block's first row in its `k`-th running sum (`n` rows).
+fn running_weight(n: u64, k: u64) -> u64 {
+    (0..k).fold(1, |acc, m| acc * (n + m) / (m + 1))
+}
+
+/// Rows of a block whose running sums cannot overflow 32 bits: the largest `b <= rows` with every total below
+/// 2^32 given `v <= vmax` in `vectors` vectors; 0 if not even one row fits.
+fn block_rows(vmax: u64, vectors: usize, rows: u64) -> u64 {
+    let lanes = 8 * vectors as u64;
+    let row: [u64; 4] = std::array::from_fn(|p| vmax * power_sum(lanes, p));
+    // P0 is summed 4 deep, P1 3, P2 2, P3 once.
+    let fits = |b: u64| (0..4).all(|p| running_weight(b, 4 - p as u64) * row[p] < 1 << 32);
+    if fits(rows) {
+        return rows;
+    }
+    let (mut lo, mut hi) = (0, rows);
+    while hi - lo > 1 {
+        let mid = (lo + hi) / 2;
+        if fits(mid) { lo = mid } else { hi = mid }
+    }
+    lo
+}
+
+/// Totals of a block of rows folded into `sums` (relative to the window's first column and the component's first
+/// row); `last_plus_one` the row after the block's last, relative to the component's first row. The running sums
+/// `run` are, in order, P0 to 4 deep, P1 to 3, P2 to 2 and P3 once, `Pp` the rows' sums of `v i^p`.
+#[inline(always)]
+fn fold(sums: &mut [i64; 10], run: &[__m128i; 10], last_plus_one: usize) {
+    let h: [i64; 10] = std::array::from_fn(|k| i64::from(hsum(run[k])));
+    let l = last_plus_one as i64;
+    // The running sums of a block give Σ u^k P, u = last + 1 - y >= 1: Σ u P = b, Σ u² P = 2c - b,
+    // Σ u³ P = 6d - 6c + b; then y = l - u. (Every term stays below 2^51: l <= 64, the sums below 2^32.)
+    let moments = |a: i64, b: i64, c: i64, d: i64| {
+        let (u1, u2, u3) = (b, 2 * c - b, 6 * d - 6 * c + b);
+        (
+            a,
+            l * a - u1,
+            l * l * a - 2 * l * u1 + u2,
+            l * l * l * a - 3 * l * l * u1 + 3 * l * u2 - u3,
+        )
+    };
+    let (s00, s01, s02, s03) = moments(h[0], h[1], h[2], h[3]);
+    let (s10, s11, s12, _) = moments(h[4], h[5], h[6], 0);
+    let (s20, s21, _, _) = moments(h[7], h[8], 0, 0);
+    // Order of `sums`: 00, 10, 01, 20, 11, 02, 30, 21, 12, 03.
+    let block = [s00, s10, s01, s20, s11, s02, h[9], s21, s12, s03];
+    for (total, x) in sums.iter_mut().zip(block) {
+        *total += x;
+    }
+}
+
+/// The sum of the four 32-bit lanes (kept below 2^32 by the blocks).
+#[inline(always)]
+fn hsum(v: __m128i) -> u32 {
+    // SAFETY: SSE2 is part of the x86_64 baseline.
+    unsafe {
+        let v = _mm_add_epi32(v, _mm_shuffle_epi32(v, 0b01_00_11_10));
+        let v = _mm_add_epi32(v, _mm_shuffle_epi32(v, 0b10_11_00_01));
+        _mm_cvtsi128_si32(v) as u32
+    }
+}
+
+/// The sums of `v = value -sat threshold` over the component (rows `lo..=hi`, within columns `s..s + 8 * vectors`),
+/// times `x^p y^q` (p + q <= 3), x from column `s`, y from row `lo`. `comp`: the component's rows (bit i column i),
+/// or `None` when every above-threshold pixel of those rows is the component's. `None` when the values or the window
+/// are too large for 16-bit products (`vmax > 32767`, more than [`MAX_VECTORS`] vectors) or one row's sums for 32
+/// bits.
+#[allow(clippy::too_many_arguments)]
+#[inline]
+pub(super) fn shape_sums(
+    px: &[u16],
+    w: usize,
+    comp: Option<&[u64]>,
+    rows: (usize, usize),
+    s: usize,
+    vectors: usize,
+    threshold: u16,
+    vmax: u16,
+) -> Option<ShapeSums> {
+    if vectors > MAX_VECTORS || vmax > i16::MAX as u16 || s + 8 * vectors > w {
+        return None;
+    }
+    let block = block_rows(u64::from(vmax), vectors, (rows.1 - rows.0 + 1) as u64) as usize;
+    if block == 0 {
+        return None;
+    }
+    macro_rules! window {
+        ($n:literal) => {
+            match comp {
+                Some(comp) => sums_in::<$n, true>(px, w, comp, rows, s, threshold, block),
+                None => sums_in::<$n, false>(px, w, &[], rows, s, threshold, block),
+            }
+        };
+    }
+    Some(match vectors {
+        1 => window!(1),
+        2 => window!(2),
+        3 => window!(3),
+        _ => window!(4),
+    })
+}
+
+/// [`shape_sums`] over `N` vectors, of the pixels of `comp` (`COMP`) or of every above-threshold pixel, in blocks of
+/// `block` rows.
+// Indices, not iterators: a row's index picks its component row and its running position, a vector's its columns.
+#[allow(clippy::needless_range_loop)]
+#[inline(always)]
+fn sums_in<const N: usize, const COMP: bool>(
+    px: &[u16],
+    w: usize,
+    comp: &[u64],
+    (lo, hi): (usize, usize),
+    s: usize,
+    threshold: u16,
+    block: usize,
+) -> ShapeSums {
+    let mut sums = [0i64; 10];
+    assert!(lo <= hi && (hi + 1) * w <= px.len() && s + 8 * N <= w);
+    // SAFETY: SSE2 is part of the x86_64 baseline; every load reads 8 pixels of a row `lo..=hi` inside `px` (checked
+    // above: columns `s..s + 8 N` within `w`) or 8 entries of a 32-entry column table (N <= 4).
+    unsafe {
+        let load = |a: &[i16], k: usize| _mm_loadu_si128(a[8 * k..8 * k + 8].as_ptr().cast());
+        let cols: [[__m128i; N]; 4] =
+            std::array::from_fn(|p| std::array::from_fn(|k| load(&POWERS[p], k)));
+        let t = _mm_set1_epi16(threshold as i16);
+        let lane_bit = _mm_setr_epi16(1, 2, 4, 8, 16, 32, 64, 128);
+        let z = _mm_setzero_si128();
+        let mut run = [z; 10];
+        let mut in_block = 0;
+        let mut row = px.as_ptr().add(lo * w + s);
+        for j in lo..=hi {
+            let (mut p0, mut p1, mut p2, mut p3) = (z, z, z, z);
+            for k in 0..N {
+                let mut v = _mm_subs_epu16(_mm_loadu_si128(row.add(8 * k).cast()), t);
+                if COMP {
+                    let byte = _mm_set1_epi16(((comp[j] >> (s + 8 * k)) & 0xFF) as i16);
+                    let keep = _mm_cmpeq_epi16(_mm_and_si128(byte, lane_bit), lane_bit);
+                    v = _mm_and_si128(v, keep);
+                }
+                p0 = _mm_add_epi32(p0, _mm_madd_epi16(v, cols[0][k]));
+                p1 = _mm_add_epi32(p1, _mm_madd_epi16(v, cols[1][k]));
+                p2 = _mm_add_epi32(p2, _mm_madd_epi16(v, cols[2][k]));
+                p3 = _mm_add_epi32(p3, _mm_madd_epi16(v, cols[3][k]));
+            }
+            row = row.add(w);
+            // Running sums: P0 four deep, P1 three, P2 two, P3 once.
+            run[0] = _mm_add_epi32(run[0], p0);
+            run[1] = _mm_add_epi32(run[1], run[0]);
+            run[2] = _mm_add_epi32(run[2], run[1]);
+            run[3] = _mm_add_epi32(run[3], run[2]);
+            run[4] = _mm_add_epi32(run[4], p1);
+            run[5] = _mm_add_epi32(run[5], run[4]);
+            run[6] = _mm_add_epi32(run[6], run[5]);
+            run[7] = _mm_add_epi32(run[7], p2);
+            run[8] = _mm_add_epi32(run[8], run[7]);
+            run[9] = _mm_add_epi32(run[9], p3);
+            in_block += 1;
+            if in_block == block || j == hi {
+                fold(&mut sums, &run, j + 1 - lo);
+                run = [z; 10];
+                in_block = 0;
+            }
+        }
+    }
+    ShapeSums::from_i64(sums)
+}
