@@ -214,12 +214,15 @@ pub fn detect_photo_blobs(
             let shape = Ellipse::from_moments(cu, cv, c.covariance());
             let light = (polarity == Polarity::Dark).then_some(full_scale);
             let grey = grey_centre(image, w, h, &shape, light, &mut scratch.ring)?;
+            if grey.contrast < min_contrast {
+                return None;
+            }
             let start = nalgebra::Vector2::new(grey.u_px, grey.v_px);
             // The outline's ellipse where it can be fitted (the better centre under uneven light and on real
             // photographs), else the grey-level moments.
             let centre =
                 edge::edge_centre(image, w, h, &shape, start, &mut scratch.edges).unwrap_or(start);
-            (grey.contrast >= min_contrast).then_some(PhotoBlob {
+            Some(PhotoBlob {
                 u_px: centre.x,
                 v_px: centre.y,
                 area_px: std::f64::consts::PI * shape.semi_major_px * shape.semi_minor_px,
