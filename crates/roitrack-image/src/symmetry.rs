@@ -1,8 +1,8 @@
 //! The shape check of a blob's centroid ([`crate::SymmetryCheck`]): is the blob the image of a disk, with nothing
 //! merged with it? Computed from the second- and third-order moments of the component's weights
 //! `v = value - threshold`, summed in one more integer pass over the component's rows (`centroid/kernels/shape.rs`:
-//! a few vector operations a row), then about a hundred floating-point operations, with no square root in the
-//! statistic.
+//! about twenty vector operations a row), then about a hundred floating-point operations: one division and no square
+//! root in the statistic.
 //!
 //! **What it measures.** The image of a disk (an ellipse, blurred by the optics and the pixels, motion-blurred along a
 //! line, clipped where it saturates) is centrally symmetric: its odd central moments vanish. Whitened by its second
@@ -44,35 +44,64 @@
 //! half of its. Blobs of fewer than [`crate::SymmetryCheck::min_area_px`] pixels (30: about 5 px across) are not
 //! tested: their sampling alone skews them as much as a merged spot.
 
+use crate::centroid::SymmetryCheck;
 use crate::centroid::moments::ShapeSums;
 
+/// Whether the component's whitened trefoil or coma exceeds what a clean disk can show (see the module's
+/// documentation): `sums` its [`ShapeSums`], `n` its pixel count, `vmax` its peak above the threshold (DN),
+/// `noise_range` the range of the border pixels that set the background (DN). Degenerate weights (all on a line) are
+/// not tested.
+#[inline(always)]
+pub(crate) fn is_asymmetric(
+    sums: &ShapeSums,
+    n: f64,
+    vmax: f64,
+    noise_range: f64,
+    check: &SymmetryCheck,
+) -> bool {
+    let Some((trefoil_a3, coma_a3, a3)) = trefoil_and_coma_a3(sums) else {
+        return false;
+    };
+    let (per_sampling, noise) = allowances(
+        n,
+        sums.s[0] as i64 as f64,
+        vmax,
+        noise_range,
+        check.noise_sigmas,
+    );
+    let trefoil_max = check.trefoil_sampling * per_sampling + noise;
+    let coma_max = check.coma_sampling * per_sampling + noise;
+    trefoil_a3 > trefoil_max * trefoil_max * a3 || coma_a3 > coma_max * coma_max * a3
+}
+
 /// The squares of the whitened trefoil `|tau|` and coma `|kappa|` of a component (see the module's documentation)
-/// from its [`ShapeSums`], or `None` when its weights are degenerate (no weight, or all on a line).
+/// from its [`ShapeSums`], each times `a³`, and `a³` (`a` its variance along x), all in units where the weight is
+/// `M = Σ v` (so that no division by `M` comes first: the ratios are the same), or `None` when its weights are
+/// degenerate (no weight, or all on a line).
 ///
 /// Whitened by the inverse of the Cholesky factor of the covariance `[[a, b], [b, c]]` (a whitening, like any other
 /// up to a rotation, which leaves `|tau|` and `|kappa|` as they are): `y1 = x / √a`, `y2 = (a y - b x) / √(a D)`,
 /// `D = ac - b²`, x and y from the centroid. With `Q1 = E[x (ay - bx)²]`, `Q2 = E[x² (ay - bx)]`,
 /// `Q3 = E[(ay - bx)³]` (`u` the central moments):
-/// `a³ |tau|² = (u30 - 3 Q1 / D)² + (3 Q2 - Q3 / D)² / D` and `a³ |kappa|² = (u30 + Q1 / D)² + (Q2 + Q3 / D)² / D`:
-/// no square root, two divisions.
-#[inline]
-pub(crate) fn trefoil_and_coma_squared(sums: &ShapeSums) -> Option<(f64, f64)> {
+/// `a³ |tau|² = (u30 - 3 Q1 / D)² + (3 Q2 - Q3 / D)² / D` and `a³ |kappa|² = (u30 + Q1 / D)² + (Q2 + Q3 / D)² / D`.
+/// Both sides are homogeneous in the moments: with the second moments times `M²` and the third times `M³`, one
+/// division (by `D`) and no square root.
+#[inline(always)]
+pub(crate) fn trefoil_and_coma_a3(sums: &ShapeSums) -> Option<(f64, f64, f64)> {
     // Through i64 (the sums are below 2^53): a single instruction, where u64 takes several.
-    let [s00, s10, s01, s20, s11, s02, s30, s21, s12, s03] = sums.s.map(|x| x as i64 as f64);
-    if s00 <= 0.0 {
+    let [m, s10, s01, s20, s11, s02, s30, s21, s12, s03] = sums.s.map(|x| x as i64 as f64);
+    if m <= 0.0 {
         return None;
     }
-    let inv = 1.0 / s00;
-    let (cx, cy) = (s10 * inv, s01 * inv);
-    let (m20, m11, m02) = (s20 * inv, s11 * inv, s02 * inv);
-    // Central moments (per unit weight).
-    let a = m20 - cx * cx;
-    let b = m11 - cx * cy;
-    let c = m02 - cy * cy;
-    let u30 = s30 * inv - cx * (3.0 * m20 - 2.0 * cx * cx);
-    let u03 = s03 * inv - cy * (3.0 * m02 - 2.0 * cy * cy);
-    let u21 = s21 * inv - 2.0 * cx * m11 - cy * (m20 - 2.0 * cx * cx);
-    let u12 = s12 * inv - 2.0 * cy * m11 - cx * (m02 - 2.0 * cy * cy);
+    // Central moments, the second times M², the third times M³.
+    let (mm, x2, y2) = (m * m, s10 * s10, s01 * s01);
+    let a = m * s20 - x2;
+    let b = m * s11 - s10 * s01;
+    let c = m * s02 - y2;
+    let u30 = mm * s30 - s10 * (3.0 * m * s20 - 2.0 * x2);
+    let u03 = mm * s03 - s01 * (3.0 * m * s02 - 2.0 * y2);
+    let u21 = mm * s21 - m * (2.0 * s10 * s11 + s01 * s20) + 2.0 * x2 * s01;
+    let u12 = mm * s12 - m * (2.0 * s01 * s11 + s10 * s02) + 2.0 * y2 * s10;
     let d = a * c - b * b;
     if d.is_nan() || a <= 0.0 || d <= 1e-9 * (a + c) * (a + c) {
         return None;
@@ -82,12 +111,12 @@ pub(crate) fn trefoil_and_coma_squared(sums: &ShapeSums) -> Option<(f64, f64)> {
     let q1 = (aa * u12 - 2.0 * ab * u21 + bb * u30) * inv_d;
     let q2 = a * u21 - b * u30;
     let q3 = (aa * a * u03 - 3.0 * aa * b * u12 + 3.0 * a * bb * u21 - bb * b * u30) * inv_d;
-    let inv_a3 = 1.0 / (aa * a);
     let (re3, im3) = (u30 - 3.0 * q1, 3.0 * q2 - q3);
     let (re1, im1) = (u30 + q1, q2 + q3);
     Some((
-        (re3 * re3 + im3 * im3 * inv_d) * inv_a3,
-        (re1 * re1 + im1 * im1 * inv_d) * inv_a3,
+        re3 * re3 + im3 * im3 * inv_d,
+        re1 * re1 + im1 * im1 * inv_d,
+        aa * a,
     ))
 }
 
@@ -95,7 +124,7 @@ pub(crate) fn trefoil_and_coma_squared(sums: &ShapeSums) -> Option<(f64, f64)> {
 /// coefficient, and the noise's part: `(g(e) / n, noise_sigmas s √n / M)`, `n` the component's pixels, `weight`
 /// `M = Σ v`, `vmax` the peak above the threshold (DN), `noise_range` the range of the background's border pixels
 /// (DN).
-#[inline]
+#[inline(always)]
 pub(crate) fn allowances(
     n: f64,
     weight: f64,
@@ -103,10 +132,16 @@ pub(crate) fn allowances(
     noise_range: f64,
     noise_sigmas: f64,
 ) -> (f64, f64) {
-    let deficit = (1.0 - weight / (vmax * n)).max(0.0);
-    // (1.5 / e)³ = (2.25 / e²)^1.5, e² = deficit² n / π; between 1 and 30.
-    let x = 2.25 * std::f64::consts::PI / (deficit * deficit * n).max(1e-9);
-    let g = (x * x.sqrt()).clamp(1.0, 30.0);
+    let full = vmax * n;
+    let lost = (full - weight).max(0.0);
+    // g = (1.5 / e)³ = (2.25 / e²)^1.5 with e² = (lost / full)² n / π, between 1 and 30: 1 for the usual blurred
+    // edges (tested without a division).
+    let g = if lost * lost * n >= 2.25 * std::f64::consts::PI * full * full {
+        1.0
+    } else {
+        let x = 2.25 * std::f64::consts::PI * full * full / (lost * lost * n).max(1e-300);
+        (x * x.sqrt()).min(30.0)
+    };
     let variance = 0.25 * noise_range * noise_range + 1.0 / 12.0;
     (g / n, noise_sigmas * (variance * n).sqrt() / weight)
 }
@@ -177,9 +212,8 @@ mod tests {
             ((16.2, 14.6), (5.0, 8.0, -1.1), 0.02),
             ((15.5, 15.5), (6.0, 6.0, 0.3), -0.03),
         ] {
-            let tau =
-                trefoil_and_coma_squared(&sums_of(32, &ellipse(32, centre, shape, slope, None)))
-                    .map(|t| t.0);
+            let tau = trefoil_and_coma_a3(&sums_of(32, &ellipse(32, centre, shape, slope, None)))
+                .map(|(t, _, a3)| t / a3);
             // Pixel sampling of the steep edge leaves about 0.01.
             assert!(tau.unwrap().sqrt() < 0.02, "{shape:?} {slope}: {tau:?}");
         }
@@ -204,10 +238,8 @@ mod tests {
                 / m
         };
         let delta = moved(&spotted, m1) - moved(&clean, m0);
-        let tau = trefoil_and_coma_squared(&sums_of(32, &spotted))
-            .unwrap()
-            .0
-            .sqrt();
+        let (t, _, a3) = trefoil_and_coma_a3(&sums_of(32, &spotted)).unwrap();
+        let tau = (t / a3).sqrt();
         // The spot moved the centroid by about 0.1 px and shows as (delta / sigma) (d / sigma)², sigma about 3.6 px.
         assert!(delta > 0.05, "{delta}");
         let sigma = 3.6;
@@ -220,13 +252,13 @@ mod tests {
 
     #[test]
     fn degenerate_weights_have_no_trefoil() {
-        assert_eq!(trefoil_and_coma_squared(&ShapeSums::default()), None);
+        assert_eq!(trefoil_and_coma_a3(&ShapeSums::default()), None);
         // A line.
         let mut line = vec![0.0; 64];
         for k in 0..8 {
             line[k * 8 + k] = 10.0;
         }
-        assert_eq!(trefoil_and_coma_squared(&sums_of(8, &line)), None);
+        assert_eq!(trefoil_and_coma_a3(&sums_of(8, &line)), None);
     }
 
     #[test]

@@ -107,36 +107,18 @@ impl ShapeSums {
             s: s.map(|x| x as u64),
         }
     }
-
-    /// The same sums with the origin moved `dx` columns right (the pixels stay right of it).
-    pub(super) fn shifted(&self, dx: u64) -> Self {
-        // Every term stays below 2^53: the sums of the d-th power are below 2^32 * 64^(3-d) * 4096, times d^k.
-        let [s00, s10, s01, s20, s11, s02, s30, s21, s12, s03] = self.s.map(|x| x as i64);
-        let d = dx as i64;
-        Self::from_i64([
-            s00,
-            s10 - d * s00,
-            s01,
-            s20 - 2 * d * s10 + d * d * s00,
-            s11 - d * s01,
-            s02,
-            s30 - 3 * d * s20 + 3 * d * d * s10 - d * d * d * s00,
-            s21 - 2 * d * s11 + d * d * s01,
-            s12 - d * s02,
-            s03,
-        ])
-    }
 }
 
-/// The [`ShapeSums`] of the component of rows `lo..=hi` and columns `first..=last`, x from `first`, y from `lo`, a
-/// pixel at a time: of the pixels of `comp` (bit i column i), or with `None` of every above-threshold pixel of those
-/// rows and columns (a simple component's).
+/// The [`ShapeSums`] of the component of rows `lo..=hi` and columns `first..=last`, x from column `origin`
+/// (`<= first`), y from row `lo`, a pixel at a time: of the pixels of `comp` (bit i column i), or with `None` of every
+/// above-threshold pixel of those rows and columns (a simple component's).
 pub(super) fn scalar_shape_sums(
     pixels: &[u16],
     w: usize,
     comp: Option<&[u64]>,
     (lo, hi): (usize, usize),
     (first, last): (usize, usize),
+    origin: usize,
     threshold: u16,
 ) -> ShapeSums {
     let mut s = [0u64; 10];
@@ -145,7 +127,7 @@ pub(super) fn scalar_shape_sums(
         let bits = comp.map_or(u64::MAX, |c| c[j]);
         for i in first..=last {
             let v = u64::from(pixels[j * w + i].saturating_sub(threshold)) * ((bits >> i) & 1);
-            let x = (i - first) as u64;
+            let x = (i - origin) as u64;
             let (vx, vy) = (v * x, v * y);
             s[0] += v;
             s[1] += vx;

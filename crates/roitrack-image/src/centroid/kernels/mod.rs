@@ -165,10 +165,11 @@ pub(super) fn window_moments(
     None
 }
 
-/// The [`ShapeSums`] of the component of rows `rows` and columns `cols` (their union), x from its first column, y
-/// from its first row: of the pixels of `comp`, or with `None` of every above-threshold pixel of those rows (a simple
-/// component's). With SSE2 over a window of up to 4 vectors holding its columns (see `shape.rs`) where the ROI, the
-/// component and its values allow, else a pixel at a time; the same integers either way.
+/// The [`ShapeSums`] of the component of rows `rows` and columns `cols` (their union), y from its first row, x from
+/// the first column of the window of 8-pixel vectors that holds its columns (from its first column where the ROI is
+/// too narrow for the window): of the pixels of `comp`, or with `None` of every above-threshold pixel of those rows (a
+/// simple component's). With SSE2 over that window (see `shape.rs`) where the component's values allow, else a pixel
+/// at a time; the same integers either way.
 #[inline]
 pub(super) fn shape_sums(
     isa: Isa,
@@ -181,21 +182,23 @@ pub(super) fn shape_sums(
 ) -> ShapeSums {
     let first = cols.trailing_zeros() as usize;
     let last = 63 - cols.leading_zeros() as usize;
+    let vectors = (last - first) / 8 + 1;
+    let origin = if 8 * vectors <= w {
+        first.min(w - 8 * vectors)
+    } else {
+        first
+    };
     #[cfg(target_arch = "x86_64")]
-    if isa != Isa::Portable {
-        let vectors = (last - first) / 8 + 1;
-        if 8 * vectors <= w {
-            let s = first.min(w - 8 * vectors);
-            let vmax = peak - threshold;
-            if let Some(sums) =
-                shape::shape_sums(pixels, w, comp, rows, s, vectors, threshold, vmax)
-            {
-                return sums.shifted((first - s) as u64);
-            }
+    if isa != Isa::Portable && 8 * vectors <= w {
+        let vmax = peak - threshold;
+        if let Some(sums) =
+            shape::shape_sums(pixels, w, comp, rows, origin, vectors, threshold, vmax)
+        {
+            return sums;
         }
     }
     let _ = (isa, peak);
-    scalar_shape_sums(pixels, w, comp, rows, (first, last), threshold)
+    scalar_shape_sums(pixels, w, comp, rows, (first, last), origin, threshold)
 }
 
 /// The seed's component (its moments, first and last rows and union of columns) when it is simple, found and
@@ -261,6 +264,16 @@ mod tests {
     use crate::centroid::component::{grow_component, simple_rows};
     use crate::centroid::moments::scalar_moments;
     use crate::centroid::test_rois::{Scene, synthetic};
+
+    /// The origin of [`shape_sums`]'s x for a component of columns `first..=last`.
+    fn shape_origin(first: usize, last: usize, w: usize) -> usize {
+        let vectors = (last - first) / 8 + 1;
+        if 8 * vectors <= w {
+            first.min(w - 8 * vectors)
+        } else {
+            first
+        }
+    }
 
     /// The instruction sets the CPU runs, but the portable one.
     fn vector_isas() -> Vec<Isa> {
@@ -344,8 +357,9 @@ mod tests {
             if let Some((_, (lo, hi), union)) = walked {
                 let first = union.trailing_zeros() as usize;
                 let last = 63 - union.leading_zeros() as usize;
+                let origin = shape_origin(first, last, w);
                 let expected =
-                    scalar_shape_sums(pixels, w, None, (lo, hi), (first, last), threshold);
+                    scalar_shape_sums(pixels, w, None, (lo, hi), (first, last), origin, threshold);
                 for &isa in isas {
                     let found = shape_sums(isa, pixels, w, None, (lo, hi), union, levels);
                     assert_eq!(found, expected, "{isa:?} {case}");
@@ -362,8 +376,16 @@ mod tests {
                 cols.trailing_zeros() as usize,
                 63 - cols.leading_zeros() as usize,
             );
-            let expected =
-                scalar_shape_sums(pixels, w, Some(&comp), (lo, hi), (first, last), threshold);
+            let origin = shape_origin(first, last, w);
+            let expected = scalar_shape_sums(
+                pixels,
+                w,
+                Some(&comp),
+                (lo, hi),
+                (first, last),
+                origin,
+                threshold,
+            );
             for &isa in isas {
                 let found = shape_sums(isa, pixels, w, Some(&comp), (lo, hi), cols, levels);
                 assert_eq!(found, expected, "{isa:?} {case}");

@@ -1,14 +1,19 @@
-//! The second- and third-order moment sums of a component for the shape check ([`crate::symmetry`]), with SSE2:
-//! per row, the sums of `v`, `v i`, `v i²` and `v i³` over a window of up to 4 vectors (32 columns) holding the
-//! component (`_mm_madd_epi16` against the columns' powers), then the rows' powers from running sums of those sums
-//! (4-lane 32-bit vectors, a few additions a row), folded into exact totals at the end of blocks of rows short
-//! enough not to overflow. Integer sums: the same as the portable ones to the bit.
+//! The second- and third-order moment sums of a component for the shape check ([`crate::symmetry`]), with SSE2, over
+//! a window of up to 4 vectors (32 columns) holding the component, `v = value -sat threshold` a row at a time:
+//!
+//! - per row, the sums `P0 = Σ v` and `P1 = Σ v i` (`_mm_madd_epi16` against the columns' powers, into 32-bit lanes),
+//!   and running sums of them (P0 four deep, P1 three), whence `Σ y^q P0` (q <= 3) and `Σ y^q P1` (q <= 2);
+//! - per column, in 16-bit lanes, `A = Σ v` and its running sum `B` (one addition each a vector a row), whence
+//!   `Σ i² A`, `Σ i³ A` and `Σ i² B` at the end: the sums of `v i²`, `v i³` and `v i² y`.
+//!
+//! All are folded into exact totals at the end of blocks of rows short enough for no lane to overflow. Integer sums:
+//! the same as the portable ones to the bit.
 
 use std::arch::x86_64::*;
 
 use crate::centroid::moments::ShapeSums;
 
-/// Widest window (vectors of 8 columns): the cube of a column, below 32, fits a signed 16-bit lane.
+/// Widest window (vectors of 8 columns): the cube of a column, below 32, fits a 16-bit lane.
 pub(super) const MAX_VECTORS: usize = 4;
 
 /// Column `i` to the power `p`, for the columns 0 to 31 of a window.
@@ -34,18 +39,29 @@ fn power_sum(n: u64, p: usize) -> u64 {
     }
 }
 
-/// `C(n + k - 1, k)`: the weight of a block's first row in its `k`-th running sum (`n` rows).
-fn running_weight(n: u64, k: u64) -> u64 {
-    (0..k).fold(1, |acc, m| acc * (n + m) / (m + 1))
+/// `C(n + k - 1, k)` (`1 <= k <= 4`): the largest weight of a row in the `k`-th running sum over `n` rows.
+fn running_weight(n: u64, k: usize) -> u64 {
+    match k {
+        1 => n,
+        2 => n * (n + 1) / 2,
+        3 => n * (n + 1) * (n + 2) / 6,
+        _ => n * (n + 1) * (n + 2) * (n + 3) / 24,
+    }
 }
 
-/// Rows of a block whose running sums cannot overflow 32 bits: the largest `b <= rows` with every total below
-/// 2^32 given `v <= vmax` in `vectors` vectors; 0 if not even one row fits.
+/// Rows of a block that no sum can overflow in: the largest `b <= rows` with the 32-bit totals below 2^32 and the
+/// 16-bit column sums below 2^16, given `v <= vmax` in `vectors` vectors; 0 if not even one row fits.
 fn block_rows(vmax: u64, vectors: usize, rows: u64) -> u64 {
     let lanes = 8 * vectors as u64;
     let row: [u64; 4] = std::array::from_fn(|p| vmax * power_sum(lanes, p));
-    // P0 is summed 4 deep, P1 3, P2 2, P3 once.
-    let fits = |b: u64| (0..4).all(|p| running_weight(b, 4 - p as u64) * row[p] < 1 << 32);
+    let fits = |b: u64| {
+        let (once, twice) = (running_weight(b, 1), running_weight(b, 2));
+        running_weight(b, 4) * row[0] < 1 << 32
+            && running_weight(b, 3) * row[1] < 1 << 32
+            && twice * vmax < 1 << 16
+            && once * row[3] < 1 << 32
+            && twice * row[2] < 1 << 32
+    };
     if fits(rows) {
         return rows;
     }
@@ -57,34 +73,6 @@ fn block_rows(vmax: u64, vectors: usize, rows: u64) -> u64 {
     lo
 }
 
-/// Totals of a block of rows folded into `sums` (relative to the window's first column and the component's first
-/// row); `last_plus_one` the row after the block's last, relative to the component's first row. The running sums
-/// `run` are, in order, P0 to 4 deep, P1 to 3, P2 to 2 and P3 once, `Pp` the rows' sums of `v i^p`.
-#[inline(always)]
-fn fold(sums: &mut [i64; 10], run: &[__m128i; 10], last_plus_one: usize) {
-    let h: [i64; 10] = std::array::from_fn(|k| i64::from(hsum(run[k])));
-    let l = last_plus_one as i64;
-    // The running sums of a block give Σ u^k P, u = last + 1 - y >= 1: Σ u P = b, Σ u² P = 2c - b,
-    // Σ u³ P = 6d - 6c + b; then y = l - u. (Every term stays below 2^51: l <= 64, the sums below 2^32.)
-    let moments = |a: i64, b: i64, c: i64, d: i64| {
-        let (u1, u2, u3) = (b, 2 * c - b, 6 * d - 6 * c + b);
-        (
-            a,
-            l * a - u1,
-            l * l * a - 2 * l * u1 + u2,
-            l * l * l * a - 3 * l * l * u1 + 3 * l * u2 - u3,
-        )
-    };
-    let (s00, s01, s02, s03) = moments(h[0], h[1], h[2], h[3]);
-    let (s10, s11, s12, _) = moments(h[4], h[5], h[6], 0);
-    let (s20, s21, _, _) = moments(h[7], h[8], 0, 0);
-    // Order of `sums`: 00, 10, 01, 20, 11, 02, 30, 21, 12, 03.
-    let block = [s00, s10, s01, s20, s11, s02, h[9], s21, s12, s03];
-    for (total, x) in sums.iter_mut().zip(block) {
-        *total += x;
-    }
-}
-
 /// The sum of the four 32-bit lanes (kept below 2^32 by the blocks).
 #[inline(always)]
 fn hsum(v: __m128i) -> u32 {
@@ -93,6 +81,17 @@ fn hsum(v: __m128i) -> u32 {
         let v = _mm_add_epi32(v, _mm_shuffle_epi32(v, 0b01_00_11_10));
         let v = _mm_add_epi32(v, _mm_shuffle_epi32(v, 0b10_11_00_01));
         _mm_cvtsi128_si32(v) as u32
+    }
+}
+
+/// `acc` plus the products of the unsigned 16-bit lanes of `a` and `w`, in 32-bit lanes.
+#[inline(always)]
+fn add_products(acc: __m128i, a: __m128i, w: __m128i) -> __m128i {
+    // SAFETY: SSE2 is part of the x86_64 baseline.
+    unsafe {
+        let (lo, hi) = (_mm_mullo_epi16(a, w), _mm_mulhi_epu16(a, w));
+        let products = _mm_add_epi32(_mm_unpacklo_epi16(lo, hi), _mm_unpackhi_epi16(lo, hi));
+        _mm_add_epi32(acc, products)
     }
 }
 
@@ -150,6 +149,7 @@ fn sums_in<const N: usize, const COMP: bool>(
     threshold: u16,
     block: usize,
 ) -> ShapeSums {
+    // Order of `sums`: 00, 10, 01, 20, 11, 02, 30, 21, 12, 03.
     let mut sums = [0i64; 10];
     assert!(lo <= hi && (hi + 1) * w <= px.len() && s + 8 * N <= w);
     // SAFETY: SSE2 is part of the x86_64 baseline; every load reads 8 pixels of a row `lo..=hi` inside `px` (checked
@@ -161,11 +161,13 @@ fn sums_in<const N: usize, const COMP: bool>(
         let t = _mm_set1_epi16(threshold as i16);
         let lane_bit = _mm_setr_epi16(1, 2, 4, 8, 16, 32, 64, 128);
         let z = _mm_setzero_si128();
-        let mut run = [z; 10];
+        // Running sums of P0 (four deep) and P1 (three deep); per column, A and B.
+        let mut run = [z; 7];
+        let (mut col_a, mut col_b) = ([z; N], [z; N]);
         let mut in_block = 0;
         let mut row = px.as_ptr().add(lo * w + s);
         for j in lo..=hi {
-            let (mut p0, mut p1, mut p2, mut p3) = (z, z, z, z);
+            let (mut p0, mut p1) = (z, z);
             for k in 0..N {
                 let mut v = _mm_subs_epu16(_mm_loadu_si128(row.add(8 * k).cast()), t);
                 if COMP {
@@ -175,11 +177,10 @@ fn sums_in<const N: usize, const COMP: bool>(
                 }
                 p0 = _mm_add_epi32(p0, _mm_madd_epi16(v, cols[0][k]));
                 p1 = _mm_add_epi32(p1, _mm_madd_epi16(v, cols[1][k]));
-                p2 = _mm_add_epi32(p2, _mm_madd_epi16(v, cols[2][k]));
-                p3 = _mm_add_epi32(p3, _mm_madd_epi16(v, cols[3][k]));
+                col_a[k] = _mm_add_epi16(col_a[k], v);
+                col_b[k] = _mm_add_epi16(col_b[k], col_a[k]);
             }
             row = row.add(w);
-            // Running sums: P0 four deep, P1 three, P2 two, P3 once.
             run[0] = _mm_add_epi32(run[0], p0);
             run[1] = _mm_add_epi32(run[1], run[0]);
             run[2] = _mm_add_epi32(run[2], run[1]);
@@ -187,16 +188,55 @@ fn sums_in<const N: usize, const COMP: bool>(
             run[4] = _mm_add_epi32(run[4], p1);
             run[5] = _mm_add_epi32(run[5], run[4]);
             run[6] = _mm_add_epi32(run[6], run[5]);
-            run[7] = _mm_add_epi32(run[7], p2);
-            run[8] = _mm_add_epi32(run[8], run[7]);
-            run[9] = _mm_add_epi32(run[9], p3);
             in_block += 1;
             if in_block == block || j == hi {
-                fold(&mut sums, &run, j + 1 - lo);
-                run = [z; 10];
+                // The columns' sums weighted by the columns' powers.
+                let (mut a2, mut a3, mut b2) = (z, z, z);
+                for k in 0..N {
+                    a2 = add_products(a2, col_a[k], cols[2][k]);
+                    a3 = add_products(a3, col_a[k], cols[3][k]);
+                    b2 = add_products(b2, col_b[k], cols[2][k]);
+                }
+                let h: [i64; 7] = std::array::from_fn(|k| i64::from(hsum(run[k])));
+                let (a2, a3, b2) = (hsum(a2), hsum(a3), hsum(b2));
+                fold(
+                    &mut sums,
+                    h,
+                    [a2, a3, b2].map(i64::from),
+                    (j + 1 - lo) as i64,
+                );
+                run = [z; 7];
+                col_a = [z; N];
+                col_b = [z; N];
                 in_block = 0;
             }
         }
     }
     ShapeSums::from_i64(sums)
+}
+
+/// Folds a block's totals into `sums`: `run` the running sums of P0 (four deep) and P1 (three deep), `cols` the sums
+/// `Σ i² A`, `Σ i³ A` and `Σ i² B` of the columns' sums; `l` the row after the block's last, relative to the
+/// component's first row. (Every term stays below 2^51: `l <= 64`, the totals below 2^32.)
+#[inline(always)]
+fn fold(sums: &mut [i64; 10], run: [i64; 7], [a2, a3, b2]: [i64; 3], l: i64) {
+    // Running sums give Σ u^k P with u = last + 1 - y >= 1: Σ u P = b, Σ u² P = 2c - b, Σ u³ P = 6d - 6c + b; then
+    // y = l - u.
+    let moments = |a: i64, b: i64, c: i64, d: i64| {
+        let (u1, u2, u3) = (b, 2 * c - b, 6 * d - 6 * c + b);
+        (
+            a,
+            l * a - u1,
+            l * l * a - 2 * l * u1 + u2,
+            l * l * l * a - 3 * l * l * u1 + 3 * l * u2 - u3,
+        )
+    };
+    let (s00, s01, s02, s03) = moments(run[0], run[1], run[2], run[3]);
+    let (s10, s11, s12, _) = moments(run[4], run[5], run[6], 0);
+    // B is the running sum of A down the block: Σ i² B = Σ u v i².
+    let s21 = l * a2 - b2;
+    let block = [s00, s10, s01, a2, s11, s02, a3, s21, s12, s03];
+    for (total, x) in sums.iter_mut().zip(block) {
+        *total += x;
+    }
 }
