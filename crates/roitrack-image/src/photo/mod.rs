@@ -58,7 +58,8 @@ pub struct PhotoBlobOptions {
     pub min_inertia_ratio: f64,
     /// Bounds of the area over the area of the ellipse with the same second moments (1 for an ellipse).
     pub ellipse_fill_range: (f64, f64),
-    /// Most horizontal runs per row (1 for a convex shape; pixel noise on the outline adds a few).
+    /// Most horizontal runs per row (1 for a convex shape; noise on the outline of a faint blob, found at few levels,
+    /// breaks it into more: 2 keeps such blobs, and rings and crosses still fail the ellipse fill).
     pub max_runs_per_row: f64,
     /// Number of threshold levels between the image's dark and bright ends.
     pub levels: usize,
@@ -76,7 +77,7 @@ impl Default for PhotoBlobOptions {
             max_area_fraction: 0.25,
             min_inertia_ratio: 0.04,
             ellipse_fill_range: (0.8, 1.15),
-            max_runs_per_row: 1.25,
+            max_runs_per_row: 2.0,
             levels: 8,
             min_levels: 2,
             min_contrast_fraction: 0.08,

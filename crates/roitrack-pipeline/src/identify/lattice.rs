@@ -83,11 +83,7 @@ impl TargetLattice {
             }
             *slot = Some(k as u32);
         }
-        Some(Self {
-            lo,
-            hi,
-            cell,
-        })
+        Some(Self { lo, hi, cell })
     }
 
     /// The point at lattice coordinates (i, j).
@@ -216,12 +212,13 @@ fn unimodular_maps() -> Vec<[i32; 4]> {
     maps
 }
 
-/// Every (map, shift) that lays at least `min_fraction` of the grown nodes on target points: the correspondences
-/// (target point, blob) of each.
+/// Every (map, shift) that lays at least `min_fraction` of the grown nodes on target points, the nodes' box sticking
+/// out of the target's by at most `slack` lattice steps: the correspondences (target point, blob) of each.
 pub(crate) fn placements(
     lattice: &TargetLattice,
     grown: &GrownLattice,
     min_fraction: f64,
+    slack: i32,
 ) -> Vec<Vec<(usize, usize)>> {
     let nodes = &grown.nodes;
     let allowed_misses = ((1.0 - min_fraction) * nodes.len() as f64).floor() as usize;
@@ -237,8 +234,7 @@ pub(crate) fn placements(
         let hi = mapped
             .iter()
             .fold((i32::MIN, i32::MIN), |h, c| (h.0.max(c.0), h.1.max(c.1)));
-        // Shifts that keep the nodes' box within the target's, give or take the misses allowed.
-        let slack = allowed_misses.min(3) as i32;
+        // Shifts that keep the nodes' box within the target's, give or take the slack.
         for ti in (lattice.lo.0 - lo.0 - slack)..=(lattice.hi.0 - hi.0 + slack) {
             'shift: for tj in (lattice.lo.1 - lo.1 - slack)..=(lattice.hi.1 - hi.1 + slack) {
                 let mut pairs = Vec::with_capacity(nodes.len());
@@ -331,7 +327,7 @@ mod tests {
             .map(|k| Vector2::new(f64::from(k % 7), f64::from(k / 7)))
             .collect();
         let lattice = TargetLattice::of(&target).unwrap();
-        let placed = placements(&lattice, &grown, 0.95);
+        let placed = placements(&lattice, &grown, 0.95, 1);
         // The identity and the half turn lay every node on the target.
         assert!(placed.iter().any(|pairs| pairs.iter().all(|&(p, b)| {
             let k = if p >= 17 { p - 1 } else { p };
