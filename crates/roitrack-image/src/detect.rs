@@ -61,22 +61,8 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 /// Background (DN), integer threshold and weight origin (DN) of a full frame; `None` if nothing stands out.
 fn frame_levels(pixels: &[u16], threshold: Threshold) -> Option<(f64, u16, f64)> {
     let peak = pixels.iter().copied().max()?;
-    let mut histogram = vec![0u32; usize::from(peak) + 1];
-    for &p in pixels {
-        histogram[usize::from(p)] += 1;
-    }
-    // Smallest value with at least `fraction` of the pixels at or below it.
-    let percentile = |fraction: f64| {
-        let rank = (fraction * pixels.len() as f64).ceil().max(1.0) as u64;
-        let mut seen = 0u64;
-        histogram
-            .iter()
-            .position(|&c| {
-                seen += u64::from(c);
-                seen >= rank
-            })
-            .unwrap_or(0) as f64
-    };
+    let histogram = crate::histogram::Histogram::of(pixels, peak);
+    let percentile = |fraction: f64| f64::from(histogram.percentile(fraction));
     let background = percentile(0.5);
     match threshold {
         Threshold::Fixed(t) => (peak > t).then_some((background, t, f64::from(t))),

@@ -27,6 +27,7 @@ pub mod camera;
 pub mod centroid;
 pub mod detect;
 pub mod frame;
+mod histogram;
 pub mod measure;
 pub mod photo;
 pub mod reflection;

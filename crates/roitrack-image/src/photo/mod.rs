@@ -185,7 +185,8 @@ pub fn detect_photo_blobs(
         }
     };
     // The top of the range is the brightest pixel: small blobs can be far fewer than 1 % of the pixels.
-    let (low, high) = percentiles(image, full_scale, 0.01, 1.0);
+    let histogram = crate::histogram::Histogram::of(image, full_scale);
+    let (low, high) = (histogram.percentile(0.01), histogram.percentile(1.0));
     let range = f64::from(high.saturating_sub(low));
     if range < 4.0 {
         return Vec::new();
@@ -237,26 +238,6 @@ pub fn detect_photo_blobs(
         .collect();
     blobs.sort_by(|a, b| b.contrast.total_cmp(&a.contrast));
     blobs
-}
-
-/// The values below which fractions `lo` and `hi` of the pixels lie.
-fn percentiles(image: &[u16], full_scale: u16, lo: f64, hi: f64) -> (u16, u16) {
-    let mut histogram = vec![0u32; usize::from(full_scale) + 1];
-    for &p in image {
-        histogram[usize::from(p.min(full_scale))] += 1;
-    }
-    let at = |fraction: f64| {
-        let rank = (fraction * image.len() as f64).ceil().max(1.0) as u64;
-        let mut seen = 0u64;
-        histogram
-            .iter()
-            .position(|&c| {
-                seen += u64::from(c);
-                seen >= rank
-            })
-            .unwrap_or(0) as u16
-    };
-    (at(lo), at(hi))
 }
 
 fn passes_shape(c: &Component, options: &PhotoBlobOptions, max_area: f64) -> bool {

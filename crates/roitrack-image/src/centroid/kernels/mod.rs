@@ -191,9 +191,10 @@ pub(super) fn shape_sums(
     #[cfg(target_arch = "x86_64")]
     if isa != Isa::Portable && 8 * vectors <= w {
         let vmax = peak - threshold;
-        if let Some(sums) =
-            shape::shape_sums(pixels, w, comp, rows, origin, vectors, threshold, vmax)
-        {
+        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        if let Some(sums) = shape::shape_sums(
+            pixels, w, comp, rows, origin, vectors, threshold, vmax, avx2,
+        ) {
             return sums;
         }
     }

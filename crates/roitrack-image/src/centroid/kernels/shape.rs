@@ -6,8 +6,9 @@
 //! - per column, in 16-bit lanes, `A = Σ v` and its running sum `B` (one addition each a vector a row), whence
 //!   `Σ i² A`, `Σ i³ A` and `Σ i² B` at the end: the sums of `v i²`, `v i³` and `v i² y`.
 //!
-//! All are folded into exact totals at the end of blocks of rows short enough for no lane to overflow. Integer sums:
-//! the same as the portable ones to the bit.
+//! All are folded into exact totals at the end of blocks of rows short enough for no lane to overflow. Where the CPU
+//! has AVX2 and the window is an even number of 8-pixel vectors, the same in 16-pixel vectors. Integer sums: the same
+//! as the portable ones to the bit, whichever instructions.
 
 use std::arch::x86_64::*;
 
@@ -99,7 +100,7 @@ fn add_products(acc: __m128i, a: __m128i, w: __m128i) -> __m128i {
 /// times `x^p y^q` (p + q <= 3), x from column `s`, y from row `lo`. `comp`: the component's rows (bit i column i),
 /// or `None` when every above-threshold pixel of those rows is the component's. `None` when the values or the window
 /// are too large for 16-bit products (`vmax > 32767`, more than [`MAX_VECTORS`] vectors) or one row's sums for 32
-/// bits.
+/// bits. With `avx2` (only where the CPU has it), 16-pixel vectors where `vectors` is even.
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub(super) fn shape_sums(
@@ -111,6 +112,7 @@ pub(super) fn shape_sums(
     vectors: usize,
     threshold: u16,
     vmax: u16,
+    avx2: bool,
 ) -> Option<ShapeSums> {
     if vectors > MAX_VECTORS || vmax > i16::MAX as u16 || s + 8 * vectors > w {
         return None;
@@ -118,6 +120,23 @@ pub(super) fn shape_sums(
     let block = block_rows(u64::from(vmax), vectors, (rows.1 - rows.0 + 1) as u64) as usize;
     if block == 0 {
         return None;
+    }
+    if avx2 && vectors % 2 == 0 {
+        assert!(std::arch::is_x86_feature_detected!("avx2"));
+        macro_rules! wide {
+            ($m:literal) => {
+                // SAFETY: the CPU has AVX2 (checked above).
+                unsafe {
+                    match comp {
+                        Some(comp) => {
+                            sums_in_avx2::<$m, true>(px, w, comp, rows, s, threshold, block)
+                        }
+                        None => sums_in_avx2::<$m, false>(px, w, &[], rows, s, threshold, block),
+                    }
+                }
+            };
+        }
+        return Some(if vectors == 2 { wide!(1) } else { wide!(2) });
     }
     macro_rules! window {
         ($n:literal) => {
@@ -210,6 +229,107 @@ fn sums_in<const N: usize, const COMP: bool>(
                 col_b = [z; N];
                 in_block = 0;
             }
+        }
+    }
+    ShapeSums::from_i64(sums)
+}
+
+/// [`sums_in`] with AVX2, over `M` vectors of 16 pixels.
+// Indices, not iterators: as `sums_in`.
+#[allow(clippy::needless_range_loop)]
+#[target_feature(enable = "avx2")]
+fn sums_in_avx2<const M: usize, const COMP: bool>(
+    px: &[u16],
+    w: usize,
+    comp: &[u64],
+    (lo, hi): (usize, usize),
+    s: usize,
+    threshold: u16,
+    block: usize,
+) -> ShapeSums {
+    let mut sums = [0i64; 10];
+    assert!(lo <= hi && (hi + 1) * w <= px.len() && s + 16 * M <= w && M <= 2);
+    let load = |a: &[i16], m: usize| {
+        let a: &[i16; 16] = a[16 * m..16 * m + 16].try_into().expect("16 entries");
+        // SAFETY: `a` is 32 readable bytes; `_mm256_loadu_si256` reads 32 bytes at any alignment.
+        unsafe { _mm256_loadu_si256(a.as_ptr().cast()) }
+    };
+    let cols: [[__m256i; M]; 4] =
+        std::array::from_fn(|p| std::array::from_fn(|m| load(&POWERS[p], m)));
+    let t = _mm256_set1_epi16(threshold as i16);
+    let lane_bit = _mm256_setr_epi16(
+        1,
+        2,
+        4,
+        8,
+        16,
+        32,
+        64,
+        128,
+        256,
+        512,
+        1024,
+        2048,
+        4096,
+        8192,
+        16384,
+        i16::MIN,
+    );
+    let z = _mm256_setzero_si256();
+    let mut run = [z; 7];
+    let (mut col_a, mut col_b) = ([z; M], [z; M]);
+    let mut in_block = 0;
+    for j in lo..=hi {
+        let row: &[u16] = &px[j * w + s..j * w + s + 16 * M];
+        let (mut p0, mut p1) = (z, z);
+        for m in 0..M {
+            // SAFETY: 16 pixels of `row` (16 M long) from 16 m: 32 readable bytes.
+            let pixels = unsafe { _mm256_loadu_si256(row[16 * m..].as_ptr().cast()) };
+            let mut v = _mm256_subs_epu16(pixels, t);
+            if COMP {
+                let bits = _mm256_set1_epi16(((comp[j] >> (s + 16 * m)) & 0xFFFF) as u16 as i16);
+                let keep = _mm256_cmpeq_epi16(_mm256_and_si256(bits, lane_bit), lane_bit);
+                v = _mm256_and_si256(v, keep);
+            }
+            p0 = _mm256_add_epi32(p0, _mm256_madd_epi16(v, cols[0][m]));
+            p1 = _mm256_add_epi32(p1, _mm256_madd_epi16(v, cols[1][m]));
+            col_a[m] = _mm256_add_epi16(col_a[m], v);
+            col_b[m] = _mm256_add_epi16(col_b[m], col_a[m]);
+        }
+        run[0] = _mm256_add_epi32(run[0], p0);
+        run[1] = _mm256_add_epi32(run[1], run[0]);
+        run[2] = _mm256_add_epi32(run[2], run[1]);
+        run[3] = _mm256_add_epi32(run[3], run[2]);
+        run[4] = _mm256_add_epi32(run[4], p1);
+        run[5] = _mm256_add_epi32(run[5], run[4]);
+        run[6] = _mm256_add_epi32(run[6], run[5]);
+        in_block += 1;
+        if in_block == block || j == hi {
+            let products = |acc: __m256i, a: __m256i, w: __m256i| {
+                let (lo, hi) = (_mm256_mullo_epi16(a, w), _mm256_mulhi_epu16(a, w));
+                let p =
+                    _mm256_add_epi32(_mm256_unpacklo_epi16(lo, hi), _mm256_unpackhi_epi16(lo, hi));
+                _mm256_add_epi32(acc, p)
+            };
+            let (mut a2, mut a3, mut b2) = (z, z, z);
+            for m in 0..M {
+                a2 = products(a2, col_a[m], cols[2][m]);
+                a3 = products(a3, col_a[m], cols[3][m]);
+                b2 = products(b2, col_b[m], cols[2][m]);
+            }
+            let hsum256 = |v: __m256i| {
+                hsum(_mm_add_epi32(
+                    _mm256_castsi256_si128(v),
+                    _mm256_extracti128_si256(v, 1),
+                ))
+            };
+            let h: [i64; 7] = std::array::from_fn(|k| i64::from(hsum256(run[k])));
+            let cols_sums = [hsum256(a2), hsum256(a3), hsum256(b2)].map(i64::from);
+            fold(&mut sums, h, cols_sums, (j + 1 - lo) as i64);
+            run = [z; 7];
+            col_a = [z; M];
+            col_b = [z; M];
+            in_block = 0;
         }
     }
     ShapeSums::from_i64(sums)

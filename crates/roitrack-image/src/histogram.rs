@@ -1,0 +1,50 @@
+//! Histograms of pixel values, for the percentiles that set a frame's levels.
+
+/// Counts of each pixel value of an image.
+#[derive(Debug, Clone)]
+pub(crate) struct Histogram {
+    counts: Vec<u32>,
+    total: u64,
+}
+
+impl Histogram {
+    /// The histogram of `pixels`, values above `top` counted as `top`.
+    pub fn of(pixels: &[u16], top: u16) -> Self {
+        let mut counts = vec![0u32; usize::from(top) + 1];
+        for &p in pixels {
+            counts[usize::from(p.min(top))] += 1;
+        }
+        Self {
+            counts,
+            total: pixels.len() as u64,
+        }
+    }
+
+    /// The smallest value with at least `fraction` of the pixels at or below it.
+    pub fn percentile(&self, fraction: f64) -> u16 {
+        let rank = (fraction * self.total as f64).ceil().max(1.0) as u64;
+        let mut seen = 0u64;
+        self.counts
+            .iter()
+            .position(|&c| {
+                seen += u64::from(c);
+                seen >= rank
+            })
+            .unwrap_or(0) as u16
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn percentiles_of_a_ramp() {
+        let pixels: Vec<u16> = (0..100).collect();
+        let h = Histogram::of(&pixels, 99);
+        assert_eq!(h.percentile(0.5), 49);
+        assert_eq!(h.percentile(0.01), 0);
+        assert_eq!(h.percentile(1.0), 99);
+        assert_eq!(Histogram::of(&pixels, 10).percentile(0.5), 10);
+    }
+}
