@@ -875,7 +875,13 @@ fn plane_axes(target: &Target) -> (Vector3<f64>, Vector3<f64>) {
 
 /// Sampled Gaussian of standard deviation `sigma_px`, radius ceil(3 sigma), normalised to sum 1 (its variance is
 /// within 3 % of sigma² for sigma ≥ 0.5). A single tap for no blur.
-fn gaussian_kernel(sigma_px: f64) -> Vec<f64> {
+///
+/// ```
+/// let k = roitrack_image::render::gaussian_kernel(1.0);
+/// assert_eq!(k.len(), 7);
+/// assert!((k.iter().sum::<f64>() - 1.0).abs() < 1e-12 && k[3] > k[2]);
+/// ```
+pub fn gaussian_kernel(sigma_px: f64) -> Vec<f64> {
     if sigma_px < 1e-3 {
         return vec![1.0];
     }

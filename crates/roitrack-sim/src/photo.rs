@@ -795,7 +795,7 @@ pub fn render_photo(scene: &PhotoScene) -> Result<RenderedPhoto, PhotoError> {
         scene.camera.width_px as usize,
         scene.camera.height_px as usize,
     );
-    let kernel = gaussian_kernel(scene.blur_sigma_px);
+    let kernel = roitrack_image::render::gaussian_kernel(scene.blur_sigma_px);
     let area = Area {
         margin: kernel.len() / 2,
         width: w + kernel.len() - 1,
@@ -1987,20 +1987,6 @@ fn lattice_value(seed: u64, i: i64, j: i64) -> f64 {
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^= z >> 31;
     (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
-}
-
-/// Sampled, normalised Gaussian kernel of `2 ceil(3 sigma) + 1` taps (a single tap under 1e-3 px).
-fn gaussian_kernel(sigma_px: f64) -> Vec<f64> {
-    if sigma_px < 1e-3 {
-        return vec![1.0];
-    }
-    let radius = (3.0 * sigma_px).ceil() as i64;
-    let mut k: Vec<f64> = (-radius..=radius)
-        .map(|x| (-(x * x) as f64 / (2.0 * sigma_px * sigma_px)).exp())
-        .collect();
-    let sum: f64 = k.iter().sum();
-    k.iter_mut().for_each(|w| *w /= sum);
-    k
 }
 
 /// Separable blur of the area, cropped to the `w` x `h` image.
