@@ -31,7 +31,7 @@ pub enum MatchError {
         expected: usize,
         required: usize,
     },
-    #[error("automatic matching needs a planar target (this one is not)")]
+    #[error("automatic matching needs a planar target or a non-planar one of at least 6 points")]
     NotPlanar,
     #[error(
         "the blobs' convex hull has {image} corners, the target's has {model}: the view is not of the whole target"

@@ -3,7 +3,8 @@
 //! Hypotheses come from the target's structure. A grid (square or hexagonal: the points on a lattice) is matched by
 //! growing a lattice through the blobs from a seed and laying it on the target's lattice every way the lattice allows
 //! ([`lattice`]); any other planar layout by triples of neighbouring points mapped onto triples of neighbouring blobs
-//! ([`sparse`]). Neither needs every point to be seen nor the blobs to be only the target's.
+//! ([`sparse`]); a non-planar one (at least 6 points) by quadruples of neighbouring points and blobs, through an
+//! affine camera ([`spatial`]). None needs every point to be seen nor the blobs to be only the target's.
 //!
 //! Every hypothesis is verified the same way: the static pose from its correspondences (intrinsics and distortion
 //! known), then the projection of every target point with that pose. A point projected well inside the image must
@@ -32,6 +33,7 @@
 pub(crate) mod index;
 pub(crate) mod lattice;
 pub(crate) mod sparse;
+pub(crate) mod spatial;
 
 use nalgebra::{Vector2, Vector3};
 use roitrack_core::estimator::{Observation, solve_static_pose};
@@ -41,6 +43,7 @@ use crate::matching::{DetectedBlob, MatchError};
 use index::PointIndex;
 use lattice::{TargetLattice, grow, placements};
 use sparse::{PlanarModel, triple_hypotheses};
+use spatial::quadruple_hypotheses;
 
 /// Largest RMS reprojection residual (px, per coordinate) of an accepted identification: a few times the centroid
 /// noise of real photographs (0.1 to 0.35 px), well below what a wrong labelling leaves (a pixel or more).
@@ -338,10 +341,12 @@ pub fn identify(
     blobs: &[DetectedBlob],
 ) -> Result<Identification, MatchError> {
     let n = target.len();
-    let Some((plane, front)) = plane_and_front(target) else {
+    let planar = plane_and_front(target);
+    // A non-planar pose needs 6 points (the DLT).
+    let min_matched = if planar.is_some() { n.clamp(4, 6) } else { 6 };
+    if n < min_matched {
         return Err(MatchError::NotPlanar);
-    };
-    let min_matched = n.clamp(4, 6);
+    }
     if blobs.len() < min_matched {
         return Err(MatchError::TooFewBlobs {
             found: blobs.len(),
@@ -390,24 +395,37 @@ pub fn identify(
         areas_px: &areas_px,
         index: &index,
         nearest_point,
-        front_normal: Some(front),
+        front_normal: planar.as_ref().map(|(_, front)| *front),
         centre_m,
     };
-    let hypothesis_groups: Vec<Vec<Vec<(usize, usize)>>> = match TargetLattice::of(&plane) {
-        Some(lattice) => lattice_hypotheses(&lattice, &ideal, &areas_px, &index),
-        None => {
+    let lattice = planar
+        .as_ref()
+        .and_then(|(plane, _)| TargetLattice::of(plane));
+    let hypothesis_groups: Vec<Vec<Vec<(usize, usize)>>> = match (&planar, lattice) {
+        (Some(_), Some(lattice)) => lattice_hypotheses(&lattice, &ideal, &areas_px, &index),
+        (None, _) => {
+            let spread: Vec<Vector3<f64>> = points.iter().map(|p| p.point_in_obj_m).collect();
+            by_size(quadruple_hypotheses(
+                &spread,
+                &ideal,
+                &areas_px,
+                &index,
+                min_matched,
+            ))
+        }
+        (Some((plane, _)), None) => {
             let diameters: Vec<Option<f64>> = points.iter().map(|p| p.diameter_m).collect();
             let model = PlanarModel {
-                plane_m: &plane,
+                plane_m: plane,
                 diameters_m: &diameters,
             };
-            vec![triple_hypotheses(
+            by_size(triple_hypotheses(
                 &model,
                 &ideal,
                 &areas_px,
                 &index,
                 min_matched,
-            )]
+            ))
         }
     };
     // Groups in order of promise (the largest grown lattice first): stop at the first that gives an accepted fit.
@@ -473,6 +491,20 @@ pub fn identify(
         .unwrap_or(&best)
         .clone();
     Ok(finish(&verifier, chosen, ambiguous, tried))
+}
+
+/// Hypotheses grouped by how many points they match, most first: a group is verified only if the larger ones gave
+/// no accepted fit (rivals as good as the best have as many points, so they are in its group).
+fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> Vec<Vec<Vec<(usize, usize)>>> {
+    hypotheses.sort_by_key(|h| std::cmp::Reverse(h.len()));
+    let mut groups: Vec<Vec<Vec<(usize, usize)>>> = Vec::new();
+    for h in hypotheses {
+        match groups.last_mut() {
+            Some(group) if group[0].len() == h.len() => group.push(h),
+            _ => groups.push(vec![h]),
+        }
+    }
+    groups
 }
 
 /// Corrects the matched centres for the perspective displacement of a disk's centre and solves the pose again.
@@ -609,4 +641,112 @@ fn lattice_hypotheses(
     let strict = grown_sets.iter().map(|g| placements(lattice, g, 0.9, 1));
     let lenient = grown_sets.iter().map(|g| placements(lattice, g, 0.5, 3));
     strict.chain(lenient).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+    use roitrack_core::TargetPoint;
+
+    /// Blobs at the projections of every target point, shuffled, with clutter.
+    fn blobs_of(
+        camera: &CameraModel,
+        target: &Target,
+        truth: &MotionState,
+        clutter: usize,
+    ) -> Vec<DetectedBlob> {
+        let mut blobs: Vec<DetectedBlob> = target
+            .points()
+            .iter()
+            .map(|p| {
+                let px = camera
+                    .raw_pixel_from_cam(&truth.point_in_cam_at(&p.point_in_obj_m, 0.0))
+                    .unwrap();
+                DetectedBlob {
+                    u_px: px.x,
+                    v_px: px.y,
+                    area_px: 60.0,
+                }
+            })
+            .collect();
+        for k in 0..clutter {
+            let (x, y) = (((k * 7919) % 997) as f64, ((k * 104_729) % 991) as f64);
+            blobs.push(DetectedBlob {
+                u_px: 15.0 + x,
+                v_px: 17.0 + y,
+                area_px: 55.0,
+            });
+        }
+        for i in (1..blobs.len()).rev() {
+            blobs.swap(i, (i * 31 + 7) % (i + 1));
+        }
+        blobs
+    }
+
+    #[test]
+    fn identifies_a_non_planar_target_among_clutter() {
+        let camera = CameraModel::canonical();
+        let layout = [
+            (0.0, 0.0, 0.0),
+            (0.06, 0.0, 0.01),
+            (0.0, 0.05, 0.02),
+            (0.05, 0.06, -0.01),
+            (0.02, 0.03, 0.05),
+            (-0.03, 0.02, 0.03),
+            (0.03, -0.03, 0.04),
+            (0.07, 0.03, 0.06),
+        ];
+        let points: Vec<TargetPoint> = layout
+            .iter()
+            .enumerate()
+            .map(|(i, &(x, y, z))| TargetPoint {
+                id: 10 + i as u32,
+                point_in_obj_m: Vector3::new(x, y, z),
+                diameter_m: None,
+            })
+            .collect();
+        let target = Target::new(points).unwrap();
+        assert!(target.plane().is_none());
+        for (k, angles) in [(0.3, -0.2, 0.5), (-0.4, 0.3, 2.0), (0.1, 0.5, -1.2)]
+            .into_iter()
+            .enumerate()
+        {
+            let truth = MotionState::at_rest(
+                Rotation3::from_euler_angles(angles.0, angles.1, angles.2),
+                Vector3::new(0.01, -0.02, 0.6),
+            );
+            let blobs = blobs_of(&camera, &target, &truth, 10 + 5 * k);
+            let found = identify(&camera, &target, &blobs).unwrap();
+            assert_eq!(found.pairs.len(), 8);
+            assert!(!found.ambiguous);
+            assert!(
+                (found.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-6,
+                "pose {k}"
+            );
+            for &(p, b) in &found.pairs {
+                let px = camera
+                    .raw_pixel_from_cam(
+                        &truth.point_in_cam_at(&target.points()[p].point_in_obj_m, 0.0),
+                    )
+                    .unwrap();
+                assert!((px.x - blobs[b].u_px).abs() < 1e-9 && (px.y - blobs[b].v_px).abs() < 1e-9);
+            }
+        }
+        // Five points in depth cannot be posed from an image: refused, not guessed.
+        let few = Target::new(target.points()[..5].to_vec()).unwrap();
+        assert!(
+            identify(
+                &camera,
+                &few,
+                &blobs_of(
+                    &camera,
+                    &few,
+                    &MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.6)),
+                    0
+                )
+            )
+            .is_err()
+        );
+    }
 }
