@@ -7,8 +7,8 @@
 //!   `Σ i² A`, `Σ i³ A` and `Σ i² B` at the end: the sums of `v i²`, `v i³` and `v i² y`.
 //!
 //! All are folded into exact totals at the end of blocks of rows short enough for no lane to overflow. Where the CPU
-//! has AVX2 and the window is an even number of 8-pixel vectors, the same in 16-pixel vectors. Integer sums: the same
-//! as the portable ones to the bit, whichever instructions.
+//! has AVX2 and the window is 2 to 4 8-pixel vectors, the same in 16-pixel vectors (and an 8-pixel one). Integer sums:
+//! the same as the portable ones to the bit, whichever instructions.
 
 use std::arch::x86_64::*;
 
@@ -100,7 +100,7 @@ fn add_products(acc: __m128i, a: __m128i, w: __m128i) -> __m128i {
 /// times `x^p y^q` (p + q <= 3), x from column `s`, y from row `lo`. `comp`: the component's rows (bit i column i),
 /// or `None` when every above-threshold pixel of those rows is the component's. `None` when the values or the window
 /// are too large for 16-bit products (`vmax > 32767`, more than [`MAX_VECTORS`] vectors) or one row's sums for 32
-/// bits. With `avx2` (only where the CPU has it), 16-pixel vectors where `vectors` is even.
+/// bits. With `avx2` (only where the CPU has it), 16-pixel vectors (and an 8-pixel one where `vectors` is odd).
 #[allow(clippy::too_many_arguments)]
 #[inline]
 pub(super) fn shape_sums(
@@ -121,22 +121,28 @@ pub(super) fn shape_sums(
     if block == 0 {
         return None;
     }
-    if avx2 && vectors % 2 == 0 {
+    if avx2 && vectors >= 2 {
         assert!(std::arch::is_x86_feature_detected!("avx2"));
         macro_rules! wide {
-            ($m:literal) => {
+            ($m:literal, $half:literal) => {
                 // SAFETY: the CPU has AVX2 (checked above).
                 unsafe {
                     match comp {
                         Some(comp) => {
-                            sums_in_avx2::<$m, true>(px, w, comp, rows, s, threshold, block)
+                            sums_in_avx2::<$m, $half, true>(px, w, comp, rows, s, threshold, block)
                         }
-                        None => sums_in_avx2::<$m, false>(px, w, &[], rows, s, threshold, block),
+                        None => {
+                            sums_in_avx2::<$m, $half, false>(px, w, &[], rows, s, threshold, block)
+                        }
                     }
                 }
             };
         }
-        return Some(if vectors == 2 { wide!(1) } else { wide!(2) });
+        return Some(match vectors {
+            2 => wide!(1, false),
+            3 => wide!(1, true),
+            _ => wide!(2, false),
+        });
     }
     macro_rules! window {
         ($n:literal) => {
@@ -234,11 +240,11 @@ fn sums_in<const N: usize, const COMP: bool>(
     ShapeSums::from_i64(sums)
 }
 
-/// [`sums_in`] with AVX2, over `M` vectors of 16 pixels.
+/// [`sums_in`] with AVX2, over `M` vectors of 16 pixels and, with `HALF`, one of 8 after them.
 // Indices, not iterators: as `sums_in`.
 #[allow(clippy::needless_range_loop)]
 #[target_feature(enable = "avx2")]
-fn sums_in_avx2<const M: usize, const COMP: bool>(
+fn sums_in_avx2<const M: usize, const HALF: bool, const COMP: bool>(
     px: &[u16],
     w: usize,
     comp: &[u64],
@@ -248,15 +254,25 @@ fn sums_in_avx2<const M: usize, const COMP: bool>(
     block: usize,
 ) -> ShapeSums {
     let mut sums = [0i64; 10];
-    assert!(lo <= hi && (hi + 1) * w <= px.len() && s + 16 * M <= w && M <= 2);
+    let width = 16 * M + if HALF { 8 } else { 0 };
+    assert!(lo <= hi && (hi + 1) * w <= px.len() && s + width <= w && width <= 32);
     let load = |a: &[i16], m: usize| {
         let a: &[i16; 16] = a[16 * m..16 * m + 16].try_into().expect("16 entries");
         // SAFETY: `a` is 32 readable bytes; `_mm256_loadu_si256` reads 32 bytes at any alignment.
         unsafe { _mm256_loadu_si256(a.as_ptr().cast()) }
     };
+    // The 8-pixel vector's columns (unused without `HALF`, where they may be past the table).
+    let half = if HALF { 16 * M } else { 0 };
+    let load_half = |a: &[i16]| {
+        let a: &[i16; 8] = a[half..half + 8].try_into().expect("8 entries");
+        // SAFETY: `a` is 16 readable bytes; `_mm_loadu_si128` reads 16 bytes at any alignment.
+        unsafe { _mm_loadu_si128(a.as_ptr().cast()) }
+    };
     let cols: [[__m256i; M]; 4] =
         std::array::from_fn(|p| std::array::from_fn(|m| load(&POWERS[p], m)));
+    let cols_half: [__m128i; 4] = std::array::from_fn(|p| load_half(&POWERS[p]));
     let t = _mm256_set1_epi16(threshold as i16);
+    let t_half = _mm_set1_epi16(threshold as i16);
     let lane_bit = _mm256_setr_epi16(
         1,
         2,
@@ -275,19 +291,23 @@ fn sums_in_avx2<const M: usize, const COMP: bool>(
         16384,
         i16::MIN,
     );
+    let lane_bit_half = _mm_setr_epi16(1, 2, 4, 8, 16, 32, 64, 128);
     let z = _mm256_setzero_si256();
+    let z_half = _mm_setzero_si128();
     let mut run = [z; 7];
     let (mut col_a, mut col_b) = ([z; M], [z; M]);
+    let (mut half_a, mut half_b) = (z_half, z_half);
     let mut in_block = 0;
     for j in lo..=hi {
-        let row: &[u16] = &px[j * w + s..j * w + s + 16 * M];
+        let row: &[u16] = &px[j * w + s..j * w + s + width];
         let (mut p0, mut p1) = (z, z);
         for m in 0..M {
-            // SAFETY: 16 pixels of `row` (16 M long) from 16 m: 32 readable bytes.
+            // SAFETY: 16 pixels of `row` from 16 m (`width >= 16 M`): 32 readable bytes.
             let pixels = unsafe { _mm256_loadu_si256(row[16 * m..].as_ptr().cast()) };
             let mut v = _mm256_subs_epu16(pixels, t);
             if COMP {
-                let bits = _mm256_set1_epi16(((comp[j] >> (s + 16 * m)) & 0xFFFF) as u16 as i16);
+                let bits = ((comp[j] >> (s + 16 * m)) & 0xFFFF) as u16 as i16;
+                let bits = _mm256_set1_epi16(bits);
                 let keep = _mm256_cmpeq_epi16(_mm256_and_si256(bits, lane_bit), lane_bit);
                 v = _mm256_and_si256(v, keep);
             }
@@ -295,6 +315,22 @@ fn sums_in_avx2<const M: usize, const COMP: bool>(
             p1 = _mm256_add_epi32(p1, _mm256_madd_epi16(v, cols[1][m]));
             col_a[m] = _mm256_add_epi16(col_a[m], v);
             col_b[m] = _mm256_add_epi16(col_b[m], col_a[m]);
+        }
+        if HALF {
+            // SAFETY: the 8 pixels of `row` from 16 M (`width = 16 M + 8`): 16 readable bytes.
+            let pixels = unsafe { _mm_loadu_si128(row[16 * M..].as_ptr().cast()) };
+            let mut v = _mm_subs_epu16(pixels, t_half);
+            if COMP {
+                let bits = _mm_set1_epi16(((comp[j] >> (s + 16 * M)) & 0xFF) as i16);
+                let keep = _mm_cmpeq_epi16(_mm_and_si128(bits, lane_bit_half), lane_bit_half);
+                v = _mm_and_si128(v, keep);
+            }
+            let q0 = _mm_madd_epi16(v, cols_half[0]);
+            let q1 = _mm_madd_epi16(v, cols_half[1]);
+            p0 = _mm256_add_epi32(p0, _mm256_zextsi128_si256(q0));
+            p1 = _mm256_add_epi32(p1, _mm256_zextsi128_si256(q1));
+            half_a = _mm_add_epi16(half_a, v);
+            half_b = _mm_add_epi16(half_b, half_a);
         }
         run[0] = _mm256_add_epi32(run[0], p0);
         run[1] = _mm256_add_epi32(run[1], run[0]);
@@ -317,18 +353,22 @@ fn sums_in_avx2<const M: usize, const COMP: bool>(
                 a3 = products(a3, col_a[m], cols[3][m]);
                 b2 = products(b2, col_b[m], cols[2][m]);
             }
-            let hsum256 = |v: __m256i| {
-                hsum(_mm_add_epi32(
-                    _mm256_castsi256_si128(v),
-                    _mm256_extracti128_si256(v, 1),
-                ))
+            let narrow = |v: __m256i| {
+                _mm_add_epi32(_mm256_castsi256_si128(v), _mm256_extracti128_si256(v, 1))
             };
-            let h: [i64; 7] = std::array::from_fn(|k| i64::from(hsum256(run[k])));
-            let cols_sums = [hsum256(a2), hsum256(a3), hsum256(b2)].map(i64::from);
+            let (mut a2, mut a3, mut b2) = (narrow(a2), narrow(a3), narrow(b2));
+            if HALF {
+                a2 = add_products(a2, half_a, cols_half[2]);
+                a3 = add_products(a3, half_a, cols_half[3]);
+                b2 = add_products(b2, half_b, cols_half[2]);
+            }
+            let h: [i64; 7] = std::array::from_fn(|k| i64::from(hsum(narrow(run[k]))));
+            let cols_sums = [hsum(a2), hsum(a3), hsum(b2)].map(i64::from);
             fold(&mut sums, h, cols_sums, (j + 1 - lo) as i64);
             run = [z; 7];
             col_a = [z; M];
             col_b = [z; M];
+            (half_a, half_b) = (z_half, z_half);
             in_block = 0;
         }
     }
@@ -358,5 +398,85 @@ fn fold(sums: &mut [i64; 10], run: [i64; 7], [a2, a3, b2]: [i64; 3], l: i64) {
     let block = [s00, s10, s01, a2, s11, s02, a3, s21, s12, s03];
     for (total, x) in sums.iter_mut().zip(block) {
         *total += x;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use rand::{Rng, SeedableRng};
+
+    use super::*;
+    use crate::centroid::component::grow_component;
+    use crate::centroid::kernels::portable;
+    use crate::centroid::moments::scalar_shape_sums;
+    use crate::centroid::test_rois::synthetic;
+
+    /// With SSE2 and with AVX2 (where the CPU has it), every window the component fits, the sums are the portable
+    /// ones to the bit: synthetic ROIs of 8 to 64 columns, 8- to 16-bit pixels, thresholds from 0 to the peak, of the
+    /// grown component and of the whole rows.
+    #[test]
+    fn sse2_and_avx2_sums_are_the_portable_ones() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(31);
+        let avx2 = std::arch::is_x86_feature_detected!("avx2");
+        let mut compared = [0usize; 2];
+        for case in 0..4000 {
+            let (w, h) = (rng.random_range(8..=64usize), rng.random_range(1..=64usize));
+            let pixels = synthetic(&mut rng, w, h, case);
+            let (peak, seed) = portable::peak(&pixels);
+            if peak == 0 {
+                continue;
+            }
+            let threshold = rng.random_range(0..peak);
+            let mut mask = vec![0u64; h];
+            portable::row_masks(&pixels, w, threshold, &mut mask);
+            let mut comp = vec![0u64; h];
+            let (lo, hi) = grow_component(&mask, seed % w, seed / w, &mut comp);
+            let cols = comp.iter().fold(0, |acc, &c| acc | c);
+            let (first, last) = (
+                cols.trailing_zeros() as usize,
+                63 - cols.leading_zeros() as usize,
+            );
+            let vectors = (last - first) / 8 + 1;
+            if 8 * vectors > w {
+                continue;
+            }
+            let s = first.min(w - 8 * vectors);
+            let vmax = peak - threshold;
+            for whole in [false, true] {
+                // With `None`, every above-threshold pixel of the rows and the window's columns counts.
+                let (component, span) = if whole {
+                    (None, (s, s + 8 * vectors - 1))
+                } else {
+                    (Some(comp.as_slice()), (first, last))
+                };
+                let expected =
+                    scalar_shape_sums(&pixels, w, component, (lo, hi), span, s, threshold);
+                for (k, wide) in [false, true].into_iter().enumerate() {
+                    if wide && !avx2 {
+                        continue;
+                    }
+                    let found = shape_sums(
+                        &pixels,
+                        w,
+                        component,
+                        (lo, hi),
+                        s,
+                        vectors,
+                        threshold,
+                        vmax,
+                        wide,
+                    );
+                    if let Some(found) = found {
+                        assert_eq!(
+                            found, expected,
+                            "{w}x{h} case {case} whole {whole} avx2 {wide}"
+                        );
+                        compared[k] += usize::from(!wide || vectors >= 2);
+                    }
+                }
+            }
+        }
+        assert!(compared[0] > 2000, "{compared:?}");
+        assert!(!avx2 || compared[1] > 1500, "{compared:?}");
     }
 }
