@@ -27,7 +27,7 @@
 //! - `kernels/`: the passes over the pixels and the choice of instructions: `mod.rs` the choice (`Isa`) and the
 //!   calls, `lanes.rs` the trait of lane primitives, `scan.rs` the generic peak, border statistics and row masks,
 //!   `walk.rs` the generic moment sums (the one-pass walk of a simple component, the window moments), `shape.rs` the
-//!   shape check's sums (SSE2), `sse2.rs` and
+//!   shape check's sums (SSE2, or AVX2 where the CPU has it), `sse2.rs` and
 //!   `avx512.rs` the primitives of each instruction set, `portable.rs` the pixel-at-a-time kernels (the reference);
 //! - `test_rois.rs` (tests only): synthetic and rendered ROIs of any size, for the comparisons of instruction sets.
 
@@ -117,8 +117,8 @@ pub struct CentroidOptions {
 /// 8 and 12 bits, clipped cores, ellipses up to 1.5:1, background gradients, brightness uneven by up to 2 % a radius)
 /// it rejects none, its allowances at least 1.7 times the largest skew any showed. A brightness ramp across the blob
 /// is a coma too: unclipped 15 px blobs lit unevenly by up to 4 % a radius pass, by 6 % half are rejected (to third
-/// order they look like a blob with a spot inside it). It adds about 40 % to the centroid's time (24 x 24 ROI, SSE2:
-/// 0.43 µs against 0.30 µs without it, `roitrack bench`).
+/// order they look like a blob with a spot inside it). It adds about 40 % to the centroid's time (24 x 24 ROI, on a
+/// 2-core AMD EPYC development VM: 0.42 µs against 0.31 µs without it, `roitrack bench`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SymmetryCheck {
     /// The trefoil allowed for pixel sampling, times the blob's pixel count, for a blurred edge (1.5 px or wider;

@@ -168,8 +168,9 @@ pub(super) fn window_moments(
 /// The [`ShapeSums`] of the component of rows `rows` and columns `cols` (their union), y from its first row, x from
 /// the first column of the window of 8-pixel vectors that holds its columns (from its first column where the ROI is
 /// too narrow for the window): of the pixels of `comp`, or with `None` of every above-threshold pixel of those rows (a
-/// simple component's). With SSE2 over that window (see `shape.rs`) where the component's values allow, else a pixel
-/// at a time; the same integers either way.
+/// simple component's). With SSE2, or AVX2 where the CPU has it, over that window (see `shape.rs`) where the
+/// component's values allow, else a pixel at a time; the same integers either way. (AVX2 is used whatever `isa` but
+/// the portable: the AVX-512 token is not needed for 16-pixel vectors.)
 #[inline]
 pub(super) fn shape_sums(
     isa: Isa,
