@@ -1,9 +1,11 @@
 //! The shape check ([`SymmetryCheck`], on by default) rejects no clean blob: 100,000 rendered ellipses (disks seen in
 //! perspective) of 3 to 20 px across at random sub-pixel positions, blurred by 0 to 1.5 px, with read and shot noise
 //! at several levels, in 8 and 12 bits, in 24 x 24 and 32 x 32 ROIs; half of them plain disks, half like real
-//! sensor blobs (clipped cores, aspect ratios up to 1.5, a background gradient and curvature, uneven brightness).
-//! It still rejects blobs with a spot merged with them. The renderer is exact across each of 16 sub-rows a pixel
-//! (the ellipse's chord), then a sampled Gaussian blur, then noise and quantisation.
+//! sensor blobs (clipped cores in 40 % of them, aspect ratios up to 1.5 at any tilt, a background swinging by up to
+//! 10 % of the contrast across the ROI and curved by up to 5 %, brightness uneven by up to 2 % a radius). It still
+//! rejects blobs with a spot merged with them. The renderer is exact across each of 16 sub-rows a pixel (the
+//! ellipse's chord), then a sampled Gaussian blur, then noise and quantisation. The check's constants were fitted on
+//! the same generator with another seed (see `roitrack_image::symmetry`).
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
