@@ -5,8 +5,9 @@
 //! window that holds the whole blurred blob do not: blur and the optics' point spread preserve the centroid of the
 //! light, so the weighted centroid is the centroid of the disk's image (its area centroid), whatever the blur. The
 //! background is measured in a ring around the window (a low percentile, so that a neighbouring circle reaching into
-//! the ring does not raise it), and the window, an ellipse of the blob's own shape grown by a margin, is recentred
-//! on the estimate and the moments taken again, so that what it cuts of the blur's tails is cut symmetrically.
+//! the ring does not raise it), and the window, an ellipse of the blob's own shape grown by a margin, can be
+//! recentred on the estimate and the moments taken again, so that what it cuts of the blur's tails is cut
+//! symmetrically (the photo detector takes one pass: the outline's ellipse refines it).
 
 /// The blob's shape as thresholding saw it: centre (px) and the semi-axes (px) and orientation of the ellipse with
 /// its second moments.
@@ -163,6 +164,7 @@ pub(crate) fn grey_centre(
     height: usize,
     shape: &Ellipse,
     light_full_scale: Option<u16>,
+    passes: usize,
     scratch: &mut Vec<(f64, f64, f64)>,
 ) -> Option<GreyCentre> {
     // The window must take the blurred edge (a pixel or two) but stay clear of neighbours in dense grids, whose gap
@@ -174,8 +176,8 @@ pub(crate) fn grey_centre(
     let outer = shape.grown(margin_px + ring_px);
     let mut centre = (shape.u_px, shape.v_px);
     let mut result = None;
-    // The threshold's centre, then once recentred: the second window moves by hundredths of a pixel.
-    for _ in 0..2 {
+    // The window on the threshold's centre, then `passes - 1` times recentred.
+    for _ in 0..passes {
         let (u0, v0) = centre;
         let (i_lo, i_hi) = ((u0 - reach).floor(), (u0 + reach).ceil());
         let (j_lo, j_hi) = ((v0 - reach).floor(), (v0 + reach).ceil());
@@ -281,7 +283,7 @@ mod tests {
                 semi_minor_px: r,
                 angle_rad: 0.0,
             };
-            let c = grey_centre(&img, 44, 44, &shape, None, &mut scratch).unwrap();
+            let c = grey_centre(&img, 44, 44, &shape, None, 3, &mut scratch).unwrap();
             let err = (c.u_px - cu).hypot(c.v_px - cv);
             assert!(err < 0.01, "radius {r}: error {err} px");
             assert!((c.background - 40.0).abs() < 1e-9);
@@ -311,6 +313,6 @@ mod tests {
             semi_minor_px: 3.0,
             angle_rad: 0.0,
         };
-        assert!(grey_centre(&img, 20, 20, &shape, None, &mut Vec::new()).is_none());
+        assert!(grey_centre(&img, 20, 20, &shape, None, 2, &mut Vec::new()).is_none());
     }
 }
