@@ -28,6 +28,46 @@ pub enum PolarityChoice {
 pub struct PhotoOptions {
     pub polarity: PolarityChoice,
     pub blobs: PhotoBlobOptions,
+    /// The distances (m) at which the target may be, nearest and farthest, if known: blobs whose area no target
+    /// circle can have at such a distance (from the target's diameters and the focal length, tilts up to 80°, a
+    /// threshold's error of a factor 2) are left out before identification. `None`: any size from
+    /// [`PhotoBlobOptions::min_area_px`] to a quarter of the image.
+    pub distance_range_m: Option<(f64, f64)>,
+}
+
+impl PhotoOptions {
+    /// The blob options with the area range narrowed by [`Self::distance_range_m`] and the target's diameters.
+    ///
+    /// ```
+    /// use roitrack_core::{CameraModel, Target};
+    /// use roitrack_pipeline::photo::PhotoOptions;
+    /// let options = PhotoOptions { distance_range_m: Some((0.4, 0.8)), ..PhotoOptions::default() };
+    /// // 6 and 9 mm blobs at 0.4-0.8 m through a 1500 px lens: 11 to 34 px across.
+    /// let blobs = options.blob_options(&CameraModel::canonical(), &Target::grid4x4());
+    /// assert!(blobs.min_area_px > 7.0 && blobs.max_area_fraction < 0.01);
+    /// ```
+    pub fn blob_options(&self, camera: &CameraModel, target: &Target) -> PhotoBlobOptions {
+        let mut blobs = self.blobs;
+        let diameters = target.points().iter().filter_map(|p| p.diameter_m);
+        let (small, large) = diameters.fold((f64::INFINITY, 0.0f64), |(lo, hi), d| {
+            (lo.min(d), hi.max(d))
+        });
+        let Some((near, far)) = self.distance_range_m else {
+            return blobs;
+        };
+        if !(small.is_finite() && near > 0.0 && far >= near) {
+            return blobs;
+        }
+        let focal = camera.intrinsics.fx_px.max(camera.intrinsics.fy_px);
+        let area = |d: f64, z: f64| std::f64::consts::FRAC_PI_4 * (focal * d / z).powi(2);
+        // Foreshortening to cos 80° and a threshold that finds half the area below; twice above.
+        let min_area = 0.5 * 80f64.to_radians().cos() * area(small, far);
+        let max_area = 2.0 * area(large, near);
+        let image_area = f64::from(camera.width_px) * f64::from(camera.height_px);
+        blobs.min_area_px = blobs.min_area_px.max(min_area);
+        blobs.max_area_fraction = blobs.max_area_fraction.min(max_area / image_area);
+        blobs
+    }
 }
 
 /// One identified target point in a photograph.
@@ -136,6 +176,7 @@ pub fn detect_target(
         });
     }
     let mut scratch = PhotoScratch::default();
+    let blob_options = options.blob_options(camera, target);
     let mut attempt = |polarity: Polarity| {
         let blobs = detect_photo_blobs(
             &frame.pixels,
@@ -143,7 +184,7 @@ pub fn detect_target(
             frame.height,
             frame.bit_depth,
             polarity,
-            &options.blobs,
+            &blob_options,
             &mut scratch,
         );
         let detected: Vec<DetectedBlob> = blobs

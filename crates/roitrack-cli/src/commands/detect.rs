@@ -35,6 +35,10 @@ pub struct DetectArgs {
     /// Which blobs to look for.
     #[arg(long, value_enum, default_value = "auto")]
     pub polarity: PolarityArg,
+    /// The nearest and farthest distances (m) the target may be at: blobs no target circle can make at such
+    /// distances are left out (needs diameters in the target file). Default: any size.
+    #[arg(long, num_args = 2, value_names = ["NEAR_M", "FAR_M"])]
+    pub distance_m: Option<Vec<f64>>,
     /// Write per image a PNG (`<image name>.overlay.png`) with the matched blobs and their ids (green), the model
     /// projected with the pose (red +), unmatched blobs (yellow) and points expected but not found (magenta x).
     #[arg(long)]
@@ -63,6 +67,13 @@ pub fn run(args: &DetectArgs) -> Result<()> {
             PolarityArg::Auto => PolarityChoice::Auto,
             PolarityArg::Bright => PolarityChoice::Bright,
             PolarityArg::Dark => PolarityChoice::Dark,
+        },
+        distance_range_m: match args.distance_m.as_deref() {
+            Some(&[near, far]) if near > 0.0 && far >= near && far.is_finite() => Some((near, far)),
+            Some(other) => {
+                bail!("--distance-m: want NEAR_M FAR_M with 0 < NEAR_M <= FAR_M, got {other:?}")
+            }
+            None => None,
         },
         ..PhotoOptions::default()
     };
