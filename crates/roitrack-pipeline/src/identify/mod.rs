@@ -49,6 +49,9 @@ use spatial::quadruple_hypotheses;
 /// noise of real photographs (0.1 to 0.35 px), well below what a wrong labelling leaves (a pixel or more).
 pub const MAX_IDENTIFY_RESIDUAL_PX: f64 = 1.0;
 
+/// Blobs (in the order given: strongest first from the photo detector) that seed the triple and quadruple searches.
+pub const MAX_SEED_BLOBS: usize = 200;
+
 /// The target identified among the blobs ([`identify`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Identification {
@@ -316,6 +319,8 @@ pub fn disk_centre_displacement_px(
 }
 
 /// Identifies the target among `blobs` (raw pixel centres and areas) with no prior; see the module's documentation.
+/// List the strongest blobs first: for targets that are not grids only the first [`MAX_SEED_BLOBS`] (200) seed the
+/// search (every blob can be matched).
 ///
 /// ```
 /// use nalgebra::{Rotation3, Vector3};

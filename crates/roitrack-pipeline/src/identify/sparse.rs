@@ -6,6 +6,7 @@ use std::collections::HashSet;
 
 use nalgebra::{Matrix2, Vector2};
 
+use super::MAX_SEED_BLOBS;
 use super::index::PointIndex;
 
 /// What the search needs of the target: in-plane points and diameters (m, if known).
@@ -87,7 +88,9 @@ pub(crate) fn triple_hypotheses(
         .collect();
     // Any distance: a sparse target's blobs may be far apart; the nearest twelve are enough.
     let image_radius = 1e6;
-    for b0 in 0..ideal.len() {
+    // Seeds among the first blobs only (detectors list the strongest first): the search grows with the square of
+    // the seeds' neighbourhoods, and a cluttered frame of thousands of blobs must not take seconds.
+    for b0 in 0..ideal.len().min(MAX_SEED_BLOBS) {
         if !ideal[b0].x.is_finite() {
             continue;
         }

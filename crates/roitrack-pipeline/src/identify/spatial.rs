@@ -7,6 +7,7 @@ use std::collections::HashSet;
 
 use nalgebra::{SMatrix, SVector, Vector2, Vector3};
 
+use super::MAX_SEED_BLOBS;
 use super::index::PointIndex;
 
 /// Target points used as the first point of a quadruple: all of a small target, else a few spread ones.
@@ -94,7 +95,9 @@ pub(crate) fn quadruple_hypotheses(
     }
     let mut seen: HashSet<Vec<(usize, usize)>> = HashSet::new();
     let mut out = Vec::new();
-    for b0 in 0..ideal.len() {
+    // Seeds among the first blobs only (detectors list the strongest first): the search grows with the square of
+    // the seeds' neighbourhoods, and a cluttered frame of thousands of blobs must not take seconds.
+    for b0 in 0..ideal.len().min(MAX_SEED_BLOBS) {
         if !ideal[b0].x.is_finite() {
             continue;
         }
