@@ -151,21 +151,32 @@ impl Verifier<'_> {
 
     /// Verifies a hypothesis: pose, then every point projected, matched, the pose solved again.
     fn verify(&self, pairs: &[(usize, usize)]) -> Option<Verified> {
-        let centres: Vec<Vector2<f64>> = pairs.iter().map(|&(_, b)| self.ideal[b]).collect();
-        let (mut state, _, _) = self.pose(pairs, &centres)?;
+        let mut current: Vec<(usize, usize)> = pairs.to_vec();
+        current.sort_unstable();
+        let centres: Vec<Vector2<f64>> = current.iter().map(|&(_, b)| self.ideal[b]).collect();
+        let (mut state, mut residual_px, mut from_back) = self.pose(&current, &centres)?;
         let mut result = None;
         for _ in 0..2 {
             let verified = self.project_and_match(&state)?;
-            let centres: Vec<Vector2<f64>> =
-                verified.pairs.iter().map(|&(_, b)| self.ideal[b]).collect();
-            let (refitted, residual_px, from_back) = self.pose(&verified.pairs, &centres)?;
-            state = refitted;
+            // The same correspondences (by point index, as matched): the pose is already theirs.
+            if verified.pairs != current {
+                current.clone_from(&verified.pairs);
+                let centres: Vec<Vector2<f64>> =
+                    current.iter().map(|&(_, b)| self.ideal[b]).collect();
+                (state, residual_px, from_back) = self.pose(&current, &centres)?;
+            }
+            let settled = result
+                .as_ref()
+                .is_some_and(|r: &Verified| r.pairs == verified.pairs);
             result = Some(Verified {
                 state,
                 residual_px,
                 from_back,
                 ..verified
             });
+            if settled {
+                break;
+            }
         }
         result
     }
