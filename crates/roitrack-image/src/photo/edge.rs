@@ -29,7 +29,8 @@ fn sample(pixels: &[u16], width: usize, height: usize, u: f64, v: f64) -> Option
 const STEPS: usize = 16;
 
 /// The centre (px) of the ellipse fitted to the blob's edge points (blob brighter than its surroundings), starting
-/// from `shape` centred on `centre`; `None` if too few rays find an edge or the fit is not an ellipse.
+/// from `shape` centred on `centre`, and the blob's contrast (the median over the rays of inside minus outside);
+/// `None` if too few rays find an edge or the fit is not an ellipse.
 pub(crate) fn edge_centre(
     pixels: &[u16],
     width: usize,
@@ -37,11 +38,13 @@ pub(crate) fn edge_centre(
     shape: &Ellipse,
     centre: Vector2<f64>,
     edges: &mut Vec<Vector2<f64>>,
-) -> Option<Vector2<f64>> {
+    contrasts: &mut Vec<f64>,
+) -> Option<(Vector2<f64>, f64)> {
     // A ray every 2 px of outline (finer changed nothing on real photographs).
     let rays = ((std::f64::consts::TAU * shape.semi_major_px / 2.0).round() as usize).clamp(20, 64);
     let (sin, cos) = shape.angle_rad.sin_cos();
     edges.clear();
+    contrasts.clear();
     let mut profile = [0.0f64; STEPS + 1];
     for k in 0..rays {
         let phi = std::f64::consts::TAU * k as f64 / rays as f64;
@@ -85,11 +88,14 @@ pub(crate) fn edge_centre(
         let f = (profile[n - 1] - mid) / (profile[n - 1] - profile[n]);
         let s = s0 + (s1 - s0) * ((n - 1) as f64 + f) / STEPS as f64;
         edges.push(centre + s * radius);
+        contrasts.push(inside - outside);
     }
     if edges.len() < 10 || edges.len() * 3 < rays * 2 {
         return None;
     }
-    fit_ellipse_centre(edges, centre)
+    let middle = contrasts.len() / 2;
+    let contrast = *contrasts.select_nth_unstable_by(middle, f64::total_cmp).1;
+    Some((fit_ellipse_centre(edges, centre)?, contrast))
 }
 
 /// Centre of the conic `a x² + b xy + c y² + d x + e y = 1` fitted by least squares to `points` (relative to
