@@ -158,16 +158,14 @@ impl Verifier<'_> {
         let mut result = None;
         for _ in 0..2 {
             let verified = self.project_and_match(&state)?;
-            // The same correspondences (by point index, as matched): the pose is already theirs.
-            if verified.pairs != current {
+            // The same correspondences (by point index, as matched): the pose is already theirs, and final.
+            let settled = verified.pairs == current;
+            if !settled {
                 current.clone_from(&verified.pairs);
                 let centres: Vec<Vector2<f64>> =
                     current.iter().map(|&(_, b)| self.ideal[b]).collect();
                 (state, residual_px, from_back) = self.pose(&current, &centres)?;
             }
-            let settled = result
-                .as_ref()
-                .is_some_and(|r: &Verified| r.pairs == verified.pairs);
             result = Some(Verified {
                 state,
                 residual_px,
