@@ -26,7 +26,7 @@ fn sample(pixels: &[u16], width: usize, height: usize, u: f64, v: f64) -> Option
 }
 
 /// Profile samples per unit of the ray's radius.
-const STEPS: usize = 16;
+const STEPS: usize = 12;
 
 /// The centre (px) of the ellipse fitted to the blob's edge points (blob brighter than its surroundings), starting
 /// from `shape` centred on `centre`, and the blob's contrast (the median over the rays of inside minus outside);
