@@ -135,6 +135,53 @@ impl PointIndex {
     }
 }
 
+/// Hypotheses from predictions, collected once each.
+#[derive(Debug, Default)]
+pub(crate) struct Hypotheses {
+    seen: std::collections::HashSet<Vec<(usize, usize)>>,
+    pub list: Vec<Vec<(usize, usize)>>,
+}
+
+impl Hypotheses {
+    /// Extends the seed correspondences `pairs` to every other of the `n` target points whose `predicted` position
+    /// has an unused blob within `gate`, and keeps the result if it covers at least `min_matched` points and is new.
+    /// Gives up as soon as too many points miss.
+    pub fn extend_and_keep(
+        &mut self,
+        index: &PointIndex,
+        mut pairs: Vec<(usize, usize)>,
+        n: usize,
+        gate: f64,
+        min_matched: usize,
+        predicted: impl Fn(usize) -> Vector2<f64>,
+    ) {
+        let seeds = pairs.len();
+        let mut misses = 0;
+        for p in 0..n {
+            if pairs[..seeds].iter().any(|&(q, _)| q == p) {
+                continue;
+            }
+            match index.nearest(&predicted(p), gate, |b| {
+                pairs.iter().all(|&(_, pb)| pb != b)
+            }) {
+                Some((b, _)) => pairs.push((p, b)),
+                None => {
+                    misses += 1;
+                    if n - misses < min_matched {
+                        return;
+                    }
+                }
+            }
+        }
+        if pairs.len() >= min_matched {
+            pairs.sort_unstable();
+            if self.seen.insert(pairs.clone()) {
+                self.list.push(pairs);
+            }
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

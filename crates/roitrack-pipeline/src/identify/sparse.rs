@@ -2,12 +2,10 @@
 //! image blobs that are neighbours give an affine map of the target's plane into the image, which predicts where the
 //! other points are; a triple whose predictions land on blobs is a hypothesis, to be verified by a pose.
 
-use std::collections::HashSet;
-
 use nalgebra::{Matrix2, Vector2};
 
 use super::MAX_SEED_BLOBS;
-use super::index::PointIndex;
+use super::index::{Hypotheses, PointIndex};
 
 /// What the search needs of the target: in-plane points and diameters (m, if known).
 pub(crate) struct PlanarModel<'a> {
@@ -56,8 +54,7 @@ pub(crate) fn triple_hypotheses(
     min_matched: usize,
 ) -> Vec<Vec<(usize, usize)>> {
     let n = model.plane_m.len();
-    let mut seen: HashSet<Vec<(usize, usize)>> = HashSet::new();
-    let mut out = Vec::new();
+    let mut hypotheses = Hypotheses::default();
     // The smallest target spacing, for the prediction gate.
     let mut spacing_m = f64::INFINITY;
     for (k, p) in model.plane_m.iter().enumerate() {
@@ -129,34 +126,17 @@ pub(crate) fn triple_hypotheses(
                         }
                     }
                     let gate = 0.3 * spacing_m * scale.sqrt();
-                    let mut pairs = vec![(p0, b0), (p1, b1), (p2, b2)];
-                    let mut misses = 0;
-                    for p in 0..n {
-                        if p == p0 || p == p1 || p == p2 {
-                            continue;
-                        }
-                        let predicted = ideal[b0] + map * (model.plane_m[p] - model.plane_m[p0]);
-                        match index
-                            .nearest(&predicted, gate, |b| pairs.iter().all(|&(_, pb)| pb != b))
-                        {
-                            Some((b, _)) => pairs.push((p, b)),
-                            None => {
-                                misses += 1;
-                                if n - misses < min_matched {
-                                    break;
-                                }
-                            }
-                        }
-                    }
-                    if pairs.len() >= min_matched {
-                        pairs.sort_unstable();
-                        if seen.insert(pairs.clone()) {
-                            out.push(pairs);
-                        }
-                    }
+                    hypotheses.extend_and_keep(
+                        index,
+                        vec![(p0, b0), (p1, b1), (p2, b2)],
+                        n,
+                        gate,
+                        min_matched,
+                        |p| ideal[b0] + map * (model.plane_m[p] - model.plane_m[p0]),
+                    );
                 }
             }
         }
     }
-    out
+    hypotheses.list
 }

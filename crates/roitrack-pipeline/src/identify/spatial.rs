@@ -3,12 +3,10 @@
 //! first order for a target small against its distance), which predicts where the other points are; a quadruple
 //! whose predictions land on blobs is a hypothesis, to be verified by a pose.
 
-use std::collections::HashSet;
-
 use nalgebra::{SMatrix, SVector, Vector2, Vector3};
 
 use super::MAX_SEED_BLOBS;
-use super::index::PointIndex;
+use super::index::{Hypotheses, PointIndex};
 
 /// Target points used as the first point of a quadruple: all of a small target, else a few spread ones.
 fn anchors(points: &[Vector3<f64>]) -> Vec<usize> {
@@ -93,8 +91,7 @@ pub(crate) fn quadruple_hypotheses(
             }
         }
     }
-    let mut seen: HashSet<Vec<(usize, usize)>> = HashSet::new();
-    let mut out = Vec::new();
+    let mut hypotheses = Hypotheses::default();
     // Seeds among the first blobs only (detectors list the strongest first): the search grows with the square of
     // the seeds' neighbourhoods, and a cluttered frame of thousands of blobs must not take seconds.
     for b0 in 0..ideal.len().min(MAX_SEED_BLOBS) {
@@ -124,44 +121,31 @@ pub(crate) fn quadruple_hypotheses(
                         let a = camera.fixed_view::<2, 3>(0, 0);
                         let scale = (a.row(0).norm() * a.row(1).norm()).sqrt();
                         let gate = 0.3 * spacing_m * scale;
-                        let mut pairs: Vec<(usize, usize)> = quad
-                            .iter()
-                            .zip([b0, b1, b2, b3])
-                            .map(|(&p, b)| (p, b))
-                            .collect();
-                        let mut misses = 0;
-                        for p in (0..n).filter(|p| !quad.contains(p)) {
-                            let predicted = camera
-                                * SVector::<f64, 4>::new(
-                                    points[p].x,
-                                    points[p].y,
-                                    points[p].z,
-                                    1.0,
-                                );
-                            match index
-                                .nearest(&predicted, gate, |b| pairs.iter().all(|&(_, pb)| pb != b))
-                            {
-                                Some((b, _)) => pairs.push((p, b)),
-                                None => {
-                                    misses += 1;
-                                    if n - misses < min_matched {
-                                        break;
-                                    }
-                                }
-                            }
-                        }
-                        if pairs.len() >= min_matched {
-                            pairs.sort_unstable();
-                            if seen.insert(pairs.clone()) {
-                                out.push(pairs);
-                            }
-                        }
+                        hypotheses.extend_and_keep(
+                            index,
+                            quad.iter()
+                                .zip([b0, b1, b2, b3])
+                                .map(|(&p, b)| (p, b))
+                                .collect(),
+                            n,
+                            gate,
+                            min_matched,
+                            |p| {
+                                camera
+                                    * SVector::<f64, 4>::new(
+                                        points[p].x,
+                                        points[p].y,
+                                        points[p].z,
+                                        1.0,
+                                    )
+                            },
+                        );
                     }
                 }
             }
         }
     }
-    out
+    hypotheses.list
 }
 
 #[cfg(test)]
