@@ -77,17 +77,18 @@
 //! | --- | --- | --- |
 //! | [`math`] | `roitrack-core` | camera models, SO(3), the target, the time model, the spatio-temporal projection and its Jacobians, the solver, the estimators (no I/O, no threads) |
 //! | [`image`] | `roitrack-image` | ROIs and frames, the camera trait, the simulated and replay cameras, centroids, blob detection, the renderer |
-//! | [`pipeline`] | `roitrack-pipeline` | finding the target in a full frame, the ROI scheduler, the two-thread real-time loop, offline ROI tracking |
-//! | [`sim`] | `roitrack-sim` | scenario motions with ground truth, the measurement simulator, rendered ROI recordings |
+//! | [`pipeline`] | `roitrack-pipeline` | finding the target in a full frame or a photograph (`detect_target`), the ROI scheduler, the two-thread real-time loop, offline ROI tracking |
+//! | [`sim`] | `roitrack-sim` | scenario motions with ground truth, the measurement simulator, rendered ROI recordings, synthetic photographs |
 //! | [`eval`] | `roitrack-eval` | every accuracy metric, the velocity lag included |
-//! | [`formats`] | `roitrack-formats` | the files: camera YAML, target CSV, measurements CSV, TUM poses, twists, diagnostics, ROI recordings |
+//! | [`formats`] | `roitrack-formats` | the files: camera YAML, target CSV, measurements CSV, TUM poses, twists, diagnostics, ROI recordings, images, detection overlays |
 //! | `plot` | `roitrack-plot` | charts and the figures of a run (feature `plot`, on by default) |
 //! | `experiments` | `roitrack-experiments` | the demo, the estimator comparison, the fault table, the lag trade-off (feature `experiments`, on by default) |
 //! | `bench` | `roitrack-bench` | the hot-path, loop, soak and PnP benchmarks (feature `bench`) |
 //!
 //! The programs in `examples/` show the main uses end to end: `track_recording` (files in, estimates out),
 //! `simulate_and_evaluate` (your own camera and target, ground truth, metrics), `own_camera` (the real-time loop on a
-//! camera of your own) and `find_target` (the target in a full frame, no prior).
+//! camera of your own), `find_target` (the target in a full frame, no prior) and `detect_photo` (a circle grid in a
+//! photograph: yours, or a synthetic one checked against its truth).
 
 pub use nalgebra;
 #[cfg(feature = "bench")]
