@@ -4,14 +4,7 @@ use crate::centroid::{
     AUTO_MIN_CONTRAST_DN, AUTO_MIN_CONTRAST_SIGMAS, AUTO_THRESHOLD_FRACTION, Centroid,
     CentroidOptions, Threshold,
 };
-
-/// A horizontal run of above-threshold pixels (its moments are kept alongside).
-#[derive(Debug, Clone, Copy)]
-struct Run {
-    start: u32,
-    /// Inclusive.
-    end: u32,
-}
+use crate::components::{Labeller, RunSums};
 
 /// Moments of a component (integers: exact).
 #[derive(Debug, Clone, Copy, Default)]
@@ -26,7 +19,30 @@ struct Moments {
     touches_border: bool,
 }
 
-impl Moments {
+impl RunSums for Moments {
+    fn of_run(
+        row: &[u16],
+        start: usize,
+        end: usize,
+        j: usize,
+        width: usize,
+        height: usize,
+    ) -> Self {
+        let mut m = Moments::default();
+        for (i, &value) in row.iter().enumerate().take(end).skip(start) {
+            let p = u64::from(value);
+            m.n += 1;
+            m.sum_i += i as u64;
+            m.sum_p += p;
+            m.sum_pi += p * i as u64;
+            m.peak = m.peak.max(value);
+        }
+        m.sum_j = m.n * j as u64;
+        m.sum_pj = m.sum_p * j as u64;
+        m.touches_border = j == 0 || j + 1 == height || start == 0 || end == width;
+        m
+    }
+
     fn add(&mut self, o: &Moments) {
         self.n += o.n;
         self.sum_i += o.sum_i;
@@ -36,25 +52,6 @@ impl Moments {
         self.sum_pj += o.sum_pj;
         self.peak = self.peak.max(o.peak);
         self.touches_border |= o.touches_border;
-    }
-}
-
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
-    while parent[x as usize] != x {
-        let grand = parent[parent[x as usize] as usize];
-        parent[x as usize] = grand;
-        x = grand;
-    }
-    x
-}
-
-fn union(parent: &mut [u32], a: u32, b: u32) {
-    let (ra, rb) = (find(parent, a), find(parent, b));
-    // The older run stays the root, so components keep the order of their first pixel.
-    if ra < rb {
-        parent[rb as usize] = ra;
-    } else if rb < ra {
-        parent[ra as usize] = rb;
     }
 }
 
@@ -113,64 +110,10 @@ pub fn detect_blobs(
     let Some((background, threshold, weight_origin)) = frame_levels(pixels, opts.threshold) else {
         return Vec::new();
     };
-    let mut runs: Vec<Run> = Vec::new();
-    let mut moments: Vec<Moments> = Vec::new();
-    let mut parent: Vec<u32> = Vec::new();
-    let mut previous_row = 0..0;
-    for (j, row) in pixels.chunks_exact(w.max(1)).enumerate() {
-        let row_start = runs.len();
-        let mut i = 0;
-        while i < w {
-            if row[i] <= threshold {
-                i += 1;
-                continue;
-            }
-            let start = i;
-            let mut m = Moments::default();
-            while i < w && row[i] > threshold {
-                let p = u64::from(row[i]);
-                m.n += 1;
-                m.sum_i += i as u64;
-                m.sum_p += p;
-                m.sum_pi += p * i as u64;
-                m.peak = m.peak.max(row[i]);
-                i += 1;
-            }
-            m.sum_j = m.n * j as u64;
-            m.sum_pj = m.sum_p * j as u64;
-            m.touches_border = j == 0 || j + 1 == h || start == 0 || i == w;
-            let id = runs.len() as u32;
-            runs.push(Run {
-                start: start as u32,
-                end: (i - 1) as u32,
-            });
-            moments.push(m);
-            parent.push(id);
-        }
-        // Join with the overlapping runs of the row above (8-connectivity: touching diagonally counts).
-        let mut p = previous_row.start;
-        for r in row_start..runs.len() {
-            let run = runs[r];
-            while p < previous_row.end && runs[p].end + 1 < run.start {
-                p += 1;
-            }
-            let mut q = p;
-            while q < previous_row.end && runs[q].start <= run.end + 1 {
-                union(&mut parent, q as u32, r as u32);
-                q += 1;
-            }
-        }
-        previous_row = row_start..runs.len();
-    }
-    // Aggregate per component (roots are each component's first run).
-    let mut totals: Vec<Option<Moments>> = vec![None; runs.len()];
-    for (r, m) in moments.iter().enumerate() {
-        let root = find(&mut parent, r as u32) as usize;
-        totals[root].get_or_insert_with(Moments::default).add(m);
-    }
-    totals
+    let mut components: Vec<Moments> = Vec::new();
+    Labeller::<Moments>::default().components(pixels, w, h, threshold, |m| components.push(*m));
+    components
         .into_iter()
-        .flatten()
         .filter(|m| !m.touches_border)
         .filter_map(|m| {
             let area_px = u32::try_from(m.n).ok()?;

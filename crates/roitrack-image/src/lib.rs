@@ -25,6 +25,7 @@
 pub mod accuracy;
 pub mod camera;
 pub mod centroid;
+mod components;
 pub mod detect;
 pub mod frame;
 mod histogram;

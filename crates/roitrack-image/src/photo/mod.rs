@@ -20,11 +20,10 @@
 //! Dark blobs are found as bright blobs of the inverted image, so everything downstream sees one polarity.
 
 mod centre;
-mod components;
 mod edge;
 
+use crate::components::{Component, Labeller};
 use centre::{Ellipse, grey_centre};
-use components::{Component, Labeller};
 
 /// Whether the blobs are brighter or darker than what surrounds them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -125,7 +124,7 @@ struct Group {
 #[derive(Debug, Default)]
 pub struct PhotoScratch {
     inverted: Vec<u16>,
-    labeller: Labeller,
+    labeller: Labeller<Component>,
     ring: Vec<(f64, f64, f64)>,
     edges: Vec<nalgebra::Vector2<f64>>,
     contrasts: Vec<f64>,

@@ -1,5 +1,15 @@
-//! Connected components (8-connectivity) of the pixels above one threshold, with their binary moments up to second
-//! order and what the shape filters need, from horizontal runs joined by union-find.
+//! Connected components (8-connectivity) of the pixels above one threshold, from horizontal runs joined by
+//! union-find, each with the sums its user needs ([`RunSums`]): binary moments up to second order and the shape
+//! filters' figures for the photo detector ([`Component`]), grey-level first moments for the frame detector.
+
+/// What is summed over a component, run by run.
+pub(crate) trait RunSums: Copy {
+    /// The sums of the run `start..end` of `row` (row `j` of a `width` x `height` image).
+    fn of_run(row: &[u16], start: usize, end: usize, j: usize, width: usize, height: usize)
+    -> Self;
+    /// Adds another part of the same component.
+    fn add(&mut self, other: &Self);
+}
 
 /// Binary moments and outline figures of one component (integer sums: exact).
 #[derive(Debug, Clone, Copy, Default)]
@@ -17,7 +27,36 @@ pub(crate) struct Component {
     pub touches_border: bool,
 }
 
-impl Component {
+impl RunSums for Component {
+    fn of_run(
+        _row: &[u16],
+        start: usize,
+        end: usize,
+        j: usize,
+        width: usize,
+        height: usize,
+    ) -> Self {
+        let (s, e) = (start as u64, end as u64);
+        let n = e - s;
+        let jj = j as u64;
+        // Sums of i and i² over s..e in closed form.
+        let sum_i = (s + e - 1) * n / 2;
+        let sq = |x: u64| x * (x + 1) * (2 * x + 1) / 6;
+        let sum_ii = sq(e - 1) - if s > 0 { sq(s - 1) } else { 0 };
+        Self {
+            n,
+            sum_i,
+            sum_j: n * jj,
+            sum_ii,
+            sum_jj: n * jj * jj,
+            sum_ij: sum_i * jj,
+            runs: 1,
+            row_min: j as u32,
+            row_max: j as u32,
+            touches_border: j == 0 || j + 1 == height || start == 0 || end == width,
+        }
+    }
+
     fn add(&mut self, o: &Component) {
         self.n += o.n;
         self.sum_i += o.sum_i;
@@ -30,7 +69,9 @@ impl Component {
         self.row_max = self.row_max.max(o.row_max);
         self.touches_border |= o.touches_border;
     }
+}
 
+impl Component {
     /// Centre of the pixels (px).
     pub fn centre(&self) -> (f64, f64) {
         let n = self.n as f64;
@@ -66,12 +107,12 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
 }
 
 /// Buffers reused from one threshold to the next.
-#[derive(Debug, Default)]
-pub(crate) struct Labeller {
+#[derive(Debug)]
+pub(crate) struct Labeller<S> {
     runs: Vec<Run>,
-    parts: Vec<Component>,
+    parts: Vec<S>,
     parent: Vec<u32>,
-    totals: Vec<Option<Component>>,
+    totals: Vec<Option<S>>,
     mask: Vec<u64>,
 }
 
@@ -142,7 +183,19 @@ fn next_bit(mask: &[u64], from: usize, set: bool, width: usize) -> Option<usize>
     }
 }
 
-impl Labeller {
+impl<S> Default for Labeller<S> {
+    fn default() -> Self {
+        Self {
+            runs: Vec::new(),
+            parts: Vec::new(),
+            parent: Vec::new(),
+            totals: Vec::new(),
+            mask: Vec::new(),
+        }
+    }
+}
+
+impl<S: RunSums> Labeller<S> {
     /// The components of the pixels strictly above `threshold` in a row-major `width` x `height` image, each passed
     /// to `keep` (in the order of their first pixel).
     pub fn components(
@@ -151,7 +204,7 @@ impl Labeller {
         width: usize,
         height: usize,
         threshold: u16,
-        mut keep: impl FnMut(&Component),
+        mut keep: impl FnMut(&S),
     ) {
         self.runs.clear();
         self.parts.clear();
@@ -171,30 +224,13 @@ impl Labeller {
                 };
                 let end = next_bit(&self.mask, start, false, width).unwrap_or(width);
                 i = end;
-                let (s, e) = (start as u64, end as u64);
-                let n = e - s;
-                let jj = j as u64;
-                // Sums of i and i² over s..e in closed form.
-                let sum_i = (s + e - 1) * n / 2;
-                let sq = |x: u64| x * (x + 1) * (2 * x + 1) / 6;
-                let sum_ii = sq(e - 1) - if s > 0 { sq(s - 1) } else { 0 };
                 let id = self.runs.len() as u32;
                 self.runs.push(Run {
                     start: start as u32,
                     end: (end - 1) as u32,
                 });
-                self.parts.push(Component {
-                    n,
-                    sum_i,
-                    sum_j: n * jj,
-                    sum_ii,
-                    sum_jj: n * jj * jj,
-                    sum_ij: sum_i * jj,
-                    runs: 1,
-                    row_min: j as u32,
-                    row_max: j as u32,
-                    touches_border: j == 0 || j + 1 == height || start == 0 || end == width,
-                });
+                self.parts
+                    .push(S::of_run(row, start, end, j, width, height));
                 self.parent.push(id);
             }
             // Join with the runs of the row above that overlap or touch diagonally.
@@ -274,7 +310,7 @@ mod tests {
             }
         }
         let mut found = Vec::new();
-        Labeller::default().components(&img, w, h, 50, |c| found.push(*c));
+        Labeller::<Component>::default().components(&img, w, h, 50, |c| found.push(*c));
         assert_eq!(found.len(), 2);
         let rect = found[0];
         assert_eq!(rect.n, 24);
