@@ -25,9 +25,8 @@ impl Ellipse {
     /// The ellipse with the central second moments (μ_uu, μ_vv, μ_uv) of a filled ellipse (a filled ellipse of
     /// semi-axes a, b has moments a²/4 and b²/4 along its axes).
     pub fn from_moments(u_px: f64, v_px: f64, (uu, vv, uv): (f64, f64, f64)) -> Self {
-        let mean = 0.5 * (uu + vv);
-        let spread = (0.25 * (uu - vv).powi(2) + uv * uv).sqrt();
-        let (l1, l2) = (mean + spread, (mean - spread).max(0.0));
+        let (l1, l2) = principal_moments((uu, vv, uv));
+        let l2 = l2.max(0.0);
         Self {
             u_px,
             v_px,
@@ -81,6 +80,13 @@ impl GrownEllipse {
         }
         (lo as usize).min(width)..(hi as usize).min(width)
     }
+}
+
+/// The larger and smaller principal second moments (px²) of central moments (μ_uu, μ_vv, μ_uv).
+pub(crate) fn principal_moments((uu, vv, uv): (f64, f64, f64)) -> (f64, f64) {
+    let mean = 0.5 * (uu + vv);
+    let spread = (0.25 * (uu - vv).powi(2) + uv * uv).sqrt();
+    (mean + spread, mean - spread)
 }
 
 /// Result of the grey-level measurement.

@@ -23,7 +23,7 @@ mod centre;
 mod edge;
 
 use crate::components::{Component, Labeller};
-use centre::{Ellipse, grey_centre};
+use centre::{Ellipse, grey_centre, principal_moments};
 
 /// Whether the blobs are brighter or darker than what surrounds them.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -260,10 +260,7 @@ fn passes_shape(c: &Component, options: &PhotoBlobOptions, max_area: f64) -> boo
     if f64::from(c.runs) > options.max_runs_per_row * rows {
         return false;
     }
-    let (uu, vv, uv) = c.covariance();
-    let mean = 0.5 * (uu + vv);
-    let spread = (0.25 * (uu - vv).powi(2) + uv * uv).sqrt();
-    let (l1, l2) = (mean + spread, mean - spread);
+    let (l1, l2) = principal_moments(c.covariance());
     if l2 <= 0.0 || l2 < options.min_inertia_ratio * l1 {
         return false;
     }

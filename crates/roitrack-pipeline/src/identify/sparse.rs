@@ -33,7 +33,11 @@ fn anchors(model: &PlanarModel) -> Vec<usize> {
 }
 
 /// The `k` nearest other points of `i` in a small point set.
-fn nearest_points(points: &[Vector2<f64>], i: usize, k: usize) -> Vec<usize> {
+pub(crate) fn nearest_points<const D: usize>(
+    points: &[nalgebra::SVector<f64, D>],
+    i: usize,
+    k: usize,
+) -> Vec<usize> {
     let mut others: Vec<usize> = (0..points.len()).filter(|&j| j != i).collect();
     others.sort_by(|&a, &b| {
         (points[a] - points[i])

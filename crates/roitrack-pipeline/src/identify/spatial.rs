@@ -7,6 +7,7 @@ use nalgebra::{SMatrix, SVector, Vector2, Vector3};
 
 use super::MAX_SEED_BLOBS;
 use super::index::{Hypotheses, PointIndex};
+use super::sparse::nearest_points;
 
 /// Target points used as the first point of a quadruple: all of a small target, else a few spread ones.
 fn anchors(points: &[Vector3<f64>]) -> Vec<usize> {
@@ -74,13 +75,7 @@ pub(crate) fn quadruple_hypotheses(
     // Model quadruples: an anchor and three of its nearest, in every order, not coplanar.
     let mut quadruples = Vec::new();
     for p0 in anchors(points) {
-        let mut near: Vec<usize> = (0..n).filter(|&j| j != p0).collect();
-        near.sort_by(|&a, &b| {
-            (points[a] - points[p0])
-                .norm()
-                .total_cmp(&(points[b] - points[p0]).norm())
-        });
-        near.truncate(4);
+        let near = nearest_points(points, p0, 4);
         for &p1 in &near {
             for &p2 in &near {
                 for &p3 in &near {
