@@ -5,14 +5,21 @@
 //! Gaussian noise, dropped ROIs and outliers as options, and faults (occlusions, time gaps, bursts of lost ROIs, a
 //! sudden jump of the target, blobs leaving the image); and the ROI images of a run, rendered by the simulated camera
 //! ([`rois`]); and synthetic photographs of planar circle targets in cluttered, unevenly lit scenes, with the true
-//! circle centres ([`photo`]). A scenario's motion can be seen by any camera and carry any target
+//! circle centres ([`photo`]); and the full frames a global- or rolling-shutter camera takes of a scenario, bright blobs
+//! or dark ones on an unevenly lit background, with dense ground truth and each blob's true centre at its row time
+//! ([`frames`]). A scenario's motion can be seen by any camera and carry any target
 //! ([`Scenario::with_camera`], [`Scenario::with_target`]).
 
+pub mod frames;
 pub mod measurements;
 pub mod photo;
 pub mod rois;
 pub mod scenario;
 
+pub use frames::{
+    DARK_BLOB_CONTRAST, DEFAULT_TRUTH_RATE_HZ, FrameOptions, FrameSequence, FrameSequenceError,
+    FrameTruth,
+};
 pub use measurements::{
     Excursion, Jump, Occlusion, RoiBurst, SimError, SimulatedRun, SimulationOptions, TimeGap,
     simulate,
