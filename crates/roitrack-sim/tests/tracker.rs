@@ -3,7 +3,7 @@
 
 use nalgebra::{Rotation3, Vector3};
 use roitrack_core::estimator::{
-    Estimate, Estimator, EstimatorConfig, TrackError, TrackStatus, Tracker, TrackerConfig,
+    Emit, Estimate, Estimator, EstimatorConfig, TrackError, TrackStatus, Tracker, TrackerConfig,
     VvsSettings,
 };
 use roitrack_core::{CameraModel, JacobianKind, Measurement, MotionState, RoiOrder, Target, so3};
@@ -302,4 +302,127 @@ fn invalid_configurations_are_refused() {
         assert!(Tracker::new(CameraModel::canonical(), Target::grid4x4(), config).is_err());
     }
     let _ = Rotation3::<f64>::identity();
+}
+
+/// Noiseless frames of a target under a constant fast twist: every blob of frame k at `t_k` (global shutter) or at
+/// `t_k + v * line_delay_s` (rolling shutter, v its row), in time order within the frame.
+fn frames_of(start: &MotionState, line_delay_s: f64, frames: usize) -> Vec<Vec<Measurement>> {
+    let (camera, target) = (CameraModel::canonical(), Target::grid4x4());
+    (0..frames)
+        .map(|k| {
+            let t_frame_s = k as f64 / 30.0;
+            let mut frame: Vec<Measurement> = target
+                .points()
+                .iter()
+                .map(|p| {
+                    // The row fixes the time and the time the row: a few rounds converge.
+                    let mut t_s = t_frame_s;
+                    let mut px = nalgebra::Vector2::zeros();
+                    for _ in 0..6 {
+                        px = camera
+                            .raw_pixel_from_cam(&start.point_in_cam_at(&p.point_in_obj_m, t_s))
+                            .unwrap();
+                        t_s = t_frame_s + px.y * line_delay_s;
+                    }
+                    Measurement {
+                        t_s,
+                        id: p.id,
+                        u_px: px.x,
+                        v_px: px.y,
+                    }
+                })
+                .collect();
+            frame.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+            frame
+        })
+        .collect()
+}
+
+#[test]
+fn frames_of_simultaneous_measurements_give_one_estimate_each_and_exact_states() {
+    let start = MotionState {
+        cam_r_obj: bench_rotation(),
+        cam_t_obj_m: Vector3::new(-0.03, 0.02, 0.6),
+        velocity_mps: Vector3::new(0.3, -0.1, 0.05),
+        angular_velocity_radps: Vector3::new(0.2, -0.3, 1.0),
+    };
+    // Global shutter (every blob of a frame at one time) and a rolling shutter of 30 µs a row.
+    for line_delay_s in [0.0, 30e-6] {
+        let frames = frames_of(&start, line_delay_s, 40);
+        for (name, config) in configs() {
+            if name == "static" || name == "vvs-paper" {
+                continue;
+            }
+            let config = TrackerConfig { every: 1, ..config };
+            // One batch per frame: one estimate per frame once initialised (the second frame), at its newest time.
+            let mut tracker =
+                Tracker::new(CameraModel::canonical(), Target::grid4x4(), config).unwrap();
+            let mut estimates = Vec::new();
+            for frame in &frames {
+                if let Some(e) = tracker.push_batch(frame, Emit::EachBatch).unwrap() {
+                    assert_eq!(e.t_ref_s, frame.last().unwrap().t_s, "{name}");
+                    estimates.push(e);
+                }
+            }
+            assert_eq!(estimates.len(), frames.len() - 1, "{name} {line_delay_s}");
+            let last = estimates.last().unwrap();
+            let truth = start.predicted(last.t_ref_s);
+            let dp = position_error_m(last, &truth);
+            let dv = (last.state.velocity_mps - truth.velocity_mps).norm();
+            assert!(
+                dp < 1e-7 && dv < 1e-4,
+                "{name}, line delay {line_delay_s}: {dp} m, {dv} m/s"
+            );
+            // `track` over the flat stream groups measurements that share a time: with --every 1, a global-shutter
+            // frame gives one estimate, never two at the same time.
+            let flat: Vec<Measurement> = frames.iter().flatten().copied().collect();
+            let mut tracker =
+                Tracker::new(CameraModel::canonical(), Target::grid4x4(), config).unwrap();
+            let mut times = Vec::new();
+            roitrack_core::estimator::track(
+                &mut tracker,
+                flat.iter().map(|m| Ok::<_, std::convert::Infallible>(*m)),
+                |e| {
+                    times.push(e.t_ref_s);
+                    Ok::<_, std::convert::Infallible>(())
+                },
+            )
+            .unwrap();
+            assert!(times.windows(2).all(|w| w[1] > w[0]), "{name}");
+            if line_delay_s == 0.0 {
+                assert_eq!(times.len(), frames.len() - 1, "{name}");
+            }
+        }
+    }
+}
+
+#[test]
+fn a_refused_batch_changes_nothing() {
+    let start = MotionState::at_rest(bench_rotation(), Vector3::new(0.0, 0.0, 0.6));
+    let frames = frames_of(&start, 0.0, 4);
+    let mut tracker = Tracker::new(
+        CameraModel::canonical(),
+        Target::grid4x4(),
+        TrackerConfig::default(),
+    )
+    .unwrap();
+    tracker.push_batch(&frames[0], Emit::EachBatch).unwrap();
+    tracker.push_batch(&frames[1], Emit::EachBatch).unwrap();
+    let before = (tracker.state(), tracker.report());
+    let mut bad = frames[2].clone();
+    bad[7].id = 99;
+    assert!(matches!(
+        tracker.push_batch(&bad, Emit::EachBatch),
+        Err(TrackError::UnknownId { id: 99, .. })
+    ));
+    assert_eq!(tracker.state(), before.0);
+    assert_eq!(tracker.report().measurements, before.1.measurements);
+    assert_eq!(tracker.report().refused, before.1.refused + 1);
+    // The same frame, corrected, is taken.
+    assert!(
+        tracker
+            .push_batch(&frames[2], Emit::EachBatch)
+            .unwrap()
+            .is_some()
+    );
 }

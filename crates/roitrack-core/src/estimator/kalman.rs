@@ -270,7 +270,7 @@ impl Law for KalmanLaw {
     /// The newest measurement rejected, or most of those since the last estimate (the filter was reset after a run
     /// of them and is still re-converging).
     fn is_disputed(&self, core: &TrackCore, _residuals: &ResidualFigures) -> bool {
-        self.gated_in_a_row > 0 || 2 * self.gated_since_estimate >= core.config.every.max(2)
+        self.gated_in_a_row > 0 || 2 * self.gated_since_estimate >= core.step_measurements.max(2)
     }
 
     fn after_estimate(&mut self) {

@@ -334,6 +334,45 @@ pub enum TrackError {
     },
 }
 
+/// When [`Estimator::push_batch`] gives an estimate.
+///
+/// ```
+/// use roitrack_core::estimator::{Emit, Estimator, Tracker, TrackerConfig};
+/// use roitrack_core::{CameraModel, Measurement, MotionState, Target};
+/// use nalgebra::Vector3;
+///
+/// // A global-shutter camera: the 16 blobs of each frame share the frame's time; one estimate per frame.
+/// let (camera, target) = (CameraModel::canonical(), Target::grid4x4());
+/// let truth = MotionState::at_rest(Default::default(), Vector3::new(0.0, 0.0, 0.6));
+/// let mut tracker = Tracker::new(camera.clone(), target.clone(), TrackerConfig::default()).unwrap();
+/// let mut estimates = 0;
+/// for k in 0..5 {
+///     let t_s = k as f64 / 30.0;
+///     let frame: Vec<Measurement> = target.points().iter().map(|p| {
+///         let px = camera.raw_pixel_from_cam(&truth.point_in_cam_at(&p.point_in_obj_m, t_s)).unwrap();
+///         Measurement { t_s, id: p.id, u_px: px.x, v_px: px.y }
+///     }).collect();
+///     if let Some(e) = tracker.push_batch(&frame, Emit::EachBatch).unwrap() {
+///         assert_eq!(e.t_ref_s, t_s);
+///         estimates += 1;
+///     }
+/// }
+/// // The first frame alone cannot initialise (two cycles over the points are needed); every later frame gives one.
+/// assert_eq!(estimates, 4);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Emit {
+    /// One estimate after every batch (a frame camera: one estimate per frame).
+    EachBatch,
+    /// As [`Estimator::push`]: once `every` measurements have come since the previous estimate, but only after the
+    /// batch's last measurement.
+    #[default]
+    Every,
+    /// None yet: more measurements of the same readout follow. A later batch (an empty one will do) closes the
+    /// readout and gives the estimate that is due.
+    Hold,
+}
+
 /// Estimates counted by status.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct StatusCounts {
@@ -409,6 +448,17 @@ pub trait Estimator: Send + std::fmt::Debug {
     /// initialised. A refused measurement leaves the estimator as it was.
     fn push(&mut self, m: &Measurement) -> Result<Option<Estimate>, TrackError>;
 
+    /// Takes the measurements of one readout at once (the blobs of a frame, in time order: one time for a global
+    /// shutter, one per row for a rolling shutter) and returns at most one estimate, at the newest measurement's time,
+    /// after the last of them (see [`Emit`]). Each measurement updates the state at its own time, as with
+    /// [`Self::push`]; measurements that share a time are one readout, never an error. Every measurement is checked
+    /// before any is used: a refused batch leaves the estimator as it was.
+    fn push_batch(
+        &mut self,
+        measurements: &[Measurement],
+        emit: Emit,
+    ) -> Result<Option<Estimate>, TrackError>;
+
     /// Drops the current track: the next measurements initialise a new one (after a re-initialisation from a full
     /// frame, say). Measurement times must still not decrease.
     fn reset(&mut self);
@@ -436,6 +486,13 @@ macro_rules! delegate_estimator {
         impl Estimator for $name {
             fn push(&mut self, m: &Measurement) -> Result<Option<Estimate>, TrackError> {
                 self.0.push(m)
+            }
+            fn push_batch(
+                &mut self,
+                measurements: &[Measurement],
+                emit: $crate::estimator::Emit,
+            ) -> Result<Option<Estimate>, TrackError> {
+                self.0.push_batch(measurements, emit)
             }
             fn reset(&mut self) {
                 self.0.reset()
@@ -523,6 +580,10 @@ pub enum StreamError<S, K = S> {
 /// Runs `estimator` over a stream of measurements (times not decreasing), handing every estimate to `sink` as it
 /// comes: constant memory whatever the stream's length. Returns the estimator's report.
 ///
+/// Consecutive measurements that share a time (the blobs of a global-shutter frame) are pushed together
+/// ([`Estimator::push_batch`] with [`Emit::Every`]): an estimate comes only after the last of them, so no two
+/// estimates share a time and none rests on half a frame.
+///
 /// ```
 /// use roitrack_core::estimator::{Tracker, TrackerConfig, track};
 /// use roitrack_core::{CameraModel, Measurement, Target};
@@ -544,14 +605,27 @@ pub fn track<S, K>(
     measurements: impl IntoIterator<Item = Result<Measurement, S>>,
     mut sink: impl FnMut(&Estimate) -> Result<(), K>,
 ) -> Result<EstimatorReport, StreamError<S, K>> {
+    // Measurements that share a time are held; the readout they form is closed (and an estimate given if one is
+    // due) when a later time comes, or the stream ends.
+    let mut open_time_s: Option<f64> = None;
+    let mut close = |estimator: &mut dyn Estimator| -> Result<(), StreamError<S, K>> {
+        match estimator.push_batch(&[], Emit::Every) {
+            Ok(Some(estimate)) => sink(&estimate).map_err(StreamError::Sink),
+            _ => Ok(()),
+        }
+    };
     for (index, m) in measurements.into_iter().enumerate() {
         let m = m.map_err(StreamError::Source)?;
-        if let Some(estimate) = estimator
-            .push(&m)
-            .map_err(|source| StreamError::Refused { index, source })?
-        {
-            sink(&estimate).map_err(StreamError::Sink)?;
+        if open_time_s.is_some_and(|t_s| t_s != m.t_s) {
+            close(estimator)?;
         }
+        estimator
+            .push_batch(std::slice::from_ref(&m), Emit::Hold)
+            .map_err(|source| StreamError::Refused { index, source })?;
+        open_time_s = Some(m.t_s);
+    }
+    if open_time_s.is_some() {
+        close(estimator)?;
     }
     Ok(estimator.report())
 }

@@ -12,8 +12,8 @@ use nalgebra::{SMatrix, Vector2};
 use super::problem::{Observation, ResidualFigures, WindowProblem, scale_from_median_px};
 use super::window::ObservationWindow;
 use super::{
-    ConfigError, Estimate, EstimatorConfig, EstimatorReport, Matrix12, RobustLoss, TrackError,
-    TrackStatus, TrackerConfig, WindowMode, static_pose::solve_static_pose,
+    ConfigError, Emit, Estimate, EstimatorConfig, EstimatorReport, Matrix12, RobustLoss,
+    TrackError, TrackStatus, TrackerConfig, WindowMode, static_pose::solve_static_pose,
 };
 use crate::solver::NormalEquations;
 use crate::{CameraModel, Measurement, MotionState, SpatioTemporalModel, Target};
@@ -79,11 +79,15 @@ pub(crate) struct TrackCore {
     window: ObservationWindow,
     /// Scratch copy of the current window, so solvers can take several passes over a slice.
     pub scratch: Vec<Observation>,
+    /// Checked measurements of a batch, before any is applied.
+    pending: Vec<Observation>,
     phase: Phase,
     pub state: MotionState,
     pub t_ref_s: f64,
     last_t_s: Option<f64>,
     since_estimate: usize,
+    /// Measurements the current control step answers (those since the previous estimate).
+    pub step_measurements: usize,
     estimates_since_init: usize,
     /// Window widening after a degenerate window: number of extra cycles (0 = the configured window).
     widening: usize,
@@ -102,6 +106,7 @@ impl TrackCore {
             camera,
             window: ObservationWindow::new(n, capacity),
             scratch: Vec::with_capacity(capacity.max(n)),
+            pending: Vec::with_capacity(n),
             target,
             config,
             phase: Phase::Initializing,
@@ -109,6 +114,7 @@ impl TrackCore {
             t_ref_s: 0.0,
             last_t_s: None,
             since_estimate: 0,
+            step_measurements: 0,
             estimates_since_init: 0,
             widening: 0,
             good_steps: 0,
@@ -191,8 +197,9 @@ impl TrackCore {
         self.scratch.extend(self.window.select(mode).copied());
     }
 
-    /// Checks a raw measurement, undistorts it and adds it to the window.
-    fn accept(&mut self, m: &Measurement) -> Result<Observation, TrackError> {
+    /// Checks a raw measurement against the previous time `previous_s` and undistorts it, without changing
+    /// anything: a refused measurement leaves the estimator as it was.
+    fn check(&self, m: &Measurement, previous_s: Option<f64>) -> Result<Observation, TrackError> {
         for (field, value) in [("t", m.t_s), ("u", m.u_px), ("v", m.v_px)] {
             if !value.is_finite() {
                 return Err(TrackError::NotFinite {
@@ -202,7 +209,7 @@ impl TrackCore {
                 });
             }
         }
-        if let Some(previous_s) = self.last_t_s
+        if let Some(previous_s) = previous_s
             && m.t_s < previous_s
         {
             return Err(TrackError::TimeOutOfOrder {
@@ -218,14 +225,18 @@ impl TrackCore {
             .camera
             .undistort_pixel(&Vector2::new(m.u_px, m.v_px))
             .map_err(|source| TrackError::Undistortion { t_s: m.t_s, source })?;
-        self.last_t_s = Some(m.t_s);
-        let obs = Observation {
+        Ok(Observation {
             t_s: m.t_s,
             point_index,
             ideal_px,
-        };
+        })
+    }
+
+    /// Adds a checked observation to the window.
+    fn commit(&mut self, obs: Observation) {
+        self.last_t_s = Some(obs.t_s);
         self.window.push(obs);
-        Ok(obs)
+        self.report.measurements += 1;
     }
 
     /// Widens the window after a degenerate step; shrinks it back after a run of good ones.
@@ -283,24 +294,67 @@ impl<L: Law> Track<L> {
 
     /// Takes one raw centroid; returns an estimate every `every` measurements once initialised.
     pub fn push(&mut self, m: &Measurement) -> Result<Option<Estimate>, TrackError> {
-        let obs = match self.core.accept(m) {
+        let obs = match self.core.check(m, self.core.last_t_s) {
             Ok(obs) => obs,
             Err(e) => {
                 self.core.report.refused += 1;
                 return Err(e);
             }
         };
-        self.core.report.measurements += 1;
-        match self.core.phase {
-            Phase::Initializing => Ok(self.try_initialize()),
-            Phase::Running => {
-                self.law.on_measurement(&mut self.core, &obs);
-                self.core.since_estimate += 1;
-                if self.core.since_estimate >= self.core.config.every {
-                    Ok(Some(self.control_step()))
-                } else {
-                    Ok(None)
+        self.apply(obs);
+        Ok(self.estimate_if_due(Emit::Every))
+    }
+
+    /// Takes the measurements of one readout (the blobs of a frame, in time order) and returns at most one
+    /// estimate, after the last of them: always with [`Emit::EachBatch`], with [`Emit::Every`] once `every`
+    /// measurements have come since the previous estimate. Every measurement is checked before any is used: a refused
+    /// batch leaves the estimator as it was.
+    pub fn push_batch(
+        &mut self,
+        measurements: &[Measurement],
+        emit: Emit,
+    ) -> Result<Option<Estimate>, TrackError> {
+        let mut pending = std::mem::take(&mut self.core.pending);
+        pending.clear();
+        let mut previous_s = self.core.last_t_s;
+        for m in measurements {
+            match self.core.check(m, previous_s) {
+                Ok(obs) => pending.push(obs),
+                Err(e) => {
+                    self.core.report.refused += 1;
+                    self.core.pending = pending;
+                    return Err(e);
                 }
+            }
+            previous_s = Some(m.t_s);
+        }
+        for obs in &pending {
+            self.apply(*obs);
+        }
+        self.core.pending = pending;
+        Ok(self.estimate_if_due(emit))
+    }
+
+    /// Adds a checked measurement to the window and, on a running track, to the state.
+    fn apply(&mut self, obs: Observation) {
+        self.core.commit(obs);
+        if self.core.phase == Phase::Running {
+            self.law.on_measurement(&mut self.core, &obs);
+            self.core.since_estimate += 1;
+        }
+    }
+
+    /// After new measurements: an initialisation when one is possible, or a control step when `emit` says one is
+    /// due.
+    fn estimate_if_due(&mut self, emit: Emit) -> Option<Estimate> {
+        match (self.core.phase, emit) {
+            (_, Emit::Hold) => None,
+            (Phase::Initializing, _) => self.try_initialize(),
+            (Phase::Running, Emit::EachBatch) => {
+                (self.core.since_estimate > 0).then(|| self.control_step())
+            }
+            (Phase::Running, Emit::Every) => {
+                (self.core.since_estimate >= self.core.config.every).then(|| self.control_step())
             }
         }
     }
@@ -417,6 +471,7 @@ impl<L: Law> Track<L> {
     /// One control step at the newest measurement's time.
     fn control_step(&mut self) -> Estimate {
         let core = &mut self.core;
+        core.step_measurements = core.since_estimate;
         core.since_estimate = 0;
         let t_new_s = core.last_t_s.unwrap_or(core.t_ref_s);
         let mode = core.effective_window();
