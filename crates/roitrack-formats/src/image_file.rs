@@ -8,12 +8,13 @@
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::Path;
 
+use image::codecs::png::PngEncoder;
 use image::error::{ImageError, UnsupportedErrorKind};
-use image::{DynamicImage, ImageFormat};
+use image::{DynamicImage, ImageEncoder, ImageFormat};
 use roitrack_core::CameraModel;
 use roitrack_image::Frame;
 
-use crate::FormatError;
+use crate::{AtomicFile, FormatError};
 
 /// The image formats [`read_frame`] and [`decode_frame`] read, as said in their errors.
 pub const FRAME_IMAGE_FORMATS: &str = "PNG, JPEG, PGM/PPM or TIFF";
@@ -41,8 +42,13 @@ pub const FRAME_IMAGE_FORMATS: &str = "PNG, JPEG, PGM/PPM or TIFF";
 /// ```
 pub fn read_frame(path: impl AsRef<Path>) -> Result<Frame, FormatError> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| FormatError::io(path, "cannot read", e))?;
+    let bytes = std::fs::read(path).map_err(|e| read_error(path, e))?;
     decode_frame(&bytes, path)
+}
+
+/// The error of a frame file that cannot be read (the same for [`read_frame`] and the frame sources).
+pub(crate) fn read_error(path: &Path, error: std::io::Error) -> FormatError {
+    FormatError::io(path, "cannot read", error)
 }
 
 /// Decodes the bytes of an image file into a grey [`Frame`] at time 0; `path` names it in errors (and, when the
@@ -57,7 +63,18 @@ pub fn read_frame(path: impl AsRef<Path>) -> Result<Frame, FormatError> {
 /// or corrupt image (with the decoder's message), an image of zero width or height, floating-point images, and
 /// images whose decoding would need more than 512 MiB. Never panics.
 pub fn decode_frame(bytes: &[u8], path: impl AsRef<Path>) -> Result<Frame, FormatError> {
-    let path = path.as_ref();
+    let mut frame = Frame::default();
+    decode_frame_into(bytes, path.as_ref(), &mut frame)?;
+    Ok(frame)
+}
+
+/// [`decode_frame`] into a frame the caller owns, reusing its pixel buffer (so a sequence of frames decoded into the
+/// same `Frame` does not allocate a pixel buffer per frame). `frame.t_s` is set to 0.
+pub(crate) fn decode_frame_into(
+    bytes: &[u8],
+    path: &Path,
+    frame: &mut Frame,
+) -> Result<(), FormatError> {
     if bytes.is_empty() {
         return Err(FormatError::new(
             path,
@@ -94,7 +111,7 @@ pub fn decode_frame(bytes: &[u8], path: impl AsRef<Path>) -> Result<Frame, Forma
             )
         }
     })?;
-    frame_from_image(image, path)
+    frame_from_image(image, path, frame)
 }
 
 /// Checks that a frame has the image size of the camera model it is to be used with.
@@ -124,6 +141,87 @@ pub fn check_frame_size(
             frame.width, frame.height, camera.width_px, camera.height_px
         ),
     ))
+}
+
+/// Writes `frame` as a grey PNG at `path`, atomically (through [`AtomicFile`]: the file appears complete or not at all).
+///
+/// A frame of `bit_depth` 8 or less becomes an 8-bit PNG, a deeper one a 16-bit PNG; the values are written as they
+/// are, not scaled (a 12-bit frame's 4095 stays 4095, and reads back as a 16-bit frame). [`read_frame`] reads the file
+/// back to the same pixels. `t_s` is not stored.
+///
+/// Refuses, naming the file: a frame of zero width or height, one whose pixel count is not `width * height`, a
+/// `bit_depth` outside 1 to 16, a value above 255 in a frame of 8 bits or less, and the output's errors (missing
+/// directory, full disk, ...).
+///
+/// ```
+/// use roitrack_image::Frame;
+///
+/// # fn main() -> Result<(), roitrack_formats::FormatError> {
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("frame_00000.png");
+/// let mut frame = Frame::new(4, 3, 12);
+/// frame.pixels[5] = 4095;
+/// roitrack_formats::write_frame_png(&path, &frame)?;
+///
+/// let back = roitrack_formats::read_frame(&path)?;
+/// assert_eq!((back.width, back.height, back.bit_depth), (4, 3, 16));
+/// assert_eq!(back.pixels, frame.pixels);
+/// # Ok(())
+/// # }
+/// ```
+pub fn write_frame_png(path: impl AsRef<Path>, frame: &Frame) -> Result<(), FormatError> {
+    let path = path.as_ref();
+    let (width, height) = (frame.width, frame.height);
+    if width == 0 || height == 0 {
+        return Err(FormatError::new(
+            path,
+            format!("cannot write an empty frame ({width} x {height} px)"),
+        ));
+    }
+    if (width as usize).checked_mul(height as usize) != Some(frame.pixels.len()) {
+        return Err(FormatError::new(
+            path,
+            format!(
+                "the frame has {} pixel values for {width} x {height} px",
+                frame.pixels.len()
+            ),
+        ));
+    }
+    if !(1..=16).contains(&frame.bit_depth) {
+        return Err(FormatError::new(
+            path,
+            format!(
+                "the frame's bit depth is {}, expected 1 to 16",
+                frame.bit_depth
+            ),
+        ));
+    }
+    let (bytes, color) = if frame.bit_depth <= 8 {
+        if let Some(at) = frame.pixels.iter().position(|&v| v > 255) {
+            let (column, row) = (at % width as usize, at / width as usize);
+            return Err(FormatError::new(
+                path,
+                format!(
+                    "pixel ({column}, {row}) is {}, above 255 in a frame of {} bits",
+                    frame.pixels[at], frame.bit_depth
+                ),
+            ));
+        }
+        let bytes: Vec<u8> = frame.pixels.iter().map(|&v| v as u8).collect();
+        (bytes, image::ColorType::L8)
+    } else {
+        // The encoder takes 16-bit samples in native byte order and writes them big-endian, as PNG wants.
+        let bytes: Vec<u8> = frame.pixels.iter().flat_map(|v| v.to_ne_bytes()).collect();
+        (bytes, image::ColorType::L16)
+    };
+    let mut file = AtomicFile::create(path)?;
+    PngEncoder::new(&mut file)
+        .write_image(&bytes, width, height, color)
+        .map_err(|e| match e {
+            ImageError::IoError(e) => file.write_error(e),
+            other => FormatError::new(path, format!("cannot encode the PNG: {other}")),
+        })?;
+    file.finish()
 }
 
 /// The format to decode with: the one the content's magic bytes say if it is readable, else the extension's if that
@@ -202,8 +300,12 @@ fn luma(r: u16, g: u16, b: u16) -> u16 {
     (0.299 * f64::from(r) + 0.587 * f64::from(g) + 0.114 * f64::from(b)).round() as u16
 }
 
-/// The grey frame of a decoded image, at time 0.
-fn frame_from_image(image: DynamicImage, path: &Path) -> Result<Frame, FormatError> {
+/// The grey frame of a decoded image, at time 0, written into `frame` (its pixel buffer reused).
+fn frame_from_image(
+    image: DynamicImage,
+    path: &Path,
+    frame: &mut Frame,
+) -> Result<(), FormatError> {
     let (width, height) = (image.width(), image.height());
     if width == 0 || height == 0 {
         return Err(FormatError::new(
@@ -211,31 +313,52 @@ fn frame_from_image(image: DynamicImage, path: &Path) -> Result<Frame, FormatErr
             format!("empty image: {width} x {height} px"),
         ));
     }
-    let (bit_depth, pixels): (u8, Vec<u16>) = match image {
-        DynamicImage::ImageLuma8(im) => (8, im.into_raw().into_iter().map(u16::from).collect()),
-        DynamicImage::ImageLumaA8(im) => (8, im.pixels().map(|p| u16::from(p.0[0])).collect()),
-        DynamicImage::ImageRgb8(im) => (
-            8,
-            im.pixels()
-                .map(|p| luma(p.0[0].into(), p.0[1].into(), p.0[2].into()))
-                .collect(),
-        ),
-        DynamicImage::ImageRgba8(im) => (
-            8,
-            im.pixels()
-                .map(|p| luma(p.0[0].into(), p.0[1].into(), p.0[2].into()))
-                .collect(),
-        ),
-        DynamicImage::ImageLuma16(im) => (16, im.into_raw()),
-        DynamicImage::ImageLumaA16(im) => (16, im.pixels().map(|p| p.0[0]).collect()),
-        DynamicImage::ImageRgb16(im) => (
-            16,
-            im.pixels().map(|p| luma(p.0[0], p.0[1], p.0[2])).collect(),
-        ),
-        DynamicImage::ImageRgba16(im) => (
-            16,
-            im.pixels().map(|p| luma(p.0[0], p.0[1], p.0[2])).collect(),
-        ),
+    let pixels = &mut frame.pixels;
+    pixels.clear();
+    let bit_depth = match image {
+        DynamicImage::ImageLuma8(im) => {
+            pixels.extend(im.as_raw().iter().map(|&v| u16::from(v)));
+            8
+        }
+        DynamicImage::ImageLumaA8(im) => {
+            pixels.extend(im.pixels().map(|p| u16::from(p.0[0])));
+            8
+        }
+        DynamicImage::ImageRgb8(im) => {
+            pixels.extend(
+                im.pixels()
+                    .map(|p| luma(p.0[0].into(), p.0[1].into(), p.0[2].into())),
+            );
+            8
+        }
+        DynamicImage::ImageRgba8(im) => {
+            pixels.extend(
+                im.pixels()
+                    .map(|p| luma(p.0[0].into(), p.0[1].into(), p.0[2].into())),
+            );
+            8
+        }
+        DynamicImage::ImageLuma16(im) => {
+            // A fresh frame takes the decoder's buffer as it is; a reused one keeps its own.
+            if pixels.capacity() == 0 {
+                *pixels = im.into_raw();
+            } else {
+                pixels.extend_from_slice(im.as_raw());
+            }
+            16
+        }
+        DynamicImage::ImageLumaA16(im) => {
+            pixels.extend(im.pixels().map(|p| p.0[0]));
+            16
+        }
+        DynamicImage::ImageRgb16(im) => {
+            pixels.extend(im.pixels().map(|p| luma(p.0[0], p.0[1], p.0[2])));
+            16
+        }
+        DynamicImage::ImageRgba16(im) => {
+            pixels.extend(im.pixels().map(|p| luma(p.0[0], p.0[1], p.0[2])));
+            16
+        }
         DynamicImage::ImageRgb32F(_) | DynamicImage::ImageRgba32F(_) => {
             return Err(float_error(path));
         }
@@ -246,13 +369,11 @@ fn frame_from_image(image: DynamicImage, path: &Path) -> Result<Frame, FormatErr
             ));
         }
     };
-    Ok(Frame {
-        t_s: 0.0,
-        width,
-        height,
-        bit_depth,
-        pixels,
-    })
+    frame.t_s = 0.0;
+    frame.width = width;
+    frame.height = height;
+    frame.bit_depth = bit_depth;
+    Ok(())
 }
 
 #[cfg(test)]
@@ -275,7 +396,7 @@ mod tests {
     #[test]
     fn float_images_are_refused() {
         let image = DynamicImage::ImageRgb32F(image::Rgb32FImage::new(2, 2));
-        let e = frame_from_image(image, Path::new("f.tiff")).unwrap_err();
+        let e = frame_from_image(image, Path::new("f.tiff"), &mut Frame::default()).unwrap_err();
         assert!(e.to_string().starts_with("f.tiff: floating-point"), "{e}");
     }
 
@@ -283,11 +404,17 @@ mod tests {
     fn alpha_is_dropped() {
         let mut im = image::RgbaImage::new(1, 1);
         im.put_pixel(0, 0, image::Rgba([0, 255, 0, 0]));
-        let frame = frame_from_image(DynamicImage::ImageRgba8(im), Path::new("a.png")).unwrap();
+        let mut frame = Frame::default();
+        frame_from_image(DynamicImage::ImageRgba8(im), Path::new("a.png"), &mut frame).unwrap();
         assert_eq!(frame.pixels, vec![150]);
         let mut im = image::GrayAlphaImage::new(1, 1);
         im.put_pixel(0, 0, image::LumaA([200, 7]));
-        let frame = frame_from_image(DynamicImage::ImageLumaA8(im), Path::new("a.png")).unwrap();
+        frame_from_image(
+            DynamicImage::ImageLumaA8(im),
+            Path::new("a.png"),
+            &mut frame,
+        )
+        .unwrap();
         assert_eq!(frame.pixels, vec![200]);
     }
 
@@ -559,6 +686,45 @@ mod tests {
         );
         let right = Frame::new(camera.width_px, camera.height_px, 16);
         check_frame_size(&right, &camera, "f.png").unwrap();
+    }
+
+    #[test]
+    fn write_frame_png_round_trips_8_and_16_bits_and_refuses_bad_frames() {
+        let dir = tempfile::tempdir().unwrap();
+        for bit_depth in [1u8, 8, 10, 16] {
+            let max = if bit_depth <= 8 { 255 } else { 65535 };
+            let mut frame = Frame::new(7, 5, bit_depth);
+            for (k, v) in frame.pixels.iter_mut().enumerate() {
+                *v = (k as u32 * 7919 % (max + 1)) as u16;
+            }
+            let path = dir.path().join(format!("f{bit_depth}.png"));
+            write_frame_png(&path, &frame).unwrap();
+            let back = read_frame(&path).unwrap();
+            assert_eq!((back.width, back.height), (7, 5));
+            assert_eq!(back.bit_depth, if bit_depth <= 8 { 8 } else { 16 });
+            assert_eq!(back.pixels, frame.pixels, "{bit_depth} bits");
+        }
+        // Only the finished file is left: no temporary file.
+        assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 4);
+
+        let path = dir.path().join("bad.png");
+        let error = |frame: &Frame| {
+            let e = write_frame_png(&path, frame).unwrap_err().to_string();
+            assert!(e.starts_with(&path.display().to_string()), "{e}");
+            assert!(!path.exists());
+            e
+        };
+        let mut too_bright = Frame::new(3, 2, 8);
+        too_bright.pixels[4] = 256;
+        assert!(error(&too_bright).contains("pixel (1, 1) is 256"));
+        assert!(error(&Frame::new(0, 2, 8)).contains("empty frame"));
+        let mut short = Frame::new(3, 2, 8);
+        short.pixels.pop();
+        assert!(error(&short).contains("5 pixel values for 3 x 2 px"));
+        assert!(error(&Frame::new(3, 2, 17)).contains("bit depth is 17"));
+        let missing_dir = dir.path().join("no-such-dir").join("f.png");
+        let e = write_frame_png(&missing_dir, &Frame::new(3, 2, 8)).unwrap_err();
+        assert!(e.to_string().contains("no-such-dir"), "{e}");
     }
 
     /// Mutated and truncated copies of valid files of every format: an image or an error naming the file, and never

@@ -12,7 +12,8 @@
 //! | ROI recordings ([`roitrack_image::RoiImage`]s): binary, see [`RoiRecordingReader`] | [`RoiRecordingReader`] (streaming) | [`RoiRecordingWriter`] |
 //! | twists: CSV `t,vx,vy,vz,wx,wy,wz` (camera frame) | [`read_twists_csv`], [`parse_twists_csv`] | [`TwistWriter`], [`write_twists_csv`] |
 //! | estimates: poses, twists and diagnostics CSV together | | [`EstimateWriter`] |
-//! | full frames ([`roitrack_image::Frame`]): PNG, JPEG, PGM/PPM, TIFF, 8 or 16 bits, colour made grey | [`read_frame`], [`decode_frame`] | |
+//! | full frames ([`roitrack_image::Frame`]): PNG, JPEG, PGM/PPM, TIFF, 8 or 16 bits, colour made grey | [`read_frame`], [`decode_frame`] | [`write_frame_png`] |
+//! | timed frame streams: a folder of images, a pattern `frame_%05d.png`, a glob or a video (by ffmpeg), with a timestamps CSV `t[,file]` or a frame rate | [`FrameSource`] | |
 //! | detection overlays: a frame as an RGB PNG with marks and ids drawn on it | | [`write_overlay_png`] |
 //!
 //! Every reader refuses non-finite numbers and times out of order; every writer refuses what the reader would refuse
@@ -51,6 +52,7 @@ mod camera_yaml;
 mod csv_util;
 mod error;
 mod estimates;
+mod frame_source;
 mod image_file;
 mod measurements;
 mod overlay;
@@ -59,12 +61,16 @@ mod row_writer;
 mod target_csv;
 mod tum;
 mod twists;
+mod video;
 
 pub use atomic::AtomicFile;
 pub use camera_yaml::{camera_yaml_string, parse_camera_yaml, read_camera_yaml, write_camera_yaml};
 pub use error::FormatError;
 pub use estimates::{DIAGNOSTICS_HEADER, EstimateWriter};
-pub use image_file::{FRAME_IMAGE_FORMATS, check_frame_size, decode_frame, read_frame};
+pub use frame_source::{FRAME_IMAGE_EXTENSIONS, FrameInfo, FrameSource, FrameTiming, SourceKind};
+pub use image_file::{
+    FRAME_IMAGE_FORMATS, check_frame_size, decode_frame, read_frame, write_frame_png,
+};
 pub use measurements::{
     MeasurementReader, MeasurementWriter, read_measurements_csv, write_measurements_csv,
 };
