@@ -95,7 +95,7 @@ pub enum SourceKind {
 ///   (not shifted to start at 0), listed by `ffprobe` alongside the decoding; for an image sequence, an error:
 ///   roitrack never guesses frame times.
 ///
-/// Times must increase strictly, whatever their source.
+/// Giving both a CSV and a frame rate is an error. Times must increase strictly, whatever their source.
 ///
 /// Videos are decoded by running `ffprobe` (size, pixel format, time base, frame count) and then `ffmpeg`, which
 /// writes the first video stream (not cover art) as raw grey pixels to a pipe: 8 bits (`gray`) for sources of 8 bits
@@ -300,14 +300,14 @@ impl FrameSource {
 
     fn read_next(&mut self, frame: &mut Frame) -> Result<Option<FrameInfo>, FormatError> {
         let index = self.index;
-        let (name, own_t_s, location) = match &mut self.frames {
+        let (name, own_t_s) = match &mut self.frames {
             Frames::Images { files, bytes } => {
                 let Some(path) = files.get(index) else {
                     return Ok(None);
                 };
                 read_into(path, bytes).map_err(|e| read_error(path, e))?;
                 decode_frame_into(bytes, path, frame)?;
-                (file_name(path), None, path.clone())
+                (file_name(path), None)
             }
             Frames::Video { decoder, name } => {
                 let Some(own_t_s) = decoder.next(frame)? else {
@@ -322,21 +322,17 @@ impl FrameSource {
                     }
                     return Ok(None);
                 };
-                (
-                    format!("frame {index} of {name}"),
-                    own_t_s,
-                    self.source.clone(),
-                )
+                (format!("frame {index} of {name}"), own_t_s)
             }
         };
-        self.check_size(index, &name, frame, &location)?;
+        self.check_size(index, &name, frame)?;
         let t_s = self.time_of(index, &name, own_t_s)?;
         if let Some(previous) = self.previous_t_s
             && t_s <= previous
         {
             // Only a video's own times can get here: CSV times were checked as read, fps times increase.
             return Err(FormatError::new(
-                &location,
+                self.location(index),
                 format!(
                     "{name}: time {t_s} s is not after the previous frame's {previous} s: the video's timestamps \
                      repeat or go backwards (give --fps F or --timestamps FILE.csv)"
@@ -349,21 +345,23 @@ impl FrameSource {
         Ok(Some(FrameInfo { index, name, t_s }))
     }
 
+    /// The file that frame `index` comes from, for errors about it.
+    fn location(&self, index: usize) -> &Path {
+        match &self.frames {
+            Frames::Images { files, .. } => files.get(index).map_or(&self.source, |p| p),
+            Frames::Video { .. } => &self.source,
+        }
+    }
+
     /// Checks that a frame has the size and bit depth of the first.
-    fn check_size(
-        &mut self,
-        index: usize,
-        name: &str,
-        frame: &Frame,
-        location: &Path,
-    ) -> Result<(), FormatError> {
+    fn check_size(&mut self, index: usize, name: &str, frame: &Frame) -> Result<(), FormatError> {
         let Some((first_name, width, height, bit_depth)) = &self.first else {
             self.first = Some((name.to_string(), frame.width, frame.height, frame.bit_depth));
             return Ok(());
         };
         if (frame.width, frame.height) != (*width, *height) {
             return Err(FormatError::new(
-                location,
+                self.location(index),
                 format!(
                     "frame {index} is {} x {} px, but the first frame ({first_name}) is {width} x {height} px: \
                      every frame must have the same size",
@@ -373,7 +371,7 @@ impl FrameSource {
         }
         if frame.bit_depth != *bit_depth {
             return Err(FormatError::new(
-                location,
+                self.location(index),
                 format!(
                     "frame {index} has {} bits per pixel, but the first frame ({first_name}) has {bit_depth}: \
                      every frame must have the same bit depth",
