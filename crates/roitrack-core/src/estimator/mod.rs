@@ -289,7 +289,9 @@ pub struct Estimate {
     /// Reference time (s): the time of the newest measurement used.
     pub t_ref_s: f64,
     pub state: MotionState,
-    /// RMS of the window's reprojection residual at the emitted state (px, per coordinate).
+    /// RMS of the window's reprojection residual at the emitted state (px, per coordinate); for the Kalman filter,
+    /// of the innovations of the measurements since the previous estimate (each against the prediction from the
+    /// measurement before it).
     pub residual_rms_px: f64,
     /// Reciprocal condition number of the window's column-scaled Jacobian (1 perfect, 0 singular).
     pub inverse_condition: f64,

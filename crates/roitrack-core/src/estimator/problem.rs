@@ -98,6 +98,62 @@ pub(crate) struct ResidualFigures {
     pub newest_px: f64,
 }
 
+/// Residual norms gathered one at a time (a filter's innovations), summed into [`ResidualFigures`]: no allocation.
+#[derive(Debug, Clone)]
+pub(crate) struct ResidualTally {
+    /// The first [`Self::MAX`] norms, for the median.
+    norms: [f64; Self::MAX],
+    count: usize,
+    sum_squares: f64,
+    newest_px: f64,
+}
+
+impl Default for ResidualTally {
+    fn default() -> Self {
+        Self {
+            norms: [0.0; Self::MAX],
+            count: 0,
+            sum_squares: 0.0,
+            newest_px: 0.0,
+        }
+    }
+}
+
+impl ResidualTally {
+    const MAX: usize = 128;
+
+    /// Adds the norm (px) of one residual, the newest.
+    pub fn add(&mut self, norm_px: f64) {
+        if self.count < Self::MAX {
+            self.norms[self.count] = norm_px;
+        }
+        self.count += 1;
+        self.sum_squares += norm_px * norm_px;
+        self.newest_px = norm_px;
+    }
+
+    pub fn clear(&mut self) {
+        self.count = 0;
+        self.sum_squares = 0.0;
+        self.newest_px = 0.0;
+    }
+
+    /// RMS per coordinate, median and newest norm; `None` before the first residual.
+    pub fn figures(&self) -> Option<ResidualFigures> {
+        if self.count == 0 {
+            return None;
+        }
+        let n = self.count.min(Self::MAX);
+        let mut norms = self.norms;
+        let (_, median, _) = norms[..n].select_nth_unstable_by(n / 2, f64::total_cmp);
+        Some(ResidualFigures {
+            rms_px: (self.sum_squares / (2 * self.count) as f64).sqrt(),
+            median_px: *median,
+            newest_px: self.newest_px,
+        })
+    }
+}
+
 /// The 12-dof fit of a [`MotionState`] at `t_ref_s` to a window of observations, each seen at its own time: the
 /// residual of observation `o` is the projection of its model point `o.t_s - t_ref_s` after the reference time minus
 /// its ideal pixel, weighted by `loss` at `|residual| / scale_px`.

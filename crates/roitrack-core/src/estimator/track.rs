@@ -59,6 +59,11 @@ pub(crate) trait Law: Clone + std::fmt::Debug + Send {
     fn control_step(&mut self, core: &mut TrackCore, t_new_s: f64) -> Step;
     /// Whether the estimate just computed rests on the older measurements only: the newest was rejected.
     fn is_disputed(&self, core: &TrackCore, residuals: &ResidualFigures) -> bool;
+    /// The law's own residual figures for the estimate, if it has better ones than the window's residual at the
+    /// emitted state (a filter's innovations).
+    fn own_residuals(&self) -> Option<ResidualFigures> {
+        None
+    }
     /// Whether the estimate's residuals take every measurement as simultaneous (the static baseline).
     fn simultaneous_residuals(&self) -> bool {
         false
@@ -485,11 +490,11 @@ impl<L: Law> Track<L> {
     fn finish_estimate(&mut self, step: Step) -> Estimate {
         // Residual over the step's window at the emitted state. The track is judged on the median residual: a few
         // outliers in the window must not make it look lost.
-        let residuals = {
+        let residuals = self.law.own_residuals().unwrap_or_else(|| {
             let mut problem = self.core.window_problem(self.core.t_ref_s);
             problem.simultaneous = self.law.simultaneous_residuals();
             problem.residual_figures(&self.core.state)
-        };
+        });
         let disputed = self.law.is_disputed(&self.core, &residuals);
         let core = &mut self.core;
         let mut status = step.status;
