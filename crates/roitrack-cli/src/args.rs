@@ -13,6 +13,7 @@ pub enum ScenarioArg {
     Orthoglide,
     Spin,
     Random,
+    Sweep,
 }
 
 impl From<ScenarioArg> for ScenarioKind {
@@ -22,6 +23,7 @@ impl From<ScenarioArg> for ScenarioKind {
             ScenarioArg::Orthoglide => ScenarioKind::Orthoglide,
             ScenarioArg::Spin => ScenarioKind::Spin,
             ScenarioArg::Random => ScenarioKind::Random,
+            ScenarioArg::Sweep => ScenarioKind::Sweep,
         }
     }
 }

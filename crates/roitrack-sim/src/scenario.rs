@@ -21,10 +21,19 @@ pub enum ScenarioKind {
     Spin,
     /// Smooth random 6-dof motion (sums of sinusoids), peak 1.5 m/s and 4 rad/s, depth 0.45-0.8 m, 4 s.
     Random,
+    /// A part swept in front of a video camera: smooth random 6-dof motion, peak 0.5 m/s and 1.5 rad/s at 0.5-1.2 Hz
+    /// (accelerations of a few m/s², which a frame camera at 30 Hz can follow), depth 0.45-0.8 m, 6 s.
+    Sweep,
 }
 
 impl ScenarioKind {
-    pub const ALL: [ScenarioKind; 4] = [Self::Static, Self::Orthoglide, Self::Spin, Self::Random];
+    pub const ALL: [ScenarioKind; 5] = [
+        Self::Static,
+        Self::Orthoglide,
+        Self::Spin,
+        Self::Random,
+        Self::Sweep,
+    ];
 
     pub fn name(&self) -> &'static str {
         match self {
@@ -32,6 +41,7 @@ impl ScenarioKind {
             Self::Orthoglide => "orthoglide",
             Self::Spin => "spin",
             Self::Random => "random",
+            Self::Sweep => "sweep",
         }
     }
 
@@ -169,9 +179,35 @@ fn orthoglide_breaks_s() -> [f64; 8] {
 const SPIN_RATE_REV_S: f64 = 3.0;
 const SPIN_AXIS_TILT_DEG: f64 = 20.0;
 
-const RANDOM_PEAK_SPEED_MPS: f64 = 1.5;
-const RANDOM_PEAK_ANGULAR_RADPS: f64 = 4.0;
-const RANDOM_DURATION_S: f64 = 4.0;
+/// The parameters of a smooth random motion.
+struct RandomMotion {
+    peak_speed_mps: f64,
+    peak_angular_radps: f64,
+    duration_s: f64,
+    /// Frequency ranges (Hz) of the translation's and the rotation's sinusoids.
+    position_hz: (f64, f64),
+    rotation_hz: (f64, f64),
+    /// Salt of the seed, so that two kinds with one seed do not share their draws.
+    salt: u64,
+}
+
+const RANDOM: RandomMotion = RandomMotion {
+    peak_speed_mps: 1.5,
+    peak_angular_radps: 4.0,
+    duration_s: 4.0,
+    position_hz: (0.4, 2.5),
+    rotation_hz: (0.3, 1.5),
+    salt: 0x5eed_0f7a_4d0e,
+};
+
+const SWEEP: RandomMotion = RandomMotion {
+    peak_speed_mps: 0.5,
+    peak_angular_radps: 1.5,
+    duration_s: 6.0,
+    position_hz: (0.5, 1.2),
+    rotation_hz: (0.3, 1.0),
+    salt: 0x5eed_5eed_0f7a,
+};
 
 impl Scenario {
     /// The scenario of this kind. `seed` only matters for [`ScenarioKind::Random`].
@@ -180,7 +216,8 @@ impl Scenario {
             ScenarioKind::Static => (1.0, Motion::Static),
             ScenarioKind::Orthoglide => (orthoglide_breaks_s()[7], Motion::Orthoglide),
             ScenarioKind::Spin => (3.0, Motion::Spin),
-            ScenarioKind::Random => (RANDOM_DURATION_S, random_motion(seed)),
+            ScenarioKind::Random => (RANDOM.duration_s, random_motion(seed, &RANDOM)),
+            ScenarioKind::Sweep => (SWEEP.duration_s, random_motion(seed, &SWEEP)),
         };
         Self {
             kind,
@@ -337,37 +374,37 @@ fn random_state(
 
 /// Draws random smooth motions until one keeps every blob inside the image with a margin, the depth in
 /// [0.45, 0.8] m and the target facing the camera, scaled to the peak speeds.
-fn random_motion(seed: u64) -> Motion {
-    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x5eed_0f7a_4d0e);
+fn random_motion(seed: u64, spec: &RandomMotion) -> Motion {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ spec.salt);
     let camera = CameraModel::canonical();
     let target = Target::grid4x4();
     let centre_m = Vector3::new(0.0, 0.0, 0.625);
+    let duration_s = spec.duration_s;
     loop {
-        let mut position = SinusoidSum::random(&mut rng, 3, (0.4, 2.5), [0.06, 0.06, 0.06]);
-        let mut rotation = SinusoidSum::random(&mut rng, 3, (0.3, 1.5), [0.3, 0.3, 0.3]);
+        let mut position = SinusoidSum::random(&mut rng, 3, spec.position_hz, [0.06, 0.06, 0.06]);
+        let mut rotation = SinusoidSum::random(&mut rng, 3, spec.rotation_hz, [0.3, 0.3, 0.3]);
         let peak = |f: &dyn Fn(f64) -> f64| {
-            (0..=(RANDOM_DURATION_S * 500.0) as usize)
+            (0..=(duration_s * 500.0) as usize)
                 .map(|k| f(k as f64 / 500.0))
                 .fold(0.0, f64::max)
         };
         let speed = peak(&|t| position.eval(t).1.norm());
-        position.scale(RANDOM_PEAK_SPEED_MPS / speed);
+        position.scale(spec.peak_speed_mps / speed);
         for _ in 0..3 {
             let angular = peak(&|t| {
                 random_state(t, &position, &rotation, &centre_m)
                     .angular_velocity_radps
                     .norm()
             });
-            rotation.scale(RANDOM_PEAK_ANGULAR_RADPS / angular);
+            rotation.scale(spec.peak_angular_radps / angular);
         }
         let state_at = |t| random_state(t, &position, &rotation, &centre_m);
-        let steps = (RANDOM_DURATION_S * 500.0) as usize;
+        let steps = (duration_s * 500.0) as usize;
         let acceptable = (0..=steps).all(|k| {
             let s = state_at(k as f64 / 500.0);
             let facing = (s.cam_r_obj * Vector3::z()).z.abs() > 60f64.to_radians().cos();
             (0.45..=0.8).contains(&s.cam_t_obj_m.z) && facing
-        }) && min_image_margin_px(&camera, &target, RANDOM_DURATION_S, state_at)
-            > 20.0;
+        }) && min_image_margin_px(&camera, &target, duration_s, state_at) > 20.0;
         if acceptable {
             return Motion::Random {
                 position,
