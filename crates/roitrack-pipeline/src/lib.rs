@@ -4,8 +4,10 @@
 //! ([`matching`], [`find_target`]) or in a photograph ([`photo`], [`detect_target`]: either polarity, clutter, partial
 //! views, symmetric and hexagonal grids, by hypothesis and verification in [`identify`]), the placement of each next ROI ([`scheduler`]), and the real-time loop of two
 //! threads, acquisition and estimation, joined by lock-free single-producer single-consumer queues ([`realtime`]),
-//! driving any [`roitrack_image::RoiCamera`]; and the same tracking offline, from recorded ROI images ([`offline`]).
+//! driving any [`roitrack_image::RoiCamera`]; the same tracking offline, from recorded ROI images ([`offline`]); and
+//! tracking from whole frames of a global or rolling shutter, one estimate per frame ([`frames`]).
 
+pub mod frames;
 pub mod identify;
 pub mod matching;
 pub mod offline;
@@ -13,6 +15,10 @@ pub mod photo;
 pub mod realtime;
 pub mod scheduler;
 
+pub use frames::{
+    FrameError, FrameMethod, FrameOutcome, FrameStreamError, FrameTrackReport, FrameTracker,
+    FrameTrackerConfig, track_frame_stream,
+};
 pub use identify::{Identification, identify};
 pub use matching::{MatchError, TargetDetection, find_target, match_full_frame};
 pub use offline::{RoiTrackReport, track_rois};

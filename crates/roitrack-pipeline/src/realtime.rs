@@ -166,7 +166,7 @@ enum Event {
 }
 
 /// The broad prior of a pose from a full frame: 2 mm, 0.02 rad, 1 m/s, 10 rad/s (1 sigma).
-fn full_frame_covariance() -> Matrix12 {
+pub(crate) fn full_frame_covariance() -> Matrix12 {
     let sigmas = [
         2e-3, 2e-3, 2e-3, 0.02, 0.02, 0.02, 1.0, 1.0, 1.0, 10.0, 10.0, 10.0,
     ];

@@ -1,0 +1,718 @@
+//! Tracking from whole frames (image sequences, videos, frame cameras with a global or a rolling shutter): every
+//! blob centroid becomes a measurement at its own time, and each frame gives one estimate.
+//!
+//! Per frame ([`FrameTracker::process`]):
+//!
+//! 1. With a running track, each target point's blob is predicted from the last estimate (pose and twist) at the
+//!    time its row is read (for a rolling shutter, row `v` is read `v * line_delay_s` after row 0: the predicted row
+//!    gives the time, the time the row), and measured in a small window there, the ROI path of the paper: the window
+//!    is sized by the [`RoiScheduler`] (blob size, motion blur, the prediction's uncertainty), its background is a
+//!    plane fitted to its border and taken away (for dark blobs the window is divided by it: printed circles under
+//!    uneven light keep their contrast, not their difference), and the centroid is [`measure_blob`]'s.
+//! 2. When fewer than [`FrameTrackerConfig::min_window_points`] blobs were found in their windows (the target
+//!    accelerated out of them, or was hidden), the frame's blobs are found whole and each predicted point takes the
+//!    blob nearest to it, within half the distance between predicted points. Without a track, or when that too
+//!    fails, the target is searched for and identified with no prior ([`detect_target`]: either polarity, clutter,
+//!    partial views), and a new track starts from its static pose.
+//! 3. The frame's measurements, in time order, are one batch for the estimator ([`Estimator::push_batch`] with
+//!    [`Emit::EachBatch`]): one estimate per frame, at the time of its newest measurement.
+//!
+//! A track the estimator declares lost is dropped, and the next frame is searched whole.
+//!
+//! [`track_frame_stream`] runs a [`FrameTracker`] over a source of frames with the decoding on its own thread.
+
+use std::sync::mpsc;
+
+use nalgebra::Vector2;
+use roitrack_core::estimator::{
+    ConfigError, Emit, Estimate, Estimator, EstimatorReport, TrackError, TrackStatus, Tracker,
+    TrackerConfig,
+};
+use roitrack_core::{CameraModel, Measurement, Target};
+use roitrack_image::{
+    BlobRejection, CentroidOptions, Frame, PhotoBlobOptions, PhotoScratch, Polarity,
+    RejectionCounts, Roi, detect_photo_blobs, measure_blob,
+};
+use thiserror::Error;
+
+use crate::photo::{PhotoOptions, PolarityChoice, detect_target};
+use crate::realtime::full_frame_covariance;
+use crate::scheduler::{Predictor, RoiRequest, RoiScheduler, SchedulerConfig};
+
+/// Settings of a [`FrameTracker`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameTrackerConfig {
+    /// The estimator. Its `every` is not used: one estimate per frame.
+    pub tracker: TrackerConfig,
+    /// The full-frame search (polarity, blob filters, distance range).
+    pub detection: PhotoOptions,
+    /// Window sizing (sizes between `min_size_px` and `max_size_px`, at most 64).
+    pub windows: SchedulerConfig,
+    pub centroid: CentroidOptions,
+    /// Fewest blobs found in their windows for a frame to be tracked from its windows; with fewer, the frame is
+    /// searched whole. `None`: half the target's points, and at least 4.
+    pub min_window_points: Option<usize>,
+}
+
+impl Default for FrameTrackerConfig {
+    fn default() -> Self {
+        Self {
+            tracker: TrackerConfig::default(),
+            detection: PhotoOptions::default(),
+            // Three standard deviations: at frame rates the prediction's spread is many pixels (a target
+            // accelerating at 17 m/s² strays 9 mm from a constant-velocity prediction in 1/30 s), and a window must stay
+            // within the 64 px the centroid handles.
+            windows: SchedulerConfig {
+                sigma_margin: 3.0,
+                ..SchedulerConfig::default()
+            },
+            centroid: CentroidOptions::default(),
+            min_window_points: None,
+        }
+    }
+}
+
+/// How a frame was measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FrameMethod {
+    /// In windows around the predicted blobs.
+    Windows,
+    /// By a full-frame search, continuing the track.
+    FullFrame,
+    /// By a full-frame search that started a new track.
+    Restart,
+    /// The target was not found: no estimate.
+    NotFound,
+}
+
+impl FrameMethod {
+    /// `windows`, `full-frame`, `restart` or `not-found`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Windows => "windows",
+            Self::FullFrame => "full-frame",
+            Self::Restart => "restart",
+            Self::NotFound => "not-found",
+        }
+    }
+}
+
+/// What one frame gave.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameOutcome {
+    /// The frame's estimate, if the target was measured and the estimator gave one.
+    pub estimate: Option<Estimate>,
+    pub method: FrameMethod,
+    /// Blobs measured in the frame.
+    pub measured: usize,
+}
+
+/// What a [`FrameTracker`] has done.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrameTrackReport {
+    pub frames: usize,
+    /// Frames measured in windows, by a full-frame search that continued the track, or that started a new one.
+    pub by_windows: usize,
+    pub by_full_frame: usize,
+    pub restarts: usize,
+    /// Frames in which the target was not found.
+    pub not_found: usize,
+    /// Frames that gave an estimate.
+    pub estimates: usize,
+    /// Blobs not found in their windows, by reason.
+    pub window_rejections: RejectionCounts,
+    /// The polarity in use (decided by the first full-frame search with [`PolarityChoice::Auto`]).
+    pub polarity: Option<Polarity>,
+    pub estimator: EstimatorReport,
+}
+
+/// Why a frame could not be processed at all (a frame in which the target is not found is not an error).
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum FrameError {
+    #[error("the frame is {width} x {height} px, the camera's {camera_width} x {camera_height} px")]
+    Size {
+        width: u32,
+        height: u32,
+        camera_width: u32,
+        camera_height: u32,
+    },
+    #[error("the frame's time is not finite ({0})")]
+    Time(f64),
+    #[error(
+        "the frame's time {t_s} s does not come after the previous frame's measurements ({previous_s} s): frame times \
+         must increase, and a rolling shutter's readout must end before the next frame starts"
+    )]
+    TimeOrder { t_s: f64, previous_s: f64 },
+    #[error("the estimator refused a measurement: {0}")]
+    Refused(#[from] TrackError),
+}
+
+/// Tracks a target through frames: one estimate per frame (see the [module documentation](self)).
+///
+/// ```
+/// use nalgebra::Vector3;
+/// use rand::SeedableRng;
+/// use roitrack_core::{CameraModel, MotionState, Target};
+/// use roitrack_image::{Frame, RenderScratch, RoiRenderer, SensorModel};
+/// use roitrack_pipeline::frames::{FrameMethod, FrameTracker, FrameTrackerConfig};
+///
+/// // A target gliding sideways at 0.2 m/s, 30 frames a second through a global shutter.
+/// let (camera, target) = (CameraModel::canonical(), Target::grid4x4());
+/// let mut start = MotionState::at_rest(Default::default(), Vector3::new(-0.02, 0.0, 0.6));
+/// start.velocity_mps = Vector3::new(0.2, 0.0, 0.0);
+/// let renderer = RoiRenderer::new(camera.clone(), target.clone(), SensorModel::default()).unwrap();
+/// let mut tracker = FrameTracker::new(camera, target, FrameTrackerConfig::default()).unwrap();
+/// let (mut frame, mut scratch) = (Frame::default(), RenderScratch::new());
+/// let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
+/// let mut last = None;
+/// for k in 0..8 {
+///     let t_s = k as f64 / 30.0;
+///     renderer.render_frame(&|t| start.predicted(t), t_s, &mut rng, &mut scratch, &mut frame);
+///     let outcome = tracker.process(&frame).unwrap();
+///     // The first frame is searched and identified whole; the second's blobs are found whole (the velocity is not
+///     // known yet) and given to the points predicted nearest; from the third on, each is measured in its window.
+///     let expected = match k {
+///         0 => FrameMethod::Restart,
+///         1 => FrameMethod::FullFrame,
+///         _ => FrameMethod::Windows,
+///     };
+///     assert_eq!(outcome.method, expected);
+///     last = outcome.estimate;
+/// }
+/// let last = last.unwrap();
+/// assert!((last.state.cam_t_obj_m - start.predicted(last.t_ref_s).cam_t_obj_m).norm() < 1e-3);
+/// assert!((last.state.velocity_mps - start.velocity_mps).norm() < 0.05);
+/// ```
+#[derive(Debug)]
+pub struct FrameTracker {
+    camera: CameraModel,
+    target: Target,
+    config: FrameTrackerConfig,
+    tracker: Tracker,
+    scheduler: RoiScheduler,
+    /// The full-frame blob search's settings and buffers.
+    blob_options: PhotoBlobOptions,
+    photo_scratch: PhotoScratch,
+    /// The last estimate, from which the next frame's windows are placed.
+    predictor: Option<Predictor>,
+    polarity: Option<Polarity>,
+    /// The frame's measurements, in time order.
+    measurements: Vec<Measurement>,
+    window: Vec<u16>,
+    last_time_s: Option<f64>,
+    report: FrameTrackReport,
+}
+
+impl FrameTracker {
+    /// A tracker for frames of `camera` (its time model says how the rows are read) showing `target`.
+    pub fn new(
+        camera: CameraModel,
+        target: Target,
+        config: FrameTrackerConfig,
+    ) -> Result<Self, ConfigError> {
+        camera.time.validate().map_err(|e| ConfigError::Invalid {
+            field: match e {
+                roitrack_core::time::TimeModelError::Exposure(_) => "exposure_s",
+                roitrack_core::time::TimeModelError::LineDelay(_) => "line_delay_s",
+            },
+            expected: "finite and non-negative",
+            value: match e {
+                roitrack_core::time::TimeModelError::Exposure(v)
+                | roitrack_core::time::TimeModelError::LineDelay(v) => v,
+            },
+        })?;
+        let windows = config.windows;
+        if !(windows.min_size_px >= 3
+            && windows.max_size_px >= windows.min_size_px
+            && windows.max_size_px <= roitrack_image::MAX_ROI_WIDTH)
+        {
+            return Err(ConfigError::Invalid {
+                field: "windows.max_size_px",
+                expected: "at least min_size_px (3 or more) and at most 64",
+                value: f64::from(windows.max_size_px),
+            });
+        }
+        let tracker = Tracker::new(camera.clone(), target.clone(), config.tracker)?;
+        let scheduler = RoiScheduler::new(
+            camera.clone(),
+            target.clone(),
+            config.windows,
+            config.tracker.noise_px,
+        );
+        let polarity = match config.detection.polarity {
+            PolarityChoice::Auto => None,
+            PolarityChoice::Bright => Some(Polarity::Bright),
+            PolarityChoice::Dark => Some(Polarity::Dark),
+        };
+        let max_side = windows.max_size_px as usize;
+        let blob_options = config.detection.blob_options(&camera, &target);
+        Ok(Self {
+            measurements: Vec::with_capacity(target.len()),
+            window: Vec::with_capacity(max_side * max_side),
+            camera,
+            target,
+            config,
+            tracker,
+            scheduler,
+            blob_options,
+            photo_scratch: PhotoScratch::default(),
+            predictor: None,
+            polarity,
+            last_time_s: None,
+            report: FrameTrackReport {
+                polarity,
+                ..FrameTrackReport::default()
+            },
+        })
+    }
+
+    /// The camera model (its time model included).
+    pub fn camera(&self) -> &CameraModel {
+        &self.camera
+    }
+
+    /// What the tracker has done so far.
+    pub fn report(&self) -> FrameTrackReport {
+        FrameTrackReport {
+            estimator: self.tracker.report(),
+            ..self.report
+        }
+    }
+
+    /// The measurements of the last frame processed, in time order (raw pixels).
+    pub fn measurements(&self) -> &[Measurement] {
+        &self.measurements
+    }
+
+    /// Measures one frame (its `t_s` is the mid-exposure time of its row 0) and gives its estimate.
+    pub fn process(&mut self, frame: &Frame) -> Result<FrameOutcome, FrameError> {
+        if (frame.width, frame.height) != (self.camera.width_px, self.camera.height_px) {
+            return Err(FrameError::Size {
+                width: frame.width,
+                height: frame.height,
+                camera_width: self.camera.width_px,
+                camera_height: self.camera.height_px,
+            });
+        }
+        if !frame.t_s.is_finite() {
+            return Err(FrameError::Time(frame.t_s));
+        }
+        if let Some(previous_s) = self.last_time_s
+            && frame.t_s <= previous_s
+        {
+            return Err(FrameError::TimeOrder {
+                t_s: frame.t_s,
+                previous_s,
+            });
+        }
+        self.report.frames += 1;
+        let mut method = FrameMethod::NotFound;
+        if let Some(predictor) = self.predictor
+            && self.measure_windows(frame, &predictor) >= self.min_window_points()
+        {
+            method = FrameMethod::Windows;
+        }
+        if method == FrameMethod::NotFound {
+            method = self.search_whole_frame(frame);
+        }
+        let estimate = if method == FrameMethod::NotFound {
+            None
+        } else {
+            self.measurements.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+            let estimate = self
+                .tracker
+                .push_batch(&self.measurements, Emit::EachBatch)?;
+            if let Some(last) = self.measurements.last() {
+                self.last_time_s = Some(last.t_s);
+            }
+            estimate
+        };
+        match method {
+            FrameMethod::Windows => self.report.by_windows += 1,
+            FrameMethod::FullFrame => self.report.by_full_frame += 1,
+            FrameMethod::Restart => self.report.restarts += 1,
+            FrameMethod::NotFound => self.report.not_found += 1,
+        }
+        self.last_time_s = Some(self.last_time_s.map_or(frame.t_s, |t| t.max(frame.t_s)));
+        if let Some(e) = estimate {
+            self.report.estimates += 1;
+            // A lost track is dropped by the estimator: the next frame is searched whole.
+            self.predictor = (e.status != TrackStatus::Lost).then_some(Predictor {
+                t_ref_s: e.t_ref_s,
+                state: e.state,
+                covariance: e.covariance,
+            });
+        }
+        Ok(FrameOutcome {
+            estimate,
+            method,
+            measured: if method == FrameMethod::NotFound {
+                0
+            } else {
+                self.measurements.len()
+            },
+        })
+    }
+
+    fn min_window_points(&self) -> usize {
+        self.config
+            .min_window_points
+            .unwrap_or(self.target.len().div_ceil(2).max(4))
+            .clamp(1, self.target.len())
+    }
+
+    /// The window of point `i` at the time its predicted row is read in the frame whose row 0 is read at `t_frame_s`.
+    fn request_at_row_time(
+        &self,
+        predictor: &Predictor,
+        i: usize,
+        t_frame_s: f64,
+    ) -> Option<RoiRequest> {
+        let time = self.camera.time;
+        let mut request = self.scheduler.request(predictor, i, t_frame_s);
+        if time.is_rolling() {
+            // The row gives the time and the time the row: two rounds are plenty for any real line delay.
+            for _ in 0..2 {
+                let r = request?;
+                request = self.scheduler.request(
+                    predictor,
+                    i,
+                    time.blob_time_s(t_frame_s, r.predicted_px.y),
+                );
+            }
+        }
+        request
+    }
+
+    /// Measures every predicted blob in its window; returns how many were found (in `self.measurements`).
+    fn measure_windows(&mut self, frame: &Frame, predictor: &Predictor) -> usize {
+        self.measurements.clear();
+        let polarity = self.polarity.unwrap_or(Polarity::Bright);
+        let time = self.camera.time;
+        for i in 0..self.target.len() {
+            let request = self.request_at_row_time(predictor, i, frame.t_s);
+            let Some(request) = request else {
+                continue;
+            };
+            // A prediction too uncertain for the largest window (the velocity right after a new track, before a
+            // second frame has measured it) could put a neighbouring blob in the window: search the frame instead.
+            let largest = f64::from(self.config.windows.max_size_px);
+            if request
+                .sigma_px
+                .is_some_and(|sigma| 2.0 * self.config.windows.sigma_margin * sigma > largest)
+            {
+                self.measurements.clear();
+                return 0;
+            }
+            let roi = request.roi;
+            flatten_window(frame, &roi, polarity, &mut self.window);
+            match measure_blob(&self.window, &roi, &self.config.centroid) {
+                Ok(c) => {
+                    self.scheduler.report(i, true);
+                    self.measurements.push(Measurement {
+                        t_s: time.blob_time_s(frame.t_s, c.v_px),
+                        id: self.target.points()[i].id,
+                        u_px: c.u_px,
+                        v_px: c.v_px,
+                    });
+                }
+                Err(r) => {
+                    self.scheduler.report(i, false);
+                    self.report.window_rejections.count(&r);
+                    // A blob cut by its window's edge: the prediction is off by about half a window, and the other
+                    // windows may hold cut blobs too, or a neighbour. Measure the frame whole instead.
+                    if r == BlobRejection::TouchesBorder {
+                        self.measurements.clear();
+                        return 0;
+                    }
+                }
+            }
+        }
+        self.measurements.len()
+    }
+
+    /// Searches the whole frame; fills `self.measurements` and says whether the track goes on, restarts, or the
+    /// target was not found.
+    fn search_whole_frame(&mut self, frame: &Frame) -> FrameMethod {
+        self.measurements.clear();
+        if let (Some(predictor), Some(polarity)) = (self.predictor, self.polarity)
+            && self.tracker.state().is_some()
+        {
+            if self.associate_blobs(frame, &predictor, polarity) >= self.min_window_points() {
+                self.scheduler.reset();
+                return FrameMethod::FullFrame;
+            }
+            self.measurements.clear();
+        }
+        let mut options = self.config.detection;
+        if let Some(polarity) = self.polarity {
+            options.polarity = match polarity {
+                Polarity::Bright => PolarityChoice::Bright,
+                Polarity::Dark => PolarityChoice::Dark,
+            };
+        }
+        let Ok(detection) = detect_target(&self.camera, &self.target, frame, &options) else {
+            return FrameMethod::NotFound;
+        };
+        if self.polarity.is_none() {
+            self.polarity = Some(detection.polarity);
+            self.report.polarity = Some(detection.polarity);
+        }
+        let time = self.camera.time;
+        self.measurements
+            .extend(detection.points.iter().map(|p| Measurement {
+                t_s: time.blob_time_s(frame.t_s, p.centre_px.y),
+                id: p.id,
+                u_px: p.centre_px.x,
+                v_px: p.centre_px.y,
+            }));
+        self.scheduler.reset();
+        // A new track from the static pose, at the frame's time; the frame's measurements follow at their own times.
+        self.tracker.reset();
+        self.tracker
+            .start_from(frame.t_s, detection.state, Some(full_frame_covariance()));
+        FrameMethod::Restart
+    }
+
+    /// The frame's blobs attributed to the running track's points: each point takes the blob nearest its prediction
+    /// when that blob has no other point nearer, within half the distance between predicted points (so that no blob
+    /// can be given to two points however far the target strayed from the prediction). For frames whose blobs left
+    /// their windows (a sudden acceleration); returns how many points were measured (in `self.measurements`).
+    fn associate_blobs(
+        &mut self,
+        frame: &Frame,
+        predictor: &Predictor,
+        polarity: Polarity,
+    ) -> usize {
+        let blobs = detect_photo_blobs(
+            &frame.pixels,
+            frame.width,
+            frame.height,
+            frame.bit_depth,
+            polarity,
+            &self.blob_options,
+            &mut self.photo_scratch,
+        );
+        let predicted: Vec<(usize, Vector2<f64>)> = (0..self.target.len())
+            .filter_map(|i| {
+                self.request_at_row_time(predictor, i, frame.t_s)
+                    .map(|r| (i, r.predicted_px))
+            })
+            .collect();
+        let mut spacing_px = f64::INFINITY;
+        for (a, (_, pa)) in predicted.iter().enumerate() {
+            for (_, pb) in &predicted[a + 1..] {
+                spacing_px = spacing_px.min((pa - pb).norm());
+            }
+        }
+        let gate_px = 0.5 * spacing_px;
+        let nearest = |p: &Vector2<f64>, candidates: &mut dyn Iterator<Item = Vector2<f64>>| {
+            candidates
+                .enumerate()
+                .map(|(k, c)| (k, (c - p).norm()))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+        };
+        let time = self.camera.time;
+        for &(i, p) in &predicted {
+            let Some((b, distance)) =
+                nearest(&p, &mut blobs.iter().map(|b| Vector2::new(b.u_px, b.v_px)))
+            else {
+                continue;
+            };
+            let blob = Vector2::new(blobs[b].u_px, blobs[b].v_px);
+            let mutual = nearest(&blob, &mut predicted.iter().map(|(_, q)| *q))
+                .is_some_and(|(k, _)| predicted[k].0 == i);
+            if distance < gate_px && mutual {
+                self.measurements.push(Measurement {
+                    t_s: time.blob_time_s(frame.t_s, blob.y),
+                    id: self.target.points()[i].id,
+                    u_px: blob.x,
+                    v_px: blob.y,
+                });
+            }
+        }
+        self.measurements.len()
+    }
+}
+
+/// Copies the window `roi` of `frame` into `out` with its background taken away, so that the blob stands bright on
+/// a flat, dark background whatever the light: the background is the least-squares plane through the window's border
+/// pixels. Bright blobs: `value - plane`; dark blobs: the contrast `1 - value / plane`, scaled to the frame's range
+/// (under uneven light a printed circle keeps its contrast, not its difference in grey level). An offset of 1/16 of
+/// the range keeps the background's noise above zero.
+fn flatten_window(frame: &Frame, roi: &Roi, polarity: Polarity, out: &mut Vec<u16>) {
+    let (w, h) = (roi.width as usize, roi.height as usize);
+    out.clear();
+    out.resize(w * h, 0);
+    let max_value = ((1u32 << frame.bit_depth.clamp(1, 16)) - 1) as f64;
+    let offset = (max_value + 1.0) / 16.0;
+    let at = |i: usize, j: usize| {
+        f64::from(frame.pixels[(roi.y0 as usize + j) * frame.width as usize + roi.x0 as usize + i])
+    };
+    // Border plane a + b x + c y, x and y centred on the window so the normal equations decouple.
+    let (cx, cy) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
+    let (mut n, mut s, mut sx, mut sy, mut sxx, mut syy) = (0.0f64, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let mut add = |i: usize, j: usize| {
+        let (x, y, v) = (i as f64 - cx, j as f64 - cy, at(i, j));
+        n += 1.0;
+        s += v;
+        sx += x * v;
+        sy += y * v;
+        sxx += x * x;
+        syy += y * y;
+    };
+    for i in 0..w {
+        add(i, 0);
+        if h > 1 {
+            add(i, h - 1);
+        }
+    }
+    for j in 1..h.saturating_sub(1) {
+        add(0, j);
+        if w > 1 {
+            add(w - 1, j);
+        }
+    }
+    // The border is symmetric about the centre: Σx = Σy = Σxy = 0, so each coefficient is its own ratio.
+    let a = s / n.max(1.0);
+    let b = if sxx > 0.0 { sx / sxx } else { 0.0 };
+    let c = if syy > 0.0 { sy / syy } else { 0.0 };
+    for j in 0..h {
+        let y = j as f64 - cy;
+        for i in 0..w {
+            let x = i as f64 - cx;
+            let plane = a + b * x + c * y;
+            let v = at(i, j);
+            let flat = match polarity {
+                Polarity::Bright => v - plane,
+                Polarity::Dark => {
+                    if plane > 0.0 {
+                        (1.0 - v / plane) * max_value
+                    } else {
+                        0.0
+                    }
+                }
+            };
+            out[j * w + i] = (flat + offset).round().clamp(0.0, max_value) as u16;
+        }
+    }
+}
+
+/// Why [`track_frame_stream`] stopped: the source failed (`S`: an unreadable frame, a timestamps file that does not
+/// match), a frame could not be processed, or an estimate could not be handed on (`K`). The estimates handed on before
+/// are kept.
+#[derive(Debug, Error)]
+pub enum FrameStreamError<S, K> {
+    #[error(transparent)]
+    Source(S),
+    #[error("frame {index}: {source}")]
+    Frame {
+        index: usize,
+        #[source]
+        source: FrameError,
+    },
+    #[error(transparent)]
+    Sink(K),
+    #[error("the decoding thread panicked")]
+    DecoderPanicked,
+}
+
+/// Frames decoded ahead of the tracker: enough to ride out a slow frame, few enough to bound memory.
+const FRAMES_IN_FLIGHT: usize = 4;
+
+/// Runs `tracker` over the frames `next_frame` decodes, the decoding on a thread of its own beside the tracker (the
+/// two-thread loop): `next_frame` fills the frame it is given (a reused buffer, its `t_s` set) and returns what the
+/// caller wants to know of it (a file name, say), `None` at the end. `sink` gets every frame's outcome with that
+/// information, in order. Returns the tracker's report; on an error, what was handed to `sink` stays handed.
+///
+/// ```
+/// use roitrack_core::{CameraModel, Target};
+/// use roitrack_image::Frame;
+/// use roitrack_pipeline::frames::{FrameTracker, FrameTrackerConfig, track_frame_stream};
+///
+/// // Three black frames: no target, no estimate, no error.
+/// let mut tracker =
+///     FrameTracker::new(CameraModel::canonical(), Target::grid4x4(), FrameTrackerConfig::default()).unwrap();
+/// let mut k = 0;
+/// let next = move |frame: &mut Frame| {
+///     k += 1;
+///     (k <= 3).then(|| {
+///         frame.resize(1024, 1024, 8);
+///         frame.pixels.fill(0);
+///         frame.t_s = k as f64 / 30.0;
+///         Ok::<_, std::convert::Infallible>(k)
+///     })
+/// };
+/// let mut seen = Vec::new();
+/// let report = track_frame_stream(&mut tracker, next, |k, outcome| {
+///     seen.push((*k, outcome.estimate.is_some()));
+///     Ok::<_, std::convert::Infallible>(())
+/// })
+/// .unwrap();
+/// assert_eq!(seen, vec![(1, false), (2, false), (3, false)]);
+/// assert_eq!(report.not_found, 3);
+/// ```
+pub fn track_frame_stream<I, S, K>(
+    tracker: &mut FrameTracker,
+    mut next_frame: impl FnMut(&mut Frame) -> Option<Result<I, S>> + Send,
+    mut sink: impl FnMut(&I, &FrameOutcome) -> Result<(), K>,
+) -> Result<FrameTrackReport, FrameStreamError<S, K>>
+where
+    I: Send,
+    S: Send,
+{
+    let (full_tx, full_rx) = mpsc::sync_channel::<Result<(Frame, I), S>>(FRAMES_IN_FLIGHT);
+    let (empty_tx, empty_rx) = mpsc::channel::<Frame>();
+    for _ in 0..FRAMES_IN_FLIGHT + 1 {
+        let _ = empty_tx.send(Frame::default());
+    }
+    std::thread::scope(|scope| {
+        let decoder = scope.spawn(move || {
+            // Buffers come back from the tracker once used; when it stops taking frames (an error), stop too.
+            while let Ok(mut frame) = empty_rx.recv() {
+                match next_frame(&mut frame) {
+                    None => break,
+                    Some(Ok(info)) => {
+                        if full_tx.send(Ok((frame, info))).is_err() {
+                            break;
+                        }
+                    }
+                    Some(Err(e)) => {
+                        let _ = full_tx.send(Err(e));
+                        break;
+                    }
+                }
+            }
+        });
+        let mut result = Ok(());
+        for (index, item) in full_rx.iter().enumerate() {
+            let (frame, info) = match item {
+                Ok(item) => item,
+                Err(e) => {
+                    result = Err(FrameStreamError::Source(e));
+                    break;
+                }
+            };
+            let outcome = match tracker.process(&frame) {
+                Ok(outcome) => outcome,
+                Err(source) => {
+                    result = Err(FrameStreamError::Frame { index, source });
+                    break;
+                }
+            };
+            if let Err(e) = sink(&info, &outcome) {
+                result = Err(FrameStreamError::Sink(e));
+                break;
+            }
+            let _ = empty_tx.send(frame);
+        }
+        // Unblocks a decoder waiting for a buffer or for room in the queue.
+        drop(empty_tx);
+        drop(full_rx);
+        if decoder.join().is_err() {
+            return Err(FrameStreamError::DecoderPanicked);
+        }
+        result
+    })?;
+    Ok(tracker.report())
+}
