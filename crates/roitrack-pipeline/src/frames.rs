@@ -602,12 +602,14 @@ fn flatten_window(frame: &Frame, roi: &Roi, polarity: Polarity, out: &mut Vec<u1
 /// match), a frame could not be processed, or an estimate could not be handed on (`K`). The estimates handed on before
 /// are kept.
 #[derive(Debug, Error)]
-pub enum FrameStreamError<S, K> {
+pub enum FrameStreamError<S, K, I> {
     #[error(transparent)]
     Source(S),
+    /// Frame number `index` (0-based), which `next_frame` described as `info`, could not be processed.
     #[error("frame {index}: {source}")]
     Frame {
         index: usize,
+        info: I,
         #[source]
         source: FrameError,
     },
@@ -656,7 +658,7 @@ pub fn track_frame_stream<I, S, K>(
     tracker: &mut FrameTracker,
     mut next_frame: impl FnMut(&mut Frame) -> Option<Result<I, S>> + Send,
     mut sink: impl FnMut(&I, &FrameOutcome) -> Result<(), K>,
-) -> Result<FrameTrackReport, FrameStreamError<S, K>>
+) -> Result<FrameTrackReport, FrameStreamError<S, K, I>>
 where
     I: Send,
     S: Send,
@@ -696,7 +698,11 @@ where
             let outcome = match tracker.process(&frame) {
                 Ok(outcome) => outcome,
                 Err(source) => {
-                    result = Err(FrameStreamError::Frame { index, source });
+                    result = Err(FrameStreamError::Frame {
+                        index,
+                        info,
+                        source,
+                    });
                     break;
                 }
             };

@@ -21,6 +21,27 @@ pub enum PolarityArg {
     Dark,
 }
 
+impl From<PolarityArg> for PolarityChoice {
+    fn from(p: PolarityArg) -> Self {
+        match p {
+            PolarityArg::Auto => PolarityChoice::Auto,
+            PolarityArg::Bright => PolarityChoice::Bright,
+            PolarityArg::Dark => PolarityChoice::Dark,
+        }
+    }
+}
+
+/// The `--distance-m NEAR FAR` option, checked.
+pub fn distance_range(distance_m: Option<&[f64]>) -> Result<Option<(f64, f64)>> {
+    match distance_m {
+        Some(&[near, far]) if near > 0.0 && far >= near && far.is_finite() => Ok(Some((near, far))),
+        Some(other) => {
+            bail!("--distance-m: want NEAR_M FAR_M with 0 < NEAR_M <= FAR_M, got {other:?}")
+        }
+        None => Ok(None),
+    }
+}
+
 /// Find the target in photographs (PNG, JPEG, PGM/PPM, TIFF; 8 or 16 bits; colour made grey): detect the blobs,
 /// identify the target's points among them (clutter, partial views, symmetric and hexagonal grids), solve the pose.
 /// Exits with status 1 if any image failed, each failure's reason printed.
@@ -63,18 +84,8 @@ pub fn run(args: &DetectArgs) -> Result<()> {
         })?;
     }
     let options = PhotoOptions {
-        polarity: match args.polarity {
-            PolarityArg::Auto => PolarityChoice::Auto,
-            PolarityArg::Bright => PolarityChoice::Bright,
-            PolarityArg::Dark => PolarityChoice::Dark,
-        },
-        distance_range_m: match args.distance_m.as_deref() {
-            Some(&[near, far]) if near > 0.0 && far >= near && far.is_finite() => Some((near, far)),
-            Some(other) => {
-                bail!("--distance-m: want NEAR_M FAR_M with 0 < NEAR_M <= FAR_M, got {other:?}")
-            }
-            None => None,
-        },
+        polarity: args.polarity.into(),
+        distance_range_m: distance_range(args.distance_m.as_deref())?,
         ..PhotoOptions::default()
     };
     let stdout = std::io::stdout();

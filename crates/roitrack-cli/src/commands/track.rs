@@ -5,15 +5,24 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use clap::Args;
+use clap::{Args, ValueEnum};
 use roitrack::formats::{EstimateWriter, MeasurementReader, RoiRecordingReader};
 use roitrack::image::CentroidOptions;
 use roitrack::{EstimatorReport, TrackStatus, Tracker};
 
 use crate::args::EstimatorArgs;
+use crate::commands::detect::{PolarityArg, distance_range};
 
-/// Track pose and velocity from a measurements file (t,id,u,v) or a ROI recording: one pose and one twist per
-/// control step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ShutterArg {
+    /// Every pixel of a frame exposed over the same interval.
+    Global,
+    /// Rows read one after another, --line-delay-s apart.
+    Rolling,
+}
+
+/// Track pose and velocity from a measurements file (t,id,u,v), a ROI recording, or frames (an image folder, a
+/// numbered pattern, a glob or a video): one pose and one twist per control step (per frame with --images).
 #[derive(Debug, Args)]
 pub struct TrackArgs {
     /// Camera calibration (ROS camera_info YAML).
@@ -22,12 +31,49 @@ pub struct TrackArgs {
     /// Target model (CSV id,x,y,z[,diameter], metres).
     #[arg(long)]
     pub target: PathBuf,
-    /// Measured centroids (CSV t,id,u,v; raw pixels; time order).
-    #[arg(long, required_unless_present = "rois", conflicts_with = "rois")]
+    /// Measured centroids (CSV t,id,u,v; raw pixels; time order). Centroids that share a time (the blobs of a
+    /// global-shutter frame) form one readout: an estimate comes only after the last of them.
+    #[arg(long, required_unless_present_any = ["rois", "images"], conflicts_with_all = ["rois", "images"])]
     pub measurements: Option<PathBuf>,
     /// Instead of centroids: a recording of ROI images (see roitrack_formats::RoiRecordingReader), centroided here.
-    #[arg(long)]
+    #[arg(long, conflicts_with = "images")]
     pub rois: Option<PathBuf>,
+    /// Instead of centroids: frames. A folder of images (PNG, JPEG, PGM/PPM, TIFF, in natural order: frame2 before
+    /// frame10), a numbered pattern (`frames/frame_%05d.png`), a quoted glob (`'frames/*.png'`), or a video (mp4,
+    /// mkv, avi, mov, webm; decoded by Debian's `ffmpeg`). One estimate per frame where the target is found.
+    #[arg(long, value_name = "SOURCE")]
+    pub images: Option<PathBuf>,
+    /// With --images: the frames' times, a CSV file with a header, a column `t` (s: the mid-exposure time of the
+    /// frame's row 0) and one row per frame in order; an optional column `file` must match each frame's file name.
+    #[arg(
+        long,
+        value_name = "FILE.csv",
+        requires = "images",
+        conflicts_with = "fps"
+    )]
+    pub timestamps: Option<PathBuf>,
+    /// With --images: frame k is at k / F seconds. Without --timestamps or --fps, only a video's own timestamps are
+    /// used; an image sequence without either is refused (roitrack never guesses frame times).
+    #[arg(long, value_name = "F", requires = "images")]
+    pub fps: Option<f64>,
+    /// With --images: how the camera reads its rows. global: every blob of a frame at the frame's time. rolling:
+    /// row v is read v * --line-delay-s after row 0, and a blob centred on row v is at t + v * D.
+    #[arg(long, value_enum, default_value = "global", requires = "images")]
+    pub shutter: ShutterArg,
+    /// With --shutter rolling: the time between two rows (s), the sensor's readout time divided by its number of
+    /// rows (datasheet, or a calibration); e.g. 30e-6 for 1,024 rows read in 30.7 ms.
+    #[arg(long, value_name = "D")]
+    pub line_delay_s: Option<f64>,
+    /// With --images: the exposure time (s), used to size the windows for motion blur.
+    #[arg(long, default_value_t = 1e-3, requires = "images")]
+    pub exposure_s: f64,
+    /// With --images: which blobs to look for (auto decides on the first frame where the target is found).
+    #[arg(long, value_enum, default_value = "auto", requires = "images")]
+    pub polarity: PolarityArg,
+    /// With --images: the nearest and farthest distances (m) the target may be at, to leave out blobs of impossible
+    /// size when searching whole frames (needs diameters in the target file).
+    #[arg(long, num_args = 2, value_names = ["NEAR_M", "FAR_M"], requires = "images")]
+    pub distance_m: Option<Vec<f64>>,
     /// With --rois: keep blobs that are not centrally symmetric (by default they are rejected: a reflection or an
     /// occluder merged with a blob biases its centroid by up to half a pixel). For blobs that are not images of disks.
     #[arg(long, requires = "rois")]
@@ -48,6 +94,12 @@ pub struct TrackArgs {
 pub fn run(args: &TrackArgs) -> Result<()> {
     let camera = roitrack::formats::read_camera_yaml(&args.camera)?;
     let target = roitrack::formats::read_target_csv(&args.target)?;
+    if let Some(source) = &args.images {
+        return run_frames(args, source, camera, target);
+    }
+    if args.line_delay_s.is_some() {
+        bail!("--line-delay-s is for --images with --shutter rolling");
+    }
     let known_ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
     let mut tracker = Tracker::new(camera.clone(), target, args.estimator.config())
         .context("invalid tracker options")?;
@@ -129,5 +181,134 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         estimates.get(TrackStatus::Lost),
         1e6 * seconds / measurements.max(1) as f64
     );
+    Ok(())
+}
+
+/// `track --images`: frames decoded on their own thread, tracked by the frame tracker, one estimate per frame. On an
+/// error (an unreadable frame, a timestamps file that does not match), the estimates so far are written, then the
+/// error is reported.
+fn run_frames(
+    args: &TrackArgs,
+    source: &std::path::Path,
+    mut camera: roitrack::CameraModel,
+    target: roitrack::Target,
+) -> Result<()> {
+    use roitrack::math::time::{Readout, TimeModel};
+    use roitrack::pipeline::{FrameStreamError, FrameTracker, FrameTrackerConfig, PhotoOptions};
+
+    let readout = match (args.shutter, args.line_delay_s) {
+        (ShutterArg::Global, None) => Readout::GlobalShutter,
+        (ShutterArg::Global, Some(_)) => {
+            bail!(
+                "--line-delay-s is for --shutter rolling (the frames are read with a global shutter)"
+            )
+        }
+        (ShutterArg::Rolling, Some(line_delay_s)) => Readout::RollingShutter { line_delay_s },
+        (ShutterArg::Rolling, None) => bail!(
+            "--shutter rolling needs --line-delay-s D: the sensor's readout time divided by its number of rows"
+        ),
+    };
+    camera.time = TimeModel {
+        readout,
+        exposure_s: args.exposure_s,
+    };
+    camera
+        .time
+        .validate()
+        .context("invalid --line-delay-s or --exposure-s")?;
+    let config = FrameTrackerConfig {
+        tracker: args.estimator.config(),
+        detection: PhotoOptions {
+            polarity: args.polarity.into(),
+            distance_range_m: distance_range(args.distance_m.as_deref())?,
+            ..PhotoOptions::default()
+        },
+        ..FrameTrackerConfig::default()
+    };
+    let timing = roitrack::formats::FrameTiming {
+        timestamps: args.timestamps.clone(),
+        fps: args.fps,
+    };
+    let mut frames = roitrack::formats::FrameSource::open(source, &timing)?;
+    let mut tracker =
+        FrameTracker::new(camera, target, config).context("invalid tracker options")?;
+    let mut writer =
+        EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?;
+    let progress = match frames.frame_count() {
+        Some(n) => indicatif::ProgressBar::new(n as u64).with_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:30} {human_pos}/{human_len} frames ({per_sec}, {eta} left)",
+            )
+            .expect("valid progress template"),
+        ),
+        None => indicatif::ProgressBar::new_spinner().with_style(
+            indicatif::ProgressStyle::with_template("{spinner} {human_pos} frames ({per_sec})")
+                .expect("valid progress template"),
+        ),
+    };
+    let start = Instant::now();
+    let result = roitrack::pipeline::track_frame_stream(
+        &mut tracker,
+        |frame| frames.next_frame(frame),
+        |info, outcome| {
+            progress.inc(1);
+            let _ = info;
+            match &outcome.estimate {
+                Some(e) => writer.write(e),
+                None => Ok(()),
+            }
+        },
+    );
+    progress.finish_and_clear();
+    let seconds = start.elapsed().as_secs_f64();
+    let report = tracker.report();
+    // What was estimated before an error is kept: the files are completed first.
+    let written = if report.estimates > 0 {
+        writer.finish().map(|()| true)
+    } else {
+        Ok(false)
+    };
+    let polarity = report.polarity.map_or("none", |p| p.name());
+    eprintln!(
+        "roitrack: {} frames -> {} estimates in {seconds:.3} s ({:.0} frames/s); measured in windows {}, whole \
+         {}, new tracks {}, target not found in {}; polarity {polarity}",
+        report.frames,
+        report.estimates,
+        report.frames as f64 / seconds.max(1e-9),
+        report.by_windows,
+        report.by_full_frame,
+        report.restarts,
+        report.not_found,
+    );
+    if let Err(e) = result {
+        let kept = if report.estimates > 0 {
+            format!(
+                " (the {} estimates before it are written)",
+                report.estimates
+            )
+        } else {
+            String::new()
+        };
+        return Err(match e {
+            FrameStreamError::Source(e) => anyhow::Error::new(e),
+            FrameStreamError::Frame {
+                info, source: err, ..
+            } => {
+                anyhow::anyhow!("frame {} ({}): {err}", info.index, info.name)
+            }
+            FrameStreamError::Sink(e) => anyhow::Error::new(e),
+            FrameStreamError::DecoderPanicked => anyhow::anyhow!("the decoding thread panicked"),
+        }
+        .context(format!("tracking {} stopped{kept}", source.display())));
+    }
+    written?;
+    if report.estimates == 0 {
+        bail!(
+            "{}: no estimate from {} frames: the target was never found (check --camera, --target, --polarity; \
+             `roitrack detect` on one frame shows what is seen)",
+            source.display(),
+            report.frames
+        );
+    }
     Ok(())
 }
