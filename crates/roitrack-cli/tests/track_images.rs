@@ -203,3 +203,36 @@ fn bad_frame_inputs_are_refused_naming_the_frame_and_the_estimates_before_are_ke
         "{message}"
     );
 }
+
+#[test]
+fn a_video_is_tracked_with_its_own_timestamps() {
+    let has_ffmpeg = std::process::Command::new("ffmpeg")
+        .arg("-version")
+        .output()
+        .is_ok_and(|o| o.status.success());
+    if !has_ffmpeg {
+        assert!(
+            std::env::var_os("ROITRACK_REQUIRE_FFMPEG").is_none(),
+            "ffmpeg is required (ROITRACK_REQUIRE_FFMPEG is set) but not installed"
+        );
+        eprintln!("ffmpeg is not installed: the video test is skipped");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let frames = write_sequence(dir.path(), Readout::GlobalShutter, 12);
+    // Lossless, 30 frames a second: the video's timestamps are k / 30 s, as the sequence's.
+    let video = dir.path().join("run.mkv");
+    let status = std::process::Command::new("ffmpeg")
+        .args(["-v", "error", "-framerate", "30", "-i"])
+        .arg(dir.path().join("frames/frame_%05d.png"))
+        .args(["-c:v", "ffv1", "-pix_fmt", "gray"])
+        .arg(&video)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = tempfile::tempdir().unwrap();
+    run_ok(&track_args(dir.path(), p(&video), out.path()));
+    let (count, rmse) = position_rmse_m(&frames, &out.path().join("poses.tum"));
+    assert_eq!(count, 12);
+    assert!(rmse < 0.5e-3, "{} mm", rmse * 1e3);
+}
