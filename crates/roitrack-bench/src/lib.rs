@@ -1,7 +1,7 @@
 //! # roitrack-bench
 //!
-//! roitrack's benchmarks as library calls: the hot paths (this page), the real-time loop ([`loop_bench`]), the long
-//! soak run ([`soak`]) and the PnP comparison with OpenCV ([`pnp`]). `roitrack bench`, `roitrack soak` and
+//! roitrack's benchmarks as library calls: the hot paths (this page), the real-time loop ([`loop_bench`]), tracking
+//! from frames ([`frame_bench`]), the long soak run ([`soak`]) and the PnP comparison with OpenCV ([`pnp`]). `roitrack bench`, `roitrack soak` and
 //! `roitrack pnp-bench` only print what these return.
 //!
 //! The inputs of roitrack's hot-path benchmarks, built on the canonical scene of SPEC section 6 with the public APIs
@@ -34,6 +34,7 @@
 //! - `render_roi`: the simulator's rendering of that ROI (one blob, shot and read noise drawn)
 //!   ([`RoiRenderer::render_roi_with_scratch`], scratch buffers reused).
 
+pub mod frame_bench;
 pub mod loop_bench;
 pub mod pnp;
 pub mod soak;
