@@ -171,31 +171,8 @@ pub fn check_frame_size(
 /// ```
 pub fn write_frame_png(path: impl AsRef<Path>, frame: &Frame) -> Result<(), FormatError> {
     let path = path.as_ref();
+    check_frame_buffer(frame, path, "write")?;
     let (width, height) = (frame.width, frame.height);
-    if width == 0 || height == 0 {
-        return Err(FormatError::new(
-            path,
-            format!("cannot write an empty frame ({width} x {height} px)"),
-        ));
-    }
-    if (width as usize).checked_mul(height as usize) != Some(frame.pixels.len()) {
-        return Err(FormatError::new(
-            path,
-            format!(
-                "the frame has {} pixel values for {width} x {height} px",
-                frame.pixels.len()
-            ),
-        ));
-    }
-    if !(1..=16).contains(&frame.bit_depth) {
-        return Err(FormatError::new(
-            path,
-            format!(
-                "the frame's bit depth is {}, expected 1 to 16",
-                frame.bit_depth
-            ),
-        ));
-    }
     let (bytes, color) = if frame.bit_depth <= 8 {
         if let Some(at) = frame.pixels.iter().position(|&v| v > 255) {
             let (column, row) = (at % width as usize, at / width as usize);
@@ -373,6 +350,41 @@ fn frame_from_image(
     frame.width = width;
     frame.height = height;
     frame.bit_depth = bit_depth;
+    Ok(())
+}
+
+/// Refuses a frame that cannot be written or drawn on (`doing`: what was to be done with it): empty, a pixel buffer
+/// that does not match its size, or a bit depth outside 1 to 16.
+pub(crate) fn check_frame_buffer(
+    frame: &Frame,
+    path: &Path,
+    doing: &str,
+) -> Result<(), FormatError> {
+    let (width, height) = (frame.width, frame.height);
+    if width == 0 || height == 0 {
+        return Err(FormatError::new(
+            path,
+            format!("cannot {doing} an empty frame ({width} x {height} px)"),
+        ));
+    }
+    if (width as usize).checked_mul(height as usize) != Some(frame.pixels.len()) {
+        return Err(FormatError::new(
+            path,
+            format!(
+                "the frame has {} pixel values for {width} x {height} px",
+                frame.pixels.len()
+            ),
+        ));
+    }
+    if !(1..=16).contains(&frame.bit_depth) {
+        return Err(FormatError::new(
+            path,
+            format!(
+                "the frame's bit depth is {}, expected 1 to 16",
+                frame.bit_depth
+            ),
+        ));
+    }
     Ok(())
 }
 

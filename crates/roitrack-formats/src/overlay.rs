@@ -128,32 +128,8 @@ struct Canvas {
 impl Canvas {
     /// The frame's grey values, scaled to 8 bits, in all three channels.
     fn from_frame(frame: &Frame, path: &Path) -> Result<Self, FormatError> {
+        crate::image_file::check_frame_buffer(frame, path, "draw an overlay on")?;
         let (width, height) = (frame.width, frame.height);
-        if width == 0 || height == 0 {
-            return Err(FormatError::new(
-                path,
-                format!("cannot draw an overlay on an empty frame ({width} x {height} px)"),
-            ));
-        }
-        let count = (width as usize).checked_mul(height as usize);
-        if count != Some(frame.pixels.len()) {
-            return Err(FormatError::new(
-                path,
-                format!(
-                    "the frame has {} pixel values for {width} x {height} px",
-                    frame.pixels.len()
-                ),
-            ));
-        }
-        if !(1..=16).contains(&frame.bit_depth) {
-            return Err(FormatError::new(
-                path,
-                format!(
-                    "the frame's bit depth is {}, expected 1 to 16",
-                    frame.bit_depth
-                ),
-            ));
-        }
         let max = (1u32 << frame.bit_depth) - 1;
         let rgb = frame
             .pixels
