@@ -29,6 +29,7 @@ enum Command {
     Tradeoff(commands::tradeoff::TradeoffArgs),
     PnpBench(commands::pnp_bench::PnpBenchArgs),
     Faults(commands::faults::FaultsArgs),
+    FrameStudy(commands::frame_study::FrameStudyArgs),
 }
 
 fn main() -> ExitCode {
@@ -53,6 +54,7 @@ fn main() -> ExitCode {
         Command::Tradeoff(args) => commands::tradeoff::run(&args),
         Command::PnpBench(args) => commands::pnp_bench::run(&args),
         Command::Faults(args) => commands::faults::run(&args),
+        Command::FrameStudy(args) => commands::frame_study::run(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

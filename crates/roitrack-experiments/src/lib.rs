@@ -9,7 +9,9 @@
 //!   centroids of the same noise;
 //! - [`faults`]: the default estimator under faults (outliers, drops, occlusions, gaps, jumps, blobs leaving the
 //!   image, reflections in the ROIs): accuracy, recovery, flagged and unflagged wrong estimates;
-//! - [`tradeoff`]: velocity noise against velocity lag, for the paper's gain and the Kalman filter's process noise.
+//! - [`tradeoff`]: velocity noise against velocity lag, for the paper's gain and the Kalman filter's process noise;
+//! - [`frames`]: frame cameras (global and rolling shutters, bright and dark blobs) on simulated image sequences,
+//!   each tracked with the right time model and the wrong one, and the frame-camera targets checked.
 //!
 //! Every metric comes from [`roitrack_eval`]; every estimator from [`roitrack_core::estimator`].
 //!
@@ -27,6 +29,7 @@
 pub mod compare;
 pub mod demo;
 pub mod faults;
+pub mod frames;
 pub mod scoring;
 pub mod tradeoff;
 

@@ -6,6 +6,7 @@ pub mod demo;
 pub mod detect;
 pub mod eval;
 pub mod faults;
+pub mod frame_study;
 pub mod pnp_bench;
 pub mod simulate;
 pub mod soak;
