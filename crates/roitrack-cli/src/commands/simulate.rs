@@ -1,16 +1,20 @@
 //! `roitrack simulate`: write a scenario's camera, target, measurements and ground truth (and optionally a recording
-//! of rendered ROIs).
+//! of rendered ROIs), or with `--frames` the full frames a global- or rolling-shutter camera takes of it.
 
+use std::io::Write as _;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, ValueEnum};
-use roitrack::image::{ReflectionFault, SensorModel};
+use roitrack::formats::AtomicFile;
+use roitrack::image::{Frame, Polarity, ReflectionFault, SensorModel};
 use roitrack::math::RoiOrder;
+use roitrack::math::time::Readout;
 use roitrack::nalgebra::Vector3;
 use roitrack::sim::{
-    Excursion, Jump, Occlusion, RoiBurst, Scenario, SimulatedRun, SimulationOptions, TimeGap,
-    render_roi_images, simulate,
+    DEFAULT_TRUTH_RATE_HZ, Excursion, FrameOptions, FrameSequence, Jump, Occlusion, RoiBurst,
+    Scenario, ScenarioKind, SimulatedRun, SimulationOptions, TimeGap, render_roi_images, simulate,
 };
 
 use crate::args::ScenarioArg;
@@ -22,6 +26,46 @@ pub const MEASUREMENTS_FILE: &str = "measurements.csv";
 pub const TRUTH_POSES_FILE: &str = "gt_poses.tum";
 pub const TRUTH_TWISTS_FILE: &str = "gt_twists.csv";
 pub const ROIS_FILE: &str = "rois.bin";
+/// With `--frames`: the folder of the frames (`frame_00000.png`, ...), their times, and how to track them.
+pub const FRAMES_DIR: &str = "frames";
+pub const TIMESTAMPS_FILE: &str = "timestamps.csv";
+pub const FRAMES_README_FILE: &str = "README.txt";
+
+/// With `--frames`: how the simulated camera reads its rows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FrameShutterArg {
+    /// Every pixel of a frame exposed over the same interval.
+    Global,
+    /// Rows read one after another, --line-delay-s apart.
+    Rolling,
+}
+
+impl FrameShutterArg {
+    fn name(self) -> &'static str {
+        match self {
+            Self::Global => "global",
+            Self::Rolling => "rolling",
+        }
+    }
+}
+
+/// With `--frames`: the blobs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum FramePolarityArg {
+    /// Bright blobs on a dark background (LEDs, retro-reflective markers).
+    Bright,
+    /// Dark printed circles on a light, unevenly lit background.
+    Dark,
+}
+
+impl From<FramePolarityArg> for Polarity {
+    fn from(p: FramePolarityArg) -> Self {
+        match p {
+            FramePolarityArg::Bright => Polarity::Bright,
+            FramePolarityArg::Dark => Polarity::Dark,
+        }
+    }
+}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum OrderArg {
@@ -44,10 +88,12 @@ impl From<OrderArg> for RoiOrder {
 }
 
 /// Simulate a scenario one ROI at a time and write camera.yaml, target.csv, measurements.csv, gt_poses.tum and
-/// gt_twists.csv into a folder.
+/// gt_twists.csv into a folder; or, with --frames, the full frames a global- or rolling-shutter camera takes of it
+/// (camera.yaml, target.csv, frames/frame_00000.png ..., timestamps.csv, gt_poses.tum, gt_twists.csv, README.txt).
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// Which motion: static (bench pose), orthoglide (SPEC section 7), spin (3 rev/s), random (smooth 6-dof).
+    /// Which motion: static (bench pose), orthoglide (SPEC section 7), spin (3 rev/s), random (smooth 6-dof), sweep
+    /// (0.5 m/s, 1.5 rad/s: what a 30 Hz frame camera can follow).
     #[arg(long, value_enum, default_value = "orthoglide")]
     pub scenario: ScenarioArg,
     /// Output folder (created if missing).
@@ -100,6 +146,32 @@ pub struct SimulateArgs {
     /// Drop the measurements of blobs outside the image instead of failing.
     #[arg(long)]
     pub skip_off_image: bool,
+    /// Instead of measurements: render the full frames of a frame camera (PNG, with sensor noise; the
+    /// measurement-level options do not apply), their times (timestamps.csv), and a dense ground truth.
+    #[arg(long, conflicts_with_all = [
+        "noise_px", "rate_hz", "order", "drop_fraction", "outlier_fraction", "rois", "reflections", "occlusions",
+        "gaps", "bursts", "jump", "excursion", "skip_off_image",
+    ])]
+    pub frames: bool,
+    /// With --frames: frames per second; frame k is at k / F s (the mid-exposure time of its row 0).
+    #[arg(long, value_name = "F", default_value_t = 30.0, requires = "frames")]
+    pub fps: f64,
+    /// With --frames: how the camera reads its rows: global (every row at once) or rolling (row v read
+    /// v * --line-delay-s after row 0).
+    #[arg(long, value_enum, default_value = "global", requires = "frames")]
+    pub shutter: FrameShutterArg,
+    /// With --shutter rolling: the time between two rows (s), e.g. 30e-6 (1,024 rows read in 30.7 ms).
+    #[arg(long, value_name = "D", requires = "frames")]
+    pub line_delay_s: Option<f64>,
+    /// With --frames: the exposure of each row (s), centred on the row's time.
+    #[arg(long, value_name = "E", default_value_t = 1e-3, requires = "frames")]
+    pub exposure_s: f64,
+    /// With --frames: bright blobs, or dark printed circles on a light, unevenly lit background.
+    #[arg(long, value_enum, default_value = "bright", requires = "frames")]
+    pub polarity: FramePolarityArg,
+    /// With --frames: how many frames (default: every frame whose rows are all exposed within the scenario).
+    #[arg(long, value_name = "N", requires = "frames")]
+    pub frame_count: Option<usize>,
 }
 
 /// A fraction in [0, 1].
@@ -227,6 +299,9 @@ impl SimulateArgs {
 }
 
 pub fn run(args: &SimulateArgs) -> Result<()> {
+    if args.frames {
+        return run_frames(args);
+    }
     let scenario = Scenario::new(args.scenario.into(), args.seed);
     let options = args.options();
     let run = simulate(&scenario, &options).context("simulation failed")?;
@@ -268,4 +343,269 @@ pub fn write_run(run: &SimulatedRun, dir: &Path) -> Result<()> {
     roitrack::formats::write_tum(dir.join(TRUTH_POSES_FILE), &run.truth_poses)?;
     roitrack::formats::write_twists_csv(dir.join(TRUTH_TWISTS_FILE), &run.truth_twists)?;
     Ok(())
+}
+
+impl SimulateArgs {
+    /// The readout of `--shutter` and `--line-delay-s`, refusing a line delay without a rolling shutter and a rolling
+    /// shutter without a line delay.
+    fn readout(&self) -> Result<Readout> {
+        match (self.shutter, self.line_delay_s) {
+            (FrameShutterArg::Global, None) => Ok(Readout::GlobalShutter),
+            (FrameShutterArg::Global, Some(_)) => {
+                bail!(
+                    "--line-delay-s is for --shutter rolling (the frames are read by a global shutter)"
+                )
+            }
+            (FrameShutterArg::Rolling, Some(line_delay_s)) => {
+                Ok(Readout::RollingShutter { line_delay_s })
+            }
+            (FrameShutterArg::Rolling, None) => bail!(
+                "--shutter rolling needs --line-delay-s D, the time between two rows (s), e.g. 30e-6 for 1,024 rows \
+                 read in 30.7 ms"
+            ),
+        }
+    }
+
+    /// The `roitrack simulate` command that makes these frames.
+    fn frames_command(&self) -> String {
+        let mut command = format!(
+            "roitrack simulate --frames --scenario {} --seed {} --fps {} --shutter {}",
+            ScenarioKind::from(self.scenario).name(),
+            self.seed,
+            self.fps,
+            self.shutter.name()
+        );
+        if let Some(d) = self.line_delay_s {
+            command += &format!(" --line-delay-s {d:e}");
+        }
+        command += &format!(
+            " --exposure-s {:e} --polarity {}",
+            self.exposure_s,
+            Polarity::from(self.polarity).name()
+        );
+        if let Some(n) = self.frame_count {
+            command += &format!(" --frame-count {n}");
+        }
+        command + &format!(" --out {}", self.out.display())
+    }
+
+    /// The `roitrack track` options that tell it how these frames were taken (a camera_info file has no time model).
+    fn track_time_options(&self) -> String {
+        let mut options = format!("--shutter {}", self.shutter.name());
+        if let Some(d) = self.line_delay_s {
+            options += &format!(" --line-delay-s {d:e}");
+        }
+        options + &format!(" --exposure-s {:e}", self.exposure_s)
+    }
+}
+
+/// The file name of frame `k`.
+fn frame_file_name(k: usize) -> String {
+    format!("frame_{k:05}.png")
+}
+
+/// `simulate --frames`: the frames of a frame camera, their times and a dense ground truth.
+fn run_frames(args: &SimulateArgs) -> Result<()> {
+    let scenario = Scenario::new(args.scenario.into(), args.seed);
+    let options = FrameOptions {
+        fps_hz: args.fps,
+        readout: args.readout()?,
+        exposure_s: args.exposure_s,
+        polarity: args.polarity.into(),
+        sensor: SensorModel::default(),
+        seed: args.seed,
+        start_s: 0.0,
+        frame_count: args.frame_count,
+    };
+    let sequence =
+        FrameSequence::new(&scenario, &options).context("cannot simulate these frames")?;
+    let count = sequence.len();
+    let dir = &args.out;
+    let frames_dir = dir.join(FRAMES_DIR);
+    std::fs::create_dir_all(&frames_dir)
+        .with_context(|| format!("cannot create folder {}", frames_dir.display()))?;
+    remove_stale_frames(&frames_dir, count)?;
+    roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), sequence.camera())?;
+    roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scenario.target)?;
+    render_frames(&sequence, &frames_dir)?;
+    write_timestamps(&sequence, &dir.join(TIMESTAMPS_FILE))?;
+    // Dense, so that `roitrack eval` interpolates the truth at each estimate's own time (its newest blob's row).
+    let truth = sequence
+        .truth_samples(DEFAULT_TRUTH_RATE_HZ)
+        .context("cannot sample the ground truth")?;
+    roitrack::formats::write_tum(dir.join(TRUTH_POSES_FILE), &truth.poses)?;
+    roitrack::formats::write_twists_csv(dir.join(TRUTH_TWISTS_FILE), &truth.twists)?;
+    let track = track_command(args);
+    let readme = frames_readme(args, &sequence, &track);
+    let readme_path = dir.join(FRAMES_README_FILE);
+    let mut file = AtomicFile::create(&readme_path)?;
+    file.write_all(readme.as_bytes())
+        .with_context(|| format!("cannot write {}", readme_path.display()))?;
+    file.finish()?;
+    eprintln!(
+        "roitrack: {} scenario: {count} frames of {} x {} px ({} shutter, {} blobs) written to {}; a camera_info \
+         file has no time model: track them with\n  {track}",
+        scenario.kind.name(),
+        sequence.camera().width_px,
+        sequence.camera().height_px,
+        args.shutter.name(),
+        Polarity::from(args.polarity).name(),
+        frames_dir.display(),
+    );
+    Ok(())
+}
+
+/// Removes the frames a previous, longer simulation left in `frames_dir` (only our own `frame_NNNNN.png` names, from
+/// `count` on): a folder of frames is read whole, and the timestamps would not match.
+fn remove_stale_frames(frames_dir: &Path, count: usize) -> Result<()> {
+    let entries = std::fs::read_dir(frames_dir)
+        .with_context(|| format!("cannot list folder {}", frames_dir.display()))?;
+    for entry in entries {
+        let entry =
+            entry.with_context(|| format!("cannot list folder {}", frames_dir.display()))?;
+        let name = entry.file_name();
+        let Some(index) = name
+            .to_str()
+            .and_then(|n| n.strip_prefix("frame_"))
+            .and_then(|n| n.strip_suffix(".png"))
+            .filter(|digits| digits.len() >= 5 && digits.bytes().all(|b| b.is_ascii_digit()))
+            .and_then(|digits| digits.parse::<usize>().ok())
+        else {
+            continue;
+        };
+        if index >= count && frame_file_name(index) == name.to_string_lossy() {
+            std::fs::remove_file(entry.path()).with_context(|| {
+                format!("cannot remove the old frame {}", entry.path().display())
+            })?;
+        }
+    }
+    Ok(())
+}
+
+/// Renders and writes every frame, on as many threads as there are cores: a frame's pixels depend only on its
+/// index, so each thread renders its share with its own copy of the sequence.
+fn render_frames(sequence: &FrameSequence, frames_dir: &Path) -> Result<()> {
+    let count = sequence.len();
+    let threads = std::thread::available_parallelism()
+        .map_or(1, |n| n.get())
+        .min(count);
+    // Drawn on stderr, only when it is a terminal.
+    let bar = indicatif::ProgressBar::new(count as u64).with_style(
+        indicatif::ProgressStyle::with_template(
+            "{bar:40} {pos}/{len} frames ({elapsed}, {eta} left)",
+        )
+        .expect("valid progress template"),
+    );
+    let next = AtomicUsize::new(0);
+    let result = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads)
+            .map(|_| {
+                let mut sequence = sequence.clone();
+                let (next, bar) = (&next, &bar);
+                scope.spawn(move || -> Result<()> {
+                    let mut frame = Frame::default();
+                    loop {
+                        let k = next.fetch_add(1, Ordering::Relaxed);
+                        if k >= count {
+                            return Ok(());
+                        }
+                        sequence.render(k, &mut frame);
+                        if let Err(e) = roitrack::formats::write_frame_png(
+                            frames_dir.join(frame_file_name(k)),
+                            &frame,
+                        ) {
+                            // The others stop at their next frame.
+                            next.store(count, Ordering::Relaxed);
+                            return Err(e.into());
+                        }
+                        bar.inc(1);
+                    }
+                })
+            })
+            .collect();
+        workers.into_iter().try_for_each(|w| {
+            w.join()
+                .map_err(|_| anyhow!("a rendering thread panicked"))?
+        })
+    });
+    bar.finish_and_clear();
+    result
+}
+
+/// `t,file`: each frame's time (s, the mid-exposure time of its row 0) and file name, as `roitrack track
+/// --timestamps` reads them. Times are written in full (shortest round-trip form).
+fn write_timestamps(sequence: &FrameSequence, path: &Path) -> Result<()> {
+    let mut file = AtomicFile::create(path)?;
+    let mut text = String::from("t,file\n");
+    for k in 0..sequence.len() {
+        text += &format!("{},{}\n", sequence.frame_time_s(k), frame_file_name(k));
+    }
+    file.write_all(text.as_bytes())
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    file.finish()?;
+    Ok(())
+}
+
+/// The `roitrack track` command for the frames in `args.out`.
+fn track_command(args: &SimulateArgs) -> String {
+    let dir = |name: &str| args.out.join(name).display().to_string();
+    format!(
+        "roitrack track --camera {} --target {} --images {} --timestamps {} {} --polarity {} --poses poses.tum \
+         --twists twists.csv",
+        dir(CAMERA_FILE),
+        dir(TARGET_FILE),
+        dir(FRAMES_DIR),
+        dir(TIMESTAMPS_FILE),
+        args.track_time_options(),
+        Polarity::from(args.polarity).name()
+    )
+}
+
+/// What the folder holds and how to track and score it.
+fn frames_readme(args: &SimulateArgs, sequence: &FrameSequence, track: &str) -> String {
+    let camera = sequence.camera();
+    let readout = match camera.time.readout {
+        Readout::RollingShutter { line_delay_s } => format!(
+            "a rolling shutter (row v read v x {line_delay_s:e} s after row 0: {:.4} s from the first row to the \
+             last)",
+            line_delay_s * f64::from(camera.height_px.saturating_sub(1)),
+        ),
+        _ => "a global shutter (every row at the frame's time)".to_owned(),
+    };
+    let (start, end) = sequence.span_s();
+    format!(
+        "Simulated frames of the {scenario} scenario (seed {seed}), made by\n\n    {command}\n\n\
+         {count} frames of {w} x {h} px at {fps} Hz, {polarity} blobs, read by {readout}, each row exposed for {e:e} \
+         s around its time.\n\n\
+         {camera_file:<16} the camera (ROS camera_info). It has no time model: tell `roitrack track` how the rows \
+         were read,\n{pad:<16} {options}\n\
+         {target_file:<16} the target (id,x,y,z,diameter in metres)\n\
+         {frames_dir:<16} frame_00000.png ...: grey PNGs, {bits} bits\n\
+         {timestamps:<16} t,file: each frame's time (s: the mid-exposure time of its row 0) and file name\n\
+         {poses:<16} the true poses (TUM, camera_T_object) every {dt:e} s and at every frame's time, from {start:.6} s \
+         to {end:.6} s (the last frame's last row)\n\
+         {twists:<16} the true twists (t,vx,vy,vz,wx,wy,wz) at the same times\n\n\
+         Track and score them (`roitrack eval` interpolates the truth at each estimate's own time, that of its frame's \
+         newest blob):\n\n    {track}\n    roitrack eval --truth {out} --poses poses.tum --twists twists.csv\n",
+        scenario = sequence.scenario().kind.name(),
+        seed = args.seed,
+        command = args.frames_command(),
+        count = sequence.len(),
+        w = camera.width_px,
+        h = camera.height_px,
+        fps = args.fps,
+        polarity = Polarity::from(args.polarity).name(),
+        e = args.exposure_s,
+        camera_file = CAMERA_FILE,
+        pad = "",
+        options = args.track_time_options(),
+        target_file = TARGET_FILE,
+        frames_dir = format!("{FRAMES_DIR}/"),
+        bits = sequence.options().sensor.bit_depth,
+        timestamps = TIMESTAMPS_FILE,
+        poses = TRUTH_POSES_FILE,
+        dt = 1.0 / DEFAULT_TRUTH_RATE_HZ,
+        twists = TRUTH_TWISTS_FILE,
+        out = args.out.display(),
+    )
 }
