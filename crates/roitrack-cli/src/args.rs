@@ -1,5 +1,6 @@
 //! Command-line values shared by several commands, and their translation into the library's types.
 
+use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use roitrack::math::JacobianKind;
 use roitrack::math::estimator::RobustLoss;
@@ -145,6 +146,44 @@ impl EstimatorArgs {
                 RobustArg::Tukey => RobustLoss::Tukey,
             },
             ..defaults
+        }
+    }
+}
+
+/// How a frame camera reads its rows (`--shutter`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ShutterArg {
+    /// Every pixel of a frame exposed over the same interval.
+    Global,
+    /// Rows read one after another, --line-delay-s apart.
+    Rolling,
+}
+
+impl ShutterArg {
+    /// `global` or `rolling`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Global => "global",
+            Self::Rolling => "rolling",
+        }
+    }
+
+    /// The readout of `--shutter` and `--line-delay-s`, refusing a line delay without a rolling shutter and a rolling
+    /// shutter without a line delay.
+    pub fn readout(self, line_delay_s: Option<f64>) -> Result<roitrack::math::time::Readout> {
+        use roitrack::math::time::Readout;
+        match (self, line_delay_s) {
+            (Self::Global, None) => Ok(Readout::GlobalShutter),
+            (Self::Global, Some(_)) => {
+                bail!(
+                    "--line-delay-s is for --shutter rolling (the frames are read by a global shutter)"
+                )
+            }
+            (Self::Rolling, Some(line_delay_s)) => Ok(Readout::RollingShutter { line_delay_s }),
+            (Self::Rolling, None) => bail!(
+                "--shutter rolling needs --line-delay-s D, the time between two rows (s): the sensor's readout time \
+                 divided by its number of rows, e.g. 30e-6 for 1,024 rows read in 30.7 ms"
+            ),
         }
     }
 }

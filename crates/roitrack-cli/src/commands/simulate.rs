@@ -5,7 +5,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use anyhow::{Context, Result, anyhow, bail};
+use anyhow::{Context, Result, anyhow};
 use clap::{Args, ValueEnum};
 use roitrack::formats::AtomicFile;
 use roitrack::image::{Frame, Polarity, ReflectionFault, SensorModel};
@@ -17,7 +17,7 @@ use roitrack::sim::{
     Scenario, ScenarioKind, SimulatedRun, SimulationOptions, TimeGap, render_roi_images, simulate,
 };
 
-use crate::args::ScenarioArg;
+use crate::args::{ScenarioArg, ShutterArg};
 
 /// File names inside a simulation folder.
 pub const CAMERA_FILE: &str = "camera.yaml";
@@ -30,24 +30,6 @@ pub const ROIS_FILE: &str = "rois.bin";
 pub const FRAMES_DIR: &str = "frames";
 pub const TIMESTAMPS_FILE: &str = "timestamps.csv";
 pub const FRAMES_README_FILE: &str = "README.txt";
-
-/// With `--frames`: how the simulated camera reads its rows.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum FrameShutterArg {
-    /// Every pixel of a frame exposed over the same interval.
-    Global,
-    /// Rows read one after another, --line-delay-s apart.
-    Rolling,
-}
-
-impl FrameShutterArg {
-    fn name(self) -> &'static str {
-        match self {
-            Self::Global => "global",
-            Self::Rolling => "rolling",
-        }
-    }
-}
 
 /// With `--frames`: the blobs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -159,7 +141,7 @@ pub struct SimulateArgs {
     /// With --frames: how the camera reads its rows: global (every row at once) or rolling (row v read
     /// v * --line-delay-s after row 0).
     #[arg(long, value_enum, default_value = "global", requires = "frames")]
-    pub shutter: FrameShutterArg,
+    pub shutter: ShutterArg,
     /// With --shutter rolling: the time between two rows (s), e.g. 30e-6 (1,024 rows read in 30.7 ms).
     #[arg(long, value_name = "D", requires = "frames")]
     pub line_delay_s: Option<f64>,
@@ -346,24 +328,8 @@ pub fn write_run(run: &SimulatedRun, dir: &Path) -> Result<()> {
 }
 
 impl SimulateArgs {
-    /// The readout of `--shutter` and `--line-delay-s`, refusing a line delay without a rolling shutter and a rolling
-    /// shutter without a line delay.
     fn readout(&self) -> Result<Readout> {
-        match (self.shutter, self.line_delay_s) {
-            (FrameShutterArg::Global, None) => Ok(Readout::GlobalShutter),
-            (FrameShutterArg::Global, Some(_)) => {
-                bail!(
-                    "--line-delay-s is for --shutter rolling (the frames are read by a global shutter)"
-                )
-            }
-            (FrameShutterArg::Rolling, Some(line_delay_s)) => {
-                Ok(Readout::RollingShutter { line_delay_s })
-            }
-            (FrameShutterArg::Rolling, None) => bail!(
-                "--shutter rolling needs --line-delay-s D, the time between two rows (s), e.g. 30e-6 for 1,024 rows \
-                 read in 30.7 ms"
-            ),
-        }
+        self.shutter.readout(self.line_delay_s)
     }
 
     /// The `roitrack simulate` command that makes these frames.

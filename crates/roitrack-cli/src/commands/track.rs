@@ -5,21 +5,13 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
-use clap::{Args, ValueEnum};
+use clap::Args;
 use roitrack::formats::{EstimateWriter, MeasurementReader, RoiRecordingReader};
 use roitrack::image::CentroidOptions;
 use roitrack::{EstimatorReport, TrackStatus, Tracker};
 
-use crate::args::EstimatorArgs;
+use crate::args::{EstimatorArgs, ShutterArg};
 use crate::commands::detect::{PolarityArg, distance_range};
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum ShutterArg {
-    /// Every pixel of a frame exposed over the same interval.
-    Global,
-    /// Rows read one after another, --line-delay-s apart.
-    Rolling,
-}
 
 /// Track pose and velocity from a measurements file (t,id,u,v), a ROI recording, or frames (an image folder, a
 /// numbered pattern, a glob or a video): one pose and one twist per control step (per frame with --images).
@@ -193,21 +185,10 @@ fn run_frames(
     mut camera: roitrack::CameraModel,
     target: roitrack::Target,
 ) -> Result<()> {
-    use roitrack::math::time::{Readout, TimeModel};
+    use roitrack::math::time::TimeModel;
     use roitrack::pipeline::{FrameStreamError, FrameTracker, FrameTrackerConfig, PhotoOptions};
 
-    let readout = match (args.shutter, args.line_delay_s) {
-        (ShutterArg::Global, None) => Readout::GlobalShutter,
-        (ShutterArg::Global, Some(_)) => {
-            bail!(
-                "--line-delay-s is for --shutter rolling (the frames are read with a global shutter)"
-            )
-        }
-        (ShutterArg::Rolling, Some(line_delay_s)) => Readout::RollingShutter { line_delay_s },
-        (ShutterArg::Rolling, None) => bail!(
-            "--shutter rolling needs --line-delay-s D: the sensor's readout time divided by its number of rows"
-        ),
-    };
+    let readout = args.shutter.readout(args.line_delay_s)?;
     camera.time = TimeModel {
         readout,
         exposure_s: args.exposure_s,
