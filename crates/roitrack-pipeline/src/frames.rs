@@ -273,8 +273,11 @@ impl FrameTracker {
 
     /// What the tracker has done so far.
     pub fn report(&self) -> FrameTrackReport {
+        let estimator = self.tracker.report();
         FrameTrackReport {
-            estimator: self.tracker.report(),
+            // One batch per frame, so one estimate at most per frame: the estimator's count is the frames'.
+            estimates: estimator.estimates.total(),
+            estimator,
             ..self.report
         }
     }
@@ -319,13 +322,8 @@ impl FrameTracker {
             None
         } else {
             self.measurements.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
-            let estimate = self
-                .tracker
-                .push_batch(&self.measurements, Emit::EachBatch)?;
-            if let Some(last) = self.measurements.last() {
-                self.last_time_s = Some(last.t_s);
-            }
-            estimate
+            self.tracker
+                .push_batch(&self.measurements, Emit::EachBatch)?
         };
         match method {
             FrameMethod::Windows => self.report.by_windows += 1,
@@ -333,9 +331,10 @@ impl FrameTracker {
             FrameMethod::Restart => self.report.restarts += 1,
             FrameMethod::NotFound => self.report.not_found += 1,
         }
-        self.last_time_s = Some(self.last_time_s.map_or(frame.t_s, |t| t.max(frame.t_s)));
+        // The measurements are in time order: the last is the frame's latest time, if later than its row 0.
+        let latest_s = self.measurements.last().map_or(frame.t_s, |m| m.t_s);
+        self.last_time_s = Some(latest_s.max(frame.t_s));
         if let Some(e) = estimate {
-            self.report.estimates += 1;
             // A lost track is dropped by the estimator: the next frame is searched whole.
             self.predictor = (e.status != TrackStatus::Lost).then_some(Predictor {
                 t_ref_s: e.t_ref_s,
@@ -346,11 +345,8 @@ impl FrameTracker {
         Ok(FrameOutcome {
             estimate,
             method,
-            measured: if method == FrameMethod::NotFound {
-                0
-            } else {
-                self.measurements.len()
-            },
+            // A frame whose target was not found leaves no measurement.
+            measured: self.measurements.len(),
         })
     }
 
@@ -577,24 +573,31 @@ fn flatten_window(frame: &Frame, roi: &Roi, polarity: Polarity, out: &mut Vec<u1
     let a = s / n.max(1.0);
     let b = if sxx > 0.0 { sx / sxx } else { 0.0 };
     let c = if syy > 0.0 { sy / syy } else { 0.0 };
-    for j in 0..h {
-        let y = j as f64 - cy;
-        for i in 0..w {
-            let x = i as f64 - cx;
-            let plane = a + b * x + c * y;
-            let v = at(i, j);
-            let flat = match polarity {
-                Polarity::Bright => v - plane,
-                Polarity::Dark => {
-                    if plane > 0.0 {
-                        (1.0 - v / plane) * max_value
-                    } else {
-                        0.0
-                    }
-                }
-            };
-            out[j * w + i] = (flat + offset).round().clamp(0.0, max_value) as u16;
+    let frame_width = frame.width as usize;
+    // The hot loop of the windows path: row slices (no per-pixel index checks), the polarity chosen once per window,
+    // and rounding as +0.5 then truncation (`f64::round` is a library call; the values are clamped non-negative
+    // first, where the two agree).
+    let mut fill = |flat: fn(f64, f64, f64) -> f64| {
+        for (j, out_row) in out.chunks_exact_mut(w).enumerate() {
+            let y = j as f64 - cy;
+            let start = (roi.y0 as usize + j) * frame_width + roi.x0 as usize;
+            let row = &frame.pixels[start..start + w];
+            for (i, (o, &v)) in out_row.iter_mut().zip(row).enumerate() {
+                let plane = a + b * (i as f64 - cx) + c * y;
+                let value = flat(f64::from(v), plane, max_value) + offset;
+                *o = (value + 0.5).clamp(0.0, max_value) as u16;
+            }
         }
+    };
+    match polarity {
+        Polarity::Bright => fill(|v, plane, _| v - plane),
+        Polarity::Dark => fill(|v, plane, max_value| {
+            if plane > 0.0 {
+                (1.0 - v / plane) * max_value
+            } else {
+                0.0
+            }
+        }),
     }
 }
 

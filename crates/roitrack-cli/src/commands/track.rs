@@ -231,9 +231,8 @@ fn run_frames(
     let result = roitrack::pipeline::track_frame_stream(
         &mut tracker,
         |frame| frames.next_frame(frame),
-        |info, outcome| {
+        |_info, outcome| {
             progress.inc(1);
-            let _ = info;
             match &outcome.estimate {
                 Some(e) => writer.write(e),
                 None => Ok(()),
