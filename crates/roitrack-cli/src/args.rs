@@ -61,6 +61,14 @@ pub enum EstimatorArg {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum AdaptArg {
+    Both,
+    Noise,
+    Motion,
+    None,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum RobustArg {
     None,
     Huber,
@@ -85,9 +93,14 @@ pub struct EstimatorArgs {
     /// Control period k: one estimate every K measurements.
     #[arg(long, default_value_t = 10)]
     pub every: usize,
-    /// Centroid noise standard deviation (px), used by the Kalman filter and the covariances.
+    /// Centroid noise standard deviation (px): the window fits' covariance scale, and the Kalman filter's starting
+    /// value (it estimates the noise online unless --adapt leaves the noise out).
     #[arg(long, default_value_t = 0.1)]
     pub noise_px: f64,
+    /// Kalman: what the filter learns online: the centroid noise and the process noise (both, the default), one of
+    /// them, or none (--noise-px, --accel-psd and --angular-accel-psd taken as the truth: a hand-tuned filter).
+    #[arg(long, value_enum, default_value = "both")]
+    pub adapt: AdaptArg,
     /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise.
     #[arg(long)]
     pub accel_psd: Option<f64>,
@@ -115,6 +128,8 @@ impl EstimatorArgs {
             } else {
                 defaults.huber_sigma
             },
+            adapt_noise: matches!(self.adapt, AdaptArg::Both | AdaptArg::Noise),
+            adapt_motion: matches!(self.adapt, AdaptArg::Both | AdaptArg::Motion),
             ..defaults
         };
         let vvs = |jacobian| VvsSettings {

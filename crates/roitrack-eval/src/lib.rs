@@ -316,6 +316,7 @@ pub fn evaluate_estimates(
 ///     iterations: 1,
 ///     status: TrackStatus::Tracking,
 ///     covariance: None,
+///     noise_px: 0.1,
 /// };
 /// let (poses, twists) = samples_of(&[e]);
 /// assert_eq!((poses[0].t_s, twists[0].t_s), (0.5, 0.5));

@@ -44,6 +44,7 @@ pub const DIAGNOSTICS_HEADER: &str = "t,status,residual_rms_px,inverse_condition
 ///     iterations: 1,
 ///     status: TrackStatus::Tracking,
 ///     covariance: None,
+///     noise_px: 0.1,
 /// })?;
 /// writer.finish()?;
 /// let text = std::fs::read_to_string(&diagnostics).unwrap();

@@ -54,6 +54,13 @@ pub struct KalmanTuning {
     /// Huber threshold (standard deviations, Mahalanobis): a larger innovation gets its measurement noise inflated
     /// by `distance / huber_sigma` (the Huber weight), so a moderate outlier pulls less; `f64::INFINITY` turns it off.
     pub huber_sigma: f64,
+    /// Estimate the centroid noise online from the innovations (default): `TrackerConfig::noise_px` is then only the
+    /// starting value. Off, the filter takes `noise_px` as the truth (a hand-tuned filter).
+    pub adapt_noise: bool,
+    /// Let the process noise follow the motion (default): the acceleration densities above are then only starting
+    /// values, lowered while the innovations show the filter over-reacting (a still target is averaged down) and
+    /// raised while they show it lagging. Off, they are fixed (a hand-tuned filter).
+    pub adapt_motion: bool,
 }
 
 impl Default for KalmanTuning {
@@ -63,6 +70,8 @@ impl Default for KalmanTuning {
             angular_accel_psd: 10.0,
             gate_sigma: 3.0,
             huber_sigma: 2.5,
+            adapt_noise: true,
+            adapt_motion: true,
         }
     }
 }

@@ -303,6 +303,9 @@ pub struct Estimate {
     /// Covariance of the error state (v, w, dV, dW) where the estimator has one (Kalman; batch and VVS give the
     /// Gauss-Newton covariance σ² (JᵀJ)⁻¹ of the window).
     pub covariance: Option<Matrix12>,
+    /// The centroid noise (px, standard deviation per coordinate) the estimate was computed with: the adaptive
+    /// Kalman filter's online estimate, else [`TrackerConfig::noise_px`].
+    pub noise_px: f64,
 }
 
 impl Estimate {

@@ -70,6 +70,10 @@ pub(crate) trait Law: Clone + std::fmt::Debug + Send {
     }
     /// After each estimate (its counters since the last one start again).
     fn after_estimate(&mut self) {}
+    /// The centroid noise (px) the law works with: its own estimate, or the configured one.
+    fn noise_px(&self, core: &TrackCore) -> f64 {
+        core.config.noise_px
+    }
     /// Adds the law's own counters to a report.
     fn add_to_report(&self, _report: &mut EstimatorReport) {}
 }
@@ -515,7 +519,9 @@ impl<L: Law> Track<L> {
         }
         core.estimates_since_init += 1;
         core.report.count(status);
+        let noise_px = self.law.noise_px(core);
         self.law.after_estimate();
+        let core = &self.core;
         Estimate {
             t_ref_s: core.t_ref_s,
             state: core.state,
@@ -525,6 +531,7 @@ impl<L: Law> Track<L> {
             iterations: step.iterations,
             status,
             covariance: step.covariance,
+            noise_px,
         }
     }
 }
