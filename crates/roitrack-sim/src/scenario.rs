@@ -119,7 +119,8 @@ impl SinusoidSum {
 
 #[derive(Debug, Clone)]
 enum Motion {
-    Static,
+    /// At rest at this state (its twist zero).
+    Static(MotionState),
     Orthoglide,
     Spin,
     Random {
@@ -213,7 +214,13 @@ impl Scenario {
     /// The scenario of this kind. `seed` only matters for [`ScenarioKind::Random`].
     pub fn new(kind: ScenarioKind, seed: u64) -> Self {
         let (duration_s, motion) = match kind {
-            ScenarioKind::Static => (1.0, Motion::Static),
+            ScenarioKind::Static => (
+                1.0,
+                Motion::Static(MotionState::at_rest(
+                    bench_rotation(),
+                    Vector3::new(0.02, -0.01, 0.60),
+                )),
+            ),
             ScenarioKind::Orthoglide => (orthoglide_breaks_s()[7], Motion::Orthoglide),
             ScenarioKind::Spin => (3.0, Motion::Spin),
             ScenarioKind::Random => (RANDOM.duration_s, random_motion(seed, &RANDOM)),
@@ -225,6 +232,105 @@ impl Scenario {
             target: Target::grid4x4(),
             duration_s,
             motion,
+        }
+    }
+
+    /// A target at rest at the pose (`cam_r_obj`, `cam_t_obj_m`) for `duration_s` seconds: a [`ScenarioKind::Static`]
+    /// scenario at any pose (the canonical static scenario is the bench pose 0.6 m away, 1 s), with the canonical
+    /// camera and target unless replaced.
+    ///
+    /// # Panics
+    ///
+    /// If `duration_s` is not finite and positive or the translation is not finite.
+    ///
+    /// ```
+    /// use nalgebra::Vector3;
+    /// use roitrack_sim::{Scenario, ScenarioKind, bench_rotation};
+    ///
+    /// // The grid 1.6 m away, at rest for 2 s.
+    /// let far = Scenario::still(bench_rotation(), Vector3::new(0.02, -0.01, 1.6), 2.0);
+    /// assert_eq!((far.kind, far.duration_s), (ScenarioKind::Static, 2.0));
+    /// assert_eq!(far.state_at(1.3).cam_t_obj_m.z, 1.6);
+    /// assert_eq!(far.state_at(1.3).velocity_mps, Vector3::zeros());
+    /// assert!(far.min_image_margin_px() > 0.0);
+    /// ```
+    pub fn still(cam_r_obj: Rotation3<f64>, cam_t_obj_m: Vector3<f64>, duration_s: f64) -> Self {
+        assert!(
+            duration_s.is_finite() && duration_s > 0.0,
+            "Scenario::still: duration_s must be finite and positive, got {duration_s}"
+        );
+        assert!(
+            cam_t_obj_m.iter().all(|x| x.is_finite()),
+            "Scenario::still: the translation must be finite, got {cam_t_obj_m:?}"
+        );
+        Self {
+            kind: ScenarioKind::Static,
+            camera: CameraModel::canonical(),
+            target: Target::grid4x4(),
+            duration_s,
+            motion: Motion::Static(MotionState::at_rest(cam_r_obj, cam_t_obj_m)),
+        }
+    }
+
+    /// Smooth random 6-dof motion as [`ScenarioKind::Random`] (the same draws for a seed), scaled to the peak speed
+    /// `peak_speed_mps` and peak angular rate `peak_angular_radps` over `duration_s` seconds. Faster than the
+    /// canonical random motion (1.5 m/s, 4 rad/s), the frequencies of the sinusoids are raised in proportion, so that
+    /// the excursions stay those of the canonical scene (depth 0.45-0.8 m, every blob of the canonical target at least
+    /// 20 px inside the canonical image, the target facing the camera within 60 deg) and the accelerations grow with
+    /// the square of the speed; slower, only the amplitudes shrink. `random_with(seed, 1.5, 4.0, 4.0)` is
+    /// `Scenario::new(ScenarioKind::Random, seed)`.
+    ///
+    /// # Panics
+    ///
+    /// If a peak or the duration is not finite and positive.
+    ///
+    /// ```
+    /// use roitrack_sim::{Scenario, ScenarioKind};
+    ///
+    /// // Fast: 2.5 m/s and 7 rad/s at their peaks, 4 s.
+    /// let fast = Scenario::random_with(1, 2.5, 7.0, 4.0);
+    /// assert_eq!((fast.kind, fast.duration_s), (ScenarioKind::Random, 4.0));
+    /// let peak_speed = (0..=4000)
+    ///     .map(|k| fast.state_at(k as f64 / 1000.0).velocity_mps.norm())
+    ///     .fold(0.0, f64::max);
+    /// assert!((peak_speed - 2.5).abs() < 0.05, "{peak_speed}");
+    /// assert!(fast.min_image_margin_px() > 0.0);
+    /// ```
+    pub fn random_with(
+        seed: u64,
+        peak_speed_mps: f64,
+        peak_angular_radps: f64,
+        duration_s: f64,
+    ) -> Self {
+        for (name, value) in [
+            ("peak_speed_mps", peak_speed_mps),
+            ("peak_angular_radps", peak_angular_radps),
+            ("duration_s", duration_s),
+        ] {
+            assert!(
+                value.is_finite() && value > 0.0,
+                "Scenario::random_with: {name} must be finite and positive, got {value}"
+            );
+        }
+        let faster = |peak: f64, canonical: f64| (peak / canonical).max(1.0);
+        let (fp, fr) = (
+            faster(peak_speed_mps, RANDOM.peak_speed_mps),
+            faster(peak_angular_radps, RANDOM.peak_angular_radps),
+        );
+        let spec = RandomMotion {
+            peak_speed_mps,
+            peak_angular_radps,
+            duration_s,
+            position_hz: (RANDOM.position_hz.0 * fp, RANDOM.position_hz.1 * fp),
+            rotation_hz: (RANDOM.rotation_hz.0 * fr, RANDOM.rotation_hz.1 * fr),
+            salt: RANDOM.salt,
+        };
+        Self {
+            kind: ScenarioKind::Random,
+            camera: CameraModel::canonical(),
+            target: Target::grid4x4(),
+            duration_s,
+            motion: random_motion(seed, &spec),
         }
     }
 
@@ -242,9 +348,7 @@ impl Scenario {
     /// True pose and instantaneous twist at time `t_s`.
     pub fn state_at(&self, t_s: f64) -> MotionState {
         match &self.motion {
-            Motion::Static => {
-                MotionState::at_rest(bench_rotation(), Vector3::new(0.02, -0.01, 0.60))
-            }
+            Motion::Static(state) => *state,
             Motion::Orthoglide => orthoglide_state(t_s),
             Motion::Spin => spin_state(t_s),
             Motion::Random {
@@ -516,5 +620,84 @@ mod tests {
         let a = Scenario::new(ScenarioKind::Random, 1).state_at(1.0);
         let b = Scenario::new(ScenarioKind::Random, 2).state_at(1.0);
         assert_ne!(a.cam_t_obj_m, b.cam_t_obj_m);
+    }
+
+    /// Peak speed and angular rate of a scenario, sampled at 1 kHz.
+    fn peaks(s: &Scenario) -> (f64, f64) {
+        let (mut speed, mut angular): (f64, f64) = (0.0, 0.0);
+        for k in 0..=(s.duration_s * 1000.0) as usize {
+            let st = s.state_at(k as f64 / 1000.0);
+            speed = speed.max(st.velocity_mps.norm());
+            angular = angular.max(st.angular_velocity_radps.norm());
+        }
+        (speed, angular)
+    }
+
+    #[test]
+    fn random_with_reaches_its_peaks_and_keeps_the_blobs_in_the_image() {
+        for (seed, speed, angular, duration) in [
+            (1, 2.5, 7.0, 4.0),
+            (2, 2.5, 7.0, 4.0),
+            (3, 0.5, 1.0, 2.0),
+            (4, 3.0, 5.0, 3.0),
+        ] {
+            let s = Scenario::random_with(seed, speed, angular, duration);
+            assert_eq!((s.kind, s.duration_s), (ScenarioKind::Random, duration));
+            let (peak_speed, peak_angular) = peaks(&s);
+            assert!(
+                (peak_speed / speed - 1.0).abs() < 0.03,
+                "seed {seed}: peak speed {peak_speed} for {speed}"
+            );
+            assert!(
+                (peak_angular / angular - 1.0).abs() < 0.03,
+                "seed {seed}: peak angular rate {peak_angular} for {angular}"
+            );
+            assert!(
+                s.min_image_margin_px() > 10.0,
+                "seed {seed}: margin {}",
+                s.min_image_margin_px()
+            );
+            assert_twist_is_pose_derivative(&s);
+        }
+    }
+
+    #[test]
+    fn random_with_the_canonical_peaks_is_the_random_scenario() {
+        for seed in [1, 5] {
+            let a = Scenario::new(ScenarioKind::Random, seed);
+            let b = Scenario::random_with(seed, 1.5, 4.0, 4.0);
+            for t in [0.0, 0.7, 2.3, 4.0] {
+                assert_eq!(a.state_at(t), b.state_at(t));
+            }
+        }
+    }
+
+    #[test]
+    fn still_rests_at_its_pose() {
+        let rotation = bench_rotation();
+        let s = Scenario::still(rotation, Vector3::new(0.02, -0.01, 1.6), 1.5);
+        assert_eq!((s.kind, s.duration_s), (ScenarioKind::Static, 1.5));
+        for t in [0.0, 0.4, 1.5] {
+            let st = s.state_at(t);
+            assert_eq!(st.cam_r_obj, rotation);
+            assert_eq!(st.cam_t_obj_m, Vector3::new(0.02, -0.01, 1.6));
+            assert_eq!(st.velocity_mps, Vector3::zeros());
+            assert_eq!(st.angular_velocity_radps, Vector3::zeros());
+        }
+        assert_eq!(peaks(&s), (0.0, 0.0));
+        assert!(s.min_image_margin_px() > 100.0);
+        // The canonical static scenario is the bench pose 0.6 m away.
+        let canonical = Scenario::new(ScenarioKind::Static, 1);
+        let bench = Scenario::still(rotation, Vector3::new(0.02, -0.01, 0.6), 1.0);
+        assert_eq!(canonical.state_at(0.5), bench.state_at(0.5));
+        // Too close: the grid fills more than the image.
+        let close = Scenario::still(rotation, Vector3::new(0.0, 0.0, 0.05), 1.0);
+        assert!(close.min_image_margin_px() < 0.0);
+    }
+
+    #[test]
+    #[should_panic(expected = "duration_s must be finite and positive")]
+    fn still_refuses_a_zero_duration() {
+        let _ = Scenario::still(bench_rotation(), Vector3::new(0.0, 0.0, 1.0), 0.0);
     }
 }
