@@ -14,9 +14,11 @@
 //!   velocity, positive when the estimate lags behind the truth.
 //!
 //! [`estimate_errors`] gives the error of every estimate, which the figures plot; [`evaluate_estimates`] takes a
-//! tracker's estimates directly. Every metric of roitrack's tables and figures is defined here, once.
+//! tracker's estimates directly. [`consistency`] tells whether an estimator's covariance matches its errors (the NEES
+//! of position and velocity, [`consistency_of`]). Every metric of roitrack's tables and figures is defined here, once.
 
 mod align;
+pub mod consistency;
 mod error;
 mod lag;
 mod metrics;
@@ -25,6 +27,7 @@ use nalgebra::Vector3;
 use roitrack_core::estimator::Estimate;
 use roitrack_core::{PoseSample, TwistSample, so3};
 
+pub use consistency::{BlockNees, CHI2_3DOF_99, Consistency, consistency_of, nees};
 pub use error::EvalError;
 pub use metrics::Metrics;
 
