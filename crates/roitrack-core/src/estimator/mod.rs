@@ -105,8 +105,8 @@ impl EstimatorConfig {
     }
 }
 
-/// Options of an estimator. `Default` gives the recommended configuration: the Kalman filter, an estimate every 10
-/// measurements, 0.1 px of centroid noise.
+/// Options of an estimator. `Default` gives the recommended configuration: the Kalman filter that learns the noise
+/// and the motion, an estimate every 10 measurements, 0.1 px of centroid noise to start from.
 ///
 /// ```
 /// use roitrack_core::estimator::TrackerConfig;
@@ -121,7 +121,9 @@ pub struct TrackerConfig {
     pub window: WindowMode,
     /// Control period k: an estimate every `every` measurements (the paper: 10, i.e. 400 Hz at 4 kHz).
     pub every: usize,
-    /// Centroid noise standard deviation (px): the Kalman measurement noise and the covariance scale.
+    /// Centroid noise standard deviation (px): the covariance scale of the window fits and, for the Kalman filter,
+    /// the measurement noise; the default Kalman filter learns the noise online and takes this only as its starting
+    /// value ([`KalmanTuning::adapt_noise`]).
     pub noise_px: f64,
     /// Windows whose column-scaled Jacobian has a reciprocal condition number below this are degenerate.
     pub min_inverse_condition: f64,

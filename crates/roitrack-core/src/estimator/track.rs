@@ -32,6 +32,14 @@ const CONVERGING_ESTIMATES: usize = 3;
 const LOST_AFTER_BAD_ESTIMATES: usize = 3;
 /// Levenberg-Marquardt iterations of the initial 12-dof fit.
 const INIT_MAX_ITERATIONS: usize = 50;
+/// Largest median residual (px) of an initial fit accepted by an estimator that learns the noise: the noise is not
+/// known, so the fit is judged only against gross failures (a wrong local minimum leaves residuals of many pixels).
+/// 2.5 px is the median residual norm of 2.1 px noise per axis.
+pub(crate) const ADAPTIVE_INIT_MAX_MEDIAN_PX: f64 = 2.5;
+/// The smallest noise (px) an estimator that learns it may settle on.
+pub(crate) const MIN_NOISE_PX: f64 = 0.005;
+/// The median of the norm of a 2-d Gaussian residual of σ = 1 per axis (Rayleigh: √(2 ln 2)).
+const RAYLEIGH_MEDIAN: f64 = 1.177_410_022_515_474_7;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -70,9 +78,10 @@ pub(crate) trait Law: Clone + std::fmt::Debug + Send {
     }
     /// After each estimate (its counters since the last one start again).
     fn after_estimate(&mut self) {}
-    /// The centroid noise (px) the law works with: its own estimate, or the configured one.
-    fn noise_px(&self, core: &TrackCore) -> f64 {
-        core.config.noise_px
+    /// Whether the law estimates the centroid noise itself ([`TrackCore::noise_px`]): the initialisation then
+    /// accepts any noise up to [`ADAPTIVE_INIT_MAX_MEDIAN_PX`] and starts the estimate from its own residual.
+    fn adapts_noise(&self) -> bool {
+        false
     }
     /// Adds the law's own counters to a report.
     fn add_to_report(&self, _report: &mut EstimatorReport) {}
@@ -93,6 +102,9 @@ pub(crate) struct TrackCore {
     phase: Phase,
     pub state: MotionState,
     pub t_ref_s: f64,
+    /// The centroid noise (px, per axis) the estimates are computed with: [`TrackerConfig::noise_px`], or the
+    /// estimate of a law that learns it.
+    pub noise_px: f64,
     last_t_s: Option<f64>,
     since_estimate: usize,
     /// Measurements the current control step answers (those since the previous estimate).
@@ -121,6 +133,7 @@ impl TrackCore {
             phase: Phase::Initializing,
             state: MotionState::at_rest(Default::default(), Default::default()),
             t_ref_s: 0.0,
+            noise_px: config.noise_px,
             last_t_s: None,
             since_estimate: 0,
             step_measurements: 0,
@@ -153,7 +166,7 @@ impl TrackCore {
 
     /// The smallest robust scale of the window fits (px): the noise, and at least 1 px.
     pub fn robust_scale_floor_px(&self) -> f64 {
-        ROBUST_SCALE_FLOOR_PX.max(self.config.noise_px)
+        ROBUST_SCALE_FLOOR_PX.max(self.noise_px)
     }
 
     /// A broad prior when the initial window cannot give a covariance: 1 cm, 0.1 rad, 1 m/s, 10 rad/s.
@@ -176,7 +189,7 @@ impl TrackCore {
         if inverse_condition < self.config.min_inverse_condition {
             return None;
         }
-        ne.covariance(self.config.noise_px)
+        ne.covariance(self.noise_px)
     }
 
     /// Whether the newest measurement lies beyond Tukey's c at the window's robust scale (see
@@ -448,10 +461,20 @@ impl<L: Law> Track<L> {
         // median residual, which outliers do not inflate, must be at the noise level: the 12-dof model is exact over
         // two cycles.
         let median_px = problem.median_residual_px(&state).unwrap_or(0.0);
-        if ne.residual_rms_px() > core.config.lost_residual_px
-            || median_px > (3.0 * core.config.noise_px).max(0.3)
-        {
+        let max_median_px = if self.law.adapts_noise() {
+            ADAPTIVE_INIT_MAX_MEDIAN_PX
+        } else {
+            (3.0 * core.config.noise_px).max(0.3)
+        };
+        if ne.residual_rms_px() > core.config.lost_residual_px || median_px > max_median_px {
             return None;
+        }
+        if self.law.adapts_noise() {
+            // The noise from the median residual (which outliers do not move), corrected for the 12 fitted
+            // parameters; never below a hundredth of a pixel, the floor of any centroid.
+            let n = 2.0 * ne.count() as f64;
+            let dof_correction = (n / (n - 12.0).max(1.0)).sqrt();
+            core.noise_px = (median_px / RAYLEIGH_MEDIAN * dof_correction).max(MIN_NOISE_PX);
         }
         let state = if well_posed {
             state
@@ -519,7 +542,7 @@ impl<L: Law> Track<L> {
         }
         core.estimates_since_init += 1;
         core.report.count(status);
-        let noise_px = self.law.noise_px(core);
+        let noise_px = core.noise_px;
         self.law.after_estimate();
         let core = &self.core;
         Estimate {
