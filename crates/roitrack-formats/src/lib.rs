@@ -11,7 +11,8 @@
 //! | poses: TUM `t tx ty tz qx qy qz qw` (camera_T_object) | [`read_tum`], [`parse_tum`] | [`PoseWriter`], [`write_tum`] |
 //! | ROI recordings ([`roitrack_image::RoiImage`]s): binary, see [`RoiRecordingReader`] | [`RoiRecordingReader`] (streaming) | [`RoiRecordingWriter`] |
 //! | twists: CSV `t,vx,vy,vz,wx,wy,wz` (camera frame) | [`read_twists_csv`], [`parse_twists_csv`] | [`TwistWriter`], [`write_twists_csv`] |
-//! | estimates: poses, twists and diagnostics CSV together | | [`EstimateWriter`] |
+//! | estimates: poses, twists, diagnostics and covariance CSV together | | [`EstimateWriter`] |
+//! | covariance: CSV `t,c0_0,c0_1,...,c11_11`, the 12 x 12 covariance's upper triangle per estimate | | [`CovarianceWriter`] |
 //! | full frames ([`roitrack_image::Frame`]): PNG, JPEG, PGM/PPM, TIFF, 8 or 16 bits, colour made grey | [`read_frame`], [`decode_frame`] | [`write_frame_png`] |
 //! | timed frame streams: a folder of images, a pattern `frame_%05d.png`, a glob or a video (by ffmpeg), with a timestamps CSV `t[,file]` or a frame rate | [`FrameSource`] | |
 //! | detection overlays: a frame as an RGB PNG with marks and ids drawn on it | | [`write_overlay_png`] |
@@ -49,6 +50,7 @@
 
 mod atomic;
 mod camera_yaml;
+mod covariance;
 mod csv_util;
 mod error;
 mod estimates;
@@ -65,6 +67,10 @@ mod video;
 
 pub use atomic::AtomicFile;
 pub use camera_yaml::{camera_yaml_string, parse_camera_yaml, read_camera_yaml, write_camera_yaml};
+pub use covariance::{
+    COVARIANCE_ENTRIES, COVARIANCE_SIZE, CovarianceWriter, covariance_entry_index,
+    covariance_from_upper_triangle, covariance_header, covariance_upper_triangle,
+};
 pub use error::FormatError;
 pub use estimates::{DIAGNOSTICS_HEADER, EstimateWriter};
 pub use frame_source::{FRAME_IMAGE_EXTENSIONS, FrameInfo, FrameSource, FrameTiming, SourceKind};
