@@ -12,6 +12,9 @@ use roitrack::sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
 mod common;
 use common::{fails, ok, roitrack};
 
+#[path = "common/covariance_file.rs"]
+mod covariance_file;
+
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
 }
@@ -102,15 +105,23 @@ fn frames_from_a_folder_a_pattern_and_a_glob_give_an_estimate_per_frame() {
         assert_eq!(count, 12, "{stderr}");
         assert!(rmse < 0.5e-3, "{} mm: {stderr}", rmse * 1e3);
     }
-    // --fps instead of a timestamps file (the sequence is at 30 Hz from t = 0).
+    // --fps instead of a timestamps file (the sequence is at 30 Hz from t = 0), with the diagnostics and the
+    // covariance: one covariance row per pose, its diagonal the diagnostics' sigmas squared.
     let out = tempfile::tempdir().unwrap();
     let mut args = track_args(dir.path(), p(&dir.path().join("frames")), out.path());
-    args.extend(["--fps".into(), "30".into()]);
-    run_ok(&args);
-    assert_eq!(
-        position_rmse_m(&frames, &out.path().join("poses.tum")).0,
-        12
+    let (diagnostics, covariance) = (
+        out.path().join("diagnostics.csv"),
+        out.path().join("covariance.csv"),
     );
+    args.extend(["--fps".into(), "30".into()]);
+    args.extend(["--diagnostics".into(), p(&diagnostics).into()]);
+    args.extend(["--covariance".into(), p(&covariance).into()]);
+    run_ok(&args);
+    let poses = out.path().join("poses.tum");
+    assert_eq!(position_rmse_m(&frames, &poses).0, 12);
+    let rows =
+        covariance_file::check_against_poses_and_diagnostics(&poses, &diagnostics, &covariance);
+    assert!(rows.iter().all(|(_, c)| c.iter().all(|x| x.is_finite())));
 }
 
 #[test]

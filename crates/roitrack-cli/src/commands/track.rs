@@ -1,5 +1,5 @@
-//! `roitrack track`: run an estimator over a measurements file or a ROI recording and write poses (TUM), twists and
-//! diagnostics (CSV).
+//! `roitrack track`: run an estimator over a measurements file, a ROI recording or frames and write poses (TUM),
+//! twists, diagnostics and the full covariance (CSV).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -76,9 +76,18 @@ pub struct TrackArgs {
     /// Output twists (CSV t,vx,vy,vz,wx,wy,wz).
     #[arg(long)]
     pub twists: PathBuf,
-    /// Output diagnostics per estimate (CSV: t, status, residual, conditioning, measurements used, 1-sigma).
-    #[arg(long)]
+    /// Output diagnostics per estimate (CSV: t, status, residual, conditioning, measurements used, iterations, and the
+    /// 1-sigma of the position sigma_x_m, sigma_y_m, sigma_z_m (m) and of the velocity sigma_vx_mps, sigma_vy_mps,
+    /// sigma_vz_mps (m/s), camera frame: the square roots of the --covariance file's c0_0, c1_1, c2_2 and c6_6, c7_7,
+    /// c8_8; NaN where the estimate has no covariance).
+    #[arg(long, value_name = "FILE.csv")]
     pub diagnostics: Option<PathBuf>,
+    /// Output the full 12x12 covariance per estimate (CSV: t, then the upper triangle c{i}_{j}, i <= j, row by row;
+    /// indices 0-11: position (m), rotation vector (rad), velocity (m/s), angular velocity (rad/s), camera frame;
+    /// rotation perturbed on the left, R = Exp(w) R_est). NaN entries where the estimate has none (the static
+    /// baseline, but for the estimate starting a track; a degenerate window of paper, exact or batch).
+    #[arg(long, value_name = "FILE.csv")]
+    pub covariance: Option<PathBuf>,
     #[command(flatten)]
     pub estimator: EstimatorArgs,
 }
@@ -96,7 +105,8 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     let mut tracker = Tracker::new(camera.clone(), target, args.estimator.config())
         .context("invalid tracker options")?;
     let mut writer =
-        EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?;
+        EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
+            .with_covariance(args.covariance.as_deref())?;
     // Progress on stderr for long files (drawn only when stderr is a terminal).
     let progress = indicatif::ProgressBar::new_spinner().with_style(
         indicatif::ProgressStyle::with_template(
@@ -214,7 +224,8 @@ fn run_frames(
     let mut tracker =
         FrameTracker::new(camera, target, config).context("invalid tracker options")?;
     let mut writer =
-        EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?;
+        EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
+            .with_covariance(args.covariance.as_deref())?;
     let progress = match frames.frame_count() {
         Some(n) => indicatif::ProgressBar::new(n as u64).with_style(
             indicatif::ProgressStyle::with_template(
