@@ -1,7 +1,7 @@
 //! Criterion benchmarks of roitrack's hot paths on the canonical scene (SPEC section 6); the inputs are those of
 //! `roitrack bench` ([`roitrack_bench::HotPaths`]). Benchmark ids are the items' JSON keys.
 //!
-//! `cargo bench -p roitrack-bench` takes about 25 s (1 s warm-up and 2 s of measurement per item, set below for a
+//! `cargo bench -p roitrack-bench` takes about 30 s (1 s warm-up and 2 s of measurement per item, set below for a
 //! shared 2-core machine); `cargo bench -p roitrack-bench -- --quick` about 5 s; `-- control_step` runs only the
 //! ids containing `control_step`.
 
@@ -27,6 +27,7 @@ fn hot_paths(c: &mut Criterion) {
     c.bench_function(Item::StaticPose.key(), |b| b.iter(|| hot.static_pose()));
     c.bench_function(Item::Centroid24.key(), |b| b.iter(|| hot.centroid()));
     c.bench_function(Item::RenderRoi.key(), |b| b.iter(|| hot.render_roi()));
+    c.bench_function(Item::KalmanUpdate.key(), |b| b.iter(|| hot.kalman_update()));
 }
 
 fn config() -> Criterion {

@@ -32,7 +32,10 @@
 //!   the default sensor ([`measure_blob`], default options, so with the symmetry check);
 //! - `centroid_24_moments`: the same without the symmetry check (the first-order moments alone);
 //! - `render_roi`: the simulator's rendering of that ROI (one blob, shot and read noise drawn)
-//!   ([`RoiRenderer::render_roi_with_scratch`], scratch buffers reused).
+//!   ([`RoiRenderer::render_roi_with_scratch`], scratch buffers reused);
+//! - `kalman_update`: one measurement pushed into the default Kalman filter ([`KalmanEstimator`], default options but
+//!   an estimate period so long that none is due) on a running track of the bench scene: the prediction, the update
+//!   and the window's bookkeeping of one centroid, the per-measurement cost of tracking ([`KalmanStream`]).
 
 pub mod frame_bench;
 pub mod loop_bench;
@@ -46,10 +49,15 @@ use nalgebra::{Vector2, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use roitrack_core::estimator::{self, InitError, Observation, PoseFit, WindowProblem};
+use roitrack_core::estimator::{
+    self, Estimate, Estimator, InitError, KalmanEstimator, KalmanTuning, Observation, PoseFit,
+    TrackError, TrackerConfig, WindowProblem,
+};
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::solver::{self, NormalEquations, Solution, SolverOptions};
-use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target, Vector12};
+use roitrack_core::{
+    CameraModel, Measurement, MotionState, SpatioTemporalModel, Target, Vector12, so3,
+};
 use roitrack_image::{
     BlobRejection, Centroid, CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel,
     measure_blob,
@@ -274,6 +282,149 @@ impl RoiProblem {
     }
 }
 
+/// Period of the bench scene's oscillation in the Kalman stream (s): 4,000 measurements at 4 kHz.
+pub const KALMAN_STREAM_PERIOD_S: f64 = 1.0;
+/// Measurements the Kalman stream's filter takes after its initialisation before it is timed (10 cycles of the 16
+/// points).
+pub const KALMAN_WARM_UP_MEASUREMENTS: usize = 160;
+
+/// An endless stream of measurements of the bench scene and a default Kalman filter tracking it: the input of the
+/// `kalman_update` item.
+///
+/// The target oscillates about the bench pose with period [`KALMAN_STREAM_PERIOD_S`]: with `s(t) = P / (2π) sin(2π t /
+/// P)`, the pose at time `t` is `R = Exp(W s) R₀`, `p = p₀ + V s` for the bench pose `(R₀, p₀)` and the bench twist
+/// `(V, W)` (the twist at `t = 0`; ±16 mm and ±3.4° about the bench pose). Measurement `k` is at `k` x
+/// [`ROI_PERIOD_S`], of the points in the bit-reversed order, the raw pixel of the true pose plus Gaussian noise of
+/// [`NOISE_PX`]; one period of measurements is generated once and replayed with later times, so the stream never ends
+/// and the timed calls allocate nothing.
+///
+/// ```
+/// use roitrack_bench::{KalmanStream, SEED, scene};
+/// use roitrack_core::estimator::Estimator;
+///
+/// let mut stream = KalmanStream::new(&scene(), SEED, usize::MAX);
+/// // Initialised and warmed up: every push is one predict and update, no estimate due.
+/// assert!(stream.estimator().state().is_some());
+/// assert_eq!(stream.push(), Ok(None));
+/// // ... and the filter follows the oscillation.
+/// let (t_s, state) = stream.estimator().state().unwrap();
+/// assert!((state.cam_t_obj_m - stream.truth_at(t_s).cam_t_obj_m).norm() < 1e-3);
+/// assert_eq!(stream.next_measurement().t_s, stream.pushed() as f64 * roitrack_bench::ROI_PERIOD_S);
+/// ```
+#[derive(Debug, Clone)]
+pub struct KalmanStream {
+    estimator: KalmanEstimator,
+    /// One period of measurements, times from 0.
+    period: Vec<Measurement>,
+    /// Index of the next measurement in the endless stream.
+    next: u64,
+    origin: MotionState,
+}
+
+impl KalmanStream {
+    /// The stream of `scene` with noise drawn from `seed`, and a default Kalman filter ([`KalmanTuning::default`],
+    /// [`TrackerConfig::default`] but an estimate every `every` measurements) fed until it is initialised, then
+    /// [`KALMAN_WARM_UP_MEASUREMENTS`] more. `usize::MAX` for `every`: no estimate after the initialisation.
+    pub fn new(scene: &Scene, seed: u64, every: usize) -> Self {
+        let origin = scene.truth;
+        let n = (KALMAN_STREAM_PERIOD_S / ROI_PERIOD_S).round() as usize;
+        let order = bit_reversed_indices(scene.target.len());
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let noise = Normal::new(0.0, NOISE_PX).expect("valid noise");
+        let period = (0..n)
+            .map(|k| {
+                let t_s = k as f64 * ROI_PERIOD_S;
+                let point = &scene.target.points()[order[k % order.len()]];
+                let state = Self::oscillation(&origin, t_s);
+                let px = scene
+                    .camera
+                    .raw_pixel_from_cam(&state.point_in_cam_at(&point.point_in_obj_m, 0.0))
+                    .expect("bench points are in front of the camera");
+                Measurement {
+                    t_s,
+                    id: point.id,
+                    u_px: px.x + noise.sample(&mut rng),
+                    v_px: px.y + noise.sample(&mut rng),
+                }
+            })
+            .collect();
+        let config = TrackerConfig {
+            every,
+            ..TrackerConfig::default()
+        };
+        let estimator = KalmanEstimator::new(
+            scene.camera.clone(),
+            scene.target.clone(),
+            config,
+            KalmanTuning::default(),
+        )
+        .expect("the default Kalman options are valid");
+        let mut stream = Self {
+            estimator,
+            period,
+            next: 0,
+            origin,
+        };
+        while stream.estimator.state().is_none() {
+            assert!(
+                stream.next < n as u64,
+                "the Kalman filter did not initialise on the bench stream"
+            );
+            stream.push().expect("bench measurements are valid");
+        }
+        for _ in 0..KALMAN_WARM_UP_MEASUREMENTS {
+            stream.push().expect("bench measurements are valid");
+        }
+        stream
+    }
+
+    /// The oscillating motion's state at time `t_s` (see the type's documentation).
+    fn oscillation(origin: &MotionState, t_s: f64) -> MotionState {
+        let phase = std::f64::consts::TAU * t_s / KALMAN_STREAM_PERIOD_S;
+        let s = KALMAN_STREAM_PERIOD_S / std::f64::consts::TAU * phase.sin();
+        let rate = phase.cos();
+        MotionState {
+            cam_r_obj: so3::exp(&(origin.angular_velocity_radps * s)) * origin.cam_r_obj,
+            cam_t_obj_m: origin.cam_t_obj_m + origin.velocity_mps * s,
+            velocity_mps: origin.velocity_mps * rate,
+            angular_velocity_radps: origin.angular_velocity_radps * rate,
+        }
+    }
+
+    /// The true state at time `t_s`.
+    pub fn truth_at(&self, t_s: f64) -> MotionState {
+        Self::oscillation(&self.origin, t_s)
+    }
+
+    /// The next measurement of the stream (without pushing it).
+    pub fn next_measurement(&self) -> Measurement {
+        let n = self.period.len() as u64;
+        let m = self.period[(self.next % n) as usize];
+        Measurement {
+            t_s: self.next as f64 * ROI_PERIOD_S,
+            ..m
+        }
+    }
+
+    /// Pushes the next measurement into the filter; returns what the filter returns.
+    #[inline(never)]
+    pub fn push(&mut self) -> Result<Option<Estimate>, TrackError> {
+        let m = self.next_measurement();
+        self.next += 1;
+        self.estimator.push(black_box(&m))
+    }
+
+    /// The filter.
+    pub fn estimator(&self) -> &KalmanEstimator {
+        &self.estimator
+    }
+
+    /// Measurements pushed so far.
+    pub fn pushed(&self) -> u64 {
+        self.next
+    }
+}
+
 /// Every hot path's inputs, built once.
 #[derive(Debug, Clone)]
 pub struct HotPaths {
@@ -282,6 +433,8 @@ pub struct HotPaths {
     pub w32: BenchWindow,
     pub static_observations: Vec<Observation>,
     pub roi: RoiProblem,
+    /// The running Kalman filter of `kalman_update`, no estimate due.
+    pub kalman: KalmanStream,
 }
 
 impl Default for HotPaths {
@@ -298,6 +451,7 @@ impl HotPaths {
             w32: scene.window(32, SEED),
             static_observations: scene.static_observations(SEED + 1),
             roi: RoiProblem::new(&scene, SEED + 2),
+            kalman: KalmanStream::new(&scene, SEED + 3, usize::MAX),
             scene,
         }
     }
@@ -391,6 +545,12 @@ impl HotPaths {
         );
         r.out[r.out.len() / 2 + ROI_SIZE_PX as usize / 2]
     }
+
+    /// One measurement into the running Kalman filter (predict, update, window bookkeeping; no estimate due).
+    #[inline(never)]
+    pub fn kalman_update(&mut self) -> Result<Option<Estimate>, TrackError> {
+        self.kalman.push()
+    }
 }
 
 /// A timed hot path. [`Item::key`] is the prefix of its `roitrack bench --json` keys and its criterion benchmark id.
@@ -404,10 +564,11 @@ pub enum Item {
     Centroid24,
     Centroid24Moments,
     RenderRoi,
+    KalmanUpdate,
 }
 
 impl Item {
-    pub const ALL: [Item; 8] = [
+    pub const ALL: [Item; 9] = [
         Item::JacobianResidualW16,
         Item::ControlStepW16,
         Item::ControlStepW32,
@@ -416,6 +577,7 @@ impl Item {
         Item::Centroid24,
         Item::Centroid24Moments,
         Item::RenderRoi,
+        Item::KalmanUpdate,
     ];
 
     /// Stable name: `roitrack bench --json` reports `<key>_us_median` and `<key>_us_p99`.
@@ -429,6 +591,7 @@ impl Item {
             Item::Centroid24 => "centroid_24",
             Item::Centroid24Moments => "centroid_24_moments",
             Item::RenderRoi => "render_roi",
+            Item::KalmanUpdate => "kalman_update",
         }
     }
 
@@ -443,6 +606,7 @@ impl Item {
             Item::Centroid24 => "ROI centroid, 24x24 8-bit, symmetry checked",
             Item::Centroid24Moments => "ROI centroid, 24x24 8-bit, moments only",
             Item::RenderRoi => "ROI rendering (simulator), 24x24, one blob",
+            Item::KalmanUpdate => "Kalman filter, one measurement, running track",
         }
     }
 }
@@ -526,6 +690,7 @@ pub fn time_all(hot: &mut HotPaths, budget: Duration) -> Vec<(Item, Timing)> {
                 Item::Centroid24 => time_item(|| hot.centroid(), budget),
                 Item::Centroid24Moments => time_item(|| hot.centroid_moments(), budget),
                 Item::RenderRoi => time_item(|| hot.render_roi(), budget),
+                Item::KalmanUpdate => time_item(|| hot.kalman_update(), budget),
             };
             (item, timing)
         })
@@ -597,6 +762,45 @@ mod tests {
         hot.render_roi();
         let again = measure_blob(&hot.roi.out, &hot.roi.roi, &hot.roi.options).unwrap();
         assert!((again.u_px - c.u_px).abs() < 0.05);
+
+        // The Kalman stream is tracked: no estimate due, the filter's state near the truth, a full period later too.
+        let start = hot.kalman.pushed();
+        for _ in 0..4000 {
+            assert_eq!(hot.kalman_update(), Ok(None));
+        }
+        let report = hot.kalman.estimator().report();
+        assert_eq!(report.initialisations, 1, "{report:?}");
+        assert_eq!(report.measurements as u64, hot.kalman.pushed());
+        assert!(hot.kalman.pushed() >= start + 4000);
+        let (t_s, state) = hot.kalman.estimator().state().unwrap();
+        let truth = hot.kalman.truth_at(t_s);
+        assert!(
+            (state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-3,
+            "{state:?} {truth:?}"
+        );
+        assert!(so3::angle_between(&state.cam_r_obj, &truth.cam_r_obj) < 0.2f64.to_radians());
+        assert!(
+            (state.velocity_mps - truth.velocity_mps).norm() < 0.05,
+            "{state:?} {truth:?}"
+        );
+    }
+
+    #[test]
+    fn the_kalman_stream_is_periodic_and_continuous() {
+        let stream = KalmanStream::new(&scene(), SEED, usize::MAX);
+        let n = stream.period.len();
+        assert_eq!(n, 4000);
+        // The motion after one period is where it started, and the true twist at 0 is the bench twist.
+        let (a, b) = (stream.truth_at(0.1), stream.truth_at(1.1));
+        assert!(MotionState::difference(&a, &b).norm() < 1e-12);
+        let truth = stream.truth_at(0.0);
+        assert!(MotionState::difference(&truth, &scene().truth).norm() < 1e-15);
+        // The replayed measurements keep going in time, 250 µs apart, in the same point order.
+        let m = stream.next_measurement();
+        assert!((m.t_s - stream.pushed() as f64 * ROI_PERIOD_S).abs() < 1e-12);
+        let k = stream.pushed() as usize % n;
+        assert_eq!(m.id, stream.period[k].id);
+        assert_eq!(stream.period[0].id, stream.period[16].id);
     }
 
     #[test]

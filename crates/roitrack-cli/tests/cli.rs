@@ -478,6 +478,8 @@ fn bench_prints_the_loop_figures_as_json() {
         "loop_k1_rois_per_s",
         "latency_us_p50",
         "latency_us_p99",
+        "kalman_update_us_median",
+        "kalman_update_us_p99",
     ] {
         assert!(f(&m, key) > 0.0, "{key} in {m}");
     }

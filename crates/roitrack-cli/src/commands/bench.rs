@@ -26,6 +26,9 @@
 //! - `centroid_24_us_median`, `centroid_24_us_p99`: blob centroid of a 24x24 8-bit ROI (6 mm blob), default options
 //!   (with the symmetry check); `centroid_24_moments_us_median`, `centroid_24_moments_us_p99`: the same without it;
 //! - `render_roi_us_median`, `render_roi_us_p99`: the simulator's rendering of that ROI (one blob, noise drawn);
+//! - `kalman_update_us_median`, `kalman_update_us_p99`: one measurement into the default Kalman filter on a running
+//!   track of the bench scene (oscillating about the bench pose), with an estimate period so long that none is due:
+//!   prediction, update and window bookkeeping, the per-measurement cost of tracking (target 1 µs);
 //! - `item_ms`: the timing budget of each of those items (ms);
 //! - `loop_k10_rois_per_s`, `loop_k1_rois_per_s`: free-running loop throughput with an estimate every 10 ROIs and at
 //!   every ROI (best of `--repeats`); `loop_k10_dropped`, `loop_k1_dropped`: ROIs dropped in those runs;

@@ -1,0 +1,97 @@
+//! The default Kalman filter allocates nothing per measurement on a running track: pushing measurements of the bench
+//! stream (the `kalman_update` item's input) makes no heap allocation, with no estimate due and with an estimate every
+//! 10 measurements (the default period). Allocations are counted per thread, so other tests running at the same time
+//! do not count.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use roitrack_bench::{KalmanStream, SEED, scene};
+use roitrack_core::estimator::Estimator;
+
+struct CountingAllocator;
+
+thread_local! {
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn count() {
+    // `try_with`: the thread's counter may be gone while the thread exits.
+    let _ = ALLOCATIONS.try_with(|n| n.set(n.get() + 1));
+}
+
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        count();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAllocator = CountingAllocator;
+
+fn allocations() -> usize {
+    ALLOCATIONS.with(Cell::get)
+}
+
+/// Pushes `n` measurements into `stream`; returns the allocations made and the estimates returned.
+fn push(stream: &mut KalmanStream, n: usize) -> (usize, usize) {
+    let mut estimates = 0;
+    let before = allocations();
+    for _ in 0..n {
+        if stream
+            .push()
+            .expect("bench measurements are valid")
+            .is_some()
+        {
+            estimates += 1;
+        }
+    }
+    (allocations() - before, estimates)
+}
+
+#[test]
+fn the_counter_counts_this_threads_allocations() {
+    let before = allocations();
+    let v: Vec<u8> = Vec::with_capacity(std::hint::black_box(64));
+    drop(std::hint::black_box(v));
+    assert_eq!(allocations(), before + 1);
+}
+
+#[test]
+fn kalman_push_on_a_running_track_does_not_allocate() {
+    // The bench configuration: no estimate due, only predict, update and the window.
+    let mut stream = KalmanStream::new(&scene(), SEED, usize::MAX);
+    let (allocated, estimates) = push(&mut stream, 1000);
+    assert_eq!(estimates, 0);
+    assert_eq!(
+        allocated, 0,
+        "allocations in 1,000 pushes without estimates"
+    );
+    assert_eq!(stream.estimator().report().initialisations, 1);
+}
+
+#[test]
+fn kalman_push_with_estimates_does_not_allocate() {
+    // The default period: an estimate (a control step, the window's conditioning) every 10 measurements.
+    let mut stream = KalmanStream::new(&scene(), SEED, 10);
+    let (allocated, estimates) = push(&mut stream, 1000);
+    assert_eq!(estimates, 100);
+    assert_eq!(
+        allocated, 0,
+        "allocations in 1,000 pushes with 100 estimates"
+    );
+    let report = stream.estimator().report();
+    assert_eq!(report.initialisations, 1, "{report:?}");
+}
