@@ -80,7 +80,7 @@
 //! | [`pipeline`] | `roitrack-pipeline` | finding the target in a full frame or a photograph (`detect_target`), the ROI scheduler, the two-thread real-time loop, offline ROI tracking |
 //! | [`sim`] | `roitrack-sim` | scenario motions with ground truth, the measurement simulator, rendered ROI recordings, synthetic photographs |
 //! | [`eval`] | `roitrack-eval` | every accuracy metric, the velocity lag included |
-//! | [`formats`] | `roitrack-formats` | the files: camera YAML, target CSV, measurements CSV, TUM poses, twists, diagnostics, ROI recordings, images, detection overlays |
+//! | [`formats`] | `roitrack-formats` | the files: camera YAML, target CSV, measurements CSV, TUM poses, twists, diagnostics, covariance, ROI recordings, images, detection overlays |
 //! | `plot` | `roitrack-plot` | charts and the figures of a run (feature `plot`, on by default) |
 //! | `experiments` | `roitrack-experiments` | the demo, the estimator comparison, the fault table, the lag trade-off (feature `experiments`, on by default) |
 //! | `bench` | `roitrack-bench` | the hot-path, loop, soak and PnP benchmarks (feature `bench`) |
