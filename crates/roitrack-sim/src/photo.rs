@@ -2680,7 +2680,7 @@ mod tests {
     }
 
     #[test]
-    fn renders_vga_quickly() {
+    fn renders_a_vga_photo_of_63_circles() {
         let scene = PhotoScene::new(
             vga(
                 PlumbBob::from_coefficients([-0.25, 0.08, 5e-4, -3e-4, 0.0]),
@@ -2698,10 +2698,8 @@ mod tests {
             best = best.min(start.elapsed().as_secs_f64());
             assert_eq!(photo.truth.len(), 63);
         }
+        // Printed, not asserted: the machines are shared, and speed is checked by the benchmarks, never by a timed
+        // test (the budget is 150 ms).
         eprintln!("640 x 480 harsh photo: {:.1} ms", best * 1e3);
-        if !cfg!(debug_assertions) {
-            // The budget is 150 ms; leave room for a loaded machine.
-            assert!(best < 0.6, "{best} s");
-        }
     }
 }

@@ -426,3 +426,68 @@ fn a_refused_batch_changes_nothing() {
             .is_some()
     );
 }
+
+#[test]
+fn window_fits_do_not_vouch_for_windows_without_redundancy() {
+    use roitrack_core::target::{CircleGrid, GridLayout};
+    // Six points: the newest centroid of each gives 12 equations for 12 unknowns, an exact fit of the noise.
+    let grid = Target::circle_grid(&CircleGrid {
+        rows: 2,
+        cols: 3,
+        spacing_m: 0.03,
+        diameter_m: 0.008,
+        layout: GridLayout::Square,
+    })
+    .unwrap();
+    // Its origin at its centre, as the motions of the scenarios expect.
+    let centre = Vector3::new(0.03, 0.015, 0.0);
+    let target = Target::new(
+        grid.points()
+            .iter()
+            .map(|p| roitrack_core::target::TargetPoint {
+                point_in_obj_m: p.point_in_obj_m - centre,
+                ..*p
+            })
+            .collect(),
+    )
+    .unwrap();
+    let scenario = Scenario::new(ScenarioKind::Orthoglide, 1).with_target(target);
+    let simulated = simulate(&scenario, &SimulationOptions::default()).unwrap();
+    for estimator in [
+        EstimatorConfig::Batch,
+        EstimatorConfig::Vvs(VvsSettings::default()),
+    ] {
+        let config = TrackerConfig {
+            estimator,
+            ..TrackerConfig::default()
+        };
+        let (estimates, _) = roitrack_core::estimator::track_all(
+            &simulated.camera,
+            &simulated.target,
+            config,
+            &simulated.measurements,
+        )
+        .unwrap();
+        let vouched: Vec<&Estimate> = estimates
+            .iter()
+            .filter(|e| e.status.is_vouched_for())
+            .collect();
+        // The first windows are flagged and widened; the track goes on with the wider window.
+        assert!(
+            estimates
+                .iter()
+                .any(|e| e.status == TrackStatus::Degenerate)
+        );
+        assert!(
+            vouched.len() > estimates.len() * 9 / 10,
+            "{}",
+            estimates.len()
+        );
+        assert!(vouched.iter().all(|e| 2 * e.measurements_used >= 16));
+        let worst_mm = vouched
+            .iter()
+            .map(|e| 1e3 * position_error_m(e, &scenario.state_at(e.t_ref_s)))
+            .fold(0.0, f64::max);
+        assert!(worst_mm < 5.0, "{} {worst_mm} mm", estimator.name());
+    }
+}

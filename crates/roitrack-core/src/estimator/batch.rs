@@ -1,6 +1,6 @@
 //! The batch baseline (after Ait-Aider et al.): at each control step, Levenberg-Marquardt of the 12 parameters to
-//! convergence on the window, from the state predicted to the newest measurement's time; a degenerate window keeps the
-//! prediction.
+//! convergence on the window, from the state predicted to the newest measurement's time; a degenerate window (badly
+//! conditioned, or with fewer than 4 equations beyond the 12 unknowns) keeps the prediction.
 
 use super::problem::ResidualFigures;
 use super::track::{Law, Step, Track, TrackCore};
@@ -28,7 +28,10 @@ impl Law for BatchLaw {
             .fit_robustly(predicted, MAX_ITERATIONS);
         let ne = fit.normal_equations;
         let inverse_condition = ne.fast_inverse_condition();
-        let status = if core.is_degenerate(inverse_condition) || !fit.params.is_finite() {
+        let status = if core.is_degenerate(inverse_condition)
+            || core.is_underdetermined(ne.count())
+            || !fit.params.is_finite()
+        {
             core.state = predicted;
             TrackStatus::Degenerate
         } else {

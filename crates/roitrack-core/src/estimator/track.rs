@@ -26,6 +26,8 @@ const SHRINK_AFTER_GOOD_STEPS: usize = 20;
 /// model's own (a prediction across a fast rotation, a gain-limited loop), not outliers, and must not be cut away.
 /// With Tukey's c = 4.685 scales, residuals beyond about 5 px are rejected.
 const ROBUST_SCALE_FLOOR_PX: f64 = 1.0;
+/// Smallest redundancy (equations beyond the 12 unknowns) of a window whose 12-parameter fit is vouched for.
+pub(crate) const MIN_FIT_REDUNDANCY: usize = 4;
 /// Estimates reported as `Converging` after an initialisation.
 const CONVERGING_ESTIMATES: usize = 3;
 /// Consecutive bad estimates before the track is declared lost.
@@ -204,6 +206,13 @@ impl TrackCore {
         inverse_condition < self.config.min_inverse_condition
     }
 
+    /// Whether a window of `measurements` centroids is too small for a 12-parameter fit to be vouched for: fewer
+    /// than [`MIN_FIT_REDUNDANCY`] equations beyond the 12 unknowns (the newest centroid of each of 6 points fits
+    /// exactly whatever their noise, and nothing tells a wrong centroid).
+    pub fn is_underdetermined(&self, measurements: usize) -> bool {
+        2 * measurements < 12 + MIN_FIT_REDUNDANCY
+    }
+
     fn effective_window(&self) -> WindowMode {
         let n = self.target.len();
         match (self.config.window, self.widening) {
@@ -262,8 +271,8 @@ impl TrackCore {
     }
 
     /// Widens the window after a degenerate step; shrinks it back after a run of good ones.
-    fn track_conditioning(&mut self, inverse_condition: f64) {
-        if self.is_degenerate(inverse_condition) {
+    fn track_conditioning(&mut self, step: &Step) {
+        if step.status == TrackStatus::Degenerate || self.is_degenerate(step.inverse_condition) {
             self.widening = (self.widening + 1).min(3);
             self.good_steps = 0;
             self.degenerate_windows += 1;
@@ -509,7 +518,7 @@ impl<L: Law> Track<L> {
         let mode = core.effective_window();
         core.fill_scratch(mode);
         let step = self.law.control_step(core, t_new_s);
-        self.core.track_conditioning(step.inverse_condition);
+        self.core.track_conditioning(&step);
         self.finish_estimate(step)
     }
 

@@ -64,11 +64,18 @@ impl Law for VvsLaw {
             .with_jacobian(self.settings.jacobian)
             .with_loss(core.config.robust, 1.0);
         let fit = solver::solve(&mut problem, predicted, &options);
-        core.state = fit.params;
-        let refused = matches!(
-            fit.report.stop,
-            StopReason::SingularSystem | StopReason::IllConditioned | StopReason::InvalidStep
-        );
+        // A window with too little redundancy is not used either: its exact fit follows every centroid's noise.
+        let underdetermined = core.is_underdetermined(core.scratch.len());
+        core.state = if underdetermined {
+            predicted
+        } else {
+            fit.params
+        };
+        let refused = underdetermined
+            || matches!(
+                fit.report.stop,
+                StopReason::SingularSystem | StopReason::IllConditioned | StopReason::InvalidStep
+            );
         let inverse_condition = fit.report.inverse_condition.unwrap_or(1.0);
         Step {
             inverse_condition,
