@@ -1,28 +1,53 @@
 //! `roitrack compare`: every estimator and baseline on one scenario at the measurement level (see
-//! [`roitrack::experiments::compare`]).
+//! [`roitrack::experiments::compare`]); with `--sweep`, the default Kalman filter against hand-tuned ones on every
+//! case of issue 15 (see [`roitrack::experiments::adaptive`]).
 
-use anyhow::Result;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::Duration;
+
+use anyhow::{Result, bail};
 use clap::Args;
+use roitrack::experiments::adaptive::{SweepOptions, sweep};
 use roitrack::experiments::compare;
 
 use crate::args::ScenarioArg;
 
-/// Track one simulated scenario with every estimator and baseline and print their accuracy.
+/// Track one simulated scenario with every estimator and baseline and print their accuracy; or, with `--sweep`,
+/// the default (adaptive) Kalman filter against hand-tuned filters searched over a grid, on every case of issue 15,
+/// with the calibration of its covariance: the table of docs/results.md in markdown.
 #[derive(Debug, Args)]
 pub struct CompareArgs {
-    #[arg(long, value_enum, default_value = "orthoglide")]
+    #[arg(
+        long,
+        value_enum,
+        default_value = "orthoglide",
+        conflicts_with = "sweep"
+    )]
     pub scenario: ScenarioArg,
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, conflicts_with = "sweep")]
     pub seed: u64,
     /// Centroid noise (px, per axis).
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.1, conflicts_with = "sweep")]
     pub noise_px: f64,
-    /// Print one JSON object per estimator instead of a table.
+    /// Print one JSON object per estimator instead of a table (with --sweep: one JSON object with every case,
+    /// check and grid point).
     #[arg(long)]
     pub json: bool,
+    /// Run the sweep of issue 15 (adaptive estimation): every case, the hand-tuned grid, the targets checked.
+    #[arg(long)]
+    pub sweep: bool,
+    /// With --sweep: a smoke run (a few cases cut to 0.6 s, a small grid), not the table of record.
+    #[arg(long, requires = "sweep")]
+    pub quick: bool,
+    /// With --sweep: exit with a failure naming the targets that do not hold (after printing everything).
+    #[arg(long, requires = "sweep")]
+    pub check: bool,
 }
 
 pub fn run(args: &CompareArgs) -> Result<()> {
+    if args.sweep {
+        return run_sweep(args);
+    }
     let rows = compare::compare(args.scenario.into(), args.seed, args.noise_px)?;
     if args.json {
         for row in &rows {
@@ -30,6 +55,47 @@ pub fn run(args: &CompareArgs) -> Result<()> {
         }
     } else {
         print!("{}", compare::table(&rows));
+    }
+    Ok(())
+}
+
+fn run_sweep(args: &CompareArgs) -> Result<()> {
+    let options = if args.quick {
+        SweepOptions::quick()
+    } else {
+        SweepOptions::full()
+    };
+    // Drawn on stderr, only when it is a terminal: the table on stdout stays clean.
+    let bar = indicatif::ProgressBar::new(options.cases.len() as u64).with_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} cases ({elapsed})")
+            .expect("valid progress template"),
+    );
+    let done = AtomicUsize::new(0);
+    let finished = AtomicBool::new(false);
+    let result = std::thread::scope(|scope| {
+        scope.spawn(|| {
+            while !finished.load(Ordering::Relaxed) {
+                bar.set_position(done.load(Ordering::Relaxed) as u64);
+                std::thread::sleep(Duration::from_millis(200));
+            }
+        });
+        let result = sweep(&options, Some(&done));
+        finished.store(true, Ordering::Relaxed);
+        result
+    })?;
+    bar.finish_and_clear();
+    if args.json {
+        println!("{}", result.json());
+    } else {
+        print!("{}", result.markdown());
+    }
+    let failures = result.failures();
+    if args.check && !failures.is_empty() {
+        bail!(
+            "{} target(s) do not hold:\n  {}",
+            failures.len(),
+            failures.join("\n  ")
+        );
     }
     Ok(())
 }
