@@ -55,7 +55,9 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use nalgebra::Vector3;
-use roitrack_core::estimator::{EstimatorConfig, KalmanTuning, StatusCounts, TrackerConfig};
+use roitrack_core::estimator::{
+    EstimatorConfig, KalmanTuning, StatusCounts, TrackerConfig, track_all,
+};
 use roitrack_core::{CameraModel, PinholeIntrinsics, PlumbBob, Target, TargetPoint};
 use roitrack_eval::{Consistency, EvalOptions, consistency_of};
 use roitrack_sim::{
@@ -64,7 +66,7 @@ use roitrack_sim::{
 use serde::Serialize;
 
 use crate::ExperimentError;
-use crate::scoring::{Scored, track_and_score};
+use crate::scoring::{Scored, score};
 
 /// [`Goal::Rmse`]: the default filter's position RMSE may be at most this many times the best hand-tuned one.
 ///
@@ -833,6 +835,9 @@ impl HandTuning {
 pub struct RunSummary {
     /// Estimates, of every status.
     pub estimates: usize,
+    /// Seeds on which the filter gave no estimate at all (it never initialised): every figure then comes from the
+    /// other seeds (NaN when none is left), and every target fails.
+    pub runs_without_estimates: usize,
     /// RMSE of the position error over every estimate (mm), pooled over the seeds.
     pub position_rmse_mm: f64,
     /// RMSE of the velocity error over every estimate (mm/s).
@@ -855,7 +860,8 @@ pub struct RunSummary {
 }
 
 impl RunSummary {
-    fn of(runs: &[SimulatedRun], scored: &[Scored]) -> Result<Self, ExperimentError> {
+    /// The figures of a filter's runs, one per seed (`None`: the run gave no estimate at all).
+    fn of(runs: &[SimulatedRun], scored: &[Option<Scored>]) -> Result<Self, ExperimentError> {
         let mut count = 0usize;
         let (mut position_sq, mut velocity_sq) = (0.0, 0.0);
         let mut max_vouched_error_mm: f64 = 0.0;
@@ -863,7 +869,12 @@ impl RunSummary {
         let mut statuses = StatusCounts::default();
         let mut consistencies = Vec::with_capacity(scored.len());
         let (mut noise_sum, mut vouched) = (0.0, 0usize);
+        let mut runs_without_estimates = 0;
         for (run, s) in runs.iter().zip(scored) {
+            let Some(s) = s else {
+                runs_without_estimates += 1;
+                continue;
+            };
             let m = &s.metrics;
             let n = m.count as f64;
             count += m.count;
@@ -893,9 +904,10 @@ impl RunSummary {
                 &EvalOptions::default(),
             )?);
         }
-        let n = count.max(1) as f64;
+        let n = count as f64;
         Ok(Self {
             estimates: count,
+            runs_without_estimates,
             position_rmse_mm: (position_sq / n).sqrt(),
             velocity_rmse_mm_s: (velocity_sq / n).sqrt(),
             max_vouched_error_mm,
@@ -987,9 +999,13 @@ impl CaseResult {
         })
     }
 
-    /// Whether the default filter meets `goal` on this case (see [`Goal`]).
+    /// Whether the default filter meets `goal` on this case (see [`Goal`]). No target holds when the default filter
+    /// gave no estimate on some seed.
     pub fn holds(&self, goal: Goal) -> bool {
         let d = &self.default;
+        if d.runs_without_estimates > 0 {
+            return false;
+        }
         match goal {
             Goal::Rmse => self.rmse_ratio() <= RMSE_RATIO_LIMIT,
             Goal::Clean => d.disputed == 0 && d.lost == 0,
@@ -1004,6 +1020,9 @@ impl CaseResult {
     /// The figure `goal` is judged on, as text.
     fn figure(&self, goal: Goal) -> String {
         let d = &self.default;
+        if d.runs_without_estimates > 0 {
+            return format!("no estimate on {} seed(s)", d.runs_without_estimates);
+        }
         match goal {
             Goal::Rmse => format!("{:.3}", self.rmse_ratio()),
             Goal::Clean => format!("{} disputed, {} lost", d.disputed, d.lost),
@@ -1263,6 +1282,15 @@ pub fn sweep(options: &SweepOptions, progress: Option<&AtomicUsize>) -> Result<S
     })
 }
 
+/// What the search minimises: the pooled position RMSE, infinite when some seed gave no estimate.
+fn objective(summary: &RunSummary) -> f64 {
+    if summary.runs_without_estimates == 0 && summary.position_rmse_mm.is_finite() {
+        summary.position_rmse_mm
+    } else {
+        f64::INFINITY
+    }
+}
+
 /// Simulates a case's seeds, searches the grid (accuracy cases), and runs the default filter.
 fn run_case(case: &Case, options: &SweepOptions) -> Result<CaseResult, ExperimentError> {
     let start = Instant::now();
@@ -1283,9 +1311,19 @@ fn run_case(case: &Case, options: &SweepOptions) -> Result<CaseResult, Experimen
             simulate(&scenario, &sim)
         })
         .collect::<Result<_, _>>()?;
-    let track = |config: TrackerConfig| -> Result<Vec<Scored>, ExperimentError> {
+    let track = |config: TrackerConfig| -> Result<Vec<Option<Scored>>, ExperimentError> {
         runs.iter()
-            .map(|run| track_and_score(run, config))
+            .map(|run| {
+                let start = Instant::now();
+                let (estimates, _) =
+                    track_all(&run.camera, &run.target, config, &run.measurements)?;
+                let seconds = start.elapsed().as_secs_f64();
+                if estimates.is_empty() {
+                    Ok(None)
+                } else {
+                    score(run, estimates, seconds).map(Some)
+                }
+            })
             .collect()
     };
     let grid = &options.grid;
@@ -1293,9 +1331,7 @@ fn run_case(case: &Case, options: &SweepOptions) -> Result<CaseResult, Experimen
         RunSummary::of(&runs, &track(grid.tuning(at, case.noise_px).config())?)
     };
     let mut visited: Vec<Visited> = Vec::new();
-    let mut seen: HashSet<GridIndex> = HashSet::new();
     let mut note = |at: GridIndex, summary: &RunSummary| {
-        seen.insert(at);
         visited.push(Visited {
             tuning: grid.tuning(at, case.noise_px),
             position_rmse_mm: summary.position_rmse_mm,
@@ -1314,7 +1350,7 @@ fn run_case(case: &Case, options: &SweepOptions) -> Result<CaseResult, Experimen
         for at in grid.coarse().into_iter().filter(|&p| p != truth_at) {
             let summary = run_at(at)?;
             note(at, &summary);
-            if summary.position_rmse_mm < best.1.position_rmse_mm {
+            if objective(&summary) < objective(&best.1) {
                 best = (at, summary);
             }
         }
@@ -1327,7 +1363,7 @@ fn run_case(case: &Case, options: &SweepOptions) -> Result<CaseResult, Experimen
                 }
                 let summary = run_at(at)?;
                 note(at, &summary);
-                if summary.position_rmse_mm < best.1.position_rmse_mm {
+                if objective(&summary) < objective(&best.1) {
                     best = (at, summary);
                     moved = true;
                 }
@@ -1351,6 +1387,7 @@ fn run_case(case: &Case, options: &SweepOptions) -> Result<CaseResult, Experimen
         let bound_m = BOUND_FACTOR * nominal * 1e-3;
         default_scored
             .iter()
+            .flatten()
             .flat_map(|s| s.estimates.iter().zip(&s.errors.position_m))
             .filter(|(e, error)| e.status.is_vouched_for() && error.norm() > bound_m)
             .count()
@@ -1580,7 +1617,9 @@ impl Sweep {
                 lag(best.summary.velocity_lag_samples),
                 d.mean_noise_px,
                 r.case.noise_px,
-                if fails.is_empty() {
+                if d.runs_without_estimates > 0 {
+                    format!("all (no estimate on {} seed(s))", d.runs_without_estimates)
+                } else if fails.is_empty() {
                     "none".to_string()
                 } else {
                     fails.join(", ")

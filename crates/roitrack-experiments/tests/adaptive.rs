@@ -41,6 +41,12 @@ fn the_quick_sweep_measures_honestly() {
         assert_eq!(r.case.name, case.name, "cases in the options' order");
         let name = case.name;
         let d = &r.default;
+        if d.runs_without_estimates > 0 {
+            // The default filter never initialised: every target fails, and the figures say so.
+            assert!(case.goals().iter().all(|&g| !r.holds(g)), "{name}");
+            assert!(d.position_rmse_mm.is_nan(), "{name}");
+            continue;
+        }
         assert!(d.estimates > 0, "{name}");
         assert_eq!(
             d.converging + d.tracking + d.degenerate + d.disputed + d.lost,
