@@ -23,7 +23,7 @@
 //! With [`KalmanTuning::adapt_noise`] and [`KalmanTuning::adapt_motion`] off, the filter takes
 //! [`TrackerConfig::noise_px`] and the densities as the truth: a hand-tuned filter.
 
-use nalgebra::{Matrix2, Matrix3, SMatrix, Vector2, Vector3};
+use nalgebra::{Matrix2, SMatrix, Vector2, Vector3};
 
 use super::problem::{Observation, ResidualFigures, ResidualTally};
 use super::track::{Law, Step, Track, TrackCore};
@@ -38,6 +38,9 @@ use crate::{
 /// A 12 x 12 matrix: covariances of the error state (v, w, dV, dW).
 pub type Matrix12 = SMatrix<f64, 12, 12>;
 
+/// The covariance is made exactly symmetric again after this many updates (each leaves a round-off asymmetry of
+/// about 1e-16 of its entries).
+const SYMMETRISE_EVERY_UPDATES: u64 = 16;
 /// Consecutive measurements rejected by the gate after which the covariance is widened.
 const GATED_IN_A_ROW_FOR_RESET: usize = 6;
 /// Fractions of the broad prior covariance added at successive covariance resets (variance scales: 1/100 is a tenth
@@ -101,6 +104,8 @@ struct ErrorStateKalman {
     /// Exponential average of the recent corrections (error-state units), and its weight per update.
     trend: Vector12,
     trend_rate: f64,
+    /// Updates applied, to symmetrise the covariance every [`SYMMETRISE_EVERY_UPDATES`].
+    updates: u64,
     /// The persistence of the newest innovation along the translational and the rotational part of the trend (see
     /// [`Self::update`]); 0 when there is no trend yet.
     persistence: [f64; 2],
@@ -126,6 +131,7 @@ impl ErrorStateKalman {
             trend: Vector12::zeros(),
             trend_rate,
             persistence: [0.0; 2],
+            updates: 0,
         }
     }
 
@@ -135,32 +141,39 @@ impl ErrorStateKalman {
         if dt_s == 0.0 {
             return;
         }
+        // F = [I 0 dt·I 0; 0 E 0 B; 0 0 I 0; 0 0 0 I] with E = Exp(W dt) and B = J_l(W dt) dt: F P Fᵀ by blocks of
+        // three rows, then three columns (a seventh of the dense product's work).
         let rotation_increment = state.angular_velocity_radps * dt_s;
-        let mut f = Matrix12::identity();
-        f.fixed_view_mut::<3, 3>(0, 6)
-            .copy_from(&(Matrix3::identity() * dt_s));
-        f.fixed_view_mut::<3, 3>(3, 3)
-            .copy_from(so3::exp(&rotation_increment).matrix());
-        f.fixed_view_mut::<3, 3>(3, 9)
-            .copy_from(&(so3::left_jacobian(&rotation_increment) * dt_s));
+        let e_rotation = so3::exp(&rotation_increment);
+        let e = *e_rotation.matrix();
+        let b = so3::left_jacobian(&rotation_increment) * dt_s;
+        let p = &mut self.covariance;
+        let translation_rows = p.fixed_rows::<3>(0) + p.fixed_rows::<3>(6) * dt_s;
+        let rotation_rows = e * p.fixed_rows::<3>(3) + b * p.fixed_rows::<3>(9);
+        p.fixed_rows_mut::<3>(0).copy_from(&translation_rows);
+        p.fixed_rows_mut::<3>(3).copy_from(&rotation_rows);
+        let translation_columns = p.fixed_columns::<3>(0) + p.fixed_columns::<3>(6) * dt_s;
+        let rotation_columns =
+            p.fixed_columns::<3>(3) * e.transpose() + p.fixed_columns::<3>(9) * b.transpose();
+        p.fixed_columns_mut::<3>(0).copy_from(&translation_columns);
+        p.fixed_columns_mut::<3>(3).copy_from(&rotation_columns);
+        // Q of white acceleration: per axis [dt³/3 dt²/2; dt²/2 dt] times the density.
         let dt = dt_s.abs();
-        let mut q = Matrix12::zeros();
         for (pos, vel, psd) in [
             (0, 6, self.tuning.linear_accel_psd * process_scale[0]),
             (3, 9, self.tuning.angular_accel_psd * process_scale[1]),
         ] {
-            let i3 = Matrix3::identity();
-            q.fixed_view_mut::<3, 3>(pos, pos)
-                .copy_from(&(i3 * (psd * dt * dt * dt / 3.0)));
-            q.fixed_view_mut::<3, 3>(pos, vel)
-                .copy_from(&(i3 * (psd * dt * dt / 2.0)));
-            q.fixed_view_mut::<3, 3>(vel, pos)
-                .copy_from(&(i3 * (psd * dt * dt / 2.0)));
-            q.fixed_view_mut::<3, 3>(vel, vel)
-                .copy_from(&(i3 * (psd * dt)));
+            let (qpp, qpv, qvv) = (psd * dt * dt * dt / 3.0, psd * dt * dt / 2.0, psd * dt);
+            for i in 0..3 {
+                p[(pos + i, pos + i)] += qpp;
+                p[(pos + i, vel + i)] += qpv;
+                p[(vel + i, pos + i)] += qpv;
+                p[(vel + i, vel + i)] += qvv;
+            }
         }
-        self.covariance = f * self.covariance * f.transpose() + q;
-        *state = state.predicted(dt_s);
+        // The state's own prediction (`MotionState::predicted`), with the rotation increment already at hand.
+        state.cam_r_obj = e_rotation * state.cam_r_obj;
+        state.cam_t_obj_m += state.velocity_mps * dt_s;
     }
 
     /// Updates with one centroid (ideal pixel) of `point_in_obj_m`, observed at the state's reference time.
@@ -231,10 +244,20 @@ impl ErrorStateKalman {
         }
         *state = corrected;
         self.trend += (correction - self.trend) * self.trend_rate;
-        // Joseph form: stays symmetric positive definite in floating point.
-        let i_kh = Matrix12::identity() - gain * h;
-        self.covariance =
-            i_kh * self.covariance * i_kh.transpose() + gain * gain.transpose() * sigma2;
+        // P - K S Kᵀ = P - (P Hᵀ) S⁻¹ (P Hᵀ)ᵀ with the gain that is optimal for S (the Huber-inflated one included):
+        // a twelfth of the Joseph form's work, symmetrised every few updates against round-off. Should rounding ever leave a variance that is not
+        // positive, the Joseph form takes over.
+        let k_s_kt = gain * ph_t.transpose();
+        self.covariance -= k_s_kt;
+        self.updates += 1;
+        if self.updates.is_multiple_of(SYMMETRISE_EVERY_UPDATES) {
+            self.covariance = (self.covariance + self.covariance.transpose()) * 0.5;
+        }
+        if (0..12).any(|i| self.covariance[(i, i)] <= 0.0) {
+            let before = self.covariance + k_s_kt;
+            let i_kh = Matrix12::identity() - gain * h;
+            self.covariance = i_kh * before * i_kh.transpose() + gain * gain.transpose() * sigma2;
+        }
         UpdateOutcome::Accepted {
             norm_px: innovation.norm(),
             nis: mahalanobis2,
