@@ -842,7 +842,7 @@ pub struct RunSummary {
     pub position_rmse_mm: f64,
     /// RMSE of the velocity error over every estimate (mm/s).
     pub velocity_rmse_mm_s: f64,
-    /// The largest position error of an estimate marked tracking or converging (mm).
+    /// The largest position error of an estimate marked tracking or converging (mm); NaN without one.
     pub max_vouched_error_mm: f64,
     /// The velocity lag (estimator samples), the largest in magnitude over the seeds.
     pub velocity_lag_samples: Option<i64>,
@@ -910,7 +910,11 @@ impl RunSummary {
             runs_without_estimates,
             position_rmse_mm: (position_sq / n).sqrt(),
             velocity_rmse_mm_s: (velocity_sq / n).sqrt(),
-            max_vouched_error_mm,
+            max_vouched_error_mm: if vouched == 0 {
+                f64::NAN
+            } else {
+                max_vouched_error_mm
+            },
             velocity_lag_samples: lag,
             converging: statuses.converging,
             tracking: statuses.tracking,
