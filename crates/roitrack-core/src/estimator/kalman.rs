@@ -147,18 +147,30 @@ impl ErrorStateKalman {
         let e_rotation = so3::exp(&rotation_increment);
         let e = *e_rotation.matrix();
         let b = so3::left_jacobian(&rotation_increment) * dt_s;
-        let p = &mut self.covariance;
-        let translation_rows = p.fixed_rows::<3>(0) + p.fixed_rows::<3>(6) * dt_s;
-        let rotation_rows = e * p.fixed_rows::<3>(3) + b * p.fixed_rows::<3>(9);
-        p.fixed_rows_mut::<3>(0).copy_from(&translation_rows);
-        p.fixed_rows_mut::<3>(3).copy_from(&rotation_rows);
-        let translation_columns = p.fixed_columns::<3>(0) + p.fixed_columns::<3>(6) * dt_s;
-        let rotation_columns =
-            p.fixed_columns::<3>(3) * e.transpose() + p.fixed_columns::<3>(9) * b.transpose();
-        p.fixed_columns_mut::<3>(0).copy_from(&translation_columns);
-        p.fixed_columns_mut::<3>(3).copy_from(&rotation_columns);
+        // In place on the column-major entries (p[i + 12 j] is row i, column j): no 12 x 12 temporaries.
+        let p = self.covariance.as_mut_slice();
+        for column in p.chunks_exact_mut(12) {
+            let old: [f64; 12] = column.try_into().expect("12 rows");
+            for k in 0..3 {
+                column[k] = old[k] + old[6 + k] * dt_s;
+                column[3 + k] = (0..3)
+                    .map(|l| e[(k, l)] * old[3 + l] + b[(k, l)] * old[9 + l])
+                    .sum();
+            }
+        }
+        let old_translation: [f64; 36] = p[..36].try_into().expect("3 columns");
+        let old_rotation: [f64; 36] = p[36..72].try_into().expect("3 columns");
+        for k in 0..3 {
+            for i in 0..12 {
+                p[i + 12 * k] = old_translation[i + 12 * k] + p[i + 12 * (6 + k)] * dt_s;
+                p[i + 12 * (3 + k)] = (0..3)
+                    .map(|l| old_rotation[i + 12 * l] * e[(k, l)] + p[i + 12 * (9 + l)] * b[(k, l)])
+                    .sum();
+            }
+        }
         // Q of white acceleration: per axis [dt³/3 dt²/2; dt²/2 dt] times the density.
         let dt = dt_s.abs();
+        let p = &mut self.covariance;
         for (pos, vel, psd) in [
             (0, 6, self.tuning.linear_accel_psd * process_scale[0]),
             (3, 9, self.tuning.angular_accel_psd * process_scale[1]),
@@ -247,14 +259,24 @@ impl ErrorStateKalman {
         // P - K S Kᵀ = P - (P Hᵀ) S⁻¹ (P Hᵀ)ᵀ with the gain that is optimal for S (the Huber-inflated one included):
         // a twelfth of the Joseph form's work, symmetrised every few updates against round-off. Should rounding ever leave a variance that is not
         // positive, the Joseph form takes over.
-        let k_s_kt = gain * ph_t.transpose();
-        self.covariance -= k_s_kt;
+        // The rank-2 downdate in place.
+        for (j, column) in self
+            .covariance
+            .as_mut_slice()
+            .chunks_exact_mut(12)
+            .enumerate()
+        {
+            let (a, b) = (ph_t[(j, 0)], ph_t[(j, 1)]);
+            for (i, entry) in column.iter_mut().enumerate() {
+                *entry -= gain[(i, 0)] * a + gain[(i, 1)] * b;
+            }
+        }
         self.updates += 1;
         if self.updates.is_multiple_of(SYMMETRISE_EVERY_UPDATES) {
             self.covariance = (self.covariance + self.covariance.transpose()) * 0.5;
         }
         if (0..12).any(|i| self.covariance[(i, i)] <= 0.0) {
-            let before = self.covariance + k_s_kt;
+            let before = self.covariance + gain * ph_t.transpose();
             let i_kh = Matrix12::identity() - gain * h;
             self.covariance = i_kh * before * i_kh.transpose() + gain * gain.transpose() * sigma2;
         }
