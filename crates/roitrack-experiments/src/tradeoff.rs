@@ -85,8 +85,11 @@ pub fn sweep(kind: ScenarioKind, seed: u64) -> Result<Vec<TradeoffPoint>, Experi
                     gain: value,
                     iterations: 1,
                 }),
+                // The process noise held at the value swept (not learnt), and the noise told.
                 Scheme::Kalman => EstimatorConfig::Kalman(KalmanTuning {
                     linear_accel_psd: value,
+                    adapt_noise: false,
+                    adapt_motion: false,
                     ..KalmanTuning::default()
                 }),
             };
