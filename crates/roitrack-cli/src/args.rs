@@ -97,10 +97,12 @@ pub struct EstimatorArgs {
     /// value (it estimates the noise online unless --adapt leaves the noise out).
     #[arg(long, default_value_t = 0.1)]
     pub noise_px: f64,
-    /// Kalman: what the filter learns online: the centroid noise and the process noise (both, the default), one of
-    /// them, or none (--noise-px, --accel-psd and --angular-accel-psd taken as the truth: a hand-tuned filter).
-    #[arg(long, value_enum, default_value = "both")]
-    pub adapt: AdaptArg,
+    /// Kalman: what the filter learns online: the centroid noise and the process noise (both), one of them, or none
+    /// (--noise-px, --accel-psd and --angular-accel-psd taken as the truth: a hand-tuned filter). Default: both for
+    /// measurements and ROI recordings, none for --images (a frame's blobs span one instant or one readout, too
+    /// short for the noise estimate).
+    #[arg(long, value_enum)]
+    pub adapt: Option<AdaptArg>,
     /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise.
     #[arg(long)]
     pub accel_psd: Option<f64>,
@@ -128,8 +130,8 @@ impl EstimatorArgs {
             } else {
                 defaults.huber_sigma
             },
-            adapt_noise: matches!(self.adapt, AdaptArg::Both | AdaptArg::Noise),
-            adapt_motion: matches!(self.adapt, AdaptArg::Both | AdaptArg::Motion),
+            adapt_noise: matches!(self.adapt, None | Some(AdaptArg::Both | AdaptArg::Noise)),
+            adapt_motion: matches!(self.adapt, None | Some(AdaptArg::Both | AdaptArg::Motion)),
             ..defaults
         };
         let vvs = |jacobian| VvsSettings {

@@ -208,7 +208,11 @@ fn run_frames(
         .validate()
         .context("invalid --line-delay-s or --exposure-s")?;
     let config = FrameTrackerConfig {
-        tracker: args.estimator.config(),
+        // Without --adapt, the frame tracker's own default: no online learning.
+        tracker: match args.estimator.adapt {
+            Some(_) => args.estimator.config(),
+            None => FrameTrackerConfig::frame_estimator(args.estimator.config()),
+        },
         detection: PhotoOptions {
             polarity: args.polarity.into(),
             distance_range_m: distance_range(args.distance_m.as_deref())?,
