@@ -302,7 +302,8 @@ const PROCESS_SCALE_RANGE: (f64, f64) = (1e-4, 1e4);
 const NOISE_MEMORY_DOF: f64 = 2000.0;
 /// Smallest redundancy (2 x measurements - 12) of a window that feeds the noise estimate.
 const MIN_NOISE_DOF: usize = 8;
-/// Largest factor by which one window may move the noise variance: a window that holds an outlier does not drag it.
+/// Largest factor by which one window may raise the noise variance: a window that holds an outlier does not drag it
+/// up.
 const NOISE_STEP_FACTOR: f64 = 4.0;
 
 /// The centroid noise learnt from the redundancy of the measurement windows.
@@ -332,11 +333,10 @@ impl NoiseEstimate {
             return;
         }
         let floor = super::track::MIN_NOISE_PX * super::track::MIN_NOISE_PX;
+        // Only upwards: a window that holds an outlier the gate let through must not drag the estimate up, but a
+        // quiet window is no outlier (after a start from a noisy initial fit, the estimate must come down fast).
         let sample = sample_px2
-            .clamp(
-                self.variance_px2 / NOISE_STEP_FACTOR,
-                self.variance_px2 * NOISE_STEP_FACTOR,
-            )
+            .min(self.variance_px2 * NOISE_STEP_FACTOR)
             .max(floor);
         let weight = dof / (self.dof.min(NOISE_MEMORY_DOF) + dof);
         self.variance_px2 += weight * (sample - self.variance_px2);
@@ -369,6 +369,8 @@ struct KalmanLaw {
     newest_nis: f64,
     /// The learnt centroid noise (when `tuning.adapt_noise`).
     noise: NoiseEstimate,
+    /// Per point: the time of its newest measurement if the gate rejected it.
+    gated_at: Vec<Option<f64>>,
     /// Natural logarithms of the factors applied to the linear and the angular acceleration density (when
     /// `tuning.adapt_motion`).
     process_log_scale: [f64; 2],
@@ -388,6 +390,12 @@ impl Law for KalmanLaw {
             // carries over from the previous track.
             noise: NoiseEstimate::new(core.noise_px, 2.0 * core.target.len() as f64),
             process_log_scale: self.process_log_scale,
+            gated_at: {
+                let mut gated_at = std::mem::take(&mut self.gated_at);
+                gated_at.clear();
+                gated_at.resize(core.target.len(), None);
+                gated_at
+            },
             ..Self::new(self.filter.tuning)
         };
     }
@@ -414,13 +422,18 @@ impl Law for KalmanLaw {
         {
             self.innovations.add(norm_px);
             self.newest_nis = nis;
-            if self.filter.tuning.adapt_motion {
-                self.adapt_process_scale(self.filter.persistence);
-            }
+        }
+        // Only measurements the gate let through teach the process noise: an outlier's innovation along the trend
+        // says nothing about the motion. A manoeuvre the filter lags shows in the accepted ones first.
+        if self.filter.tuning.adapt_motion && matches!(outcome, UpdateOutcome::Accepted { .. }) {
+            self.adapt_process_scale(self.filter.persistence);
         }
         // Outliers are rare and scattered; a run of gated measurements means the filter itself is off (after a jump
         // of the target, or an outlier that got through): widen its covariance so the measurements pull it back,
         // instead of coasting on a wrong state.
+        if let Some(gated_at) = self.gated_at.get_mut(obs.point_index) {
+            *gated_at = matches!(outcome, UpdateOutcome::Gated { .. }).then_some(obs.t_s);
+        }
         if matches!(outcome, UpdateOutcome::Gated { .. }) {
             self.gated_since_estimate += 1;
             self.gated_total += 1;
@@ -522,6 +535,7 @@ impl KalmanLaw {
             newest_nis: 0.0,
             noise: NoiseEstimate::new(1.0, 0.0),
             process_log_scale: [0.0; 2],
+            gated_at: Vec::new(),
         }
     }
 
@@ -537,7 +551,10 @@ impl KalmanLaw {
     }
 
     /// Folds the residual of the window at its least-squares optimum into the noise estimate. Targets of fewer than
-    /// 10 points take a longer window, so that it has a redundancy of at least [`MIN_NOISE_DOF`].
+    /// 10 points take a longer window, so that it has a redundancy of at least [`MIN_NOISE_DOF`]. Measurements the
+    /// gate rejected are left out (an outlier of 5-20 px would count as much noise as a hundred good centroids),
+    /// unless they are more than a quarter of the window: then the noise itself has grown beyond the estimate, and
+    /// they must count for the estimate to follow.
     fn learn_noise(
         &mut self,
         core: &mut TrackCore,
@@ -545,25 +562,41 @@ impl KalmanLaw {
         ne: &crate::solver::NormalEquations<12>,
         step: Option<crate::Vector12>,
     ) {
-        let needed = (12 + MIN_NOISE_DOF).div_ceil(2);
-        let (cost_px2, dof) = if 2 * ne.count() >= 12 + MIN_NOISE_DOF {
-            let Some(step) = step else { return };
-            (ne.cost_px2() + step.dot(ne.jte()), 2 * ne.count() - 12)
-        } else {
-            core.fill_scratch(super::WindowMode::Last(needed.max(ne.count())));
-            let longer = core.window_problem(t_new_s).normal_equations(&core.state);
-            if 2 * longer.count() < 12 + MIN_NOISE_DOF {
-                return;
-            }
-            let Some((step, _)) = longer.solve_with_conditioning() else {
+        let min_measurements = (12 + MIN_NOISE_DOF).div_ceil(2);
+        let mut rebuilt = false;
+        if ne.count() < min_measurements {
+            core.fill_scratch(super::WindowMode::Last(min_measurements));
+            rebuilt = true;
+        }
+        let gated_at = &self.gated_at;
+        let is_gated = |o: &Observation| gated_at.get(o.point_index) == Some(&Some(o.t_s));
+        let gated = core.scratch.iter().filter(|o| is_gated(o)).count();
+        if gated > 0 && 4 * gated <= core.scratch.len() {
+            core.scratch.retain(|o| !is_gated(o));
+            rebuilt = true;
+        }
+        let (cost_px2, count) = if rebuilt {
+            let window = core.window_problem(t_new_s).normal_equations(&core.state);
+            let Some((step, _)) = window.solve_with_conditioning() else {
                 return;
             };
-            (
-                longer.cost_px2() + step.dot(longer.jte()),
-                2 * longer.count() - 12,
-            )
+            (window.cost_px2() + step.dot(window.jte()), window.count())
+        } else {
+            let Some(step) = step else { return };
+            (ne.cost_px2() + step.dot(ne.jte()), ne.count())
         };
-        self.noise.add(cost_px2.max(0.0) / dof as f64, dof as f64);
+        if 2 * count < 12 + MIN_NOISE_DOF {
+            return;
+        }
+        let dof = (2 * count - 12) as f64;
+        // Every measurement left in lies inside the gate: the sample is that of a noise truncated at the gate's
+        // Mahalanobis radius g, whose variance is a fraction (1 - (1 + g²/2) e^(-g²/2)) / (1 - e^(-g²/2)) of the
+        // noise's (0.949 at 3 σ; measured on clean orthoglide without this: 0.92).
+        let g2 = self.filter.tuning.gate_sigma * self.filter.tuning.gate_sigma;
+        let tail = (-g2 / 2.0).exp();
+        let truncated_fraction = (1.0 - (1.0 + g2 / 2.0) * tail) / (1.0 - tail);
+        self.noise
+            .add(cost_px2.max(0.0) / dof / truncated_fraction, dof);
         core.noise_px = self.noise.noise_px();
     }
 }
