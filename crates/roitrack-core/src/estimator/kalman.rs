@@ -53,16 +53,18 @@ const ACCEPTED_IN_A_ROW_FOR_CALM: usize = 64;
 ///
 /// ```
 /// use roitrack_core::estimator::{EstimatorConfig, KalmanTuning, TrackerConfig};
-/// // Less lag, more noise: a larger linear acceleration density.
-/// let tuning = KalmanTuning { linear_accel_psd: 10.0, ..KalmanTuning::default() };
+/// // A hand-tuned filter: less lag, more noise with a larger linear acceleration density, held fixed.
+/// let tuning = KalmanTuning { linear_accel_psd: 10.0, adapt_motion: false, ..KalmanTuning::default() };
 /// let config = TrackerConfig { estimator: EstimatorConfig::Kalman(tuning), ..TrackerConfig::default() };
 /// assert!(config.validate().is_ok());
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct KalmanTuning {
-    /// White linear acceleration spectral density q_a ((m/s²)²/Hz). Larger: less lag, more noise.
+    /// White linear acceleration spectral density q_a ((m/s²)²/Hz). Larger: less lag, more noise. With
+    /// [`Self::adapt_motion`], only the starting value.
     pub linear_accel_psd: f64,
-    /// White angular acceleration spectral density q_α ((rad/s²)²/Hz).
+    /// White angular acceleration spectral density q_α ((rad/s²)²/Hz). With [`Self::adapt_motion`], only the
+    /// starting value.
     pub angular_accel_psd: f64,
     /// Innovations beyond this many standard deviations (Mahalanobis, 2 dof) are rejected as outliers. Default 3:
     /// it rejects exp(-9/2) = 1.1 % of good measurements. Measured with `roitrack faults` (3 runs each): against 6,
@@ -257,9 +259,8 @@ impl ErrorStateKalman {
         *state = corrected;
         self.trend += (correction - self.trend) * self.trend_rate;
         // P - K S Kᵀ = P - (P Hᵀ) S⁻¹ (P Hᵀ)ᵀ with the gain that is optimal for S (the Huber-inflated one included):
-        // a twelfth of the Joseph form's work, symmetrised every few updates against round-off. Should rounding ever leave a variance that is not
-        // positive, the Joseph form takes over.
-        // The rank-2 downdate in place.
+        // a twelfth of the Joseph form's work, as a rank-2 downdate in place, symmetrised every few updates against
+        // round-off. Should rounding ever leave a variance that is not positive, the Joseph form takes over.
         for (j, column) in self
             .covariance
             .as_mut_slice()
