@@ -177,7 +177,7 @@ pub fn chart(points: &[TradeoffPoint], kind: ScenarioKind, seed: u64) -> Chart {
             series(Scheme::Paper, "paper's VVS loop, gain λ (1 iteration)", "λ"),
             series(
                 Scheme::Kalman,
-                "Kalman filter (default), accel. PSD q (m²/s³)",
+                "Kalman filter (hand-tuned: q held), accel. PSD q (m²/s³)",
                 "q",
             ),
         ],
