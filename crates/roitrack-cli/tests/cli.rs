@@ -429,7 +429,7 @@ fn reflections_in_roi_recordings_are_rejected_by_the_symmetry_check() {
     let (stderr, unchecked_mm) = track("unchecked", &["--no-symmetry-check"]);
     assert!(stderr.contains(" 0 asymmetric"), "{stderr}");
     // The Kalman filter's gate and its noise learning (which leaves out what the gate rejects) already hold part of the
-    // bias off: 4.1x on 2026-11-24 (0.072 against 0.017 mm), 8x when the noise was told.
+    // bias off: 4.1x on 2026-11-24 (0.072 against 0.017 mm); 10x when the filter was told the noise.
     assert!(
         unchecked_mm > 3.0 * checked_mm,
         "{unchecked_mm} mm against {checked_mm} mm"
