@@ -220,13 +220,10 @@ impl ErrorStateKalman {
         // the corrections keep going one way (the filter lags the motion) and negative when they undo each other
         // (the filter chases the noise).
         for (part, rows) in [(0, [0, 6]), (1, [3, 9])] {
-            let mut trend = Vector12::zeros();
-            for r in rows {
-                trend
-                    .fixed_rows_mut::<3>(r)
-                    .copy_from(&self.trend.fixed_rows::<3>(r));
-            }
-            let expected = h * trend;
+            let expected: Vector2<f64> = rows
+                .iter()
+                .map(|&r| h.fixed_columns::<3>(r) * self.trend.fixed_rows::<3>(r))
+                .sum();
             let spread2 = (expected.transpose() * s_inv * expected)[0];
             self.persistence[part] = if spread2 > 0.0 {
                 (innovation.transpose() * s_inv * expected)[0] / spread2.sqrt()
