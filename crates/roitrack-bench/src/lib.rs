@@ -41,6 +41,7 @@ pub mod frame_bench;
 pub mod loop_bench;
 pub mod pnp;
 pub mod soak;
+pub mod track_bench;
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};

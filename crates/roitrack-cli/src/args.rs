@@ -2,11 +2,11 @@
 
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
-use roitrack::math::JacobianKind;
+use roitrack::TrackerConfig;
 use roitrack::math::estimator::RobustLoss;
+use roitrack::math::estimator::TrackerOptions;
 use roitrack::pipeline::ScheduleOrder;
 use roitrack::sim::ScenarioKind;
-use roitrack::{EstimatorConfig, KalmanTuning, TrackerConfig, VvsSettings, WindowMode};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ScenarioArg {
@@ -120,50 +120,38 @@ pub struct EstimatorArgs {
 }
 
 impl EstimatorArgs {
+    /// The options by name, translated into a configuration by the library (as the Python package does).
     pub fn config(&self) -> TrackerConfig {
-        let defaults = KalmanTuning::default();
-        let kalman = KalmanTuning {
-            linear_accel_psd: self.accel_psd.unwrap_or(defaults.linear_accel_psd),
-            angular_accel_psd: self.angular_accel_psd.unwrap_or(defaults.angular_accel_psd),
-            huber_sigma: if self.robust == RobustArg::None {
-                f64::INFINITY
-            } else {
-                defaults.huber_sigma
+        use roitrack::math::estimator::{Adaptation, EstimatorKind};
+        TrackerOptions {
+            estimator: match self.estimator {
+                EstimatorArg::Kalman => EstimatorKind::Kalman,
+                EstimatorArg::Exact => EstimatorKind::Exact,
+                EstimatorArg::Paper => EstimatorKind::Paper,
+                EstimatorArg::Static => EstimatorKind::Static,
+                EstimatorArg::Batch => EstimatorKind::Batch,
             },
-            adapt_noise: matches!(self.adapt, None | Some(AdaptArg::Both | AdaptArg::Noise)),
-            adapt_motion: matches!(self.adapt, None | Some(AdaptArg::Both | AdaptArg::Motion)),
-            ..defaults
-        };
-        let vvs = |jacobian| VvsSettings {
-            jacobian,
             gain: self.gain,
             iterations: self.iterations,
-        };
-        let defaults = TrackerConfig::default();
-        TrackerConfig {
-            estimator: match self.estimator {
-                EstimatorArg::Kalman => EstimatorConfig::Kalman(kalman),
-                EstimatorArg::Exact => EstimatorConfig::Vvs(vvs(JacobianKind::Exact)),
-                EstimatorArg::Paper => EstimatorConfig::Vvs(vvs(JacobianKind::Paper)),
-                EstimatorArg::Static => EstimatorConfig::Static,
-                EstimatorArg::Batch => EstimatorConfig::Batch,
-            },
-            window: match self.window {
-                0 => WindowMode::NewestPerPoint,
-                n => WindowMode::Last(n),
-            },
+            window: self.window,
             every: self.every,
             noise_px: self.noise_px,
-            min_inverse_condition: self
-                .min_conditioning
-                .unwrap_or(defaults.min_inverse_condition),
+            adapt: self.adapt.map(|a| match a {
+                AdaptArg::Both => Adaptation::Both,
+                AdaptArg::Noise => Adaptation::Noise,
+                AdaptArg::Motion => Adaptation::Motion,
+                AdaptArg::None => Adaptation::None,
+            }),
+            accel_psd: self.accel_psd,
+            angular_accel_psd: self.angular_accel_psd,
             robust: match self.robust {
                 RobustArg::None => RobustLoss::None,
                 RobustArg::Huber => RobustLoss::Huber,
                 RobustArg::Tukey => RobustLoss::Tukey,
             },
-            ..defaults
+            min_conditioning: self.min_conditioning,
         }
+        .config()
     }
 }
 

@@ -48,6 +48,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
         ],
     ),
     ("roitrack-cli", &["roitrack"]),
+    ("roitrack-python", &["roitrack"]),
 ];
 
 fn crates_dir() -> PathBuf {

@@ -36,7 +36,10 @@
 //! - `latency_us_p50`, `latency_us_p99`: ROI-to-estimate latency with the camera paced at `paced_hz` (median over
 //!   `--repeats` of each run's quantile); `paced_rois_per_s`, `paced_dropped`, `paced_late`: that run's throughput,
 //!   drops and late ROIs;
-//! - `rois_per_run`: ROIs per loop run.
+//! - `rois_per_run`: ROIs per loop run;
+//! - `track_library_meas_per_s`: measurements/s of the library's `track` over the orthoglide scenario's 19,655
+//!   simulated measurements in memory (default Kalman filter, an estimate every 10, every estimate collected; best of
+//!   `--repeats`): the call the Python package's `roitrack.track` makes ([`roitrack::bench::track_bench`]).
 //!
 //! Keys are only ever added, never renamed or removed.
 
@@ -45,6 +48,7 @@ use std::time::Duration;
 use anyhow::Result;
 use clap::Args;
 use roitrack::bench::loop_bench::{LoopBench, LoopFigures, PACED_HZ};
+use roitrack::bench::track_bench::TrackLibraryBench;
 use roitrack::bench::{HotPaths, Item, Timing, time_all};
 
 /// Time the hot paths (median, p99) and the real-time loop (throughput, latency).
@@ -106,6 +110,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let k1 = bench.measure(1, None, args.repeats)?;
     // Latency without queueing: the camera paced at 20 kHz (5x the paper), below the loop's capacity.
     let paced = bench.measure(10, Some(PACED_HZ), args.repeats)?;
+    let track_library = TrackLibraryBench::orthoglide()?.measure(args.repeats);
     if args.json {
         let mut fields: Vec<(String, String)> = Vec::new();
         for (item, t) in &timings {
@@ -135,6 +140,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         field("loop_k10_rejected", k10.rejected.to_string());
         field("loop_k1_rejected", k1.rejected.to_string());
         field("rois_per_run", bench.rois().to_string());
+        field(
+            "track_library_meas_per_s",
+            json_number(track_library.meas_per_s, 0),
+        );
         let body: Vec<String> = fields
             .iter()
             .map(|(key, value)| format!("\"{key}\":{value}"))
@@ -155,6 +164,10 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 ("free, estimate every ROI", &k1),
             ],
             &paced,
+        );
+        println!(
+            "\nlibrary track(), orthoglide, {} measurements in memory, Kalman, every 10: {:.0} measurements/s",
+            track_library.measurements, track_library.meas_per_s
         );
     }
     Ok(())

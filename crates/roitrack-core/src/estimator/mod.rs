@@ -50,6 +50,7 @@
 
 pub mod batch;
 pub mod kalman;
+mod options;
 mod problem;
 pub mod static_baseline;
 mod static_pose;
@@ -62,6 +63,7 @@ use thiserror::Error;
 use crate::{CameraModel, Measurement, MotionState, Target};
 pub use batch::BatchEstimator;
 pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12};
+pub use options::{Adaptation, EstimatorKind, TrackerOptions, UnknownName};
 pub use problem::{Observation, RobustLoss, WindowProblem};
 pub use static_baseline::StaticEstimator;
 pub use static_pose::{InitError, PoseFit, refine_static_pose, solve_static_pose};
