@@ -359,16 +359,17 @@ fn quaternion_xyzw(e: &RustEstimate) -> [f64; 4] {
 }
 
 /// The covariance row by row, as the covariance file has it (`track --covariance`): the symmetric part of the
-/// estimator's matrix, which rounding may leave slightly asymmetric; NaN without one.
+/// estimator's matrix (which rounding may leave slightly asymmetric), from the file's upper triangle; NaN without one.
 fn covariance_entries(e: &RustEstimate) -> [f64; 144] {
     let mut out = [f64::NAN; 144];
     if let Some(c) = &e.covariance {
-        let symmetric = roitrack::formats::covariance_from_upper_triangle(
-            &roitrack::formats::covariance_upper_triangle(c),
-        );
+        let upper = roitrack::formats::covariance_upper_triangle(c);
+        let mut k = 0;
         for i in 0..12 {
-            for j in 0..12 {
-                out[12 * i + j] = symmetric[(i, j)];
+            for j in i..12 {
+                out[12 * i + j] = upper[k];
+                out[12 * j + i] = upper[k];
+                k += 1;
             }
         }
     }
@@ -575,7 +576,6 @@ impl Tracker {
 }
 
 /// Estimates as arrays, filled as they come (no per-estimate Python object).
-#[derive(Default)]
 struct EstimateColumns {
     t_s: Vec<f64>,
     position_m: Vec<f64>,
@@ -589,6 +589,21 @@ struct EstimateColumns {
 }
 
 impl EstimateColumns {
+    /// Room for `estimates` estimates, so that the columns are not copied as they grow.
+    fn with_capacity(estimates: usize) -> Self {
+        Self {
+            t_s: Vec::with_capacity(estimates),
+            position_m: Vec::with_capacity(3 * estimates),
+            quaternion_xyzw: Vec::with_capacity(4 * estimates),
+            velocity_mps: Vec::with_capacity(3 * estimates),
+            angular_velocity_radps: Vec::with_capacity(3 * estimates),
+            covariance: Vec::with_capacity(144 * estimates),
+            status: Vec::with_capacity(estimates),
+            residual_px: Vec::with_capacity(estimates),
+            conditioning: Vec::with_capacity(estimates),
+        }
+    }
+
     fn push(&mut self, e: &RustEstimate) {
         self.t_s.push(e.t_ref_s);
         self.position_m
@@ -704,8 +719,10 @@ fn track<'py>(
     )?;
     let measurements = measurements_of(measurements)?;
     let mut tracker = new_tracker(&camera, &target, &options)?;
+    // An estimate every `every` measurements, and one per readout at most: room for them all.
+    let expected = measurements.len() / every.max(1) + 1;
     let (columns, report) = py.detach(move || {
-        let mut columns = EstimateColumns::default();
+        let mut columns = EstimateColumns::with_capacity(expected);
         let report = roitrack::track(
             &mut tracker,
             measurements
