@@ -1,5 +1,7 @@
 //! Command-line values shared by several commands, and their translation into the library's types.
 
+use std::path::PathBuf;
+
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use roitrack::TrackerConfig;
@@ -190,5 +192,47 @@ impl ShutterArg {
                  divided by its number of rows, e.g. 30e-6 for 1,024 rows read in 30.7 ms"
             ),
         }
+    }
+}
+
+/// The camera calibration, with what some files leave out (`--camera`, `--image-size`, `--camera-name`), shared by
+/// every command that takes a camera.
+#[derive(Debug, Clone, Args)]
+pub struct CameraArgs {
+    /// Camera calibration: ROS camera_info YAML (ROS 1 or 2, also as `ros2 topic echo` prints it), OpenCV
+    /// FileStorage YAML or XML, or a Kalibr camchain; recognised from the content. Models: pinhole with plumb_bob,
+    /// rational_polynomial, equidistant (fisheye) or no distortion.
+    #[arg(long, value_name = "FILE")]
+    pub camera: PathBuf,
+    /// The image size for a calibration file that has none (OpenCV files may not); refused if the file says
+    /// otherwise. Default: the file's.
+    #[arg(long, value_name = "WxH", value_parser = parse_image_size)]
+    pub image_size: Option<(u32, u32)>,
+    /// Which camera of a Kalibr camchain (cam0, cam1, ...). Default: cam0.
+    #[arg(long, value_name = "NAME")]
+    pub camera_name: Option<String>,
+}
+
+impl CameraArgs {
+    /// Reads the camera through the library's one reader of calibration files.
+    pub fn read(&self) -> Result<roitrack::CameraModel> {
+        let options = roitrack::formats::CameraFileOptions {
+            image_size: self.image_size,
+            camera_name: self.camera_name.clone(),
+        };
+        Ok(roitrack::formats::read_camera_file(&self.camera, &options)?)
+    }
+}
+
+/// `640x480` -> (640, 480).
+fn parse_image_size(text: &str) -> Result<(u32, u32), String> {
+    let parsed = text
+        .split_once(['x', 'X'])
+        .and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
+    match parsed {
+        Some((w, h)) if w > 0 && h > 0 => Ok((w, h)),
+        _ => Err(format!(
+            "expected WIDTHxHEIGHT in pixels, e.g. 1280x1024, got {text:?}"
+        )),
     }
 }

@@ -1,4 +1,16 @@
-//! The camera: pinhole intrinsics with skew and plumb_bob lens distortion (OpenCV's convention).
+//! The camera: pinhole intrinsics with skew and a lens distortion model, in OpenCV's conventions.
+//!
+//! Four distortion models ([`Distortion`]), each acting on the normalised image point `(x, y) = (X/Z, Y/Z)` of a
+//! point `(X, Y, Z)` in the camera frame before the intrinsics turn it into pixels:
+//!
+//! - `none`: the pinhole camera.
+//! - `plumb_bob` ([`PlumbBob`], 4 or 5 coefficients `k1 k2 p1 p2 [k3]`): radial `1 + k1 r² + k2 r⁴ + k3 r⁶` and
+//!   tangential `p1 p2` terms, OpenCV's default model (`cv::projectPoints` with 4 or 5 coefficients).
+//! - `rational_polynomial` ([`RationalPolynomial`], 8 coefficients `k1 k2 p1 p2 k3 k4 k5 k6`): the radial factor is
+//!   `(1 + k1 r² + k2 r⁴ + k3 r⁶) / (1 + k4 r² + k5 r⁴ + k6 r⁶)`, OpenCV's `CALIB_RATIONAL_MODEL`.
+//! - `equidistant` ([`Equidistant`], 4 coefficients `k1 k2 k3 k4`): the fisheye model of `cv::fisheye`, where the
+//!   angle `θ = atan(r)` of the ray to the optical axis becomes `θd = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)` and the
+//!   point is scaled by `θd / r`. Skew is `fx α` in OpenCV's fisheye terms.
 //!
 //! Pixels come in two kinds. *Raw* pixels are what the sensor measures (distorted). *Ideal* pixels are the pinhole
 //! projection `u = fx x/z + s y/z + cx`, `v = fy y/z + cy` of the same ray, with the distortion removed. The estimator
@@ -120,6 +132,9 @@ pub struct PlumbBob {
 }
 
 impl PlumbBob {
+    /// The coefficient names, in the order of [`Self::coefficients`].
+    pub const NAMES: [&'static str; 5] = ["k1", "k2", "p1", "p2", "k3"];
+
     /// `[k1, k2, p1, p2, k3]`, the order of ROS camera_info and OpenCV.
     pub fn from_coefficients(c: [f64; 5]) -> Self {
         Self {
@@ -200,7 +215,378 @@ impl PlumbBob {
     }
 }
 
-/// A calibrated camera: image size, pinhole intrinsics, plumb_bob distortion, and when its pixels are exposed.
+/// Newton's method for the undistorted point `n` with `distort(n) = distorted`, to 1e-14 in normalised units, as
+/// [`PlumbBob::undistort`] does. `None` if it does not converge.
+fn undistort_by_newton(
+    distorted: &Vector2<f64>,
+    distort_with_jacobian: impl Fn(&Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>),
+) -> Option<Vector2<f64>> {
+    let mut n = *distorted;
+    for _ in 0..50 {
+        let (d, j) = distort_with_jacobian(&n);
+        let residual = d - distorted;
+        if residual.norm() < 1e-14 {
+            return Some(n);
+        }
+        n -= j.try_inverse()? * residual;
+        if !n.x.is_finite() || !n.y.is_finite() {
+            return None;
+        }
+    }
+    let residual = (distort_with_jacobian(&n).0 - distorted).norm();
+    (residual < 1e-11).then_some(n)
+}
+
+fn check_finite(names: &[&'static str], values: &[f64]) -> Result<(), CameraError> {
+    for (&field, &value) in names.iter().zip(values) {
+        if !value.is_finite() {
+            return Err(CameraError::NotFinite { field, value });
+        }
+    }
+    Ok(())
+}
+
+/// rational_polynomial lens distortion (OpenCV's `CALIB_RATIONAL_MODEL`, ROS's `rational_polynomial`): the radial
+/// factor `(1 + k1 r² + k2 r⁴ + k3 r⁶) / (1 + k4 r² + k5 r⁴ + k6 r⁶)` and plumb_bob's tangential terms.
+///
+/// ```
+/// use nalgebra::Vector2;
+/// use roitrack_core::camera::RationalPolynomial;
+///
+/// let d = RationalPolynomial::from_coefficients([0.1, -0.02, 1e-3, -5e-4, 0.0, 0.05, 0.0, 0.0]);
+/// let n = Vector2::new(0.2, -0.1);
+/// assert!((d.undistort(&d.distort(&n)).unwrap() - n).norm() < 1e-13);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RationalPolynomial {
+    pub k1: f64,
+    pub k2: f64,
+    pub p1: f64,
+    pub p2: f64,
+    pub k3: f64,
+    pub k4: f64,
+    pub k5: f64,
+    pub k6: f64,
+}
+
+impl RationalPolynomial {
+    /// The coefficient names, in the order of [`Self::coefficients`].
+    pub const NAMES: [&'static str; 8] = ["k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"];
+
+    /// `[k1, k2, p1, p2, k3, k4, k5, k6]`, the order of ROS camera_info and OpenCV.
+    pub fn from_coefficients(c: [f64; 8]) -> Self {
+        Self {
+            k1: c[0],
+            k2: c[1],
+            p1: c[2],
+            p2: c[3],
+            k3: c[4],
+            k4: c[5],
+            k5: c[6],
+            k6: c[7],
+        }
+    }
+
+    pub fn coefficients(&self) -> [f64; 8] {
+        [
+            self.k1, self.k2, self.p1, self.p2, self.k3, self.k4, self.k5, self.k6,
+        ]
+    }
+
+    pub fn validate(&self) -> Result<(), CameraError> {
+        check_finite(&Self::NAMES, &self.coefficients())
+    }
+
+    /// Distorted normalised point of an undistorted one, and the 2x2 Jacobian of that map.
+    #[inline]
+    pub fn distort_with_jacobian(&self, n: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
+        let (x, y) = (n.x, n.y);
+        let r2 = x * x + y * y;
+        let num = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
+        let den = 1.0 + r2 * (self.k4 + r2 * (self.k5 + r2 * self.k6));
+        let d_num = self.k1 + r2 * (2.0 * self.k2 + 3.0 * r2 * self.k3);
+        let d_den = self.k4 + r2 * (2.0 * self.k5 + 3.0 * r2 * self.k6);
+        let radial = num / den;
+        let d_radial_d_r2 = (d_num * den - num * d_den) / (den * den);
+        let xy = x * y;
+        let distorted = Vector2::new(
+            x * radial + 2.0 * self.p1 * xy + self.p2 * (r2 + 2.0 * x * x),
+            y * radial + self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * xy,
+        );
+        let cross = 2.0 * xy * d_radial_d_r2 + 2.0 * self.p1 * x + 2.0 * self.p2 * y;
+        let jacobian = Matrix2::new(
+            radial + 2.0 * x * x * d_radial_d_r2 + 2.0 * self.p1 * y + 6.0 * self.p2 * x,
+            cross,
+            cross,
+            radial + 2.0 * y * y * d_radial_d_r2 + 6.0 * self.p1 * y + 2.0 * self.p2 * x,
+        );
+        (distorted, jacobian)
+    }
+
+    #[inline]
+    pub fn distort(&self, n: &Vector2<f64>) -> Vector2<f64> {
+        self.distort_with_jacobian(n).0
+    }
+
+    /// The undistorted normalised point whose distortion is `distorted`, by Newton's method, to 1e-14 in normalised
+    /// units. `None` if it does not converge.
+    pub fn undistort(&self, distorted: &Vector2<f64>) -> Option<Vector2<f64>> {
+        undistort_by_newton(distorted, |n| self.distort_with_jacobian(n))
+    }
+}
+
+/// equidistant (fisheye) lens distortion, OpenCV's `cv::fisheye` model and ROS's `equidistant`: the angle
+/// `θ = atan(r)` between the ray and the optical axis becomes `θd = θ (1 + k1 θ² + k2 θ⁴ + k3 θ⁶ + k4 θ⁸)`, and the
+/// normalised point `(x, y)` becomes `(θd / r) (x, y)`.
+///
+/// Rays at 90° or more from the axis have no normalised point, so this model covers fields of view under 180°; the
+/// estimator's ideal pixels grow without bound towards 90°.
+///
+/// ```
+/// use nalgebra::Vector2;
+/// use roitrack_core::camera::Equidistant;
+///
+/// let d = Equidistant::from_coefficients([-0.01, 0.003, -0.001, 2e-4]);
+/// let n = Vector2::new(0.8, -0.5);
+/// assert!((d.undistort(&d.distort(&n)).unwrap() - n).norm() < 1e-13);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Equidistant {
+    pub k1: f64,
+    pub k2: f64,
+    pub k3: f64,
+    pub k4: f64,
+}
+
+impl Equidistant {
+    /// The coefficient names, in the order of [`Self::coefficients`].
+    pub const NAMES: [&'static str; 4] = ["k1", "k2", "k3", "k4"];
+
+    /// `[k1, k2, k3, k4]`, the order of `cv::fisheye` and ROS.
+    pub fn from_coefficients(c: [f64; 4]) -> Self {
+        Self {
+            k1: c[0],
+            k2: c[1],
+            k3: c[2],
+            k4: c[3],
+        }
+    }
+
+    pub fn coefficients(&self) -> [f64; 4] {
+        [self.k1, self.k2, self.k3, self.k4]
+    }
+
+    pub fn validate(&self) -> Result<(), CameraError> {
+        check_finite(&Self::NAMES, &self.coefficients())
+    }
+
+    /// `θd(θ)` and its derivative.
+    #[inline]
+    fn theta_d(&self, theta: f64) -> (f64, f64) {
+        let t2 = theta * theta;
+        let poly = 1.0 + t2 * (self.k1 + t2 * (self.k2 + t2 * (self.k3 + t2 * self.k4)));
+        let d_poly = 1.0
+            + t2 * (3.0 * self.k1
+                + t2 * (5.0 * self.k2 + t2 * (7.0 * self.k3 + t2 * 9.0 * self.k4)));
+        (theta * poly, d_poly)
+    }
+
+    /// Distorted normalised point of an undistorted one, and the 2x2 Jacobian of that map.
+    #[inline]
+    pub fn distort_with_jacobian(&self, n: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
+        let r2 = n.norm_squared();
+        let r = r2.sqrt();
+        // Below 1e-8 the scale is 1 to within r², as in OpenCV.
+        if r <= 1e-8 {
+            return (*n, Matrix2::identity());
+        }
+        let theta = r.atan();
+        let (theta_d, d_theta_d) = self.theta_d(theta);
+        let scale = theta_d / r;
+        // d(scale)/dr, divided by r: the Jacobian is scale I + (d scale / dr / r) n nᵀ.
+        let d_scale_over_r = (d_theta_d / (1.0 + r2) - scale) / r2;
+        let outer = n * n.transpose();
+        (
+            n * scale,
+            Matrix2::identity() * scale + outer * d_scale_over_r,
+        )
+    }
+
+    #[inline]
+    pub fn distort(&self, n: &Vector2<f64>) -> Vector2<f64> {
+        self.distort_with_jacobian(n).0
+    }
+
+    /// The undistorted normalised point whose distortion is `distorted`: Newton's method on the angle `θ` (to 1e-15
+    /// rad), then `tan θ`. `None` if it does not converge, or if the angle would be 90° or more (outside the model's
+    /// range, or beyond the turning point of `θd(θ)`).
+    pub fn undistort(&self, distorted: &Vector2<f64>) -> Option<Vector2<f64>> {
+        let theta_d = distorted.norm();
+        if !theta_d.is_finite() {
+            return None;
+        }
+        if theta_d <= 1e-8 {
+            return Some(*distorted);
+        }
+        let half_pi = std::f64::consts::FRAC_PI_2;
+        let mut theta = theta_d.min(1.5);
+        let mut converged = false;
+        for _ in 0..50 {
+            let (f, df) = self.theta_d(theta);
+            if df <= 0.0 || !df.is_finite() {
+                return None;
+            }
+            let step = (f - theta_d) / df;
+            theta -= step;
+            if !theta.is_finite() || theta < 0.0 || theta >= half_pi {
+                return None;
+            }
+            if step.abs() < 1e-15 {
+                converged = true;
+                break;
+            }
+        }
+        let residual = (self.theta_d(theta).0 - theta_d).abs();
+        if !converged && residual > 1e-12 {
+            return None;
+        }
+        // The map must be increasing up to θ, or another angle could give the same θd.
+        if self.theta_d(theta).1 <= 0.0 {
+            return None;
+        }
+        Some(distorted * (theta.tan() / theta_d))
+    }
+}
+
+/// A lens distortion model: how the normalised image point of a ray is moved before the intrinsics apply.
+///
+/// Each model maps an undistorted normalised point to a distorted one ([`Self::distort_with_jacobian`]) and back
+/// ([`Self::undistort`], by iteration). `From` the model structs, so `CameraModel::new` takes any of them.
+///
+/// ```
+/// use nalgebra::Vector2;
+/// use roitrack_core::camera::{Distortion, Equidistant, PlumbBob};
+///
+/// let fisheye = Distortion::from(Equidistant::from_coefficients([0.05, -0.01, 0.0, 0.0]));
+/// assert_eq!(fisheye.model_name(), "equidistant");
+/// assert_eq!(Distortion::from(PlumbBob::default()).model_name(), "plumb_bob");
+/// assert!(Distortion::None.is_identity());
+/// let n = Vector2::new(0.3, 0.2);
+/// assert!((fisheye.undistort(&fisheye.distort(&n)).unwrap() - n).norm() < 1e-13);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Distortion {
+    /// No distortion: the pinhole camera.
+    None,
+    PlumbBob(PlumbBob),
+    RationalPolynomial(RationalPolynomial),
+    Equidistant(Equidistant),
+}
+
+impl Default for Distortion {
+    /// plumb_bob with zero coefficients, as ROS and roitrack's own files write an undistorted camera.
+    fn default() -> Self {
+        Self::PlumbBob(PlumbBob::default())
+    }
+}
+
+impl From<PlumbBob> for Distortion {
+    fn from(d: PlumbBob) -> Self {
+        Self::PlumbBob(d)
+    }
+}
+
+impl From<RationalPolynomial> for Distortion {
+    fn from(d: RationalPolynomial) -> Self {
+        Self::RationalPolynomial(d)
+    }
+}
+
+impl From<Equidistant> for Distortion {
+    fn from(d: Equidistant) -> Self {
+        Self::Equidistant(d)
+    }
+}
+
+impl Distortion {
+    /// The model's name as ROS writes it: `none`, `plumb_bob`, `rational_polynomial`, `equidistant`.
+    pub fn model_name(&self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::PlumbBob(_) => "plumb_bob",
+            Self::RationalPolynomial(_) => "rational_polynomial",
+            Self::Equidistant(_) => "equidistant",
+        }
+    }
+
+    /// The coefficients in ROS's and OpenCV's order (none for `none`).
+    pub fn coefficients(&self) -> Vec<f64> {
+        match self {
+            Self::None => Vec::new(),
+            Self::PlumbBob(d) => d.coefficients().to_vec(),
+            Self::RationalPolynomial(d) => d.coefficients().to_vec(),
+            Self::Equidistant(d) => d.coefficients().to_vec(),
+        }
+    }
+
+    /// The coefficients' names, in the order of [`Self::coefficients`].
+    pub fn coefficient_names(&self) -> &'static [&'static str] {
+        match self {
+            Self::None => &[],
+            Self::PlumbBob(_) => &PlumbBob::NAMES,
+            Self::RationalPolynomial(_) => &RationalPolynomial::NAMES,
+            Self::Equidistant(_) => &Equidistant::NAMES,
+        }
+    }
+
+    /// Whether the model leaves every point where it is (no model, or all coefficients zero).
+    pub fn is_identity(&self) -> bool {
+        self.coefficients().iter().all(|&c| c == 0.0)
+    }
+
+    pub fn validate(&self) -> Result<(), CameraError> {
+        match self {
+            Self::None => Ok(()),
+            Self::PlumbBob(d) => d.validate(),
+            Self::RationalPolynomial(d) => d.validate(),
+            Self::Equidistant(d) => d.validate(),
+        }
+    }
+
+    /// Distorted normalised point of an undistorted one, and the 2x2 Jacobian of that map.
+    #[inline]
+    pub fn distort_with_jacobian(&self, n: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
+        match self {
+            Self::None => (*n, Matrix2::identity()),
+            Self::PlumbBob(d) => d.distort_with_jacobian(n),
+            Self::RationalPolynomial(d) => d.distort_with_jacobian(n),
+            Self::Equidistant(d) => d.distort_with_jacobian(n),
+        }
+    }
+
+    #[inline]
+    pub fn distort(&self, n: &Vector2<f64>) -> Vector2<f64> {
+        match self {
+            Self::None => *n,
+            Self::PlumbBob(d) => d.distort(n),
+            Self::RationalPolynomial(d) => d.distort(n),
+            Self::Equidistant(d) => d.distort(n),
+        }
+    }
+
+    /// The undistorted normalised point whose distortion is `distorted`, by iteration (to about 1e-14 in normalised
+    /// units); `None` if it does not converge.
+    pub fn undistort(&self, distorted: &Vector2<f64>) -> Option<Vector2<f64>> {
+        match self {
+            Self::None => Some(*distorted),
+            Self::PlumbBob(d) => d.undistort(distorted),
+            Self::RationalPolynomial(d) => d.undistort(distorted),
+            Self::Equidistant(d) => d.undistort(distorted),
+        }
+    }
+}
+
+/// A calibrated camera: image size, pinhole intrinsics, a lens distortion model, and when its pixels are exposed.
 ///
 /// ```
 /// use nalgebra::{Vector2, Vector3};
@@ -222,7 +608,7 @@ pub struct CameraModel {
     pub width_px: u32,
     pub height_px: u32,
     pub intrinsics: PinholeIntrinsics,
-    pub distortion: PlumbBob,
+    pub distortion: Distortion,
     /// When each blob is exposed (default: sequential ROIs, 100 µs).
     pub time: TimeModel,
 }
@@ -234,8 +620,9 @@ impl CameraModel {
         width_px: u32,
         height_px: u32,
         intrinsics: PinholeIntrinsics,
-        distortion: PlumbBob,
+        distortion: impl Into<Distortion>,
     ) -> Result<Self, CameraError> {
+        let distortion = distortion.into();
         if width_px == 0 || height_px == 0 {
             return Err(CameraError::EmptyImage {
                 width_px,
@@ -273,7 +660,7 @@ impl CameraModel {
                 cx_px: 512.0,
                 cy_px: 512.0,
             },
-            distortion: PlumbBob::default(),
+            distortion: Distortion::default(),
             time: TimeModel::default(),
         }
     }
@@ -292,7 +679,7 @@ impl CameraModel {
                 cx_px: 515.0,
                 cy_px: 506.0,
             },
-            distortion: PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, -0.03]),
+            distortion: PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, -0.03]).into(),
             time: TimeModel::default(),
         }
     }
@@ -310,6 +697,39 @@ impl CameraModel {
             self.intrinsics
                 .pixel_from_normalized(&self.distortion.distort(&n)),
         )
+    }
+
+    /// Raw (distorted) pixel of a point in the camera frame and its 2x3 Jacobian with respect to that point, or `None`
+    /// if the point is not in front of the camera.
+    ///
+    /// ```
+    /// use nalgebra::Vector3;
+    /// use roitrack_core::CameraModel;
+    ///
+    /// let camera = CameraModel::wide_angle_example();
+    /// let p = Vector3::new(0.05, -0.03, 0.6);
+    /// let (px, jacobian) = camera.raw_pixel_with_jacobian_wrt_cam(&p).unwrap();
+    /// assert_eq!(Some(px), camera.raw_pixel_from_cam(&p));
+    /// let dz = Vector3::new(0.0, 0.0, 1e-6);
+    /// let moved = camera.raw_pixel_from_cam(&(p + dz)).unwrap();
+    /// assert!((moved - px - jacobian * dz).norm() < 1e-9);
+    /// ```
+    pub fn raw_pixel_with_jacobian_wrt_cam(
+        &self,
+        point_in_cam: &Vector3<f64>,
+    ) -> Option<(Vector2<f64>, nalgebra::Matrix2x3<f64>)> {
+        let z = point_in_cam.z;
+        if z <= 0.0 || !z.is_finite() {
+            return None;
+        }
+        let inv_z = 1.0 / z;
+        // Divided as in raw_pixel_from_cam, so that both give the same pixel to the bit.
+        let n = Vector2::new(point_in_cam.x / z, point_in_cam.y / z);
+        let (distorted, jd) = self.distortion.distort_with_jacobian(&n);
+        let k = &self.intrinsics;
+        let dn_dp = nalgebra::Matrix2x3::new(inv_z, 0.0, -n.x * inv_z, 0.0, inv_z, -n.y * inv_z);
+        let dk = Matrix2::new(k.fx_px, k.skew_px, 0.0, k.fy_px);
+        Some((k.pixel_from_normalized(&distorted), dk * jd * dn_dp))
     }
 
     /// Raw (distorted) pixel of an ideal pixel.

@@ -33,7 +33,10 @@ pub mod stats;
 pub mod target;
 pub mod time;
 
-pub use camera::{CameraError, CameraModel, PinholeIntrinsics, PlumbBob};
+pub use camera::{
+    CameraError, CameraModel, Distortion, Equidistant, PinholeIntrinsics, PlumbBob,
+    RationalPolynomial,
+};
 pub use projection::{JacobianKind, SpatioTemporalModel};
 pub use roi_order::RoiOrder;
 pub use samples::{Measurement, PoseSample, TwistSample};

@@ -25,7 +25,7 @@ use std::fmt::{self, Write as _};
 use std::io::Write as _;
 use std::path::Path;
 
-use roitrack_core::{CameraError, CameraModel, PinholeIntrinsics, PlumbBob};
+use roitrack_core::{CameraError, CameraModel, Distortion, PinholeIntrinsics};
 use serde::Deserialize;
 use serde::de::{self, DeserializeSeed, IgnoredAny, MapAccess, SeqAccess, Unexpected, Visitor};
 
@@ -55,8 +55,9 @@ pub fn read_camera_yaml(path: impl AsRef<Path>) -> Result<CameraModel, FormatErr
 /// Parses ROS camera_info YAML text; `path` names it in errors.
 ///
 /// Checks: YAML syntax; image sizes positive integers; `camera_matrix` 3 x 3 with 9 finite numbers, `fx, fy > 0`,
-/// bottom row `[0, 0, 1]` and `data[3] = 0`; `distortion_model` `plumb_bob` with 5 finite coefficients, or no
-/// coefficients at all (no distortion; the model may then be absent or empty). Errors carry the parser's line and the
+/// bottom row `[0, 0, 1]` and `data[3] = 0`; `distortion_model` `plumb_bob` with 4 or 5 finite coefficients,
+/// `rational_polynomial` with 8, `equidistant` with 4, or no coefficients at all (no distortion; the model may then be
+/// absent, empty or `none`). Errors carry the parser's line and the
 /// key path, e.g. `camera.yaml:7: field 'camera_matrix.data[0] (fx)': fx must be positive, got 0 (column 10)`.
 pub fn parse_camera_yaml(text: &str, path: impl AsRef<Path>) -> Result<CameraModel, FormatError> {
     let path = path.as_ref();
@@ -68,30 +69,23 @@ pub fn parse_camera_yaml(text: &str, path: impl AsRef<Path>) -> Result<CameraMod
     }
     let doc: CameraInfoYaml = serde_yaml_ng::from_str(text).map_err(|e| yaml_error(&e, path))?;
     let coefficients = doc.distortion_coefficients.map(|c| c.0).unwrap_or_default();
-    let distortion = match (doc.distortion_model, coefficients.as_slice()) {
-        (_, []) => PlumbBob::default(),
-        (Some(DistortionModel::PlumbBob), &[k1, k2, p1, p2, k3]) => {
-            PlumbBob::from_coefficients([k1, k2, p1, p2, k3])
-        }
-        (Some(DistortionModel::PlumbBob), c) => {
-            // The sequence visitor already refuses any count but 0 and 5.
-            return Err(FormatError::new(
-                path,
-                format!("expected 5 numbers [k1, k2, p1, p2, k3], got {}", c.len()),
-            )
-            .with_field("distortion_coefficients.data"));
-        }
-        (None | Some(DistortionModel::Unspecified), c) => {
+    let model = match doc.distortion_model {
+        Some(DistortionModel(name)) => name,
+        None if coefficients.is_empty() => String::new(),
+        None => {
             return Err(FormatError::new(
                 path,
                 format!(
-                    "missing, but distortion_coefficients has {} values: set it to plumb_bob",
-                    c.len()
+                    "missing, but distortion_coefficients has {} values: set it to plumb_bob, \
+                     rational_polynomial or equidistant",
+                    coefficients.len()
                 ),
             )
             .with_field("distortion_model"));
         }
     };
+    let distortion = crate::camera_file::distortion_from(&model, &coefficients)
+        .map_err(|e| FormatError::new(path, e).with_field("distortion_coefficients.data"))?;
     // The deserializer has checked that K has 9 numbers in the right layout.
     let &[fx_px, skew_px, cx_px, _, fy_px, cy_px, ..] = doc.camera_matrix.0.as_slice() else {
         return Err(FormatError::new(path, "expected 9 numbers").with_field("camera_matrix.data"));
@@ -110,7 +104,7 @@ pub fn parse_camera_yaml(text: &str, path: impl AsRef<Path>) -> Result<CameraMod
         intrinsics,
         distortion,
     )
-    .map_err(|e| camera_error(&e, path))
+    .map_err(|e| camera_error(&e, &distortion, path))
 }
 
 /// The camera as ROS camera_info YAML text. Numbers are written with full round-trip precision and always as YAML
@@ -134,13 +128,19 @@ pub fn camera_yaml_string(camera: &CameraModel) -> String {
         yaml_string(&camera.name)
     );
     write_matrix(&mut text, "camera_matrix", 3, 3, &camera_matrix);
-    text.push_str("distortion_model: plumb_bob\n");
+    // No distortion is written as plumb_bob without coefficients, which every ROS reader takes.
+    let model = match camera.distortion {
+        Distortion::None => "plumb_bob",
+        d => d.model_name(),
+    };
+    let coefficients = camera.distortion.coefficients();
+    let _ = writeln!(text, "distortion_model: {model}");
     write_matrix(
         &mut text,
         "distortion_coefficients",
         1,
-        5,
-        &camera.distortion.coefficients(),
+        coefficients.len(),
+        &coefficients,
     );
     write_matrix(&mut text, "rectification_matrix", 3, 3, &rectification);
     write_matrix(&mut text, "projection_matrix", 3, 4, &projection);
@@ -158,7 +158,7 @@ pub fn write_camera_yaml(path: impl AsRef<Path>, camera: &CameraModel) -> Result
         camera.intrinsics,
         camera.distortion,
     )
-    .map_err(|e| camera_error(&e, path))?;
+    .map_err(|e| camera_error(&e, &camera.distortion, path))?;
     let mut file = AtomicFile::create(path)?;
     file.write_all(camera_yaml_string(camera).as_bytes())
         .map_err(|e| file.write_error(e))?;
@@ -271,7 +271,8 @@ fn yaml_error(error: &serde_yaml_ng::Error, path: &Path) -> FormatError {
 /// `camera_matrix.data[0]` -> `camera_matrix.data[0] (fx)`, and likewise for the distortion coefficients.
 fn annotate_field(field: &str) -> String {
     const K_NAMES: [&str; 9] = ["fx", "skew", "cx", "", "fy", "cy", "", "", ""];
-    const D_NAMES: [&str; 5] = ["k1", "k2", "p1", "p2", "k3"];
+    // plumb_bob's and rational_polynomial's order; equidistant's k3 and k4 stand where these have p1 and p2.
+    const D_NAMES: [&str; 8] = ["k1", "k2", "p1 or k3", "p2 or k4", "k3", "k4", "k5", "k6"];
     let name = field
         .strip_prefix("camera_matrix.data[")
         .and_then(|r| r.strip_suffix(']'))
@@ -291,28 +292,30 @@ fn annotate_field(field: &str) -> String {
 }
 
 /// A [`CameraError`] as a [`FormatError`] naming the YAML field of the offending value.
-fn camera_error(error: &CameraError, path: &Path) -> FormatError {
+fn camera_error(error: &CameraError, distortion: &Distortion, path: &Path) -> FormatError {
     let field = match error {
         CameraError::NotFinite { field, .. } | CameraError::NotPositive { field, .. } => {
             match *field {
-                "fx" => "camera_matrix.data[0] (fx)",
-                "skew" => "camera_matrix.data[1] (skew)",
-                "cx" => "camera_matrix.data[2] (cx)",
-                "fy" => "camera_matrix.data[4] (fy)",
-                "cy" => "camera_matrix.data[5] (cy)",
-                "k1" => "distortion_coefficients.data[0] (k1)",
-                "k2" => "distortion_coefficients.data[1] (k2)",
-                "p1" => "distortion_coefficients.data[2] (p1)",
-                "p2" => "distortion_coefficients.data[3] (p2)",
-                "k3" => "distortion_coefficients.data[4] (k3)",
-                other => other,
+                "fx" => "camera_matrix.data[0] (fx)".to_string(),
+                "skew" => "camera_matrix.data[1] (skew)".to_string(),
+                "cx" => "camera_matrix.data[2] (cx)".to_string(),
+                "fy" => "camera_matrix.data[4] (fy)".to_string(),
+                "cy" => "camera_matrix.data[5] (cy)".to_string(),
+                name => match distortion
+                    .coefficient_names()
+                    .iter()
+                    .position(|n| n == &name)
+                {
+                    Some(i) => format!("distortion_coefficients.data[{i}] ({name})"),
+                    None => name.to_string(),
+                },
             }
         }
-        CameraError::EmptyImage { width_px: 0, .. } => "image_width",
-        CameraError::EmptyImage { .. } => "image_height",
-        CameraError::UndistortionDiverged { .. } => "distortion_coefficients",
+        CameraError::EmptyImage { width_px: 0, .. } => "image_width".to_string(),
+        CameraError::EmptyImage { .. } => "image_height".to_string(),
+        CameraError::UndistortionDiverged { .. } => "distortion_coefficients".to_string(),
         // A camera_info file carries no time model: a camera read from one has the default (sequential ROIs).
-        CameraError::TimeModel(_) => "time model",
+        CameraError::TimeModel(_) => "time model".to_string(),
     };
     FormatError::new(path, error.to_string()).with_field(field)
 }
@@ -359,11 +362,8 @@ impl<'de> Deserialize<'de> for ImageSize {
     }
 }
 
-enum DistortionModel {
-    PlumbBob,
-    /// An empty string: allowed with no coefficients.
-    Unspecified,
-}
+/// The `distortion_model` string (checked against the coefficients once both are read).
+struct DistortionModel(String);
 
 impl<'de> Deserialize<'de> for DistortionModel {
     fn deserialize<D: de::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
@@ -371,16 +371,13 @@ impl<'de> Deserialize<'de> for DistortionModel {
         impl Visitor<'_> for V {
             type Value = DistortionModel;
             fn expecting(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-                f.write_str("a distortion model name (plumb_bob)")
+                f.write_str("a distortion model name (plumb_bob, rational_polynomial, equidistant)")
             }
             fn visit_str<E: de::Error>(self, v: &str) -> Result<DistortionModel, E> {
-                match v.trim() {
-                    "plumb_bob" => Ok(DistortionModel::PlumbBob),
-                    "" => Ok(DistortionModel::Unspecified),
-                    other => Err(E::custom(format!(
-                        "unsupported distortion model {other:?}: roitrack supports only plumb_bob \
-                         (5 coefficients k1, k2, p1, p2, k3)"
-                    ))),
+                let name = v.trim();
+                match crate::camera_file::check_model_name(name) {
+                    Ok(()) => Ok(DistortionModel(name.to_string())),
+                    Err(e) => Err(E::custom(e)),
                 }
             }
         }
@@ -393,7 +390,7 @@ impl<'de> Deserialize<'de> for DistortionModel {
 enum MatrixKind {
     /// K, 3 x 3.
     Camera,
-    /// plumb_bob, 1 x 5 (or empty).
+    /// The distortion coefficients, 1 x N.
     Distortion,
 }
 
@@ -401,14 +398,16 @@ impl MatrixKind {
     fn describe(self) -> &'static str {
         match self {
             Self::Camera => "9 numbers (3 x 3, row-major)",
-            Self::Distortion => "5 numbers [k1, k2, p1, p2, k3], or none for no distortion",
+            Self::Distortion => {
+                "4, 5 or 8 numbers (k1, k2, p1, p2[, k3[, k4, k5, k6]] or equidistant's k1, k2, k3, k4), or none"
+            }
         }
     }
 
     fn count_ok(self, n: usize) -> bool {
         match self {
             Self::Camera => n == 9,
-            Self::Distortion => n == 5 || n == 0,
+            Self::Distortion => matches!(n, 0 | 4 | 5 | 8),
         }
     }
 
@@ -436,7 +435,7 @@ impl MatrixKind {
 /// The 9 numbers of K, row-major, checked.
 struct CameraMatrix(Vec<f64>);
 
-/// 0 or 5 plumb_bob coefficients, checked.
+/// 0, 4, 5 or 8 distortion coefficients, checked.
 struct DistortionCoefficients(Vec<f64>);
 
 impl<'de> Deserialize<'de> for CameraMatrix {
@@ -580,6 +579,7 @@ impl Visitor<'_> for NumberSeed {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use roitrack_core::PlumbBob;
 
     const CANONICAL: &str = "\
 image_width: 1024
@@ -653,8 +653,17 @@ projection_matrix:
         let (a, b) = (back.intrinsics, camera.intrinsics);
         assert_eq!(a.cx_px.to_bits(), b.cx_px.to_bits());
         assert_eq!(
-            back.distortion.coefficients().map(f64::to_bits),
-            camera.distortion.coefficients().map(f64::to_bits)
+            back.distortion
+                .coefficients()
+                .into_iter()
+                .map(f64::to_bits)
+                .collect::<Vec<_>>(),
+            camera
+                .distortion
+                .coefficients()
+                .into_iter()
+                .map(f64::to_bits)
+                .collect::<Vec<_>>()
         );
     }
 
@@ -681,8 +690,8 @@ projection_matrix:
     #[test]
     fn extreme_floats_round_trip() {
         let mut camera = distorted();
-        camera.distortion.k3 = 1e-300;
-        camera.distortion.p1 = -2.5e-17;
+        camera.distortion =
+            PlumbBob::from_coefficients([-0.28, 0.12, -2.5e-17, -8e-4, 1e-300]).into();
         camera.intrinsics.fx_px = 1e300;
         camera.intrinsics.cy_px = -0.0;
         let back = parse_camera_yaml(&camera_yaml_string(&camera), "c.yaml").unwrap();
@@ -820,7 +829,17 @@ projection_matrix:
             "distortion_model: rational_polynomial",
         ));
         assert!(
-            e.starts_with("camera.yaml:8: field 'distortion_model': unsupported distortion model \"rational_polynomial\""),
+            e.starts_with("camera.yaml: field 'distortion_coefficients.data': rational_polynomial takes 8 numbers"),
+            "{e}"
+        );
+        let e = parse_err(&canonical_with(
+            "distortion_model: plumb_bob",
+            "distortion_model: omni",
+        ));
+        assert!(
+            e.starts_with(
+                "camera.yaml:8: field 'distortion_model': unsupported distortion model \"omni\""
+            ),
             "{e}"
         );
         let e = parse_err(&canonical_with("distortion_model: plumb_bob\n", ""));
@@ -828,13 +847,33 @@ projection_matrix:
             e.starts_with("camera.yaml: field 'distortion_model': missing"),
             "{e}"
         );
+        // Four plumb_bob coefficients are k1, k2, p1, p2 with k3 = 0.
+        let four = canonical_with(
+            "  cols: 5\n  data: [0.0, 0.0, 0.0, 0.0, 0.0]",
+            "  cols: 4\n  data: [-0.1, 0.01, 0.001, 0.002]",
+        );
+        let c = parse_camera_yaml(&four, "c.yaml").unwrap();
+        assert_eq!(
+            c.distortion,
+            PlumbBob::from_coefficients([-0.1, 0.01, 0.001, 0.002, 0.0]).into()
+        );
+        let e = parse_err(
+            &four
+                .replace("plumb_bob", "equidistant")
+                .replace("cols: 4", "cols: 5")
+                .replace("0.002]", "0.002, 0.0]"),
+        );
+        assert!(
+            e.contains("field 'distortion_coefficients.data': equidistant takes 4 numbers"),
+            "{e}"
+        );
         let e = parse_err(&canonical_with(
             "  cols: 5\n  data: [0.0, 0.0, 0.0, 0.0, 0.0]",
-            "  cols: 4\n  data: [0.0, 0.0, 0.0, 0.0]",
+            "  cols: 3\n  data: [0.0, 0.0, 0.0]",
         ));
         assert!(
             e.starts_with(
-                "camera.yaml:12: field 'distortion_coefficients.data': expected 5 numbers"
+                "camera.yaml:12: field 'distortion_coefficients.data': expected 4, 5 or 8 numbers"
             ),
             "{e}"
         );
@@ -846,6 +885,39 @@ projection_matrix:
             e.starts_with("camera.yaml:10: field 'distortion_coefficients': rows x cols"),
             "{e}"
         );
+    }
+
+    #[test]
+    fn every_model_round_trips_bit_exactly() {
+        use roitrack_core::camera::{Equidistant, RationalPolynomial};
+        for distortion in [
+            Distortion::None,
+            PlumbBob::from_coefficients([-0.28, 0.12, 1.2e-3, -8e-4, 0.1 + 0.2]).into(),
+            RationalPolynomial::from_coefficients([
+                0.42, -0.11, 7e-4, -4e-4, 0.013, 0.71, -0.05, 1e-300,
+            ])
+            .into(),
+            Equidistant::from_coefficients([-0.013, 0.021, -0.011, 0.0023]).into(),
+        ] {
+            let mut camera = distorted();
+            camera.distortion = distortion;
+            let text = camera_yaml_string(&camera);
+            assert!(
+                text.contains(&format!(
+                    "distortion_model: {}",
+                    match distortion {
+                        Distortion::None => "plumb_bob",
+                        d => d.model_name(),
+                    }
+                )),
+                "{text}"
+            );
+            assert_eq!(
+                parse_camera_yaml(&text, "c.yaml").unwrap(),
+                camera,
+                "{text}"
+            );
+        }
     }
 
     #[test]

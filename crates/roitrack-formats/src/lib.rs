@@ -6,6 +6,7 @@
 //! | file | reader | writer |
 //! | --- | --- | --- |
 //! | camera: ROS camera_info YAML | [`read_camera_yaml`], [`parse_camera_yaml`] | [`write_camera_yaml`], [`camera_yaml_string`] |
+//! | camera: any calibration file (ROS YAML or topic echo, OpenCV FileStorage YAML or XML, Kalibr camchain), by content | [`read_camera_file`], [`parse_camera_file`] | |
 //! | target: CSV `id,x,y,z[,diameter]` (m, object frame) | [`read_target_csv`], [`parse_target_csv`] | [`write_target_csv`], [`target_csv_string`] |
 //! | measurements: CSV `t,id,u,v` (s, raw px) | [`MeasurementReader`] (streaming), [`read_measurements_csv`] | [`MeasurementWriter`], [`write_measurements_csv`] |
 //! | poses: TUM `t tx ty tz qx qy qz qw` (camera_T_object) | [`read_tum`], [`parse_tum`] | [`PoseWriter`], [`write_tum`] |
@@ -49,6 +50,8 @@
 //! ```
 
 mod atomic;
+mod camera_file;
+mod camera_xml;
 mod camera_yaml;
 mod covariance;
 mod csv_util;
@@ -66,6 +69,10 @@ mod twists;
 mod video;
 
 pub use atomic::AtomicFile;
+pub use camera_file::{
+    CameraFileFormat, CameraFileOptions, detect_camera_format, distortion_from, parse_camera_file,
+    read_camera_file,
+};
 pub use camera_yaml::{camera_yaml_string, parse_camera_yaml, read_camera_yaml, write_camera_yaml};
 pub use covariance::{
     COVARIANCE_ENTRIES, COVARIANCE_SIZE, CovarianceWriter, covariance_entry_index,

@@ -874,7 +874,7 @@ impl Area {
 }
 
 /// Undistorted normalised rays (x/z, y/z) at the pixel corners of the area, row-major, `(width + 1) x (height + 1)`.
-/// Newton's method as in [`roitrack_core::PlumbBob::undistort`], started from the quadratic extrapolation of the three
+/// Newton's method as in [`roitrack_core::Distortion::undistort`], started from the quadratic extrapolation of the three
 /// previous corners of the row (within about 1e-9): one step instead of five or six.
 fn corner_rays(camera: &CameraModel, area: &Area) -> Result<Vec<[f64; 2]>, PhotoError> {
     let k = &camera.intrinsics;
@@ -919,7 +919,7 @@ fn corner_rays(camera: &CameraModel, area: &Area) -> Result<Vec<[f64; 2]>, Photo
 /// converge in 10 steps.
 #[inline]
 fn refine_undistortion(
-    distortion: &roitrack_core::PlumbBob,
+    distortion: &roitrack_core::Distortion,
     distorted: &Vector2<f64>,
     guess: Vector2<f64>,
 ) -> Option<Vector2<f64>> {

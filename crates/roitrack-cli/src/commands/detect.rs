@@ -11,6 +11,8 @@ use roitrack::pipeline::{PhotoDetection, PhotoOptions, PolarityChoice, detect_ta
 use roitrack::{CameraModel, Target};
 use serde_json::json;
 
+use crate::args::CameraArgs;
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum PolarityArg {
     /// Try both, per image, and say which identified the target.
@@ -47,9 +49,9 @@ pub fn distance_range(distance_m: Option<&[f64]>) -> Result<Option<(f64, f64)>> 
 /// Exits with status 1 if any image failed, each failure's reason printed.
 #[derive(Debug, Args)]
 pub struct DetectArgs {
-    /// Camera intrinsics (ROS camera_info YAML); the images must be its size.
-    #[arg(long)]
-    pub camera: PathBuf,
+    /// The camera (the images must be its size).
+    #[command(flatten)]
+    pub camera: CameraArgs,
     /// Target file (CSV id,x,y,z,diameter in metres; `roitrack target grid` writes grids).
     #[arg(long)]
     pub target: PathBuf,
@@ -76,7 +78,7 @@ pub struct DetectArgs {
 }
 
 pub fn run(args: &DetectArgs) -> Result<()> {
-    let camera = roitrack::formats::read_camera_yaml(&args.camera)?;
+    let camera = args.camera.read()?;
     let target = roitrack::formats::read_target_csv(&args.target)?;
     if let Some(dir) = &args.overlay {
         std::fs::create_dir_all(dir).map_err(|e| {

@@ -10,16 +10,15 @@ use roitrack::formats::{EstimateWriter, MeasurementReader, RoiRecordingReader};
 use roitrack::image::CentroidOptions;
 use roitrack::{EstimatorReport, TrackStatus, Tracker};
 
-use crate::args::{EstimatorArgs, ShutterArg};
+use crate::args::{CameraArgs, EstimatorArgs, ShutterArg};
 use crate::commands::detect::{PolarityArg, distance_range};
 
 /// Track pose and velocity from a measurements file (t,id,u,v), a ROI recording, or frames (an image folder, a
 /// numbered pattern, a glob or a video): one pose and one twist per control step (per frame with --images).
 #[derive(Debug, Args)]
 pub struct TrackArgs {
-    /// Camera calibration (ROS camera_info YAML).
-    #[arg(long)]
-    pub camera: PathBuf,
+    #[command(flatten)]
+    pub camera: CameraArgs,
     /// Target model (CSV id,x,y,z[,diameter], metres).
     #[arg(long)]
     pub target: PathBuf,
@@ -93,7 +92,7 @@ pub struct TrackArgs {
 }
 
 pub fn run(args: &TrackArgs) -> Result<()> {
-    let camera = roitrack::formats::read_camera_yaml(&args.camera)?;
+    let camera = args.camera.read()?;
     let target = roitrack::formats::read_target_csv(&args.target)?;
     if let Some(source) = &args.images {
         return run_frames(args, source, camera, target);

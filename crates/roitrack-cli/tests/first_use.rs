@@ -1,0 +1,209 @@
+//! A first use, scripted: a new user's own camera calibration (every file format and distortion model roitrack
+//! reads), their own target and measurements, and the mistakes such a user makes (units, paths), each caught with a
+//! message that says what to do.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+
+use common::{fails, ok};
+use roitrack::formats::{
+    CameraFileOptions, read_camera_file, write_measurements_csv, write_target_csv,
+};
+use roitrack::nalgebra::{Vector2, Vector3};
+use roitrack::{CameraModel, Measurement, MotionState, Target};
+
+/// The camera files of roitrack-formats' tests: written by OpenCV 4 and 5 themselves, and as ROS and Kalibr write them.
+fn camera_file(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../roitrack-formats/tests/data/cameras")
+        .join(name)
+}
+
+/// OpenCV's raw pixels for the camera with these parameters (roitrack-core's tests/data/opencv_projections.csv,
+/// computed by cv2.projectPoints and cv2.fisheye.projectPoints).
+fn opencv_projections(camera: &CameraModel) -> Vec<(Vector3<f64>, Vector2<f64>)> {
+    let text = include_str!("../../roitrack-core/tests/data/opencv_projections.csv");
+    let k = &camera.intrinsics;
+    let mut ours = camera.distortion.coefficients();
+    let mut out = Vec::new();
+    for line in text.lines().filter(|l| !l.starts_with('#')).skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let n = |i: usize| f[i].parse::<f64>().unwrap();
+        let theirs: Vec<f64> = f[6]
+            .split_whitespace()
+            .map(|c| c.parse().unwrap())
+            .collect();
+        if theirs.len() == 4 && ours.len() == 5 && ours[4] == 0.0 {
+            ours.truncate(4);
+        }
+        if f[0] == camera.distortion.model_name()
+            && (n(1), n(2), n(3), n(4), n(5)) == (k.fx_px, k.fy_px, k.skew_px, k.cx_px, k.cy_px)
+            && theirs == ours
+        {
+            out.push((Vector3::new(n(7), n(8), n(9)), Vector2::new(n(10), n(11))));
+        }
+    }
+    out
+}
+
+/// Noise-free measurements of the bundled 4 x 4 grid at rest 0.6 m in front of `camera`, 4 kHz, 40 cycles.
+fn measurements_of_grid_at_rest(camera: &CameraModel, truth: &MotionState) -> Vec<Measurement> {
+    let target = Target::grid4x4();
+    let mut out = Vec::new();
+    for k in 0..40 * target.points().len() {
+        let p = &target.points()[k % target.points().len()];
+        let t_s = k as f64 * 2.5e-4;
+        let px = camera
+            .raw_pixel_from_cam(&truth.point_in_cam_at(&p.point_in_obj_m, t_s))
+            .unwrap();
+        assert!(
+            camera.contains_raw_pixel(&px),
+            "{}: {px:?} off the image",
+            camera.name
+        );
+        out.push(Measurement {
+            t_s,
+            id: p.id,
+            u_px: px.x,
+            v_px: px.y,
+        });
+    }
+    out
+}
+
+/// The last position of a TUM file (m).
+fn last_position_m(tum: &Path) -> Vector3<f64> {
+    let text = std::fs::read_to_string(tum).unwrap();
+    let last = text.lines().rfind(|l| !l.starts_with('#')).unwrap();
+    let f: Vec<f64> = last
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    Vector3::new(f[1], f[2], f[3])
+}
+
+#[test]
+fn step_1_every_camera_file_and_model_is_read_projects_like_opencv_and_tracks() {
+    let dir = tempfile::tempdir().unwrap();
+    let target_path = dir.path().join("target.csv");
+    write_target_csv(&target_path, &Target::grid4x4()).unwrap();
+    let truth = MotionState::at_rest(Default::default(), Vector3::new(0.004, -0.003, 0.6));
+    // (file, extra options, model)
+    let cases: [(&str, &[&str], &str); 9] = [
+        ("ros1_rostopic_echo.yaml", &[], "plumb_bob"),
+        ("ros2_topic_echo.yaml", &[], "rational_polynomial"),
+        ("ros_camera_info_equidistant.yaml", &[], "equidistant"),
+        ("kalibr_camchain.yaml", &[], "plumb_bob"),
+        (
+            "kalibr_camchain.yaml",
+            &["--camera-name", "cam1"],
+            "equidistant",
+        ),
+        ("opencv4_calibration.yaml", &[], "plumb_bob"),
+        ("opencv5_calibration.xml", &[], "plumb_bob"),
+        ("opencv5_rational.yaml", &[], "rational_polynomial"),
+        (
+            "opencv4_fisheye.xml",
+            &["--image-size", "1280x960"],
+            "equidistant",
+        ),
+    ];
+    for (k, (file, extra, model)) in cases.into_iter().enumerate() {
+        let path = camera_file(file);
+        // The library reads it as the CLI will...
+        let options = CameraFileOptions {
+            image_size: extra
+                .windows(2)
+                .find(|w| w[0] == "--image-size")
+                .map(|_| (1280, 960)),
+            camera_name: extra
+                .windows(2)
+                .find(|w| w[0] == "--camera-name")
+                .map(|w| w[1].to_string()),
+        };
+        let camera = read_camera_file(&path, &options).unwrap();
+        assert_eq!(camera.distortion.model_name(), model, "{file}");
+        // ... and projects like OpenCV.
+        let rows = opencv_projections(&camera);
+        assert!(rows.len() >= 60, "{file}: {} OpenCV rows", rows.len());
+        for (p, opencv_px) in rows {
+            let px = camera.raw_pixel_from_cam(&p).unwrap();
+            assert!(
+                (px - opencv_px).norm() < 1e-9,
+                "{file}: {px:?} vs OpenCV {opencv_px:?}"
+            );
+        }
+        // The user's measurements through that lens, tracked by the CLI from the calibration file itself.
+        let measurements = dir.path().join(format!("m{k}.csv"));
+        write_measurements_csv(
+            &measurements,
+            &measurements_of_grid_at_rest(&camera, &truth),
+        )
+        .unwrap();
+        let poses = dir.path().join(format!("p{k}.tum"));
+        let twists = dir.path().join(format!("w{k}.csv"));
+        let mut args = vec![
+            "track",
+            "--camera",
+            path.to_str().unwrap(),
+            "--target",
+            target_path.to_str().unwrap(),
+            "--measurements",
+            measurements.to_str().unwrap(),
+            "--poses",
+            poses.to_str().unwrap(),
+            "--twists",
+            twists.to_str().unwrap(),
+        ];
+        args.extend_from_slice(extra);
+        ok(&args);
+        let error_m = (last_position_m(&poses) - truth.cam_t_obj_m).norm();
+        assert!(error_m < 1e-5, "{file}: position error {error_m} m");
+    }
+    // What a file leaves out, and what does not fit, is said with the option that helps.
+    let track = |camera: &Path, extra: &[&str]| {
+        let mut args = vec![
+            "track",
+            "--camera",
+            camera.to_str().unwrap(),
+            "--target",
+            target_path.to_str().unwrap(),
+            "--measurements",
+            "nowhere.csv",
+            "--poses",
+            "p.tum",
+            "--twists",
+            "w.csv",
+        ];
+        args.extend_from_slice(extra);
+        fails(&args)
+    };
+    let e = track(&camera_file("opencv5_fisheye.yaml"), &[]);
+    assert!(e.contains("opencv5_fisheye.yaml: field 'image_width': missing: give the image size with --image-size WxH"), "{e}");
+    let e = track(
+        &camera_file("kalibr_camchain.yaml"),
+        &["--camera-name", "cam7"],
+    );
+    assert!(
+        e.contains(
+            "kalibr_camchain.yaml: field 'cam7': no such camera in the camchain (it has cam0, cam1)"
+        ),
+        "{e}"
+    );
+    let e = track(
+        &camera_file("opencv4_calibration.yaml"),
+        &["--image-size", "640by480"],
+    );
+    assert!(e.contains("expected WIDTHxHEIGHT"), "{e}");
+    // The detect command takes the same options.
+    let e = fails(&[
+        "detect",
+        "--camera",
+        camera_file("opencv4_fisheye.yaml").to_str().unwrap(),
+        "--target",
+        target_path.to_str().unwrap(),
+        "photo.png",
+    ]);
+    assert!(e.contains("--image-size"), "{e}");
+}

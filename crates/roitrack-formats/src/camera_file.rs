@@ -1,0 +1,818 @@
+//! Camera calibration files of every common kind, recognised from their content: [`read_camera_file`].
+//!
+//! | format | recognised by | intrinsics | distortion | image size | name |
+//! | --- | --- | --- | --- | --- | --- |
+//! | ROS camera_info YAML (ROS 1 and ROS 2 `camera_calibration`) | `image_width`, `camera_matrix` | `camera_matrix.data` | `distortion_model`, `distortion_coefficients.data` | `image_width`, `image_height` | `camera_name` |
+//! | a camera_info message as `ros2 topic echo` (lower case) or `rostopic echo` (upper case) prints it | `k`/`K`, `d`/`D` and `width` at the top | `k` | `distortion_model`, `d` | `width`, `height` | `header.frame_id` |
+//! | OpenCV FileStorage YAML (`%YAML:1.0` from OpenCV 4, `%YAML 1.2` from OpenCV 5) or XML (`<opencv_storage>`) | the header, `!!opencv-matrix` or the XML root | `camera_matrix`, `cameraMatrix` or `K` | `distortion_coefficients`, `dist_coeffs`, `distCoeffs` or `D`; `distortion_model` where given | `image_width`, `image_height`, else `--image-size` | the file's stem |
+//! | Kalibr camchain YAML | `cam0:` ... with `intrinsics` | `intrinsics: [fu, fv, pu, pv]` (`camera_model: pinhole`) | `distortion_model` `radtan`, `equidistant` or `none`, `distortion_coeffs` | `resolution: [w, h]` | the camera's key (`--camera-name`, default `cam0`) |
+//!
+//! Distortion models and their coefficients (ROS's and OpenCV's order): `plumb_bob` 4 or 5 (`k1 k2 p1 p2 [k3]`),
+//! `rational_polynomial` 8 (`k1 k2 p1 p2 k3 k4 k5 k6`), `equidistant` 4 (`k1 k2 k3 k4`, `cv::fisheye`), `none` 0.
+//! OpenCV files do not say which model their coefficients belong to: 5, 8 (or 12 and 14 with the extra thin-prism and
+//! tilt terms zero) are unambiguous; 4 could be plumb_bob (`cv::calibrateCamera`) or equidistant (`cv::fisheye`), so
+//! such a file needs a `distortion_model` entry.
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use roitrack_core::{
+    CameraModel, Distortion, Equidistant, PinholeIntrinsics, PlumbBob, RationalPolynomial,
+};
+use serde_yaml_ng::{Mapping, Value};
+
+use crate::FormatError;
+
+/// What [`read_camera_file`] needs besides the file: what the file may leave out.
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct CameraFileOptions {
+    /// The image size (width, height in pixels) for files that do not carry one (OpenCV files may not); refused if
+    /// the file has a different one.
+    pub image_size: Option<(u32, u32)>,
+    /// Which camera of a Kalibr camchain (`cam0` if `None`); refused for other formats, which hold one camera.
+    pub camera_name: Option<String>,
+}
+
+/// The kinds of camera file [`read_camera_file`] reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CameraFileFormat {
+    /// ROS camera_info YAML as `camera_calibration` writes it (ROS 1 and ROS 2).
+    RosYaml,
+    /// A `sensor_msgs/CameraInfo` message as `ros2 topic echo` or `rostopic echo` prints it.
+    RosMessage,
+    /// OpenCV FileStorage YAML.
+    OpenCvYaml,
+    /// OpenCV FileStorage XML.
+    OpenCvXml,
+    /// A Kalibr camchain YAML.
+    Kalibr,
+}
+
+impl CameraFileFormat {
+    /// A name for messages: `ROS camera_info YAML`, `OpenCV FileStorage XML`, ...
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::RosYaml => "ROS camera_info YAML",
+            Self::RosMessage => "ROS camera_info message (topic echo)",
+            Self::OpenCvYaml => "OpenCV FileStorage YAML",
+            Self::OpenCvXml => "OpenCV FileStorage XML",
+            Self::Kalibr => "Kalibr camchain YAML",
+        }
+    }
+}
+
+/// Reads a camera calibration file of any kind in the table above, recognised from its content.
+///
+/// ```
+/// use roitrack_formats::{CameraFileOptions, read_camera_file};
+///
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("camchain.yaml");
+/// std::fs::write(&path, "cam0:\n  camera_model: pinhole\n  intrinsics: [461.6, 460.3, 366.3, 249.0]\n  \
+///     distortion_model: equidistant\n  distortion_coeffs: [-0.01, 0.02, -0.01, 0.002]\n  resolution: [752, 480]\n")
+///     .unwrap();
+/// let camera = read_camera_file(&path, &CameraFileOptions::default()).unwrap();
+/// assert_eq!((camera.width_px, camera.distortion.model_name()), (752, "equidistant"));
+/// // OpenCV files may need the image size: errors name the file and the field.
+/// std::fs::write(&path, "%YAML:1.0\n---\nK: !!opencv-matrix\n   rows: 3\n   cols: 3\n   dt: d\n   \
+///     data: [ 500., 0., 320., 0., 500., 240., 0., 0., 1. ]\n").unwrap();
+/// let e = read_camera_file(&path, &CameraFileOptions::default()).unwrap_err();
+/// assert!(e.to_string().contains("field 'image_width'") && e.to_string().contains("--image-size"));
+/// let options = CameraFileOptions { image_size: Some((640, 480)), ..Default::default() };
+/// assert!(read_camera_file(&path, &options).unwrap().distortion.is_identity());
+/// ```
+pub fn read_camera_file(
+    path: impl AsRef<Path>,
+    options: &CameraFileOptions,
+) -> Result<CameraModel, FormatError> {
+    let path = path.as_ref();
+    let bytes = std::fs::read(path).map_err(|e| FormatError::io(path, "cannot read", e))?;
+    let text = String::from_utf8(bytes)
+        .map_err(|e| FormatError::new(path, format!("not UTF-8 text: {e}")))?;
+    parse_camera_file(&text, path, options).map(|(camera, _)| camera)
+}
+
+/// Parses camera calibration text of any kind in the table above; `path` names it in errors (and gives an OpenCV
+/// camera its name). Returns the camera and the format found.
+pub fn parse_camera_file(
+    text: &str,
+    path: impl AsRef<Path>,
+    options: &CameraFileOptions,
+) -> Result<(CameraModel, CameraFileFormat), FormatError> {
+    let path = path.as_ref();
+    let format = detect_camera_format(text, path)?;
+    if options.camera_name.is_some() && format != CameraFileFormat::Kalibr {
+        return Err(FormatError::new(
+            path,
+            format!(
+                "--camera-name picks a camera of a Kalibr camchain, but this is a {} file with one camera",
+                format.describe()
+            ),
+        ));
+    }
+    let camera = match format {
+        CameraFileFormat::RosYaml => {
+            let camera = crate::parse_camera_yaml(first_document(text), path)?;
+            check_image_size(camera, options, path, ("image_width", "image_height"))?
+        }
+        CameraFileFormat::RosMessage => parse_ros_message(&yaml_value(text, path)?, path, options)?,
+        CameraFileFormat::OpenCvYaml => {
+            let cleaned = clean_opencv_yaml(text);
+            parse_opencv(&yaml_value(&cleaned, path)?, path, options)?
+        }
+        CameraFileFormat::OpenCvXml => {
+            let value = crate::camera_xml::opencv_xml_to_value(text)
+                .map_err(|(line, message)| FormatError::new(path, message).with_line(line))?;
+            parse_opencv(&value, path, options)?
+        }
+        CameraFileFormat::Kalibr => parse_kalibr(&yaml_value(text, path)?, path, options)?,
+    };
+    Ok((camera, format))
+}
+
+/// Which kind of camera file `text` is.
+pub fn detect_camera_format(
+    text: &str,
+    path: impl AsRef<Path>,
+) -> Result<CameraFileFormat, FormatError> {
+    let path = path.as_ref();
+    let start = text.trim_start_matches('\u{feff}').trim_start();
+    if start.is_empty() {
+        return Err(FormatError::new(
+            path,
+            "empty file: expected a camera calibration",
+        ));
+    }
+    if start.starts_with("<?xml") || start.starts_with("<opencv_storage") {
+        return Ok(CameraFileFormat::OpenCvXml);
+    }
+    if start.starts_with("%YAML:") || text.contains("!!opencv-matrix") {
+        return Ok(CameraFileFormat::OpenCvYaml);
+    }
+    // Other YAML: by the keys at the top.
+    let value = yaml_value(text, path)?;
+    let Value::Mapping(map) = &value else {
+        return Err(not_a_camera_file(path));
+    };
+    let has = |key: &str| map.contains_key(key);
+    if has("image_width") && has("camera_matrix") {
+        return Ok(CameraFileFormat::RosYaml);
+    }
+    if (has("k") || has("K")) && (has("width") || has("height")) {
+        return Ok(CameraFileFormat::RosMessage);
+    }
+    if OPENCV_K_KEYS.iter().any(|k| has(k)) {
+        return Ok(CameraFileFormat::OpenCvYaml);
+    }
+    let kalibr = map.iter().any(|(k, v)| {
+        k.as_str().is_some_and(|k| k.starts_with("cam"))
+            && v.as_mapping().is_some_and(|m| m.contains_key("intrinsics"))
+    });
+    if kalibr {
+        return Ok(CameraFileFormat::Kalibr);
+    }
+    if has("camera_matrix") {
+        // camera_info YAML without its image size: let its reader name what is missing.
+        return Ok(CameraFileFormat::RosYaml);
+    }
+    Err(not_a_camera_file(path))
+}
+
+fn not_a_camera_file(path: &Path) -> FormatError {
+    FormatError::new(
+        path,
+        "not a camera file roitrack knows: expected ROS camera_info YAML (image_width, camera_matrix, ...), a \
+         camera_info message (width, height, k, d), OpenCV FileStorage YAML or XML (camera_matrix or K, \
+         distortion_coefficients or D) or a Kalibr camchain (cam0: intrinsics, distortion_coeffs, resolution)",
+    )
+}
+
+/// The distortion model `name` (as ROS and roitrack write it) with `coefficients`, checked.
+///
+/// ```
+/// use roitrack_formats::distortion_from;
+///
+/// assert_eq!(distortion_from("plumb_bob", &[0.1, 0.0, 0.0, 0.0]).unwrap().coefficients().len(), 5);
+/// assert!(distortion_from("equidistant", &[0.1, 0.0, 0.0, 0.0, 0.0]).unwrap_err().contains("4 numbers"));
+/// ```
+pub fn distortion_from(name: &str, coefficients: &[f64]) -> Result<Distortion, String> {
+    check_model_name(name)?;
+    if let Some(i) = coefficients.iter().position(|c| !c.is_finite()) {
+        return Err(format!(
+            "coefficient {i} must be a finite number, got {}",
+            coefficients[i]
+        ));
+    }
+    let c = coefficients;
+    match (name, c.len()) {
+        (_, 0) => Ok(Distortion::None),
+        ("none", n) => Err(format!(
+            "distortion model none takes no coefficients, got {n}"
+        )),
+        ("plumb_bob" | "", 4) => {
+            Ok(PlumbBob::from_coefficients([c[0], c[1], c[2], c[3], 0.0]).into())
+        }
+        ("plumb_bob" | "", 5) => {
+            Ok(PlumbBob::from_coefficients([c[0], c[1], c[2], c[3], c[4]]).into())
+        }
+        ("plumb_bob", n) => Err(format!(
+            "plumb_bob takes 4 or 5 numbers [k1, k2, p1, p2(, k3)], got {n} (8 would be rational_polynomial)"
+        )),
+        ("rational_polynomial", 8) => Ok(RationalPolynomial::from_coefficients([
+            c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7],
+        ])
+        .into()),
+        ("rational_polynomial", n) => Err(format!(
+            "rational_polynomial takes 8 numbers [k1, k2, p1, p2, k3, k4, k5, k6], got {n}"
+        )),
+        ("equidistant", 4) => Ok(Equidistant::from_coefficients([c[0], c[1], c[2], c[3]]).into()),
+        ("equidistant", n) => Err(format!(
+            "equidistant takes 4 numbers [k1, k2, k3, k4], got {n}"
+        )),
+        ("", n) => Err(format!(
+            "{n} coefficients without a distortion model: set distortion_model to plumb_bob (4 or 5), \
+             rational_polynomial (8) or equidistant (4)"
+        )),
+        (other, _) => Err(format!("unsupported distortion model {other:?}")),
+    }
+}
+
+/// Whether roitrack knows the distortion model `name` (an empty name means "not said").
+pub(crate) fn check_model_name(name: &str) -> Result<(), String> {
+    match name {
+        "plumb_bob" | "rational_polynomial" | "equidistant" | "none" | "" => Ok(()),
+        other => Err(format!(
+            "unsupported distortion model {other:?}: roitrack supports plumb_bob (4 or 5 coefficients), \
+             rational_polynomial (8), equidistant (4, the fisheye model of cv::fisheye) and none"
+        )),
+    }
+}
+
+/// The text up to the end of its first YAML document (a `---` or `...` line after some content), so that a topic
+/// echo's trailing separators and later messages are left out. Line numbers are unchanged.
+fn first_document(text: &str) -> &str {
+    let mut offset = 0;
+    let mut seen_content = false;
+    for line in text.split_inclusive('\n') {
+        let trimmed = line.trim_end();
+        if (trimmed == "---" || trimmed == "...") && seen_content {
+            return &text[..offset];
+        }
+        if !trimmed.is_empty()
+            && !trimmed.starts_with('#')
+            && !trimmed.starts_with('%')
+            && trimmed != "---"
+        {
+            seen_content = true;
+        }
+        offset += line.len();
+    }
+    text
+}
+
+/// The first YAML document of `text` as a value; syntax errors name the line.
+fn yaml_value(text: &str, path: &Path) -> Result<Value, FormatError> {
+    serde_yaml_ng::from_str::<Value>(first_document(text)).map_err(|e| {
+        let line = e.location().map(|l| l.line() as u64);
+        FormatError::new(path, format!("not valid YAML: {e}")).with_line(line)
+    })
+}
+
+/// OpenCV's YAML made plain YAML: its `%YAML:1.0` directive (not valid YAML 1.1) and its `!!opencv-matrix` tags
+/// blanked out, keeping every line and column where it was.
+fn clean_opencv_yaml(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for (i, line) in text.split_inclusive('\n').enumerate() {
+        if i == 0 && line.trim_start_matches('\u{feff}').starts_with("%YAML") {
+            out.push('\n');
+            continue;
+        }
+        let mut rest = line;
+        while let Some(at) = rest.find("!!opencv-") {
+            out.push_str(&rest[..at]);
+            let tag_len = rest[at..]
+                .find(char::is_whitespace)
+                .unwrap_or(rest.len() - at);
+            out.extend(std::iter::repeat_n(' ', tag_len));
+            rest = &rest[at + tag_len..];
+        }
+        out.push_str(rest);
+    }
+    out
+}
+
+/// `path`'s stem, the name of a camera from a file that has none.
+fn file_stem(path: &Path) -> String {
+    path.file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default()
+}
+
+fn field_error(path: &Path, field: &str, message: impl Into<String>) -> FormatError {
+    FormatError::new(path, message).with_field(field)
+}
+
+/// The value at `key` of `map`.
+fn get<'a>(map: &'a Mapping, key: &str) -> Option<&'a Value> {
+    map.get(key)
+}
+
+/// A number (YAML integer or float).
+fn number(value: &Value, path: &Path, field: &str) -> Result<f64, FormatError> {
+    match value {
+        Value::Number(n) => n
+            .as_f64()
+            .ok_or_else(|| field_error(path, field, "not a number")),
+        other => Err(field_error(
+            path,
+            field,
+            format!("expected a number, got {}", describe(other)),
+        )),
+    }
+}
+
+fn describe(value: &Value) -> String {
+    match value {
+        Value::Null => "nothing".to_string(),
+        Value::Bool(b) => format!("{b}"),
+        Value::Number(n) => format!("{n}"),
+        Value::String(s) => format!("{s:?}"),
+        Value::Sequence(s) => format!("a list of {}", s.len()),
+        Value::Mapping(_) => "a mapping".to_string(),
+        Value::Tagged(_) => "a tagged value".to_string(),
+    }
+}
+
+/// A list of finite numbers.
+fn numbers(value: &Value, path: &Path, field: &str) -> Result<Vec<f64>, FormatError> {
+    let Value::Sequence(items) = value else {
+        return Err(field_error(
+            path,
+            field,
+            format!("expected a list of numbers, got {}", describe(value)),
+        ));
+    };
+    items
+        .iter()
+        .enumerate()
+        .map(|(i, v)| {
+            let f = format!("{field}[{i}]");
+            let x = number(v, path, &f)?;
+            if x.is_finite() {
+                Ok(x)
+            } else {
+                Err(field_error(
+                    path,
+                    &f,
+                    format!("must be a finite number, got {x}"),
+                ))
+            }
+        })
+        .collect()
+}
+
+/// A positive image size.
+fn size(value: &Value, path: &Path, field: &str) -> Result<u32, FormatError> {
+    match value.as_u64().and_then(|v| u32::try_from(v).ok()) {
+        Some(v) if v > 0 => Ok(v),
+        _ => Err(field_error(
+            path,
+            field,
+            format!(
+                "expected a positive image size in pixels, got {}",
+                describe(value)
+            ),
+        )),
+    }
+}
+
+/// The 9 numbers of K checked: its layout `[[fx, s, cx], [0, fy, cy], [0, 0, 1]]` and positive focal lengths.
+fn intrinsics_from_k(
+    k: &[f64],
+    path: &Path,
+    field: &str,
+) -> Result<PinholeIntrinsics, FormatError> {
+    if k.len() != 9 {
+        return Err(field_error(
+            path,
+            field,
+            format!("the camera matrix needs 9 numbers (3 x 3), got {}", k.len()),
+        ));
+    }
+    for (i, want) in [(3, 0.0), (6, 0.0), (7, 0.0), (8, 1.0)] {
+        if k[i] != want {
+            return Err(field_error(
+                path,
+                &format!("{field}[{i}]"),
+                format!(
+                    "must be {want} (K must be [[fx, s, cx], [0, fy, cy], [0, 0, 1]]), got {}",
+                    k[i]
+                ),
+            ));
+        }
+    }
+    let intrinsics = PinholeIntrinsics {
+        fx_px: k[0],
+        fy_px: k[4],
+        skew_px: k[1],
+        cx_px: k[2],
+        cy_px: k[5],
+    };
+    intrinsics.validate().map_err(|e| {
+        let index = match &e {
+            roitrack_core::CameraError::NotPositive { field: "fy", .. }
+            | roitrack_core::CameraError::NotFinite { field: "fy", .. } => 4,
+            _ => 0,
+        };
+        field_error(path, &format!("{field}[{index}]"), e.to_string())
+    })?;
+    Ok(intrinsics)
+}
+
+/// The camera, its image size taken from the file or, if the file has none, from the options.
+fn build(
+    name: String,
+    file_size: (Option<u32>, Option<u32>),
+    intrinsics: PinholeIntrinsics,
+    distortion: Distortion,
+    options: &CameraFileOptions,
+    path: &Path,
+    size_fields: (&str, &str),
+) -> Result<CameraModel, FormatError> {
+    let (width_px, height_px) = match (file_size, options.image_size) {
+        ((Some(w), Some(h)), Some((ow, oh))) if (w, h) != (ow, oh) => {
+            return Err(field_error(
+                path,
+                size_fields.0,
+                format!(
+                    "the file says {w}x{h} px, --image-size says {ow}x{oh}: a calibration holds for the size it was \
+                     made at; leave --image-size out or recalibrate"
+                ),
+            ));
+        }
+        ((Some(w), Some(h)), _) => (w, h),
+        (_, Some(size)) => size,
+        ((None, _), None) => {
+            return Err(field_error(
+                path,
+                size_fields.0,
+                "missing: give the image size with --image-size WxH",
+            ));
+        }
+        ((_, None), None) => {
+            return Err(field_error(
+                path,
+                size_fields.1,
+                "missing: give the image size with --image-size WxH",
+            ));
+        }
+    };
+    CameraModel::new(name, width_px, height_px, intrinsics, distortion)
+        .map_err(|e| FormatError::new(path, e.to_string()))
+}
+
+/// A camera read by the ROS YAML reader, with its size checked against the options.
+fn check_image_size(
+    camera: CameraModel,
+    options: &CameraFileOptions,
+    path: &Path,
+    size_fields: (&str, &str),
+) -> Result<CameraModel, FormatError> {
+    build(
+        camera.name.clone(),
+        (Some(camera.width_px), Some(camera.height_px)),
+        camera.intrinsics,
+        camera.distortion,
+        options,
+        path,
+        size_fields,
+    )
+}
+
+/// A `sensor_msgs/CameraInfo` message as a topic echo prints it (`k`, `d` in ROS 2; `K`, `D` in ROS 1).
+fn parse_ros_message(
+    value: &Value,
+    path: &Path,
+    options: &CameraFileOptions,
+) -> Result<CameraModel, FormatError> {
+    let map = value.as_mapping().ok_or_else(|| not_a_camera_file(path))?;
+    let pick = |lower: &'static str, upper: &'static str| {
+        get(map, lower)
+            .map(|v| (lower, v))
+            .or_else(|| get(map, upper).map(|v| (upper, v)))
+    };
+    let (k_field, k) = pick("k", "K").ok_or_else(|| field_error(path, "k", "missing"))?;
+    let intrinsics = intrinsics_from_k(&numbers(k, path, k_field)?, path, k_field)?;
+    let coefficients = match pick("d", "D") {
+        Some((field, d)) if !d.is_null() => numbers(d, path, field)?,
+        _ => Vec::new(),
+    };
+    let model = match get(map, "distortion_model") {
+        Some(Value::String(s)) => s.trim().to_string(),
+        Some(Value::Null) | None => String::new(),
+        Some(other) => {
+            return Err(field_error(
+                path,
+                "distortion_model",
+                format!("expected a name, got {}", describe(other)),
+            ));
+        }
+    };
+    let d_field = if map.contains_key("D") { "D" } else { "d" };
+    let distortion =
+        distortion_from(&model, &coefficients).map_err(|e| field_error(path, d_field, e))?;
+    let width = get(map, "width")
+        .map(|v| size(v, path, "width"))
+        .transpose()?;
+    let height = get(map, "height")
+        .map(|v| size(v, path, "height"))
+        .transpose()?;
+    // A message from a driver that has no calibration says 0 x 0 and K all zero; K is refused above.
+    let name = get(map, "header")
+        .and_then(|h| h.get("frame_id"))
+        .and_then(Value::as_str)
+        .map_or_else(|| file_stem(path), str::to_string);
+    build(
+        name,
+        (width, height),
+        intrinsics,
+        distortion,
+        options,
+        path,
+        ("width", "height"),
+    )
+}
+
+/// Keys of K and of the distortion coefficients in OpenCV files, as OpenCV's samples and common programs write them.
+const OPENCV_K_KEYS: [&str; 4] = ["camera_matrix", "cameraMatrix", "K", "Camera_Matrix"];
+const OPENCV_D_KEYS: [&str; 5] = [
+    "distortion_coefficients",
+    "dist_coeffs",
+    "distCoeffs",
+    "D",
+    "Distortion_Coefficients",
+];
+
+/// An `!!opencv-matrix` mapping `{rows, cols, dt, data}`: its numbers, row-major.
+fn opencv_matrix(value: &Value, path: &Path, field: &str) -> Result<Vec<f64>, FormatError> {
+    let Value::Mapping(m) = value else {
+        // A plain list is taken too (some programs write K as a list of 9).
+        return numbers(value, path, field);
+    };
+    let rows =
+        get(m, "rows").ok_or_else(|| field_error(path, &format!("{field}.rows"), "missing"))?;
+    let cols =
+        get(m, "cols").ok_or_else(|| field_error(path, &format!("{field}.cols"), "missing"))?;
+    let (rows, cols) = (
+        rows.as_u64()
+            .ok_or_else(|| field_error(path, &format!("{field}.rows"), "expected a count"))?,
+        cols.as_u64()
+            .ok_or_else(|| field_error(path, &format!("{field}.cols"), "expected a count"))?,
+    );
+    if let Some(dt) = get(m, "dt").and_then(Value::as_str)
+        && !matches!(dt, "d" | "f")
+    {
+        return Err(field_error(
+            path,
+            &format!("{field}.dt"),
+            format!("expected d or f (floating point), got {dt:?}"),
+        ));
+    }
+    let data_field = format!("{field}.data");
+    let data = get(m, "data").ok_or_else(|| field_error(path, &data_field, "missing"))?;
+    let data = numbers(data, path, &data_field)?;
+    if rows.checked_mul(cols) != Some(data.len() as u64) {
+        return Err(field_error(
+            path,
+            field,
+            format!(
+                "rows x cols = {rows} x {cols} does not match the {} numbers of data",
+                data.len()
+            ),
+        ));
+    }
+    Ok(data)
+}
+
+/// OpenCV FileStorage (YAML or XML, as a value).
+fn parse_opencv(
+    value: &Value,
+    path: &Path,
+    options: &CameraFileOptions,
+) -> Result<CameraModel, FormatError> {
+    let map = value.as_mapping().ok_or_else(|| not_a_camera_file(path))?;
+    let Some((k_field, k)) = OPENCV_K_KEYS
+        .iter()
+        .find_map(|&key| get(map, key).map(|v| (key, v)))
+    else {
+        return Err(field_error(
+            path,
+            "camera_matrix",
+            "missing (looked for camera_matrix, cameraMatrix and K)",
+        ));
+    };
+    let intrinsics = intrinsics_from_k(&opencv_matrix(k, path, k_field)?, path, k_field)?;
+    let (d_field, coefficients) = match OPENCV_D_KEYS
+        .iter()
+        .find_map(|&key| get(map, key).map(|v| (key, v)))
+    {
+        Some((key, d)) => (key, opencv_matrix(d, path, key)?),
+        None => ("distortion_coefficients", Vec::new()),
+    };
+    let model = match get(map, "distortion_model") {
+        Some(Value::String(s)) => match s.trim() {
+            "fisheye" => "equidistant".to_string(),
+            "radtan" => "plumb_bob".to_string(),
+            s => s.to_string(),
+        },
+        Some(other) => {
+            return Err(field_error(
+                path,
+                "distortion_model",
+                format!("expected a name, got {}", describe(other)),
+            ));
+        }
+        None => String::new(),
+    };
+    let distortion = match (model.as_str(), coefficients.len()) {
+        ("", 4) => {
+            return Err(field_error(
+                path,
+                d_field,
+                "4 coefficients could be plumb_bob [k1, k2, p1, p2] (cv::calibrateCamera) or equidistant [k1, k2, \
+                 k3, k4] (cv::fisheye::calibrate): add a line distortion_model: plumb_bob or distortion_model: \
+                 equidistant to the file",
+            ));
+        }
+        ("" | "rational_polynomial", 12 | 14) => {
+            // Thin-prism (s1..s4) and tilt (tauX, tauY) terms: roitrack has neither, so they must be zero.
+            if let Some(i) = coefficients[8..].iter().position(|&c| c != 0.0) {
+                return Err(field_error(
+                    path,
+                    &format!("{d_field}.data[{}]", i + 8),
+                    "thin-prism and tilt coefficients (after the 8th) are not supported and must be 0",
+                ));
+            }
+            distortion_from("rational_polynomial", &coefficients[..8])
+        }
+        ("", 8) => distortion_from("rational_polynomial", &coefficients),
+        ("", n) if n != 0 && n != 5 => Err(format!(
+            "OpenCV's distortion vectors have 4, 5, 8, 12 or 14 coefficients, got {n}"
+        )),
+        (m, _) => distortion_from(m, &coefficients),
+    }
+    .map_err(|e| field_error(path, d_field, e))?;
+    let mut width = get(map, "image_width")
+        .map(|v| size(v, path, "image_width"))
+        .transpose()?;
+    let mut height = get(map, "image_height")
+        .map(|v| size(v, path, "image_height"))
+        .transpose()?;
+    for key in ["image_size", "imageSize", "cameraResolution"] {
+        if let Some(v) = get(map, key) {
+            let wh = numbers(v, path, key)?;
+            match wh.as_slice() {
+                &[w, h]
+                    if w >= 1.0
+                        && h >= 1.0
+                        && w.fract() == 0.0
+                        && h.fract() == 0.0
+                        && w <= u32::MAX as f64
+                        && h <= u32::MAX as f64 =>
+                {
+                    width = width.or(Some(w as u32));
+                    height = height.or(Some(h as u32));
+                }
+                _ => return Err(field_error(path, key, "expected [width, height] in pixels")),
+            }
+        }
+    }
+    build(
+        file_stem(path),
+        (width, height),
+        intrinsics,
+        distortion,
+        options,
+        path,
+        ("image_width", "image_height"),
+    )
+}
+
+/// A Kalibr camchain: `cam0: {camera_model, intrinsics, distortion_model, distortion_coeffs, resolution}`.
+fn parse_kalibr(
+    value: &Value,
+    path: &Path,
+    options: &CameraFileOptions,
+) -> Result<CameraModel, FormatError> {
+    let map = value.as_mapping().ok_or_else(|| not_a_camera_file(path))?;
+    let name = options.camera_name.as_deref().unwrap_or("cam0");
+    let Some(cam) = get(map, name) else {
+        let mut names = String::new();
+        for key in map.keys().filter_map(Value::as_str) {
+            let _ = write!(names, "{}{key}", if names.is_empty() { "" } else { ", " });
+        }
+        return Err(field_error(
+            path,
+            name,
+            format!("no such camera in the camchain (it has {names}): pick one with --camera-name"),
+        ));
+    };
+    let cam = cam
+        .as_mapping()
+        .ok_or_else(|| field_error(path, name, "expected a mapping"))?;
+    let f = |key: &str| format!("{name}.{key}");
+    match get(cam, "camera_model").and_then(Value::as_str) {
+        Some("pinhole") | None => {}
+        Some(other) => {
+            return Err(field_error(
+                path,
+                &f("camera_model"),
+                format!(
+                    "unsupported camera model {other:?}: roitrack reads Kalibr's pinhole cameras (with radtan, equidistant or none)"
+                ),
+            ));
+        }
+    }
+    let intrinsics_value =
+        get(cam, "intrinsics").ok_or_else(|| field_error(path, &f("intrinsics"), "missing"))?;
+    let k = numbers(intrinsics_value, path, &f("intrinsics"))?;
+    let &[fx_px, fy_px, cx_px, cy_px] = k.as_slice() else {
+        return Err(field_error(
+            path,
+            &f("intrinsics"),
+            format!("expected 4 numbers [fu, fv, pu, pv], got {}", k.len()),
+        ));
+    };
+    let intrinsics = PinholeIntrinsics {
+        fx_px,
+        fy_px,
+        skew_px: 0.0,
+        cx_px,
+        cy_px,
+    };
+    intrinsics
+        .validate()
+        .map_err(|e| field_error(path, &f("intrinsics"), e.to_string()))?;
+    let coefficients = match get(cam, "distortion_coeffs") {
+        Some(v) => numbers(v, path, &f("distortion_coeffs"))?,
+        None => Vec::new(),
+    };
+    let model = match get(cam, "distortion_model").and_then(Value::as_str) {
+        Some("radtan") => "plumb_bob",
+        Some("equidistant") => "equidistant",
+        Some("none") => "none",
+        None if coefficients.is_empty() => "none",
+        None => return Err(field_error(path, &f("distortion_model"), "missing")),
+        Some(other) => {
+            return Err(field_error(
+                path,
+                &f("distortion_model"),
+                format!(
+                    "unsupported distortion model {other:?}: roitrack reads radtan, equidistant and none"
+                ),
+            ));
+        }
+    };
+    let distortion = match (model, coefficients.len()) {
+        ("plumb_bob", n) if n != 4 => {
+            Err(format!("radtan takes 4 numbers [k1, k2, r1, r2], got {n}"))
+        }
+        _ => distortion_from(model, &coefficients),
+    }
+    .map_err(|e| field_error(path, &f("distortion_coeffs"), e))?;
+    let resolution = match get(cam, "resolution") {
+        Some(v) => {
+            let r = numbers(v, path, &f("resolution"))?;
+            match r.as_slice() {
+                &[w, h]
+                    if w >= 1.0
+                        && h >= 1.0
+                        && w.fract() == 0.0
+                        && h.fract() == 0.0
+                        && w <= u32::MAX as f64
+                        && h <= u32::MAX as f64 =>
+                {
+                    (Some(w as u32), Some(h as u32))
+                }
+                _ => {
+                    return Err(field_error(
+                        path,
+                        &f("resolution"),
+                        "expected [width, height] in pixels",
+                    ));
+                }
+            }
+        }
+        None => (None, None),
+    };
+    let (wf, hf) = (f("resolution"), f("resolution"));
+    build(
+        name.to_string(),
+        resolution,
+        intrinsics,
+        distortion,
+        options,
+        path,
+        (&wf, &hf),
+    )
+}
