@@ -152,7 +152,7 @@ def test_detect_equals_roitrack_detect(tmp_path: Path) -> None:
     expected = cli_json("detect", "--camera", tmp_path / "camera.yaml", "--target", tmp_path / "target.csv",
                         "--json", tmp_path / "photo.pgm")
     assert expected["ok"]
-    for array in (image.astype(np.uint8), (image.astype(np.uint16) << 8) | image.astype(np.uint16)):
+    for array in (image.astype(np.uint8), ((image.astype(np.uint16) << 8) | image.astype(np.uint16)).astype(np.uint16)):
         det = roitrack.detect(camera, target, array, polarity="auto")
         assert det["ok"] and det["polarity"] == "bright"
         np.testing.assert_allclose(det["position_m"], position, atol=2e-4)
