@@ -57,6 +57,15 @@ fn assert_projects_like_opencv(camera: &CameraModel, file: &str) {
     }
 }
 
+/// A file, the options it is read with, the format and model it has, its image size.
+type Case = (
+    &'static str,
+    CameraFileOptions,
+    CameraFileFormat,
+    &'static str,
+    (u32, u32),
+);
+
 #[test]
 fn every_format_and_model_reads_and_projects_like_opencv() {
     let wxh = |w, h| CameraFileOptions {
@@ -68,7 +77,7 @@ fn every_format_and_model_reads_and_projects_like_opencv() {
         camera_name: Some("cam1".to_string()),
     };
     let none = CameraFileOptions::default();
-    let cases: Vec<(&str, CameraFileOptions, CameraFileFormat, &str, (u32, u32))> = vec![
+    let cases: Vec<Case> = vec![
         (
             "ros2_topic_echo.yaml",
             none.clone(),
