@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod args;
 mod commands;
+mod ros;
 
 #[derive(Debug, Parser)]
 #[command(name = "roitrack", version, about, long_about = None)]

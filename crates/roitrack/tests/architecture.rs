@@ -34,6 +34,10 @@ const ALLOWED: &[(&str, &[&str])] = &[
         ],
     ),
     (
+        "roitrack-ros",
+        &["roitrack-core", "roitrack-image", "roitrack-formats"],
+    ),
+    (
         "roitrack",
         &[
             "roitrack-core",
@@ -45,6 +49,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "roitrack-plot",
             "roitrack-experiments",
             "roitrack-bench",
+            "roitrack-ros",
         ],
     ),
     ("roitrack-cli", &["roitrack"]),

@@ -36,6 +36,8 @@ pub struct DemoArgs {
     /// Print one JSON object per row instead of a table.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub ros: crate::ros::McapArgs,
 }
 
 pub fn run(args: &DemoArgs) -> Result<()> {
@@ -95,6 +97,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             writer.write(e)?;
         }
         writer.finish()?;
+        if k == 0 {
+            let mut bag = args.ros.open(&demo.run.camera, None)?;
+            for e in &from_images.scored.estimates {
+                bag.estimate(e)?;
+            }
+            bag.finish()?;
+        }
         runs.push(from_images);
         runs.push(demo.from_centroids(estimator)?);
     }

@@ -89,6 +89,8 @@ pub struct TrackArgs {
     pub covariance: Option<PathBuf>,
     #[command(flatten)]
     pub estimator: EstimatorArgs,
+    #[command(flatten)]
+    pub ros: crate::ros::McapArgs,
 }
 
 pub fn run(args: &TrackArgs) -> Result<()> {
@@ -118,8 +120,9 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             progress.set_position(count as u64);
         }
     };
+    let mut bag = args.ros.open(&camera, None)?;
     let start = Instant::now();
-    let mut sink = |e: &roitrack::Estimate| writer.write(e);
+    let mut sink = |e: &roitrack::Estimate| writer.write(e).and_then(|()| bag.estimate(e));
     let (path, report, rois) = match (&args.measurements, &args.rois) {
         (Some(path), _) => {
             let reader = MeasurementReader::open(path)?.with_known_ids(known_ids);
@@ -168,6 +171,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         );
     }
     writer.finish()?;
+    bag.finish()?;
     if let Some(rois) = rois {
         eprintln!(
             "roitrack: {} ROIs centroided; rejected: {}",
@@ -224,6 +228,10 @@ fn run_frames(
         fps: args.fps,
     };
     let mut frames = roitrack::formats::FrameSource::open(source, &timing)?;
+    let (mut bag, copy_frames) = (
+        args.ros.open(&camera, Some(&target))?,
+        args.ros.wants_frames(),
+    );
     let mut tracker =
         FrameTracker::new(camera, target, config).context("invalid tracker options")?;
     let mut writer =
@@ -244,11 +252,22 @@ fn run_frames(
     let start = Instant::now();
     let result = roitrack::pipeline::track_frame_stream(
         &mut tracker,
-        |frame| frames.next_frame(frame),
-        |_info, outcome| {
+        // With --mcap, each frame goes to the bag too: a copy travels with its information.
+        |frame| {
+            frames.next_frame(frame).map(|r| {
+                r.map(|info| {
+                    (
+                        info,
+                        std::cell::Cell::new(copy_frames.then(|| frame.clone())),
+                    )
+                })
+            })
+        },
+        |(_info, frame), outcome| {
             progress.inc(1);
+            bag.frame(frame.take(), outcome.estimate.as_ref().map(|e| &e.state))?;
             match &outcome.estimate {
-                Some(e) => writer.write(e),
+                Some(e) => writer.write(e).and_then(|()| bag.estimate(e)),
                 None => Ok(()),
             }
         },
@@ -262,6 +281,7 @@ fn run_frames(
     } else {
         Ok(false)
     };
+    let bag_finished = bag.finish();
     let polarity = report.polarity.map_or("none", |p| p.name());
     eprintln!(
         "roitrack: {} frames -> {} estimates in {seconds:.3} s ({:.0} frames/s); measured in windows {}, whole \
@@ -288,7 +308,7 @@ fn run_frames(
             FrameStreamError::Frame {
                 info, source: err, ..
             } => {
-                anyhow::anyhow!("frame {} ({}): {err}", info.index, info.name)
+                anyhow::anyhow!("frame {} ({}): {err}", info.0.index, info.0.name)
             }
             FrameStreamError::Sink(e) => anyhow::Error::new(e),
             FrameStreamError::DecoderPanicked => anyhow::anyhow!("the decoding thread panicked"),
@@ -296,6 +316,7 @@ fn run_frames(
         .context(format!("tracking {} stopped{kept}", source.display())));
     }
     written?;
+    bag_finished?;
     if report.estimates == 0 {
         bail!(
             "{}: no estimate from {} frames: the target was never found (check --camera, --target, --polarity; \

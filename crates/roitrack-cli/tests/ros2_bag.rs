@@ -1,0 +1,249 @@
+//! `roitrack track --mcap`: the ROS 2 bags read back by two independent readers, Python's `rosbags` (its MCAP storage
+//! reader and ROS 2 Humble type store) and `mcap` with `mcap-ros2-support`, through `crates/roitrack-ros/tests/
+//! check_bag.py`: every pose equal to the TUM file's, twists to the twists CSV's, covariances symmetric, positive
+//! semi-definite and those of the covariance CSV in ROS's order and each message's frame, stamps and frame ids right;
+//! the bag of a run that fails midway readable up to its last estimate.
+//!
+//! The readers live in the virtual environment that scripts/setup-test-deps makes (`target/ros-venv`, or
+//! `ROITRACK_ROS_VENV`). Without it the tests say they were skipped, unless `ROITRACK_REQUIRE_ROS_PY` is set (as
+//! `.ci/run` does), when its absence is a failure.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+mod common;
+use common::{fails, ok};
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// The Python of the readers' virtual environment, or `None` (the test is then skipped) if it is not installed.
+fn python() -> Option<PathBuf> {
+    let venv = std::env::var_os("ROITRACK_ROS_VENV").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv"),
+        PathBuf::from,
+    );
+    let python = venv.join("bin/python");
+    let ready = python.is_file()
+        && Command::new(&python)
+            .args(["-c", "import rosbags, mcap, mcap_ros2, numpy"])
+            .status()
+            .is_ok_and(|s| s.success());
+    if ready {
+        return Some(python);
+    }
+    assert!(
+        std::env::var_os("ROITRACK_REQUIRE_ROS_PY").is_none(),
+        "rosbags and mcap-ros2-support are required (ROITRACK_REQUIRE_ROS_PY is set) but not in {}",
+        venv.display()
+    );
+    eprintln!("skipped: rosbags and mcap are not installed; run scripts/setup-test-deps");
+    None
+}
+
+fn check_bag(python: &Path, dir: &Path, frame_ids: [&str; 2], extra: &[&str]) -> String {
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/check_bag.py");
+    let out = Command::new(python)
+        .arg(script)
+        .args([
+            p(&dir.join("run.mcap")),
+            p(&dir.join("poses.tum")),
+            p(&dir.join("twists.csv")),
+            p(&dir.join("covariance.csv")),
+            frame_ids[0],
+            frame_ids[1],
+        ])
+        .args(extra)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        out.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    stdout
+}
+
+fn track_args(dir: &Path, measurements: &Path, out: &Path) -> Vec<String> {
+    [
+        "track",
+        "--camera",
+        p(&dir.join("camera.yaml")),
+        "--target",
+        p(&dir.join("target.csv")),
+        "--measurements",
+        p(measurements),
+        "--poses",
+        p(&out.join("poses.tum")),
+        "--twists",
+        p(&out.join("twists.csv")),
+        "--covariance",
+        p(&out.join("covariance.csv")),
+        "--mcap",
+        p(&out.join("run.mcap")),
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
+fn strs(args: &[String]) -> Vec<&str> {
+    args.iter().map(String::as_str).collect()
+}
+
+#[test]
+fn a_bag_from_measurements_reads_back_equal_to_the_tum_and_csv_files() {
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    ok(&[
+        "simulate",
+        "--scenario",
+        "random",
+        "--seed",
+        "2",
+        "--out",
+        p(dir),
+    ]);
+    let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
+    args.extend(["--frame-id", "cam0", "--child-frame-id", "tool"].map(String::from));
+    ok(&strs(&args));
+    let report = check_bag(&python, dir, ["cam0", "tool"], &[]);
+    assert!(report.contains("read back by mcap and rosbags"), "{report}");
+    // A checker that cannot fail would prove nothing: a bag held against another run's files is refused.
+    ok(&[
+        "simulate",
+        "--scenario",
+        "random",
+        "--seed",
+        "3",
+        "--out",
+        p(&dir.join("other")),
+    ]);
+    let other = dir.join("other");
+    ok(&strs(&track_args(
+        &other,
+        &other.join("measurements.csv"),
+        &other,
+    )));
+    std::fs::copy(dir.join("run.mcap"), other.join("run.mcap")).unwrap();
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/check_bag.py");
+    let refused = Command::new(&python)
+        .arg(script)
+        .args([
+            p(&other.join("run.mcap")),
+            p(&other.join("poses.tum")),
+            p(&other.join("twists.csv")),
+            p(&other.join("covariance.csv")),
+            "cam0",
+            "tool",
+        ])
+        .output()
+        .unwrap();
+    assert!(!refused.status.success());
+}
+
+#[test]
+fn a_bag_from_frames_holds_the_images_and_their_annotations() {
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let sim = dir.join("sim");
+    ok(&[
+        "simulate",
+        "--frames",
+        "--scenario",
+        "sweep",
+        "--frame-count",
+        "8",
+        "--out",
+        p(&sim),
+    ]);
+    ok(&[
+        "track",
+        "--camera",
+        p(&sim.join("camera.yaml")),
+        "--target",
+        p(&sim.join("target.csv")),
+        "--images",
+        p(&sim.join("frames")),
+        "--timestamps",
+        p(&sim.join("timestamps.csv")),
+        "--polarity",
+        "bright",
+        "--poses",
+        p(&dir.join("poses.tum")),
+        "--twists",
+        p(&dir.join("twists.csv")),
+        "--covariance",
+        p(&dir.join("covariance.csv")),
+        "--mcap",
+        p(&dir.join("run.mcap")),
+    ]);
+    let estimates = std::fs::read_to_string(dir.join("poses.tum"))
+        .unwrap()
+        .lines()
+        .count();
+    assert_eq!(estimates, 8);
+    check_bag(&python, dir, ["camera", "target"], &["--images", "8"]);
+}
+
+#[test]
+fn the_bag_of_a_run_that_fails_midway_is_readable_up_to_its_last_estimate() {
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    ok(&["simulate", "--scenario", "orthoglide", "--out", p(dir)]);
+    // A bad field two thirds of the way through: the run fails there.
+    let text = std::fs::read_to_string(dir.join("measurements.csv")).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let cut = 2 * lines.len() / 3;
+    let mut broken = lines[..cut].join("\n");
+    broken.push_str("\n1e9,abc,1,2\n");
+    std::fs::write(dir.join("broken.csv"), broken).unwrap();
+    let failed = dir.join("failed");
+    std::fs::create_dir(&failed).unwrap();
+    let error = fails(&strs(&track_args(dir, &dir.join("broken.csv"), &failed)));
+    assert!(error.contains("broken.csv"), "{error}");
+    assert!(!failed.join("poses.tum").exists());
+    // The same measurements up to the bad line, tracked to the end: the failed run's bag holds their first estimates.
+    std::fs::write(dir.join("good.csv"), lines[..cut].join("\n") + "\n").unwrap();
+    ok(&strs(&track_args(dir, &dir.join("good.csv"), dir)));
+    std::fs::rename(failed.join("run.mcap"), dir.join("run.mcap")).unwrap();
+    let report = check_bag(&python, dir, ["camera", "target"], &["--prefix"]);
+    let estimates: usize = report
+        .split_whitespace()
+        .skip_while(|w| !w.ends_with(".mcap:"))
+        .nth(1)
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{report}"));
+    // 4 kHz measurements, an estimate every 10: all but the last few before the bad line.
+    let tracked = std::fs::read_to_string(dir.join("poses.tum"))
+        .unwrap()
+        .lines()
+        .count();
+    assert!(
+        estimates + 2 >= tracked && estimates <= tracked,
+        "{estimates} of {tracked}"
+    );
+}
+
+#[test]
+fn bag_options_are_refused_with_a_reason() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    ok(&["simulate", "--scenario", "static", "--out", p(dir)]);
+    let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
+    args.extend(["--frame-id", ""].map(String::from));
+    let error = fails(&strs(&args));
+    assert!(
+        error.contains("run.mcap") && error.contains("frame_id"),
+        "{error}"
+    );
+    let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
+    let missing = dir.join("no/such/folder/run.mcap");
+    *args.last_mut().unwrap() = p(&missing).to_string();
+    let error = fails(&strs(&args));
+    assert!(error.contains("no/such/folder/run.mcap"), "{error}");
+}

@@ -1,0 +1,29 @@
+//! # roitrack-ros
+//!
+//! roitrack's estimates as a ROS 2 bag in MCAP storage, so that they play next to a robot's other topics (`ros2 bag
+//! play`), show in Foxglove, and feed a fusion node with their covariances: [`BagWriter`] writes
+//! `/roitrack/pose` (`geometry_msgs/msg/PoseWithCovarianceStamped`), `/roitrack/twist`
+//! (`geometry_msgs/msg/TwistWithCovarianceStamped`, camera frame), `/roitrack/odometry` (`nav_msgs/msg/Odometry`,
+//! its twist in the target frame), `/tf` (`tf2_msgs/msg/TFMessage`), `/roitrack/camera_info`
+//! (`sensor_msgs/msg/CameraInfo`, once) and `/roitrack/status` (`diagnostic_msgs/msg/DiagnosticArray`), and with
+//! frames `/roitrack/image` (`sensor_msgs/msg/Image`) and `/roitrack/annotations`
+//! (`foxglove_msgs/msg/ImageAnnotations`).
+//!
+//! [`BackgroundBag`] runs a [`BagWriter`] on a thread of its own, beside the tracker. [`convert`] holds the conversions (stamps, quaternions, the covariances in ROS's order and each message's
+//! frame), [`msg`] the messages and their definitions. docs/ros2.md documents the bag.
+//!
+//! ```
+//! use roitrack_ros::{BagOptions, BagWriter};
+//!
+//! let dir = tempfile::tempdir().unwrap();
+//! let bag = BagWriter::create(dir.path().join("empty.mcap"), &BagOptions::default(), None).unwrap();
+//! assert_eq!(bag.finish().unwrap(), 0);
+//! ```
+
+mod background;
+pub mod convert;
+pub mod msg;
+mod writer;
+
+pub use background::BackgroundBag;
+pub use writer::{BagOptions, BagWriter, diagnostic_level, topics};
