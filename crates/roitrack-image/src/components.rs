@@ -95,6 +95,7 @@ impl Component {
 struct Run {
     start: u32,
     end: u32,
+    row: u32,
 }
 
 fn find(parent: &mut [u32], mut x: u32) -> u32 {
@@ -110,15 +111,31 @@ fn find(parent: &mut [u32], mut x: u32) -> u32 {
 #[derive(Debug)]
 pub(crate) struct Labeller<S> {
     runs: Vec<Run>,
-    parts: Vec<S>,
     parent: Vec<u32>,
-    totals: Vec<Option<S>>,
+    /// Per run that is its component's root, the component's index in `totals`.
+    slot: Vec<u32>,
+    totals: Vec<S>,
     mask: Vec<u64>,
+    /// Per row, a bit per 64-pixel word of the mask that had a pixel above the last threshold (64 words a `u64`).
+    active: Vec<u64>,
 }
 
 /// Sets bit `b` of `mask[w]` when `row[64 w + b] > threshold`.
+#[cfg(test)]
 fn row_mask(row: &[u16], threshold: u16, mask: &mut [u64]) {
-    for (word, chunk) in mask.iter_mut().zip(row.chunks(64)) {
+    let mut active = vec![u64::MAX; mask.len().div_ceil(64)];
+    row_mask_within(row, threshold, mask, &mut active);
+}
+
+/// [`row_mask`] for the words `w` whose bit `w % 64` of `active[w / 64]` is set (the others are cleared), and clears
+/// that bit where the word has no pixel above the threshold.
+fn row_mask_within(row: &[u16], threshold: u16, mask: &mut [u64], active: &mut [u64]) {
+    for (w, (word, chunk)) in mask.iter_mut().zip(row.chunks(64)).enumerate() {
+        let bit = 1u64 << (w % 64);
+        if active[w / 64] & bit == 0 {
+            *word = 0;
+            continue;
+        }
         *word = match <&[u16; 64]>::try_from(chunk) {
             Ok(full) => mask_of_64(full, threshold),
             Err(_) => chunk
@@ -126,6 +143,9 @@ fn row_mask(row: &[u16], threshold: u16, mask: &mut [u64]) {
                 .enumerate()
                 .fold(0, |bits, (b, &p)| bits | (u64::from(p > threshold) << b)),
         };
+        if *word == 0 {
+            active[w / 64] &= !bit;
+        }
     }
 }
 
@@ -187,10 +207,11 @@ impl<S> Default for Labeller<S> {
     fn default() -> Self {
         Self {
             runs: Vec::new(),
-            parts: Vec::new(),
             parent: Vec::new(),
+            slot: Vec::new(),
             totals: Vec::new(),
             mask: Vec::new(),
+            active: Vec::new(),
         }
     }
 }
@@ -204,19 +225,60 @@ impl<S: RunSums> Labeller<S> {
         width: usize,
         height: usize,
         threshold: u16,
+        keep: impl FnMut(&S),
+    ) {
+        self.label(pixels, width, height, threshold, false, keep);
+    }
+
+    /// [`Self::components`] at a threshold at least the one of the previous call on the same image: the pixels above
+    /// it are among those above the previous one, so only the 64-pixel words that held some are read again.
+    pub fn components_above_previous(
+        &mut self,
+        pixels: &[u16],
+        width: usize,
+        height: usize,
+        threshold: u16,
+        keep: impl FnMut(&S),
+    ) {
+        self.label(pixels, width, height, threshold, true, keep);
+    }
+
+    /// Makes the next [`Self::components_above_previous`] read every pixel (call it before the first level of an
+    /// image).
+    pub fn forget_levels(&mut self) {
+        self.active.clear();
+    }
+
+    fn label(
+        &mut self,
+        pixels: &[u16],
+        width: usize,
+        height: usize,
+        threshold: u16,
+        nested: bool,
         mut keep: impl FnMut(&S),
     ) {
         self.runs.clear();
-        self.parts.clear();
         self.parent.clear();
         let mut previous_row = 0..0;
         let words = width.div_ceil(64);
+        let active_words = words.div_ceil(64);
         self.mask.resize(words, 0);
+        let nested = nested && self.active.len() == active_words * height;
+        if !nested {
+            self.active.clear();
+            self.active.resize(active_words * height, u64::MAX);
+        }
         for (j, row) in pixels.chunks_exact(width.max(1)).take(height).enumerate() {
             let row_start = self.runs.len();
             // The row's above-threshold mask, 64 pixels a word; runs are then read from the words a run at a time,
-            // not a pixel at a time.
-            row_mask(row, threshold, &mut self.mask);
+            // not a pixel at a time. Words with nothing above a lower threshold have nothing above this one.
+            let active = &mut self.active[j * active_words..(j + 1) * active_words];
+            if active.iter().all(|&a| a == 0) {
+                previous_row = row_start..row_start;
+                continue;
+            }
+            row_mask_within(row, threshold, &mut self.mask, active);
             let mut i = 0;
             while i < width {
                 let Some(start) = next_bit(&self.mask, i, true, width) else {
@@ -228,12 +290,12 @@ impl<S: RunSums> Labeller<S> {
                 self.runs.push(Run {
                     start: start as u32,
                     end: (end - 1) as u32,
+                    row: j as u32,
                 });
-                self.parts
-                    .push(S::of_run(row, start, end, j, width, height));
                 self.parent.push(id);
             }
-            // Join with the runs of the row above that overlap or touch diagonally.
+            // Join with the runs of the row above that overlap or touch diagonally. A set's root is its smallest run
+            // (the larger root is linked under the smaller), so every run's parent comes before it.
             let mut p = previous_row.start;
             for r in row_start..self.runs.len() {
                 let run = self.runs[r];
@@ -241,32 +303,48 @@ impl<S: RunSums> Labeller<S> {
                     p += 1;
                 }
                 let mut q = p;
+                let mut root = r as u32;
                 while q < previous_row.end && self.runs[q].start <= run.end + 1 {
-                    let (ra, rb) = (
-                        find(&mut self.parent, q as u32),
-                        find(&mut self.parent, r as u32),
-                    );
-                    if ra < rb {
-                        self.parent[rb as usize] = ra;
-                    } else if rb < ra {
-                        self.parent[ra as usize] = rb;
+                    let other = find(&mut self.parent, q as u32);
+                    if other < root {
+                        self.parent[root as usize] = other;
+                        root = other;
+                    } else if root < other {
+                        self.parent[other as usize] = root;
                     }
                     q += 1;
                 }
             }
             previous_row = row_start..self.runs.len();
         }
+        // A component's root is its first run (joins keep the smaller index), so one pass in run order meets every
+        // root before the other runs of its component, and the components come out in the order of their first pixel.
         self.totals.clear();
-        self.totals.resize(self.runs.len(), None);
-        for r in 0..self.parts.len() {
-            let root = find(&mut self.parent, r as u32) as usize;
-            let part = self.parts[r];
-            match &mut self.totals[root] {
-                Some(total) => total.add(&part),
-                slot => *slot = Some(part),
+        self.slot.clear();
+        self.slot.resize(self.runs.len(), 0);
+        for r in 0..self.runs.len() {
+            let Run { start, end, row } = self.runs[r];
+            let (start, end, j) = (start as usize, end as usize + 1, row as usize);
+            let part = S::of_run(
+                &pixels[j * width..(j + 1) * width],
+                start,
+                end,
+                j,
+                width,
+                height,
+            );
+            // The parent comes before the run, so its slot is already its root's.
+            let parent = self.parent[r] as usize;
+            if parent == r {
+                self.slot[r] = self.totals.len() as u32;
+                self.totals.push(part);
+            } else {
+                let slot = self.slot[parent];
+                self.slot[r] = slot;
+                self.totals[slot as usize].add(&part);
             }
         }
-        for c in self.totals.iter().flatten() {
+        for c in &self.totals {
             keep(c);
         }
     }

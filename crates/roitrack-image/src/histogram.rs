@@ -10,10 +10,39 @@ pub(crate) struct Histogram {
 impl Histogram {
     /// The histogram of `pixels`, values above `top` counted as `top`.
     pub fn of(pixels: &[u16], top: u16) -> Self {
-        let mut counts = vec![0u32; usize::from(top) + 1];
-        for &p in pixels {
-            counts[usize::from(p.min(top))] += 1;
-        }
+        // Four interleaved tables: neighbouring pixels mostly share a value, and one table would make each count
+        // wait for the previous one's store.
+        let bins = usize::from(top) + 1;
+        let counts = if top <= 255 {
+            // 8-bit images: tables indexed by a byte need no bounds checks.
+            let mut lanes = [[0u32; 256]; 4];
+            let (quads, rest) = pixels.as_chunks::<4>();
+            for quad in quads {
+                for (lane, &p) in lanes.iter_mut().zip(quad) {
+                    lane[usize::from(p.min(top) as u8)] += 1;
+                }
+            }
+            for &p in rest {
+                lanes[0][usize::from(p.min(top) as u8)] += 1;
+            }
+            (0..bins)
+                .map(|b| lanes[0][b] + lanes[1][b] + lanes[2][b] + lanes[3][b])
+                .collect()
+        } else {
+            let mut lanes = vec![0u32; 4 * bins];
+            let (quads, rest) = pixels.as_chunks::<4>();
+            for quad in quads {
+                for (lane, &p) in quad.iter().enumerate() {
+                    lanes[lane * bins + usize::from(p.min(top))] += 1;
+                }
+            }
+            for &p in rest {
+                lanes[usize::from(p.min(top))] += 1;
+            }
+            (0..bins)
+                .map(|b| lanes[b] + lanes[bins + b] + lanes[2 * bins + b] + lanes[3 * bins + b])
+                .collect()
+        };
         Self {
             counts,
             total: pixels.len() as u64,

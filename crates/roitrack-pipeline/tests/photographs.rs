@@ -708,6 +708,48 @@ fn polarity_is_chosen_and_reported() {
     }
 }
 
+/// Sharing the work between two threads (the default) changes nothing: the same blobs in the same order, the same
+/// identification and pose, for both polarities and for one polarity asked for, on photographs large enough for the
+/// second thread.
+#[test]
+fn two_threads_find_exactly_what_one_finds() {
+    let target = grid(8, 10, 0.025, 0.015, GridLayout::Square);
+    for (shade, seed) in [
+        (CircleShade::DarkOnLight, 7),
+        (CircleShade::BrightOnDark, 8),
+        (CircleShade::DarkOnLight, 9),
+    ] {
+        let scene = PhotoScene::facing(camera_xga(), target.clone(), 0.6, tilt(30.0, 90.0, 5.0))
+            .harsh()
+            .with_shade(shade)
+            .with_seed(seed);
+        let photo = render_photo(&scene).unwrap();
+        for polarity in [
+            PolarityChoice::Auto,
+            PolarityChoice::Dark,
+            PolarityChoice::Bright,
+        ] {
+            let found = |threads: usize| {
+                let mut options = PhotoOptions {
+                    polarity,
+                    ..PhotoOptions::default()
+                };
+                options.blobs.threads = threads;
+                detect_target(&scene.camera, &target, &photo.frame, &options)
+            };
+            let (one, two) = (found(1), found(2));
+            assert_eq!(
+                format!("{one:?}"),
+                format!("{two:?}"),
+                "{shade:?} seed {seed}, {polarity:?}"
+            );
+            if polarity == PolarityChoice::Auto {
+                assert!(one.is_ok(), "{shade:?} seed {seed}: {one:?}");
+            }
+        }
+    }
+}
+
 // ---------------------------------------------------------------------------------------------------------------
 // 2. Centre accuracy
 

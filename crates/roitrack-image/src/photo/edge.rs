@@ -9,20 +9,19 @@ use nalgebra::{Matrix5, Vector2, Vector5};
 
 use super::centre::Ellipse;
 
-/// The value at (u, v) by bilinear interpolation; `None` outside the image.
-fn sample(pixels: &[u16], width: usize, height: usize, u: f64, v: f64) -> Option<f64> {
-    if !(u >= 0.0 && v >= 0.0 && u <= (width - 1) as f64 && v <= (height - 1) as f64) {
-        return None;
-    }
+/// The value at (u, v) by bilinear interpolation, (u, v) in the image (0 <= u <= width - 1, 0 <= v <= height - 1).
+fn sample_within(pixels: &[u16], width: usize, height: usize, u: f64, v: f64) -> f64 {
     // Non-negative: truncation is the floor (and much cheaper than a call to it).
     let (i, j) = (u as usize, v as usize);
-    let (i1, j1) = ((i + 1).min(width - 1), (j + 1).min(height - 1));
+    let (di, dj) = (
+        usize::from(i + 1 < width),
+        if j + 1 < height { width } else { 0 },
+    );
     let (fu, fv) = (u - i as f64, v - j as f64);
-    let at = |i: usize, j: usize| f64::from(pixels[j * width + i]);
-    Some(
-        (1.0 - fv) * ((1.0 - fu) * at(i, j) + fu * at(i1, j))
-            + fv * ((1.0 - fu) * at(i, j1) + fu * at(i1, j1)),
-    )
+    let k = j * width + i;
+    let at = |k: usize| f64::from(pixels[k]);
+    (1.0 - fv) * ((1.0 - fu) * at(k) + fu * at(k + di))
+        + fv * ((1.0 - fu) * at(k + dj) + fu * at(k + dj + di))
 }
 
 /// Profile samples per unit of the ray's radius.
@@ -46,31 +45,31 @@ pub(crate) fn edge_centre(
     edges.clear();
     contrasts.clear();
     let mut profile = [0.0f64; STEPS + 1];
-    for k in 0..rays {
-        let phi = std::f64::consts::TAU * k as f64 / rays as f64;
-        let (x, y) = (
-            shape.semi_major_px * phi.cos(),
-            shape.semi_minor_px * phi.sin(),
+    // The rays' angles by rotation: one sine and cosine in all.
+    let (step_sin, step_cos) = (std::f64::consts::TAU / rays as f64).sin_cos();
+    let (mut phi_cos, mut phi_sin) = (1.0f64, 0.0f64);
+    let (u_max, v_max) = ((width - 1) as f64, (height - 1) as f64);
+    for _ in 0..rays {
+        let (x, y) = (shape.semi_major_px * phi_cos, shape.semi_minor_px * phi_sin);
+        (phi_cos, phi_sin) = (
+            phi_cos * step_cos - phi_sin * step_sin,
+            phi_sin * step_cos + phi_cos * step_sin,
         );
         // The ray through the ellipse's point at phi, its length that of the radius there.
         let radius = Vector2::new(cos * x - sin * y, sin * x + cos * y);
         // From 0.5 to 1.5 radii, but no more than 3 px beyond the outline (neighbours in dense grids).
         let reach = 0.5f64.min(3.0 / radius.norm().max(1e-9)).max(0.2);
         let (s0, s1) = (0.6, 1.0 + reach);
-        let mut ok = true;
-        for (n, p) in profile.iter_mut().enumerate() {
-            let s = s0 + (s1 - s0) * n as f64 / STEPS as f64;
-            let at = centre + s * radius;
-            match sample(pixels, width, height, at.x, at.y) {
-                Some(value) => *p = value,
-                None => {
-                    ok = false;
-                    break;
-                }
-            }
-        }
-        if !ok {
+        // Both ends in the image: so is the whole segment between them (the image is convex).
+        let (first, last) = (centre + s0 * radius, centre + s1 * radius);
+        let within = |p: Vector2<f64>| p.x >= 0.0 && p.y >= 0.0 && p.x <= u_max && p.y <= v_max;
+        if !(within(first) && within(last)) {
             continue;
+        }
+        let step = (s1 - s0) / STEPS as f64 * radius;
+        for (n, p) in profile.iter_mut().enumerate() {
+            let at = first + n as f64 * step;
+            *p = sample_within(pixels, width, height, at.x, at.y);
         }
         let inside = profile[..STEPS / 4].iter().sum::<f64>() / (STEPS / 4) as f64;
         let outside = profile[STEPS - 3..]
