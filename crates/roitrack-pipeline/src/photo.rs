@@ -255,21 +255,41 @@ pub fn detect_target(
     Ok(finish(camera, target, polarity, blobs, found))
 }
 
-/// Dark blobs if the frame's median is above the middle of its range, else bright.
+/// Side of a square cell (px) of [`likely_polarity`]: a few blobs' worth.
+const POLARITY_CELL_PX: usize = 32;
+
+/// Dark blobs if small dark features dominate the frame's local contrast, else bright. Each 32 x 32 cell (every other
+/// pixel of every other row) votes with its contrast: a few dark blobs on paper pull a cell's minimum far below its
+/// mean while its maximum stays near it, bright markers the other way round; an edge or a smooth gradient pulls both
+/// alike. Global statistics (the median against the range) fail on a print in a shadowed or dark scene; this is only
+/// the order in which the two polarities are tried, so a wrong guess costs time, never the result.
 fn likely_polarity(frame: &Frame) -> Polarity {
-    // A sparse sample is enough for a median.
-    let step = (frame.pixels.len() / 4096).max(1);
-    let mut sample: Vec<u16> = frame.pixels.iter().step_by(step).copied().collect();
-    if sample.is_empty() {
-        return Polarity::Dark;
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let (cols, rows) = (w.div_ceil(POLARITY_CELL_PX), h.div_ceil(POLARITY_CELL_PX));
+    // Per cell: minimum, maximum, sum and count of the sampled pixels.
+    let mut cells = vec![(u16::MAX, 0u16, 0u64, 0u32); cols * rows];
+    for j in (0..h).step_by(2) {
+        let row = &frame.pixels[j * w..(j + 1) * w];
+        let cell_row = &mut cells[(j / POLARITY_CELL_PX) * cols..][..cols];
+        for (cell, chunk) in cell_row.iter_mut().zip(row.chunks(POLARITY_CELL_PX)) {
+            for &p in chunk.iter().step_by(2) {
+                cell.0 = cell.0.min(p);
+                cell.1 = cell.1.max(p);
+                cell.2 += u64::from(p);
+                cell.3 += 1;
+            }
+        }
     }
-    let (lo, hi) = (
-        sample.iter().copied().min().unwrap_or(0),
-        sample.iter().copied().max().unwrap_or(0),
-    );
-    let middle = sample.len() / 2;
-    let median = *sample.select_nth_unstable(middle).1;
-    if f64::from(median) > 0.5 * (f64::from(lo) + f64::from(hi)) {
+    let mut vote = 0.0;
+    for &(lo, hi, sum, n) in &cells {
+        if n == 0 {
+            continue;
+        }
+        let mean = sum as f64 / f64::from(n);
+        // How far below the mean the darkest pixel lies, against how far above it the brightest.
+        vote += (mean - f64::from(lo)) - (f64::from(hi) - mean);
+    }
+    if vote > 0.0 {
         Polarity::Dark
     } else {
         Polarity::Bright

@@ -123,15 +123,31 @@ impl PointIndex {
 
     /// Up to `k` nearest points to point `i` (itself excluded) within `radius`, nearest first.
     pub fn neighbours(&self, i: usize, k: usize, radius: f64) -> Vec<(usize, f64)> {
+        // Search a growing disk, not the whole `radius` (often "everything"): once it holds k others, the k nearest
+        // of all are in it, and in the same order (the cells are visited in the same row-major order, the sort is
+        // stable), so this is the full search's answer at the cost of a few cells.
         let mut found = Vec::new();
-        self.within(&self.points[i], radius, |j, d| {
-            if j != i {
-                found.push((j, d));
+        let mut reach = (2.0 * self.cell).min(radius);
+        loop {
+            found.clear();
+            self.within(&self.points[i], reach, |j, d| {
+                if j != i {
+                    found.push((j, d));
+                }
+            });
+            if reach >= radius || found.len() >= k.max(1) || reach > self.extent() {
+                break;
             }
-        });
+            reach = (2.0 * reach).min(radius);
+        }
         found.sort_by(|a, b| a.1.total_cmp(&b.1));
         found.truncate(k);
         found
+    }
+
+    /// The diagonal of the indexed area (px): a disk of this radius around any indexed point covers every cell.
+    fn extent(&self) -> f64 {
+        self.cell * ((self.cols * self.cols + self.rows * self.rows) as f64).sqrt()
     }
 }
 

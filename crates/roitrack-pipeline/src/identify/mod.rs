@@ -422,7 +422,7 @@ pub fn identify(
     let lattice = planar
         .as_ref()
         .and_then(|(plane, _)| TargetLattice::of(plane));
-    let hypothesis_groups: Vec<Vec<Vec<(usize, usize)>>> = match (&planar, lattice) {
+    let hypothesis_groups: HypothesisGroups = match (&planar, lattice) {
         (Some(_), Some(lattice)) => lattice_hypotheses(&lattice, &ideal, &areas_px, &index),
         (None, _) => {
             let spread: Vec<Vector3<f64>> = points.iter().map(|p| p.point_in_obj_m).collect();
@@ -452,7 +452,7 @@ pub fn identify(
     // Groups in order of promise (the largest grown lattice first): stop at the first that gives an accepted fit.
     let mut verified: Vec<Verified> = Vec::new();
     let mut tried = 0;
-    for group in &hypothesis_groups {
+    for group in hypothesis_groups {
         tried += group.len();
         verified.extend(group.iter().filter_map(|pairs| verifier.verify(pairs)));
         if verified.iter().any(|v| v.accepted(min_matched)) {
@@ -514,9 +514,13 @@ pub fn identify(
     Ok(finish(&verifier, chosen, ambiguous, tried))
 }
 
+/// Groups of hypotheses (lists of (target point, blob) pairs) in the order they are verified; a group is made only
+/// if the ones before it gave no accepted fit.
+type HypothesisGroups = Box<dyn Iterator<Item = Vec<Vec<(usize, usize)>>>>;
+
 /// Hypotheses grouped by how many points they match, most first: a group is verified only if the larger ones gave
 /// no accepted fit (rivals as good as the best have as many points, so they are in its group).
-fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> Vec<Vec<Vec<(usize, usize)>>> {
+fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> HypothesisGroups {
     hypotheses.sort_by_key(|h| std::cmp::Reverse(h.len()));
     let mut groups: Vec<Vec<Vec<(usize, usize)>>> = Vec::new();
     for h in hypotheses {
@@ -525,7 +529,7 @@ fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> Vec<Vec<Vec<(usize, usiz
             _ => groups.push(vec![h]),
         }
     }
-    groups
+    Box::new(groups.into_iter())
 }
 
 /// Corrects the matched centres for the perspective displacement of a disk's centre and solves the pose again.
@@ -597,7 +601,7 @@ fn lattice_hypotheses(
     ideal: &[Vector2<f64>],
     areas_px: &[f64],
     index: &PointIndex,
-) -> Vec<Vec<Vec<(usize, usize)>>> {
+) -> HypothesisGroups {
     const SEEDS: usize = 12;
     let mut grown_sets: Vec<lattice::GrownLattice> = Vec::new();
     let mut covered = vec![false; ideal.len()];
@@ -650,17 +654,25 @@ fn lattice_hypotheses(
         grown_sets.push(grown);
     }
     grown_sets.sort_by_key(|g| std::cmp::Reverse(g.nodes.len()));
-    let grown_sets: Vec<&lattice::GrownLattice> = grown_sets
-        .iter()
+    let grown_sets: Vec<lattice::GrownLattice> = grown_sets
+        .into_iter()
         .take(3)
         .filter(|g| g.nodes.len() >= 4)
         .collect();
     // First the placements that put nearly every grown blob on the target; then, if none verifies, those that leave
     // up to half of them off it: stray blobs where the lattice goes on beyond the target (printed marks, clutter)
     // join the growth and stick out of the target.
-    let strict = grown_sets.iter().map(|g| placements(lattice, g, 0.9, 1));
-    let lenient = grown_sets.iter().map(|g| placements(lattice, g, 0.5, 3));
-    strict.chain(lenient).collect()
+    // Made as the search asks for them: the lenient ones are many, and seldom needed.
+    let count = grown_sets.len();
+    let lattice = lattice.clone();
+    Box::new((0..2 * count).map(move |k| {
+        let grown = &grown_sets[k % count];
+        if k < count {
+            placements(&lattice, grown, 0.9, 1)
+        } else {
+            placements(&lattice, grown, 0.5, 3)
+        }
+    }))
 }
 
 #[cfg(test)]
