@@ -236,3 +236,64 @@ fn parse_image_size(text: &str) -> Result<(u32, u32), String> {
         )),
     }
 }
+
+/// `--target-units`: the unit of a target file's coordinates and diameters.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum LengthUnitArg {
+    M,
+    Cm,
+    Mm,
+}
+
+impl From<LengthUnitArg> for roitrack::formats::LengthUnit {
+    fn from(u: LengthUnitArg) -> Self {
+        match u {
+            LengthUnitArg::M => Self::M,
+            LengthUnitArg::Cm => Self::Cm,
+            LengthUnitArg::Mm => Self::Mm,
+        }
+    }
+}
+
+/// `--time-units`: the unit of a measurements file's times.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum TimeUnitArg {
+    S,
+    Ms,
+    Us,
+    Ns,
+}
+
+impl From<TimeUnitArg> for roitrack::formats::TimeUnit {
+    fn from(u: TimeUnitArg) -> Self {
+        match u {
+            TimeUnitArg::S => Self::S,
+            TimeUnitArg::Ms => Self::Ms,
+            TimeUnitArg::Us => Self::Us,
+            TimeUnitArg::Ns => Self::Ns,
+        }
+    }
+}
+
+/// The target file and its unit (`--target`, `--target-units`), shared by every command that reads a target.
+#[derive(Debug, Clone, Args)]
+pub struct TargetArgs {
+    /// Target model: CSV id,x,y,z[,diameter] in the object frame, in metres unless --target-units says otherwise.
+    #[arg(long, value_name = "FILE.csv")]
+    pub target: PathBuf,
+    /// The unit of the target file's coordinates and diameters. Default: metres, and a target spanning more than
+    /// 2 m or with blobs wider than 0.2 m is refused as likely millimetres or centimetres (give m to read it as
+    /// metres anyway).
+    #[arg(long, value_enum, value_name = "UNIT")]
+    pub target_units: Option<LengthUnitArg>,
+}
+
+impl TargetArgs {
+    /// Reads the target through the library's reader, in the unit given (or checked for a likely unit mistake).
+    pub fn read(&self) -> Result<roitrack::Target> {
+        Ok(roitrack::formats::read_target_csv_in(
+            &self.target,
+            self.target_units.map(Into::into),
+        )?)
+    }
+}

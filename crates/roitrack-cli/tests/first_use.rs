@@ -207,3 +207,138 @@ fn step_1_every_camera_file_and_model_is_read_projects_like_opencv_and_tracks() 
     ]);
     assert!(e.contains("--image-size"), "{e}");
 }
+
+/// Runs `track` on the canonical camera with these files and extra options.
+fn track(dir: &Path, target: &Path, measurements: &Path, extra: &[&str]) -> Result<String, String> {
+    let camera = dir.join("camera.yaml");
+    if !camera.exists() {
+        roitrack::formats::write_camera_yaml(&camera, &CameraModel::canonical()).unwrap();
+    }
+    let poses = dir.join("poses.tum");
+    let twists = dir.join("twists.csv");
+    let mut args = vec![
+        "track",
+        "--camera",
+        camera.to_str().unwrap(),
+        "--target",
+        target.to_str().unwrap(),
+        "--measurements",
+        measurements.to_str().unwrap(),
+        "--poses",
+        poses.to_str().unwrap(),
+        "--twists",
+        twists.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    let out = common::roitrack(&args);
+    if out.status.success() {
+        Ok(std::fs::read_to_string(&poses).unwrap())
+    } else {
+        Err(String::from_utf8(out.stderr).unwrap())
+    }
+}
+
+#[test]
+fn step_2_unit_and_range_mistakes_are_caught_with_their_hint() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let camera = CameraModel::canonical();
+    let truth = MotionState::at_rest(Default::default(), Vector3::new(0.004, -0.003, 0.6));
+    let measurements = measurements_of_grid_at_rest(&camera, &truth);
+    let good_m = d.join("m.csv");
+    write_measurements_csv(&good_m, &measurements).unwrap();
+    let good_t = d.join("target.csv");
+    write_target_csv(&good_t, &Target::grid4x4()).unwrap();
+    let position = |tum: &str| {
+        let f: Vec<f64> = tum
+            .lines()
+            .next_back()
+            .unwrap()
+            .split_whitespace()
+            .map(|v| v.parse().unwrap())
+            .collect();
+        Vector3::new(f[1], f[2], f[3])
+    };
+    assert!(
+        (position(&track(d, &good_t, &good_m, &[]).unwrap()) - truth.cam_t_obj_m).norm() < 1e-5
+    );
+
+    // A target written in millimetres: refused with the hint, read with --target-units mm.
+    let mut mm = String::from("id,x,y,z,diameter\n");
+    for p in Target::grid4x4().points() {
+        let q = p.point_in_obj_m * 1000.0;
+        mm.push_str(&format!(
+            "{},{},{},{},{}\n",
+            p.id,
+            q.x,
+            q.y,
+            q.z,
+            p.diameter_m.unwrap() * 1000.0
+        ));
+    }
+    let mm_t = d.join("target_mm.csv");
+    std::fs::write(&mm_t, mm).unwrap();
+    let e = track(d, &mm_t, &good_m, &[]).unwrap_err();
+    assert!(
+        e.contains("target_mm.csv: field 'x, y, z': its points span")
+            && e.contains("--target-units mm"),
+        "{e}"
+    );
+    let tum = track(d, &mm_t, &good_m, &["--target-units", "mm"]).unwrap();
+    assert!((position(&tum) - truth.cam_t_obj_m).norm() < 1e-5);
+    // Insisting that it is in metres gives a first pose 600 m away: refused too, with the same hint.
+    let e = track(d, &mm_t, &good_m, &["--target-units", "m"]).unwrap_err();
+    assert!(
+        e.contains("more than 100 m away") && e.contains("--target-units mm or cm"),
+        "{e}"
+    );
+
+    // Times in milliseconds: refused with the hint, read with --time-units ms.
+    let ms: Vec<Measurement> = measurements
+        .iter()
+        .map(|m| Measurement {
+            t_s: m.t_s * 1e3,
+            ..*m
+        })
+        .collect();
+    let ms_m = d.join("m_ms.csv");
+    write_measurements_csv(&ms_m, &ms).unwrap();
+    let e = track(d, &good_t, &ms_m, &[]).unwrap_err();
+    assert!(
+        e.contains("m_ms.csv:3: field 't': ") && e.contains("--time-units ms"),
+        "{e}"
+    );
+    let tum = track(d, &good_t, &ms_m, &["--time-units", "ms"]).unwrap();
+    assert!(
+        tum.lines().next_back().unwrap().starts_with("0.15"),
+        "{}",
+        tum.lines().next_back().unwrap()
+    );
+    // And nanoseconds since 1970.
+    let ns: Vec<Measurement> = measurements
+        .iter()
+        .map(|m| Measurement {
+            t_s: 1.764e18 + m.t_s * 1e9,
+            ..*m
+        })
+        .collect();
+    let ns_m = d.join("m_ns.csv");
+    write_measurements_csv(&ns_m, &ns).unwrap();
+    let e = track(d, &good_t, &ns_m, &[]).unwrap_err();
+    assert!(
+        e.contains("m_ns.csv:2: field 't': ") && e.contains("--time-units ns"),
+        "{e}"
+    );
+
+    // A centroid 4,000 px off a 1,024 px image: the file, the line and the field.
+    let mut off = measurements.clone();
+    off[37].u_px += 4000.0;
+    let off_m = d.join("m_off.csv");
+    write_measurements_csv(&off_m, &off).unwrap();
+    let e = track(d, &good_t, &off_m, &[]).unwrap_err();
+    assert!(
+        e.contains("m_off.csv:39: field 'u': centroid u = ")
+            && e.contains("outside the image, which is 1024 px wide"),
+        "{e}"
+    );
+}

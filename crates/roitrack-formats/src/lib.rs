@@ -66,6 +66,7 @@ mod row_writer;
 mod target_csv;
 mod tum;
 mod twists;
+mod units;
 mod video;
 
 pub use atomic::AtomicFile;
@@ -85,7 +86,8 @@ pub use image_file::{
     FRAME_IMAGE_FORMATS, check_frame_size, decode_frame, read_frame, write_frame_png,
 };
 pub use measurements::{
-    MeasurementReader, MeasurementWriter, read_measurements_csv, write_measurements_csv,
+    CENTROID_EDGE_TOLERANCE_PX, MeasurementReader, MeasurementWriter, read_measurements_csv,
+    write_measurements_csv,
 };
 pub use overlay::{MarkKind, OverlayMark, write_overlay_png};
 pub use roi_recording::{
@@ -94,3 +96,8 @@ pub use roi_recording::{
 pub use target_csv::{parse_target_csv, read_target_csv, target_csv_string, write_target_csv};
 pub use tum::{PoseWriter, QUATERNION_NORM_TOLERANCE, parse_tum, read_tum, write_tum};
 pub use twists::{TwistWriter, parse_twists_csv, read_twists_csv, write_twists_csv};
+pub use units::{
+    LengthUnit, MAX_PLAUSIBLE_BLOB_DIAMETER_M, MAX_PLAUSIBLE_MEDIAN_STEP_S,
+    MAX_PLAUSIBLE_TARGET_SPAN_M, MAX_PLAUSIBLE_TIME_S, TimeUnit, TimedMeasurements,
+    parse_target_csv_in, read_target_csv_in,
+};

@@ -17,6 +17,10 @@ use crate::row_writer::RowWriter;
 
 const COLUMNS: [&str; 4] = ["t", "id", "u", "v"];
 
+/// How far (px) a centroid may lie beyond the sensor's edge (at -0.5 and size - 0.5) before
+/// [`MeasurementReader::with_image_size`] refuses it: centroid noise on a blob cut by the edge.
+pub const CENTROID_EDGE_TOLERANCE_PX: f64 = 1.0;
+
 /// A streaming reader of a measurements CSV: one [`Measurement`] per row, in constant memory.
 ///
 /// It checks every row: four fields, `t`, `u`, `v` finite numbers, `id` a non-negative integer (and, with
@@ -30,6 +34,8 @@ pub struct MeasurementReader<R: Read> {
     known_ids: Option<HashSet<u32>>,
     /// Time (s) and line of the previous row.
     previous: Option<(f64, u64)>,
+    /// With [`Self::with_image_size`]: the image (px) every centroid must lie on.
+    image_size: Option<(u32, u32)>,
     done: bool,
 }
 
@@ -55,6 +61,7 @@ impl<R: Read> MeasurementReader<R> {
             path,
             known_ids: None,
             previous: None,
+            image_size: None,
             done: false,
         })
     }
@@ -64,6 +71,25 @@ impl<R: Read> MeasurementReader<R> {
     pub fn with_known_ids(mut self, ids: impl IntoIterator<Item = u32>) -> Self {
         self.known_ids = Some(ids.into_iter().collect());
         self
+    }
+
+    /// Makes a centroid off an image of `width_px` x `height_px` (the camera's) an error naming its line and field.
+    /// A centroid may lie up to [`CENTROID_EDGE_TOLERANCE_PX`] beyond the sensor's edge (noise on a blob cut by
+    /// the edge), not more.
+    #[must_use]
+    pub fn with_image_size(mut self, width_px: u32, height_px: u32) -> Self {
+        self.image_size = Some((width_px, height_px));
+        self
+    }
+
+    /// The file, as named by the caller.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The line of the last row read (0 before the first).
+    pub fn line(&self) -> u64 {
+        self.previous.map_or(0, |(_, line)| line)
     }
 
     fn next_measurement(&mut self) -> Result<Option<Measurement>, FormatError> {
@@ -87,6 +113,25 @@ impl<R: Read> MeasurementReader<R> {
                 1,
                 format!("unknown point id {id}: the target has no such point"),
             ));
+        }
+        if let Some((width_px, height_px)) = self.image_size {
+            for (i, value, size, axis) in
+                [(2, u_px, width_px, "wide"), (3, v_px, height_px, "high")]
+            {
+                let edge = -0.5 - CENTROID_EDGE_TOLERANCE_PX;
+                if !(edge..=f64::from(size) - edge - 1.0).contains(&value) {
+                    return Err(row.error(
+                        i,
+                        format!(
+                            "centroid {} = {value} px is outside the image, which is {size} px {axis} (0 to {} px, \
+                             from the camera file): the measurements are not from this camera, or their pixels are \
+                             scaled or offset (a ROI's own coordinates instead of the image's?)",
+                            COLUMNS[i],
+                            size - 1
+                        ),
+                    ));
+                }
+            }
         }
         check_time_order(self.previous, t_s, false, &self.path, line, "t")?;
         self.previous = Some((t_s, line));

@@ -11,7 +11,7 @@ use roitrack::pipeline::{PhotoDetection, PhotoOptions, PolarityChoice, detect_ta
 use roitrack::{CameraModel, Target};
 use serde_json::json;
 
-use crate::args::CameraArgs;
+use crate::args::{CameraArgs, TargetArgs};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum PolarityArg {
@@ -52,9 +52,8 @@ pub struct DetectArgs {
     /// The camera (the images must be its size).
     #[command(flatten)]
     pub camera: CameraArgs,
-    /// Target file (CSV id,x,y,z,diameter in metres; `roitrack target grid` writes grids).
-    #[arg(long)]
-    pub target: PathBuf,
+    #[command(flatten)]
+    pub target: TargetArgs,
     /// Which blobs to look for.
     #[arg(long, value_enum, default_value = "auto")]
     pub polarity: PolarityArg,
@@ -79,7 +78,7 @@ pub struct DetectArgs {
 
 pub fn run(args: &DetectArgs) -> Result<()> {
     let camera = args.camera.read()?;
-    let target = roitrack::formats::read_target_csv(&args.target)?;
+    let target = args.target.read()?;
     if let Some(dir) = &args.overlay {
         std::fs::create_dir_all(dir).map_err(|e| {
             anyhow::anyhow!("{}: cannot create the overlay folder: {e}", dir.display())

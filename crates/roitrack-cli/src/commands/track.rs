@@ -6,11 +6,11 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use roitrack::formats::{EstimateWriter, MeasurementReader, RoiRecordingReader};
+use roitrack::formats::{EstimateWriter, MeasurementReader, RoiRecordingReader, TimedMeasurements};
 use roitrack::image::CentroidOptions;
 use roitrack::{EstimatorReport, TrackStatus, Tracker};
 
-use crate::args::{CameraArgs, EstimatorArgs, ShutterArg};
+use crate::args::{CameraArgs, EstimatorArgs, ShutterArg, TargetArgs, TimeUnitArg};
 use crate::commands::detect::{PolarityArg, distance_range};
 
 /// Track pose and velocity from a measurements file (t,id,u,v), a ROI recording, or frames (an image folder, a
@@ -19,9 +19,8 @@ use crate::commands::detect::{PolarityArg, distance_range};
 pub struct TrackArgs {
     #[command(flatten)]
     pub camera: CameraArgs,
-    /// Target model (CSV id,x,y,z[,diameter], metres).
-    #[arg(long)]
-    pub target: PathBuf,
+    #[command(flatten)]
+    pub target: TargetArgs,
     /// Measured centroids (CSV t,id,u,v; raw pixels; time order). Centroids that share a time (the blobs of a
     /// global-shutter frame) form one readout: an estimate comes only after the last of them.
     #[arg(long, required_unless_present_any = ["rois", "images"], conflicts_with_all = ["rois", "images"])]
@@ -29,6 +28,11 @@ pub struct TrackArgs {
     /// Instead of centroids: a recording of ROI images (see roitrack_formats::RoiRecordingReader), centroided here.
     #[arg(long, conflicts_with = "images")]
     pub rois: Option<PathBuf>,
+    /// With --measurements: the unit of the times. Default: seconds, and times more than 0.2 apart (median over the
+    /// first 1,000 rows, slower than 5 Hz) or past the year 5000 are refused as likely ms, us or ns (give s to read
+    /// them as seconds anyway).
+    #[arg(long, value_enum, value_name = "UNIT", requires = "measurements")]
+    pub time_units: Option<TimeUnitArg>,
     /// Instead of centroids: frames. A folder of images (PNG, JPEG, PGM/PPM, TIFF, in natural order: frame2 before
     /// frame10), a numbered pattern (`frames/frame_%05d.png`), a quoted glob (`'frames/*.png'`), or a video (mp4,
     /// mkv, avi, mov, webm; decoded by Debian's `ffmpeg`). One estimate per frame where the target is found.
@@ -95,7 +99,7 @@ pub struct TrackArgs {
 
 pub fn run(args: &TrackArgs) -> Result<()> {
     let camera = args.camera.read()?;
-    let target = roitrack::formats::read_target_csv(&args.target)?;
+    let target = args.target.read()?;
     if let Some(source) = &args.images {
         return run_frames(args, source, camera, target);
     }
@@ -125,7 +129,11 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     let mut sink = |e: &roitrack::Estimate| writer.write(e).and_then(|()| bag.estimate(e));
     let (path, report, rois) = match (&args.measurements, &args.rois) {
         (Some(path), _) => {
-            let reader = MeasurementReader::open(path)?.with_known_ids(known_ids);
+            // Checked: known ids, centroids on the camera's image, times in seconds (or converted).
+            let reader = MeasurementReader::open(path)?
+                .with_known_ids(known_ids)
+                .with_image_size(camera.width_px, camera.height_px);
+            let reader = TimedMeasurements::new(reader, args.time_units.map(Into::into));
             let measurements = reader.enumerate().map(|(k, m)| {
                 tick(k);
                 m

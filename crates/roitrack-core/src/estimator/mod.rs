@@ -135,6 +135,10 @@ pub struct TrackerConfig {
     /// Huber only down-weights), Huber or none. The Kalman filter has its own ([`KalmanTuning::huber_sigma`],
     /// [`KalmanTuning::gate_sigma`]).
     pub robust: RobustLoss,
+    /// The farthest the first pose of a track may put the target's origin (m): a first pose farther away, or
+    /// behind the camera, is refused ([`TrackError::ImplausibleFirstPose`]), as it comes from files in the wrong
+    /// units far more often than from a real scene. Default 100 m; `f64::INFINITY` turns the check off.
+    pub max_first_distance_m: f64,
 }
 
 impl Default for TrackerConfig {
@@ -147,6 +151,7 @@ impl Default for TrackerConfig {
             min_inverse_condition: 3e-3,
             lost_residual_px: 5.0,
             robust: RobustLoss::Tukey,
+            max_first_distance_m: 100.0,
         }
     }
 }
@@ -181,6 +186,14 @@ impl TrackerConfig {
         )?;
         if let WindowMode::Last(n) = self.window {
             check("window", n as f64, "at least 4 measurements", n >= 4)?;
+        }
+        // Infinity is allowed here: it turns the check off.
+        if !(self.max_first_distance_m > 0.0) {
+            return Err(ConfigError::Invalid {
+                field: "max_first_distance_m",
+                expected: "positive (or infinite)",
+                value: self.max_first_distance_m,
+            });
         }
         match self.estimator {
             EstimatorConfig::Kalman(k) => {
@@ -340,6 +353,21 @@ pub enum TrackError {
         t_s: f64,
         #[source]
         source: crate::CameraError,
+    },
+    /// The first pose of a track is farther than [`TrackerConfig::max_first_distance_m`] or behind the camera.
+    #[error(
+        "the first pose (t = {t_s} s) puts the target's origin at ({x_m:.3}, {y_m:.3}, {z_m:.3}) m, {distance_m:.1} m \
+         from the camera{}: check the units of the target file (a target in millimetres or centimetres needs \
+         --target-units mm or cm) and that the camera file matches the camera that took the measurements",
+        if *z_m <= 0.0 { ", behind it".to_string() } else { format!(", more than {max_m} m away") }
+    )]
+    ImplausibleFirstPose {
+        t_s: f64,
+        x_m: f64,
+        y_m: f64,
+        z_m: f64,
+        distance_m: f64,
+        max_m: f64,
     },
 }
 
@@ -617,24 +645,29 @@ pub fn track<S, K>(
     // Measurements that share a time are held; the readout they form is closed (and an estimate given if one is
     // due) when a later time comes, or the stream ends.
     let mut open_time_s: Option<f64> = None;
-    let mut close = |estimator: &mut dyn Estimator| -> Result<(), StreamError<S, K>> {
-        match estimator.push_batch(&[], Emit::Every) {
-            Ok(Some(estimate)) => sink(&estimate).map_err(StreamError::Sink),
-            _ => Ok(()),
-        }
-    };
+    // `index`: the readout's last measurement, named if the estimate it closes is refused (a first pose out of range).
+    let mut close =
+        |estimator: &mut dyn Estimator, index: usize| -> Result<(), StreamError<S, K>> {
+            match estimator.push_batch(&[], Emit::Every) {
+                Ok(Some(estimate)) => sink(&estimate).map_err(StreamError::Sink),
+                Ok(None) => Ok(()),
+                Err(source) => Err(StreamError::Refused { index, source }),
+            }
+        };
+    let mut last_index = 0;
     for (index, m) in measurements.into_iter().enumerate() {
         let m = m.map_err(StreamError::Source)?;
         if open_time_s.is_some_and(|t_s| t_s != m.t_s) {
-            close(estimator)?;
+            close(estimator, last_index)?;
         }
+        last_index = index;
         estimator
             .push_batch(std::slice::from_ref(&m), Emit::Hold)
             .map_err(|source| StreamError::Refused { index, source })?;
         open_time_s = Some(m.t_s);
     }
     if open_time_s.is_some() {
-        close(estimator)?;
+        close(estimator, last_index)?;
     }
     Ok(estimator.report())
 }

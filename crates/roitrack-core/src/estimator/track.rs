@@ -333,7 +333,9 @@ impl<L: Law> Track<L> {
             }
         };
         self.apply(obs);
-        Ok(self.estimate_if_due(Emit::Every))
+        let initialisations = self.core.report.initialisations;
+        let estimate = self.estimate_if_due(Emit::Every);
+        self.check_first_pose(initialisations, estimate)
     }
 
     /// Takes the measurements of one readout (the blobs of a frame, in time order) and returns at most one
@@ -363,7 +365,9 @@ impl<L: Law> Track<L> {
             self.apply(*obs);
         }
         self.core.pending = pending;
-        Ok(self.estimate_if_due(emit))
+        let initialisations = self.core.report.initialisations;
+        let estimate = self.estimate_if_due(emit);
+        self.check_first_pose(initialisations, estimate)
     }
 
     /// Adds a checked measurement to the window and, on a running track, to the state.
@@ -373,6 +377,36 @@ impl<L: Law> Track<L> {
             self.law.on_measurement(&mut self.core, &obs);
             self.core.since_estimate += 1;
         }
+    }
+
+    /// The estimate, or an error if it starts a track (the initialisations went up from `initialisations`) at a pose
+    /// behind the camera or farther than the configured distance. The track is dropped then.
+    fn check_first_pose(
+        &mut self,
+        initialisations: usize,
+        estimate: Option<Estimate>,
+    ) -> Result<Option<Estimate>, TrackError> {
+        let Some(e) = estimate else {
+            return Ok(None);
+        };
+        if self.core.report.initialisations == initialisations {
+            return Ok(Some(e));
+        }
+        let t = e.state.cam_t_obj_m;
+        let distance_m = t.norm();
+        let max_m = self.core.config.max_first_distance_m;
+        if t.z > 0.0 && distance_m <= max_m {
+            return Ok(Some(e));
+        }
+        self.reset();
+        Err(TrackError::ImplausibleFirstPose {
+            t_s: e.t_ref_s,
+            x_m: t.x,
+            y_m: t.y,
+            z_m: t.z,
+            distance_m,
+            max_m,
+        })
     }
 
     /// After new measurements: an initialisation when one is possible, or a control step when `emit` says one is
