@@ -1,10 +1,12 @@
-//! `--mcap OUT.mcap` on `track` and `demo`: the estimates also as a ROS 2 bag (see `roitrack::ros`, docs/ros2.md).
+//! `--mcap OUT.mcap` on `track` and `demo`: the estimates also as a ROS 2 bag; `track --mcap-in BAG --image-topic
+//! TOPIC`: the frames of a bag (see `roitrack::ros`, docs/ros2.md).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Result, bail};
 use clap::Args;
-use roitrack::ros::{BackgroundBag, BagOptions, BagWriter};
+use roitrack::formats::{FormatError, FrameInfo, FrameSource, FrameTiming};
+use roitrack::ros::{BackgroundBag, BagFrameSource, BagOptions, BagWriter};
 use roitrack::{CameraModel, Estimate, Frame, MotionState, Target};
 
 /// The options of the ROS 2 bag output.
@@ -79,5 +81,105 @@ impl Bag {
             );
         }
         Ok(())
+    }
+}
+
+/// The options of tracking the frames of a ROS 2 bag (`--mcap-in BAG`, an alias of `--images BAG`).
+#[derive(Debug, Args)]
+pub struct McapInArgs {
+    /// With --mcap-in (or --images) BAG, a .mcap file or a rosbag2 folder: the topic of the frames,
+    /// sensor_msgs/msg/Image (mono8, mono16, bgr8, rgb8) or sensor_msgs/msg/CompressedImage; each frame at its header
+    /// stamp.
+    #[arg(long, value_name = "TOPIC")]
+    pub image_topic: Option<String>,
+    /// With --mcap-in: the sensor_msgs/msg/CameraInfo topic giving the camera when no --camera is given (default:
+    /// camera_info beside the image topic, `/ns/image_raw` -> `/ns/camera_info`); every frame must have its size.
+    #[arg(long, value_name = "TOPIC", requires = "image_topic")]
+    pub camera_info_topic: Option<String>,
+}
+
+/// Whether a frame source is a ROS 2 bag: a `.mcap` file, or a folder holding one (rosbag2).
+pub fn is_bag(source: &Path) -> bool {
+    let is_mcap = |p: &Path| p.extension().is_some_and(|x| x == "mcap");
+    is_mcap(source)
+        || (source.is_dir()
+            && std::fs::read_dir(source)
+                .map(|entries| entries.flatten().any(|e| is_mcap(&e.path())))
+                .unwrap_or(false))
+}
+
+/// The camera: from `--camera` when given, else from the CameraInfo of the bag given by --mcap-in.
+pub fn camera(
+    camera: Option<&crate::args::CameraArgs>,
+    source: Option<&Path>,
+    mcap_in: &McapInArgs,
+) -> Result<CameraModel> {
+    match (camera, source, &mcap_in.image_topic) {
+        (Some(camera), _, _) => camera.read(),
+        (None, Some(bag), Some(image_topic)) if is_bag(bag) => {
+            let mut source = BagFrameSource::open(bag, image_topic)?;
+            let info_topic = mcap_in
+                .camera_info_topic
+                .clone()
+                .unwrap_or_else(|| BagFrameSource::camera_info_topic_of(image_topic));
+            Ok(source.camera_info(&info_topic)?)
+        }
+        _ => bail!(
+            "--camera is required (only the frames of a bag, --mcap-in, may take the camera from the bag)"
+        ),
+    }
+}
+
+/// Frames from files (`FrameSource`) or from a bag's topic (`BagFrameSource`).
+pub enum Frames {
+    Files(FrameSource),
+    Bag(Box<BagFrameSource>),
+}
+
+impl Frames {
+    /// Opens the frames of `source`: a bag's topic (--image-topic), checked against the camera's size, or files.
+    pub fn open(
+        source: &Path,
+        timing: &FrameTiming,
+        mcap_in: &McapInArgs,
+        camera: &CameraModel,
+    ) -> Result<Self> {
+        if !is_bag(source) {
+            if mcap_in.image_topic.is_some() {
+                bail!(
+                    "--image-topic is for a ROS 2 bag (a .mcap file or a rosbag2 folder), and {} is not one",
+                    source.display()
+                );
+            }
+            return Ok(Self::Files(FrameSource::open(source, timing)?));
+        }
+        if timing.timestamps.is_some() || timing.fps.is_some() {
+            bail!(
+                "--timestamps and --fps are not for a bag: its frames are at their header stamps"
+            );
+        }
+        let Some(topic) = &mcap_in.image_topic else {
+            bail!(
+                "{} is a ROS 2 bag: give the topic of its frames with --image-topic",
+                source.display()
+            );
+        };
+        let mut frames = BagFrameSource::open(source, topic)?;
+        frames.expect_size(camera.width_px, camera.height_px);
+        Ok(Self::Bag(Box::new(frames)))
+    }
+
+    pub fn next_frame(&mut self, frame: &mut Frame) -> Option<Result<FrameInfo, FormatError>> {
+        match self {
+            Self::Files(files) => files.next_frame(frame),
+            Self::Bag(bag) => bag.next_frame(frame),
+        }
+    }
+
+    pub fn frame_count(&self) -> Option<usize> {
+        match self {
+            Self::Files(files) => files.frame_count(),
+            Self::Bag(_) => None,
+        }
     }
 }

@@ -247,3 +247,229 @@ fn bag_options_are_refused_with_a_reason() {
     let error = fails(&strs(&args));
     assert!(error.contains("no/such/folder/run.mcap"), "{error}");
 }
+
+/// Simulated frames (`roitrack simulate --frames`), each also as raw 8-bit pixels beside its PNG for the bag writer.
+fn simulate_frames(dir: &Path, count: usize) -> PathBuf {
+    let sim = dir.join("sim");
+    ok(&[
+        "simulate",
+        "--frames",
+        "--scenario",
+        "sweep",
+        "--frame-count",
+        &count.to_string(),
+        "--out",
+        p(&sim),
+    ]);
+    let frames = sim.join("frames");
+    // Frame times on whole nanoseconds, written as a bag's stamp reads back (sec + 1e-9 nanosec), so that the files
+    // and the bag give the tracker the very same times.
+    let text = std::fs::read_to_string(sim.join("timestamps.csv")).unwrap();
+    let mut times = String::from("t,file\n");
+    for line in text.lines().skip(1) {
+        let (t, file) = line.split_once(',').unwrap();
+        let ns = (t.parse::<f64>().unwrap() * 1e9).round() as u64;
+        let t = (ns / 1_000_000_000) as f64 + 1e-9 * (ns % 1_000_000_000) as f64;
+        times.push_str(&format!("{t},{file}\n"));
+    }
+    std::fs::write(sim.join("timestamps.csv"), &times).unwrap();
+    std::fs::write(frames.join("timestamps.csv"), &times).unwrap();
+    for entry in std::fs::read_dir(&frames).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|x| x == "png") {
+            let frame = roitrack::formats::read_frame(&path).unwrap();
+            assert_eq!(frame.bit_depth, 8);
+            let raw: Vec<u8> = frame.pixels.iter().map(|&v| v as u8).collect();
+            std::fs::write(path.with_extension("raw"), raw).unwrap();
+        }
+    }
+    sim
+}
+
+/// Writes the frames as a rosbag2 folder with Python's rosbags (`write_image_bag.py`).
+fn write_bag(python: &Path, sim: &Path, bag: &Path, encoding: &str, info_size: Option<(u32, u32)>) {
+    let camera = roitrack::formats::read_camera_yaml(sim.join("camera.yaml")).unwrap();
+    let i = camera.intrinsics;
+    let d = camera.distortion.coefficients();
+    let mut args: Vec<String> = vec![
+        p(bag).into(),
+        p(&sim.join("frames")).into(),
+        encoding.into(),
+        camera.width_px.to_string(),
+        camera.height_px.to_string(),
+    ];
+    args.extend([i.fx_px, i.fy_px, i.cx_px, i.cy_px, i.skew_px].map(|x| x.to_string()));
+    args.extend(d.iter().map(|x| x.to_string()));
+    if let Some((w, h)) = info_size {
+        args.extend([w.to_string(), h.to_string()]);
+    }
+    let script =
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/write_image_bag.py");
+    let out = Command::new(python)
+        .arg(script)
+        .args(&args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+fn read_poses(path: &Path) -> Vec<Vec<f64>> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|l| l.split_whitespace().map(|x| x.parse().unwrap()).collect())
+        .collect()
+}
+
+#[test]
+fn a_bag_written_by_rosbags_tracks_like_the_same_frames_from_files() {
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let sim = simulate_frames(dir, 10);
+    let common = |poses: &str| -> Vec<String> {
+        [
+            "track",
+            "--target",
+            p(&sim.join("target.csv")),
+            "--polarity",
+            "bright",
+            "--poses",
+            p(&dir.join(poses)),
+            "--twists",
+            p(&dir.join(format!("{poses}.twists.csv"))),
+        ]
+        .map(String::from)
+        .to_vec()
+    };
+    let mut files = common("files.tum");
+    files.extend(
+        [
+            "--camera",
+            p(&sim.join("camera.yaml")),
+            "--images",
+            p(&sim.join("frames")),
+            "--timestamps",
+            p(&sim.join("timestamps.csv")),
+        ]
+        .map(String::from),
+    );
+    ok(&strs(&files));
+    let expected = read_poses(&dir.join("files.tum"));
+    assert_eq!(expected.len(), 10);
+    for (encoding, topic, with_camera) in [
+        ("mono8", "/cam/image_raw", false),
+        ("rgb8", "/cam/image_raw", true),
+        ("bgr8", "/cam/image_raw", false),
+        ("png", "/cam/image_raw/compressed", false),
+    ] {
+        let bag = dir.join(format!("bag_{encoding}"));
+        write_bag(&python, &sim, &bag, encoding, None);
+        let poses = format!("{encoding}.tum");
+        let mut args = common(&poses);
+        args.extend(["--mcap-in", p(&bag), "--image-topic", topic].map(String::from));
+        if with_camera {
+            args.extend(["--camera", p(&sim.join("camera.yaml"))].map(String::from));
+        } else if encoding == "png" {
+            args.extend(["--camera-info-topic", "/cam/camera_info"].map(String::from));
+        }
+        ok(&strs(&args));
+        let got = read_poses(&dir.join(&poses));
+        assert_eq!(got.len(), expected.len(), "{encoding}");
+        for (g, e) in got.iter().zip(&expected) {
+            // The same frames at the same times: the same estimates, to the last bit.
+            assert_eq!(g, e, "{encoding}");
+        }
+    }
+}
+
+#[test]
+fn bad_bags_are_refused_naming_the_bag_and_the_topic() {
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let sim = simulate_frames(dir, 3);
+    let (target, poses, twists) = (
+        sim.join("target.csv"),
+        dir.join("poses.tum"),
+        dir.join("twists.csv"),
+    );
+    let track = |bag: &Path, topic: &str, extra: &[&str]| {
+        let mut args = vec![
+            "track",
+            "--target",
+            p(&target),
+            "--poses",
+            p(&poses),
+            "--twists",
+            p(&twists),
+            "--mcap-in",
+            p(bag),
+            "--image-topic",
+            topic,
+        ];
+        args.extend(extra);
+        fails(&args)
+    };
+    let bag = dir.join("bag");
+    write_bag(&python, &sim, &bag, "mono8", None);
+    let error = track(&bag, "/cam/nothing", &[]);
+    assert!(
+        error.contains(p(&bag))
+            && error.contains("/cam/nothing")
+            && error.contains("no such topic"),
+        "{error}"
+    );
+    assert!(
+        error.contains("/cam/image_raw (sensor_msgs/msg/Image)"),
+        "{error}"
+    );
+    let error = track(&bag, "/cam/camera_info", &[]);
+    assert!(error.contains("not sensor_msgs/msg/Image"), "{error}");
+    // A camera info that disagrees with the images.
+    let wrong = dir.join("wrong_info");
+    write_bag(&python, &sim, &wrong, "mono8", Some((640, 480)));
+    let error = track(&wrong, "/cam/image_raw", &[]);
+    assert!(
+        error.contains(p(&wrong))
+            && error.contains("/cam/image_raw")
+            && error.contains("640 x 480"),
+        "{error}"
+    );
+    // A truncated bag.
+    let mcap = std::fs::read_dir(&bag)
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "mcap"))
+        .unwrap();
+    let bytes = std::fs::read(&mcap).unwrap();
+    std::fs::write(&mcap, &bytes[..bytes.len() / 2]).unwrap();
+    let error = track(
+        &bag,
+        "/cam/image_raw",
+        &["--camera", p(&sim.join("camera.yaml"))],
+    );
+    assert!(
+        error.contains(p(&bag)) && error.contains("/cam/image_raw") && error.contains("truncated"),
+        "{error}"
+    );
+    // Without a camera and not a bag: --camera is required.
+    let error = fails(&[
+        "track",
+        "--target",
+        p(&sim.join("target.csv")),
+        "--images",
+        p(&sim.join("frames")),
+        "--timestamps",
+        p(&sim.join("timestamps.csv")),
+        "--poses",
+        p(&dir.join("poses.tum")),
+        "--twists",
+        p(&dir.join("twists.csv")),
+    ]);
+    assert!(error.contains("--camera is required"), "{error}");
+}

@@ -19,6 +19,8 @@ const BATCH: usize = 32;
 /// tracking thread waits (nothing is dropped).
 const IN_FLIGHT: usize = 64;
 
+// Estimates travel unboxed, by batches in a `Vec`: boxing each would cost an allocation per estimate.
+#[allow(clippy::large_enum_variant)]
 #[derive(Debug)]
 enum Item {
     Estimate(Estimate),

@@ -9,8 +9,10 @@
 //! frames `/roitrack/image` (`sensor_msgs/msg/Image`) and `/roitrack/annotations`
 //! (`foxglove_msgs/msg/ImageAnnotations`).
 //!
-//! [`BackgroundBag`] runs a [`BagWriter`] on a thread of its own, beside the tracker. [`convert`] holds the conversions (stamps, quaternions, the covariances in ROS's order and each message's
-//! frame), [`msg`] the messages and their definitions. docs/ros2.md documents the bag.
+//! [`BagFrameSource`] reads the other way: the image frames of a bag's topic, as a timed frame stream, and the camera
+//! of its CameraInfo. [`BackgroundBag`] runs a [`BagWriter`] on a thread of its own, beside the tracker. [`convert`]
+//! holds the conversions (stamps, quaternions, the covariances in ROS's order and each message's frame), [`msg`] the
+//! messages and their definitions. docs/ros2.md documents the bag.
 //!
 //! ```
 //! use roitrack_ros::{BagOptions, BagWriter};
@@ -23,7 +25,9 @@
 mod background;
 pub mod convert;
 pub mod msg;
+mod reader;
 mod writer;
 
 pub use background::BackgroundBag;
+pub use reader::{BagFrameSource, IMAGE_ENCODINGS, IMAGE_TYPES};
 pub use writer::{BagOptions, BagWriter, diagnostic_level, topics};

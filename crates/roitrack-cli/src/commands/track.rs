@@ -16,9 +16,11 @@ use crate::commands::detect::{PolarityArg, distance_range};
 /// Track pose and velocity from a measurements file (t,id,u,v), a ROI recording, or frames (an image folder, a
 /// numbered pattern, a glob or a video): one pose and one twist per control step (per frame with --images).
 #[derive(Debug, Args)]
+// --camera may be left out with --mcap-in: the camera is then the bag's CameraInfo (crate::ros::camera).
+#[command(mut_arg("camera", |a| a.required(false)))]
 pub struct TrackArgs {
     #[command(flatten)]
-    pub camera: CameraArgs,
+    pub camera: Option<CameraArgs>,
     #[command(flatten)]
     pub target: TargetArgs,
     /// Measured centroids (CSV t,id,u,v; raw pixels; time order). Centroids that share a time (the blobs of a
@@ -36,7 +38,8 @@ pub struct TrackArgs {
     /// Instead of centroids: frames. A folder of images (PNG, JPEG, PGM/PPM, TIFF, in natural order: frame2 before
     /// frame10), a numbered pattern (`frames/frame_%05d.png`), a quoted glob (`'frames/*.png'`), or a video (mp4,
     /// mkv, avi, mov, webm; decoded by Debian's `ffmpeg`). One estimate per frame where the target is found.
-    #[arg(long, value_name = "SOURCE")]
+    /// Also a ROS 2 bag (a .mcap file or a rosbag2 folder; `--mcap-in BAG`) with --image-topic.
+    #[arg(long, value_name = "SOURCE", visible_alias = "mcap-in")]
     pub images: Option<PathBuf>,
     /// With --images: the frames' times, a CSV file with a header, a column `t` (s: the mid-exposure time of the
     /// frame's row 0) and one row per frame in order; an optional column `file` must match each frame's file name.
@@ -95,10 +98,12 @@ pub struct TrackArgs {
     pub estimator: EstimatorArgs,
     #[command(flatten)]
     pub ros: crate::ros::McapArgs,
+    #[command(flatten)]
+    pub mcap_in: crate::ros::McapInArgs,
 }
 
 pub fn run(args: &TrackArgs) -> Result<()> {
-    let camera = args.camera.read()?;
+    let camera = crate::ros::camera(args.camera.as_ref(), args.images.as_deref(), &args.mcap_in)?;
     let target = args.target.read()?;
     if let Some(source) = &args.images {
         return run_frames(args, source, camera, target);
@@ -235,7 +240,7 @@ fn run_frames(
         timestamps: args.timestamps.clone(),
         fps: args.fps,
     };
-    let mut frames = roitrack::formats::FrameSource::open(source, &timing)?;
+    let mut frames = crate::ros::Frames::open(source, &timing, &args.mcap_in, &camera)?;
     let (mut bag, copy_frames) = (
         args.ros.open(&camera, Some(&target))?,
         args.ros.wants_frames(),

@@ -188,7 +188,7 @@ impl TrackerConfig {
             check("window", n as f64, "at least 4 measurements", n >= 4)?;
         }
         // Infinity is allowed here: it turns the check off.
-        if !(self.max_first_distance_m > 0.0) {
+        if self.max_first_distance_m.is_nan() || self.max_first_distance_m <= 0.0 {
             return Err(ConfigError::Invalid {
                 field: "max_first_distance_m",
                 expected: "positive (or infinite)",
