@@ -297,3 +297,20 @@ impl TargetArgs {
         )?)
     }
 }
+
+/// The camera file a command was given, if any (some sources carry their own camera).
+pub trait CameraPath {
+    fn camera_path(&self) -> Option<&std::path::Path>;
+}
+
+impl CameraPath for CameraArgs {
+    fn camera_path(&self) -> Option<&std::path::Path> {
+        Some(&self.camera)
+    }
+}
+
+impl CameraPath for Option<CameraArgs> {
+    fn camera_path(&self) -> Option<&std::path::Path> {
+        self.as_ref().map(|c| c.camera.as_path())
+    }
+}

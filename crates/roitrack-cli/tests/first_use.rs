@@ -342,3 +342,200 @@ fn step_2_unit_and_range_mistakes_are_caught_with_their_hint() {
         "{e}"
     );
 }
+
+/// `track` with these (name, path) options over the grid's files in `dir`; stdin from `stdin` if given.
+fn track_paths(dir: &Path, paths: &[(&str, &str)], stdin: Option<&[u8]>) -> std::process::Output {
+    use std::io::Write as _;
+    let camera = dir.join("camera.yaml");
+    if !camera.exists() {
+        roitrack::formats::write_camera_yaml(&camera, &CameraModel::canonical()).unwrap();
+        write_target_csv(dir.join("target.csv"), &Target::grid4x4()).unwrap();
+        let truth = MotionState::at_rest(Default::default(), Vector3::new(0.004, -0.003, 0.6));
+        let m = measurements_of_grid_at_rest(&CameraModel::canonical(), &truth);
+        write_measurements_csv(dir.join("m.csv"), &m).unwrap();
+    }
+    let mut command = std::process::Command::new(env!("CARGO_BIN_EXE_roitrack"));
+    command
+        .current_dir(dir)
+        .args(["track", "--camera", "camera.yaml", "--target", "target.csv"]);
+    for (name, path) in paths {
+        command.args([name, path]);
+    }
+    command.stdin(std::process::Stdio::piped());
+    command.stdout(std::process::Stdio::piped());
+    command.stderr(std::process::Stdio::piped());
+    let mut child = command.spawn().unwrap();
+    let mut input = child.stdin.take().unwrap();
+    if let Some(bytes) = stdin {
+        input.write_all(bytes).unwrap();
+    }
+    drop(input);
+    child.wait_with_output().unwrap()
+}
+
+#[cfg(unix)]
+#[test]
+fn step_3_unsafe_outputs_are_refused_or_handled_and_inputs_stay_intact() {
+    use std::os::unix::fs::{FileTypeExt, symlink};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let run = |paths: &[(&str, &str)]| track_paths(d, paths, None);
+    let stderr = |o: &std::process::Output| String::from_utf8_lossy(&o.stderr).into_owned();
+    assert!(
+        run(&[
+            ("--measurements", "m.csv"),
+            ("--poses", "p.tum"),
+            ("--twists", "w.csv")
+        ])
+        .status
+        .success()
+    );
+    let inputs: Vec<(&str, Vec<u8>)> = ["camera.yaml", "target.csv", "m.csv"]
+        .into_iter()
+        .map(|f| (f, std::fs::read(d.join(f)).unwrap()))
+        .collect();
+    let inputs_intact = || {
+        for (f, bytes) in &inputs {
+            assert_eq!(&std::fs::read(d.join(f)).unwrap(), bytes, "{f} changed");
+        }
+    };
+    symlink("m.csv", d.join("link_to_m.csv")).unwrap();
+    std::fs::hard_link(d.join("target.csv"), d.join("hard_target.csv")).unwrap();
+    // An output that is an input: by its name, through a symbolic link, through a hard link.
+    for (output, input, option) in [
+        ("m.csv", "--measurements", "--poses"),
+        ("link_to_m.csv", "--measurements", "--twists"),
+        ("hard_target.csv", "--target", "--poses"),
+        ("camera.yaml", "--camera", "--twists"),
+    ] {
+        let mut paths = vec![
+            ("--measurements", "m.csv"),
+            ("--poses", "p.tum"),
+            ("--twists", "w.csv"),
+        ];
+        paths.retain(|(name, _)| *name != option);
+        paths.push((option, output));
+        let out = run(&paths);
+        assert!(!out.status.success());
+        let e = stderr(&out);
+        assert!(
+            e.contains(&format!(
+                "the output {option} is the input given as {input}"
+            )),
+            "{e}"
+        );
+        inputs_intact();
+    }
+    // Two outputs to one file, also by two spellings; '-' twice.
+    let out = run(&[
+        ("--measurements", "m.csv"),
+        ("--poses", "out.txt"),
+        ("--twists", "./out.txt"),
+    ]);
+    assert!(
+        stderr(&out).contains("--poses and --twists would both write"),
+        "{}",
+        stderr(&out)
+    );
+    assert!(!d.join("out.txt").exists());
+    let out = run(&[
+        ("--measurements", "m.csv"),
+        ("--poses", "-"),
+        ("--twists", "-"),
+    ]);
+    assert!(
+        stderr(&out).contains("--poses, --twists all write to the standard output"),
+        "{}",
+        stderr(&out)
+    );
+    // '-': poses on the standard output, measurements from the standard input.
+    let m = std::fs::read(d.join("m.csv")).unwrap();
+    let out = track_paths(
+        d,
+        &[
+            ("--measurements", "-"),
+            ("--poses", "-"),
+            ("--twists", "w2.csv"),
+        ],
+        Some(&m),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    assert_eq!(stdout, std::fs::read_to_string(d.join("p.tum")).unwrap());
+    assert!(!d.join("-").exists());
+    // A symbolic link as an output: its target is written, the link stays.
+    std::fs::create_dir(d.join("results")).unwrap();
+    symlink("results/poses.tum", d.join("latest.tum")).unwrap();
+    assert!(
+        run(&[
+            ("--measurements", "m.csv"),
+            ("--poses", "latest.tum"),
+            ("--twists", "w.csv")
+        ])
+        .status
+        .success()
+    );
+    assert!(
+        std::fs::symlink_metadata(d.join("latest.tum"))
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert_eq!(
+        std::fs::read(d.join("results/poses.tum")).unwrap(),
+        std::fs::read(d.join("p.tum")).unwrap()
+    );
+    // A FIFO is written in place, never replaced; /dev/null takes any output.
+    assert!(
+        std::process::Command::new("mkfifo")
+            .arg(d.join("twists.fifo"))
+            .status()
+            .unwrap()
+            .success()
+    );
+    let reader = {
+        let fifo = d.join("twists.fifo");
+        std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+    };
+    let out = run(&[
+        ("--measurements", "m.csv"),
+        ("--poses", "/dev/null"),
+        ("--twists", "twists.fifo"),
+        ("--diagnostics", "/dev/null"),
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(
+        reader.join().unwrap(),
+        std::fs::read_to_string(d.join("w.csv")).unwrap()
+    );
+    assert!(
+        std::fs::symlink_metadata(d.join("twists.fifo"))
+            .unwrap()
+            .file_type()
+            .is_fifo()
+    );
+    assert!(
+        std::fs::metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device()
+    );
+    // A regular file is still written atomically: a run that fails leaves the previous file as it was.
+    let before = std::fs::read(d.join("p.tum")).unwrap();
+    let mut broken = std::fs::read_to_string(d.join("m.csv")).unwrap();
+    broken.push_str("oops,1,1,1\n");
+    std::fs::write(d.join("broken.csv"), broken).unwrap();
+    let out = run(&[
+        ("--measurements", "broken.csv"),
+        ("--poses", "p.tum"),
+        ("--twists", "w.csv"),
+    ]);
+    assert!(!out.status.success());
+    assert!(
+        stderr(&out).contains("broken.csv:642: field 't'"),
+        "{}",
+        stderr(&out)
+    );
+    assert_eq!(std::fs::read(d.join("p.tum")).unwrap(), before);
+    inputs_intact();
+}

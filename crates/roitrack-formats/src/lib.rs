@@ -69,7 +69,7 @@ mod twists;
 mod units;
 mod video;
 
-pub use atomic::AtomicFile;
+pub use atomic::{AtomicFile, check_output_paths, open_input};
 pub use camera_file::{
     CameraFileFormat, CameraFileOptions, detect_camera_format, distortion_from, parse_camera_file,
     read_camera_file,

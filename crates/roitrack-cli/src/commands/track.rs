@@ -6,11 +6,14 @@ use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use roitrack::formats::{EstimateWriter, MeasurementReader, RoiRecordingReader, TimedMeasurements};
+use roitrack::formats::{
+    EstimateWriter, MeasurementReader, RoiRecordingReader, TimedMeasurements, check_output_paths,
+    open_input,
+};
 use roitrack::image::CentroidOptions;
 use roitrack::{EstimatorReport, TrackStatus, Tracker};
 
-use crate::args::{CameraArgs, EstimatorArgs, ShutterArg, TargetArgs, TimeUnitArg};
+use crate::args::{CameraArgs, CameraPath, EstimatorArgs, ShutterArg, TargetArgs, TimeUnitArg};
 use crate::commands::detect::{PolarityArg, distance_range};
 
 /// Track pose and velocity from a measurements file (t,id,u,v), a ROI recording, or frames (an image folder, a
@@ -23,7 +26,7 @@ pub struct TrackArgs {
     pub camera: Option<CameraArgs>,
     #[command(flatten)]
     pub target: TargetArgs,
-    /// Measured centroids (CSV t,id,u,v; raw pixels; time order). Centroids that share a time (the blobs of a
+    /// Measured centroids (CSV t,id,u,v; raw pixels; time order; `-`: the standard input). Centroids that share a time (the blobs of a
     /// global-shutter frame) form one readout: an estimate comes only after the last of them.
     #[arg(long, required_unless_present_any = ["rois", "images"], conflicts_with_all = ["rois", "images"])]
     pub measurements: Option<PathBuf>,
@@ -76,7 +79,9 @@ pub struct TrackArgs {
     /// occluder merged with a blob biases its centroid by up to half a pixel). For blobs that are not images of disks.
     #[arg(long, requires = "rois")]
     pub no_symmetry_check: bool,
-    /// Output poses (TUM: t tx ty tz qx qy qz qw, camera_T_object).
+    /// Output poses (TUM: t tx ty tz qx qy qz qw, camera_T_object). Every output may be `-` (the standard output,
+    /// for one output at most), a symbolic link (its target is written) or a FIFO (written in place); an output that
+    /// is an input, or another output, is refused.
     #[arg(long)]
     pub poses: PathBuf,
     /// Output twists (CSV t,vx,vy,vz,wx,wy,wz).
@@ -103,6 +108,7 @@ pub struct TrackArgs {
 }
 
 pub fn run(args: &TrackArgs) -> Result<()> {
+    check_paths(args)?;
     let camera = crate::ros::camera(args.camera.as_ref(), args.images.as_deref(), &args.mcap_in)?;
     let target = args.target.read()?;
     if let Some(source) = &args.images {
@@ -135,7 +141,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     let (path, report, rois) = match (&args.measurements, &args.rois) {
         (Some(path), _) => {
             // Checked: known ids, centroids on the camera's image, times in seconds (or converted).
-            let reader = MeasurementReader::open(path)?
+            let reader = MeasurementReader::from_reader(open_input(path)?, path)?
                 .with_known_ids(known_ids)
                 .with_image_size(camera.width_px, camera.height_px);
             let reader = TimedMeasurements::new(reader, args.time_units.map(Into::into));
@@ -338,5 +344,38 @@ fn run_frames(
             report.frames
         );
     }
+    Ok(())
+}
+
+/// Refuses, before anything is read or written, outputs that are inputs (also through links) or each other, and `-`
+/// for more than one output.
+fn check_paths(args: &TrackArgs) -> Result<()> {
+    let mut inputs = vec![("--target", args.target.target.as_path())];
+    if let Some(camera) = args.camera.camera_path() {
+        inputs.push(("--camera", camera));
+    }
+    for (name, path) in [
+        ("--measurements", &args.measurements),
+        ("--rois", &args.rois),
+        ("--images", &args.images),
+        ("--timestamps", &args.timestamps),
+    ] {
+        if let Some(path) = path {
+            inputs.push((name, path.as_path()));
+        }
+    }
+    let mut outputs = vec![
+        ("--poses", args.poses.as_path()),
+        ("--twists", args.twists.as_path()),
+    ];
+    for (name, path) in [
+        ("--diagnostics", &args.diagnostics),
+        ("--covariance", &args.covariance),
+    ] {
+        if let Some(path) = path {
+            outputs.push((name, path.as_path()));
+        }
+    }
+    check_output_paths(&inputs, &outputs)?;
     Ok(())
 }
