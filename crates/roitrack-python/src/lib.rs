@@ -20,7 +20,7 @@ use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyTypeError, PyValueError
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use roitrack::formats::FormatError;
-use roitrack::math::camera::{PinholeIntrinsics, PlumbBob};
+use roitrack::math::camera::PinholeIntrinsics;
 use roitrack::math::estimator::{
     Adaptation, EstimatorKind, RobustLoss, TrackerOptions, UnknownName,
 };
@@ -122,7 +122,9 @@ struct Camera {
 #[pymethods]
 impl Camera {
     /// A camera of `width` x `height` pixels, focal lengths `fx`, `fy` and principal point `cx`, `cy` (px), `skew`
-    /// (px, camera_matrix[0][1]), and `distortion`: 0 or 5 plumb_bob coefficients `[k1, k2, p1, p2, k3]`.
+    /// (px, camera_matrix[0][1]), and the lens `distortion` of `model` in ROS's and OpenCV's order: plumb_bob
+    /// `[k1, k2, p1, p2(, k3)]`, rational_polynomial `[k1, k2, p1, p2, k3, k4, k5, k6]`, equidistant (OpenCV's
+    /// fisheye) `[k1, k2, k3, k4]`; none or an empty list for a pinhole camera.
     #[new]
     #[pyo3(signature = (width, height, fx, fy, cx, cy, distortion = None, model = "plumb_bob", skew = 0.0))]
     #[allow(clippy::too_many_arguments)]
@@ -137,21 +139,9 @@ impl Camera {
         model: &str,
         skew: f64,
     ) -> PyResult<Self> {
-        if model != "plumb_bob" {
-            return Err(RoitrackError::new_err(format!(
-                "model: unsupported distortion model {model:?}: roitrack supports only plumb_bob"
-            )));
-        }
-        let coefficients: [f64; 5] = match distortion.as_deref() {
-            None | Some([]) => [0.0; 5],
-            Some(&[k1, k2, p1, p2, k3]) => [k1, k2, p1, p2, k3],
-            Some(other) => {
-                return Err(PyValueError::new_err(format!(
-                    "distortion: expected 0 or 5 plumb_bob coefficients [k1, k2, p1, p2, k3], got {}",
-                    other.len()
-                )));
-            }
-        };
+        let distortion =
+            roitrack::formats::distortion_from(model, distortion.as_deref().unwrap_or(&[]))
+                .map_err(|e| PyValueError::new_err(format!("distortion: {e}")))?;
         let intrinsics = PinholeIntrinsics {
             fx_px: fx,
             fy_px: fy,
@@ -159,21 +149,32 @@ impl Camera {
             cx_px: cx,
             cy_px: cy,
         };
-        CameraModel::new(
-            "camera",
-            width,
-            height,
-            intrinsics,
-            PlumbBob::from_coefficients(coefficients),
-        )
-        .map(|inner| Self { inner })
-        .map_err(|e| library_error(&e))
+        CameraModel::new("camera", width, height, intrinsics, distortion)
+            .map(|inner| Self { inner })
+            .map_err(|e| library_error(&e))
     }
 
-    /// Reads a ROS camera_info YAML file (as `roitrack track --camera`).
+    /// Reads a camera calibration file as `roitrack track --camera` does: ROS camera_info YAML (and ROS topic
+    /// echoes), OpenCV FileStorage YAML or XML, or a Kalibr camchain, recognised by content.
     #[staticmethod]
     fn from_yaml(path: PathBuf) -> PyResult<Self> {
-        roitrack::formats::read_camera_yaml(&path)
+        Self::from_file(path, None, None)
+    }
+
+    /// Reads any camera file `from_yaml` reads, with the command line's `--image-size` (width, height: for OpenCV
+    /// files without one) and `--camera-name` (which camera of a Kalibr camchain).
+    #[staticmethod]
+    #[pyo3(signature = (path, image_size = None, camera_name = None))]
+    fn from_file(
+        path: PathBuf,
+        image_size: Option<(u32, u32)>,
+        camera_name: Option<String>,
+    ) -> PyResult<Self> {
+        let options = roitrack::formats::CameraFileOptions {
+            image_size,
+            camera_name,
+        };
+        roitrack::formats::read_camera_file(&path, &options)
             .map(|inner| Self { inner })
             .map_err(format_error)
     }
@@ -218,21 +219,21 @@ impl Camera {
     fn skew(&self) -> f64 {
         self.inner.intrinsics.skew_px
     }
-    /// The plumb_bob coefficients [k1, k2, p1, p2, k3].
+    /// The distortion coefficients, in ROS's and OpenCV's order for the model.
     #[getter]
     fn distortion(&self) -> Vec<f64> {
-        self.inner.distortion.coefficients().to_vec()
+        self.inner.distortion.coefficients()
     }
-    /// The distortion model: "plumb_bob".
+    /// The distortion model: none, plumb_bob, rational_polynomial or equidistant.
     #[getter]
     fn model(&self) -> &'static str {
-        "plumb_bob"
+        self.inner.distortion.model_name()
     }
 
     fn __repr__(&self) -> String {
         let i = &self.inner.intrinsics;
         format!(
-            "Camera({}, {}, fx={}, fy={}, cx={}, cy={}, skew={}, distortion={:?})",
+            "Camera({}, {}, fx={}, fy={}, cx={}, cy={}, skew={}, distortion={:?}, model={:?})",
             self.inner.width_px,
             self.inner.height_px,
             i.fx_px,
@@ -240,7 +241,8 @@ impl Camera {
             i.cx_px,
             i.cy_px,
             i.skew_px,
-            self.inner.distortion.coefficients()
+            self.inner.distortion.coefficients(),
+            self.inner.distortion.model_name()
         )
     }
 }
@@ -295,10 +297,25 @@ impl Target_ {
             .map_err(|e| library_error(&e))
     }
 
-    /// Reads a target CSV file `id,x,y,z[,diameter]` in metres (as `roitrack track --target`).
+    /// Reads a target CSV file `id,x,y,z[,diameter]` as `roitrack track --target` does: in metres, refusing a target
+    /// that looks like millimetres or centimetres, unless `units` ("m", "cm" or "mm", the command line's
+    /// `--target-units`) says the file's unit.
     #[staticmethod]
-    fn from_csv(path: PathBuf) -> PyResult<Self> {
-        roitrack::formats::read_target_csv(&path)
+    #[pyo3(signature = (path, units = None))]
+    fn from_csv(path: PathBuf, units: Option<&str>) -> PyResult<Self> {
+        use roitrack::formats::LengthUnit;
+        let units = match units {
+            None => None,
+            Some("m") => Some(LengthUnit::M),
+            Some("cm") => Some(LengthUnit::Cm),
+            Some("mm") => Some(LengthUnit::Mm),
+            Some(other) => {
+                return Err(PyValueError::new_err(format!(
+                    "units: unknown value '{other}' (expected one of m, cm, mm)"
+                )));
+            }
+        };
+        roitrack::formats::read_target_csv_in(&path, units)
             .map(|inner| Self { inner })
             .map_err(format_error)
     }

@@ -73,10 +73,14 @@ def test_camera_constructor_refuses_bad_values() -> None:
         roitrack.Camera(640, 480, 500.0, 500.0, 320.0, float("nan"))
     with pytest.raises(roitrack.RoitrackError, match="image size"):
         roitrack.Camera(0, 480, 500.0, 500.0, 320.0, 240.0)
-    with pytest.raises(ValueError, match="distortion: expected 0 or 5"):
+    with pytest.raises(ValueError, match="distortion: plumb_bob takes 4 or 5 numbers"):
         roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1, 0.2])
-    with pytest.raises(roitrack.RoitrackError, match="model: unsupported"):
-        roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, model="equidistant")
+    with pytest.raises(ValueError, match="distortion: equidistant takes 4 numbers"):
+        roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1] * 5, model="equidistant")
+    with pytest.raises(ValueError, match="distortion: .*kannala"):
+        roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1] * 4, model="kannala")
+    with pytest.raises(ValueError, match="distortion: coefficient 1 must be a finite number"):
+        roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1, float("inf"), 0, 0])
     with pytest.raises(TypeError):
         roitrack.Camera(640, 480, "fx", 500.0, 320.0, 240.0)  # type: ignore[arg-type]
 
@@ -102,6 +106,8 @@ def test_target_constructor_refuses_bad_arrays() -> None:
         roitrack.Target(GRID[:3].copy())  # too few points
     with pytest.raises(roitrack.RoitrackError):
         roitrack.Target(np.array([[0.01 * k, 0, 0] for k in range(5)]))  # collinear
+    with pytest.raises(ValueError, match="units: unknown value 'inch'"):
+        roitrack.Target.from_csv("target.csv", units="inch")
     # A list converts.
     assert len(roitrack.Target(GRID.tolist())) == 16
 
@@ -238,3 +244,34 @@ def test_evaluate_refuses_bad_dicts(sim: dict) -> None:
 
 def test_measurements_file_read_by_numpy_round_trips(orthoglide: Path, sim: dict) -> None:
     assert np.array_equal(read_measurements(orthoglide / "measurements.csv"), sim["measurements"])
+
+
+def test_target_in_millimetres_as_the_command_line(orthoglide: Path, tmp_path: Path) -> None:
+    """A target file in millimetres is refused with the command line's message unless its unit is said."""
+    target = roitrack.Target.from_csv(orthoglide / "target.csv")
+    lines = ["id,x,y,z,diameter"] + [
+        f"{i},{1e3 * x},{1e3 * y},{1e3 * z},{1e3 * d}" for i, (x, y, z), d in zip(target.ids, target.points_m, target.diameters_m)
+    ]
+    mm = tmp_path / "target_mm.csv"
+    mm.write_text("\n".join(lines) + "\n")
+    args = ["track", "--camera", orthoglide / "camera.yaml", "--measurements", orthoglide / "measurements.csv",
+            "--poses", tmp_path / "p.tum", "--twists", tmp_path / "t.csv", "--target", mm]
+    expected = cli_error(*args)
+    assert "--target-units mm" in expected
+    with pytest.raises(roitrack.RoitrackError) as raised:
+        roitrack.Target.from_csv(mm)
+    assert str(raised.value) == expected
+    np.testing.assert_allclose(roitrack.Target.from_csv(mm, units="mm").points_m, target.points_m, rtol=1e-12)
+
+
+def test_camera_models(tmp_path: Path) -> None:
+    fisheye = roitrack.Camera(640, 480, 300.0, 300.0, 320.0, 240.0, distortion=[0.05, -0.01, 0.0, 0.0], model="equidistant")
+    assert (fisheye.model, fisheye.distortion) == ("equidistant", [0.05, -0.01, 0.0, 0.0])
+    rational = roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1] * 8, model="rational_polynomial")
+    assert rational.model == "rational_polynomial" and len(rational.distortion) == 8
+    assert roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0).model == "none"
+    four = roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1, 0.01, 0.0, 0.0])
+    assert (four.model, four.distortion) == ("plumb_bob", [0.1, 0.01, 0.0, 0.0, 0.0])
+    four.to_yaml(tmp_path / "camera.yaml")
+    again = roitrack.Camera.from_file(tmp_path / "camera.yaml")
+    assert (again.model, again.distortion, again.fx) == (four.model, four.distortion, four.fx)
