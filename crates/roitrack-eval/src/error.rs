@@ -65,4 +65,12 @@ pub enum EvalError {
         value: f64,
         reason: &'static str,
     },
+
+    /// The estimated positions cannot determine an alignment.
+    #[error("cannot align the estimates with the truth ({points} positions): {reason}")]
+    DegenerateAlignment { points: usize, reason: &'static str },
+
+    /// No clock offset could be found between the estimates and the truth.
+    #[error("cannot find the time offset between the estimates and the truth: {reason}")]
+    TimeOffsetNotFound { reason: &'static str },
 }

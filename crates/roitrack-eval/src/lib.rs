@@ -22,6 +22,7 @@ pub mod consistency;
 mod error;
 mod lag;
 mod metrics;
+pub mod trajectory;
 
 use nalgebra::Vector3;
 use roitrack_core::estimator::Estimate;
@@ -30,6 +31,7 @@ use roitrack_core::{PoseSample, TwistSample, so3};
 pub use consistency::{BlockNees, CHI2_3DOF_99, Consistency, consistency_of, nees};
 pub use error::EvalError;
 pub use metrics::Metrics;
+pub use trajectory::{Alignment, SimilarityTransform, TimeOffset};
 
 use align::TruthIndex;
 
@@ -43,6 +45,19 @@ pub struct EvalOptions {
     /// The velocity lag is searched in `-max_lag_samples..=max_lag_samples` estimator samples (and within half the
     /// series). Default 40.
     pub max_lag_samples: usize,
+    /// The clock offset added to the estimates' times before they are paired with the truth, or
+    /// [`TimeOffset::Auto`] to find it ([`trajectory::find_time_offset`]). Default 0.
+    pub time_offset: TimeOffset,
+    /// With [`TimeOffset::Auto`], the largest offset searched (s). Default 5.
+    pub max_time_offset_s: f64,
+    /// The transformation of the estimates onto the truth's frame, fitted to the paired positions
+    /// ([`trajectory::umeyama`]). Default none.
+    pub alignment: Alignment,
+    /// Also the relative pose error over this interval (s) ([`trajectory::relative_errors`]). Default none.
+    pub rpe_interval_s: Option<f64>,
+    /// Leave out, and count, the estimates outside the truth's time span (after the offset) instead of refusing
+    /// them. Default false.
+    pub skip_outside_truth: bool,
 }
 
 impl Default for EvalOptions {
@@ -50,6 +65,11 @@ impl Default for EvalOptions {
         Self {
             max_time_gap_s: 1e-6,
             max_lag_samples: 40,
+            time_offset: TimeOffset::Fixed(0.0),
+            max_time_offset_s: 5.0,
+            alignment: Alignment::None,
+            rpe_interval_s: None,
+            skip_outside_truth: false,
         }
     }
 }
@@ -58,8 +78,17 @@ impl Default for EvalOptions {
 /// [`evaluate`] sums into its metrics and what the figures plot.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EstimateErrors {
-    /// The estimates' times (s).
+    /// The estimates' times (s), on the truth's clock (the time offset added).
     pub t_s: Vec<f64>,
+    /// The clock offset added to the estimates' times (s).
+    pub time_offset_s: f64,
+    /// The alignment asked for, and the transformation applied to the estimates (the identity without one).
+    pub alignment: Alignment,
+    pub transform: SimilarityTransform,
+    /// Estimates left out for lying outside the truth's time span ([`EvalOptions::skip_outside_truth`]).
+    pub skipped_outside_truth: usize,
+    /// With [`EvalOptions::rpe_interval_s`], the relative pose errors.
+    pub relative: Option<trajectory::RelativeErrors>,
     /// Position error of the object origin (m).
     pub position_m: Vec<Vector3<f64>>,
     /// Geodesic angle of `R_est⁻¹ R_true` (rad).
@@ -126,29 +155,102 @@ pub fn estimate_errors(
         check_twist_times("estimated twists", &est_times, twists, gap)?;
     }
 
-    let at: Vec<TruthIndex> = est_times
+    let time_offset_s = match opts.time_offset {
+        TimeOffset::Fixed(offset) if offset.is_finite() => offset,
+        TimeOffset::Fixed(offset) => {
+            return Err(EvalError::InvalidOption {
+                name: "time_offset",
+                value: offset,
+                reason: "must be finite",
+            });
+        }
+        TimeOffset::Auto => {
+            let coarse =
+                trajectory::find_time_offset(truth_poses, est_poses, opts.max_time_offset_s)?;
+            refine_time_offset(truth_poses, est_poses, coarse, opts.alignment)
+        }
+    };
+    if let Some(interval) = opts.rpe_interval_s
+        && !(interval.is_finite() && interval > 0.0)
+    {
+        return Err(EvalError::InvalidOption {
+            name: "rpe_interval_s",
+            value: interval,
+            reason: "must be finite and positive",
+        });
+    }
+    // Each estimate on the truth's clock, with the truth there; those outside the truth left out when asked.
+    let mut kept: Vec<(usize, TruthIndex)> = Vec::with_capacity(est_times.len());
+    for (i, &t) in est_times.iter().enumerate() {
+        match align::locate(&truth_times, i, t + time_offset_s, gap) {
+            Ok(at) => kept.push((i, at)),
+            Err(EvalError::OutsideTruthSpan { .. }) if opts.skip_outside_truth => {}
+            Err(error) => return Err(error),
+        }
+    }
+    if kept.is_empty() {
+        return Err(EvalError::Empty {
+            what: "estimates inside the truth's time span",
+        });
+    }
+    let skipped_outside_truth = est_times.len() - kept.len();
+    let truth_at: Vec<PoseSample> = kept
         .iter()
-        .enumerate()
-        .map(|(i, &t)| align::locate(&truth_times, i, t, gap))
-        .collect::<Result<_, _>>()?;
-
-    let (position_m, rotation_rad) = est_poses
+        .map(|&(i, at)| {
+            let (rotation, translation) = at.pose(truth_poses);
+            PoseSample {
+                t_s: est_times[i] + time_offset_s,
+                cam_from_obj: nalgebra::Isometry3::from_parts(translation.into(), rotation),
+            }
+        })
+        .collect();
+    let transform = match opts.alignment {
+        Alignment::None => SimilarityTransform::identity(),
+        kind => {
+            let from: Vec<Vector3<f64>> = kept
+                .iter()
+                .map(|&(i, _)| est_poses[i].cam_from_obj.translation.vector)
+                .collect();
+            let to: Vec<Vector3<f64>> = truth_at
+                .iter()
+                .map(|p| p.cam_from_obj.translation.vector)
+                .collect();
+            trajectory::umeyama(&from, &to, kind == Alignment::Sim3)?
+        }
+    };
+    let aligned: Vec<PoseSample> = kept
         .iter()
-        .zip(&at)
-        .map(|(est, truth_at)| {
-            let (truth_rotation, truth_translation) = truth_at.pose(truth_poses);
+        .zip(&truth_at)
+        .map(|(&(i, _), truth)| {
+            let mut pose = transform.pose(&est_poses[i]);
+            pose.t_s = truth.t_s;
+            pose
+        })
+        .collect();
+    let (position_m, rotation_rad) = aligned
+        .iter()
+        .zip(&truth_at)
+        .map(|(est, truth)| {
             let angle = so3::angle_between(
                 &est.cam_from_obj.rotation.to_rotation_matrix(),
-                &truth_rotation.to_rotation_matrix(),
+                &truth.cam_from_obj.rotation.to_rotation_matrix(),
             );
             (
-                est.cam_from_obj.translation.vector - truth_translation,
+                est.cam_from_obj.translation.vector - truth.cam_from_obj.translation.vector,
                 angle,
             )
         })
         .unzip();
+    let relative = opts
+        .rpe_interval_s
+        .map(|interval| trajectory::relative_errors(&truth_at, &aligned, interval));
     let mut errors = EstimateErrors {
-        t_s: est_times,
+        t_s: truth_at.iter().map(|p| p.t_s).collect(),
+        time_offset_s,
+        alignment: opts.alignment,
+        transform,
+        skipped_outside_truth,
+        relative,
         position_m,
         rotation_rad,
         velocity_mps: None,
@@ -157,22 +259,25 @@ pub fn estimate_errors(
         estimated_velocity_mps: None,
     };
     if let (Some(truth_twists), Some(est_twists)) = (truth_twists, est_twists) {
-        let count = est_twists.len();
-        let (mut velocity, mut angular, mut truth_v) = (
+        let count = kept.len();
+        let (mut velocity, mut angular, mut truth_v, mut est_v) = (
+            Vec::with_capacity(count),
             Vec::with_capacity(count),
             Vec::with_capacity(count),
             Vec::with_capacity(count),
         );
-        for (est, truth_at) in est_twists.iter().zip(&at) {
+        for &(i, truth_at) in &kept {
             let (true_v, true_w) = truth_at.twist(truth_twists);
+            let est = transform.twist(&est_twists[i]);
             velocity.push(est.velocity_mps - true_v);
             angular.push(est.angular_velocity_radps - true_w);
             truth_v.push(true_v);
+            est_v.push(est.velocity_mps);
         }
         errors.velocity_mps = Some(velocity);
         errors.angular_velocity_radps = Some(angular);
         errors.true_velocity_mps = Some(truth_v);
-        errors.estimated_velocity_mps = Some(est_twists.iter().map(|s| s.velocity_mps).collect());
+        errors.estimated_velocity_mps = Some(est_v);
     }
     Ok(errors)
 }
@@ -204,7 +309,28 @@ impl EstimateErrors {
             velocity_lag_samples: None,
             velocity_lag_subsample: None,
             velocity_lag_ms: None,
+            time_offset_s: self.time_offset_s,
+            alignment: self.alignment,
+            alignment_scale: self.transform.scale,
+            alignment_rotation_deg: self.transform.rotation.angle().to_degrees(),
+            alignment_translation_mm: (self.transform.translation_m * 1e3).into(),
+            skipped_outside_truth: self.skipped_outside_truth,
+            rpe_interval_s: None,
+            rpe_pairs: None,
+            rpe_translation_rmse_mm: None,
+            rpe_rotation_rmse_deg: None,
         };
+        if let Some(relative) = &self.relative {
+            let rms = |values: &[f64]| {
+                (values.iter().map(|v| v * v).sum::<f64>() / values.len().max(1) as f64).sqrt()
+            };
+            metrics.rpe_interval_s = Some(relative.interval_s);
+            metrics.rpe_pairs = Some(relative.translation_m.len());
+            if !relative.translation_m.is_empty() {
+                metrics.rpe_translation_rmse_mm = Some(rms(&relative.translation_m) * 1e3);
+                metrics.rpe_rotation_rmse_deg = Some(rms(&relative.rotation_rad).to_degrees());
+            }
+        }
         if let (Some(velocity_errors), Some(angular_errors), Some(truth_v), Some(est_v)) = (
             &self.velocity_mps,
             &self.angular_velocity_radps,
@@ -335,6 +461,69 @@ pub fn samples_of(estimates: &[Estimate]) -> (Vec<PoseSample>, Vec<TwistSample>)
             )
         })
         .unzip()
+}
+
+/// The clock offset near `coarse` (within three estimate periods) that minimises the RMS position error after the
+/// alignment asked for (a rigid one when none is: the search must not depend on a frame it cannot know). Speeds
+/// correlate broadly and place the offset within a few periods; positions, which a moving target changes by
+/// millimetres a millisecond, pin it down. Golden-section search.
+fn refine_time_offset(
+    truth_poses: &[PoseSample],
+    est_poses: &[PoseSample],
+    coarse: f64,
+    alignment: Alignment,
+) -> f64 {
+    let truth_times: Vec<f64> = truth_poses.iter().map(|p| p.t_s).collect();
+    let est_times: Vec<f64> = est_poses.iter().map(|p| p.t_s).collect();
+    let period = median_period(&est_times);
+    let cost = |offset: f64| -> f64 {
+        let (mut from, mut to) = (Vec::new(), Vec::new());
+        for (i, &t) in est_times.iter().enumerate() {
+            if let Ok(at) = align::locate(&truth_times, i, t + offset, 0.0) {
+                from.push(est_poses[i].cam_from_obj.translation.vector);
+                to.push(at.pose(truth_poses).1);
+            }
+        }
+        let transform = match alignment {
+            Alignment::Sim3 => trajectory::umeyama(&from, &to, true),
+            _ => trajectory::umeyama(&from, &to, false),
+        };
+        let Ok(transform) = transform else {
+            return f64::INFINITY;
+        };
+        let sum: f64 = from
+            .iter()
+            .zip(&to)
+            .map(|(a, b)| {
+                (transform.scale * (transform.rotation * a) + transform.translation_m - b)
+                    .norm_squared()
+            })
+            .sum();
+        if from.is_empty() {
+            f64::INFINITY
+        } else {
+            sum / from.len() as f64
+        }
+    };
+    let ratio = 0.5 * (5f64.sqrt() - 1.0);
+    let (mut a, mut b) = (coarse - 3.0 * period, coarse + 3.0 * period);
+    let (mut x1, mut x2) = (b - ratio * (b - a), a + ratio * (b - a));
+    let (mut f1, mut f2) = (cost(x1), cost(x2));
+    if !(f1.is_finite() || f2.is_finite()) {
+        return coarse;
+    }
+    for _ in 0..40 {
+        if f1 <= f2 {
+            (b, x2, f2) = (x2, x1, f1);
+            x1 = b - ratio * (b - a);
+            f1 = cost(x1);
+        } else {
+            (a, x1, f1) = (x1, x2, f2);
+            x2 = a + ratio * (b - a);
+            f2 = cost(x2);
+        }
+    }
+    0.5 * (a + b)
 }
 
 /// Running sums of squared error components.

@@ -37,6 +37,32 @@ pub struct Metrics {
     pub velocity_lag_subsample: Option<f64>,
     /// `velocity_lag_samples × estimator_period_ms` (ms).
     pub velocity_lag_ms: Option<f64>,
+    /// The clock offset added to the estimates' times before pairing them with the truth (s).
+    #[serde(default)]
+    pub time_offset_s: f64,
+    /// The alignment of the estimates onto the truth's frame: `none`, `se3` or `sim3`.
+    #[serde(default)]
+    pub alignment: crate::Alignment,
+    /// The alignment's scale (1 unless `sim3`), rotation angle (deg) and translation (mm, truth frame).
+    #[serde(default = "one")]
+    pub alignment_scale: f64,
+    #[serde(default)]
+    pub alignment_rotation_deg: f64,
+    #[serde(default)]
+    pub alignment_translation_mm: [f64; 3],
+    /// Estimates left out for lying outside the truth's time span (only when asked to skip them).
+    #[serde(default)]
+    pub skipped_outside_truth: usize,
+    /// The relative pose error's interval (s), the number of estimate pairs it was measured on, and the RMS of its
+    /// translation (mm) and rotation (deg); absent unless asked for.
+    pub rpe_interval_s: Option<f64>,
+    pub rpe_pairs: Option<usize>,
+    pub rpe_translation_rmse_mm: Option<f64>,
+    pub rpe_rotation_rmse_deg: Option<f64>,
+}
+
+fn one() -> f64 {
+    1.0
 }
 
 impl Metrics {
@@ -87,6 +113,45 @@ impl Metrics {
         }
         if let Some(lag) = self.velocity_lag_ms {
             rows.push(("velocity lag", number(lag), "ms"));
+        }
+        if self.time_offset_s != 0.0 {
+            rows.push(("time offset", number(self.time_offset_s), "s"));
+        }
+        if self.alignment != crate::Alignment::None {
+            rows.push(("alignment", self.alignment.name().to_string(), ""));
+            rows.push((
+                "alignment scale",
+                format!("{:.6}", self.alignment_scale),
+                "",
+            ));
+            rows.push((
+                "alignment rotation",
+                number(self.alignment_rotation_deg),
+                "deg",
+            ));
+            let [x, y, z] = self.alignment_translation_mm;
+            rows.push((
+                "alignment translation",
+                format!("{} {} {}", number(x), number(y), number(z)),
+                "mm",
+            ));
+        }
+        if self.skipped_outside_truth > 0 {
+            rows.push((
+                "skipped (outside truth)",
+                self.skipped_outside_truth.to_string(),
+                "",
+            ));
+        }
+        if let (Some(interval), Some(pairs)) = (self.rpe_interval_s, self.rpe_pairs) {
+            rows.push(("RPE interval", number(interval), "s"));
+            rows.push(("RPE pairs", pairs.to_string(), ""));
+        }
+        if let Some(t) = self.rpe_translation_rmse_mm {
+            rows.push(("RPE translation RMSE", number(t), "mm"));
+        }
+        if let Some(r) = self.rpe_rotation_rmse_deg {
+            rows.push(("RPE rotation RMSE", number(r), "deg"));
         }
 
         let header = ("metric", "value", "unit");

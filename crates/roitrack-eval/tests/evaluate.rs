@@ -483,10 +483,21 @@ fn table_and_json_show_every_metric() {
         "velocity_lag_samples",
         "velocity_lag_subsample",
         "velocity_lag_ms",
+        "time_offset_s",
+        "alignment",
+        "alignment_scale",
+        "alignment_rotation_deg",
+        "alignment_translation_mm",
+        "skipped_outside_truth",
+        "rpe_interval_s",
+        "rpe_pairs",
+        "rpe_translation_rmse_mm",
+        "rpe_rotation_rmse_deg",
     ] {
         assert!(object.contains_key(key), "missing {key} in {json}");
     }
-    assert_eq!(object.len(), 13);
+    assert_eq!(object.len(), 23);
+    assert_eq!(json["alignment"], "none");
     assert_eq!(json["velocity_lag_samples"], 3);
     assert!(!m.to_json().contains('\n'));
     let back: Metrics = serde_json::from_str(&m.to_json()).unwrap();

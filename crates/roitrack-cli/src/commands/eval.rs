@@ -2,49 +2,125 @@
 
 use std::path::PathBuf;
 
-use anyhow::Result;
-use clap::Args;
-use roitrack::eval::{EvalOptions, evaluate};
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use roitrack::eval::{Alignment, EvalOptions, TimeOffset, evaluate};
 
 use super::simulate::{TRUTH_POSES_FILE, TRUTH_TWISTS_FILE};
 
 /// Score an estimated trajectory against ground truth: position, rotation, velocity and angular-velocity RMSE, max
-/// position error, velocity lag.
+/// position error, velocity lag; optionally after a clock offset and an alignment of frames, and the relative pose
+/// error over an interval. The JSON output's fields are documented in docs/evaluation.md.
 #[derive(Debug, Args)]
 pub struct EvalArgs {
     /// Folder holding gt_poses.tum and gt_twists.csv (as written by `roitrack simulate`).
+    #[arg(long, conflicts_with_all = ["truth_poses", "truth_twists"], required_unless_present = "truth_poses")]
+    pub truth: Option<PathBuf>,
+    /// True poses (TUM: t x y z qx qy qz qw), any file name; instead of --truth.
     #[arg(long)]
-    pub truth: PathBuf,
+    pub truth_poses: Option<PathBuf>,
+    /// True twists (CSV t,vx,vy,vz,wx,wy,wz), at the true poses' times; with --truth-poses.
+    #[arg(long, requires = "truth_poses")]
+    pub truth_twists: Option<PathBuf>,
     /// Estimated poses (TUM).
     #[arg(long)]
     pub poses: PathBuf,
-    /// Estimated twists (CSV t,vx,vy,vz,wx,wy,wz), same times as the poses.
+    /// Estimated twists (CSV t,vx,vy,vz,wx,wy,wz), same times as the poses. Velocity metrics need twists on both
+    /// sides.
     #[arg(long)]
     pub twists: Option<PathBuf>,
+    /// Transformation of the estimates onto the truth's frame, fitted to the paired positions (Umeyama): none (both
+    /// in the camera frame, as simulated truth is), se3 (rotation and translation: truth in another frame, e.g. a
+    /// motion-capture system's), sim3 (also a scale: a target or calibration of the wrong size).
+    #[arg(long, value_enum, default_value_t = AlignArg::None)]
+    pub align: AlignArg,
+    /// Seconds added to the estimates' times to put them on the truth's clock, or `auto` to find the offset from the
+    /// motion (speeds correlated within --max-time-offset-s, then refined on the positions).
+    #[arg(long, default_value = "0", value_parser = parse_time_offset)]
+    pub time_offset: TimeOffset,
+    /// With --time-offset auto, the largest offset searched (s).
+    #[arg(long, default_value_t = 5.0)]
+    pub max_time_offset_s: f64,
+    /// Also the relative pose error over this interval (s): the error of the target's estimated motion between
+    /// estimates this far apart, independent of the frames and of a constant offset of the pose. Default: not
+    /// computed.
+    #[arg(long)]
+    pub rpe_interval_s: Option<f64>,
+    /// Leave out (and count) the estimates outside the truth's time span instead of refusing them.
+    #[arg(long)]
+    pub skip_outside_truth: bool,
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
 }
 
+/// `--align`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum AlignArg {
+    None,
+    Se3,
+    Sim3,
+}
+
+fn parse_time_offset(text: &str) -> Result<TimeOffset, String> {
+    if text.eq_ignore_ascii_case("auto") {
+        return Ok(TimeOffset::Auto);
+    }
+    match text.parse::<f64>() {
+        Ok(offset) if offset.is_finite() => Ok(TimeOffset::Fixed(offset)),
+        _ => Err(format!(
+            "`{text}` is neither a number of seconds nor `auto`"
+        )),
+    }
+}
+
 pub fn run(args: &EvalArgs) -> Result<()> {
-    let truth_poses = roitrack::formats::read_tum(args.truth.join(TRUTH_POSES_FILE))?;
-    let estimated_poses = roitrack::formats::read_tum(&args.poses)?;
-    let (truth_twists, estimated_twists) = match &args.twists {
-        Some(path) => (
-            Some(roitrack::formats::read_twists_csv(
-                args.truth.join(TRUTH_TWISTS_FILE),
-            )?),
-            Some(roitrack::formats::read_twists_csv(path)?),
+    let (truth_poses_path, truth_twists_path) = match (&args.truth, &args.truth_poses) {
+        (Some(dir), None) => (
+            dir.join(TRUTH_POSES_FILE),
+            args.twists.as_ref().map(|_| dir.join(TRUTH_TWISTS_FILE)),
         ),
-        None => (None, None),
+        (None, Some(poses)) => (poses.clone(), args.truth_twists.clone()),
+        _ => bail!("give the truth as --truth DIR or as --truth-poses FILE [--truth-twists FILE]"),
+    };
+    let truth_poses = roitrack::formats::read_tum(&truth_poses_path)?;
+    let estimated_poses = roitrack::formats::read_tum(&args.poses)?;
+    let (truth_twists, estimated_twists) = match (&truth_twists_path, &args.twists) {
+        (Some(truth), Some(estimated)) => (
+            Some(roitrack::formats::read_twists_csv(truth)?),
+            Some(roitrack::formats::read_twists_csv(estimated)?),
+        ),
+        (None, Some(_)) => bail!(
+            "--twists needs the true twists too: --truth-twists FILE (or --truth DIR with gt_twists.csv)"
+        ),
+        _ => (None, None),
+    };
+    let options = EvalOptions {
+        time_offset: args.time_offset,
+        max_time_offset_s: args.max_time_offset_s,
+        alignment: match args.align {
+            AlignArg::None => Alignment::None,
+            AlignArg::Se3 => Alignment::Se3,
+            AlignArg::Sim3 => Alignment::Sim3,
+        },
+        rpe_interval_s: args.rpe_interval_s,
+        skip_outside_truth: args.skip_outside_truth,
+        ..EvalOptions::default()
     };
     let metrics = evaluate(
         &truth_poses,
         truth_twists.as_deref(),
         &estimated_poses,
         estimated_twists.as_deref(),
-        &EvalOptions::default(),
-    )?;
+        &options,
+    )
+    .with_context(|| {
+        format!(
+            "evaluating {} against {}",
+            args.poses.display(),
+            truth_poses_path.display()
+        )
+    })?;
     if args.json {
         println!("{}", metrics.to_json());
     } else {
