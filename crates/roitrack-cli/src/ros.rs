@@ -15,7 +15,8 @@ pub struct McapArgs {
     /// Also write the estimates as a ROS 2 bag in MCAP storage (profile ros2, CDR): /roitrack/pose, /roitrack/twist,
     /// /roitrack/odometry, /tf, /roitrack/status per estimate, /roitrack/camera_info once, and with --images the
     /// frames and the projected target (docs/ros2.md). Completed on every exit path: a failed run leaves a bag
-    /// readable up to its last estimate.
+    /// readable up to its last estimate; the first Ctrl-C stops the run at its next estimate and completes the bag
+    /// (a second one ends the process at once).
     #[arg(long, value_name = "OUT.mcap")]
     pub mcap: Option<PathBuf>,
     /// With --mcap: the camera's frame id, the header frame of every message.
@@ -29,6 +30,40 @@ pub struct McapArgs {
 /// The bag, if --mcap was given.
 pub struct Bag(Option<BackgroundBag>);
 
+/// Set by the first Ctrl-C (SIGINT) of a run that writes a bag: the run then stops at its next estimate or frame,
+/// through the error path, which completes the bag. A second Ctrl-C ends the process at once.
+static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+#[cfg(unix)]
+extern "C" fn on_interrupt(_signal: libc::c_int) {
+    INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
+    // SAFETY: signal() is async-signal-safe; it restores the default action for a second Ctrl-C.
+    unsafe {
+        libc::signal(libc::SIGINT, libc::SIG_DFL);
+    }
+}
+
+/// Lets the first Ctrl-C stop the run through its error path instead of killing the process (which would leave the
+/// bag without its summary).
+fn stop_on_interrupt() {
+    #[cfg(unix)]
+    // SAFETY: installs a handler that only stores to an atomic and calls signal(), both async-signal-safe.
+    unsafe {
+        let handler: extern "C" fn(libc::c_int) = on_interrupt;
+        libc::signal(libc::SIGINT, handler as libc::sighandler_t);
+    }
+}
+
+fn check_interrupt(bag: &BackgroundBag) -> Result<(), FormatError> {
+    if INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst) {
+        return Err(FormatError::new(
+            bag.path(),
+            "interrupted (Ctrl-C): the bag is completed up to the last estimate",
+        ));
+    }
+    Ok(())
+}
+
 impl McapArgs {
     /// Opens the bag on a writing thread of its own; `target` is drawn on the frames by each estimate.
     pub fn open(&self, camera: &CameraModel, target: Option<&Target>) -> Result<Bag> {
@@ -37,6 +72,9 @@ impl McapArgs {
             child_frame_id: self.child_frame_id.clone(),
             ..BagOptions::default()
         };
+        if self.mcap.is_some() {
+            stop_on_interrupt();
+        }
         Ok(Bag(match &self.mcap {
             Some(path) => Some(BackgroundBag::spawn(
                 BagWriter::create(path, &options, Some(camera.clone()))?,
@@ -55,7 +93,10 @@ impl McapArgs {
 impl Bag {
     pub fn estimate(&mut self, e: &Estimate) -> Result<(), roitrack::formats::FormatError> {
         match &mut self.0 {
-            Some(bag) => bag.write_estimate(e),
+            Some(bag) => {
+                check_interrupt(bag)?;
+                bag.write_estimate(e)
+            }
             None => Ok(()),
         }
     }
@@ -66,7 +107,10 @@ impl Bag {
         state: Option<&MotionState>,
     ) -> Result<(), roitrack::formats::FormatError> {
         match (&mut self.0, frame) {
-            (Some(bag), Some(frame)) => bag.write_frame(frame, state),
+            (Some(bag), Some(frame)) => {
+                check_interrupt(bag)?;
+                bag.write_frame(frame, state)
+            }
             _ => Ok(()),
         }
     }

@@ -473,3 +473,67 @@ fn bad_bags_are_refused_naming_the_bag_and_the_topic() {
     ]);
     assert!(error.contains("--camera is required"), "{error}");
 }
+
+/// Ctrl-C while tracking: the run stops at its next estimate through the error path, so the bag is completed (its
+/// summary written) and reads back with the estimates before the interruption.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_completes_the_bag() {
+    use std::io::Write;
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    ok(&["simulate", "--scenario", "orthoglide", "--out", p(dir)]);
+    let text = std::fs::read_to_string(dir.join("measurements.csv")).unwrap();
+    let lines: Vec<&str> = text.lines().collect();
+    let cut = lines.len() / 2;
+    let interrupted = dir.join("interrupted");
+    std::fs::create_dir(&interrupted).unwrap();
+    let mut args = track_args(dir, Path::new("-"), &interrupted);
+    args.remove(0);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_roitrack"))
+        .arg("track")
+        .args(&args)
+        .stdin(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stdin = child.stdin.take().unwrap();
+    // The first half: write_all returns once the pipe holds the last 64 KiB at most; then time to track those.
+    stdin
+        .write_all((lines[..cut].join("\n") + "\n").as_bytes())
+        .unwrap();
+    stdin.flush().unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    // SAFETY: sends SIGINT to the child we spawned.
+    assert_eq!(
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
+        0
+    );
+    // The rest: the next estimate finds the interruption.
+    let _ = stdin.write_all((lines[cut..].join("\n") + "\n").as_bytes());
+    drop(stdin);
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("interrupted (Ctrl-C)"), "{stderr}");
+    assert!(!interrupted.join("poses.tum").exists());
+    std::fs::write(dir.join("half.csv"), lines[..cut].join("\n") + "\n").unwrap();
+    ok(&strs(&track_args(dir, &dir.join("half.csv"), dir)));
+    std::fs::rename(interrupted.join("run.mcap"), dir.join("run.mcap")).unwrap();
+    let report = check_bag(&python, dir, ["camera", "target"], &["--prefix"]);
+    let estimates: usize = report
+        .split_whitespace()
+        .skip_while(|w| !w.ends_with(".mcap:"))
+        .nth(1)
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{report}"));
+    let tracked = std::fs::read_to_string(dir.join("poses.tum"))
+        .unwrap()
+        .lines()
+        .count();
+    assert!(
+        estimates * 2 >= tracked && estimates <= tracked,
+        "{estimates} of {tracked}"
+    );
+}
