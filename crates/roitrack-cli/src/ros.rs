@@ -20,10 +20,10 @@ pub struct McapArgs {
     #[arg(long, value_name = "OUT.mcap")]
     pub mcap: Option<PathBuf>,
     /// With --mcap: the camera's frame id, the header frame of every message.
-    #[arg(long, default_value = "camera", value_name = "ID")]
+    #[arg(long, default_value = "camera", value_name = "ID", requires = "mcap")]
     pub frame_id: String,
     /// With --mcap: the target's frame id, the child frame of /tf and of the odometry.
-    #[arg(long, default_value = "target", value_name = "ID")]
+    #[arg(long, default_value = "target", value_name = "ID", requires = "mcap")]
     pub child_frame_id: String,
 }
 
@@ -158,6 +158,9 @@ pub fn camera(
     source: Option<&Path>,
     mcap_in: &McapInArgs,
 ) -> Result<CameraModel> {
+    if source.is_none() && mcap_in.image_topic.is_some() {
+        bail!("--image-topic is for the frames of a bag: --mcap-in BAG");
+    }
     match (camera, source, &mcap_in.image_topic) {
         (Some(camera), _, _) => camera.read(),
         (None, Some(bag), Some(image_topic)) if is_bag(bag) => {

@@ -246,6 +246,14 @@ fn bag_options_are_refused_with_a_reason() {
     *args.last_mut().unwrap() = p(&missing).to_string();
     let error = fails(&strs(&args));
     assert!(error.contains("no/such/folder/run.mcap"), "{error}");
+    // Options that would otherwise be ignored.
+    let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
+    args.extend(["--image-topic", "/cam/image_raw"].map(String::from));
+    assert!(fails(&strs(&args)).contains("--image-topic is for the frames of a bag"));
+    let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
+    args.truncate(args.len() - 2);
+    args.extend(["--child-frame-id", "tool"].map(String::from));
+    assert!(fails(&strs(&args)).contains("--mcap"));
 }
 
 /// Simulated frames (`roitrack simulate --frames`), each also as raw 8-bit pixels beside its PNG for the bag writer.

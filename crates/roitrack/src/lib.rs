@@ -84,7 +84,7 @@
 //! | `plot` | `roitrack-plot` | charts and the figures of a run (feature `plot`, on by default) |
 //! | `experiments` | `roitrack-experiments` | the demo, the estimator comparison, the fault table, the lag trade-off (feature `experiments`, on by default) |
 //! | `bench` | `roitrack-bench` | the hot-path, loop, soak and PnP benchmarks (feature `bench`) |
-//! | `ros` | `roitrack-ros` | ROS 2 bags in MCAP storage: estimates, camera info, status, images out (feature `ros`, on by default) |
+//! | `ros` | `roitrack-ros` | ROS 2 bags in MCAP storage: estimates, camera info, status, images out; image frames in (feature `ros`, on by default) |
 //!
 //! The programs in `examples/` show the main uses end to end: `track_recording` (files in, estimates out),
 //! `simulate_and_evaluate` (your own camera and target, ground truth, metrics), `own_camera` (the real-time loop on a
