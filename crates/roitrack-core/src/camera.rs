@@ -539,9 +539,15 @@ impl Distortion {
         }
     }
 
-    /// Whether the model leaves every point where it is (no model, or all coefficients zero).
+    /// Whether the model leaves every point where it is (no model, or all coefficients zero). Allocation-free: the
+    /// renderer asks it for every ROI.
     pub fn is_identity(&self) -> bool {
-        self.coefficients().iter().all(|&c| c == 0.0)
+        match self {
+            Self::None => true,
+            Self::PlumbBob(d) => d.is_identity(),
+            Self::RationalPolynomial(d) => d.coefficients().iter().all(|&c| c == 0.0),
+            Self::Equidistant(d) => d.coefficients().iter().all(|&c| c == 0.0),
+        }
     }
 
     pub fn validate(&self) -> Result<(), CameraError> {
