@@ -26,6 +26,7 @@ enum Command {
     // Boxed: the largest arguments by far (the --mcap and --mcap-in options made the enum trip clippy's size check).
     Track(Box<commands::track::TrackArgs>),
     Eval(commands::eval::EvalArgs),
+    Plot(commands::plot::PlotArgs),
     Detect(commands::detect::DetectArgs),
     Target(commands::target::TargetArgs),
     Tradeoff(commands::tradeoff::TradeoffArgs),
@@ -51,6 +52,7 @@ fn main() -> ExitCode {
         Command::Simulate(args) => commands::simulate::run(&args),
         Command::Track(args) => commands::track::run(&args),
         Command::Eval(args) => commands::eval::run(&args),
+        Command::Plot(args) => commands::plot::run(&args),
         Command::Detect(args) => commands::detect::run(&args),
         Command::Target(args) => commands::target::run(&args),
         Command::Tradeoff(args) => commands::tradeoff::run(&args),

@@ -93,6 +93,10 @@ pub struct EstimateErrors {
     pub position_m: Vec<Vector3<f64>>,
     /// Geodesic angle of `R_est⁻¹ R_true` (rad).
     pub rotation_rad: Vec<f64>,
+    /// The rotation error as a rotation vector in the camera frame, `Log(R_est R_trueᵀ)` (rad): the negative of the
+    /// left perturbation `w` of the covariance (`R_true = Exp(w) R_est`), so the covariance's rotation block is its
+    /// covariance too. Its norm is [`Self::rotation_rad`].
+    pub rotation_vector_rad: Vec<Vector3<f64>>,
     /// With twists on both sides: linear and angular velocity errors (m/s, rad/s).
     pub velocity_mps: Option<Vec<Vector3<f64>>>,
     pub angular_velocity_radps: Option<Vec<Vector3<f64>>>,
@@ -227,7 +231,7 @@ pub fn estimate_errors(
             pose
         })
         .collect();
-    let (position_m, rotation_rad) = aligned
+    let (position_m, (rotation_rad, rotation_vector_rad)): (Vec<_>, (Vec<_>, Vec<_>)) = aligned
         .iter()
         .zip(&truth_at)
         .map(|(est, truth)| {
@@ -235,9 +239,12 @@ pub fn estimate_errors(
                 &est.cam_from_obj.rotation.to_rotation_matrix(),
                 &truth.cam_from_obj.rotation.to_rotation_matrix(),
             );
+            let vector = so3::log_quaternion(
+                &(est.cam_from_obj.rotation * truth.cam_from_obj.rotation.inverse()),
+            );
             (
                 est.cam_from_obj.translation.vector - truth.cam_from_obj.translation.vector,
-                angle,
+                (angle, vector),
             )
         })
         .unzip();
@@ -253,6 +260,7 @@ pub fn estimate_errors(
         relative,
         position_m,
         rotation_rad,
+        rotation_vector_rad,
         velocity_mps: None,
         angular_velocity_radps: None,
         true_velocity_mps: None,

@@ -63,6 +63,7 @@ mod measurements;
 mod overlay;
 mod roi_recording;
 mod row_writer;
+mod run_readers;
 mod target_csv;
 mod tum;
 mod twists;
@@ -92,6 +93,10 @@ pub use measurements::{
 pub use overlay::{MarkKind, OverlayMark, write_overlay_png};
 pub use roi_recording::{
     MAX_ROI_SIDE_PX, ROI_RECORDING_MAGIC, RoiRecordingReader, RoiRecordingWriter,
+};
+pub use run_readers::{
+    CovarianceRow, DiagnosticsRow, parse_covariance_csv, parse_diagnostics_csv,
+    read_covariance_csv, read_diagnostics_csv,
 };
 pub use target_csv::{parse_target_csv, read_target_csv, target_csv_string, write_target_csv};
 pub use tum::{PoseWriter, QUATERNION_NORM_TOLERANCE, parse_tum, read_tum, write_tum};

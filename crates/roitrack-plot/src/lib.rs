@@ -7,6 +7,7 @@
 //! truth), after figures 5 to 7 of the paper.
 
 pub mod figures;
+pub mod run;
 
 pub use figures::{TrackSeries, TruthSeries, write_figures};
 

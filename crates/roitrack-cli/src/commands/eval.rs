@@ -62,6 +62,15 @@ pub enum AlignArg {
     Sim3,
 }
 
+/// The library's alignment for `--align`.
+pub fn alignment(align: AlignArg) -> Alignment {
+    match align {
+        AlignArg::None => Alignment::None,
+        AlignArg::Se3 => Alignment::Se3,
+        AlignArg::Sim3 => Alignment::Sim3,
+    }
+}
+
 fn parse_time_offset(text: &str) -> Result<TimeOffset, String> {
     if text.eq_ignore_ascii_case("auto") {
         return Ok(TimeOffset::Auto);
@@ -98,11 +107,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let options = EvalOptions {
         time_offset: args.time_offset,
         max_time_offset_s: args.max_time_offset_s,
-        alignment: match args.align {
-            AlignArg::None => Alignment::None,
-            AlignArg::Se3 => Alignment::Se3,
-            AlignArg::Sim3 => Alignment::Sim3,
-        },
+        alignment: alignment(args.align),
         rpe_interval_s: args.rpe_interval_s,
         skip_outside_truth: args.skip_outside_truth,
         ..EvalOptions::default()

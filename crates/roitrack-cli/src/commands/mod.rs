@@ -7,6 +7,7 @@ pub mod detect;
 pub mod eval;
 pub mod faults;
 pub mod frame_study;
+pub mod plot;
 pub mod pnp_bench;
 pub mod simulate;
 pub mod soak;

@@ -1,0 +1,203 @@
+//! `roitrack plot`: the figures of one tracking run from its files (see [`roitrack::plot::run`]).
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result, bail};
+use clap::Args;
+use roitrack::eval::{EvalOptions, TimeOffset, estimate_errors};
+use roitrack::plot::run::{RunFigureInputs, write_run_figures};
+
+use super::eval::AlignArg;
+use super::simulate::{TRUTH_POSES_FILE, TRUTH_TWISTS_FILE};
+
+/// Plot a run: position, orientation (rotation vector), linear and angular velocity against time; with a truth, their
+/// errors with ±3 sigma bands from the estimator's covariance; with diagnostics, the status and residual over time.
+/// Writes motion, errors and status as PNG and SVG into --out.
+#[derive(Debug, Args)]
+pub struct PlotArgs {
+    /// Estimated poses (TUM).
+    #[arg(long)]
+    pub poses: PathBuf,
+    /// Estimated twists (CSV t,vx,vy,vz,wx,wy,wz), same times as the poses. Default: none (no velocity panels).
+    #[arg(long)]
+    pub twists: Option<PathBuf>,
+    /// The diagnostics CSV of the same run (status, residual, position and velocity sigmas). Default: none.
+    #[arg(long)]
+    pub diagnostics: Option<PathBuf>,
+    /// The covariance CSV of the same run: sigmas of all 12 components, for the rotation and angular-velocity bands
+    /// too. Default: none (bands from --diagnostics, position and velocity only).
+    #[arg(long)]
+    pub covariance: Option<PathBuf>,
+    /// Folder holding gt_poses.tum and gt_twists.csv (as written by `roitrack simulate`). Default: no truth.
+    #[arg(long, conflicts_with_all = ["truth_poses", "truth_twists"])]
+    pub truth: Option<PathBuf>,
+    /// True poses (TUM), any file name; instead of --truth.
+    #[arg(long)]
+    pub truth_poses: Option<PathBuf>,
+    /// True twists (CSV); with --truth-poses.
+    #[arg(long, requires = "truth_poses")]
+    pub truth_twists: Option<PathBuf>,
+    /// Alignment of the estimates onto the truth's frame before the errors are drawn, as in `roitrack eval`.
+    #[arg(long, value_enum, default_value_t = AlignArg::None)]
+    pub align: AlignArg,
+    /// Seconds added to the estimates' times to put them on the truth's clock, as in `roitrack eval`.
+    #[arg(long, default_value_t = 0.0)]
+    pub time_offset: f64,
+    /// Folder for the figures (created if needed).
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub fn run(args: &PlotArgs) -> Result<()> {
+    let poses = roitrack::formats::read_tum(&args.poses)?;
+    let twists = args
+        .twists
+        .as_ref()
+        .map(roitrack::formats::read_twists_csv)
+        .transpose()?;
+    let times: Vec<f64> = poses.iter().map(|p| p.t_s).collect();
+    // Side files must be of the same run: one row per estimate, at its time.
+    let check_times = |what: &str, path: &PathBuf, side: &[f64]| -> Result<()> {
+        if side.len() != times.len() {
+            bail!(
+                "{}: {} rows for {} poses in {}: not the same run",
+                path.display(),
+                side.len(),
+                times.len(),
+                args.poses.display()
+            );
+        }
+        if let Some(k) = (0..side.len()).find(|&k| (side[k] - times[k]).abs() > 1e-6) {
+            bail!(
+                "{}: {what} row {} is at t = {} s but pose {} is at t = {} s: not the same run",
+                path.display(),
+                k + 1,
+                side[k],
+                k + 1,
+                times[k]
+            );
+        }
+        Ok(())
+    };
+    if let (Some(path), Some(twists)) = (&args.twists, &twists) {
+        check_times(
+            "twist",
+            path,
+            &twists.iter().map(|t| t.t_s).collect::<Vec<_>>(),
+        )?;
+    }
+    let diagnostics = match &args.diagnostics {
+        Some(path) => {
+            let rows = roitrack::formats::read_diagnostics_csv(path)?;
+            check_times(
+                "diagnostics",
+                path,
+                &rows.iter().map(|r| r.t_s).collect::<Vec<_>>(),
+            )?;
+            Some(rows)
+        }
+        None => None,
+    };
+    let covariance = match &args.covariance {
+        Some(path) => {
+            let rows = roitrack::formats::read_covariance_csv(path)?;
+            check_times(
+                "covariance",
+                path,
+                &rows.iter().map(|r| r.t_s).collect::<Vec<_>>(),
+            )?;
+            Some(rows)
+        }
+        None => None,
+    };
+    let sigmas: Option<Vec<[f64; 12]>> = match (&covariance, &diagnostics) {
+        (Some(rows), _) => Some(
+            rows.iter()
+                .map(|r| {
+                    r.covariance.as_ref().map_or(
+                        [f64::NAN; 12],
+                        roitrack::math::estimator::standard_deviations,
+                    )
+                })
+                .collect(),
+        ),
+        (None, Some(rows)) => Some(
+            rows.iter()
+                .map(|r| {
+                    let mut s = [f64::NAN; 12];
+                    s[..3].copy_from_slice(&r.sigma_position_m);
+                    s[6..9].copy_from_slice(&r.sigma_velocity_mps);
+                    s
+                })
+                .collect(),
+        ),
+        (None, None) => None,
+    };
+    let (truth_poses_path, truth_twists_path) = match (&args.truth, &args.truth_poses) {
+        (Some(dir), _) => (
+            Some(dir.join(TRUTH_POSES_FILE)),
+            Some(dir.join(TRUTH_TWISTS_FILE)),
+        ),
+        (None, Some(poses)) => (Some(poses.clone()), args.truth_twists.clone()),
+        (None, None) => (None, None),
+    };
+    let truth_poses = truth_poses_path
+        .as_ref()
+        .map(roitrack::formats::read_tum)
+        .transpose()?;
+    let truth_twists = match (&truth_twists_path, &twists) {
+        // With --truth DIR the twists are read only when the estimates have twists to compare.
+        (Some(path), Some(_)) if args.truth.is_none() || path.is_file() => {
+            Some(roitrack::formats::read_twists_csv(path)?)
+        }
+        _ => None,
+    };
+    let errors = match &truth_poses {
+        Some(truth) => Some(
+            estimate_errors(
+                truth,
+                truth_twists.as_deref(),
+                &poses,
+                twists.as_deref().filter(|_| truth_twists.is_some()),
+                &EvalOptions {
+                    alignment: super::eval::alignment(args.align),
+                    time_offset: TimeOffset::Fixed(args.time_offset),
+                    skip_outside_truth: true,
+                    ..EvalOptions::default()
+                },
+            )
+            .with_context(|| {
+                format!(
+                    "comparing {} with the truth {}",
+                    args.poses.display(),
+                    truth_poses_path
+                        .as_ref()
+                        .map_or(String::new(), |p| p.display().to_string())
+                )
+            })?,
+        ),
+        None => None,
+    };
+    let inputs = RunFigureInputs {
+        title: args
+            .poses
+            .file_name()
+            .map_or_else(|| "run".to_string(), |n| n.to_string_lossy().into_owned()),
+        poses,
+        twists,
+        truth_poses,
+        truth_twists,
+        errors,
+        sigmas,
+        status: diagnostics.map(|rows| {
+            rows.iter()
+                .map(|r| (r.t_s, r.status, r.residual_rms_px))
+                .collect()
+        }),
+    };
+    let paths = write_run_figures(&args.out, &inputs)?;
+    for path in paths {
+        println!("{}", path.display());
+    }
+    Ok(())
+}
