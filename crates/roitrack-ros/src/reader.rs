@@ -229,9 +229,19 @@ fn find_channel(
 impl BagFrameSource {
     /// Opens `bag` and checks that `topic` is one of its image topics.
     pub fn open(bag: impl AsRef<Path>, topic: &str) -> Result<Self, FormatError> {
-        let bag = bag.as_ref().to_path_buf();
-        let file = mcap_file(&bag)?;
+        let bag = bag.as_ref();
+        let file = mcap_file(bag)?;
         let bytes = std::fs::read(&file).map_err(|e| FormatError::io(&file, "cannot read", e))?;
+        Self::from_bytes(bag, bytes, topic)
+    }
+
+    /// [`open`](Self::open) on the bytes of a `.mcap` file; `bag` names it in errors.
+    pub fn from_bytes(
+        bag: impl AsRef<Path>,
+        bytes: Vec<u8>,
+        topic: &str,
+    ) -> Result<Self, FormatError> {
+        let bag = bag.as_ref().to_path_buf();
         let summary = read_summary(&bag, topic, &bytes)?;
         let channel = find_channel(&bag, &summary, topic, &IMAGE_TYPES)?;
         Ok(Self {
