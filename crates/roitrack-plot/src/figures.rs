@@ -190,6 +190,7 @@ pub fn write_figures(
             },
         )?;
         out.push(png);
+        crate::outline_svg_text(&svg)?;
         out.push(svg);
     }
     Ok(out)

@@ -1,13 +1,14 @@
 //! # roitrack-plot
 //!
 //! Line and scatter charts written as PNG and SVG with the same look everywhere: the font is embedded, nothing is
-//! read from the system.
+//! read from the system, and the SVG files carry their text as outlines of that font (no font needed to view them).
 //!
 //! [`figures`] draws the multi-panel figures of a tracking run (trajectory, position and velocity against the
 //! truth), after figures 5 to 7 of the paper.
 
 pub mod figures;
 pub mod run;
+mod svg_text;
 
 pub use figures::{TrackSeries, TruthSeries, write_figures};
 
@@ -21,6 +22,14 @@ use thiserror::Error;
 const FONT: &str = "roitrack-sans";
 static FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 static REGISTER: Once = Once::new();
+
+/// Replaces the text of a written SVG file by the embedded font's outlines (see the `svg_text` module).
+fn outline_svg_text(svg: &Path) -> Result<(), PlotError> {
+    svg_text::outline_text_in_file(svg, FONT_BYTES).map_err(|message| PlotError::Draw {
+        path: svg.to_path_buf(),
+        message,
+    })
+}
 
 fn register_font() {
     REGISTER.call_once(|| {
@@ -244,6 +253,7 @@ pub fn write_chart(stem: &Path, chart: &Chart) -> Result<(PathBuf, PathBuf), Plo
             message,
         }
     })?;
+    outline_svg_text(&svg)?;
     Ok((png, svg))
 }
 

@@ -158,6 +158,7 @@ pub fn write_run_figures(dir: &Path, inputs: &RunFigureInputs) -> Result<Vec<Pat
             message,
         })?;
         paths.push(png);
+        crate::outline_svg_text(&svg)?;
         paths.push(svg);
     }
     Ok(paths)
