@@ -225,7 +225,7 @@ impl CameraArgs {
 }
 
 /// `640x480` -> (640, 480).
-fn parse_image_size(text: &str) -> Result<(u32, u32), String> {
+pub fn parse_image_size(text: &str) -> Result<(u32, u32), String> {
     let parsed = text
         .split_once(['x', 'X'])
         .and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));

@@ -149,6 +149,10 @@ pub struct Scenario {
     pub target: Target,
     pub duration_s: f64,
     motion: Motion,
+    /// The motion played this many times faster ([`Self::with_speed_scale`]).
+    time_scale: f64,
+    /// The motion shifted by this in the camera frame ([`Self::with_distance_m`]).
+    offset_m: Vector3<f64>,
 }
 
 // Orthoglide phases (SPEC section 7).
@@ -232,6 +236,8 @@ impl Scenario {
             target: Target::grid4x4(),
             duration_s,
             motion,
+            time_scale: 1.0,
+            offset_m: Vector3::zeros(),
         }
     }
 
@@ -269,6 +275,8 @@ impl Scenario {
             target: Target::grid4x4(),
             duration_s,
             motion: Motion::Static(MotionState::at_rest(cam_r_obj, cam_t_obj_m)),
+            time_scale: 1.0,
+            offset_m: Vector3::zeros(),
         }
     }
 
@@ -331,6 +339,8 @@ impl Scenario {
             target: Target::grid4x4(),
             duration_s,
             motion: random_motion(seed, &spec),
+            time_scale: 1.0,
+            offset_m: Vector3::zeros(),
         }
     }
 
@@ -345,18 +355,98 @@ impl Scenario {
         Self { target, ..self }
     }
 
+    /// The same path played `factor` times faster (velocities and angular velocities times `factor`, the duration
+    /// divided by it): a slower or faster rig with the same excursions.
+    ///
+    /// # Panics
+    ///
+    /// If `factor` is not finite and positive.
+    ///
+    /// ```
+    /// use roitrack_sim::{Scenario, ScenarioKind};
+    /// let spin = Scenario::new(ScenarioKind::Spin, 1);
+    /// let slow = spin.clone().with_speed_scale(0.5);
+    /// assert_eq!(slow.duration_s, 2.0 * spin.duration_s);
+    /// let (a, b) = (spin.state_at(0.7), slow.state_at(1.4));
+    /// assert!((a.cam_t_obj_m - b.cam_t_obj_m).norm() < 1e-12);
+    /// assert!((0.5 * a.angular_velocity_radps - b.angular_velocity_radps).norm() < 1e-12);
+    /// ```
+    pub fn with_speed_scale(self, factor: f64) -> Self {
+        assert!(
+            factor.is_finite() && factor > 0.0,
+            "Scenario::with_speed_scale: the factor must be finite and positive, got {factor}"
+        );
+        Self {
+            time_scale: self.time_scale * factor,
+            duration_s: self.duration_s / factor,
+            ..self
+        }
+    }
+
+    /// The same motion moved along the optical axis so that the target's origin is on average `distance_m` from the
+    /// camera (the canonical motions are about 0.6 m away): for a rig whose target is nearer or farther. Check
+    /// [`Self::min_image_margin_px`] that the target stays in the image.
+    ///
+    /// # Panics
+    ///
+    /// If `distance_m` is not finite and positive.
+    ///
+    /// ```
+    /// use roitrack_sim::{Scenario, ScenarioKind};
+    /// let far = Scenario::new(ScenarioKind::Orthoglide, 1).with_distance_m(1.5);
+    /// let mean_z = (0..=100).map(|k| far.state_at(far.duration_s * k as f64 / 100.0).cam_t_obj_m.z).sum::<f64>() / 101.0;
+    /// assert!((mean_z - 1.5).abs() < 1e-3, "{mean_z}");
+    /// ```
+    pub fn with_distance_m(self, distance_m: f64) -> Self {
+        assert!(
+            distance_m.is_finite() && distance_m > 0.0,
+            "Scenario::with_distance_m: the distance must be finite and positive, got {distance_m}"
+        );
+        let samples = 101;
+        let mean_z = (0..samples)
+            .map(|k| {
+                let t = self.duration_s * k as f64 / (samples - 1) as f64;
+                self.state_at(t).cam_t_obj_m.z - self.offset_m.z
+            })
+            .sum::<f64>()
+            / samples as f64;
+        Self {
+            offset_m: Vector3::new(self.offset_m.x, self.offset_m.y, distance_m - mean_z),
+            ..self
+        }
+    }
+
+    /// The motion over `duration_s` seconds instead of its own duration: shorter, it stops early; longer, the
+    /// periodic and random motions go on and the orthoglide's rests at its end.
+    ///
+    /// # Panics
+    ///
+    /// If `duration_s` is not finite and positive.
+    pub fn with_duration_s(self, duration_s: f64) -> Self {
+        assert!(
+            duration_s.is_finite() && duration_s > 0.0,
+            "Scenario::with_duration_s: the duration must be finite and positive, got {duration_s}"
+        );
+        Self { duration_s, ..self }
+    }
+
     /// True pose and instantaneous twist at time `t_s`.
     pub fn state_at(&self, t_s: f64) -> MotionState {
-        match &self.motion {
+        let t = t_s * self.time_scale;
+        let mut state = match &self.motion {
             Motion::Static(state) => *state,
-            Motion::Orthoglide => orthoglide_state(t_s),
-            Motion::Spin => spin_state(t_s),
+            Motion::Orthoglide => orthoglide_state(t),
+            Motion::Spin => spin_state(t),
             Motion::Random {
                 position,
                 rotation,
                 centre_m,
-            } => random_state(t_s, position, rotation, centre_m),
-        }
+            } => random_state(t, position, rotation, centre_m),
+        };
+        state.cam_t_obj_m += self.offset_m;
+        state.velocity_mps *= self.time_scale;
+        state.angular_velocity_radps *= self.time_scale;
+        state
     }
 
     /// The smallest margin (px) between any blob centre and the image border over the whole scenario, sampled at

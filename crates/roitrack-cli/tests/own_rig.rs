@@ -1,0 +1,181 @@
+//! Simulating one's own rig before building it: a user's calibration (an OpenCV FileStorage file of a fisheye lens) and
+//! target (a grid made by `roitrack target grid`), the motion moved farther, slowed down and cut short; then tracked,
+//! scored and plotted. And a rig whose target would leave the image, refused with the option that fixes it.
+
+use std::path::Path;
+
+mod common;
+use common::{fails, ok};
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+/// A 1280 x 1024 fisheye camera (OpenCV's cv::fisheye model), as OpenCV's FileStorage writes it.
+const FISHEYE_YAML: &str = "%YAML:1.0\n---\nimage_width: 1280\nimage_height: 1024\ncamera_matrix: !!opencv-matrix\n   \
+    rows: 3\n   cols: 3\n   dt: d\n   data: [ 900., 0., 639.5, 0., 900., 511.5, 0., 0., 1. ]\n\
+    distortion_model: equidistant\n\
+    distortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 4\n   dt: d\n   data: [ 0.05, -0.01, 0.002, 0. ]\n";
+
+fn gt_peak_speed(dir: &Path) -> f64 {
+    roitrack::formats::read_twists_csv(dir.join("gt_twists.csv"))
+        .unwrap()
+        .iter()
+        .map(|t| t.velocity_mps.norm())
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn own_camera_and_target_simulated_tracked_scored_and_plotted() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let camera = dir.join("fisheye.yaml");
+    std::fs::write(&camera, FISHEYE_YAML).unwrap();
+    let target = dir.join("grid.csv");
+    ok(&[
+        "target",
+        "grid",
+        "--rows",
+        "3",
+        "--cols",
+        "4",
+        "--spacing-m",
+        "0.03",
+        "--diameter-m",
+        "0.012",
+        "--out",
+        p(&target),
+    ]);
+    let (plain, mine) = (dir.join("plain"), dir.join("mine"));
+    ok(&["simulate", "--scenario", "orthoglide", "--out", p(&plain)]);
+    ok(&[
+        "simulate",
+        "--scenario",
+        "orthoglide",
+        "--camera",
+        p(&camera),
+        "--target",
+        p(&target),
+        "--distance-m",
+        "0.9",
+        "--speed-scale",
+        "0.5",
+        "--duration-s",
+        "6",
+        "--out",
+        p(&mine),
+    ]);
+    // The rig's own camera and target are what the simulation wrote and used.
+    let written = roitrack::formats::read_camera_file(
+        mine.join("camera.yaml"),
+        &roitrack::formats::CameraFileOptions::default(),
+    )
+    .unwrap();
+    assert_eq!((written.width_px, written.height_px), (1280, 1024));
+    assert_eq!(written.distortion.model_name(), "equidistant");
+    assert_eq!(
+        roitrack::formats::read_target_csv(mine.join("target.csv"))
+            .unwrap()
+            .len(),
+        12
+    );
+    let truth = roitrack::formats::read_tum(mine.join("gt_poses.tum")).unwrap();
+    let last = truth.last().unwrap();
+    assert!((last.t_s - 6.0).abs() < 0.01, "{}", last.t_s);
+    let mean_z = truth
+        .iter()
+        .map(|p| p.cam_from_obj.translation.vector.z)
+        .sum::<f64>()
+        / truth.len() as f64;
+    assert!((mean_z - 0.9).abs() < 0.01, "{mean_z}");
+    // Half the speed.
+    let ratio = gt_peak_speed(&mine) / gt_peak_speed(&plain);
+    assert!((ratio - 0.5).abs() < 0.01, "{ratio}");
+
+    ok(&[
+        "track",
+        "--camera",
+        p(&mine.join("camera.yaml")),
+        "--target",
+        p(&mine.join("target.csv")),
+        "--measurements",
+        p(&mine.join("measurements.csv")),
+        "--poses",
+        p(&mine.join("est.tum")),
+        "--twists",
+        p(&mine.join("est.csv")),
+        "--diagnostics",
+        p(&mine.join("diag.csv")),
+        "--covariance",
+        p(&mine.join("cov.csv")),
+    ]);
+    let metrics: serde_json::Value = serde_json::from_str(&ok(&[
+        "eval",
+        "--truth",
+        p(&mine),
+        "--poses",
+        p(&mine.join("est.tum")),
+        "--twists",
+        p(&mine.join("est.csv")),
+        "--json",
+    ]))
+    .unwrap();
+    let rmse = metrics["position_rmse_mm"].as_f64().unwrap();
+    // 12 blobs at 0.9 m through a 900 px lens: a millimetre at most.
+    assert!(rmse < 1.0, "{metrics}");
+    let figures = mine.join("figures");
+    ok(&[
+        "plot",
+        "--poses",
+        p(&mine.join("est.tum")),
+        "--twists",
+        p(&mine.join("est.csv")),
+        "--diagnostics",
+        p(&mine.join("diag.csv")),
+        "--covariance",
+        p(&mine.join("cov.csv")),
+        "--truth",
+        p(&mine),
+        "--out",
+        p(&figures),
+    ]);
+    for stem in ["motion", "errors", "status"] {
+        assert!(figures.join(format!("{stem}.png")).is_file());
+        assert!(figures.join(format!("{stem}.svg")).is_file());
+    }
+}
+
+#[test]
+fn a_rig_that_loses_the_target_is_refused_with_the_fix() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let err = fails(&[
+        "simulate",
+        "--scenario",
+        "orthoglide",
+        "--distance-m",
+        "0.15",
+        "--out",
+        p(&dir.join("near")),
+    ]);
+    assert!(
+        err.contains("out of the image") && err.contains("--distance-m"),
+        "{err}"
+    );
+    let err = fails(&[
+        "simulate",
+        "--speed-scale",
+        "0",
+        "--out",
+        p(&dir.join("still")),
+    ]);
+    assert!(err.contains("--speed-scale"), "{err}");
+    let err = fails(&[
+        "simulate",
+        "--target",
+        p(&dir.join("missing.csv")),
+        "--out",
+        p(&dir.join("x")),
+    ]);
+    assert!(err.contains("missing.csv"), "{err}");
+}
