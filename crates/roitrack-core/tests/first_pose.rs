@@ -28,6 +28,35 @@ fn first_result(target: &Target, config: TrackerConfig) -> Result<Vector3<f64>, 
     panic!("no estimate");
 }
 
+/// The errors over `cycles` cycles of the grid seen with `target`: every first pose tried is checked.
+fn refusals(target: &Target, cycles: usize) -> usize {
+    let camera = CameraModel::canonical();
+    let grid = Target::grid4x4();
+    let truth = MotionState::at_rest(Default::default(), Vector3::new(0.01, 0.0, 0.6));
+    let mut tracker =
+        Tracker::new(camera.clone(), target.clone(), TrackerConfig::default()).unwrap();
+    let mut refused = 0;
+    for k in 0..16 * cycles {
+        let p = &grid.points()[k % 16];
+        let px = camera
+            .raw_pixel_from_cam(&truth.point_in_cam_at(&p.point_in_obj_m, 0.0))
+            .unwrap();
+        let m = Measurement {
+            t_s: k as f64 * 2.5e-4,
+            id: p.id,
+            u_px: px.x,
+            v_px: px.y,
+        };
+        match tracker.push(&m) {
+            Err(TrackError::ImplausibleFirstPose { .. }) => refused += 1,
+            Err(e) => panic!("{e}"),
+            Ok(_) => {}
+        }
+    }
+    assert_eq!(tracker.report().initialisations, 0);
+    refused
+}
+
 fn scaled(scale: f64) -> Target {
     let points = Target::grid4x4()
         .points()
@@ -60,6 +89,8 @@ fn a_target_in_millimetres_is_refused_with_the_hint() {
         ..TrackerConfig::default()
     };
     assert!(first_result(&scaled(1000.0), far).unwrap().z > 500.0);
+    // A caller that goes on after the error gets it again at each new try: the refused track is not counted.
+    assert!(refusals(&scaled(1000.0), 12) >= 3);
     let bad = TrackerConfig {
         max_first_distance_m: f64::NAN,
         ..TrackerConfig::default()

@@ -165,7 +165,14 @@ impl std::fmt::Debug for BagFrameSource {
 }
 
 fn read_summary(bag: &Path, topic: &str, bytes: &[u8]) -> Result<mcap::read::Summary, FormatError> {
-    match mcap::read::Summary::read(bytes) {
+    let read = std::panic::catch_unwind(|| mcap::read::Summary::read(bytes)).map_err(|_| {
+        bag_error(
+            bag,
+            topic,
+            "the MCAP reader failed on this file (internal error)",
+        )
+    })?;
+    match read {
         Ok(Some(summary)) => Ok(summary),
         Ok(None) => Err(bag_error(
             bag,
@@ -297,17 +304,16 @@ impl BagFrameSource {
 
     fn first_message(&self, channel_id: u16, topic: &str) -> Result<Option<Vec<u8>>, FormatError> {
         for chunk in &self.summary.chunk_indexes {
-            let messages = self
-                .summary
-                .stream_chunk(&self.bytes, chunk)
-                .map_err(|e| bag_error(&self.bag, topic, format!("cannot read a chunk: {e}")))?;
-            for message in messages {
-                let message = message.map_err(|e| {
-                    bag_error(&self.bag, topic, format!("cannot read a message: {e}"))
-                })?;
-                if message.channel.id == channel_id {
-                    return Ok(Some(message.data.into_owned()));
-                }
+            let messages = chunk_messages(
+                &self.bag,
+                &self.summary,
+                &self.bytes,
+                chunk,
+                topic,
+                channel_id,
+            )?;
+            if let Some((_, data)) = messages.into_iter().next() {
+                return Ok(Some(data));
             }
         }
         Ok(None)
@@ -320,31 +326,19 @@ impl BagFrameSource {
                 return Ok(false);
             };
             self.next_chunk += 1;
-            let messages = self.summary.stream_chunk(&self.bytes, chunk).map_err(|e| {
-                bag_error(&self.bag, &self.topic, format!("cannot read a chunk: {e}"))
-            })?;
-            let mut in_chunk = Vec::new();
-            for message in messages {
-                let message = message.map_err(|e| {
-                    bag_error(
-                        &self.bag,
-                        &self.topic,
-                        format!("cannot read a message: {e}"),
-                    )
-                })?;
-                if message.channel.id == self.channel.id {
-                    in_chunk.push((
-                        message.log_time,
-                        message.sequence,
-                        message.data.into_owned(),
-                    ));
-                }
-            }
+            let mut in_chunk = chunk_messages(
+                &self.bag,
+                &self.summary,
+                &self.bytes,
+                chunk,
+                &self.topic,
+                self.channel.id,
+            )?;
             // A chunk holds its messages in the order they were written; a writer may interleave channels, so order
             // by log time (a stable sort keeps equal times as written).
-            in_chunk.sort_by_key(|(log_time, _, _)| *log_time);
+            in_chunk.sort_by_key(|(log_time, _)| *log_time);
             self.pending
-                .extend(in_chunk.into_iter().map(|(_, _, data)| data));
+                .extend(in_chunk.into_iter().map(|(_, data)| data));
         }
         Ok(true)
     }
@@ -395,6 +389,53 @@ impl BagFrameSource {
         frame.t_s = t_s;
         Ok(Some(FrameInfo { index, name, t_s }))
     }
+}
+
+/// The messages of one channel in one chunk: (log time, data), in the chunk's order. The chunk index is checked
+/// first (mcap 0.26 slices the file by it unchecked, and panics on an index whose offset and length overflow), and
+/// the reading runs under `catch_unwind`, so that a corrupt bag gives an error naming it, never a crash.
+fn chunk_messages(
+    bag: &Path,
+    summary: &mcap::read::Summary,
+    bytes: &[u8],
+    chunk: &mcap::records::ChunkIndex,
+    topic: &str,
+    channel_id: u16,
+) -> Result<Vec<(u64, Vec<u8>)>, FormatError> {
+    let fits = chunk
+        .chunk_start_offset
+        .checked_add(chunk.chunk_length)
+        .is_some_and(|end| end <= bytes.len() as u64 && chunk.chunk_start_offset + 9 <= end);
+    if !fits {
+        return Err(bag_error(
+            bag,
+            topic,
+            format!(
+                "a chunk index points outside the file (offset {}, length {}, file {} bytes)",
+                chunk.chunk_start_offset,
+                chunk.chunk_length,
+                bytes.len()
+            ),
+        ));
+    }
+    let read = || -> Result<Vec<(u64, Vec<u8>)>, String> {
+        let messages = summary
+            .stream_chunk(bytes, chunk)
+            .map_err(|e| format!("cannot read a chunk: {e}"))?;
+        let mut out = Vec::new();
+        for message in messages {
+            let message = message.map_err(|e| format!("cannot read a message: {e}"))?;
+            if message.channel.id == channel_id {
+                out.push((message.log_time, message.data.into_owned()));
+            }
+        }
+        Ok(out)
+    };
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(read))
+        .unwrap_or_else(
+            |_| Err("the MCAP reader failed on this chunk (internal error)".to_string()),
+        )
+        .map_err(|e| bag_error(bag, topic, e))
 }
 
 /// Decodes a `sensor_msgs/msg/Image` into `frame`; its stamp (s).

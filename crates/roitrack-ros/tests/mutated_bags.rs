@@ -86,3 +86,21 @@ fn bags_with_damaged_bytes_give_frames_or_an_error_never_a_panic() {
         }
     }
 }
+
+/// Found by the fuzz target `ros_bag`: a chunk index whose offset and length overflow, on which mcap 0.26's
+/// `Summary::stream_chunk` panics; the reader checks the index first.
+#[test]
+fn a_chunk_index_pointing_outside_the_file_is_an_error() {
+    let bytes = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/chunk_index_overflow.mcap"
+    ))
+    .unwrap();
+    match read_all(bytes) {
+        Ok(count) => panic!("{count} frames from a corrupt bag"),
+        Err(e) => {
+            check_error(&e);
+            assert!(e.contains("outside the file"), "{e}");
+        }
+    }
+}

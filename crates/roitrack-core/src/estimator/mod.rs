@@ -135,9 +135,10 @@ pub struct TrackerConfig {
     /// Huber only down-weights), Huber or none. The Kalman filter has its own ([`KalmanTuning::huber_sigma`],
     /// [`KalmanTuning::gate_sigma`]).
     pub robust: RobustLoss,
-    /// The farthest the first pose of a track may put the target's origin (m): a first pose farther away, or
-    /// behind the camera, is refused ([`TrackError::ImplausibleFirstPose`]), as it comes from files in the wrong
-    /// units far more often than from a real scene. Default 100 m; `f64::INFINITY` turns the check off.
+    /// The farthest the first pose may put the target's origin (m): a first pose farther away, or behind the
+    /// camera, is refused ([`TrackError::ImplausibleFirstPose`]), as it comes from files in the wrong units far more
+    /// often than from a real scene (re-initialisations after a lost track are not checked). Default 100 m;
+    /// `f64::INFINITY` turns the check off.
     pub max_first_distance_m: f64,
 }
 

@@ -379,8 +379,10 @@ impl<L: Law> Track<L> {
         }
     }
 
-    /// The estimate, or an error if it starts a track (the initialisations went up from `initialisations`) at a pose
-    /// behind the camera or farther than the configured distance. The track is dropped then.
+    /// The estimate, or an error if it starts the first track (the initialisations went up from none) at a pose
+    /// behind the camera or farther than the configured distance. The track is dropped then and not counted, so the
+    /// next initialisation is checked again. Re-initialisations after a lost track are not checked: a run that has
+    /// tracked is not stopped by one bad restart.
     fn check_first_pose(
         &mut self,
         initialisations: usize,
@@ -389,7 +391,7 @@ impl<L: Law> Track<L> {
         let Some(e) = estimate else {
             return Ok(None);
         };
-        if self.core.report.initialisations == initialisations {
+        if initialisations > 0 || self.core.report.initialisations == initialisations {
             return Ok(Some(e));
         }
         let t = e.state.cam_t_obj_m;
@@ -399,6 +401,7 @@ impl<L: Law> Track<L> {
             return Ok(Some(e));
         }
         self.reset();
+        self.core.report.initialisations = initialisations;
         Err(TrackError::ImplausibleFirstPose {
             t_s: e.t_ref_s,
             x_m: t.x,
