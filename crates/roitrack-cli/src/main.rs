@@ -22,7 +22,8 @@ enum Command {
     Bench(commands::bench::BenchArgs),
     Compare(commands::compare::CompareArgs),
     Soak(commands::soak::SoakArgs),
-    Simulate(commands::simulate::SimulateArgs),
+    // Boxed: its many options make it the largest variant by far.
+    Simulate(Box<commands::simulate::SimulateArgs>),
     // Boxed: the largest arguments by far (the --mcap and --mcap-in options made the enum trip clippy's size check).
     Track(Box<commands::track::TrackArgs>),
     Eval(commands::eval::EvalArgs),
