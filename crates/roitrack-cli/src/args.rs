@@ -105,10 +105,13 @@ pub struct EstimatorArgs {
     /// short for the noise estimate).
     #[arg(long, value_enum)]
     pub adapt: Option<AdaptArg>,
-    /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise.
+    /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise. Default: 1
+    /// (roitrack_core::estimator::KalmanTuning's), a starting value that the filter adapts unless --adapt leaves the
+    /// motion out.
     #[arg(long)]
     pub accel_psd: Option<f64>,
-    /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz).
+    /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz). Default: 10, a starting value as for
+    /// --accel-psd.
     #[arg(long)]
     pub angular_accel_psd: Option<f64>,
     /// M-estimator against outliers: tukey (default), huber (window fits; the Kalman filter uses Huber either way)
@@ -116,7 +119,8 @@ pub struct EstimatorArgs {
     #[arg(long, value_enum, default_value = "tukey")]
     pub robust: RobustArg,
     /// Degeneracy gate: windows whose column-scaled Jacobian has a reciprocal condition number below this are not
-    /// used for an update (the estimate is flagged degenerate and the window widened).
+    /// used for an update (the estimate is flagged degenerate and the window widened). Default: 3e-3
+    /// (TrackerConfig's).
     #[arg(long)]
     pub min_conditioning: Option<f64>,
 }
@@ -201,7 +205,8 @@ impl ShutterArg {
 pub struct CameraArgs {
     /// Camera calibration: ROS camera_info YAML (ROS 1 or 2, also as `ros2 topic echo` prints it), OpenCV
     /// FileStorage YAML or XML, or a Kalibr camchain; recognised from the content. Models: pinhole with plumb_bob,
-    /// rational_polynomial, equidistant (fisheye) or no distortion.
+    /// rational_polynomial, equidistant (fisheye) or no distortion. Default: none (required), but for `track
+    /// --mcap-in BAG`, where it is the bag's CameraInfo.
     #[arg(long, value_name = "FILE")]
     pub camera: PathBuf,
     /// The image size for a calibration file that has none (OpenCV files may not); refused if the file says

@@ -16,7 +16,7 @@ pub struct McapArgs {
     /// /roitrack/odometry, /tf, /roitrack/status per estimate, /roitrack/camera_info once, and with --images the
     /// frames and the projected target (docs/ros2.md). Completed on every exit path: a failed run leaves a bag
     /// readable up to its last estimate; the first Ctrl-C stops the run at its next estimate and completes the bag
-    /// (a second one ends the process at once).
+    /// (a second one ends the process at once). Default: no bag.
     #[arg(long, value_name = "OUT.mcap")]
     pub mcap: Option<PathBuf>,
     /// With --mcap: the camera's frame id, the header frame of every message.
@@ -133,10 +133,10 @@ impl Bag {
 pub struct McapInArgs {
     /// With --mcap-in (or --images) BAG, a .mcap file or a rosbag2 folder: the topic of the frames,
     /// sensor_msgs/msg/Image (mono8, mono16, bgr8, rgb8) or sensor_msgs/msg/CompressedImage; each frame at its header
-    /// stamp.
+    /// stamp. Default: none; required with a bag.
     #[arg(long, value_name = "TOPIC")]
     pub image_topic: Option<String>,
-    /// With --mcap-in: the sensor_msgs/msg/CameraInfo topic giving the camera when no --camera is given (default:
+    /// With --mcap-in: the sensor_msgs/msg/CameraInfo topic giving the camera when no --camera is given (Default:
     /// camera_info beside the image topic, `/ns/image_raw` -> `/ns/camera_info`); every frame must have its size.
     #[arg(long, value_name = "TOPIC", requires = "image_topic")]
     pub camera_info_topic: Option<String>,

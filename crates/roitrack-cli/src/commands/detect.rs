@@ -62,7 +62,8 @@ pub struct DetectArgs {
     #[arg(long, num_args = 2, value_names = ["NEAR_M", "FAR_M"])]
     pub distance_m: Option<Vec<f64>>,
     /// Write per image a PNG (`<image name>.overlay.png`) with the matched blobs and their ids (green), the model
-    /// projected with the pose (red +), unmatched blobs (yellow) and points expected but not found (magenta x).
+    /// projected with the pose (red +), unmatched blobs (yellow) and points expected but not found (magenta x), into
+    /// this folder. Default: no overlay.
     #[arg(long)]
     pub overlay: Option<PathBuf>,
     /// One JSON object per image on its own line of stdout, instead of a table. Fields: image, ok, error (when not

@@ -14,19 +14,21 @@ use super::simulate::{TRUTH_POSES_FILE, TRUTH_TWISTS_FILE};
 #[derive(Debug, Args)]
 pub struct EvalArgs {
     /// Folder holding gt_poses.tum and gt_twists.csv (as written by `roitrack simulate`).
+    /// Default: none; this or --truth-poses is required.
     #[arg(long, conflicts_with_all = ["truth_poses", "truth_twists"], required_unless_present = "truth_poses")]
     pub truth: Option<PathBuf>,
-    /// True poses (TUM: t x y z qx qy qz qw), any file name; instead of --truth.
+    /// True poses (TUM: t x y z qx qy qz qw), any file name; instead of --truth. Default: none (then --truth).
     #[arg(long)]
     pub truth_poses: Option<PathBuf>,
-    /// True twists (CSV t,vx,vy,vz,wx,wy,wz), at the true poses' times; with --truth-poses.
+    /// True twists (CSV t,vx,vy,vz,wx,wy,wz), at the true poses' times; with --truth-poses. Default: none (no
+    /// velocity metrics).
     #[arg(long, requires = "truth_poses")]
     pub truth_twists: Option<PathBuf>,
     /// Estimated poses (TUM).
     #[arg(long)]
     pub poses: PathBuf,
     /// Estimated twists (CSV t,vx,vy,vz,wx,wy,wz), same times as the poses. Velocity metrics need twists on both
-    /// sides.
+    /// sides. Default: none (no velocity metrics).
     #[arg(long)]
     pub twists: Option<PathBuf>,
     /// Transformation of the estimates onto the truth's frame, fitted to the paired positions (Umeyama): none (both

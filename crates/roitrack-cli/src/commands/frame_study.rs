@@ -16,10 +16,10 @@ pub struct FrameStudyArgs {
     /// Seeds 1 to N: each a motion of the sweep and the noise of its frames.
     #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
     pub seeds: u64,
-    /// Frames per sequence (default: the whole sweep, 6 s).
+    /// Frames per sequence. Default: the whole sweep (6 s).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub frame_count: Option<u64>,
-    /// Sequences rendered and tracked at once (default: the machine's cores).
+    /// Sequences rendered and tracked at once. Default: the machine's cores.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
     pub threads: Option<u64>,
     /// Print one JSON object (description, rows, checks, every run) instead of markdown.

@@ -31,10 +31,10 @@ pub struct PlotArgs {
     /// Folder holding gt_poses.tum and gt_twists.csv (as written by `roitrack simulate`). Default: no truth.
     #[arg(long, conflicts_with_all = ["truth_poses", "truth_twists"])]
     pub truth: Option<PathBuf>,
-    /// True poses (TUM), any file name; instead of --truth.
+    /// True poses (TUM), any file name; instead of --truth. Default: none (no error figure).
     #[arg(long)]
     pub truth_poses: Option<PathBuf>,
-    /// True twists (CSV); with --truth-poses.
+    /// True twists (CSV); with --truth-poses. Default: none (no velocity error panels).
     #[arg(long, requires = "truth_poses")]
     pub truth_twists: Option<PathBuf>,
     /// Alignment of the estimates onto the truth's frame before the errors are drawn, as in `roitrack eval`.

@@ -132,25 +132,25 @@ pub struct SimulateArgs {
     #[arg(long)]
     pub rois: bool,
     /// Fault, with --rois: a reflection (a spot of sigma 1.2 px, 0.5-1.5 times the blob's peak, 6-10 px from the
-    /// ROI's centre, so often merged with the blob) in this fraction of the ROIs, in [0, 1].
+    /// ROI's centre, so often merged with the blob) in this fraction of the ROIs, in [0, 1]. Default: none.
     #[arg(long, value_name = "FRACTION", requires = "rois", value_parser = parse_fraction)]
     pub reflections: Option<f64>,
-    /// Fault: hide points during [T0, T1) s, e.g. `0,5,10,15@1.0:1.2` (repeatable).
+    /// Fault: hide points during [T0, T1) s, e.g. `0,5,10,15@1.0:1.2` (repeatable). Default: none.
     #[arg(long = "occlude", value_name = "IDS@T0:T1", value_parser = parse_occlusion)]
     pub occlusions: Vec<Occlusion>,
-    /// Fault: no measurement during [T0, T0 + DURATION) s, e.g. `2.0:0.05` (repeatable).
+    /// Fault: no measurement during [T0, T0 + DURATION) s, e.g. `2.0:0.05` (repeatable). Default: none.
     #[arg(long = "gap", value_name = "T0:DURATION", value_parser = parse_gap)]
     pub gaps: Vec<TimeGap>,
-    /// Fault: COUNT consecutive ROIs lost from time T0 s, e.g. `1.5:40` (repeatable).
+    /// Fault: COUNT consecutive ROIs lost from time T0 s, e.g. `1.5:40` (repeatable). Default: none.
     #[arg(long = "burst", value_name = "T0:COUNT", value_parser = parse_burst)]
     pub bursts: Vec<RoiBurst>,
     /// Fault: from time T s the target is translated by (DX, DY, DZ) m in the camera frame, ground truth included,
-    /// e.g. `2.5:0.02,0,0`.
+    /// e.g. `2.5:0.02,0,0`. Default: none.
     #[arg(long, value_name = "T:DX,DY,DZ", value_parser = parse_jump, allow_hyphen_values = true)]
     pub jump: Option<Jump>,
     /// Fault: during [T0, T1] s the target makes a smooth sideways excursion of (DX, DY, DZ) m at its peak and comes
     /// back, ground truth included, e.g. `1.0:1.4:0.12,0,0`; with `--skip-off-image`, far enough to take blobs out
-    /// of the image.
+    /// of the image. Default: none.
     #[arg(long, value_name = "T0:T1:DX,DY,DZ", value_parser = parse_excursion, allow_hyphen_values = true)]
     pub excursion: Option<Excursion>,
     /// Drop the measurements of blobs outside the image instead of failing.
@@ -171,6 +171,7 @@ pub struct SimulateArgs {
     #[arg(long, value_enum, default_value = "global", requires = "frames")]
     pub shutter: ShutterArg,
     /// With --shutter rolling: the time between two rows (s), e.g. 30e-6 (1,024 rows read in 30.7 ms).
+    /// Default: none; required with --shutter rolling.
     #[arg(long, value_name = "D", requires = "frames")]
     pub line_delay_s: Option<f64>,
     /// With --frames: the exposure of each row (s), centred on the row's time.

@@ -26,7 +26,8 @@ pub struct TargetArgs {
     /// Output target CSV.
     #[arg(long, required = true)]
     pub out: Option<PathBuf>,
-    /// Also write the canonical camera of SPEC section 6 (ROS camera_info YAML) here.
+    /// Also write the built-in camera (1024 x 1024 px, fx = fy = 1500 px; docs/model.md) here, as ROS camera_info
+    /// YAML. Default: not written.
     #[arg(long)]
     pub camera_out: Option<PathBuf>,
 }

@@ -28,9 +28,11 @@ pub struct TrackArgs {
     pub target: TargetArgs,
     /// Measured centroids (CSV t,id,u,v; raw pixels; time order; `-`: the standard input). Centroids that share a time (the blobs of a
     /// global-shutter frame) form one readout: an estimate comes only after the last of them.
+    /// Default: none; this, --rois or --images is required.
     #[arg(long, required_unless_present_any = ["rois", "images"], conflicts_with_all = ["rois", "images"])]
     pub measurements: Option<PathBuf>,
     /// Instead of centroids: a recording of ROI images (see roitrack_formats::RoiRecordingReader), centroided here.
+    /// Default: none.
     #[arg(long, conflicts_with = "images")]
     pub rois: Option<PathBuf>,
     /// With --measurements: the unit of the times. Default: seconds, and times more than 0.2 apart (median over the
@@ -41,11 +43,12 @@ pub struct TrackArgs {
     /// Instead of centroids: frames. A folder of images (PNG, JPEG, PGM/PPM, TIFF, in natural order: frame2 before
     /// frame10), a numbered pattern (`frames/frame_%05d.png`), a quoted glob (`'frames/*.png'`), or a video (mp4,
     /// mkv, avi, mov, webm; decoded by Debian's `ffmpeg`). One estimate per frame where the target is found.
-    /// Also a ROS 2 bag (a .mcap file or a rosbag2 folder; `--mcap-in BAG`) with --image-topic.
+    /// Also a ROS 2 bag (a .mcap file or a rosbag2 folder; `--mcap-in BAG`) with --image-topic. Default: none.
     #[arg(long, value_name = "SOURCE", visible_alias = "mcap-in")]
     pub images: Option<PathBuf>,
     /// With --images: the frames' times, a CSV file with a header, a column `t` (s: the mid-exposure time of the
     /// frame's row 0) and one row per frame in order; an optional column `file` must match each frame's file name.
+    /// Default: none (then --fps, or a video's own timestamps).
     #[arg(
         long,
         value_name = "FILE.csv",
@@ -54,7 +57,7 @@ pub struct TrackArgs {
     )]
     pub timestamps: Option<PathBuf>,
     /// With --images: frame k is at k / F seconds. Without --timestamps or --fps, only a video's own timestamps are
-    /// used; an image sequence without either is refused (roitrack never guesses frame times).
+    /// used; an image sequence without either is refused (roitrack never guesses frame times). Default: none.
     #[arg(long, value_name = "F", requires = "images")]
     pub fps: Option<f64>,
     /// With --images: how the camera reads its rows. global: every blob of a frame at the frame's time. rolling:
@@ -62,7 +65,8 @@ pub struct TrackArgs {
     #[arg(long, value_enum, default_value = "global", requires = "images")]
     pub shutter: ShutterArg,
     /// With --shutter rolling: the time between two rows (s), the sensor's readout time divided by its number of
-    /// rows (datasheet, or a calibration); e.g. 30e-6 for 1,024 rows read in 30.7 ms.
+    /// rows (datasheet, or a calibration); e.g. 30e-6 for 1,024 rows read in 30.7 ms. Default: none; required with
+    /// --shutter rolling.
     #[arg(long, value_name = "D")]
     pub line_delay_s: Option<f64>,
     /// With --images: the exposure time (s), used to size the windows for motion blur.
@@ -72,7 +76,8 @@ pub struct TrackArgs {
     #[arg(long, value_enum, default_value = "auto", requires = "images")]
     pub polarity: PolarityArg,
     /// With --images: the nearest and farthest distances (m) the target may be at, to leave out blobs of impossible
-    /// size when searching whole frames (needs diameters in the target file).
+    /// size when searching whole frames (needs diameters in the target file). Default: any size from 7 px to a
+    /// quarter of the image.
     #[arg(long, num_args = 2, value_names = ["NEAR_M", "FAR_M"], requires = "images")]
     pub distance_m: Option<Vec<f64>>,
     /// With --rois: keep blobs that are not centrally symmetric (by default they are rejected: a reflection or an
@@ -90,13 +95,14 @@ pub struct TrackArgs {
     /// Output diagnostics per estimate (CSV: t, status, residual, conditioning, measurements used, iterations, and the
     /// 1-sigma of the position sigma_x_m, sigma_y_m, sigma_z_m (m) and of the velocity sigma_vx_mps, sigma_vy_mps,
     /// sigma_vz_mps (m/s), camera frame: the square roots of the --covariance file's c0_0, c1_1, c2_2 and c6_6, c7_7,
-    /// c8_8; NaN where the estimate has no covariance).
+    /// c8_8; NaN where the estimate has no covariance). Default: not written.
     #[arg(long, value_name = "FILE.csv")]
     pub diagnostics: Option<PathBuf>,
     /// Output the full 12x12 covariance per estimate (CSV: t, then the upper triangle c{i}_{j}, i <= j, row by row;
     /// indices 0-11: position (m), rotation vector (rad), velocity (m/s), angular velocity (rad/s), camera frame;
     /// rotation perturbed on the left, R = Exp(w) R_est). NaN entries where the estimate has none (the static
-    /// baseline, but for the estimate starting a track; a degenerate window of paper, exact or batch).
+    /// baseline, but for the estimate starting a track; a degenerate window of paper, exact or batch). Default: not
+    /// written.
     #[arg(long, value_name = "FILE.csv")]
     pub covariance: Option<PathBuf>,
     #[command(flatten)]
