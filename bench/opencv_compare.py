@@ -4,7 +4,7 @@
 Run through `bash bench/opencv_compare.sh`, which makes the virtual environment (opencv-python-headless, numpy) and
 builds `roitrack`. This script:
 
-1. writes the problem (SPEC section 6: canonical camera, grid4x4, bench pose perturbed per instance, 0.1 px noise,
+1. writes the problem (the built-in scene: canonical camera, grid4x4, bench pose perturbed per instance, 0.1 px noise,
    seeded) to a JSON file, then reads it back: both sides solve exactly the numbers in that file;
 2. runs `roitrack pnp-bench --problem FILE --json` (our solver, timed in Rust);
 3. times cv2.solvePnP with ITERATIVE, SQPNP, EPNP and IPPE on the same instances, per call with
@@ -29,7 +29,7 @@ import numpy as np
 
 FORMAT = "roitrack-pnp-problem/1"
 
-# SPEC section 6: the canonical scene.
+# The built-in scene of docs/model.md.
 FX = FY = 1500.0
 CX = CY = 512.0
 BENCH_T_M = np.array([0.02, -0.01, 0.60])
@@ -94,7 +94,7 @@ def make_problem(instances: int, seed: int, shift_mm: float, tilt_deg: float) ->
     return {
         "format": FORMAT,
         "description": (
-            "SPEC section 6 static PnP: canonical camera (no distortion), grid4x4, bench pose perturbed per instance "
+            "Built-in scene static PnP: canonical camera (no distortion), grid4x4, bench pose perturbed per instance "
             f"(uniform +-{shift_mm} mm per axis, rotation Exp(w) R_bench with w uniform +-{tilt_deg} deg per axis), "
             f"pixel noise N(0, {NOISE_PX} px) per coordinate; pixels[i] observes model_points[i]"
         ),

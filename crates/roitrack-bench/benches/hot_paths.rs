@@ -1,4 +1,4 @@
-//! Criterion benchmarks of roitrack's hot paths on the canonical scene (SPEC section 6); the inputs are those of
+//! Criterion benchmarks of roitrack's hot paths on the built-in scene (docs/model.md); the inputs are those of
 //! `roitrack bench` ([`roitrack_bench::HotPaths`]). Benchmark ids are the items' JSON keys.
 //!
 //! `cargo bench -p roitrack-bench` takes about 30 s (1 s warm-up and 2 s of measurement per item, set below for a

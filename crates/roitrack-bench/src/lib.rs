@@ -4,7 +4,7 @@
 //! from frames ([`frame_bench`]), the long soak run ([`soak`]) and the PnP comparison with OpenCV ([`pnp`]). `roitrack bench`, `roitrack soak` and
 //! `roitrack pnp-bench` only print what these return.
 //!
-//! The inputs of roitrack's hot-path benchmarks, built on the canonical scene of SPEC section 6 with the public APIs
+//! The inputs of roitrack's hot-path benchmarks, built on the built-in scene (docs/model.md) with the public APIs
 //! only, and a batch timer. The criterion benches (`cargo bench -p roitrack-bench`, `benches/hot_paths.rs`) and the
 //! quick `roitrack bench` command use the same inputs ([`HotPaths`]) and the same calls ([`time_all`] times the
 //! [`HotPaths`] methods the criterion benches call).
@@ -85,7 +85,7 @@ pub const ROI_POINT_INDEX: usize = 5;
 /// Seed of the noise of every bench problem.
 pub const SEED: u64 = 2024;
 
-/// The canonical scene of SPEC section 6 with the true motion.
+/// The built-in scene (docs/model.md) with the true motion.
 #[derive(Debug, Clone)]
 pub struct Scene {
     pub camera: CameraModel,
@@ -95,7 +95,7 @@ pub struct Scene {
     pub truth: MotionState,
 }
 
-/// The bench pose of SPEC section 6 at rest.
+/// The bench pose of the built-in scene (docs/model.md) at rest.
 pub fn bench_pose() -> MotionState {
     MotionState::at_rest(
         roitrack_sim::bench_rotation(),

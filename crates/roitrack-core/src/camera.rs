@@ -653,7 +653,7 @@ impl CameraModel {
         Ok(Self { time, ..self })
     }
 
-    /// The canonical camera of SPEC section 6: 1024 x 1024 px, fx = fy = 1500, no skew, centre (512, 512), no distortion.
+    /// The built-in camera (docs/model.md): 1024 x 1024 px, fx = fy = 1500, no skew, centre (512, 512), no distortion.
     pub fn canonical() -> Self {
         Self {
             name: "roitrack_canonical".to_string(),

@@ -15,7 +15,7 @@
 //! - [`estimator`]: the estimators behind one trait ([`estimator::Estimator`]): Kalman (default), the paper's VVS
 //!   loop, the batch and static baselines, with their shared initialisation and degeneracy gate.
 //!
-//! Conventions (SPEC section 2): camera frame x right, y down, z forward. The state holds `cam_r_obj` (c_R_o),
+//! Conventions (docs/model.md): camera frame x right, y down, z forward. The state holds `cam_r_obj` (c_R_o),
 //! `cam_t_obj_m` (c_t_o), the velocity of the object origin `velocity_mps` and the angular velocity
 //! `angular_velocity_radps`, both in the camera frame. A model point `p` observed `d` seconds after the reference time is
 //! at `Exp(W d) R p + t + V d`. A 12-vector correction `(v, w, dV, dW)` acts as `R <- Exp(w) R`, `t <- t + v`,

@@ -1,4 +1,4 @@
-//! The spatio-temporal projection model and its interaction matrix (SPEC sections 2-3, the paper's eqs. 1-3, 17-24).
+//! The spatio-temporal projection model and its interaction matrix (docs/model.md; the paper's eqs. 1-3, 17-24).
 
 use nalgebra::{Matrix2x3, Matrix3, Vector2, Vector3};
 

@@ -4,10 +4,10 @@
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum RoiOrder {
     /// Bit-reversed index order (0 8 4 12 2 10 6 14 1 9 5 13 3 11 7 15 for 16 points): consecutive ROIs are spread
-    /// over the target, which keeps the 12-dof window well conditioned (SPEC section 6). The default.
+    /// over the target, which keeps the 12-dof window well conditioned (docs/model.md). The default.
     #[default]
     BitReversed,
-    /// Index order 0, 1, ..., n-1. On a planar grid a one-cycle window is exactly singular (SPEC section 6).
+    /// Index order 0, 1, ..., n-1. On a planar grid a one-cycle window is exactly singular (docs/model.md).
     RowMajor,
     /// A fresh random permutation every cycle.
     Random,

@@ -4,7 +4,7 @@ use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
 
 use crate::{Vector12, so3};
 
-/// Pose and twist of the object in the camera frame at the reference time `t_ref` (SPEC section 2).
+/// Pose and twist of the object in the camera frame at the reference time `t_ref` (docs/model.md).
 ///
 /// - `cam_r_obj` = c_R_o, `cam_t_obj_m` = c_t_o: the object's pose in the camera;
 /// - `velocity_mps` = V: velocity of the object's origin, camera frame;

@@ -213,7 +213,7 @@ impl Target {
         Ok(target)
     }
 
-    /// The bundled target "grid4x4" of SPEC section 6: a planar 4 x 4 grid of pitch 20 mm centred on the origin,
+    /// The bundled target "grid4x4" (docs/model.md): a planar 4 x 4 grid of pitch 20 mm centred on the origin,
     /// id = 4 r + c at ((c - 1.5) 0.02, (r - 1.5) 0.02, 0); 6 mm blobs, except the 9 mm key blob 0.
     pub fn grid4x4() -> Self {
         let points = (0..16u32)

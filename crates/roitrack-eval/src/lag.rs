@@ -1,4 +1,4 @@
-//! The velocity lag: the shift that best aligns the estimated linear velocity with the truth (SPEC section 9).
+//! The velocity lag: the shift that best aligns the estimated linear velocity with the truth (docs/evaluation.md).
 
 use nalgebra::Vector3;
 

@@ -1,6 +1,6 @@
 //! # roitrack-eval
 //!
-//! Accuracy of an estimated trajectory against ground truth (SPEC section 9), as pure computation on in-memory
+//! Accuracy of an estimated trajectory against ground truth (docs/evaluation.md), as pure computation on in-memory
 //! samples: the caller reads the files.
 //!
 //! [`evaluate`] pairs each estimate with the truth at its time (the truth sample itself when one lies within

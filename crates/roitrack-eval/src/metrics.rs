@@ -4,7 +4,7 @@ use std::fmt::Write as _;
 
 use serde::{Deserialize, Serialize};
 
-/// Accuracy of an estimated trajectory against ground truth (SPEC section 9); every field carries its unit.
+/// Accuracy of an estimated trajectory against ground truth (docs/evaluation.md); every field carries its unit.
 ///
 /// Errors are estimate minus truth, in the camera frame, at the estimate's times. The velocity fields are `None`
 /// unless both the truth and the estimate have twists.

@@ -22,12 +22,12 @@
 //! - [`Goal::Clean`]: no `disputed` or `lost` estimate (the data are clean);
 //! - [`Goal::Calibrated`]: the covariance is calibrated ([`Consistency::is_calibrated`]: mean NEES of position and
 //!   velocity within 0.5-2 times their dimension, at least 95 % of the estimates inside the 99 % chi-square bound);
-//! - [`Goal::Lag`]: the velocity lag at most [`MAX_LAG_SAMPLES`] sample, on the moving SPEC scenes (orthoglide);
+//! - [`Goal::Lag`]: the velocity lag at most [`MAX_LAG_SAMPLES`] sample, on the moving built-in scenes (orthoglide);
 //! - [`Goal::Bounded`]: no estimate marked tracking or converging more than [`BOUND_FACTOR`] times the nominal error
 //!   away from the truth.
 //!
-//! The accuracy cases ([`Purpose::Accuracy`]) are checked against every target (the lag on the SPEC scenes only); the
-//! calibration set ([`Case::in_calibration_set`]: every SPEC scenario, static, orthoglide, spin, random, at 0.03, 0.1,
+//! The accuracy cases ([`Purpose::Accuracy`]) are checked against every target (the lag on the built-in scenes only); the
+//! calibration set ([`Case::in_calibration_set`]: every built-in scenario, static, orthoglide, spin, random, at 0.03, 0.1,
 //! 0.3 and 1 px) against [`Goal::Calibrated`]; its orthoglide rows are accuracy cases too. A calibration-only case
 //! ([`Purpose::Calibration`]) runs the default and the told-the-truth filters, no grid.
 //!
@@ -82,7 +82,7 @@ pub const RMSE_RATIO_LIMIT: f64 = 1.2;
 /// ```
 pub const BOUND_FACTOR: f64 = 10.0;
 
-/// [`Goal::Lag`]: the largest velocity lag (estimator samples) on the SPEC scenes.
+/// [`Goal::Lag`]: the largest velocity lag (estimator samples) on the built-in scenes.
 ///
 /// ```
 /// assert_eq!(roitrack_experiments::adaptive::MAX_LAG_SAMPLES, 1);
@@ -102,7 +102,7 @@ pub const MAX_LAG_SAMPLES: i64 = 1;
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Scene {
-    /// A scenario of the SPEC, `Scenario::new(kind, seed)`.
+    /// A built-in scenario, `Scenario::new(kind, seed)`.
     Spec(ScenarioKind),
     /// The target at rest `distance_m` in front of the camera, [`Scenario::still`] at the bench rotation and
     /// t = (0.02, -0.01, distance) m.
@@ -116,7 +116,7 @@ pub enum Scene {
 }
 
 impl Scene {
-    /// A short name: the SPEC scenario's, `still 1.6 m`, `random 2.5 m/s, 7 rad/s`.
+    /// A short name: the built-in scenario's, `still 1.6 m`, `random 2.5 m/s, 7 rad/s`.
     pub fn name(&self) -> String {
         match self {
             Self::Spec(kind) => kind.name().to_string(),
@@ -129,7 +129,7 @@ impl Scene {
         }
     }
 
-    /// Whether this is a SPEC scene in motion (orthoglide, spin, random): where the velocity lag means something.
+    /// Whether this is a built-in scene in motion (orthoglide, spin, random): where the velocity lag means something.
     pub fn is_moving_spec_scene(&self) -> bool {
         matches!(self, Self::Spec(kind) if *kind != ScenarioKind::Static)
     }
@@ -155,7 +155,7 @@ impl Scene {
     }
 }
 
-/// A [`Scene`] as serialised: tagged by `kind`, a SPEC scenario by its name.
+/// A [`Scene`] as serialised: tagged by `kind`, a built-in scenario by its name.
 #[derive(Serialize)]
 #[serde(tag = "kind", rename_all = "snake_case")]
 enum SceneRecord {
@@ -408,7 +408,7 @@ pub struct Case {
     /// Each seed is a simulation (the noise, and the motion of a random scene); figures are pooled over seeds.
     pub seeds: Vec<u64>,
     pub purpose: Purpose,
-    /// One of the calibration set: a SPEC scenario at 4 kHz, canonical camera and target, 0.03 to 1 px.
+    /// One of the calibration set: a built-in scenario at 4 kHz, canonical camera and target, 0.03 to 1 px.
     pub in_calibration_set: bool,
 }
 
@@ -445,7 +445,7 @@ impl Case {
 
 /// Every case of issue 15, accuracy cases first, then the rest of the calibration set.
 ///
-/// - 4 kHz at 0.03, 0.1, 0.3 and 1 px, and 10 kHz at 0.2 px, on orthoglide (the SPEC scene);
+/// - 4 kHz at 0.03, 0.1, 0.3 and 1 px, and 10 kHz at 0.2 px, on orthoglide (the built-in scene);
 /// - the grid at rest 1.6 m away at 0.15 px, 2 s;
 /// - random 6-dof motion at 2.5 m/s and 7 rad/s (peaks), 4 s, 0.1 px;
 /// - orthoglide through [`wide_angle_1280x1024`], with [`non_planar_11`], with [`grid2x3`], each at 0.1 px;
@@ -1101,7 +1101,7 @@ impl Goal {
             Self::Calibrated => {
                 "mean NEES of position and velocity within 0.5-2 x 3, at least 95 % inside the 99 % bound"
             }
-            Self::Lag => "velocity lag at most 1 sample (moving SPEC scenes)",
+            Self::Lag => "velocity lag at most 1 sample (moving built-in scenes)",
             Self::Bounded => "no vouched estimate beyond 10 x the nominal error",
         }
     }
@@ -1712,7 +1712,7 @@ impl Sweep {
         let failing = checks.iter().filter(|c| !c.holds).count();
         format!(
             "{}\n\nCases:\n\n{}\nAccuracy cases (default filter against the best hand-tuned one):\n\n{}\n\
-             Calibration set (every SPEC scenario at 4 kHz):\n\n{}\nTargets:\n\n{}\n{}\n",
+             Calibration set (every built-in scenario at 4 kHz):\n\n{}\nTargets:\n\n{}\n{}\n",
             self.description(),
             self.cases_list(),
             self.accuracy_table(),

@@ -18,7 +18,7 @@ fn every_case_keeps_its_blobs_in_the_image_and_simulates() {
     unique.sort_unstable();
     unique.dedup();
     assert_eq!(unique.len(), names.len(), "case names are unique");
-    // The calibration set: every SPEC scenario but the sweep, at four noise levels.
+    // The calibration set: every built-in scenario but the sweep, at four noise levels.
     let calibration: Vec<_> = all.iter().filter(|c| c.in_calibration_set).collect();
     assert_eq!(calibration.len(), 16);
     for noise_px in [0.03, 0.1, 0.3, 1.0] {

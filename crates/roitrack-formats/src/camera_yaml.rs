@@ -1,4 +1,4 @@
-//! Camera: ROS camera_info YAML (SPEC section 8), as written by ROS `camera_calibration` and read by
+//! Camera: ROS camera_info YAML (docs/model.md), as written by ROS `camera_calibration` and read by
 //! `camera_info_manager`:
 //!
 //! ```yaml

@@ -1,6 +1,6 @@
 //! # roitrack-formats
 //!
-//! The files roitrack reads and writes (SPEC section 8), with strict readers whose errors name the file, the line and
+//! The files roitrack reads and writes (docs/model.md), with strict readers whose errors name the file, the line and
 //! the field, and writers that never leave a half-written file behind:
 //!
 //! | file | reader | writer |

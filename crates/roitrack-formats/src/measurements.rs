@@ -1,4 +1,4 @@
-//! Measurements CSV (SPEC section 8): header `t,id,u,v`, one measured blob centroid per row, rows in time order.
+//! Measurements CSV (docs/model.md): header `t,id,u,v`, one measured blob centroid per row, rows in time order.
 //!
 //! `t` is the time of the exposure midpoint (seconds, any origin), `id` the target point id, `u v` the centroid in raw
 //! (distorted) pixels: `u` to the right, `v` down, pixel centres at integer coordinates.

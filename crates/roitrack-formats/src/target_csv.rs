@@ -1,4 +1,4 @@
-//! Target CSV (SPEC section 8): header `id,x,y,z` with an optional trailing `diameter` column.
+//! Target CSV (docs/model.md): header `id,x,y,z` with an optional trailing `diameter` column.
 //!
 //! One model point per row: its id (as in the measurements) and its position in the object frame, in metres; the
 //! optional `diameter` is the blob's diameter in metres (an empty cell means unknown).

@@ -1,4 +1,4 @@
-//! TUM trajectories (SPEC section 8), the format evo reads: one pose per line, `t tx ty tz qx qy qz qw`,
+//! TUM trajectories (docs/model.md), the format evo reads: one pose per line, `t tx ty tz qx qy qz qw`,
 //! space-separated.
 //!
 //! Each line is camera_T_object at time `t` (seconds): the translation `tx ty tz` (metres) is the object origin in

@@ -1,7 +1,7 @@
-//! Twists CSV (SPEC section 8): header `t,vx,vy,vz,wx,wy,wz`, one twist per row, times strictly increasing.
+//! Twists CSV (docs/model.md): header `t,vx,vy,vz,wx,wy,wz`, one twist per row, times strictly increasing.
 //!
 //! `t` in seconds; `vx vy vz` the velocity V of the object origin (m/s) and `wx wy wz` the angular velocity W
-//! (rad/s), both expressed in the camera frame (SPEC section 2). The rows have the same times as the poses.
+//! (rad/s), both expressed in the camera frame (docs/model.md). The rows have the same times as the poses.
 
 use std::fs::File;
 use std::io::Read;

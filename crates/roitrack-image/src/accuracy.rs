@@ -10,14 +10,14 @@ use crate::reflection::ReflectionFault;
 use crate::render::{RenderScratch, RoiRenderer};
 use crate::roi::Roi;
 
-/// R = Rz(5 deg) Ry(-15 deg) Rx(10 deg), the bench rotation of SPEC section 6.
+/// R = Rz(5 deg) Ry(-15 deg) Rx(10 deg), the bench rotation of the built-in scene (docs/model.md).
 pub fn bench_rotation() -> Rotation3<f64> {
     Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
         * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
         * Rotation3::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians())
 }
 
-/// The bench pose of SPEC section 6, at rest: origin at (0.02, -0.01, 0.60) m, rotation [`bench_rotation`].
+/// The bench pose of the built-in scene (docs/model.md), at rest: origin at (0.02, -0.01, 0.60) m, rotation [`bench_rotation`].
 pub fn bench_state() -> MotionState {
     MotionState::at_rest(bench_rotation(), Vector3::new(0.02, -0.01, 0.60))
 }
@@ -51,7 +51,7 @@ pub struct CentroidAccuracy {
 }
 
 /// Renders `count` ROIs of `roi_size` x `roi_size` pixels, each of a random blob of the renderer's target at a random
-/// state near the SPEC bench pose (position within ±5 mm per axis, rotation within ±5° per axis, speed up to 1 m/s,
+/// state near the bench pose (position within ±5 mm per axis, rotation within ±5° per axis, speed up to 1 m/s,
 /// angular speed up to 3 rad/s, so motion blur is exercised), with the ROI centred on the true blob centre plus a
 /// random offset of up to ±3 px per axis; measures each with `opts` and compares with the TRUE projected centre
 /// (`camera.raw_pixel_from_cam` of the model point at mid-exposure). Deterministic for a `seed`.

@@ -1,6 +1,6 @@
 //! # roitrack-image
 //!
-//! The image side of roitrack (SPEC section 5), pure computation (no I/O, no threads):
+//! The image side of roitrack (docs/image-side.md), pure computation (no I/O, no threads):
 //!
 //! - [`roi`]: regions of interest ([`Roi`]), centred on a predicted blob and clamped to the sensor, and the pixels a
 //!   camera read in one ([`RoiImage`]); [`frame`]: full frames ([`Frame`]);

@@ -1,4 +1,4 @@
-//! Scene-level checks of the renderer and the centroid on the canonical scene (SPEC section 6).
+//! Scene-level checks of the renderer and the centroid on the built-in scene (docs/model.md).
 
 use nalgebra::{Vector2, Vector3};
 use rand::SeedableRng;

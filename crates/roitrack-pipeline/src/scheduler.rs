@@ -25,7 +25,7 @@ pub struct Predictor {
 /// The order in which points are read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum ScheduleOrder {
-    /// Bit-reversed cycle (SPEC section 6), the default.
+    /// Bit-reversed cycle (docs/model.md), the default.
     #[default]
     BitReversed,
     /// 0, 1, ..., n-1 (degenerate windows on planar grids: for tests and comparison).

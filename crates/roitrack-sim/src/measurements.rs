@@ -18,9 +18,9 @@ use crate::Scenario;
 pub struct SimulationOptions {
     /// Seed of every random choice (noise, drops, outliers, random order).
     pub seed: u64,
-    /// Standard deviation of the centroid noise, per image axis (px). SPEC section 6: 0.1 px.
+    /// Standard deviation of the centroid noise, per image axis (px). The built-in scene: 0.1 px.
     pub noise_px: f64,
-    /// ROI rate (Hz): sample k is taken at t = k / rate, its exposure midpoint. SPEC: 4 kHz.
+    /// ROI rate (Hz): sample k is taken at t = k / rate, its exposure midpoint. The built-in scene: 4 kHz.
     pub rate_hz: f64,
     pub order: RoiOrder,
     /// Fraction of ROIs whose measurement is lost, in [0, 1).

@@ -1,7 +1,7 @@
 //! Scenario trajectories: the true pose and twist of the target at any time.
 //!
 //! Each scenario gives, at time `t`, a [`MotionState`] whose pose is the true pose at `t` and whose twist is the true
-//! instantaneous twist at `t` (V = d t/dt, and W with dR/dt = [W]× R, both in the camera frame, SPEC section 2).
+//! instantaneous twist at `t` (V = d t/dt, and W with dR/dt = [W]× R, both in the camera frame; docs/model.md).
 
 use std::f64::consts::PI;
 
@@ -13,9 +13,9 @@ use roitrack_core::{CameraModel, MotionState, Target, so3};
 /// The scenarios the simulator offers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ScenarioKind {
-    /// The bench pose of SPEC section 6, at rest, 1 s.
+    /// The bench pose of the built-in scene (docs/model.md), at rest, 1 s.
     Static,
-    /// SPEC section 7: the paper's Orthoglide experiment (translations in the image plane, peak 1 m/s), 4.914 s.
+    /// The paper's Orthoglide experiment (docs/model.md; translations in the image plane, peak 1 m/s, 4.914 s).
     Orthoglide,
     /// Fast rotation: 3 rev/s about an axis tilted 20 deg from the optical axis while translating slowly, 3 s.
     Spin,
@@ -50,7 +50,7 @@ impl ScenarioKind {
     }
 }
 
-/// R = Rz(5 deg) Ry(-15 deg) Rx(10 deg), the bench rotation of SPEC section 6.
+/// R = Rz(5 deg) Ry(-15 deg) Rx(10 deg), the bench rotation of the built-in scene (docs/model.md).
 pub fn bench_rotation() -> Rotation3<f64> {
     Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
         * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
@@ -155,7 +155,7 @@ pub struct Scenario {
     offset_m: Vector3<f64>,
 }
 
-// Orthoglide phases (SPEC section 7).
+// Orthoglide phases (docs/model.md).
 const HOME_M: [f64; 3] = [0.0, 0.0, 0.60];
 const LINE_M: f64 = 0.080;
 const RADIUS_M: f64 = 0.060;

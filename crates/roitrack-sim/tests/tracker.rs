@@ -1,4 +1,4 @@
-//! The tracker on simulated data with known ground truth (SPEC scene): convergence, exactness on constant-twist
+//! The tracker on simulated data with known ground truth (built-in scene): convergence, exactness on constant-twist
 //! motion, the degeneracy gate, and initialisation of a target already moving.
 
 use nalgebra::{Rotation3, Vector3};

@@ -1,6 +1,6 @@
 //! `roitrack bench`: a quick measurement (about 10 s) of the hot paths and of the real-time loop.
 //!
-//! **Hot paths**, on the canonical scene of SPEC section 6 (inputs and timer shared with the criterion benches of
+//! **Hot paths**, on the built-in scene of docs/model.md (inputs and timer shared with the criterion benches of
 //! `cargo bench -p roitrack-bench`, see [`roitrack_bench`]): each item is timed for `--item-ms` in batches of calls
 //! lasting at least 5 µs (a sub-µs item is called many times per clock reading); the figures are the median and the
 //! 99th percentile over batches of batch time / batch size, in µs (for a batch of one call, the p99 is per call; for
@@ -203,7 +203,7 @@ fn print_items(
     static_pose_iterations: usize,
 ) {
     println!(
-        "hot paths, canonical scene (SPEC section 6), one thread, {:.0} ms each:",
+        "hot paths, built-in scene (docs/model.md), one thread, {:.0} ms each:",
         budget.as_secs_f64() * 1e3
     );
     println!(

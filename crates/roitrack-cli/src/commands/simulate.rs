@@ -51,7 +51,7 @@ impl From<FramePolarityArg> for Polarity {
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum OrderArg {
-    /// 0 8 4 12 2 10 6 14 1 9 5 13 3 11 7 15 (SPEC section 6)
+    /// 0 8 4 12 2 10 6 14 1 9 5 13 3 11 7 15 (docs/model.md)
     Bitrev,
     /// 0 1 2 ... 15: singular one-cycle windows on the planar grid
     Rowmajor,
@@ -74,7 +74,7 @@ impl From<OrderArg> for RoiOrder {
 /// (camera.yaml, target.csv, frames/frame_00000.png ..., timestamps.csv, gt_poses.tum, gt_twists.csv, README.txt).
 #[derive(Debug, Args)]
 pub struct SimulateArgs {
-    /// Which motion: static (bench pose), orthoglide (SPEC section 7), spin (3 rev/s), random (smooth 6-dof), sweep
+    /// Which motion: static (bench pose), orthoglide (docs/model.md), spin (3 rev/s), random (smooth 6-dof), sweep
     /// (0.5 m/s, 1.5 rad/s: what a 30 Hz frame camera can follow).
     #[arg(long, value_enum, default_value = "orthoglide")]
     pub scenario: ScenarioArg,

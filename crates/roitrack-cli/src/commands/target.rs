@@ -9,7 +9,7 @@ use roitrack::{CameraModel, Target};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum BundledTarget {
-    /// 4 x 4 planar grid, pitch 20 mm, 6 mm blobs, 9 mm key blob 0 (SPEC section 6).
+    /// 4 x 4 planar grid, pitch 20 mm, 6 mm blobs, 9 mm key blob 0 (docs/model.md).
     Grid4x4,
 }
 

@@ -89,7 +89,8 @@ pub struct TrackArgs {
     /// is an input, or another output, is refused.
     #[arg(long)]
     pub poses: PathBuf,
-    /// Output twists (CSV t,vx,vy,vz,wx,wy,wz).
+    /// Output twists (CSV t,vx,vy,vz,wx,wy,wz): the velocity of the target's origin (m/s) and its angular velocity
+    /// (rad/s), both in the camera frame (x right, y down, z forward).
     #[arg(long)]
     pub twists: PathBuf,
     /// Output diagnostics per estimate (CSV: t, status, residual, conditioning, measurements used, iterations, and the
