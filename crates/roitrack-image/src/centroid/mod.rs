@@ -117,8 +117,8 @@ pub struct CentroidOptions {
 /// 8 and 12 bits, clipped cores, ellipses up to 1.5:1, background gradients, brightness uneven by up to 2 % a radius)
 /// it rejects none, its allowances at least 1.7 times the largest skew any showed. A brightness ramp across the blob
 /// is a coma too: unclipped 15 px blobs lit unevenly by up to 4 % a radius pass, by 6 % half are rejected (to third
-/// order they look like a blob with a spot inside it). It adds about 40 % to the centroid's time (24 x 24 ROI, on a
-/// 2-core AMD EPYC development VM: 0.42 µs against 0.31 µs without it, `roitrack bench`).
+/// order they look like a blob with a spot inside it). It adds about half to the centroid's time (24 x 24 ROI, on a
+/// 2-core AMD EPYC development VM: 0.19 µs against 0.13 µs without it, `roitrack bench`, 2026-11-27).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SymmetryCheck {
     /// The trefoil allowed for pixel sampling, times the blob's pixel count, for a blurred edge (1.5 px or wider;
