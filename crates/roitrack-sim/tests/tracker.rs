@@ -430,7 +430,8 @@ fn a_refused_batch_changes_nothing() {
 #[test]
 fn window_fits_do_not_vouch_for_windows_without_redundancy() {
     use roitrack_core::target::{CircleGrid, GridLayout};
-    // Six points: the newest centroid of each gives 12 equations for 12 unknowns, an exact fit of the noise.
+    // Six points: a window of the newest centroid of each (asked for here: the default window of a target this small
+    // holds four cycles) gives 12 equations for 12 unknowns, an exact fit of the noise.
     let grid = Target::circle_grid(&CircleGrid {
         rows: 2,
         cols: 3,
@@ -459,6 +460,7 @@ fn window_fits_do_not_vouch_for_windows_without_redundancy() {
     ] {
         let config = TrackerConfig {
             estimator,
+            window: roitrack_core::estimator::WindowMode::Last(6),
             ..TrackerConfig::default()
         };
         let (estimates, _) = roitrack_core::estimator::track_all(
@@ -489,5 +491,95 @@ fn window_fits_do_not_vouch_for_windows_without_redundancy() {
             .map(|e| 1e3 * position_error_m(e, &scenario.state_at(e.t_ref_s)))
             .fold(0.0, f64::max);
         assert!(worst_mm < 5.0, "{} {worst_mm} mm", estimator.name());
+    }
+}
+
+/// A centred 3 x 3 grid (20 mm pitch, 6 mm blobs): one cycle of it (18 equations for 12 unknowns) tied the servo loops
+/// so loosely that they wandered 20 to 260 mm off, vouched for, on fast rotation and random motion. Small targets now
+/// get windows of whole cycles up to 24 measurements, and an estimate whose window residual the noise cannot explain
+/// is disputed: nothing vouched for strays far from the run's typical error.
+#[test]
+fn window_fits_do_not_vouch_for_wandering_states_on_a_3x3_grid() {
+    use roitrack_core::target::{CircleGrid, GridLayout};
+    let grid = Target::circle_grid(&CircleGrid {
+        rows: 3,
+        cols: 3,
+        spacing_m: 0.02,
+        diameter_m: 0.006,
+        layout: GridLayout::Square,
+    })
+    .unwrap();
+    let centre = Vector3::new(0.02, 0.02, 0.0);
+    let target = Target::new(
+        grid.points()
+            .iter()
+            .map(|p| roitrack_core::target::TargetPoint {
+                point_in_obj_m: p.point_in_obj_m - centre,
+                ..*p
+            })
+            .collect(),
+    )
+    .unwrap();
+    for kind in [ScenarioKind::Spin, ScenarioKind::Random] {
+        let scenario = Scenario::new(kind, 1).with_target(target.clone());
+        let simulated = simulate(&scenario, &SimulationOptions::default()).unwrap();
+        for (estimator, strict) in [
+            (EstimatorConfig::Batch, true),
+            (EstimatorConfig::Vvs(VvsSettings::default()), true),
+            (
+                EstimatorConfig::Vvs(VvsSettings {
+                    jacobian: JacobianKind::Paper,
+                    ..VvsSettings::default()
+                }),
+                false,
+            ),
+        ] {
+            let config = TrackerConfig {
+                estimator,
+                ..TrackerConfig::default()
+            };
+            let (estimates, _) = roitrack_core::estimator::track_all(
+                &simulated.camera,
+                &simulated.target,
+                config,
+                &simulated.measurements,
+            )
+            .unwrap();
+            let errors_mm: Vec<(f64, bool)> = estimates
+                .iter()
+                .map(|e| {
+                    (
+                        1e3 * position_error_m(e, &scenario.state_at(e.t_ref_s)),
+                        e.status.is_vouched_for(),
+                    )
+                })
+                .collect();
+            let mut sorted: Vec<f64> = errors_mm.iter().map(|e| e.0).collect();
+            sorted.sort_by(f64::total_cmp);
+            let median_mm = sorted[sorted.len() / 2];
+            let vouched: Vec<f64> = errors_mm.iter().filter(|e| e.1).map(|e| e.0).collect();
+            let worst_mm = vouched.iter().copied().fold(0.0, f64::max);
+            let name = format!("{kind:?} {}", estimator.name());
+            assert!(
+                vouched.len() > estimates.len() * 3 / 4,
+                "{name}: {} vouched",
+                vouched.len()
+            );
+            assert!(median_mm < 1.0, "{name}: median {median_mm} mm");
+            if strict {
+                // The exact Jacobian's loop and the batch fit: every vouched estimate within 10x the median error.
+                assert!(
+                    worst_mm < 10.0 * median_mm,
+                    "{name}: {worst_mm} mm vouched, median {median_mm} mm"
+                );
+            } else {
+                // The paper's first-order Jacobian at 3 rev/s misleads the loop itself; what it vouches for stays within
+                // a few times its own RMS error, never tens of millimetres.
+                assert!(
+                    worst_mm < 15.0,
+                    "{name}: {worst_mm} mm vouched, median {median_mm} mm"
+                );
+            }
+        }
     }
 }

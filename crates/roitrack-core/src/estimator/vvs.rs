@@ -90,9 +90,10 @@ impl Law for VvsLaw {
         }
     }
 
-    /// The newest measurement beyond Tukey's c at the window's robust scale: it weighed nothing.
+    /// The newest measurement beyond Tukey's c at the window's robust scale (it weighed nothing), or a residual that
+    /// the noise cannot explain (the state does not fit its own window).
     fn is_disputed(&self, core: &TrackCore, residuals: &ResidualFigures) -> bool {
-        core.newest_beyond_robust_scale(residuals)
+        core.newest_beyond_robust_scale(residuals) || core.residual_inconsistent(residuals)
     }
 }
 
