@@ -1,10 +1,11 @@
 //! End-to-end tests of the `roitrack` binary: simulate, track, eval, bad input, and the cross-check against evo.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::path::Path;
 
 mod common;
 use common::{fails, ok, roitrack};
+#[path = "common/evo.rs"]
+mod evo;
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -324,52 +325,20 @@ fn malformed_inputs_name_the_file_line_and_field() {
 /// test says it was skipped, except under CI where a missing evo is a failure.
 #[test]
 fn evo_ape_agrees_with_roitrack_eval() {
-    let venv = std::env::var_os("ROITRACK_EVO_VENV").map(PathBuf::from);
-    let Some(venv) = venv.filter(|v| v.join("bin/evo_ape").is_file()) else {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI must provide evo (ROITRACK_EVO_VENV)"
-        );
-        eprintln!(
-            "skipped: evo not installed; run scripts/setup-test-deps and set ROITRACK_EVO_VENV"
-        );
+    let Some(venv) = evo::venv() else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     simulate(dir, "random", &["--seed", "3"]);
     let ours = track_and_eval(dir, "estimate", &["--estimator", "paper", "--gain", "0.5"]);
-    let results = dir.join("ape.zip");
-    let out = Command::new(venv.join("bin/evo_ape"))
-        .args([
-            "tum",
-            p(&dir.join("gt_poses.tum")),
-            p(&dir.join("estimate.tum")),
-        ])
-        .args(["--save_results", p(&results), "--no_warnings"])
-        .env("HOME", dir)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "evo_ape failed: {}",
-        String::from_utf8_lossy(&out.stderr)
+    let evo_rmse_m = evo::ape_rmse_m(
+        &venv,
+        dir,
+        &dir.join("gt_poses.tum"),
+        &dir.join("estimate.tum"),
+        &[],
     );
-    let script = "import json, sys, zipfile; print(json.load(zipfile.ZipFile(sys.argv[1]).open('stats.json'))['rmse'])";
-    let out = Command::new(venv.join("bin/python"))
-        .args(["-c", script, p(&results)])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let evo_rmse_m: f64 = String::from_utf8(out.stdout)
-        .unwrap()
-        .trim()
-        .parse()
-        .unwrap();
     let ours_m = f(&ours, "position_rmse_mm") / 1e3;
     assert!(evo_rmse_m > 1e-5, "a non-trivial case: {evo_rmse_m}");
     assert!(

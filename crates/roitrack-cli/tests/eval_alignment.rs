@@ -2,13 +2,14 @@
 //! own alignment), another clock (`--time-offset S|auto`), the relative pose error, and its refusals.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 
 use roitrack::eval::SimilarityTransform;
 use roitrack::nalgebra::{Rotation3, Vector3};
 
 mod common;
 use common::{fails, ok};
+#[path = "common/evo.rs"]
+mod evo;
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -244,15 +245,7 @@ fn bad_eval_options_are_refused_with_their_reason() {
 /// says it was skipped, except under CI where a missing evo is a failure.
 #[test]
 fn evo_ape_aligned_agrees_with_roitrack_eval_aligned() {
-    let venv = std::env::var_os("ROITRACK_EVO_VENV").map(PathBuf::from);
-    let Some(venv) = venv.filter(|v| v.join("bin/evo_ape").is_file()) else {
-        assert!(
-            std::env::var_os("CI").is_none(),
-            "CI must provide evo (ROITRACK_EVO_VENV)"
-        );
-        eprintln!(
-            "skipped: evo not installed; run scripts/setup-test-deps and set ROITRACK_EVO_VENV"
-        );
+    let Some(venv) = evo::venv() else {
         return;
     };
     let tmp = tempfile::tempdir().unwrap();
@@ -279,34 +272,7 @@ fn evo_ape_aligned_agrees_with_roitrack_eval_aligned() {
             align,
             "--json",
         ]));
-        let results = dir.join(format!("ape_{align}.zip"));
-        let out = Command::new(venv.join("bin/evo_ape"))
-            .args(["tum", p(&truth), p(&poses)])
-            .args(evo_flags)
-            .args(["--save_results", p(&results), "--no_warnings"])
-            .env("HOME", dir)
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "evo_ape failed: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let script = "import json, sys, zipfile; print(json.load(zipfile.ZipFile(sys.argv[1]).open('stats.json'))['rmse'])";
-        let out = Command::new(venv.join("bin/python"))
-            .args(["-c", script, p(&results)])
-            .output()
-            .unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let evo_m: f64 = String::from_utf8(out.stdout)
-            .unwrap()
-            .trim()
-            .parse()
-            .unwrap();
+        let evo_m = evo::ape_rmse_m(&venv, dir, &truth, &poses, evo_flags);
         let ours_m = f(&ours, "position_rmse_mm") / 1e3;
         assert!(
             (evo_m - ours_m).abs() < 1e-6,

@@ -55,6 +55,34 @@ fn run(measurements: &[Measurement], config: TrackerConfig) -> Vec<Estimate> {
         .collect()
 }
 
+/// A `rows` x `cols` square grid of circles with its origin at its centre, as the motions of the scenarios expect.
+fn centred_grid(rows: u32, cols: u32, spacing_m: f64, diameter_m: f64) -> Target {
+    use roitrack_core::target::{CircleGrid, GridLayout, TargetPoint};
+    let grid = Target::circle_grid(&CircleGrid {
+        rows,
+        cols,
+        spacing_m,
+        diameter_m,
+        layout: GridLayout::Square,
+    })
+    .unwrap();
+    let centre = Vector3::new(
+        0.5 * spacing_m * f64::from(cols - 1),
+        0.5 * spacing_m * f64::from(rows - 1),
+        0.0,
+    );
+    Target::new(
+        grid.points()
+            .iter()
+            .map(|p| TargetPoint {
+                point_in_obj_m: p.point_in_obj_m - centre,
+                ..*p
+            })
+            .collect(),
+    )
+    .unwrap()
+}
+
 fn position_error_m(e: &Estimate, truth: &MotionState) -> f64 {
     (e.state.cam_t_obj_m - truth.cam_t_obj_m).norm()
 }
@@ -429,29 +457,9 @@ fn a_refused_batch_changes_nothing() {
 
 #[test]
 fn window_fits_do_not_vouch_for_windows_without_redundancy() {
-    use roitrack_core::target::{CircleGrid, GridLayout};
     // Six points: a window of the newest centroid of each (asked for here: the default window of a target this small
     // holds four cycles) gives 12 equations for 12 unknowns, an exact fit of the noise.
-    let grid = Target::circle_grid(&CircleGrid {
-        rows: 2,
-        cols: 3,
-        spacing_m: 0.03,
-        diameter_m: 0.008,
-        layout: GridLayout::Square,
-    })
-    .unwrap();
-    // Its origin at its centre, as the motions of the scenarios expect.
-    let centre = Vector3::new(0.03, 0.015, 0.0);
-    let target = Target::new(
-        grid.points()
-            .iter()
-            .map(|p| roitrack_core::target::TargetPoint {
-                point_in_obj_m: p.point_in_obj_m - centre,
-                ..*p
-            })
-            .collect(),
-    )
-    .unwrap();
+    let target = centred_grid(2, 3, 0.03, 0.008);
     let scenario = Scenario::new(ScenarioKind::Orthoglide, 1).with_target(target);
     let simulated = simulate(&scenario, &SimulationOptions::default()).unwrap();
     for estimator in [
@@ -500,26 +508,7 @@ fn window_fits_do_not_vouch_for_windows_without_redundancy() {
 /// is disputed: nothing vouched for strays far from the run's typical error.
 #[test]
 fn window_fits_do_not_vouch_for_wandering_states_on_a_3x3_grid() {
-    use roitrack_core::target::{CircleGrid, GridLayout};
-    let grid = Target::circle_grid(&CircleGrid {
-        rows: 3,
-        cols: 3,
-        spacing_m: 0.02,
-        diameter_m: 0.006,
-        layout: GridLayout::Square,
-    })
-    .unwrap();
-    let centre = Vector3::new(0.02, 0.02, 0.0);
-    let target = Target::new(
-        grid.points()
-            .iter()
-            .map(|p| roitrack_core::target::TargetPoint {
-                point_in_obj_m: p.point_in_obj_m - centre,
-                ..*p
-            })
-            .collect(),
-    )
-    .unwrap();
+    let target = centred_grid(3, 3, 0.02, 0.006);
     for kind in [ScenarioKind::Spin, ScenarioKind::Random] {
         let scenario = Scenario::new(kind, 1).with_target(target.clone());
         let simulated = simulate(&scenario, &SimulationOptions::default()).unwrap();
