@@ -49,13 +49,21 @@ pub fn compare(
     seed: u64,
     noise_px: f64,
 ) -> Result<Vec<CompareRow>, ExperimentError> {
-    let scenario = Scenario::new(kind, seed);
+    compare_on(&Scenario::new(kind, seed), seed, noise_px)
+}
+
+/// [`compare`] on a scenario of one's own (another camera, target, distance or speed).
+pub fn compare_on(
+    scenario: &Scenario,
+    seed: u64,
+    noise_px: f64,
+) -> Result<Vec<CompareRow>, ExperimentError> {
     let options = SimulationOptions {
         seed,
         noise_px,
         ..SimulationOptions::default()
     };
-    let run = simulate(&scenario, &options)?;
+    let run = simulate(scenario, &options)?;
     lineup()
         .into_iter()
         .map(|(label, estimator)| {

@@ -166,7 +166,15 @@ impl Demo {
     /// Simulates the scenario; the ideal centroids get the image side's noise, measured on rendered ROIs, so that the
     /// two runs of an estimator compare the image side with a perfect one of equal precision.
     pub fn new(options: DemoOptions) -> Result<Self, ExperimentError> {
-        let scenario = Scenario::new(options.scenario, options.seed);
+        Self::with_scenario(options, Scenario::new(options.scenario, options.seed))
+    }
+
+    /// [`Self::new`] on a scenario of one's own (another camera, target, distance or speed: see
+    /// [`Scenario::with_camera`] and the others); `options.scenario` is then only its name.
+    pub fn with_scenario(
+        options: DemoOptions,
+        scenario: Scenario,
+    ) -> Result<Self, ExperimentError> {
         let (renderer, accuracy) = image_side(&scenario, ACCURACY_ROIS, options.seed)?;
         let simulation = SimulationOptions {
             seed: options.seed,

@@ -29,6 +29,9 @@ pub struct CompareArgs {
     /// Centroid noise (px, per axis).
     #[arg(long, default_value_t = 0.1, conflicts_with = "sweep")]
     pub noise_px: f64,
+    /// The scenario on your own rig (not with --sweep, whose cases are fixed).
+    #[command(flatten)]
+    pub rig: crate::args::RigArgs,
     /// Print one JSON object per estimator instead of a table (with --sweep: one JSON object with every case,
     /// check and grid point).
     #[arg(long)]
@@ -46,9 +49,19 @@ pub struct CompareArgs {
 
 pub fn run(args: &CompareArgs) -> Result<()> {
     if args.sweep {
+        if args.rig.is_given() {
+            anyhow::bail!(
+                "--sweep runs its own fixed cases: --camera, --target, --distance-m, --speed-scale and --duration-s \
+                 are for a single comparison"
+            );
+        }
         return run_sweep(args);
     }
-    let rows = compare::compare(args.scenario.into(), args.seed, args.noise_px)?;
+    let scenario = args.rig.scenario(roitrack::sim::Scenario::new(
+        args.scenario.into(),
+        args.seed,
+    ))?;
+    let rows = compare::compare_on(&scenario, args.seed, args.noise_px)?;
     if args.json {
         for row in &rows {
             println!("{}", compare::json(row));

@@ -36,17 +36,24 @@ pub struct DemoArgs {
     /// Print one JSON object per row instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// The scenario on your own rig.
+    #[command(flatten)]
+    pub rig: crate::args::RigArgs,
     #[command(flatten)]
     pub ros: crate::ros::McapArgs,
 }
 
 pub fn run(args: &DemoArgs) -> Result<()> {
-    let demo = Demo::new(DemoOptions {
+    let options = DemoOptions {
         scenario: args.scenario.into(),
         seed: args.seed,
         paced: args.paced,
         order: args.order.into(),
-    })?;
+    };
+    let scenario = args
+        .rig
+        .scenario(roitrack::sim::Scenario::new(options.scenario, options.seed))?;
+    let demo = Demo::with_scenario(options, scenario)?;
     write_run(&demo.run, &args.out)?;
     let lineup = demo::lineup();
     let slots = demo.slots();

@@ -81,34 +81,8 @@ pub struct SimulateArgs {
     /// Output folder (created if missing).
     #[arg(long)]
     pub out: PathBuf,
-    /// Your camera (any calibration file `track --camera` reads) instead of the built-in 1024 x 768 one. Default: the
-    /// built-in camera.
-    #[arg(long, value_name = "FILE")]
-    pub camera: Option<PathBuf>,
-    /// With --camera: the image size for a calibration file that has none. Default: the file's.
-    #[arg(long, value_name = "WxH", requires = "camera", value_parser = crate::args::parse_image_size)]
-    pub image_size: Option<(u32, u32)>,
-    /// With --camera: which camera of a Kalibr camchain. Default: cam0.
-    #[arg(long, value_name = "NAME", requires = "camera")]
-    pub camera_name: Option<String>,
-    /// Your target (CSV id,x,y,z[,diameter], metres unless --target-units) instead of the built-in 4 x 4 grid.
-    /// Default: the built-in target.
-    #[arg(long, value_name = "FILE.csv")]
-    pub target: Option<PathBuf>,
-    /// With --target: the unit of its coordinates and diameters. Default: metres (a target that looks like
-    /// millimetres or centimetres is refused).
-    #[arg(long, value_enum, value_name = "UNIT", requires = "target")]
-    pub target_units: Option<crate::args::LengthUnitArg>,
-    /// Move the motion along the optical axis so that the target is on average this far from the camera (m).
-    /// Default: the scenario's own (about 0.6 m).
-    #[arg(long, value_name = "M")]
-    pub distance_m: Option<f64>,
-    /// Play the motion this many times faster (0.5: half the speeds, twice the duration). Default: 1.
-    #[arg(long, value_name = "FACTOR", default_value_t = 1.0)]
-    pub speed_scale: f64,
-    /// Length of the simulation (s). Default: the scenario's own (after --speed-scale).
-    #[arg(long, value_name = "S")]
-    pub duration_s: Option<f64>,
+    #[command(flatten)]
+    pub rig: crate::args::RigArgs,
     /// Seed of the noise, drops, outliers, random order and random motion.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -309,66 +283,13 @@ impl SimulateArgs {
     }
 }
 
-/// The scenario asked for: its motion, on the camera and target given, moved, sped up and cut as asked, checked to keep
-/// the target in the image.
-fn scenario(args: &SimulateArgs) -> Result<Scenario> {
-    let mut scenario = Scenario::new(args.scenario.into(), args.seed);
-    if let Some(path) = &args.camera {
-        let options = roitrack::formats::CameraFileOptions {
-            image_size: args.image_size,
-            camera_name: args.camera_name.clone(),
-        };
-        scenario = scenario.with_camera(roitrack::formats::read_camera_file(path, &options)?);
-    }
-    if let Some(path) = &args.target {
-        scenario = scenario.with_target(roitrack::formats::read_target_csv_in(
-            path,
-            args.target_units.map(Into::into),
-        )?);
-    }
-    let positive = |name: &str, value: f64| {
-        if value.is_finite() && value > 0.0 {
-            Ok(value)
-        } else {
-            Err(anyhow!("{name} must be a positive number, got {value}"))
-        }
-    };
-    let speed = positive("--speed-scale", args.speed_scale)?;
-    if speed != 1.0 {
-        scenario = scenario.with_speed_scale(speed);
-    }
-    if let Some(distance) = args.distance_m {
-        scenario = scenario.with_distance_m(positive("--distance-m", distance)?);
-    }
-    if let Some(duration) = args.duration_s {
-        scenario = scenario.with_duration_s(positive("--duration-s", duration)?);
-    }
-    let margin = scenario.min_image_margin_px();
-    if margin.is_infinite() && margin < 0.0 {
-        return Err(anyhow!(
-            "with this camera and target the {} motion takes blobs behind the camera: move the target farther with \
-             --distance-m",
-            scenario.kind.name()
-        ));
-    }
-    if margin < 0.0 {
-        return Err(anyhow!(
-            "with this camera and target the {} motion takes blobs out of the image, up to {:.0} px beyond the \
-             border of the {} x {} image: move the target farther with --distance-m, or use a smaller target",
-            scenario.kind.name(),
-            -margin,
-            scenario.camera.width_px,
-            scenario.camera.height_px
-        ));
-    }
-    Ok(scenario)
-}
-
 pub fn run(args: &SimulateArgs) -> Result<()> {
     if args.frames {
         return run_frames(args);
     }
-    let scenario = scenario(args)?;
+    let scenario = args
+        .rig
+        .scenario(Scenario::new(args.scenario.into(), args.seed))?;
     let options = args.options();
     let run = simulate(&scenario, &options).context("simulation failed")?;
     write_run(&run, &args.out)?;
@@ -456,7 +377,9 @@ fn frame_file_name(k: usize) -> String {
 
 /// `simulate --frames`: the frames of a frame camera, their times and a dense ground truth.
 fn run_frames(args: &SimulateArgs) -> Result<()> {
-    let scenario = scenario(args)?;
+    let scenario = args
+        .rig
+        .scenario(Scenario::new(args.scenario.into(), args.seed))?;
     let options = FrameOptions {
         fps_hz: args.fps,
         readout: args.readout()?,
