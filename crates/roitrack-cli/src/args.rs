@@ -354,6 +354,24 @@ pub struct RigArgs {
 }
 
 impl RigArgs {
+    /// Refuses a run whose files in `dir` would overwrite the rig's camera or target file (through links too).
+    pub fn check_outputs(&self, dir: &std::path::Path, files: &[&str]) -> Result<()> {
+        let inputs: Vec<(&str, &std::path::Path)> =
+            [("--camera", &self.camera), ("--target", &self.target)]
+                .into_iter()
+                .filter_map(|(name, path)| path.as_deref().map(|p| (name, p)))
+                .collect();
+        let outputs: Vec<(String, PathBuf)> = files
+            .iter()
+            .map(|f| (format!("--out's {f}"), dir.join(f)))
+            .collect();
+        let outputs: Vec<(&str, &std::path::Path)> = outputs
+            .iter()
+            .map(|(n, p)| (n.as_str(), p.as_path()))
+            .collect();
+        Ok(roitrack::formats::check_output_paths(&inputs, &outputs)?)
+    }
+
     /// Whether any option of the rig was given.
     pub fn is_given(&self) -> bool {
         self.camera.is_some()

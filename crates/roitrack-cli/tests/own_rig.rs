@@ -245,3 +245,45 @@ fn demo_and_compare_take_the_rig() {
     let err = fails(&["compare", "--sweep", "--quick", "--target", p(&target)]);
     assert!(err.contains("--sweep"), "{err}");
 }
+
+/// A simulation into the folder that holds its own camera file would overwrite it (with the ROS form of it): refused,
+/// the file left as it was; so are `target --out` and `--camera-out` on one file.
+#[test]
+fn outputs_never_overwrite_the_rig_files() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let camera = dir.join("camera.yaml");
+    std::fs::write(&camera, FISHEYE_YAML).unwrap();
+    let err = fails(&[
+        "simulate",
+        "--camera",
+        p(&camera),
+        "--distance-m",
+        "1.0",
+        "--out",
+        p(dir),
+    ]);
+    assert!(
+        err.contains("--camera") && err.contains("camera.yaml"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_to_string(&camera).unwrap(), FISHEYE_YAML);
+    assert!(!dir.join("measurements.csv").exists());
+    let err = fails(&[
+        "demo",
+        "--camera",
+        p(&camera),
+        "--distance-m",
+        "1.0",
+        "--out",
+        p(dir),
+    ]);
+    assert!(err.contains("--camera"), "{err}");
+    assert_eq!(std::fs::read_to_string(&camera).unwrap(), FISHEYE_YAML);
+    let both = dir.join("both.csv");
+    let err = fails(&["target", "--out", p(&both), "--camera-out", p(&both)]);
+    assert!(
+        err.contains("--out") && err.contains("--camera-out"),
+        "{err}"
+    );
+}

@@ -53,6 +53,8 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let scenario = args
         .rig
         .scenario(roitrack::sim::Scenario::new(options.scenario, options.seed))?;
+    args.rig
+        .check_outputs(&args.out, &super::simulate::RUN_FILES)?;
     let demo = Demo::with_scenario(options, scenario)?;
     write_run(&demo.run, &args.out)?;
     let lineup = demo::lineup();

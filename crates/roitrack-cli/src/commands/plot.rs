@@ -49,6 +49,28 @@ pub struct PlotArgs {
 }
 
 pub fn run(args: &PlotArgs) -> Result<()> {
+    // No figure may overwrite an input.
+    let inputs: Vec<(&str, &std::path::Path)> = [
+        ("--poses", Some(args.poses.as_path())),
+        ("--twists", args.twists.as_deref()),
+        ("--diagnostics", args.diagnostics.as_deref()),
+        ("--covariance", args.covariance.as_deref()),
+        ("--truth-poses", args.truth_poses.as_deref()),
+        ("--truth-twists", args.truth_twists.as_deref()),
+    ]
+    .into_iter()
+    .filter_map(|(name, path)| path.map(|p| (name, p)))
+    .collect();
+    let figures: Vec<(String, PathBuf)> = ["motion", "errors", "status"]
+        .iter()
+        .flat_map(|stem| ["png", "svg"].map(|ext| format!("{stem}.{ext}")))
+        .map(|name| (format!("--out's {name}"), args.out.join(&name)))
+        .collect();
+    let outputs: Vec<(&str, &std::path::Path)> = figures
+        .iter()
+        .map(|(n, p)| (n.as_str(), p.as_path()))
+        .collect();
+    roitrack::formats::check_output_paths(&inputs, &outputs)?;
     let poses = roitrack::formats::read_tum(&args.poses)?;
     let twists = args
         .twists

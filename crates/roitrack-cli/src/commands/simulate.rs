@@ -26,6 +26,14 @@ pub const MEASUREMENTS_FILE: &str = "measurements.csv";
 pub const TRUTH_POSES_FILE: &str = "gt_poses.tum";
 pub const TRUTH_TWISTS_FILE: &str = "gt_twists.csv";
 pub const ROIS_FILE: &str = "rois.bin";
+/// The files every simulated run writes ([`write_run`]).
+pub const RUN_FILES: [&str; 5] = [
+    CAMERA_FILE,
+    TARGET_FILE,
+    MEASUREMENTS_FILE,
+    TRUTH_POSES_FILE,
+    TRUTH_TWISTS_FILE,
+];
 /// With `--frames`: the folder of the frames (`frame_00000.png`, ...), their times, and how to track them.
 pub const FRAMES_DIR: &str = "frames";
 pub const TIMESTAMPS_FILE: &str = "timestamps.csv";
@@ -290,6 +298,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let scenario = args
         .rig
         .scenario(Scenario::new(args.scenario.into(), args.seed))?;
+    args.rig.check_outputs(&args.out, &RUN_FILES)?;
     let options = args.options();
     let run = simulate(&scenario, &options).context("simulation failed")?;
     write_run(&run, &args.out)?;
@@ -380,6 +389,16 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
     let scenario = args
         .rig
         .scenario(Scenario::new(args.scenario.into(), args.seed))?;
+    args.rig.check_outputs(
+        &args.out,
+        &[
+            CAMERA_FILE,
+            TARGET_FILE,
+            TIMESTAMPS_FILE,
+            TRUTH_POSES_FILE,
+            TRUTH_TWISTS_FILE,
+        ],
+    )?;
     let options = FrameOptions {
         fps_hz: args.fps,
         readout: args.readout()?,

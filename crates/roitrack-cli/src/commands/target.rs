@@ -80,6 +80,12 @@ pub fn run(args: &TargetArgs) -> Result<()> {
         .out
         .as_ref()
         .ok_or_else(|| anyhow!("--out is required"))?;
+    if let Some(camera_out) = &args.camera_out {
+        roitrack::formats::check_output_paths(
+            &[],
+            &[("--out", out), ("--camera-out", camera_out)],
+        )?;
+    }
     let target = match args.name {
         BundledTarget::Grid4x4 => Target::grid4x4(),
     };
