@@ -242,6 +242,22 @@ fn demo_and_compare_take_the_rig() {
     .unwrap();
     assert_eq!(written.distortion.model_name(), "equidistant");
     assert!(out.join("kalman_poses.tum").is_file());
+    // A plain 4 x 5 grid looks the same turned half way round: the loop cannot start, and says why.
+    let err = fails(&[
+        "demo",
+        "--scenario",
+        "spin",
+        "--target",
+        p(&target),
+        "--duration-s",
+        "0.3",
+        "--out",
+        p(&dir.join("plain")),
+    ]);
+    assert!(
+        err.contains("never identified") && err.contains("marked point"),
+        "{err}"
+    );
     let err = fails(&["compare", "--sweep", "--quick", "--target", p(&target)]);
     assert!(err.contains("--sweep"), "{err}");
 }

@@ -236,6 +236,11 @@ impl Demo {
             &loop_config,
             progress,
         )?;
+        if report.estimates.is_empty() {
+            return Err(ExperimentError::NeverStarted {
+                attempts: report.failed_initialisations,
+            });
+        }
         let scored = score(&self.run, report.estimates.clone(), report.wall_s)?;
         Ok(DemoRun {
             estimator: *estimator,

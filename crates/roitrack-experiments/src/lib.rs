@@ -53,4 +53,11 @@ pub enum ExperimentError {
     Loop(#[from] roitrack_pipeline::PipelineError),
     #[error("evaluation failed: {0}")]
     Evaluation(#[from] roitrack_eval::EvalError),
+    /// The real-time loop ran but never started a track.
+    #[error(
+        "the real-time loop made no estimate: the target was never identified in a full frame ({attempts} \
+         attempts; a target whose views are ambiguous, such as a plain symmetric grid, needs a marked point, e.g. one \
+         larger blob, for the loop to start)"
+    )]
+    NeverStarted { attempts: usize },
 }
