@@ -180,9 +180,9 @@ fn a_rig_that_loses_the_target_is_refused_with_the_fix() {
     assert!(err.contains("missing.csv"), "{err}");
 }
 
-/// `demo` and `compare` run on the rig too: the demo's loop renders the target through the user's camera.
+/// `demo`, `compare` and `tradeoff` run on the rig too: the demo's loop renders the target through the user's camera.
 #[test]
-fn demo_and_compare_take_the_rig() {
+fn demo_compare_and_tradeoff_take_the_rig() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let camera = dir.join("fisheye.yaml");
@@ -242,6 +242,23 @@ fn demo_and_compare_take_the_rig() {
     .unwrap();
     assert_eq!(written.distortion.model_name(), "equidistant");
     assert!(out.join("kalman_poses.tum").is_file());
+    let tradeoff = dir.join("tradeoff");
+    ok(&[
+        "tradeoff",
+        "--scenario",
+        "random",
+        "--camera",
+        p(&camera),
+        "--target",
+        p(&target),
+        "--distance-m",
+        "1.0",
+        "--duration-s",
+        "1.0",
+        "--out",
+        p(&tradeoff),
+    ]);
+    assert!(tradeoff.join("tradeoff.csv").is_file() && tradeoff.join("tradeoff.svg").is_file());
     // A plain 4 x 5 grid looks the same turned half way round: the loop cannot start, and says why.
     let err = fails(&[
         "demo",

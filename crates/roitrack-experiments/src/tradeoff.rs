@@ -65,9 +65,13 @@ pub struct TradeoffPoint {
 /// assert!(lag(Scheme::Paper, 0.2) > lag(Scheme::Paper, 1.0));
 /// ```
 pub fn sweep(kind: ScenarioKind, seed: u64) -> Result<Vec<TradeoffPoint>, ExperimentError> {
-    let scenario = Scenario::new(kind, seed);
+    sweep_on(&Scenario::new(kind, seed), seed)
+}
+
+/// [`sweep`] on a scenario of one's own (another camera, target, distance or speed).
+pub fn sweep_on(scenario: &Scenario, seed: u64) -> Result<Vec<TradeoffPoint>, ExperimentError> {
     let run = simulate(
-        &scenario,
+        scenario,
         &SimulationOptions {
             seed,
             ..Default::default()

@@ -20,10 +20,17 @@ pub struct TradeoffArgs {
     /// Output folder for tradeoff.csv, tradeoff.png and tradeoff.svg.
     #[arg(long, default_value = "out/tradeoff")]
     pub out: PathBuf,
+    /// The scenario on your own rig.
+    #[command(flatten)]
+    pub rig: crate::args::RigArgs,
 }
 
 pub fn run(args: &TradeoffArgs) -> Result<()> {
-    let points = tradeoff::sweep(args.scenario.into(), args.seed)?;
+    let scenario = args.rig.scenario(roitrack::sim::Scenario::new(
+        args.scenario.into(),
+        args.seed,
+    ))?;
+    let points = tradeoff::sweep_on(&scenario, args.seed)?;
     std::fs::create_dir_all(&args.out)?;
     let mut csv = roitrack::formats::AtomicFile::create(args.out.join("tradeoff.csv"))?;
     writeln!(csv, "{}", tradeoff::CSV_HEADER)?;
