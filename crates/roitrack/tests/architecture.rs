@@ -52,7 +52,16 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "roitrack-ros",
         ],
     ),
-    ("roitrack-cli", &["roitrack"]),
+    (
+        "roitrack-genicam",
+        &[
+            "roitrack-core",
+            "roitrack-image",
+            "roitrack-sim",
+            "roitrack-pipeline",
+        ],
+    ),
+    ("roitrack-cli", &["roitrack", "roitrack-genicam"]),
     ("roitrack-python", &["roitrack"]),
 ];
 

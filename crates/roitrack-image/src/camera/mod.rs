@@ -53,6 +53,10 @@ pub enum GrabError {
     /// A replayed recording has no more images.
     #[error("the recording has no more images")]
     EndOfRecording,
+    /// The run was asked to stop (Ctrl-C): a live camera ends the run like the end of a recording, and what was
+    /// estimated until then is kept.
+    #[error("stopped: {reason}")]
+    Stopped { reason: String },
     /// The camera's frames are not the size its camera model says: the calibration is of another camera, or of
     /// another mode.
     #[error(

@@ -1,0 +1,168 @@
+//! The two-thread loop on a live GenICam camera, real or fake.
+
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use roitrack_core::estimator::TrackerConfig;
+use roitrack_core::{CameraModel, Target};
+use roitrack_image::SensorModel;
+use roitrack_pipeline::{LoopConfig, LoopReport, run_loop};
+use roitrack_sim::Scenario;
+
+use crate::{CameraStats, FakeGigeCamera, GenicamCamera, GenicamError, GenicamOptions};
+
+/// Options of a live run.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveOptions {
+    pub camera: GenicamOptions,
+    /// Length of the run (s of the loop's clock).
+    pub duration_s: f64,
+    /// ROI slots per second: a real camera is paced at this rate (its ROIs are taken at the wall-clock times of
+    /// their slots, so the camera must sustain it); the fake camera runs free, each ROI at its slot's scenario time.
+    pub rate_hz: f64,
+    pub tracker: TrackerConfig,
+}
+
+impl Default for LiveOptions {
+    fn default() -> Self {
+        Self {
+            camera: GenicamOptions::default(),
+            duration_s: 10.0,
+            rate_hz: 4000.0,
+            tracker: TrackerConfig::default(),
+        }
+    }
+}
+
+/// What a live run did: the loop's report (estimates, latencies, rejections, why it stopped) and the camera's.
+#[derive(Debug, Clone)]
+pub struct LiveReport {
+    pub loop_report: LoopReport,
+    pub camera: CameraStats,
+    /// The camera, as opened ([`GenicamCamera::description`]).
+    pub description: String,
+}
+
+impl LiveReport {
+    /// The end-of-run summary: ROIs grabbed, lost, incomplete, the fraction read from the window asked for, ROIs/s,
+    /// latencies, the clock offset, and why the run stopped early if it did.
+    pub fn summary(&self) -> String {
+        let r = &self.loop_report;
+        let c = &self.camera;
+        let grab = roitrack_core::stats::sorted(&c.grab_us);
+        let mut text = format!(
+            "{}\nROIs grabbed {}, lost (no image in time) {}, incomplete {}, stale (old window) {}, moved as asked \
+             {:.2} %, refused moves {}, full frames {}\n{:.0} ROIs/s over {:.2} s; grab (move, trigger, buffer) \
+             p50/p99 {:.0}/{:.0} us; ROI-to-estimate latency p50/p99 {:.0}/{:.0} us\n{} estimates, {} measurements, \
+             {} rejected blobs, {} initialisations ({} failed), {} dropped measurements",
+            self.description,
+            c.rois,
+            c.lost,
+            c.incomplete,
+            c.stale,
+            100.0 * c.moved_fraction(),
+            c.refused_moves,
+            c.full_frames,
+            r.rois_per_s(),
+            r.wall_s,
+            roitrack_core::stats::quantile(&grab, 0.5),
+            roitrack_core::stats::quantile(&grab, 0.99),
+            r.latency_quantile_us(0.5),
+            r.latency_quantile_us(0.99),
+            r.estimates.len(),
+            r.measurements,
+            r.rejections.total(),
+            r.initialisations,
+            r.failed_initialisations,
+            r.dropped,
+        );
+        if let Some(offset) = c.clock_offset_s {
+            let (mean, std) = c.arrival_jitter_s.unwrap_or((f64::NAN, f64::NAN));
+            text.push_str(&format!(
+                "\nclock offset device - host {offset:.6} s (moved {:.3} ms during the run); arrival latency above \
+                 the smallest: mean {:.0} us, std {:.0} us",
+                1e3 * c.clock_change_s.unwrap_or(0.0),
+                mean * 1e6,
+                std * 1e6
+            ));
+        }
+        if let Some(e) = &r.stopped_by {
+            text.push_str(&format!("\nthe run stopped early: {e}"));
+        }
+        text
+    }
+}
+
+/// Runs the loop on `camera` for `options.duration_s`: the full-frame start (and re-initialisations), then one ROI a
+/// slot where the tracker predicts each blob. `paced`: slots at their wall-clock times (a real camera); otherwise as
+/// fast as the camera delivers. A camera that stops (disconnected, Ctrl-C) ends the run with the estimates so far
+/// ([`LoopReport::stopped_by`]).
+pub fn run_live(
+    camera: &mut GenicamCamera,
+    camera_model: &CameraModel,
+    target: &Target,
+    options: &LiveOptions,
+    paced: bool,
+) -> Result<LiveReport, GenicamError> {
+    let (w, h) = camera.window();
+    let side = w.min(h);
+    let mut config = LoopConfig {
+        rate_hz: options.rate_hz,
+        paced,
+        roi_slots: (options.duration_s * options.rate_hz).round().max(0.0) as usize,
+        ..LoopConfig::default()
+    };
+    // Every ROI is the camera's window: the scheduler places windows of that size.
+    config.scheduler.min_size_px = side;
+    config.scheduler.max_size_px = side;
+    let loop_report = run_loop(camera, camera_model, target, options.tracker, &config)?;
+    Ok(LiveReport {
+        loop_report,
+        camera: camera.stats(),
+        description: camera.description().to_string(),
+    })
+}
+
+/// Starts Aravis' fake camera on 127.0.0.1 rendering `scenario` (default sensor, noise seeded with `seed`), opens it
+/// through the protocol like a real camera (its serial number checked) and runs the loop free on it for
+/// `options.duration_s` of scenario time (at most the scenario's). `stop` ends the run early (Ctrl-C); `on_start`
+/// gets the fake camera once the run is about to start (a test stops it from there to play a camera that
+/// disappears).
+pub fn run_fake(
+    scenario: &Scenario,
+    options: &LiveOptions,
+    seed: u64,
+    stop: Arc<AtomicBool>,
+    on_start: impl FnOnce(Arc<FakeGigeCamera>),
+) -> Result<LiveReport, GenicamError> {
+    let fake = Arc::new(FakeGigeCamera::start(
+        scenario,
+        SensorModel::default(),
+        seed,
+    )?);
+    let camera_options = GenicamOptions {
+        address: fake.address().to_string(),
+        expected_serial: Some(fake.serial().to_string()),
+        device_clock_is_loop_clock: true,
+        ..options.camera.clone()
+    };
+    let full_size = (scenario.camera.width_px, scenario.camera.height_px);
+    let mut camera = GenicamCamera::open(&camera_options, full_size)?
+        .with_scene_clock(fake.clock())
+        .with_stop_flag(stop);
+    let options = LiveOptions {
+        duration_s: options.duration_s.min(scenario.duration_s),
+        ..options.clone()
+    };
+    on_start(fake.clone());
+    let report = run_live(
+        &mut camera,
+        &scenario.camera,
+        &scenario.target,
+        &options,
+        false,
+    );
+    drop(camera);
+    fake.stop();
+    report
+}
