@@ -115,7 +115,11 @@ def test_evaluate_equals_roitrack_eval(orthoglide: Path, tmp_path: Path) -> None
     metrics = roitrack.evaluate(sim, res)
     assert metrics.keys() == expected.keys()
     for key, value in expected.items():
-        np.testing.assert_allclose(metrics[key], value, rtol=1e-12, err_msg=key)
+        if value is None or isinstance(value, str):
+            # Absent figures (null) and names (the alignment) are equal, not close.
+            assert metrics[key] == value, key
+        else:
+            np.testing.assert_allclose(metrics[key], value, rtol=1e-12, err_msg=key)
     # Without twists, no velocity figures (as `roitrack eval` without --twists).
     poses_only = {k: res[k] for k in ("t_s", "position_m", "quaternion_xyzw")}
     assert roitrack.evaluate(sim, poses_only)["velocity_rmse_mm_s"] is None
