@@ -366,6 +366,11 @@ impl GenicamCamera {
         &self.description
     }
 
+    /// Whether the device's timestamps are taken as the loop's times ([`GenicamOptions::device_clock_is_loop_clock`]).
+    pub fn device_clock_is_loop_clock(&self) -> bool {
+        self.options.device_clock_is_loop_clock
+    }
+
     /// The window every ROI is read through (px).
     pub fn window(&self) -> (u32, u32) {
         self.window

@@ -41,6 +41,8 @@ pub struct LiveReport {
     pub camera: CameraStats,
     /// The camera, as opened ([`GenicamCamera::description`]).
     pub description: String,
+    /// The device's timestamps were taken as the loop's times (the fake camera).
+    pub device_clock_is_loop_clock: bool,
 }
 
 impl LiveReport {
@@ -76,6 +78,12 @@ impl LiveReport {
             r.failed_initialisations,
             r.dropped,
         );
+        if self.device_clock_is_loop_clock {
+            text.push_str(
+                "\nthe device clock is the scenario's time (the fake camera), which runs at the loop's pace, not the \
+                 wall clock's: its offset to the host's clock drifts by design",
+            );
+        }
         if let Some(offset) = c.clock_offset_s {
             let (mean, std) = c.arrival_jitter_s.unwrap_or((f64::NAN, f64::NAN));
             text.push_str(&format!(
@@ -120,6 +128,7 @@ pub fn run_live(
         loop_report,
         camera: camera.stats(),
         description: camera.description().to_string(),
+        device_clock_is_loop_clock: camera.device_clock_is_loop_clock(),
     })
 }
 
