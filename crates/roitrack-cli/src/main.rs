@@ -34,6 +34,10 @@ enum Command {
     PnpBench(commands::pnp_bench::PnpBenchArgs),
     Faults(commands::faults::FaultsArgs),
     FrameStudy(commands::frame_study::FrameStudyArgs),
+    #[cfg(feature = "genicam")]
+    Live(Box<commands::live::LiveArgs>),
+    #[cfg(feature = "genicam")]
+    Cameras(commands::live::CamerasArgs),
 }
 
 fn main() -> ExitCode {
@@ -60,6 +64,10 @@ fn main() -> ExitCode {
         Command::PnpBench(args) => commands::pnp_bench::run(&args),
         Command::Faults(args) => commands::faults::run(&args),
         Command::FrameStudy(args) => commands::frame_study::run(&args),
+        #[cfg(feature = "genicam")]
+        Command::Live(args) => commands::live::run(&args),
+        #[cfg(feature = "genicam")]
+        Command::Cameras(args) => commands::live::cameras(&args),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -34,4 +34,4 @@ pub use camera::{
 #[cfg(feature = "genicam")]
 pub use fake::{FAKE_ADDRESS, FakeGigeCamera, SceneClock};
 #[cfg(feature = "genicam")]
-pub use live::{LiveOptions, LiveReport, run_fake, run_live};
+pub use live::{LiveOptions, LiveReport, run_device, run_fake, run_live, truth_samples};

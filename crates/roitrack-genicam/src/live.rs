@@ -4,7 +4,7 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
 use roitrack_core::estimator::TrackerConfig;
-use roitrack_core::{CameraModel, Target};
+use roitrack_core::{CameraModel, PoseSample, Target, TwistSample};
 use roitrack_image::SensorModel;
 use roitrack_pipeline::{LoopConfig, LoopReport, run_loop};
 use roitrack_sim::Scenario;
@@ -174,4 +174,43 @@ pub fn run_fake(
     drop(camera);
     fake.stop();
     report
+}
+
+/// The scenario's true poses and twists at the fake camera's ROI slot times (`k / rate_hz`, the scenario's time, the
+/// fake camera's clock) up to `duration_s`: the ground truth of a fake run, on the estimates' time base.
+pub fn truth_samples(
+    scenario: &Scenario,
+    duration_s: f64,
+    rate_hz: f64,
+) -> (Vec<PoseSample>, Vec<TwistSample>) {
+    let end_s = duration_s.min(scenario.duration_s).max(0.0);
+    let count = (end_s * rate_hz).floor() as usize + 1;
+    (0..count)
+        .map(|k| {
+            let t_s = k as f64 / rate_hz;
+            let state = scenario.state_at(t_s);
+            (
+                PoseSample::from_state(t_s, &state),
+                TwistSample::from_state(t_s, &state),
+            )
+        })
+        .unzip()
+}
+
+/// Opens the camera at `options.camera.address` (no scan) and runs the loop on it, paced at `options.rate_hz` on the
+/// host's clock, for `options.duration_s`; `stop` ends it early (Ctrl-C). The camera must sustain the rate: a ROI
+/// taken late is still placed for its slot's time.
+pub fn run_device(
+    camera_model: &CameraModel,
+    target: &Target,
+    options: &LiveOptions,
+    stop: Arc<AtomicBool>,
+) -> Result<LiveReport, GenicamError> {
+    let camera_options = GenicamOptions {
+        device_clock_is_loop_clock: false,
+        ..options.camera.clone()
+    };
+    let full_size = (camera_model.width_px, camera_model.height_px);
+    let mut camera = GenicamCamera::open(&camera_options, full_size)?.with_stop_flag(stop);
+    run_live(&mut camera, camera_model, target, options, true)
 }

@@ -7,6 +7,8 @@ pub mod detect;
 pub mod eval;
 pub mod faults;
 pub mod frame_study;
+#[cfg(feature = "genicam")]
+pub mod live;
 pub mod plot;
 pub mod pnp_bench;
 pub mod simulate;

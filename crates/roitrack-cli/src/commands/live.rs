@@ -1,0 +1,253 @@
+//! `roitrack live` and `roitrack cameras` (feature `genicam`): the two-thread loop on a live GenICam camera through
+//! Aravis, or on Aravis' fake GigE camera rendering a scenario (see `roitrack_genicam`, docs/cameras.md).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+
+use anyhow::{Context, Result, bail};
+use clap::{Args, ValueEnum};
+use roitrack::formats::EstimateWriter;
+use roitrack::sim::Scenario;
+use roitrack_genicam::{
+    GenicamOptions, LiveOptions, PixelFormatChoice, TriggerChoice, run_device, run_fake,
+    truth_samples,
+};
+
+use crate::args::ScenarioArg;
+
+/// Track from a live GenICam camera (GigE Vision, USB3 Vision) through Aravis, or from Aravis' fake GigE camera
+/// rendering a simulated target (--fake): a first full frame, then one ROI at a time where the tracker predicts each
+/// blob. Ctrl-C stops the run and writes every output.
+#[derive(Debug, Args)]
+pub struct LiveArgs {
+    /// The camera's IP address (GigE Vision) or Aravis id (Vendor-Model-Serial); never found by scanning. Default:
+    /// none; one of --device and --fake is required.
+    #[arg(
+        long,
+        value_name = "ADDRESS",
+        required_unless_present = "fake",
+        conflicts_with = "fake"
+    )]
+    pub device: Option<String>,
+    /// Start Aravis' fake GigE camera on 127.0.0.1 in this process and track the scenario it renders.
+    #[arg(long)]
+    pub fake: bool,
+    /// With --fake: the scenario rendered.
+    #[arg(long, value_enum, default_value = "orthoglide", requires = "fake")]
+    pub scenario: ScenarioArg,
+    /// With --fake: seed of the scenario and of the pixel noise.
+    #[arg(long, default_value_t = 1, requires = "fake")]
+    pub seed: u64,
+    /// With --fake: also write the ground truth (gt_poses.tum, gt_twists.csv) on the fake camera's clock, the
+    /// scenario's time, into this folder. Default: none.
+    #[arg(long, value_name = "DIR", requires = "fake")]
+    pub truth_out: Option<PathBuf>,
+    /// With --device: the camera's calibration (any format `track --camera` reads). Default: none (required with
+    /// --device).
+    #[arg(
+        long,
+        value_name = "FILE",
+        required_unless_present = "fake",
+        conflicts_with = "fake"
+    )]
+    pub camera: Option<PathBuf>,
+    /// With --device: the target (CSV id,x,y,z[,diameter], metres). Default: none (required with --device).
+    #[arg(
+        long,
+        value_name = "FILE.csv",
+        required_unless_present = "fake",
+        conflicts_with = "fake"
+    )]
+    pub target: Option<PathBuf>,
+    /// Length of the run (s). Default: the scenario's with --fake (a longer one stops at its end), 10 s with
+    /// --device.
+    #[arg(long, value_name = "S")]
+    pub duration: Option<f64>,
+    /// Side of the square window every ROI is read through (px, at most 64), rounded up to the camera's increments.
+    #[arg(long, value_name = "N", default_value_t = 32)]
+    pub roi_size: u32,
+    /// ROI slots per second: with --device the loop is paced at this rate on the host's clock (the camera must
+    /// sustain it); with --fake the slots are the scenario's times, read as fast as the camera delivers. Default:
+    /// 4000 with --fake, 1000 with --device.
+    #[arg(long, value_name = "HZ")]
+    pub rate_hz: Option<f64>,
+    /// ExposureTime (µs). Default: the camera's.
+    #[arg(long, value_name = "US")]
+    pub exposure_us: Option<f64>,
+    /// Pixel format.
+    #[arg(long, value_enum, default_value = "mono8")]
+    pub pixel_format: PixelFormatArg,
+    /// How each ROI is started: a software trigger once the window moved, or the camera's free run (frames still
+    /// from the old window are skipped).
+    #[arg(long, value_enum, default_value = "software")]
+    pub trigger: TriggerArg,
+    /// With --trigger free-run: AcquisitionFrameRate (Hz). Default: the camera's.
+    #[arg(long, value_name = "HZ")]
+    pub frame_rate_hz: Option<f64>,
+    /// How long a ROI may take before it counts as lost (s).
+    #[arg(long, value_name = "S", default_value_t = 0.2)]
+    pub timeout_s: f64,
+    /// Output: the poses (TUM). Required.
+    #[arg(long, value_name = "P.tum")]
+    pub poses: PathBuf,
+    /// Output: the twists (CSV). Required.
+    #[arg(long, value_name = "T.csv")]
+    pub twists: PathBuf,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum PixelFormatArg {
+    Mono8,
+    Mono12,
+    Mono16,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum TriggerArg {
+    Software,
+    FreeRun,
+}
+
+/// List the GenICam cameras Aravis finds. Only with --scan: GigE Vision discovery broadcasts on every network
+/// interface, which roitrack never does unasked (open a camera by its address with `live --device`).
+#[derive(Debug, Args)]
+pub struct CamerasArgs {
+    /// Scan every interface (GigE Vision broadcast, USB3 Vision bus).
+    #[arg(long)]
+    pub scan: bool,
+}
+
+pub fn cameras(args: &CamerasArgs) -> Result<()> {
+    if !args.scan {
+        bail!(
+            "roitrack does not scan the network unasked: give --scan to broadcast a GigE Vision discovery on every \
+             interface and list the USB3 Vision cameras"
+        );
+    }
+    let found = roitrack_genicam::scan();
+    if found.is_empty() {
+        println!("no camera found");
+    }
+    for (id, address, protocol) in found {
+        println!("{id}\t{address}\t{protocol}");
+    }
+    Ok(())
+}
+
+/// Set by Ctrl-C (SIGINT): the run stops at its next ROI and writes every output. A second Ctrl-C ends the process.
+static INTERRUPTED: AtomicBool = AtomicBool::new(false);
+
+#[cfg(unix)]
+extern "C" fn on_interrupt(_signal: libc::c_int) {
+    INTERRUPTED.store(true, Ordering::SeqCst);
+    // SAFETY: signal() is async-signal-safe; it restores the default action for a second Ctrl-C.
+    unsafe {
+        libc::signal(libc::SIGINT, libc::SIG_DFL);
+    }
+}
+
+/// The stop flag the camera reads, raised by Ctrl-C.
+fn stop_flag() -> Arc<AtomicBool> {
+    #[cfg(unix)]
+    // SAFETY: installs a handler that only stores to an atomic and calls signal(), both async-signal-safe.
+    unsafe {
+        let handler: extern "C" fn(libc::c_int) = on_interrupt;
+        libc::signal(libc::SIGINT, handler as libc::sighandler_t);
+    }
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    std::thread::spawn(move || {
+        while !INTERRUPTED.load(Ordering::SeqCst) {
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        flag.store(true, Ordering::SeqCst);
+    });
+    stop
+}
+
+pub fn run(args: &LiveArgs) -> Result<()> {
+    if args.roi_size == 0 || args.roi_size > 64 {
+        bail!("--roi-size must be in 1..=64 px, got {}", args.roi_size);
+    }
+    let camera = GenicamOptions {
+        address: args.device.clone().unwrap_or_default(),
+        pixel_format: match args.pixel_format {
+            PixelFormatArg::Mono8 => PixelFormatChoice::Mono8,
+            PixelFormatArg::Mono12 => PixelFormatChoice::Mono12,
+            PixelFormatArg::Mono16 => PixelFormatChoice::Mono16,
+        },
+        roi_size_px: args.roi_size,
+        exposure_us: args.exposure_us,
+        trigger: match args.trigger {
+            TriggerArg::Software => TriggerChoice::Software,
+            TriggerArg::FreeRun => TriggerChoice::FreeRun,
+        },
+        frame_rate_hz: args.frame_rate_hz,
+        timeout_s: args.timeout_s,
+        ..GenicamOptions::default()
+    };
+    roitrack::formats::check_output_paths(
+        &[],
+        &[("--poses", &args.poses), ("--twists", &args.twists)],
+    )?;
+    // Started before the camera, so that a bad output path fails first; finished whatever the run's end.
+    let mut writer = EstimateWriter::create(&args.poses, &args.twists, None)?;
+    let stop = stop_flag();
+    let report = if args.fake {
+        let scenario = Scenario::new(args.scenario.into(), args.seed);
+        let options = LiveOptions {
+            camera,
+            duration_s: args.duration.unwrap_or(scenario.duration_s),
+            rate_hz: args.rate_hz.unwrap_or(4000.0),
+            ..LiveOptions::default()
+        };
+        if let Some(dir) = &args.truth_out {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+            let (poses, twists) = truth_samples(&scenario, options.duration_s, options.rate_hz);
+            roitrack::formats::write_tum(dir.join(super::simulate::TRUTH_POSES_FILE), &poses)?;
+            roitrack::formats::write_twists_csv(
+                dir.join(super::simulate::TRUTH_TWISTS_FILE),
+                &twists,
+            )?;
+        }
+        run_fake(&scenario, &options, args.seed, stop, |_| {})?
+    } else {
+        let camera_model = roitrack::formats::read_camera_file(
+            args.camera
+                .as_ref()
+                .context("--camera is required with --device")?,
+            &Default::default(),
+        )?;
+        let target = roitrack::formats::read_target_csv_in(
+            args.target
+                .as_ref()
+                .context("--target is required with --device")?,
+            None,
+        )?;
+        let options = LiveOptions {
+            camera,
+            duration_s: args.duration.unwrap_or(10.0),
+            rate_hz: args.rate_hz.unwrap_or(1000.0),
+            ..LiveOptions::default()
+        };
+        run_device(&camera_model, &target, &options, stop)?
+    };
+    for e in &report.loop_report.estimates {
+        writer.write(e)?;
+    }
+    writer.finish()?;
+    println!("{}", report.summary());
+    println!(
+        "wrote {} estimates to {} and {}",
+        report.loop_report.estimates.len(),
+        args.poses.display(),
+        args.twists.display()
+    );
+    match &report.loop_report.stopped_by {
+        Some(roitrack::image::GrabError::Stopped { .. }) | None => Ok(()),
+        Some(e) => bail!("the camera ended the run: {e} (the estimates until then are written)"),
+    }
+}
