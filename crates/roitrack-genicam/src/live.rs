@@ -56,7 +56,8 @@ impl LiveReport {
             "{}\nROIs grabbed {}, lost (no image in time) {}, incomplete {}, stale (old window) {}, moved as asked \
              {:.2} %, refused moves {}, full frames {}\n{:.0} ROIs/s over {:.2} s; grab (move, trigger, buffer) \
              p50/p99 {:.0}/{:.0} us; ROI-to-estimate latency p50/p99 {:.0}/{:.0} us\n{} estimates, {} measurements, \
-             {} rejected blobs, {} initialisations ({} failed), {} dropped measurements",
+             {} rejected blobs, {} initialisations ({} failed), {} dropped measurements, {} ROIs served more than a \
+             slot late (paced)",
             self.description,
             c.rois,
             c.lost,
@@ -77,6 +78,7 @@ impl LiveReport {
             r.initialisations,
             r.failed_initialisations,
             r.dropped,
+            r.late,
         );
         if self.device_clock_is_loop_clock {
             text.push_str(

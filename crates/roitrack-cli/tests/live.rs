@@ -1,0 +1,102 @@
+//! `roitrack live --fake` (feature `genicam`): the whole command through Aravis' fake GigE camera on 127.0.0.1, its
+//! outputs read back, and Ctrl-C. Only one fake camera can own 127.0.0.1: the tests take turns (a lock here; CI also
+//! runs them on one test thread).
+#![cfg(all(feature = "genicam", unix))]
+
+use std::process::{Command, Stdio};
+use std::sync::{Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+static ONE_FAKE_CAMERA: Mutex<()> = Mutex::new(());
+
+fn turn() -> MutexGuard<'static, ()> {
+    ONE_FAKE_CAMERA.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+fn roitrack() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_roitrack"))
+}
+
+#[test]
+fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
+    let _turn = turn();
+    let dir = tempfile::tempdir().unwrap();
+    let (poses, twists, truth) = (
+        dir.path().join("p.tum"),
+        dir.path().join("t.csv"),
+        dir.path().join("truth"),
+    );
+    let out = roitrack()
+        .args(["live", "--fake", "--duration", "1.5", "--truth-out"])
+        .arg(&truth)
+        .arg("--poses")
+        .arg(&poses)
+        .arg("--twists")
+        .arg(&twists)
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("moved as asked 100.00 %"), "{stdout}");
+    assert!(truth.join("gt_poses.tum").is_file() && truth.join("gt_twists.csv").is_file());
+    let eval = roitrack()
+        .args(["eval", "--json", "--truth"])
+        .arg(&truth)
+        .arg("--poses")
+        .arg(&poses)
+        .arg("--twists")
+        .arg(&twists)
+        .output()
+        .unwrap();
+    assert!(
+        eval.status.success(),
+        "{}",
+        String::from_utf8_lossy(&eval.stderr)
+    );
+    let metrics: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
+    let rmse_mm = metrics["position_rmse_mm"].as_f64().unwrap();
+    // The demo's default estimator on orthoglide: about 0.02 mm.
+    assert!(rmse_mm < 0.1, "{metrics}");
+}
+
+#[test]
+fn ctrl_c_stops_the_run_and_writes_every_output() {
+    let _turn = turn();
+    let dir = tempfile::tempdir().unwrap();
+    let (poses, twists) = (dir.path().join("p.tum"), dir.path().join("t.csv"));
+    let child = roitrack()
+        .args(["live", "--fake", "--duration", "60", "--poses"])
+        .arg(&poses)
+        .arg("--twists")
+        .arg(&twists)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(2500));
+    // SAFETY: sends SIGINT to the child we spawned.
+    assert_eq!(
+        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
+        0
+    );
+    let start = Instant::now();
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{stdout}\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(start.elapsed() < Duration::from_secs(10));
+    assert!(stdout.contains("stopped: interrupted (Ctrl-C)"), "{stdout}");
+    let rows = std::fs::read_to_string(&poses).unwrap().lines().count();
+    assert!(rows > 10, "{rows} poses\n{stdout}");
+    assert_eq!(
+        std::fs::read_to_string(&twists).unwrap().lines().count(),
+        rows + 1
+    );
+}
