@@ -21,10 +21,11 @@ fn roitrack() -> Command {
 fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
     let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
-    let (poses, twists, truth) = (
+    let (poses, twists, truth, bag) = (
         dir.path().join("p.tum"),
         dir.path().join("t.csv"),
         dir.path().join("truth"),
+        dir.path().join("live.mcap"),
     );
     let out = roitrack()
         .args(["live", "--fake", "--duration", "1.5", "--truth-out"])
@@ -33,6 +34,8 @@ fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
         .arg(&poses)
         .arg("--twists")
         .arg(&twists)
+        .arg("--mcap")
+        .arg(&bag)
         .output()
         .unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
@@ -43,6 +46,13 @@ fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
     );
     assert!(stdout.contains("moved as asked 100.00 %"), "{stdout}");
     assert!(truth.join("gt_poses.tum").is_file() && truth.join("gt_twists.csv").is_file());
+    // The estimates also as a ROS 2 bag (MCAP, completed: its magic at both ends).
+    let bytes = std::fs::read(&bag).unwrap();
+    assert!(
+        bytes.starts_with(b"\x89MCAP0\r\n") && bytes.ends_with(b"\x89MCAP0\r\n"),
+        "{} bytes",
+        bytes.len()
+    );
     let eval = roitrack()
         .args(["eval", "--json", "--truth"])
         .arg(&truth)
@@ -67,12 +77,18 @@ fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
 fn ctrl_c_stops_the_run_and_writes_every_output() {
     let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
-    let (poses, twists) = (dir.path().join("p.tum"), dir.path().join("t.csv"));
+    let (poses, twists, bag) = (
+        dir.path().join("p.tum"),
+        dir.path().join("t.csv"),
+        dir.path().join("live.mcap"),
+    );
     let child = roitrack()
         .args(["live", "--fake", "--duration", "60", "--poses"])
         .arg(&poses)
         .arg("--twists")
         .arg(&twists)
+        .arg("--mcap")
+        .arg(&bag)
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
@@ -98,5 +114,9 @@ fn ctrl_c_stops_the_run_and_writes_every_output() {
     assert_eq!(
         std::fs::read_to_string(&twists).unwrap().lines().count(),
         rows + 1
+    );
+    assert!(
+        std::fs::read(&bag).unwrap().ends_with(b"\x89MCAP0\r\n"),
+        "the bag is not completed"
     );
 }

@@ -95,6 +95,8 @@ pub struct LiveArgs {
     /// Output: the twists (CSV). Required.
     #[arg(long, value_name = "T.csv")]
     pub twists: PathBuf,
+    #[command(flatten)]
+    pub ros: crate::ros::McapArgs,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -194,9 +196,29 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     )?;
     // Started before the camera, so that a bad output path fails first; finished whatever the run's end.
     let mut writer = EstimateWriter::create(&args.poses, &args.twists, None)?;
+    let scenario = Scenario::new(args.scenario.into(), args.seed);
+    let (camera_model, target) = if args.fake {
+        (scenario.camera.clone(), scenario.target.clone())
+    } else {
+        let camera_model = roitrack::formats::read_camera_file(
+            args.camera
+                .as_ref()
+                .context("--camera is required with --device")?,
+            &Default::default(),
+        )?;
+        let target = roitrack::formats::read_target_csv_in(
+            args.target
+                .as_ref()
+                .context("--target is required with --device")?,
+            None,
+        )?;
+        (camera_model, target)
+    };
+    // The bag is opened before our Ctrl-C handler is installed, which then takes the signal: the run stops at its
+    // next ROI and the bag is completed below with every estimate.
+    let mut bag = args.ros.open(&camera_model, Some(&target))?;
     let stop = stop_flag();
     let report = if args.fake {
-        let scenario = Scenario::new(args.scenario.into(), args.seed);
         let options = LiveOptions {
             camera,
             duration_s: args.duration.unwrap_or(scenario.duration_s),
@@ -215,18 +237,6 @@ pub fn run(args: &LiveArgs) -> Result<()> {
         }
         run_fake(&scenario, &options, args.seed, stop, |_| {})?
     } else {
-        let camera_model = roitrack::formats::read_camera_file(
-            args.camera
-                .as_ref()
-                .context("--camera is required with --device")?,
-            &Default::default(),
-        )?;
-        let target = roitrack::formats::read_target_csv_in(
-            args.target
-                .as_ref()
-                .context("--target is required with --device")?,
-            None,
-        )?;
         let options = LiveOptions {
             camera,
             duration_s: args.duration.unwrap_or(10.0),
@@ -237,8 +247,10 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     };
     for e in &report.loop_report.estimates {
         writer.write(e)?;
+        bag.estimate(e)?;
     }
     writer.finish()?;
+    bag.finish()?;
     println!("{}", report.summary());
     println!(
         "wrote {} estimates to {} and {}",
