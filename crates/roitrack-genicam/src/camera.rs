@@ -19,6 +19,11 @@ use crate::ClockOffset;
 use crate::fake::SceneClock;
 
 /// The pixel formats roitrack reads (one value a pixel; 12 bits in a 16-bit container, little-endian).
+///
+/// ```
+/// use roitrack_genicam::PixelFormatChoice;
+/// assert_eq!(PixelFormatChoice::Mono12.bit_depth(), 12);
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PixelFormatChoice {
     Mono8,
@@ -50,6 +55,11 @@ impl PixelFormatChoice {
 }
 
 /// How each ROI is started.
+///
+/// ```
+/// use roitrack_genicam::{GenicamOptions, TriggerChoice};
+/// assert_eq!(GenicamOptions::default().trigger, TriggerChoice::Software);
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TriggerChoice {
     /// `TriggerMode On`, `TriggerSource Software`: one `TriggerSoftware` command a ROI, sent once the window moved.
@@ -60,6 +70,17 @@ pub enum TriggerChoice {
 }
 
 /// How a camera is opened and driven.
+///
+/// ```
+/// use roitrack_genicam::{GenicamOptions, PixelFormatChoice};
+/// let options = GenicamOptions {
+///     address: "192.168.1.20".into(),
+///     pixel_format: PixelFormatChoice::Mono12,
+///     exposure_us: Some(100.0),
+///     ..GenicamOptions::default()
+/// };
+/// assert_eq!((options.roi_size_px, options.timeout_s), (32, 0.2));
+/// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct GenicamOptions {
     /// The camera: its IP address (GigE Vision) or its Aravis id (`Vendor-Model-Serial`, USB3 Vision too). Never a
@@ -103,6 +124,12 @@ impl Default for GenicamOptions {
 }
 
 /// Opening or setting up a camera failed.
+///
+/// ```
+/// use roitrack_genicam::GenicamError;
+/// let e = GenicamError::Open { address: "10.0.0.7".into(), reason: "no answer".into() };
+/// assert_eq!(e.to_string(), "cannot open the camera at '10.0.0.7': no answer");
+/// ```
 #[derive(Debug, Error)]
 pub enum GenicamError {
     #[error("cannot open the camera at '{address}': {reason}")]
@@ -128,6 +155,12 @@ pub enum GenicamError {
 }
 
 /// What the camera did during a run.
+///
+/// ```
+/// use roitrack_genicam::CameraStats;
+/// let stats = CameraStats { rois: 95, stale: 5, ..CameraStats::default() };
+/// assert_eq!(stats.moved_fraction(), 0.95);
+/// ```
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct CameraStats {
     /// ROI buffers received complete and read from the window asked for.
@@ -618,6 +651,12 @@ impl Drop for GenicamCamera {
     }
 }
 
+/// ```no_run
+/// for (id, address, protocol) in roitrack_genicam::scan() {
+///     println!("{id} {address} {protocol}");
+/// }
+/// ```
+///
 /// The cameras Aravis finds on every interface (GigE Vision discovery broadcasts on each network, USB3 Vision
 /// enumerates the bus): `roitrack cameras --scan` only, never implicitly. Each line: id, address, protocol.
 pub fn scan() -> Vec<(String, String, String)> {

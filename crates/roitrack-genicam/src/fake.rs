@@ -20,9 +20,19 @@ use roitrack_sim::Scenario;
 use crate::GenicamError;
 
 /// The address of the fake camera.
+///
+/// ```
+/// assert_eq!(roitrack_genicam::FAKE_ADDRESS, "127.0.0.1");
+/// ```
 pub const FAKE_ADDRESS: &str = "127.0.0.1";
 
 /// The fake camera's clock (s, the scenario's time): the time of the next buffer it renders.
+///
+/// ```
+/// let clock = roitrack_genicam::SceneClock::default();
+/// clock.set(1.25);
+/// assert_eq!(clock.get(), 1.25);
+/// ```
 #[derive(Debug, Default)]
 pub struct SceneClock(AtomicU64);
 

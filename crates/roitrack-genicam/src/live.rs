@@ -12,6 +12,12 @@ use roitrack_sim::Scenario;
 use crate::{CameraStats, FakeGigeCamera, GenicamCamera, GenicamError, GenicamOptions};
 
 /// Options of a live run.
+///
+/// ```
+/// use roitrack_genicam::LiveOptions;
+/// let options = LiveOptions { duration_s: 2.0, ..LiveOptions::default() };
+/// assert_eq!(options.rate_hz, 4000.0);
+/// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct LiveOptions {
     pub camera: GenicamOptions,
@@ -35,6 +41,17 @@ impl Default for LiveOptions {
 }
 
 /// What a live run did: the loop's report (estimates, latencies, rejections, why it stopped) and the camera's.
+///
+/// ```no_run
+/// use std::sync::{Arc, atomic::AtomicBool};
+/// use roitrack_genicam::{LiveOptions, run_fake};
+/// use roitrack_sim::{Scenario, ScenarioKind};
+/// let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
+/// let options = LiveOptions { duration_s: 1.0, ..LiveOptions::default() };
+/// let report = run_fake(&scenario, &options, 1, Arc::new(AtomicBool::new(false)), |_| {}).unwrap();
+/// println!("{}", report.summary());
+/// assert!(report.camera.moved_fraction() > 0.95);
+/// ```
 #[derive(Debug, Clone)]
 pub struct LiveReport {
     pub loop_report: LoopReport,
@@ -103,6 +120,19 @@ impl LiveReport {
     }
 }
 
+/// ```no_run
+/// use roitrack_genicam::{GenicamCamera, GenicamOptions, LiveOptions, run_live};
+/// let (camera_model, target) = (roitrack_core::CameraModel::canonical(), roitrack_core::Target::grid4x4());
+/// let options = LiveOptions {
+///     camera: GenicamOptions { address: "192.168.1.20".into(), ..GenicamOptions::default() },
+///     rate_hz: 1000.0,
+///     ..LiveOptions::default()
+/// };
+/// let mut camera = GenicamCamera::open(&options.camera, (1024, 1024)).unwrap();
+/// let report = run_live(&mut camera, &camera_model, &target, &options, true).unwrap();
+/// println!("{}", report.summary());
+/// ```
+///
 /// Runs the loop on `camera` for `options.duration_s`: the full-frame start (and re-initialisations), then one ROI a
 /// slot where the tracker predicts each blob. `paced`: slots at their wall-clock times (a real camera); otherwise as
 /// fast as the camera delivers. A camera that stops (disconnected, Ctrl-C) ends the run with the estimates so far
@@ -134,6 +164,8 @@ pub fn run_live(
     })
 }
 
+/// See [`LiveReport`] for an example.
+///
 /// Starts Aravis' fake camera on 127.0.0.1 rendering `scenario` (default sensor, noise seeded with `seed`), opens it
 /// through the protocol like a real camera (its serial number checked) and runs the loop free on it for
 /// `options.duration_s` of scenario time (at most the scenario's). `stop` ends the run early (Ctrl-C); `on_start`
@@ -178,6 +210,14 @@ pub fn run_fake(
     report
 }
 
+/// ```
+/// use roitrack_sim::{Scenario, ScenarioKind};
+/// let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
+/// let (poses, twists) = roitrack_genicam::truth_samples(&scenario, 0.5, 4000.0);
+/// assert_eq!((poses.len(), twists.len()), (2001, 2001));
+/// assert_eq!(poses[4].t_s, 0.001);
+/// ```
+///
 /// The scenario's true poses and twists at the fake camera's ROI slot times (`k / rate_hz`, the scenario's time, the
 /// fake camera's clock) up to `duration_s`: the ground truth of a fake run, on the estimates' time base.
 pub fn truth_samples(
@@ -199,6 +239,19 @@ pub fn truth_samples(
         .unzip()
 }
 
+/// ```no_run
+/// use std::sync::{Arc, atomic::AtomicBool};
+/// use roitrack_genicam::{GenicamOptions, LiveOptions, run_device};
+/// let (camera_model, target) = (roitrack_core::CameraModel::canonical(), roitrack_core::Target::grid4x4());
+/// let options = LiveOptions {
+///     camera: GenicamOptions { address: "192.168.1.20".into(), ..GenicamOptions::default() },
+///     rate_hz: 1000.0,
+///     ..LiveOptions::default()
+/// };
+/// let report = run_device(&camera_model, &target, &options, Arc::new(AtomicBool::new(false))).unwrap();
+/// println!("{}", report.summary());
+/// ```
+///
 /// Opens the camera at `options.camera.address` (no scan) and runs the loop on it, paced at `options.rate_hz` on the
 /// host's clock, for `options.duration_s`; `stop` ends it early (Ctrl-C). The camera must sustain the rate: a ROI
 /// taken late is still placed for its slot's time.
