@@ -76,11 +76,9 @@ unsafe extern "C" fn fill_scene(
         aravis_sys::arv_buffer_get_image_region(buffer, &mut x, &mut y, &mut w, &mut h);
         aravis_sys::arv_buffer_get_data(buffer, std::ptr::null_mut())
     };
-    let bytes = match pixel_format {
-        aravis_sys::ARV_PIXEL_FORMAT_MONO_8 => 1,
-        aravis_sys::ARV_PIXEL_FORMAT_MONO_16 => 2,
-        _ => 0,
-    };
+    // Mono8 only: some Aravis 0.8 releases size the fake camera's payload as one byte a pixel whatever the format,
+    // so a 16-bit image could overrun its buffer.
+    let bytes = usize::from(pixel_format == aravis_sys::ARV_PIXEL_FORMAT_MONO_8);
     let camera = scene.renderer.camera();
     let fits = x >= 0 && y >= 0 && w > 0 && h > 0;
     let roi = Roi::new(
@@ -107,19 +105,9 @@ unsafe extern "C" fn fill_scene(
     // SAFETY: the fake camera calls this only with a buffer of at least its payload, `Width * Height` pixels of its
     // pixel format (it marks a smaller one SIZE_MISMATCH and returns before), which is the region read above.
     let target = unsafe { std::slice::from_raw_parts_mut(pixels, n * bytes) };
-    let shift = scene
-        .renderer
-        .sensor()
-        .bit_depth
-        .saturating_sub(8 * bytes as u32);
-    if bytes == 1 {
-        for (t, &v) in target.iter_mut().zip(out.iter()) {
-            *t = (v >> shift).min(255) as u8;
-        }
-    } else {
-        for (t, &v) in target.chunks_exact_mut(2).zip(out.iter()) {
-            t.copy_from_slice(&v.to_le_bytes());
-        }
+    let shift = scene.renderer.sensor().bit_depth.saturating_sub(8);
+    for (t, &v) in target.iter_mut().zip(out.iter()) {
+        *t = (v >> shift).min(255) as u8;
     }
     // The buffer's device timestamp: the scenario's time of its exposure (ns; scenarios start at 0).
     // SAFETY: as above.
@@ -147,7 +135,8 @@ unsafe impl Send for FakeGigeCamera {}
 unsafe impl Sync for FakeGigeCamera {}
 
 impl FakeGigeCamera {
-    /// Starts the fake camera on 127.0.0.1, rendering `scenario` with `sensor` (8 bits: Mono8; more: Mono16), noise
+    /// Starts the fake camera on 127.0.0.1, rendering `scenario` with `sensor` (served as Mono8, deeper sensors shifted
+    /// down to 8 bits), noise
     /// seeded with `seed`. Refused if 127.0.0.1's GVCP port is taken (another fake camera).
     pub fn start(
         scenario: &Scenario,

@@ -9,7 +9,9 @@ use roitrack_image::SensorModel;
 use roitrack_pipeline::{LoopConfig, LoopReport, run_loop};
 use roitrack_sim::Scenario;
 
-use crate::{CameraStats, FakeGigeCamera, GenicamCamera, GenicamError, GenicamOptions};
+use crate::{
+    CameraStats, FakeGigeCamera, GenicamCamera, GenicamError, GenicamOptions, PixelFormatChoice,
+};
 
 /// Options of a live run.
 ///
@@ -178,6 +180,12 @@ pub fn run_fake(
     stop: Arc<AtomicBool>,
     on_start: impl FnOnce(Arc<FakeGigeCamera>),
 ) -> Result<LiveReport, GenicamError> {
+    if options.camera.pixel_format != PixelFormatChoice::Mono8 {
+        return Err(GenicamError::Fake(format!(
+            "it serves Mono8 only, not {:?}",
+            options.camera.pixel_format
+        )));
+    }
     let fake = Arc::new(FakeGigeCamera::start(
         scenario,
         SensorModel::default(),
