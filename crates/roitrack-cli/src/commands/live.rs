@@ -194,6 +194,10 @@ pub fn run(args: &LiveArgs) -> Result<()> {
         &[],
         &[("--poses", &args.poses), ("--twists", &args.twists)],
     )?;
+    // The truth's folder first: the estimates may go into it.
+    if let Some(dir) = &args.truth_out {
+        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    }
     // Started before the camera, so that a bad output path fails first; finished whatever the run's end.
     let mut writer = EstimateWriter::create(&args.poses, &args.twists, None)?;
     let scenario = Scenario::new(args.scenario.into(), args.seed);
@@ -226,8 +230,6 @@ pub fn run(args: &LiveArgs) -> Result<()> {
             ..LiveOptions::default()
         };
         if let Some(dir) = &args.truth_out {
-            std::fs::create_dir_all(dir)
-                .with_context(|| format!("cannot create {}", dir.display()))?;
             let (poses, twists) = truth_samples(&scenario, options.duration_s, options.rate_hz);
             roitrack::formats::write_tum(dir.join(super::simulate::TRUTH_POSES_FILE), &poses)?;
             roitrack::formats::write_twists_csv(
