@@ -228,10 +228,20 @@ fn feature_error(address: &str, feature: &'static str, e: impl std::fmt::Display
     }
 }
 
-/// `value` moved down onto a multiple of `increment` and into `[0, max]`.
+/// A window of `size` centred on `roi`, its offsets on the nearest multiples of `increments`, within `sensor`.
+fn window_on(roi: &Roi, size: (u32, u32), increments: (u32, u32), sensor: (u32, u32)) -> Roi {
+    let (w, h) = size;
+    let x = i64::from(roi.x0) + i64::from(roi.width / 2) - i64::from(w / 2);
+    let y = i64::from(roi.y0) + i64::from(roi.height / 2) - i64::from(h / 2);
+    let x0 = snap(x, increments.0, sensor.0.saturating_sub(w));
+    let y0 = snap(y, increments.1, sensor.1.saturating_sub(h));
+    Roi::new(x0, y0, w, h)
+}
+
+/// `value` moved onto the nearest multiple of `increment` and into `[0, max]` (onto a multiple too).
 fn snap(value: i64, increment: u32, max: u32) -> u32 {
     let inc = i64::from(increment.max(1));
-    let snapped = value.div_euclid(inc) * inc;
+    let snapped = (value + inc / 2).div_euclid(inc) * inc;
     let max_snapped = i64::from(max).div_euclid(inc) * inc;
     snapped.clamp(0, max_snapped) as u32
 }
@@ -442,12 +452,7 @@ impl GenicamCamera {
     /// The window of the camera's size on `roi`'s centre, on the offsets' increments, within the sensor's part that
     /// the camera model covers.
     pub fn window_for(&self, roi: &Roi) -> Roi {
-        let (w, h) = self.window;
-        let cx = i64::from(roi.x0) + i64::from(roi.width / 2) - i64::from(w / 2);
-        let cy = i64::from(roi.y0) + i64::from(roi.height / 2) - i64::from(h / 2);
-        let x0 = snap(cx, self.increments.0, self.full_size.0.saturating_sub(w));
-        let y0 = snap(cy, self.increments.1, self.full_size.1.saturating_sub(h));
-        Roi::new(x0, y0, w, h)
+        window_on(roi, self.window, self.increments, self.full_size)
     }
 
     fn move_to(&mut self, x0: u32, y0: u32) -> Result<(), GrabError> {
@@ -679,11 +684,47 @@ mod tests {
     use super::*;
 
     #[test]
-    fn offsets_snap_down_onto_increments_within_the_sensor() {
+    fn offsets_snap_onto_the_nearest_increment_within_the_sensor() {
         assert_eq!(snap(37, 4, 1000), 36);
+        assert_eq!(snap(39, 4, 1000), 40);
         assert_eq!(snap(-5, 4, 1000), 0);
         assert_eq!(snap(2000, 8, 1001), 1000);
         assert_eq!(round_up(30, 16), 32);
         assert_eq!(round_up(32, 1), 32);
+    }
+
+    #[test]
+    fn the_window_is_centred_on_the_roi_within_half_an_increment() {
+        let sensor = (1024, 1024);
+        // A 20 px ROI whose centre is (110, 210): a 32 px window from (94, 194), on increments of 1 and 16.
+        let roi = Roi::new(100, 200, 20, 20);
+        assert_eq!(
+            window_on(&roi, (32, 32), (1, 1), sensor),
+            Roi::new(94, 194, 32, 32)
+        );
+        assert_eq!(
+            window_on(&roi, (32, 32), (16, 16), sensor),
+            Roi::new(96, 192, 32, 32)
+        );
+        // Near the edges it stays on the sensor.
+        assert_eq!(
+            window_on(&Roi::new(0, 0, 12, 12), (32, 32), (4, 4), sensor),
+            Roi::new(0, 0, 32, 32)
+        );
+        let corner = window_on(&Roi::new(1010, 1012, 12, 12), (32, 32), (8, 8), sensor);
+        assert_eq!((corner.x0, corner.y0), (992, 992));
+        for x0 in 0..1000 {
+            let window = window_on(&Roi::new(x0, 500, 16, 16), (32, 32), (8, 2), sensor);
+            assert!(
+                window.fits_in(1024, 1024)
+                    && window.x0.is_multiple_of(8)
+                    && window.y0.is_multiple_of(2)
+            );
+            let centre_error = (i64::from(window.x0) + 16) - (i64::from(x0) + 8);
+            assert!(
+                centre_error.abs() <= 4 || !(8..=984).contains(&x0),
+                "{x0}: {window:?}"
+            );
+        }
     }
 }
