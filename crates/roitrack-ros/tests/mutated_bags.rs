@@ -104,3 +104,18 @@ fn a_chunk_index_pointing_outside_the_file_is_an_error() {
         }
     }
 }
+
+/// Found by the fuzz target `ros_bag` in CI: a chunk whose message record is shorter than its fields, on which mcap
+/// 0.26's linear reader panics (a slice out of range) while streaming the chunk; the reader catches it and names the
+/// bag.
+#[test]
+fn a_chunk_record_shorter_than_its_fields_is_an_error() {
+    let bytes = std::fs::read(concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/tests/data/chunk_record_short_field.mcap"
+    ))
+    .unwrap();
+    if let Err(e) = read_all(bytes) {
+        check_error(&e);
+    }
+}
