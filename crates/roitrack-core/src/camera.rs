@@ -167,23 +167,10 @@ impl PlumbBob {
     /// Distorted normalised point of an undistorted one, and the 2x2 Jacobian of that map.
     #[inline]
     pub fn distort_with_jacobian(&self, n: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
-        let (x, y) = (n.x, n.y);
-        let r2 = x * x + y * y;
+        let r2 = n.x * n.x + n.y * n.y;
         let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
         let d_radial_d_r2 = self.k1 + r2 * (2.0 * self.k2 + 3.0 * r2 * self.k3);
-        let xy = x * y;
-        let distorted = Vector2::new(
-            x * radial + 2.0 * self.p1 * xy + self.p2 * (r2 + 2.0 * x * x),
-            y * radial + self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * xy,
-        );
-        let cross = 2.0 * xy * d_radial_d_r2 + 2.0 * self.p1 * x + 2.0 * self.p2 * y;
-        let jacobian = Matrix2::new(
-            radial + 2.0 * x * x * d_radial_d_r2 + 2.0 * self.p1 * y + 6.0 * self.p2 * x,
-            cross,
-            cross,
-            radial + 2.0 * y * y * d_radial_d_r2 + 6.0 * self.p1 * y + 2.0 * self.p2 * x,
-        );
-        (distorted, jacobian)
+        radial_tangential(n, r2, radial, d_radial_d_r2, self.p1, self.p2)
     }
 
     #[inline]
@@ -197,22 +184,36 @@ impl PlumbBob {
         if self.is_identity() {
             return Some(*distorted);
         }
-        let mut n = *distorted;
-        for _ in 0..50 {
-            let (d, j) = self.distort_with_jacobian(&n);
-            let residual = d - distorted;
-            if residual.norm() < 1e-14 {
-                return Some(n);
-            }
-            let step = j.try_inverse()? * residual;
-            n -= step;
-            if !n.x.is_finite() || !n.y.is_finite() {
-                return None;
-            }
-        }
-        let residual = (self.distort(&n) - distorted).norm();
-        (residual < 1e-11).then_some(n)
+        undistort_by_newton(distorted, |n| self.distort_with_jacobian(n))
     }
+}
+
+/// The Brown-Conrady form shared by plumb_bob and rational_polynomial: the normalised point `n` (with `r2 = |n|²`)
+/// scaled by the radial factor `radial(r²)` plus the tangential terms `p1`, `p2`, and the 2x2 Jacobian of that map
+/// from `radial` and its derivative `d radial / d r²`.
+#[inline(always)]
+fn radial_tangential(
+    n: &Vector2<f64>,
+    r2: f64,
+    radial: f64,
+    d_radial_d_r2: f64,
+    p1: f64,
+    p2: f64,
+) -> (Vector2<f64>, Matrix2<f64>) {
+    let (x, y) = (n.x, n.y);
+    let xy = x * y;
+    let distorted = Vector2::new(
+        x * radial + 2.0 * p1 * xy + p2 * (r2 + 2.0 * x * x),
+        y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * xy,
+    );
+    let cross = 2.0 * xy * d_radial_d_r2 + 2.0 * p1 * x + 2.0 * p2 * y;
+    let jacobian = Matrix2::new(
+        radial + 2.0 * x * x * d_radial_d_r2 + 2.0 * p1 * y + 6.0 * p2 * x,
+        cross,
+        cross,
+        radial + 2.0 * y * y * d_radial_d_r2 + 6.0 * p1 * y + 2.0 * p2 * x,
+    );
+    (distorted, jacobian)
 }
 
 /// Newton's method for the undistorted point `n` with `distort(n) = distorted`, to 1e-14 in normalised units, as
@@ -300,27 +301,13 @@ impl RationalPolynomial {
     /// Distorted normalised point of an undistorted one, and the 2x2 Jacobian of that map.
     #[inline]
     pub fn distort_with_jacobian(&self, n: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
-        let (x, y) = (n.x, n.y);
-        let r2 = x * x + y * y;
+        let r2 = n.x * n.x + n.y * n.y;
         let num = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
         let den = 1.0 + r2 * (self.k4 + r2 * (self.k5 + r2 * self.k6));
         let d_num = self.k1 + r2 * (2.0 * self.k2 + 3.0 * r2 * self.k3);
         let d_den = self.k4 + r2 * (2.0 * self.k5 + 3.0 * r2 * self.k6);
-        let radial = num / den;
         let d_radial_d_r2 = (d_num * den - num * d_den) / (den * den);
-        let xy = x * y;
-        let distorted = Vector2::new(
-            x * radial + 2.0 * self.p1 * xy + self.p2 * (r2 + 2.0 * x * x),
-            y * radial + self.p1 * (r2 + 2.0 * y * y) + 2.0 * self.p2 * xy,
-        );
-        let cross = 2.0 * xy * d_radial_d_r2 + 2.0 * self.p1 * x + 2.0 * self.p2 * y;
-        let jacobian = Matrix2::new(
-            radial + 2.0 * x * x * d_radial_d_r2 + 2.0 * self.p1 * y + 6.0 * self.p2 * x,
-            cross,
-            cross,
-            radial + 2.0 * y * y * d_radial_d_r2 + 6.0 * self.p1 * y + 2.0 * self.p2 * x,
-        );
-        (distorted, jacobian)
+        radial_tangential(n, r2, num / den, d_radial_d_r2, self.p1, self.p2)
     }
 
     #[inline]
