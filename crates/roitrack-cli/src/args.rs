@@ -384,19 +384,18 @@ impl RigArgs {
     /// `base` on the camera and target given, moved, sped up and cut as asked, checked to keep the target in the
     /// image.
     pub fn scenario(&self, base: Scenario) -> Result<Scenario> {
-        let args = self;
         let mut scenario = base;
-        if let Some(path) = &args.camera {
+        if let Some(path) = &self.camera {
             let options = roitrack::formats::CameraFileOptions {
-                image_size: args.image_size,
-                camera_name: args.camera_name.clone(),
+                image_size: self.image_size,
+                camera_name: self.camera_name.clone(),
             };
             scenario = scenario.with_camera(roitrack::formats::read_camera_file(path, &options)?);
         }
-        if let Some(path) = &args.target {
+        if let Some(path) = &self.target {
             scenario = scenario.with_target(roitrack::formats::read_target_csv_in(
                 path,
-                args.target_units.map(Into::into),
+                self.target_units.map(Into::into),
             )?);
         }
         let positive = |name: &str, value: f64| {
@@ -406,14 +405,14 @@ impl RigArgs {
                 Err(anyhow!("{name} must be a positive number, got {value}"))
             }
         };
-        let speed = positive("--speed-scale", args.speed_scale)?;
+        let speed = positive("--speed-scale", self.speed_scale)?;
         if speed != 1.0 {
             scenario = scenario.with_speed_scale(speed);
         }
-        if let Some(distance) = args.distance_m {
+        if let Some(distance) = self.distance_m {
             scenario = scenario.with_distance_m(positive("--distance-m", distance)?);
         }
-        if let Some(duration) = args.duration_s {
+        if let Some(duration) = self.duration_s {
             scenario = scenario.with_duration_s(positive("--duration-s", duration)?);
         }
         let margin = scenario.min_image_margin_px();

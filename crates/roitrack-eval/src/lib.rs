@@ -171,7 +171,12 @@ pub fn estimate_errors(
         TimeOffset::Auto => {
             let coarse =
                 trajectory::find_time_offset(truth_poses, est_poses, opts.max_time_offset_s)?;
-            refine_time_offset(truth_poses, est_poses, coarse, opts.alignment)
+            refine_time_offset(
+                (truth_poses, &truth_times),
+                (est_poses, &est_times),
+                coarse,
+                opts.alignment,
+            )
         }
     };
     if let Some(interval) = opts.rpe_interval_s
@@ -476,18 +481,16 @@ pub fn samples_of(estimates: &[Estimate]) -> (Vec<PoseSample>, Vec<TwistSample>)
 /// correlate broadly and place the offset within a few periods; positions, which a moving target changes by
 /// millimetres a millisecond, pin it down. Golden-section search.
 fn refine_time_offset(
-    truth_poses: &[PoseSample],
-    est_poses: &[PoseSample],
+    (truth_poses, truth_times): (&[PoseSample], &[f64]),
+    (est_poses, est_times): (&[PoseSample], &[f64]),
     coarse: f64,
     alignment: Alignment,
 ) -> f64 {
-    let truth_times: Vec<f64> = truth_poses.iter().map(|p| p.t_s).collect();
-    let est_times: Vec<f64> = est_poses.iter().map(|p| p.t_s).collect();
-    let period = median_period(&est_times);
+    let period = median_period(est_times);
     let cost = |offset: f64| -> f64 {
         let (mut from, mut to) = (Vec::new(), Vec::new());
         for (i, &t) in est_times.iter().enumerate() {
-            if let Ok(at) = align::locate(&truth_times, i, t + offset, 0.0) {
+            if let Ok(at) = align::locate(truth_times, i, t + offset, 0.0) {
                 from.push(est_poses[i].cam_from_obj.translation.vector);
                 to.push(at.pose(truth_poses).1);
             }

@@ -108,30 +108,32 @@ pub fn run(args: &PlotArgs) -> Result<()> {
             &twists.iter().map(|t| t.t_s).collect::<Vec<_>>(),
         )?;
     }
-    let diagnostics = match &args.diagnostics {
-        Some(path) => {
+    let diagnostics = args
+        .diagnostics
+        .as_ref()
+        .map(|path| -> Result<_> {
             let rows = roitrack::formats::read_diagnostics_csv(path)?;
             check_times(
                 "diagnostics",
                 path,
                 &rows.iter().map(|r| r.t_s).collect::<Vec<_>>(),
             )?;
-            Some(rows)
-        }
-        None => None,
-    };
-    let covariance = match &args.covariance {
-        Some(path) => {
+            Ok(rows)
+        })
+        .transpose()?;
+    let covariance = args
+        .covariance
+        .as_ref()
+        .map(|path| -> Result<_> {
             let rows = roitrack::formats::read_covariance_csv(path)?;
             check_times(
                 "covariance",
                 path,
                 &rows.iter().map(|r| r.t_s).collect::<Vec<_>>(),
             )?;
-            Some(rows)
-        }
-        None => None,
-    };
+            Ok(rows)
+        })
+        .transpose()?;
     let sigmas: Option<Vec<[f64; 12]>> = match (&covariance, &diagnostics) {
         (Some(rows), _) => Some(
             rows.iter()

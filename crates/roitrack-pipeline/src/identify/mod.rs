@@ -423,7 +423,7 @@ pub fn identify(
         .as_ref()
         .and_then(|(plane, _)| TargetLattice::of(plane));
     let hypothesis_groups: HypothesisGroups = match (&planar, lattice) {
-        (Some(_), Some(lattice)) => lattice_hypotheses(&lattice, &ideal, &areas_px, &index),
+        (Some(_), Some(lattice)) => lattice_hypotheses(lattice, &ideal, &areas_px, &index),
         (None, _) => {
             let spread: Vec<Vector3<f64>> = points.iter().map(|p| p.point_in_obj_m).collect();
             by_size(quadruple_hypotheses(
@@ -597,7 +597,7 @@ fn finish(
 /// The lattice hypotheses: growth from a few seeds (each blob in one grown lattice at most), each lattice laid on the
 /// target's every way; one group of hypotheses per grown lattice, the largest first.
 fn lattice_hypotheses(
-    lattice: &TargetLattice,
+    lattice: TargetLattice,
     ideal: &[Vector2<f64>],
     areas_px: &[f64],
     index: &PointIndex,
@@ -664,14 +664,9 @@ fn lattice_hypotheses(
     // join the growth and stick out of the target.
     // Made as the search asks for them: the lenient ones are many, and seldom needed.
     let count = grown_sets.len();
-    let lattice = lattice.clone();
     Box::new((0..2 * count).map(move |k| {
-        let grown = &grown_sets[k % count];
-        if k < count {
-            placements(&lattice, grown, 0.9, 1)
-        } else {
-            placements(&lattice, grown, 0.5, 3)
-        }
+        let (min_fraction, slack) = if k < count { (0.9, 1) } else { (0.5, 3) };
+        placements(&lattice, &grown_sets[k % count], min_fraction, slack)
     }))
 }
 
