@@ -10,6 +10,8 @@ mod common;
 use common::{fails, ok};
 #[path = "common/evo.rs"]
 mod evo;
+#[path = "common/run.rs"]
+mod run;
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -25,7 +27,8 @@ fn f(v: &serde_json::Value, key: &str) -> f64 {
         .unwrap_or_else(|| panic!("{key} missing in {v}"))
 }
 
-/// A simulated run tracked in `dir`: truth `gt_poses.tum`, `gt_twists.csv`; estimates `est.tum`, `est.csv`.
+/// A simulated run tracked in `dir`: truth `gt_poses.tum`, `gt_twists.csv`; estimates `est.tum`, `est.csv` (and
+/// `diag.csv`, `cov.csv`).
 fn tracked_run(dir: &Path) {
     ok(&[
         "simulate",
@@ -36,19 +39,7 @@ fn tracked_run(dir: &Path) {
         "--out",
         p(dir),
     ]);
-    ok(&[
-        "track",
-        "--camera",
-        p(&dir.join("camera.yaml")),
-        "--target",
-        p(&dir.join("target.csv")),
-        "--measurements",
-        p(&dir.join("measurements.csv")),
-        "--poses",
-        p(&dir.join("est.tum")),
-        "--twists",
-        p(&dir.join("est.csv")),
-    ]);
+    run::track_simulated(dir);
 }
 
 /// The estimates of `dir` written again in another frame and on a clock `offset_s` behind, as `moved.tum`/`.csv`.

@@ -6,6 +6,8 @@ use std::path::Path;
 
 mod common;
 use common::{fails, ok};
+#[path = "common/run.rs"]
+mod run;
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -92,23 +94,7 @@ fn own_camera_and_target_simulated_tracked_scored_and_plotted() {
     let ratio = gt_peak_speed(&mine) / gt_peak_speed(&plain);
     assert!((ratio - 0.5).abs() < 0.01, "{ratio}");
 
-    ok(&[
-        "track",
-        "--camera",
-        p(&mine.join("camera.yaml")),
-        "--target",
-        p(&mine.join("target.csv")),
-        "--measurements",
-        p(&mine.join("measurements.csv")),
-        "--poses",
-        p(&mine.join("est.tum")),
-        "--twists",
-        p(&mine.join("est.csv")),
-        "--diagnostics",
-        p(&mine.join("diag.csv")),
-        "--covariance",
-        p(&mine.join("cov.csv")),
-    ]);
+    run::track_simulated(&mine);
     let metrics: serde_json::Value = serde_json::from_str(&ok(&[
         "eval",
         "--truth",

@@ -5,6 +5,8 @@ use std::path::Path;
 
 mod common;
 use common::{fails, ok};
+#[path = "common/run.rs"]
+mod run;
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -13,23 +15,7 @@ fn p(path: &Path) -> &str {
 /// Simulates `scenario` into `dir` and tracks it, writing est.tum, est.csv, diag.csv and cov.csv.
 fn tracked(dir: &Path, scenario: &str) {
     ok(&["simulate", "--scenario", scenario, "--out", p(dir)]);
-    ok(&[
-        "track",
-        "--camera",
-        p(&dir.join("camera.yaml")),
-        "--target",
-        p(&dir.join("target.csv")),
-        "--measurements",
-        p(&dir.join("measurements.csv")),
-        "--poses",
-        p(&dir.join("est.tum")),
-        "--twists",
-        p(&dir.join("est.csv")),
-        "--diagnostics",
-        p(&dir.join("diag.csv")),
-        "--covariance",
-        p(&dir.join("cov.csv")),
-    ]);
+    run::track_simulated(dir);
 }
 
 fn png_size(path: &Path) -> (u32, u32) {
