@@ -1,6 +1,7 @@
 //! `roitrack live --fake` (feature `genicam`): the whole command through Aravis' fake GigE camera on 127.0.0.1, its
-//! outputs read back, and Ctrl-C. Only one fake camera can own 127.0.0.1: the tests take turns (a lock here; CI also
-//! runs them on one test thread).
+//! outputs read back, Ctrl-C, a pixel format the camera does not offer; `roitrack live --device`: an id refused
+//! without `--allow-discovery`, an address where no camera answers failing fast. Only one fake camera can own
+//! 127.0.0.1: the tests take turns (a lock here; CI also runs them on one test thread).
 #![cfg(all(feature = "genicam", unix))]
 
 use std::process::{Command, Stdio};
@@ -45,6 +46,10 @@ fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
         String::from_utf8_lossy(&out.stderr)
     );
     assert!(stdout.contains("moved as asked 100.00 %"), "{stdout}");
+    assert!(
+        stdout.contains("latency from buffer timestamp to estimate p50/p99"),
+        "{stdout}"
+    );
     assert!(truth.join("gt_poses.tum").is_file() && truth.join("gt_twists.csv").is_file());
     // The estimates also as a ROS 2 bag (MCAP, completed: its magic at both ends).
     let bytes = std::fs::read(&bag).unwrap();
@@ -119,4 +124,89 @@ fn ctrl_c_stops_the_run_and_writes_every_output() {
         std::fs::read(&bag).unwrap().ends_with(b"\x89MCAP0\r\n"),
         "the bag is not completed"
     );
+}
+
+#[test]
+fn a_pixel_format_the_fake_camera_does_not_offer_is_refused_listing_those_it_does() {
+    let _turn = turn();
+    let dir = tempfile::tempdir().unwrap();
+    let out = roitrack()
+        .args([
+            "live",
+            "--fake",
+            "--duration",
+            "0.5",
+            "--pixel-format",
+            "mono12p",
+        ])
+        .arg("--poses")
+        .arg(dir.path().join("p.tum"))
+        .arg("--twists")
+        .arg(dir.path().join("t.csv"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("Mono12p is not offered; the camera offers")
+            && stderr.contains("Mono8")
+            && stderr.contains("Mono16"),
+        "{stderr}"
+    );
+}
+
+/// `roitrack live --device ADDRESS` on a simulated run's calibration and target; its output and how long it took.
+fn live_device(address: &str) -> (std::process::Output, Duration) {
+    let dir = tempfile::tempdir().unwrap();
+    let sim = roitrack()
+        .args(["simulate", "--scenario", "static", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        sim.status.success(),
+        "{}",
+        String::from_utf8_lossy(&sim.stderr)
+    );
+    let start = Instant::now();
+    let out = roitrack()
+        .args(["live", "--device", address, "--duration", "1", "--camera"])
+        .arg(dir.path().join("camera.yaml"))
+        .arg("--target")
+        .arg(dir.path().join("target.csv"))
+        .arg("--poses")
+        .arg(dir.path().join("p.tum"))
+        .arg("--twists")
+        .arg(dir.path().join("t.csv"))
+        .output()
+        .unwrap();
+    (out, start.elapsed())
+}
+
+#[test]
+fn a_device_id_is_refused_without_allow_discovery_and_nothing_is_sent() {
+    let _turn = turn();
+    let (out, took) = live_device("Aravis-Fake-GV01");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("'Aravis-Fake-GV01'") && stderr.contains("--allow-discovery"),
+        "{stderr}"
+    );
+    assert!(took < Duration::from_secs(5), "{took:?}");
+}
+
+#[test]
+fn a_device_address_where_no_camera_answers_fails_fast_with_a_clear_error() {
+    let _turn = turn();
+    // No fake camera runs: nothing answers on 127.0.0.2.
+    let (out, took) = live_device("127.0.0.2");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr
+            .contains("cannot open the camera at '127.0.0.2': no GigE Vision camera answers there"),
+        "{stderr}"
+    );
+    assert!(took < Duration::from_secs(15), "{took:?}");
 }

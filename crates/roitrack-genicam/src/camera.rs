@@ -5,6 +5,7 @@
 //! ([`GenicamOptions::roi_size_px`]) and moves it onto each ROI the scheduler asks for. The full frame of an
 //! initialisation is the one place where the size changes.
 
+use std::net::{IpAddr, Ipv4Addr, SocketAddrV4, UdpSocket};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -18,39 +19,129 @@ use thiserror::Error;
 use crate::ClockOffset;
 use crate::fake::SceneClock;
 
-/// The pixel formats roitrack reads (one value a pixel; 12 bits in a 16-bit container, little-endian).
+/// The pixel formats roitrack reads: one grey value a pixel, 8 bits, or 12 or 16 bits in a 16-bit little-endian
+/// container, or 12 bits packed two pixels in three bytes (`Mono12Packed`, GigE Vision's layout, and `Mono12p`, the
+/// PFNC layout of USB3 Vision and newer GigE cameras).
 ///
 /// ```
 /// use roitrack_genicam::PixelFormatChoice;
 /// assert_eq!(PixelFormatChoice::Mono12.bit_depth(), 12);
+/// assert_eq!(PixelFormatChoice::Mono12Packed.payload_bytes(32 * 32), 1536);
+/// assert_eq!(PixelFormatChoice::from_genicam_name("Mono16"), Some(PixelFormatChoice::Mono16));
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PixelFormatChoice {
     Mono8,
     Mono12,
     Mono16,
+    Mono12Packed,
+    Mono12p,
 }
 
+/// PFNC's `Mono12p` (Aravis 0.8 has no constant for it).
+const PIXEL_FORMAT_MONO_12_P: u32 = 0x010C_0047;
+
 impl PixelFormatChoice {
-    fn aravis(self) -> PixelFormat {
+    /// Every format roitrack reads, in the order of preference when none is asked for.
+    pub const ALL: [Self; 5] = [
+        Self::Mono8,
+        Self::Mono12,
+        Self::Mono16,
+        Self::Mono12Packed,
+        Self::Mono12p,
+    ];
+
+    /// The value the camera's `PixelFormat` feature takes (and buffers report).
+    fn pfnc(self) -> u32 {
         match self {
-            Self::Mono8 => PixelFormat::MONO_8,
-            Self::Mono12 => PixelFormat::MONO_12,
-            Self::Mono16 => PixelFormat::MONO_16,
+            Self::Mono8 => PixelFormat::MONO_8.raw(),
+            Self::Mono12 => PixelFormat::MONO_12.raw(),
+            Self::Mono16 => PixelFormat::MONO_16.raw(),
+            Self::Mono12Packed => PixelFormat::MONO_12_PACKED.raw(),
+            Self::Mono12p => PIXEL_FORMAT_MONO_12_P,
         }
+    }
+
+    /// The name of the entry of the GenICam `PixelFormat` enumeration.
+    pub fn genicam_name(self) -> &'static str {
+        match self {
+            Self::Mono8 => "Mono8",
+            Self::Mono12 => "Mono12",
+            Self::Mono16 => "Mono16",
+            Self::Mono12Packed => "Mono12Packed",
+            Self::Mono12p => "Mono12p",
+        }
+    }
+
+    /// The format of a GenICam `PixelFormat` entry, if roitrack reads it.
+    pub fn from_genicam_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|f| f.genicam_name() == name)
     }
 
     /// Bits of a pixel value.
     pub fn bit_depth(self) -> u8 {
         match self {
             Self::Mono8 => 8,
-            Self::Mono12 => 12,
             Self::Mono16 => 16,
+            Self::Mono12 | Self::Mono12Packed | Self::Mono12p => 12,
         }
     }
 
-    fn bytes(self) -> usize {
-        if self == Self::Mono8 { 1 } else { 2 }
+    /// Bytes of an image of `pixels` pixels.
+    pub fn payload_bytes(self, pixels: usize) -> usize {
+        match self {
+            Self::Mono8 => pixels,
+            Self::Mono12 | Self::Mono16 => 2 * pixels,
+            Self::Mono12Packed | Self::Mono12p => (3 * pixels).div_ceil(2),
+        }
+    }
+
+    /// The pixel values of `raw` (at least [`Self::payload_bytes`] of `out.len()`) into `out`, row-major.
+    ///
+    /// ```
+    /// use roitrack_genicam::PixelFormatChoice;
+    /// // Two 12-bit pixels 0xABC and 0x123: GigE Vision's Mono12Packed keeps each pixel's 8 high bits in a byte of
+    /// // its own and their low 4 bits together in the middle byte; PFNC's Mono12p packs them least significant first.
+    /// let mut out = [0u16; 2];
+    /// PixelFormatChoice::Mono12Packed.unpack(&[0xAB, 0x3C, 0x12], &mut out);
+    /// assert_eq!(out, [0xABC, 0x123]);
+    /// PixelFormatChoice::Mono12p.unpack(&[0xBC, 0x3A, 0x12], &mut out);
+    /// assert_eq!(out, [0xABC, 0x123]);
+    /// ```
+    pub fn unpack(self, raw: &[u8], out: &mut [u16]) {
+        match self {
+            Self::Mono8 => {
+                for (o, &v) in out.iter_mut().zip(raw) {
+                    *o = u16::from(v);
+                }
+            }
+            Self::Mono12 | Self::Mono16 => {
+                let max = ((1u32 << self.bit_depth()) - 1) as u16;
+                for (o, pair) in out.iter_mut().zip(raw.chunks_exact(2)) {
+                    *o = u16::from_le_bytes([pair[0], pair[1]]).min(max);
+                }
+            }
+            Self::Mono12Packed | Self::Mono12p => {
+                for (pair, bytes) in out.chunks_mut(2).zip(raw.chunks(3)) {
+                    let b = |i: usize| u16::from(bytes.get(i).copied().unwrap_or(0));
+                    let (first, second) = if self == Self::Mono12Packed {
+                        ((b(0) << 4) | (b(1) & 0x0F), (b(2) << 4) | (b(1) >> 4))
+                    } else {
+                        (b(0) | ((b(1) & 0x0F) << 8), (b(1) >> 4) | (b(2) << 4))
+                    };
+                    pair[0] = first;
+                    if let Some(p) = pair.get_mut(1) {
+                        *p = second;
+                    }
+                }
+            }
+        }
+    }
+}
+
+impl std::fmt::Display for PixelFormatChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.genicam_name())
     }
 }
 
@@ -75,7 +166,7 @@ pub enum TriggerChoice {
 /// use roitrack_genicam::{GenicamOptions, PixelFormatChoice};
 /// let options = GenicamOptions {
 ///     address: "192.168.1.20".into(),
-///     pixel_format: PixelFormatChoice::Mono12,
+///     pixel_format: Some(PixelFormatChoice::Mono12),
 ///     exposure_us: Some(100.0),
 ///     ..GenicamOptions::default()
 /// };
@@ -83,12 +174,18 @@ pub enum TriggerChoice {
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct GenicamOptions {
-    /// The camera: its IP address (GigE Vision) or its Aravis id (`Vendor-Model-Serial`, USB3 Vision too). Never a
-    /// scan of the network.
+    /// The camera: its IPv4 address (GigE Vision, optionally with the GVCP port `:3956`), opened directly, with no
+    /// discovery. Anything else (an Aravis id `Vendor-Model-Serial`, a USB3 Vision camera) is refused unless
+    /// [`Self::allow_discovery`]: Aravis finds such a camera by a discovery that broadcasts on every network interface.
     pub address: String,
+    /// Let Aravis search for a camera given by its id (a GigE Vision discovery broadcast on every interface, then the
+    /// USB bus). Off by default.
+    pub allow_discovery: bool,
     /// Refuse a camera whose serial number is not this one (the fake camera's check that it opened its own).
     pub expected_serial: Option<String>,
-    pub pixel_format: PixelFormatChoice,
+    /// The pixel format; `None`: Mono8 if the camera offers it, else the first of [`PixelFormatChoice::ALL`] it
+    /// offers. One the camera does not offer is refused, with the list of those it does.
+    pub pixel_format: Option<PixelFormatChoice>,
     /// Side of the square window every ROI is read through (px), rounded up to the camera's width and height
     /// increments.
     pub roi_size_px: u32,
@@ -101,24 +198,28 @@ pub struct GenicamOptions {
     pub timeout_s: f64,
     /// After this many lost grabs in a row (and no answer to a register read), the camera is taken as gone.
     pub disconnect_after: u32,
-    /// The device's timestamps are already on the loop's clock (the fake camera, whose clock is the scenario's);
-    /// otherwise they are converted to the host's clock through the estimated offset ([`ClockOffset`]).
-    pub device_clock_is_loop_clock: bool,
+    /// GigE: the stream socket's receive buffer (bytes; the kernel caps it at `net.core.rmem_max`). A full frame
+    /// arrives as one burst of packets: too small a buffer loses packets.
+    pub socket_buffer_bytes: usize,
+    /// GigE: ask the camera to send lost packets again (Aravis' packet resend).
+    pub packet_resend: bool,
 }
 
 impl Default for GenicamOptions {
     fn default() -> Self {
         Self {
             address: String::new(),
+            allow_discovery: false,
             expected_serial: None,
-            pixel_format: PixelFormatChoice::Mono8,
+            pixel_format: None,
             roi_size_px: 32,
             exposure_us: None,
             trigger: TriggerChoice::Software,
             frame_rate_hz: None,
             timeout_s: 0.2,
             disconnect_after: 5,
-            device_clock_is_loop_clock: false,
+            socket_buffer_bytes: 8 << 20,
+            packet_resend: true,
         }
     }
 }
@@ -178,6 +279,18 @@ pub struct CameraStats {
     pub full_frames: u64,
     /// Per ROI: host time from the start of the grab (move, trigger) to the buffer in hand (µs).
     pub grab_us: Vec<f64>,
+    /// Per ROI: its time on the loop's clock (s, what the estimates' `t_ref_s` refer to) and the host time from its
+    /// buffer's timestamp (the device time on the host's clock, through the clock offset's estimate) to the grab's
+    /// return (µs). With the loop's grab-to-estimate latency, the latency from buffer timestamp to estimate
+    /// ([`crate::LiveReport::timestamp_to_estimate_us`]).
+    pub timestamp_to_grab_us: Vec<(f64, f64)>,
+    /// The fake camera: ROIs it exposed at another scene time than the ROI's slot (free run: a frame begun before
+    /// the slot's time was set), each placed at its own time.
+    pub retimed: u64,
+    /// Aravis' stream: buffers it dropped because none was free to receive them (`underruns`), and buffers it gave
+    /// up on (`failures`: missing packets, timeouts), whether or not roitrack was waiting for them.
+    pub driver_underruns: u64,
+    pub driver_failures: u64,
     /// `device - host` clock offset (s): the estimate at the end, and how far it moved during the run.
     pub clock_offset_s: Option<f64>,
     pub clock_change_s: Option<f64>,
@@ -210,6 +323,7 @@ pub struct GenicamCamera {
     increments: (u32, u32),
     /// The frame read at initialisation (the camera model's size).
     full_size: (u32, u32),
+    pixel_format: PixelFormatChoice,
     current: Option<(u32, u32)>,
     stats: CameraStats,
     clock: ClockOffset,
@@ -252,23 +366,124 @@ fn round_up(value: u32, increment: u32) -> u32 {
     value.div_ceil(inc) * inc
 }
 
+/// GigE Vision's control port (GVCP, UDP).
+const GVCP_PORT: u16 = 3956;
+
+/// What an address given by the user is.
+#[derive(Debug, Clone, PartialEq)]
+enum CameraAddress {
+    /// An IPv4 address (optionally with `:3956`): opened directly.
+    Gige(Ipv4Addr),
+    /// Not an address (an Aravis id): only Aravis' search finds it.
+    Id,
+    /// An address that cannot be a camera's, and why.
+    Invalid(String),
+}
+
+fn parse_address(text: &str) -> CameraAddress {
+    let ip = match (text.parse::<Ipv4Addr>(), text.parse::<SocketAddrV4>()) {
+        (Ok(ip), _) => ip,
+        (_, Ok(socket)) if socket.port() == GVCP_PORT => *socket.ip(),
+        (_, Ok(socket)) => {
+            return CameraAddress::Invalid(format!(
+                "GigE Vision cameras answer on UDP port {GVCP_PORT}, not {}: give the IP address alone",
+                socket.port()
+            ));
+        }
+        _ => return CameraAddress::Id,
+    };
+    if ip.is_unspecified() || ip.is_broadcast() || ip.is_multicast() {
+        return CameraAddress::Invalid(format!(
+            "{ip} is not one camera's address (unspecified, broadcast or multicast)"
+        ));
+    }
+    CameraAddress::Gige(ip)
+}
+
+/// Opens the camera of `options.address`: a GigE Vision camera at an IPv4 address through a device made for that
+/// address (Aravis' `arv_camera_new` would run a discovery broadcast when the address does not answer or is off the
+/// host's subnets); an id only with [`GenicamOptions::allow_discovery`].
+fn open_camera(options: &GenicamOptions) -> Result<Camera, GenicamError> {
+    let address = options.address.trim();
+    let open_error = |reason: String| GenicamError::Open {
+        address: address.to_string(),
+        reason,
+    };
+    match parse_address(address) {
+        CameraAddress::Gige(ip) => {
+            // The interface that routes to the camera: the kernel's choice for a socket connected to it (a UDP
+            // connect sends nothing).
+            let interface = UdpSocket::bind((Ipv4Addr::UNSPECIFIED, 0))
+                .and_then(|socket| {
+                    socket.connect((ip, GVCP_PORT))?;
+                    socket.local_addr()
+                })
+                .map_err(|e| open_error(format!("no route from this host ({e})")))?;
+            let device = aravis::GvDevice::new(
+                &gio::InetAddress::from(interface.ip()),
+                &gio::InetAddress::from(IpAddr::V4(ip)),
+            )
+            .map_err(|e| {
+                open_error(format!(
+                    "no GigE Vision camera answers there (UDP {GVCP_PORT}, from {}): {e}",
+                    interface.ip()
+                ))
+            })?;
+            Camera::with_device(&device).map_err(|e| open_error(e.to_string()))
+        }
+        CameraAddress::Invalid(reason) => Err(open_error(reason)),
+        CameraAddress::Id if address.is_empty() => Err(open_error(
+            "no address given (roitrack never scans the network for a camera)".into(),
+        )),
+        CameraAddress::Id if !options.allow_discovery => Err(open_error(
+            "not an IPv4 address: Aravis would look for a camera of that id by a discovery broadcast on every network \
+             interface (and a USB enumeration), which roitrack does only when asked. Give the camera's IP address, \
+             or allow the search (`--allow-discovery`; USB3 Vision cameras need it; `roitrack cameras --scan` lists \
+             the ids and addresses)"
+                .into(),
+        )),
+        CameraAddress::Id => Camera::new(Some(address)).map_err(|e| open_error(e.to_string())),
+    }
+}
+
+/// The pixel format to use: the one asked for if the camera offers it, else (none asked) Mono8 or the first of
+/// [`PixelFormatChoice::ALL`] it offers.
+fn choose_pixel_format(
+    asked: Option<PixelFormatChoice>,
+    offered: &[String],
+) -> Result<PixelFormatChoice, String> {
+    let offers = |f: PixelFormatChoice| offered.iter().any(|o| o == f.genicam_name());
+    let read: Vec<&str> = PixelFormatChoice::ALL
+        .iter()
+        .map(|f| f.genicam_name())
+        .collect();
+    match asked {
+        Some(f) if offers(f) => Ok(f),
+        Some(f) => Err(format!(
+            "{f} is not offered; the camera offers {} (roitrack reads {})",
+            offered.join(", "),
+            read.join(", ")
+        )),
+        None => PixelFormatChoice::ALL
+            .into_iter()
+            .find(|&f| offers(f))
+            .ok_or_else(|| {
+                format!(
+                    "the camera offers {}, none of which roitrack reads ({})",
+                    offered.join(", "),
+                    read.join(", ")
+                )
+            }),
+    }
+}
+
 impl GenicamCamera {
     /// Opens the camera at `options.address` (no scan), checks its serial number if asked, and sets it up: pixel
     /// format, exposure, trigger, a window of `roi_size_px` at the sensor's origin, a stream without Aravis' packet
     /// socket (which delivers frames in batches), and buffers large enough for a `full_size` frame.
     pub fn open(options: &GenicamOptions, full_size: (u32, u32)) -> Result<Self, GenicamError> {
         let address = options.address.as_str();
-        if address.is_empty() {
-            return Err(GenicamError::Open {
-                address: String::new(),
-                reason: "no address or id given (roitrack never scans the network for a camera)"
-                    .into(),
-            });
-        }
-        let camera = Camera::new(Some(address)).map_err(|e| GenicamError::Open {
-            address: address.to_string(),
-            reason: e.to_string(),
-        })?;
+        let camera = open_camera(options)?;
         let serial = camera
             .device_serial_number()
             .map(|s| s.to_string())
@@ -291,8 +506,16 @@ impl GenicamCamera {
             .map(|s| s.to_string())
             .unwrap_or_default();
         let _ = camera.stop_acquisition();
+        let offered: Vec<String> = camera
+            .dup_available_pixel_formats_as_strings()
+            .map_err(|e| feature_error(address, "PixelFormat", e))?
+            .iter()
+            .map(|f| f.to_string())
+            .collect();
+        let pixel_format = choose_pixel_format(options.pixel_format, &offered)
+            .map_err(|e| feature_error(address, "PixelFormat", e))?;
         camera
-            .set_pixel_format(options.pixel_format.aravis())
+            .set_pixel_format_from_string(pixel_format.genicam_name())
             .map_err(|e| feature_error(address, "PixelFormat", e))?;
         if let Some(exposure_us) = options.exposure_us {
             camera
@@ -352,10 +575,15 @@ impl GenicamCamera {
         // net.core.rmem_max).
         if let Some(gv_stream) = stream.downcast_ref::<aravis::GvStream>() {
             gv_stream.set_socket_buffer(aravis::GvStreamSocketBuffer::Fixed);
-            gv_stream.set_socket_buffer_size(8 << 20);
+            gv_stream.set_socket_buffer_size(
+                i32::try_from(options.socket_buffer_bytes).unwrap_or(i32::MAX),
+            );
+            if !options.packet_resend {
+                gv_stream.set_packet_resend(aravis::GvStreamPacketResend::Never);
+            }
         }
         let payload_full =
-            full_size.0 as usize * full_size.1 as usize * options.pixel_format.bytes() + 4096;
+            pixel_format.payload_bytes(full_size.0 as usize * full_size.1 as usize) + 4096;
         for _ in 0..8 {
             stream.push_buffer(Buffer::new_allocate(payload_full));
         }
@@ -367,7 +595,7 @@ impl GenicamCamera {
              (increments: width {width_inc}, height {height_inc}, OffsetX {x_inc}, OffsetY {y_inc}), {:?}, {}",
             window.0,
             window.1,
-            options.pixel_format,
+            pixel_format,
             match options.trigger {
                 TriggerChoice::Software => "software trigger",
                 TriggerChoice::FreeRun => "free run",
@@ -381,6 +609,7 @@ impl GenicamCamera {
             window,
             increments: (x_inc, y_inc),
             full_size,
+            pixel_format,
             current: Some((0, 0)),
             stats: CameraStats::default(),
             clock: ClockOffset::new(256),
@@ -409,9 +638,9 @@ impl GenicamCamera {
         &self.description
     }
 
-    /// Whether the device's timestamps are taken as the loop's times ([`GenicamOptions::device_clock_is_loop_clock`]).
-    pub fn device_clock_is_loop_clock(&self) -> bool {
-        self.options.device_clock_is_loop_clock
+    /// The pixel format in use.
+    pub fn pixel_format(&self) -> PixelFormatChoice {
+        self.pixel_format
     }
 
     /// The window every ROI is read through (px).
@@ -425,6 +654,9 @@ impl GenicamCamera {
         stats.clock_offset_s = self.clock.offset_s();
         stats.clock_change_s = self.clock.change_s();
         stats.arrival_jitter_s = self.clock.jitter_s();
+        let (_completed, failures, underruns) = self.stream.statistics();
+        stats.driver_failures = failures;
+        stats.driver_underruns = underruns;
         stats
     }
 
@@ -547,40 +779,59 @@ impl GenicamCamera {
         }
     }
 
-    /// The buffer's pixels into `out` (row-major, `w * h` values), its time on the loop's clock.
+    /// The buffer's pixels into `out` (row-major, `w * h` values); the buffer's time on the loop's clock, and on
+    /// the host's (s).
+    ///
+    /// A real camera's device timestamp goes to the host's clock through the estimated offset, and that is the
+    /// loop's time. The fake camera's clock is a real clock too (the offset is estimated the same way), but the
+    /// scene it rendered is the scenario at the time the host set: that scene time, which the fake camera recorded
+    /// under the buffer's timestamp, is the loop's time.
     fn read_pixels(
         &mut self,
         buffer: &Buffer,
         t_s: f64,
         out: &mut [u16],
-    ) -> Result<f64, GrabError> {
-        let (data, size) = buffer.data();
-        let bytes = self.options.pixel_format.bytes();
-        if data.is_null() || size < out.len() * bytes {
+    ) -> Result<(f64, f64), GrabError> {
+        let format = buffer.image_pixel_format().raw();
+        if format != self.pixel_format.pfnc() {
             return Err(GrabError::Dropped {
-                reason: format!("a buffer of {size} bytes for {} pixels", out.len()),
+                reason: format!(
+                    "a buffer in pixel format {format:#010x}, not {} ({:#010x})",
+                    self.pixel_format,
+                    self.pixel_format.pfnc()
+                ),
+            });
+        }
+        let (data, size) = buffer.data();
+        let bytes = self.pixel_format.payload_bytes(out.len());
+        if data.is_null() || size < bytes {
+            return Err(GrabError::Dropped {
+                reason: format!(
+                    "a buffer of {size} bytes for {} pixels of {}",
+                    out.len(),
+                    self.pixel_format
+                ),
             });
         }
         // SAFETY: Aravis owns `size` bytes at `data` while we hold the popped buffer.
-        let raw = unsafe { std::slice::from_raw_parts(data as *const u8, out.len() * bytes) };
-        if bytes == 1 {
-            for (o, &v) in out.iter_mut().zip(raw) {
-                *o = u16::from(v);
-            }
-        } else {
-            let max = (1u32 << self.options.pixel_format.bit_depth()) - 1;
-            for (o, pair) in out.iter_mut().zip(raw.chunks_exact(2)) {
-                *o = u16::from_le_bytes([pair[0], pair[1]]).min(max as u16);
-            }
-        }
-        let device_s = buffer.timestamp() as f64 * 1e-9;
+        let raw = unsafe { std::slice::from_raw_parts(data as *const u8, bytes) };
+        self.pixel_format.unpack(raw, out);
+        let device_ns = buffer.timestamp();
+        let device_s = device_ns as f64 * 1e-9;
         let host_s = self.host_now_s(t_s);
         self.clock.update(device_s, host_s);
-        Ok(if self.options.device_clock_is_loop_clock {
-            device_s
-        } else {
-            self.clock.to_host_s(device_s).unwrap_or(host_s)
-        })
+        let buffer_host_s = self.clock.to_host_s(device_s).unwrap_or(host_s);
+        let loop_s = match &self.scene_clock {
+            Some(scene) => scene
+                .scene_time_of(device_ns)
+                .ok_or_else(|| GrabError::Dropped {
+                    reason: format!(
+                        "the fake camera has no scene time for the buffer stamped {device_ns} ns"
+                    ),
+                })?,
+            None => buffer_host_s,
+        };
+        Ok((loop_s, buffer_host_s))
     }
 
     fn set_full_frame(&mut self, full: bool) -> Result<(), GrabError> {
@@ -609,17 +860,28 @@ impl RoiCamera for GenicamCamera {
             return Err(self.lost());
         };
         self.lost_in_a_row = 0;
+        // The region the buffer reports (the one asked for: the others were skipped), at the time it reports.
+        let (x, y, w, h) = buffer.image_region();
+        let region = Roi::new(x as u32, y as u32, w as u32, h as u32);
         image.set(
             trigger.t_s,
             trigger.point_id,
-            window,
-            self.options.pixel_format.bit_depth(),
+            region,
+            self.pixel_format.bit_depth(),
         );
         let read = self.read_pixels(&buffer, trigger.t_s, &mut image.pixels);
         self.stream.push_buffer(buffer);
-        image.t_s = read?;
+        let (loop_s, buffer_host_s) = read?;
+        image.t_s = loop_s;
+        if self.scene_clock.is_some() && loop_s != trigger.t_s {
+            self.stats.retimed += 1;
+        }
+        let returned_host_s = self.host_now_s(trigger.t_s);
         self.stats.rois += 1;
         self.stats.grab_us.push(start.elapsed().as_secs_f64() * 1e6);
+        self.stats
+            .timestamp_to_grab_us
+            .push((loop_s, (returned_host_s - buffer_host_s) * 1e6));
         Ok(())
     }
 
@@ -636,10 +898,10 @@ impl RoiCamera for GenicamCamera {
                 return Err(self.lost());
             };
             self.lost_in_a_row = 0;
-            frame.resize(w, h, self.options.pixel_format.bit_depth());
+            frame.resize(w, h, self.pixel_format.bit_depth());
             let read = self.read_pixels(&buffer, t_s, &mut frame.pixels);
             self.stream.push_buffer(buffer);
-            frame.t_s = read?;
+            frame.t_s = read?.0;
             Ok(())
         })();
         let back = self.set_full_frame(false);

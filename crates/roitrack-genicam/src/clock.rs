@@ -63,9 +63,11 @@ impl ClockOffset {
             self.previous_max_s = self.current_max_s;
             self.current_max_s = f64::NEG_INFINITY;
             self.in_block = 0;
+            // The first estimate over a whole block: the reference of the drift (the very first buffers, a large
+            // full frame among them, may have come late).
+            self.first_s.get_or_insert(self.previous_max_s);
         }
         let estimate = self.current_max_s.max(self.previous_max_s);
-        self.first_s.get_or_insert(estimate);
         let latency = estimate - sample;
         self.latency_sum_s += latency;
         self.latency_sq_sum_s2 += latency * latency;
@@ -82,8 +84,8 @@ impl ClockOffset {
         self.offset_s().map(|offset| device_s - offset)
     }
 
-    /// How far the estimate moved since the first buffer (s): the clocks' drift over the run, plus any change of the
-    /// smallest latency.
+    /// How far the estimate moved since the end of the first block of buffers (s): the clocks' drift over the run,
+    /// plus any change of the smallest latency; `None` before a block is complete.
     pub fn change_s(&self) -> Option<f64> {
         Some(self.offset_s()? - self.first_s?)
     }

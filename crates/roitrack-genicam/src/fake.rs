@@ -2,13 +2,17 @@
 //!
 //! The fake camera speaks the real protocol (GVCP registers, GVSP packets) on the loopback interface; roitrack only
 //! replaces its test pattern: at each buffer it renders the scenario's target ([`RoiRenderer`]) in the window its
-//! registers say (`OffsetX`, `OffsetY`, `Width`, `Height`) at the time its clock says, and stamps the buffer with that
-//! time. Its clock is the scenario's: [`SceneClock`], which the host sets to each ROI's time before triggering it.
-//! Only one fake camera can own 127.0.0.1's GVCP port at a time.
+//! registers say (`OffsetX`, `OffsetY`, `Width`, `Height`), in its pixel format (Mono8 or Mono16, the two its
+//! GenICam description offers), at the scene time the host set ([`SceneClock`]), and stamps the buffer with its
+//! device clock: a real clock, started [`FAKE_DEVICE_CLOCK_START_S`] before the camera, so that the host estimates
+//! its offset as with a real camera. The scene time of each buffer is recorded under its timestamp. Only one fake
+//! camera can own 127.0.0.1's GVCP port at a time.
 
+use std::collections::VecDeque;
 use std::ffi::c_void;
-use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicPtr, AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
+use std::time::Instant;
 
 use aravis::GvFakeCamera;
 use aravis::glib::translate::ToGlibPtr;
@@ -26,25 +30,63 @@ use crate::GenicamError;
 /// ```
 pub const FAKE_ADDRESS: &str = "127.0.0.1";
 
-/// The fake camera's clock (s, the scenario's time): the time of the next buffer it renders.
+/// The fake camera's scene time (s, the scenario's): the host sets it to each ROI's time before triggering the ROI,
+/// and the fake camera renders the scenario at that time; it records the scene time of each buffer under the
+/// buffer's device timestamp, for the host to read back ([`SceneClock::scene_time_of`]).
 ///
 /// ```
 /// let clock = roitrack_genicam::SceneClock::default();
 /// clock.set(1.25);
 /// assert_eq!(clock.get(), 1.25);
+/// clock.record(5_000, 1.25);
+/// assert_eq!((clock.scene_time_of(5_000), clock.scene_time_of(5_001)), (Some(1.25), None));
 /// ```
 #[derive(Debug, Default)]
-pub struct SceneClock(AtomicU64);
+pub struct SceneClock {
+    t_s: AtomicU64,
+    /// (device timestamp (ns), scene time (s)) of the latest buffers rendered.
+    rendered: Mutex<VecDeque<(u64, f64)>>,
+}
+
+/// Buffers whose scene time is kept: far more than the stream's buffers in flight.
+const RENDERED_KEPT: usize = 256;
 
 impl SceneClock {
     pub fn set(&self, t_s: f64) {
-        self.0.store(t_s.to_bits(), Ordering::SeqCst);
+        self.t_s.store(t_s.to_bits(), Ordering::SeqCst);
     }
 
     pub fn get(&self) -> f64 {
-        f64::from_bits(self.0.load(Ordering::SeqCst))
+        f64::from_bits(self.t_s.load(Ordering::SeqCst))
+    }
+
+    /// Records that the buffer stamped `device_ns` shows the scene at `t_s`.
+    pub fn record(&self, device_ns: u64, t_s: f64) {
+        if let Ok(mut rendered) = self.rendered.lock() {
+            if rendered.len() >= RENDERED_KEPT {
+                rendered.pop_front();
+            }
+            rendered.push_back((device_ns, t_s));
+        }
+    }
+
+    /// The scene time of the buffer stamped `device_ns`, if it is among the latest rendered.
+    pub fn scene_time_of(&self, device_ns: u64) -> Option<f64> {
+        let rendered = self.rendered.lock().ok()?;
+        rendered
+            .iter()
+            .rev()
+            .find(|(ns, _)| *ns == device_ns)
+            .map(|&(_, t_s)| t_s)
     }
 }
+
+/// The fake camera's fastest free run (Hz): its `AcquisitionFramePeriod` is at least 1 ms.
+pub const FAKE_MAX_FRAME_RATE_HZ: f64 = 1000.0;
+
+/// Where the fake camera's device clock starts (s): as if it had been powered on that long before the run, so that
+/// the offset between its clock and the host's is not zero.
+pub const FAKE_DEVICE_CLOCK_START_S: f64 = 1000.0;
 
 /// What the fake camera's thread renders from.
 struct Scene {
@@ -55,6 +97,26 @@ struct Scene {
     state: Mutex<(ChaCha8Rng, RenderScratch, Vec<u16>)>,
     rendered: AtomicUsize,
     refused: AtomicUsize,
+    /// The device clock: nanoseconds since `origin`, plus [`FAKE_DEVICE_CLOCK_START_S`]; `last_ns` keeps the
+    /// timestamps strictly increasing (they key the scene times).
+    origin: Instant,
+    last_ns: AtomicU64,
+    /// The fake camera itself, for its payload size (set once it is created; it outlives the fill callback).
+    fake: AtomicPtr<aravis_sys::ArvFakeCamera>,
+}
+
+impl Scene {
+    /// The device clock now (ns), later than every timestamp given before.
+    fn device_now_ns(&self) -> u64 {
+        let now =
+            (FAKE_DEVICE_CLOCK_START_S * 1e9) as u64 + self.origin.elapsed().as_nanos() as u64;
+        let previous = self.last_ns.fetch_max(now, Ordering::SeqCst);
+        if previous >= now {
+            self.last_ns.fetch_add(1, Ordering::SeqCst) + 1
+        } else {
+            now
+        }
+    }
 }
 
 /// The fill callback of the fake camera: renders the scene into the buffer, on the fake camera's thread.
@@ -70,15 +132,27 @@ unsafe extern "C" fn fill_scene(
     }
     // SAFETY: `data` is the `Scene` that FakeGigeCamera keeps alive until it has removed this callback.
     let scene = unsafe { &*(data as *const Scene) };
+    // The exposure begins: the device clock's time, and the scene's.
+    let device_ns = scene.device_now_ns();
+    let t_s = scene.clock.get();
     let (mut x, mut y, mut w, mut h) = (0, 0, 0, 0);
-    // SAFETY: the buffer is the fake camera's, valid during this call.
-    let pixels = unsafe {
+    let fake = scene.fake.load(Ordering::SeqCst);
+    if fake.is_null() {
+        return;
+    }
+    // SAFETY: the buffer is the fake camera's, valid during this call; so is the fake camera, which calls this.
+    let (pixels, payload) = unsafe {
         aravis_sys::arv_buffer_get_image_region(buffer, &mut x, &mut y, &mut w, &mut h);
-        aravis_sys::arv_buffer_get_data(buffer, std::ptr::null_mut())
+        (
+            aravis_sys::arv_buffer_get_data(buffer, std::ptr::null_mut()),
+            aravis_sys::arv_fake_camera_get_payload(fake),
+        )
     };
-    // Mono8 only: some Aravis 0.8 releases size the fake camera's payload as one byte a pixel whatever the format,
-    // so a 16-bit image could overrun its buffer.
-    let bytes = usize::from(pixel_format == aravis_sys::ARV_PIXEL_FORMAT_MONO_8);
+    let bytes = match pixel_format {
+        aravis_sys::ARV_PIXEL_FORMAT_MONO_8 => 1,
+        aravis_sys::ARV_PIXEL_FORMAT_MONO_16 => 2,
+        _ => 0,
+    };
     let camera = scene.renderer.camera();
     let fits = x >= 0 && y >= 0 && w > 0 && h > 0;
     let roi = Roi::new(
@@ -88,11 +162,18 @@ unsafe extern "C" fn fill_scene(
         h.max(0) as u32,
     );
     let n = roi.len();
-    if bytes == 0 || !fits || !roi.fits_in(camera.width_px, camera.height_px) || pixels.is_null() {
+    // The fake camera calls this only with a buffer of at least its payload (it marks a smaller one SIZE_MISMATCH
+    // and returns before), and sends that payload: the image must fit in it (some Aravis releases size the payload
+    // as one byte a pixel whatever the format).
+    if bytes == 0
+        || !fits
+        || !roi.fits_in(camera.width_px, camera.height_px)
+        || pixels.is_null()
+        || payload < n * bytes
+    {
         scene.refused.fetch_add(1, Ordering::Relaxed);
         return;
     }
-    let t_s = scene.clock.get();
     let Ok(mut state) = scene.state.lock() else {
         return;
     };
@@ -102,16 +183,26 @@ unsafe extern "C" fn fill_scene(
     scene
         .renderer
         .render_readout(&truth, &roi, t_s, rng, scratch, out);
-    // SAFETY: the fake camera calls this only with a buffer of at least its payload, `Width * Height` pixels of its
-    // pixel format (it marks a smaller one SIZE_MISMATCH and returns before), which is the region read above.
+    // SAFETY: the buffer holds at least `payload >= n * bytes` bytes at `pixels`.
     let target = unsafe { std::slice::from_raw_parts_mut(pixels, n * bytes) };
-    let shift = scene.renderer.sensor().bit_depth.saturating_sub(8);
-    for (t, &v) in target.iter_mut().zip(out.iter()) {
-        *t = (v >> shift).min(255) as u8;
+    let depth = scene.renderer.sensor().bit_depth;
+    if bytes == 1 {
+        let shift = depth.saturating_sub(8);
+        for (t, &v) in target.iter_mut().zip(out.iter()) {
+            *t = (v >> shift).min(255) as u8;
+        }
+    } else {
+        // Mono16: the sensor's values scaled to 16 bits (most significant bits first, as cameras with a 10- or
+        // 12-bit converter do), little-endian.
+        let shift = 16u32.saturating_sub(depth);
+        for (t, &v) in target.chunks_exact_mut(2).zip(out.iter()) {
+            let value = (u32::from(v) << shift).min(u32::from(u16::MAX)) as u16;
+            t.copy_from_slice(&value.to_le_bytes());
+        }
     }
-    // The buffer's device timestamp: the scenario's time of its exposure (ns; scenarios start at 0).
     // SAFETY: as above.
-    unsafe { aravis_sys::arv_buffer_set_timestamp(buffer, (t_s.max(0.0) * 1e9).round() as u64) };
+    unsafe { aravis_sys::arv_buffer_set_timestamp(buffer, device_ns) };
+    scene.clock.record(device_ns, t_s);
     scene.rendered.fetch_add(1, Ordering::Relaxed);
 }
 
@@ -135,8 +226,8 @@ unsafe impl Send for FakeGigeCamera {}
 unsafe impl Sync for FakeGigeCamera {}
 
 impl FakeGigeCamera {
-    /// Starts the fake camera on 127.0.0.1, rendering `scenario` with `sensor` (served as Mono8, deeper sensors shifted
-    /// down to 8 bits), noise
+    /// Starts the fake camera on 127.0.0.1, rendering `scenario` with `sensor` (served as Mono8, the sensor's values
+    /// shifted down to 8 bits, or Mono16, scaled up to 16 bits), noise
     /// seeded with `seed`. Refused if 127.0.0.1's GVCP port is taken (another fake camera).
     pub fn start(
         scenario: &Scenario,
@@ -156,6 +247,9 @@ impl FakeGigeCamera {
             )),
             rendered: AtomicUsize::new(0),
             refused: AtomicUsize::new(0),
+            origin: Instant::now(),
+            last_ns: AtomicU64::new(0),
+            fake: AtomicPtr::new(std::ptr::null_mut()),
         });
         let serial = format!("ROITRACK-{}", std::process::id());
         let gv = GvFakeCamera::new(Some(FAKE_ADDRESS), Some(&serial));
@@ -172,6 +266,7 @@ impl FakeGigeCamera {
         // SAFETY: the scene outlives the callback: `stop` removes the callback before the scene can be dropped.
         unsafe {
             let raw: *mut aravis_sys::ArvFakeCamera = fake.to_glib_none().0;
+            scene.fake.store(raw, Ordering::SeqCst);
             aravis_sys::arv_fake_camera_set_fill_pattern(
                 raw,
                 Some(fill_scene),

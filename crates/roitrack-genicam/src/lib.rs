@@ -2,13 +2,14 @@
 //! (feature `genicam`, off by default: it needs Debian's `libaravis-dev`), and Aravis' fake GigE Vision camera,
 //! started in-process on 127.0.0.1, rendering a simulated target at the ROI and time of each buffer.
 //!
-//! - [`GenicamCamera`] implements [`roitrack_image::RoiCamera`]: it opens one camera by its address or id (never by
-//!   scanning the network), reads a fixed-size window whose `OffsetX`/`OffsetY` it moves onto each ROI the scheduler
-//!   asks for (on the camera's increments), by software trigger or free run, and converts each buffer's device
-//!   timestamp to the loop's clock. Incomplete and lost buffers are counted and the grab is retried; a camera that
+//! - [`GenicamCamera`] implements [`roitrack_image::RoiCamera`]: it opens one camera by its IP address (an id, which
+//!   Aravis finds by a discovery broadcast, only when allowed), in Mono8, Mono12, Mono16, Mono12Packed or Mono12p,
+//!   reads a fixed-size window whose `OffsetX`/`OffsetY` it moves onto each ROI the scheduler asks for (on the
+//!   camera's increments), by software trigger or free run, and converts each buffer's device timestamp to the
+//!   loop's clock. Incomplete and lost buffers are counted and the grab is retried; a camera that
 //!   stops answering ends the run with [`roitrack_image::GrabError::Disconnected`], the estimates so far kept.
 //! - [`FakeGigeCamera`] is Aravis' fake camera whose images are the scenario's target rendered by
-//!   [`roitrack_image::RoiRenderer`]; its clock is the scenario's time.
+//!   [`roitrack_image::RoiRenderer`] at the scene time the host sets, stamped by a device clock of its own.
 //! - [`run_live`] runs the two-thread loop on such a camera and reports what the camera did ([`LiveReport`]).
 //! - [`ClockOffset`] (always built) estimates the offset between a device's clock and the host's.
 //!
@@ -32,6 +33,11 @@ pub use camera::{
     scan,
 };
 #[cfg(feature = "genicam")]
-pub use fake::{FAKE_ADDRESS, FakeGigeCamera, SceneClock};
+pub use fake::{
+    FAKE_ADDRESS, FAKE_DEVICE_CLOCK_START_S, FAKE_MAX_FRAME_RATE_HZ, FakeGigeCamera, SceneClock,
+};
 #[cfg(feature = "genicam")]
-pub use live::{LiveOptions, LiveReport, run_device, run_fake, run_live, truth_samples};
+pub use live::{
+    LiveOptions, LiveReport, run_device, run_fake, run_live, timestamp_to_estimate_us,
+    truth_samples,
+};

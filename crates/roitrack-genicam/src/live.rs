@@ -10,7 +10,8 @@ use roitrack_pipeline::{LoopConfig, LoopReport, run_loop};
 use roitrack_sim::Scenario;
 
 use crate::{
-    CameraStats, FakeGigeCamera, GenicamCamera, GenicamError, GenicamOptions, PixelFormatChoice,
+    CameraStats, FAKE_MAX_FRAME_RATE_HZ, FakeGigeCamera, GenicamCamera, GenicamError,
+    GenicamOptions, TriggerChoice,
 };
 
 /// Options of a live run.
@@ -60,8 +61,40 @@ pub struct LiveReport {
     pub camera: CameraStats,
     /// The camera, as opened ([`GenicamCamera::description`]).
     pub description: String,
-    /// The device's timestamps were taken as the loop's times (the fake camera).
-    pub device_clock_is_loop_clock: bool,
+    /// Per estimate: host time from the timestamp of the newest buffer it used (the device time on the host's
+    /// clock, through the estimated clock offset) to the estimate (µs). See [`timestamp_to_estimate_us`].
+    pub timestamp_to_estimate_us: Vec<f64>,
+}
+
+/// ```
+/// use roitrack_genicam::{CameraStats, timestamp_to_estimate_us};
+/// // Two ROIs at 0.25 and 0.5 ms, their buffers 120 and 80 us old when the grab returned; an estimate from the
+/// // second ROI produced 30 us after its grab returned.
+/// let camera = CameraStats { timestamp_to_grab_us: vec![(0.25e-3, 120.0), (0.5e-3, 80.0)], ..Default::default() };
+/// assert_eq!(timestamp_to_estimate_us(&[0.5e-3], &[30.0], &camera), vec![110.0]);
+/// ```
+///
+/// The latency from buffer timestamp to estimate, per estimate (µs): for the estimate of reference time
+/// `t_ref_s[i]` (the time of the newest measurement it used), the age of that ROI's buffer when its grab returned
+/// (measured by the camera: the host time then, less the buffer's device timestamp on the host's clock) plus the time
+/// from that return to the estimate (`grab_to_estimate_us[i]`, measured by the loop); both on the host's monotonic
+/// clock. An estimate without such a ROI (none recorded at or before its time) has none.
+pub fn timestamp_to_estimate_us(
+    t_ref_s: &[f64],
+    grab_to_estimate_us: &[f64],
+    camera: &CameraStats,
+) -> Vec<f64> {
+    let rois = &camera.timestamp_to_grab_us;
+    t_ref_s
+        .iter()
+        .zip(grab_to_estimate_us)
+        .filter_map(|(&t_s, &after_grab_us)| {
+            // ROI times follow the run; a blob's time is its ROI's or (rolling shutter) a few rows later.
+            let newer = rois.partition_point(|&(roi_s, _)| roi_s <= t_s + 1e-9);
+            let &(_, age_us) = rois.get(newer.checked_sub(1)?)?;
+            Some(age_us + after_grab_us)
+        })
+        .collect()
 }
 
 impl LiveReport {
@@ -71,12 +104,14 @@ impl LiveReport {
         let r = &self.loop_report;
         let c = &self.camera;
         let grab = roitrack_core::stats::sorted(&c.grab_us);
-        let mut text = format!(
+        let (stamp_p50, stamp_p99) = self.timestamp_to_estimate_quantiles_us();
+        let text = format!(
             "{}\nROIs grabbed {}, lost (no image in time) {}, incomplete {}, stale (old window) {}, moved as asked \
-             {:.2} %, refused moves {}, full frames {}\n{:.0} ROIs/s over {:.2} s; grab (move, trigger, buffer) \
-             p50/p99 {:.0}/{:.0} us; ROI-to-estimate latency p50/p99 {:.0}/{:.0} us\n{} estimates, {} measurements, \
-             {} rejected blobs, {} initialisations ({} failed), {} dropped measurements, {} ROIs served more than a \
-             slot late (paced)",
+             {:.2} %, refused moves {}, full frames {}; Aravis dropped {} buffers (none free) and gave up on {}\n\
+             {:.0} ROIs/s over {:.2} s; grab (move, trigger, buffer) p50/p99 {:.0}/{:.0} us; latency from buffer \
+             timestamp to estimate p50/p99 {:.0}/{:.0} us (from the grab's return: {:.0}/{:.0} us)\n{} estimates, \
+             {} measurements, {} rejected blobs, {} initialisations ({} failed), {} dropped measurements, {} ROIs \
+             served more than a slot late (paced)",
             self.description,
             c.rois,
             c.lost,
@@ -85,10 +120,14 @@ impl LiveReport {
             100.0 * c.moved_fraction(),
             c.refused_moves,
             c.full_frames,
+            c.driver_underruns,
+            c.driver_failures,
             r.rois_per_s(),
             r.wall_s,
             roitrack_core::stats::quantile(&grab, 0.5),
             roitrack_core::stats::quantile(&grab, 0.99),
+            stamp_p50,
+            stamp_p99,
             r.latency_quantile_us(0.5),
             r.latency_quantile_us(0.99),
             r.estimates.len(),
@@ -99,11 +138,12 @@ impl LiveReport {
             r.dropped,
             r.late,
         );
-        if self.device_clock_is_loop_clock {
-            text.push_str(
-                "\nthe device clock is the scenario's time (the fake camera), which runs at the loop's pace, not the \
-                 wall clock's: its offset to the host's clock drifts by design",
-            );
+        let mut text = text;
+        if c.retimed > 0 {
+            text.push_str(&format!(
+                "\n{} ROIs exposed at another time than their slot's (free run), each placed at its own",
+                c.retimed
+            ));
         }
         if let Some(offset) = c.clock_offset_s {
             let (mean, std) = c.arrival_jitter_s.unwrap_or((f64::NAN, f64::NAN));
@@ -119,6 +159,15 @@ impl LiveReport {
             text.push_str(&format!("\nthe run stopped early: {e}"));
         }
         text
+    }
+
+    /// Median and 99th percentile (nearest rank) of [`Self::timestamp_to_estimate_us`] (µs); NaN without estimates.
+    pub fn timestamp_to_estimate_quantiles_us(&self) -> (f64, f64) {
+        let sorted = roitrack_core::stats::sorted(&self.timestamp_to_estimate_us);
+        (
+            roitrack_core::stats::quantile(&sorted, 0.5),
+            roitrack_core::stats::quantile(&sorted, 0.99),
+        )
     }
 }
 
@@ -158,11 +207,15 @@ pub fn run_live(
     config.scheduler.min_size_px = side;
     config.scheduler.max_size_px = side;
     let loop_report = run_loop(camera, camera_model, target, options.tracker, &config)?;
+    let stats = camera.stats();
+    let t_ref_s: Vec<f64> = loop_report.estimates.iter().map(|e| e.t_ref_s).collect();
+    let timestamp_to_estimate_us =
+        timestamp_to_estimate_us(&t_ref_s, &loop_report.latencies_us, &stats);
     Ok(LiveReport {
         loop_report,
-        camera: camera.stats(),
+        camera: stats,
         description: camera.description().to_string(),
-        device_clock_is_loop_clock: camera.device_clock_is_loop_clock(),
+        timestamp_to_estimate_us,
     })
 }
 
@@ -180,12 +233,6 @@ pub fn run_fake(
     stop: Arc<AtomicBool>,
     on_start: impl FnOnce(Arc<FakeGigeCamera>),
 ) -> Result<LiveReport, GenicamError> {
-    if options.camera.pixel_format != PixelFormatChoice::Mono8 {
-        return Err(GenicamError::Fake(format!(
-            "it serves Mono8 only, not {:?}",
-            options.camera.pixel_format
-        )));
-    }
     let fake = Arc::new(FakeGigeCamera::start(
         scenario,
         SensorModel::default(),
@@ -194,7 +241,14 @@ pub fn run_fake(
     let camera_options = GenicamOptions {
         address: fake.address().to_string(),
         expected_serial: Some(fake.serial().to_string()),
-        device_clock_is_loop_clock: true,
+        // Free run: the fake camera's fastest unless asked (it starts at 25 Hz).
+        frame_rate_hz: match options.camera.trigger {
+            TriggerChoice::FreeRun => options
+                .camera
+                .frame_rate_hz
+                .or(Some(FAKE_MAX_FRAME_RATE_HZ)),
+            TriggerChoice::Software => options.camera.frame_rate_hz,
+        },
         ..options.camera.clone()
     };
     let full_size = (scenario.camera.width_px, scenario.camera.height_px);
@@ -269,11 +323,7 @@ pub fn run_device(
     options: &LiveOptions,
     stop: Arc<AtomicBool>,
 ) -> Result<LiveReport, GenicamError> {
-    let camera_options = GenicamOptions {
-        device_clock_is_loop_clock: false,
-        ..options.camera.clone()
-    };
     let full_size = (camera_model.width_px, camera_model.height_px);
-    let mut camera = GenicamCamera::open(&camera_options, full_size)?.with_stop_flag(stop);
+    let mut camera = GenicamCamera::open(&options.camera, full_size)?.with_stop_flag(stop);
     run_live(&mut camera, camera_model, target, options, true)
 }

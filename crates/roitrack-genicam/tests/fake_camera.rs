@@ -1,16 +1,21 @@
 //! The live loop through Aravis' fake GigE Vision camera on 127.0.0.1 (feature `genicam`): tracking as well as the
-//! demo's simulated camera, the window moved as asked, a clean stop, a camera that disappears. Only one fake camera
-//! can own 127.0.0.1: the tests take turns (a lock here; CI also runs them on one test thread).
+//! demo's simulated camera (Mono8 and Mono16, software trigger and free run), the window moved as asked, the clock
+//! offset and the latency from buffer timestamp to estimate, a clean stop, a camera that disappears, lost packets,
+//! pixel formats the camera does not offer, addresses that are not a camera's. Only one fake camera can own
+//! 127.0.0.1: the tests take turns (a lock here; CI also runs them on one test thread).
 #![cfg(feature = "genicam")]
 
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use roitrack_core::estimator::Estimate;
 use roitrack_experiments::demo::{Demo, DemoOptions, lineup};
-use roitrack_genicam::{FakeGigeCamera, LiveOptions, run_fake};
-use roitrack_image::GrabError;
+use roitrack_genicam::{
+    FAKE_DEVICE_CLOCK_START_S, FakeGigeCamera, GenicamCamera, GenicamError, GenicamOptions,
+    LiveOptions, LiveReport, PixelFormatChoice, TriggerChoice, run_fake,
+};
+use roitrack_image::{Frame, GrabError, Roi, RoiCamera, RoiImage, RoiTrigger};
 use roitrack_sim::{Scenario, ScenarioKind};
 
 static ONE_FAKE_CAMERA: Mutex<()> = Mutex::new(());
@@ -41,19 +46,19 @@ fn position_rmse_mm(estimates: &[Estimate], scenario: &Scenario, until_s: f64) -
     )
 }
 
-#[test]
-fn tracks_through_the_protocol_within_twice_the_demo_error_and_moves_the_window() {
-    let _turn = turn();
+/// Runs the fake camera on the demo's scenario for `duration_s` with `camera` options and checks the tracking
+/// against the demo's default estimator on its simulated camera (position RMSE within 2x, as many estimates), no early
+/// stop, the clock offset and the latencies; returns the report.
+fn track_like_the_demo(camera: GenicamOptions, duration_s: f64) -> LiveReport {
     let demo = Demo::new(DemoOptions::default()).unwrap();
     let kalman = &lineup()[0];
     let reference = demo.from_images(kalman, None).unwrap();
     let scenario = &demo.scenario;
-    let duration_s = 2.0;
     let options = LiveOptions {
+        camera,
         duration_s,
         rate_hz: demo.simulation.rate_hz,
         tracker: demo.config(kalman),
-        ..LiveOptions::default()
     };
     let report = run_fake(
         scenario,
@@ -88,6 +93,43 @@ fn tracks_through_the_protocol_within_twice_the_demo_error_and_moves_the_window(
         camera.rois as f64 >= 0.9 * duration_s * options.rate_hz,
         "{camera:?}"
     );
+    // The fake camera's device clock runs with the host's from FAKE_DEVICE_CLOCK_START_S before the run: the
+    // offset is that, plus the time from the camera's start to the first grab, less the smallest latency, and it
+    // does not move.
+    let offset_s = camera.clock_offset_s.unwrap();
+    assert!(
+        (FAKE_DEVICE_CLOCK_START_S - 0.01..FAKE_DEVICE_CLOCK_START_S + 5.0).contains(&offset_s),
+        "offset {offset_s} s"
+    );
+    // The same clock on both sides: after its first block of buffers the estimate moves only with the smallest
+    // latency (tens of microseconds on loopback, more on a loaded machine).
+    let moved_s = camera.clock_change_s.unwrap();
+    assert!(moved_s.abs() < 5e-3, "the offset moved {moved_s} s");
+    // One latency from buffer timestamp to estimate per estimate, each at least the time from the grab's return.
+    let stamps = &report.timestamp_to_estimate_us;
+    assert_eq!(stamps.len(), report.loop_report.estimates.len());
+    assert!(
+        stamps
+            .iter()
+            .zip(&report.loop_report.latencies_us)
+            .all(|(stamp, grab)| stamp >= grab && stamp.is_finite()),
+        "a timestamp-to-estimate latency below its grab-to-estimate one"
+    );
+    let (p50, p99) = report.timestamp_to_estimate_quantiles_us();
+    assert!(p50 > 0.0 && p50 <= p99 && p99 < 1e6, "{p50} / {p99} us");
+    report
+}
+
+#[test]
+fn tracks_through_the_protocol_within_twice_the_demo_error_and_moves_the_window() {
+    let _turn = turn();
+    let report = track_like_the_demo(GenicamOptions::default(), 2.0);
+    let camera = &report.camera;
+    assert!(
+        report.description.contains("Mono8"),
+        "{}",
+        report.description
+    );
     assert!(
         camera.moved_fraction() >= 0.95,
         "moved as asked: {}",
@@ -99,6 +141,205 @@ fn tracks_through_the_protocol_within_twice_the_demo_error_and_moves_the_window(
         camera.moves,
         camera.rois
     );
+    // Software trigger: each ROI exposed at the time asked.
+    assert_eq!(camera.retimed, 0);
+}
+
+#[test]
+fn tracks_at_mono16_as_well() {
+    let _turn = turn();
+    let camera = GenicamOptions {
+        pixel_format: Some(PixelFormatChoice::Mono16),
+        ..GenicamOptions::default()
+    };
+    let report = track_like_the_demo(camera, 2.0);
+    assert!(
+        report.description.contains("Mono16"),
+        "{}",
+        report.description
+    );
+    assert!(report.camera.moved_fraction() >= 0.95);
+}
+
+#[test]
+fn tracks_in_free_run_each_roi_at_the_time_and_window_its_buffer_reports() {
+    let _turn = turn();
+    let camera = GenicamOptions {
+        trigger: TriggerChoice::FreeRun,
+        ..GenicamOptions::default()
+    };
+    // Free run is slower (frames from the old window are skipped, each ROI waits for a frame): 1 s of the scenario.
+    let report = track_like_the_demo(camera, 1.0);
+    assert!(
+        report.description.contains("free run"),
+        "{}",
+        report.description
+    );
+    let camera = &report.camera;
+    // The window still moves for (nearly) every ROI; the frames begun before the move are skipped as stale.
+    assert!(
+        camera.moves as f64 >= 0.95 * camera.rois as f64,
+        "{camera:?}"
+    );
+}
+
+/// The fake camera on the default scenario and a camera opened on it with `options` (address and serial filled in).
+fn open_fake(
+    options: GenicamOptions,
+) -> (
+    FakeGigeCamera,
+    Result<GenicamCamera, GenicamError>,
+    Scenario,
+) {
+    let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
+    let fake = FakeGigeCamera::start(&scenario, Default::default(), 1).unwrap();
+    let options = GenicamOptions {
+        address: fake.address().to_string(),
+        expected_serial: Some(fake.serial().to_string()),
+        ..options
+    };
+    let full_size = (scenario.camera.width_px, scenario.camera.height_px);
+    let camera = GenicamCamera::open(&options, full_size).map(|c| c.with_scene_clock(fake.clock()));
+    (fake, camera, scenario)
+}
+
+#[test]
+fn mono16_frames_carry_the_mono8_image_scaled_to_16_bits() {
+    let _turn = turn();
+    let mean_and_max = |format| {
+        let (_fake, camera, _) = open_fake(GenicamOptions {
+            pixel_format: Some(format),
+            ..GenicamOptions::default()
+        });
+        let mut camera = camera.unwrap();
+        assert_eq!(camera.pixel_format(), format);
+        let mut frame = Frame::default();
+        // A full frame (a burst of packets) may come incomplete on a loaded machine: the loop tries again, so
+        // does this.
+        let mut tries = 0;
+        while let Err(e) = camera.grab_full_frame(0.5, &mut frame) {
+            tries += 1;
+            assert!(tries < 3, "{format}: {e}: {:?}", camera.stats());
+        }
+        let mean =
+            frame.pixels.iter().map(|&v| f64::from(v)).sum::<f64>() / frame.pixels.len() as f64;
+        (frame.bit_depth, mean, *frame.pixels.iter().max().unwrap())
+    };
+    let (depth8, mean8, max8) = mean_and_max(PixelFormatChoice::Mono8);
+    let (depth16, mean16, max16) = mean_and_max(PixelFormatChoice::Mono16);
+    assert_eq!((depth8, depth16), (8, 16));
+    assert!(max8 <= 255 && max16 > 255, "{max8} {max16}");
+    // The same scene at the same time (the noise differs): 256 times the values, within the noise's share.
+    let ratio = mean16 / mean8;
+    assert!((ratio - 256.0).abs() < 0.05 * 256.0, "{mean16} / {mean8}");
+}
+
+#[test]
+fn a_pixel_format_the_camera_does_not_offer_is_refused_with_those_it_does() {
+    let _turn = turn();
+    for format in [PixelFormatChoice::Mono12, PixelFormatChoice::Mono12Packed] {
+        let (_fake, camera, _) = open_fake(GenicamOptions {
+            pixel_format: Some(format),
+            ..GenicamOptions::default()
+        });
+        let message = camera.err().expect("refused").to_string();
+        assert!(
+            message.contains(&format!("{format} is not offered"))
+                && message.contains("Mono8")
+                && message.contains("Mono16"),
+            "{message}"
+        );
+    }
+}
+
+#[test]
+fn an_id_needs_discovery_allowed_and_an_address_without_a_camera_fails_fast() {
+    let _turn = turn();
+    let open = |address: &str| {
+        let options = GenicamOptions {
+            address: address.into(),
+            ..GenicamOptions::default()
+        };
+        let start = Instant::now();
+        let result = GenicamCamera::open(&options, (64, 64));
+        (result.err().expect("refused").to_string(), start.elapsed())
+    };
+    // An id: refused at once, nothing sent.
+    let (message, took) = open("Aravis-Fake-GV01");
+    assert!(
+        message.contains("--allow-discovery") && message.contains("not an IPv4 address"),
+        "{message}"
+    );
+    assert!(took < Duration::from_millis(50), "{took:?}");
+    for (address, says) in [
+        ("127.0.0.1:4000", "port 3956"),
+        ("255.255.255.255", "broadcast"),
+        ("", "no address"),
+    ] {
+        let (message, _) = open(address);
+        assert!(message.contains(says), "{address}: {message}");
+    }
+    // A loopback address where no camera answers (the fake camera is not running): an error naming it, in seconds,
+    // with no discovery.
+    let (message, took) = open("127.0.0.2");
+    assert!(
+        message.contains("'127.0.0.2'") && message.contains("no GigE Vision camera answers"),
+        "{message}"
+    );
+    assert!(took < Duration::from_secs(10), "{took:?}");
+    println!("no camera at 127.0.0.2: refused after {took:?}: {message}");
+}
+
+#[test]
+fn lost_packets_make_incomplete_buffers_that_are_counted_and_survived() {
+    let _turn = turn();
+    // A receive buffer far smaller than a full frame's burst of packets and no resend: full frames lose packets.
+    let (_fake, camera, scenario) = open_fake(GenicamOptions {
+        socket_buffer_bytes: 4096,
+        packet_resend: false,
+        timeout_s: 0.1,
+        ..GenicamOptions::default()
+    });
+    let mut camera = camera.unwrap();
+    let mut frame = Frame::default();
+    let mut failed = 0;
+    for k in 0..3 {
+        if let Err(e) = camera.grab_full_frame(0.1 * k as f64, &mut frame) {
+            assert!(e.is_transient(), "{e}");
+            failed += 1;
+        }
+    }
+    let stats = camera.stats();
+    println!("{stats:?}");
+    assert!(failed >= 1, "every full frame arrived whole: {stats:?}");
+    assert!(stats.incomplete + stats.driver_failures >= 1, "{stats:?}");
+    // The camera goes on: ROIs (one packet each) still arrive.
+    let mut image = RoiImage::with_capacity(32 * 32);
+    let point = &scenario.target.points()[0];
+    for k in 0..20 {
+        let trigger = RoiTrigger {
+            point_id: point.id,
+            roi: Roi::new(100 + 4 * k, 200, 32, 32),
+            t_s: 1.0 + k as f64 * 1e-3,
+        };
+        // A ROI may still be lost now and then on a loaded machine (0.1 s timeout): it is tried again.
+        let mut tries = 0;
+        while let Err(e) = camera.grab_roi(&trigger, &mut image) {
+            tries += 1;
+            assert!(e.is_transient() && tries < 3, "{e}: {:?}", camera.stats());
+        }
+        assert_eq!(image.roi, Roi::new(100 + 4 * k, 200, 32, 32));
+        // The ROI's time is the one its buffer was exposed at: the trigger's, or, if a lost ROI's late frame was
+        // begun after this window moved, that earlier ROI's (and counted).
+        assert!(
+            image.t_s == trigger.t_s || (image.t_s >= 1.0 && image.t_s < trigger.t_s),
+            "{} for {}",
+            image.t_s,
+            trigger.t_s
+        );
+        assert!(image.t_s == trigger.t_s || camera.stats().retimed > 0);
+    }
+    assert_eq!(camera.stats().rois, 20);
 }
 
 #[test]

@@ -22,8 +22,8 @@ use crate::args::ScenarioArg;
 /// blob. Ctrl-C stops the run and writes every output.
 #[derive(Debug, Args)]
 pub struct LiveArgs {
-    /// The camera's IP address (GigE Vision) or Aravis id (Vendor-Model-Serial); never found by scanning. Default:
-    /// none; one of --device and --fake is required.
+    /// The camera's IPv4 address (GigE Vision), opened directly; an Aravis id (Vendor-Model-Serial, USB3 Vision)
+    /// only with --allow-discovery. Default: none; one of --device and --fake is required.
     #[arg(
         long,
         value_name = "ADDRESS",
@@ -31,6 +31,10 @@ pub struct LiveArgs {
         conflicts_with = "fake"
     )]
     pub device: Option<String>,
+    /// With --device: let Aravis search for a camera given by its id: a GigE Vision discovery broadcast on every
+    /// network interface, then the USB bus (USB3 Vision cameras need it). Without it, only an IP address is opened.
+    #[arg(long, requires = "device")]
+    pub allow_discovery: bool,
     /// Start Aravis' fake GigE camera on 127.0.0.1 in this process and track the scenario it renders.
     #[arg(long)]
     pub fake: bool,
@@ -76,9 +80,11 @@ pub struct LiveArgs {
     /// ExposureTime (µs). Default: the camera's.
     #[arg(long, value_name = "US")]
     pub exposure_us: Option<f64>,
-    /// Pixel format.
-    #[arg(long, value_enum, default_value = "mono8")]
-    pub pixel_format: PixelFormatArg,
+    /// Pixel format (one the camera does not offer is refused with the list of those it does). Default: mono8 if the
+    /// camera offers it, else the first of mono12, mono16, mono12-packed, mono12p it offers. The fake camera offers
+    /// mono8 and mono16.
+    #[arg(long, value_enum)]
+    pub pixel_format: Option<PixelFormatArg>,
     /// How each ROI is started: a software trigger once the window moved, or the camera's free run (frames still
     /// from the old window are skipped).
     #[arg(long, value_enum, default_value = "software")]
@@ -104,6 +110,10 @@ pub enum PixelFormatArg {
     Mono8,
     Mono12,
     Mono16,
+    /// GigE Vision's Mono12Packed (two pixels in three bytes).
+    Mono12Packed,
+    /// PFNC's Mono12p (two pixels in three bytes, least significant bits first).
+    Mono12p,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -175,11 +185,14 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     }
     let camera = GenicamOptions {
         address: args.device.clone().unwrap_or_default(),
-        pixel_format: match args.pixel_format {
+        allow_discovery: args.allow_discovery,
+        pixel_format: args.pixel_format.map(|f| match f {
             PixelFormatArg::Mono8 => PixelFormatChoice::Mono8,
             PixelFormatArg::Mono12 => PixelFormatChoice::Mono12,
             PixelFormatArg::Mono16 => PixelFormatChoice::Mono16,
-        },
+            PixelFormatArg::Mono12Packed => PixelFormatChoice::Mono12Packed,
+            PixelFormatArg::Mono12p => PixelFormatChoice::Mono12p,
+        }),
         roi_size_px: args.roi_size,
         exposure_us: args.exposure_us,
         trigger: match args.trigger {
