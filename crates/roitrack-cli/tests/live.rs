@@ -1,7 +1,7 @@
 //! `roitrack live --fake` (feature `genicam`): the whole command through Aravis' fake GigE camera on 127.0.0.1, its
 //! outputs read back, Ctrl-C, a pixel format the camera does not offer; `roitrack live --device`: an id refused
-//! without `--allow-discovery`, an address where no camera answers failing fast. Only one fake camera can own
-//! 127.0.0.1: the tests take turns (a lock here; CI also runs them on one test thread).
+//! without `--allow-discovery`, an address where no camera answers failing fast; `roitrack bench --fake-camera`.
+//! Only one fake camera can own 127.0.0.1: the tests take turns (a lock here; CI also runs them on one test thread).
 #![cfg(all(feature = "genicam", unix))]
 
 use std::process::{Command, Stdio};
@@ -209,4 +209,41 @@ fn a_device_address_where_no_camera_answers_fails_fast_with_a_clear_error() {
         "{stderr}"
     );
     assert!(took < Duration::from_secs(15), "{took:?}");
+}
+
+#[test]
+fn bench_measures_the_fake_camera_rate_and_latency_from_buffer_timestamp_to_estimate() {
+    let _turn = turn();
+    let out = roitrack()
+        .args([
+            "bench",
+            "--json",
+            "--rois",
+            "2000",
+            "--repeats",
+            "1",
+            "--item-ms",
+            "10",
+            "--fake-camera",
+            "1",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let m: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let f = |key: &str| m[key].as_f64().unwrap_or_else(|| panic!("{key} in {m}"));
+    assert!(f("fake_camera_rois") >= 3600.0, "{m}");
+    for key in [
+        "fake_camera_rois_per_s",
+        "fake_camera_latency_us_p50",
+        "fake_camera_grab_us_p50",
+    ] {
+        assert!(f(key) > 0.0, "{key} in {m}");
+    }
+    assert!(f("fake_camera_latency_us_p99") >= f("fake_camera_latency_us_p50"));
+    assert!(f("fake_camera_moved_fraction") >= 0.95, "{m}");
 }

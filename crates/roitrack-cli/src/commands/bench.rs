@@ -39,7 +39,12 @@
 //! - `rois_per_run`: ROIs per loop run;
 //! - `track_library_meas_per_s`: measurements/s of the library's `track` over the orthoglide scenario's 19,655
 //!   simulated measurements in memory (default Kalman filter, an estimate every 10, every estimate collected; best of
-//!   `--repeats`): the call the Python package's `roitrack.track` makes ([`roitrack::bench::track_bench`]).
+//!   `--repeats`): the call the Python package's `roitrack.track` makes ([`roitrack::bench::track_bench`]);
+//! - `fake_camera_rois`, `fake_camera_rois_per_s`, `fake_camera_latency_us_p50`, `fake_camera_latency_us_p99`,
+//!   `fake_camera_grab_us_p50`, `fake_camera_grab_us_p99`, `fake_camera_moved_fraction`: with `--fake-camera S`
+//!   (binary built with the feature `genicam`), the loop through Aravis' fake GigE camera on 127.0.0.1 for S s of the
+//!   orthoglide scenario: ROIs read, ROIs/s, latency from buffer timestamp to estimate, the grab (window moved,
+//!   trigger, buffer in hand), the fraction of buffers from the window asked for; `null` without `--fake-camera`.
 //!
 //! Keys are only ever added, never renamed or removed.
 
@@ -50,6 +55,22 @@ use clap::Args;
 use roitrack::bench::loop_bench::{LoopBench, LoopFigures, PACED_HZ};
 use roitrack::bench::track_bench::TrackLibraryBench;
 use roitrack::bench::{HotPaths, Item, Timing, time_all};
+
+/// `--fake-camera S`: the loop through Aravis' fake GigE camera on 127.0.0.1 (orthoglide, seed 1, 4 kHz ROI slots, a
+/// 32 px window, Mono8, software trigger, free-running); see `live::bench_fake_camera`.
+#[derive(Debug, Clone, Copy)]
+#[cfg_attr(not(feature = "genicam"), allow(dead_code))]
+pub struct FakeCameraFigures {
+    pub rois: u64,
+    pub rois_per_s: f64,
+    /// Latency from buffer timestamp to estimate (µs).
+    pub latency_p50_us: f64,
+    pub latency_p99_us: f64,
+    /// The grab: window moved, triggered, buffer in hand (µs).
+    pub grab_p50_us: f64,
+    pub grab_p99_us: f64,
+    pub moved_fraction: f64,
+}
 
 /// Time the hot paths (median, p99) and the real-time loop (throughput, latency).
 #[derive(Debug, Args)]
@@ -67,6 +88,11 @@ pub struct BenchArgs {
     /// `--repeats` is below the default 16,000 x 3 (at least 10 ms), so a short run stays short.
     #[arg(long)]
     pub item_ms: Option<u64>,
+    /// Also run the loop through Aravis' fake GigE camera on 127.0.0.1 for this many seconds of the orthoglide
+    /// scenario (ROIs/s, latency from buffer timestamp to estimate). Default: not run.
+    #[cfg(feature = "genicam")]
+    #[arg(long, value_name = "S")]
+    pub fake_camera: Option<f64>,
 }
 
 const DEFAULT_ROIS: usize = 16_000;
@@ -111,6 +137,13 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     // Latency without queueing: the camera paced at 20 kHz (5x the paper), below the loop's capacity.
     let paced = bench.measure(10, Some(PACED_HZ), args.repeats)?;
     let track_library = TrackLibraryBench::orthoglide()?.measure(args.repeats);
+    #[cfg(feature = "genicam")]
+    let fake_camera = args
+        .fake_camera
+        .map(super::live::bench_fake_camera)
+        .transpose()?;
+    #[cfg(not(feature = "genicam"))]
+    let fake_camera: Option<FakeCameraFigures> = None;
     if args.json {
         let mut fields: Vec<(String, String)> = Vec::new();
         for (item, t) in &timings {
@@ -144,6 +177,18 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             "track_library_meas_per_s",
             json_number(track_library.meas_per_s, 0),
         );
+        let fake = |f: fn(&FakeCameraFigures) -> f64, decimals| {
+            fake_camera
+                .as_ref()
+                .map_or("null".to_string(), |c| json_number(f(c), decimals))
+        };
+        field("fake_camera_rois", fake(|c| c.rois as f64, 0));
+        field("fake_camera_rois_per_s", fake(|c| c.rois_per_s, 0));
+        field("fake_camera_latency_us_p50", fake(|c| c.latency_p50_us, 1));
+        field("fake_camera_latency_us_p99", fake(|c| c.latency_p99_us, 1));
+        field("fake_camera_grab_us_p50", fake(|c| c.grab_p50_us, 1));
+        field("fake_camera_grab_us_p99", fake(|c| c.grab_p99_us, 1));
+        field("fake_camera_moved_fraction", fake(|c| c.moved_fraction, 4));
         let body: Vec<String> = fields
             .iter()
             .map(|(key, value)| format!("\"{key}\":{value}"))
@@ -169,6 +214,20 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             "\nlibrary track(), orthoglide, {} measurements in memory, Kalman, every 10: {:.0} measurements/s",
             track_library.measurements, track_library.meas_per_s
         );
+        if let Some(c) = &fake_camera {
+            println!(
+                "\nAravis' fake GigE camera on 127.0.0.1, orthoglide, 32x32 Mono8 window, software trigger: {} ROIs, \
+                 {:.0} ROIs/s, moved as asked {:.2} %; latency from buffer timestamp to estimate p50/p99 {:.0}/{:.0} \
+                 us; grab p50/p99 {:.0}/{:.0} us",
+                c.rois,
+                c.rois_per_s,
+                100.0 * c.moved_fraction,
+                c.latency_p50_us,
+                c.latency_p99_us,
+                c.grab_p50_us,
+                c.grab_p99_us
+            );
+        }
     }
     Ok(())
 }

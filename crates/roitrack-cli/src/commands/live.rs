@@ -278,3 +278,37 @@ pub fn run(args: &LiveArgs) -> Result<()> {
         Some(e) => bail!("the camera ended the run: {e} (the estimates until then are written)"),
     }
 }
+
+/// `roitrack bench --fake-camera S`: runs the fake camera for `duration_s` of the scenario's time and returns its
+/// figures.
+pub fn bench_fake_camera(duration_s: f64) -> Result<super::bench::FakeCameraFigures> {
+    if !(duration_s > 0.0 && duration_s.is_finite()) {
+        bail!("--fake-camera must be a positive number of seconds, got {duration_s}");
+    }
+    let scenario = Scenario::new(roitrack::sim::ScenarioKind::Orthoglide, 1);
+    let options = LiveOptions {
+        duration_s,
+        ..LiveOptions::default()
+    };
+    let report = run_fake(
+        &scenario,
+        &options,
+        1,
+        Arc::new(AtomicBool::new(false)),
+        |_| {},
+    )?;
+    if let Some(e) = &report.loop_report.stopped_by {
+        bail!("the fake camera's run stopped early: {e}");
+    }
+    let (latency_p50_us, latency_p99_us) = report.timestamp_to_estimate_quantiles_us();
+    let grab = roitrack::math::stats::sorted(&report.camera.grab_us);
+    Ok(super::bench::FakeCameraFigures {
+        rois: report.camera.rois,
+        rois_per_s: report.loop_report.rois_per_s(),
+        latency_p50_us,
+        latency_p99_us,
+        grab_p50_us: roitrack::math::stats::quantile(&grab, 0.5),
+        grab_p99_us: roitrack::math::stats::quantile(&grab, 0.99),
+        moved_fraction: report.camera.moved_fraction(),
+    })
+}
