@@ -638,6 +638,12 @@ impl GenicamCamera {
         &self.description
     }
 
+    /// The host instant of the first grab and its time on the loop's clock: the loop's clock is that time plus the
+    /// host time since (s); `None` before a grab.
+    pub fn host_epoch(&self) -> Option<(Instant, f64)> {
+        self.epoch
+    }
+
     /// The pixel format in use.
     pub fn pixel_format(&self) -> PixelFormatChoice {
         self.pixel_format

@@ -82,10 +82,18 @@ impl SceneClock {
 }
 
 /// The fake camera's fastest free run (Hz): its `AcquisitionFramePeriod` is at least 1 ms.
+///
+/// ```
+/// assert_eq!(1.0 / roitrack_genicam::FAKE_MAX_FRAME_RATE_HZ, 1e-3);
+/// ```
 pub const FAKE_MAX_FRAME_RATE_HZ: f64 = 1000.0;
 
 /// Where the fake camera's device clock starts (s): as if it had been powered on that long before the run, so that
 /// the offset between its clock and the host's is not zero.
+///
+/// ```
+/// assert_eq!(roitrack_genicam::FAKE_DEVICE_CLOCK_START_S, 1000.0);
+/// ```
 pub const FAKE_DEVICE_CLOCK_START_S: f64 = 1000.0;
 
 /// What the fake camera's thread renders from.
@@ -292,6 +300,25 @@ impl FakeGigeCamera {
     /// Its clock: set it to each ROI's time before triggering it ([`crate::GenicamCamera::with_scene_clock`]).
     pub fn clock(&self) -> Arc<SceneClock> {
         self.scene.clock.clone()
+    }
+
+    /// Its device clock's reading (s) at a host instant: what it would stamp a buffer begun then with. The host's
+    /// clock and the fake camera's are the same clock, so the true offset between them is known (a real camera's is
+    /// only estimated).
+    ///
+    /// ```no_run
+    /// use roitrack_genicam::{FAKE_DEVICE_CLOCK_START_S, FakeGigeCamera};
+    /// use roitrack_sim::{Scenario, ScenarioKind};
+    /// let fake = FakeGigeCamera::start(&Scenario::new(ScenarioKind::Orthoglide, 1), Default::default(), 1).unwrap();
+    /// assert!(fake.device_time_at_s(std::time::Instant::now()) > FAKE_DEVICE_CLOCK_START_S);
+    /// ```
+    pub fn device_time_at_s(&self, instant: Instant) -> f64 {
+        let since_origin_s = if instant >= self.scene.origin {
+            instant.duration_since(self.scene.origin).as_secs_f64()
+        } else {
+            -self.scene.origin.duration_since(instant).as_secs_f64()
+        };
+        FAKE_DEVICE_CLOCK_START_S + since_origin_s
     }
 
     /// Buffers rendered, and buffers it could not render (a window off the camera model, an unknown format).

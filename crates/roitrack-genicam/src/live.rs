@@ -64,6 +64,10 @@ pub struct LiveReport {
     /// Per estimate: host time from the timestamp of the newest buffer it used (the device time on the host's
     /// clock, through the estimated clock offset) to the estimate (µs). See [`timestamp_to_estimate_us`].
     pub timestamp_to_estimate_us: Vec<f64>,
+    /// The fake camera: the true `device - host` offset (s), known because both clocks are the host's. The estimate
+    /// ([`CameraStats::clock_offset_s`]) is below it by the smallest arrival latency, which the latencies from
+    /// buffer timestamp leave out.
+    pub true_clock_offset_s: Option<f64>,
 }
 
 /// ```
@@ -105,11 +109,14 @@ impl LiveReport {
         let c = &self.camera;
         let grab = roitrack_core::stats::sorted(&c.grab_us);
         let (stamp_p50, stamp_p99) = self.timestamp_to_estimate_quantiles_us();
+        let age: Vec<f64> = c.timestamp_to_grab_us.iter().map(|&(_, us)| us).collect();
+        let age = roitrack_core::stats::sorted(&age);
         let text = format!(
             "{}\nROIs grabbed {}, lost (no image in time) {}, incomplete {}, stale (old window) {}, moved as asked \
              {:.2} %, refused moves {}, full frames {}; Aravis dropped {} buffers (none free) and gave up on {}\n\
              {:.0} ROIs/s over {:.2} s; grab (move, trigger, buffer) p50/p99 {:.0}/{:.0} us; latency from buffer \
-             timestamp to estimate p50/p99 {:.0}/{:.0} us (from the grab's return: {:.0}/{:.0} us)\n{} estimates, \
+             timestamp to estimate p50/p99 {:.0}/{:.0} us (buffer timestamp to the grab's return {:.0}/{:.0} us, \
+             the grab's return to the estimate {:.0}/{:.0} us)\n{} estimates, \
              {} measurements, {} rejected blobs, {} initialisations ({} failed), {} dropped measurements, {} ROIs \
              served more than a slot late (paced)",
             self.description,
@@ -128,6 +135,8 @@ impl LiveReport {
             roitrack_core::stats::quantile(&grab, 0.99),
             stamp_p50,
             stamp_p99,
+            roitrack_core::stats::quantile(&age, 0.5),
+            roitrack_core::stats::quantile(&age, 0.99),
             r.latency_quantile_us(0.5),
             r.latency_quantile_us(0.99),
             r.estimates.len(),
@@ -153,6 +162,13 @@ impl LiveReport {
                 1e3 * c.clock_change_s.unwrap_or(0.0),
                 mean * 1e6,
                 std * 1e6
+            ));
+        }
+        if let (Some(truth), Some(estimate)) = (self.true_clock_offset_s, c.clock_offset_s) {
+            text.push_str(&format!(
+                "\nthe fake camera's true offset (the same clock on both sides) {truth:.6} s: the estimate is {:.0} us \
+                 below it, the smallest arrival latency, which the latencies from buffer timestamp leave out",
+                (truth - estimate) * 1e6
             ));
         }
         if let Some(e) = &r.stopped_by {
@@ -216,6 +232,7 @@ pub fn run_live(
         camera: stats,
         description: camera.description().to_string(),
         timestamp_to_estimate_us,
+        true_clock_offset_s: None,
     })
 }
 
@@ -266,7 +283,13 @@ pub fn run_fake(
         &scenario.target,
         &options,
         false,
-    );
+    )
+    .map(|mut report| {
+        report.true_clock_offset_s = camera
+            .host_epoch()
+            .map(|(instant, loop_s)| fake.device_time_at_s(instant) - loop_s);
+        report
+    });
     drop(camera);
     fake.stop();
     report

@@ -105,6 +105,12 @@ fn track_like_the_demo(camera: GenicamOptions, duration_s: f64) -> LiveReport {
     // latency (tens of microseconds on loopback, more on a loaded machine).
     let moved_s = camera.clock_change_s.unwrap();
     assert!(moved_s.abs() < 5e-3, "the offset moved {moved_s} s");
+    // Below the true offset by the smallest arrival latency: positive, and under a grab's time.
+    let below_s = report.true_clock_offset_s.unwrap() - offset_s;
+    assert!(
+        (0.0..2e-3).contains(&below_s),
+        "{below_s} s below the true offset"
+    );
     // One latency from buffer timestamp to estimate per estimate, each at least the time from the grab's return.
     let stamps = &report.timestamp_to_estimate_us;
     assert_eq!(stamps.len(), report.loop_report.estimates.len());
