@@ -952,6 +952,64 @@ mod tests {
     use super::*;
 
     #[test]
+    fn only_an_ipv4_address_is_opened_directly() {
+        let ip = |text: &str| CameraAddress::Gige(text.parse().unwrap());
+        assert_eq!(parse_address("192.168.1.20"), ip("192.168.1.20"));
+        assert_eq!(parse_address("192.168.1.20:3956"), ip("192.168.1.20"));
+        for id in [
+            "Aravis-Fake-GV01",
+            "camera.local",
+            "fe80::1",
+            "192.168.1",
+            "",
+        ] {
+            assert_eq!(parse_address(id), CameraAddress::Id, "{id}");
+        }
+        for bad in ["192.168.1.20:80", "255.255.255.255", "0.0.0.0", "239.1.2.3"] {
+            assert!(
+                matches!(parse_address(bad), CameraAddress::Invalid(_)),
+                "{bad}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_pixel_format_is_the_one_asked_if_offered_else_mono8_first() {
+        let offered = |names: &[&str]| names.iter().map(|n| n.to_string()).collect::<Vec<_>>();
+        let fake = offered(&["BayerBG8", "Mono8", "RGB8", "Mono16"]);
+        use PixelFormatChoice::*;
+        assert_eq!(choose_pixel_format(None, &fake), Ok(Mono8));
+        assert_eq!(choose_pixel_format(Some(Mono16), &fake), Ok(Mono16));
+        let refused = choose_pixel_format(Some(Mono12p), &fake).unwrap_err();
+        assert!(
+            refused.starts_with(
+                "Mono12p is not offered; the camera offers BayerBG8, Mono8, RGB8, Mono16"
+            ),
+            "{refused}"
+        );
+        let packed_only = offered(&["Mono12Packed", "BayerRG12Packed"]);
+        assert_eq!(choose_pixel_format(None, &packed_only), Ok(Mono12Packed));
+        assert!(choose_pixel_format(None, &offered(&["RGB8"])).is_err());
+    }
+
+    #[test]
+    fn twelve_bit_pixels_unpack_and_sixteen_bit_containers_are_clamped_to_their_depth() {
+        // Three pixels of Mono12Packed (the last pair half used): 0x123, 0xFFF, 0x800.
+        let mut out = [0u16; 3];
+        PixelFormatChoice::Mono12Packed.unpack(&[0x12, 0xF3, 0xFF, 0x80, 0x00], &mut out);
+        assert_eq!(out, [0x123, 0xFFF, 0x800]);
+        PixelFormatChoice::Mono12p.unpack(&[0x23, 0xF1, 0xFF, 0x00, 0x08], &mut out);
+        assert_eq!(out, [0x123, 0xFFF, 0x800]);
+        assert_eq!(PixelFormatChoice::Mono12p.payload_bytes(3), 5);
+        // Mono12 in a 16-bit container: a value above 12 bits is clamped, not wrapped.
+        let mut two = [0u16; 2];
+        PixelFormatChoice::Mono12.unpack(&[0xFF, 0x0F, 0x00, 0xF0], &mut two);
+        assert_eq!(two, [0x0FFF, 0x0FFF]);
+        PixelFormatChoice::Mono16.unpack(&[0x34, 0x12, 0xFF, 0xFF], &mut two);
+        assert_eq!(two, [0x1234, 0xFFFF]);
+    }
+
+    #[test]
     fn offsets_snap_onto_the_nearest_increment_within_the_sensor() {
         assert_eq!(snap(37, 4, 1000), 36);
         assert_eq!(snap(39, 4, 1000), 40);

@@ -147,8 +147,9 @@ fn tracks_through_the_protocol_within_twice_the_demo_error_and_moves_the_window(
         camera.moves,
         camera.rois
     );
-    // Software trigger: each ROI exposed at the time asked.
-    assert_eq!(camera.retimed, 0);
+    // Software trigger: each ROI exposed at the time asked, but for the late frame of a lost grab that a later ROI
+    // of the same window takes (at its own time).
+    assert!(camera.retimed <= camera.lost, "{camera:?}");
 }
 
 #[test]
