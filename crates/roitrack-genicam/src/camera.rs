@@ -401,8 +401,8 @@ fn parse_address(text: &str) -> CameraAddress {
 }
 
 /// Opens the camera of `options.address`: a GigE Vision camera at an IPv4 address through a device made for that
-/// address (Aravis' `arv_camera_new` would run a discovery broadcast when the address does not answer or is off the
-/// host's subnets); an id only with [`GenicamOptions::allow_discovery`].
+/// address (Aravis 0.8's `arv_camera_new` sends a register read out of every interface to locate the address, and
+/// falls back to a discovery broadcast when nothing answers); an id only with [`GenicamOptions::allow_discovery`].
 fn open_camera(options: &GenicamOptions) -> Result<Camera, GenicamError> {
     let address = options.address.trim();
     let open_error = |reason: String| GenicamError::Open {
