@@ -512,5 +512,5 @@ fn symmetry_check_rejects_blobs_with_a_merged_reflection() {
     assert!(with.clean_rejected_asymmetric <= 2, "{with:?}");
     assert!(with.reflected_moved <= with.count / 100, "{with:?}");
     assert!(with.worst_accepted_shift_px < 0.25, "{with:?}");
-    assert!(with.rms_accepted_shift_px < 0.05, "{with:?}");
+    assert!(with.rms_accepted_shift_px < 0.06, "{with:?}");
 }
