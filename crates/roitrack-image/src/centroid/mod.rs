@@ -115,10 +115,13 @@ pub struct CentroidOptions {
 /// centroid by more than 0.1 px (worst 0.14 px; without the check, 1,748, up to 0.69 px); on 100,000 rendered clean
 /// blobs (`tests/clean_disks.rs`: 3 to 20 px across, any sub-pixel position, blur 0 to 1.5 px, read and shot noise,
 /// 8 and 12 bits, clipped cores, ellipses up to 1.5:1, background gradients, brightness uneven by up to 2 % a radius)
-/// it rejects none, its allowances at least 1.7 times the largest skew any showed; on 649 real blobs (ROIs cut around
-/// the circles of 18 JPEG photographs of printed grids, 60 to 1,400 px each, inverted) it rejects none, the largest
-/// skew 0.88 of its allowance. The [`SymmetryCheck::trefoil_floor`] is what passes the largest real blobs: without
-/// it, 2 of the 649 are rejected, and 2 of the 2,000 spots above pass instead of 11. A brightness ramp across the blob
+/// it rejects none, its allowances at least 1.7 times the largest skew any showed. On real blobs (the circles of 18
+/// JPEG photographs of printed grids, 60 to 1,400 px each, inverted; the example `realdata_rois` of roitrack-bench)
+/// it rejects none of 649 in windows with a margin of a radius + 2 px (up to 64 px), but 9 of 747 in windows sized as
+/// the tracker sizes them (a 7 px margin), all nine 30 to 40 px printed circles, most for their trefoil: the
+/// threshold and background the narrower window gives leave their outlines skewed more. The
+/// [`SymmetryCheck::trefoil_floor`] is what passes most large real blobs (without it, 2 of the 649 and 37 of the 747
+/// are rejected), at a cost: 11 of the 2,000 spots above pass instead of 2. A brightness ramp across the blob
 /// is a coma too: unclipped 15 px blobs lit unevenly by up to 4 % a radius pass, by 6 % half are rejected (to third
 /// order they look like a blob with a spot inside it). It adds about half to the centroid's time (24 x 24 ROI, on a
 /// 2-core AMD EPYC development VM: 0.19 µs against 0.13 µs without it, `roitrack bench`, 2026-11-27).
