@@ -9,6 +9,9 @@
 //! frames `/roitrack/image` (`sensor_msgs/msg/Image`) and `/roitrack/annotations`
 //! (`foxglove_msgs/msg/ImageAnnotations`).
 //!
+//! [`LiveServer`] serves the same messages, byte for byte, over the Foxglove WebSocket protocol while tracking (open
+//! `ws://127.0.0.1:8765` in Foxglove); [`Pacer`] replays a recording at its own speed so that a viewer can follow it.
+//!
 //! [`BagFrameSource`] reads the other way: the image frames of a bag's topic, as a timed frame stream, and the camera
 //! of its CameraInfo. [`BackgroundBag`] runs a [`BagWriter`] on a thread of its own, beside the tracker. [`convert`]
 //! holds the conversions (stamps, quaternions, the covariances in ROS's order and each message's frame), [`msg`] the
@@ -24,10 +27,15 @@
 
 mod background;
 pub mod convert;
+#[cfg(feature = "live")]
+mod live;
 pub mod msg;
+mod output;
 mod reader;
 mod writer;
 
 pub use background::BackgroundBag;
+#[cfg(feature = "live")]
+pub use live::{DEFAULT_LIVE_ADDRESS, LIVE_SUBPROTOCOL, LiveError, LiveReport, LiveServer, Pacer};
 pub use reader::{BagFrameSource, IMAGE_ENCODINGS, IMAGE_TYPES};
 pub use writer::{BagOptions, BagWriter, diagnostic_level, topics};

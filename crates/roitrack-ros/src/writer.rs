@@ -12,6 +12,7 @@ use roitrack_image::Frame;
 
 use crate::convert;
 use crate::msg::{self, Header};
+use crate::output::Output;
 
 /// The topics of a roitrack bag.
 pub mod topics {
@@ -94,7 +95,7 @@ struct Channel {
 /// ```
 pub struct BagWriter {
     path: PathBuf,
-    writer: mcap::Writer<BufWriter<File>>,
+    writer: Output,
     options: BagOptions,
     camera: Option<CameraModel>,
     camera_info_written: bool,
@@ -130,19 +131,9 @@ impl BagWriter {
         camera: Option<CameraModel>,
     ) -> Result<Self, FormatError> {
         let path = path.as_ref().to_path_buf();
-        for (field, id) in [
-            ("frame_id", &options.frame_id),
-            ("child_frame_id", &options.child_frame_id),
-        ] {
-            if id.is_empty() || id.contains('\0') {
-                return Err(FormatError::new(
-                    &path,
-                    format!("{field} {id:?}: empty or holds a NUL"),
-                ));
-            }
-        }
+        check_frame_ids(&path, options)?;
         let file = File::create(&path).map_err(|e| FormatError::io(&path, "cannot create", e))?;
-        let mut writer = mcap::WriteOptions::new()
+        let writer = mcap::WriteOptions::new()
             .profile("ros2")
             .library(concat!("roitrack ", env!("CARGO_PKG_VERSION")))
             .compression(options.compression)
@@ -151,6 +142,18 @@ impl BagWriter {
             .compression_threads(0)
             .create(BufWriter::new(file))
             .map_err(|e| mcap_error(&path, "cannot start the bag", e))?;
+        Self::with_output(path, Output::Mcap(writer), options, camera)
+    }
+
+    /// A writer of the bag's messages to `writer` (the live server's channels, see `LiveServer`), `path` naming it in
+    /// errors.
+    pub(crate) fn with_output(
+        path: PathBuf,
+        mut writer: Output,
+        options: &BagOptions,
+        camera: Option<CameraModel>,
+    ) -> Result<Self, FormatError> {
+        check_frame_ids(&path, options)?;
         let mut channel = |topic: &str, type_name: &str| -> Result<Channel, FormatError> {
             add_channel(
                 &mut writer,
@@ -275,6 +278,12 @@ impl BagWriter {
         self.camera_info = Some(channel);
         self.camera_info_written = true;
         Ok(())
+    }
+
+    /// Writes the camera info again at the next message (for a viewer that subscribed to it late).
+    #[cfg(feature = "live")]
+    pub(crate) fn resend_camera_info(&mut self) {
+        self.camera_info_written = false;
     }
 
     /// Writes one estimate: pose, twist (camera frame), odometry (twist in the target frame), tf and status, all
@@ -453,7 +462,7 @@ impl BagWriter {
 }
 
 fn add_channel(
-    writer: &mut mcap::Writer<BufWriter<File>>,
+    writer: &mut Output,
     path: &Path,
     topic: &str,
     type_name: &str,
@@ -471,6 +480,21 @@ fn add_channel(
         .add_channel(schema_id, topic, "cdr", &metadata)
         .map_err(|e| mcap_error(path, &format!("cannot add the channel {topic}"), e))?;
     Ok(Channel { id, sequence: 0 })
+}
+
+fn check_frame_ids(path: &Path, options: &BagOptions) -> Result<(), FormatError> {
+    for (field, id) in [
+        ("frame_id", &options.frame_id),
+        ("child_frame_id", &options.child_frame_id),
+    ] {
+        if id.is_empty() || id.contains('\0') {
+            return Err(FormatError::new(
+                path,
+                format!("{field} {id:?}: empty or holds a NUL"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn mcap_error(path: &Path, doing: &str, error: mcap::McapError) -> FormatError {

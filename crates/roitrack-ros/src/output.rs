@@ -1,0 +1,135 @@
+//! Where a [`BagWriter`](crate::BagWriter)'s serialised messages go: an MCAP file, or the channels of a Foxglove live
+//! server. One writer builds and serialises every message for both, so that a message of the bag and the same
+//! message served live are the same bytes.
+
+use std::collections::BTreeMap;
+use std::fs::File;
+use std::io::BufWriter;
+#[cfg(feature = "live")]
+use std::sync::Arc;
+
+use mcap::McapResult;
+use mcap::records::MessageHeader;
+
+/// An MCAP file, or the channels of a live server; the calls are those of `mcap::Writer` that the bag uses.
+// One per writer, for its whole life: the size of the MCAP variant does not matter.
+#[allow(clippy::large_enum_variant)]
+pub(crate) enum Output {
+    Mcap(mcap::Writer<BufWriter<File>>),
+    #[cfg(feature = "live")]
+    Live(LiveChannels),
+}
+
+/// The schemas and channels of a live server, indexed by the ids handed out (as MCAP's are).
+#[cfg(feature = "live")]
+pub(crate) struct LiveChannels {
+    context: Arc<foxglove::Context>,
+    schemas: Vec<foxglove::Schema>,
+    channels: Vec<Arc<foxglove::RawChannel>>,
+}
+
+#[cfg(feature = "live")]
+impl LiveChannels {
+    pub(crate) fn new(context: Arc<foxglove::Context>) -> Self {
+        Self {
+            context,
+            schemas: Vec::new(),
+            channels: Vec::new(),
+        }
+    }
+}
+
+#[cfg(feature = "live")]
+fn live_error(message: String) -> mcap::McapError {
+    mcap::McapError::Io(std::io::Error::other(message))
+}
+
+impl Output {
+    pub(crate) fn add_schema(
+        &mut self,
+        name: &str,
+        encoding: &str,
+        data: &[u8],
+    ) -> McapResult<u16> {
+        match self {
+            Self::Mcap(writer) => writer.add_schema(name, encoding, data),
+            #[cfg(feature = "live")]
+            Self::Live(live) => {
+                live.schemas
+                    .push(foxglove::Schema::new(name, encoding, data.to_vec()));
+                u16::try_from(live.schemas.len() - 1)
+                    .map_err(|_| live_error("too many schemas".into()))
+            }
+        }
+    }
+
+    pub(crate) fn add_channel(
+        &mut self,
+        schema_id: u16,
+        topic: &str,
+        message_encoding: &str,
+        metadata: &BTreeMap<String, String>,
+    ) -> McapResult<u16> {
+        match self {
+            Self::Mcap(writer) => writer.add_channel(schema_id, topic, message_encoding, metadata),
+            #[cfg(feature = "live")]
+            Self::Live(live) => {
+                let schema = live
+                    .schemas
+                    .get(usize::from(schema_id))
+                    .cloned()
+                    .ok_or_else(|| live_error(format!("{topic}: no schema {schema_id}")))?;
+                let channel = live
+                    .context
+                    .channel_builder(topic)
+                    .schema(schema)
+                    .message_encoding(message_encoding)
+                    .metadata(metadata.clone())
+                    .build_raw()
+                    .map_err(|e| live_error(format!("cannot serve {topic}: {e}")))?;
+                live.channels.push(channel);
+                u16::try_from(live.channels.len() - 1)
+                    .map_err(|_| live_error("too many channels".into()))
+            }
+        }
+    }
+
+    pub(crate) fn write_to_known_channel(
+        &mut self,
+        header: &MessageHeader,
+        data: &[u8],
+    ) -> McapResult<()> {
+        match self {
+            Self::Mcap(writer) => writer.write_to_known_channel(header, data),
+            #[cfg(feature = "live")]
+            Self::Live(live) => {
+                let channel = live
+                    .channels
+                    .get(usize::from(header.channel_id))
+                    .ok_or(mcap::McapError::UnknownChannel(0, header.channel_id))?;
+                // Never blocks: the server queues the message for each subscribed client, dropping that client's
+                // oldest when its queue is full.
+                channel.log_with_meta(
+                    data,
+                    foxglove::PartialMetadata {
+                        log_time: Some(header.log_time),
+                    },
+                );
+                Ok(())
+            }
+        }
+    }
+
+    pub(crate) fn finish(&mut self) -> McapResult<()> {
+        match self {
+            Self::Mcap(writer) => writer.finish().map(|_| ()),
+            #[cfg(feature = "live")]
+            Self::Live(live) => {
+                for channel in &live.channels {
+                    channel.close();
+                }
+                Ok(())
+            }
+        }
+    }
+}
