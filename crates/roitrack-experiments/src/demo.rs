@@ -10,12 +10,12 @@ use std::sync::atomic::AtomicUsize;
 
 use roitrack_core::JacobianKind;
 use roitrack_core::estimator::{
-    EstimatorConfig, KalmanTuning, TrackStatus, TrackerConfig, VvsSettings,
+    Estimate, EstimatorConfig, KalmanTuning, TrackStatus, TrackerConfig, VvsSettings,
 };
 use roitrack_image::{
     CentroidAccuracy, CentroidOptions, RoiRenderer, SensorModel, SimulatedCamera, centroid_accuracy,
 };
-use roitrack_pipeline::{LoopConfig, LoopReport, ScheduleOrder, run_loop_with_progress};
+use roitrack_pipeline::{LoopConfig, LoopReport, ScheduleOrder, run_loop_with_sink};
 use roitrack_plot::{TrackSeries, TruthSeries};
 use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simulate};
 
@@ -212,6 +212,17 @@ impl Demo {
         estimator: &DemoEstimator,
         progress: Option<&AtomicUsize>,
     ) -> Result<DemoRun, ExperimentError> {
+        self.from_images_with(estimator, progress, &mut |_| {})
+    }
+
+    /// [`from_images`](Self::from_images), handing each estimate to `on_estimate` as the loop makes it (a live
+    /// view); it must not block.
+    pub fn from_images_with(
+        &self,
+        estimator: &DemoEstimator,
+        progress: Option<&AtomicUsize>,
+        on_estimate: &mut (dyn FnMut(&Estimate) + Send),
+    ) -> Result<DemoRun, ExperimentError> {
         let config = self.config(estimator);
         let mut camera = SimulatedCamera::new(
             self.renderer.clone(),
@@ -228,13 +239,14 @@ impl Demo {
             ..LoopConfig::default()
         };
         loop_config.scheduler.order = self.options.order;
-        let report = run_loop_with_progress(
+        let report = run_loop_with_sink(
             &mut camera,
             &self.scenario.camera,
             &self.scenario.target,
             config,
             &loop_config,
             progress,
+            on_estimate,
         )?;
         if report.estimates.is_empty() {
             return Err(ExperimentError::NeverStarted {

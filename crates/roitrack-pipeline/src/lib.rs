@@ -25,5 +25,7 @@ pub use offline::{RoiTrackReport, track_rois};
 pub use photo::{
     PhotoDetection, PhotoError, PhotoOptions, PhotoPoint, PolarityChoice, detect_target,
 };
-pub use realtime::{LoopConfig, LoopReport, PipelineError, run_loop, run_loop_with_progress};
+pub use realtime::{
+    LoopConfig, LoopReport, PipelineError, run_loop, run_loop_with_progress, run_loop_with_sink,
+};
 pub use scheduler::{Predictor, RoiRequest, RoiScheduler, ScheduleOrder, SchedulerConfig};

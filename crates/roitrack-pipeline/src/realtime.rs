@@ -245,6 +245,45 @@ pub fn run_loop_with_progress<C: RoiCamera>(
     config: &LoopConfig,
     progress: Option<&std::sync::atomic::AtomicUsize>,
 ) -> Result<LoopReport, PipelineError> {
+    run_loop_with_sink(
+        camera,
+        camera_model,
+        target,
+        tracker_config,
+        config,
+        progress,
+        &mut |_| {},
+    )
+}
+
+/// [`run_loop_with_progress`], also handing each estimate to `on_estimate` on the estimation thread as it is made
+/// (a live view, for one): it must not block, or it holds the loop back.
+///
+/// ```
+/// use roitrack_core::estimator::TrackerConfig;
+/// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
+/// use roitrack_pipeline::{LoopConfig, run_loop_with_sink};
+/// use roitrack_sim::{Scenario, ScenarioKind};
+///
+/// let scenario = Scenario::new(ScenarioKind::Static, 1);
+/// let renderer =
+///     RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
+/// let mut camera = SimulatedCamera::new(renderer, { let s = scenario.clone(); move |t: f64| s.state_at(t) }, 1);
+/// let config = LoopConfig { roi_slots: 600, ..LoopConfig::default() };
+/// let mut seen = 0;
+/// let report = run_loop_with_sink(&mut camera, &scenario.camera, &scenario.target, TrackerConfig::default(),
+///     &config, None, &mut |_| seen += 1).unwrap();
+/// assert_eq!(seen, report.estimates.len());
+/// ```
+pub fn run_loop_with_sink<C: RoiCamera>(
+    camera: &mut C,
+    camera_model: &CameraModel,
+    target: &Target,
+    tracker_config: TrackerConfig,
+    config: &LoopConfig,
+    progress: Option<&std::sync::atomic::AtomicUsize>,
+    on_estimate: &mut (dyn FnMut(&Estimate) + Send),
+) -> Result<LoopReport, PipelineError> {
     config.validate()?;
     camera_model.time.validate()?;
     let mut tracker = Tracker::new(camera_model.clone(), target.clone(), tracker_config)?;
@@ -267,6 +306,7 @@ pub fn run_loop_with_progress<C: RoiCamera>(
                         spins = 0;
                         match tracker.push(&m) {
                             Ok(Some(e)) => {
+                                on_estimate(&e);
                                 if estimates.len() < estimates.capacity() {
                                     latencies_us.push(grabbed.elapsed().as_secs_f64() * 1e6);
                                     estimates.push(e);
