@@ -1,16 +1,22 @@
-//! `--mcap OUT.mcap` on `track` and `demo`: the estimates also as a ROS 2 bag; `track --mcap-in BAG --image-topic
-//! TOPIC`: the frames of a bag (see `roitrack::ros`, docs/ros2.md).
+//! `--mcap OUT.mcap` on `track`, `demo` and `live`: the estimates also as a ROS 2 bag; `--foxglove [ADDR:PORT]`: the
+//! same topics served live to Foxglove; `track --paced`: at the recording's speed; `track --mcap-in BAG
+//! --image-topic TOPIC`: the frames of a bag (see `roitrack::ros`, docs/ros2.md).
 
+use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
-use anyhow::{Result, bail};
+use anyhow::{Result, anyhow, bail};
 use clap::Args;
 use roitrack::formats::{FormatError, FrameInfo, FrameSource, FrameTiming};
-use roitrack::ros::{BackgroundBag, BagFrameSource, BagOptions, BagWriter};
+use roitrack::ros::{
+    BackgroundBag, BagFrameSource, BagOptions, BagWriter, DEFAULT_LIVE_ADDRESS, LiveServer, Pacer,
+};
 use roitrack::{CameraModel, Estimate, Frame, MotionState, Target};
 
-/// The options of the ROS 2 bag output.
+/// The options of the ROS 2 outputs: the bag and the live view.
 #[derive(Debug, Args)]
+#[command(group = clap::ArgGroup::new("ros_output").multiple(true).args(["mcap", "foxglove"]))]
 pub struct McapArgs {
     /// Also write the estimates as a ROS 2 bag in MCAP storage (profile ros2, CDR): /roitrack/pose, /roitrack/twist,
     /// /roitrack/odometry, /tf, /roitrack/status per estimate, /roitrack/camera_info once, and with --images the
@@ -19,16 +25,63 @@ pub struct McapArgs {
     /// (a second one ends the process at once). Default: no bag.
     #[arg(long, value_name = "OUT.mcap")]
     pub mcap: Option<PathBuf>,
-    /// With --mcap: the camera's frame id, the header frame of every message.
-    #[arg(long, default_value = "camera", value_name = "ID", requires = "mcap")]
+    /// Serve the bag's topics live over the Foxglove WebSocket protocol while tracking: in Foxglove, Open
+    /// connection, Foxglove WebSocket, ws://ADDR:PORT (docs/ros2.md). Without a value: 127.0.0.1:8765; port 0: a free
+    /// port (printed). A viewer that is slow or absent never holds the tracking back (it misses messages instead).
+    /// With `track`, --paced plays a recording at its own speed for the viewer. Default: not served.
+    #[arg(
+        long,
+        value_name = "ADDR:PORT",
+        num_args = 0..=1,
+        default_missing_value = DEFAULT_LIVE_ADDRESS,
+        value_parser = parse_live_address,
+    )]
+    pub foxglove: Option<SocketAddr>,
+    /// With --foxglove: before tracking, wait up to S seconds for a viewer to subscribe to a topic (then start
+    /// anyway), so that it sees the run from its start. Default: no wait.
+    #[arg(long, value_name = "S", requires = "foxglove", value_parser = parse_wait_s)]
+    pub foxglove_wait_s: Option<f64>,
+    /// With --mcap or --foxglove: the camera's frame id, the header frame of every message.
+    #[arg(
+        long,
+        default_value = "camera",
+        value_name = "ID",
+        requires = "ros_output"
+    )]
     pub frame_id: String,
-    /// With --mcap: the target's frame id, the child frame of /tf and of the odometry.
-    #[arg(long, default_value = "target", value_name = "ID", requires = "mcap")]
+    /// With --mcap or --foxglove: the target's frame id, the child frame of /tf and of the odometry.
+    #[arg(
+        long,
+        default_value = "target",
+        value_name = "ID",
+        requires = "ros_output"
+    )]
     pub child_frame_id: String,
 }
 
-/// The bag, if --mcap was given.
-pub struct Bag(Option<BackgroundBag>);
+fn parse_live_address(text: &str) -> Result<SocketAddr, String> {
+    let text = text.trim();
+    let text = match text.strip_prefix("localhost:") {
+        Some(port) => format!("127.0.0.1:{port}"),
+        None => text.to_string(),
+    };
+    text.parse().map_err(|_| {
+        format!("expected ADDR:PORT, an IP address and a port such as {DEFAULT_LIVE_ADDRESS}")
+    })
+}
+
+fn parse_wait_s(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(s) if s.is_finite() && s >= 0.0 => Ok(s),
+        _ => Err("expected seconds, a number from 0".into()),
+    }
+}
+
+/// The bag (--mcap) and the live view (--foxglove), each if asked for.
+pub struct Bag {
+    bag: Option<BackgroundBag>,
+    live: Option<LiveServer>,
+}
 
 /// Set by the first Ctrl-C (SIGINT) of a run that writes a bag: the run then stops at its next estimate or frame,
 /// through the error path, which completes the bag. A second Ctrl-C ends the process at once.
@@ -72,27 +125,51 @@ impl McapArgs {
             child_frame_id: self.child_frame_id.clone(),
             ..BagOptions::default()
         };
+        // The live server first: an address that cannot be served fails before the bag is created.
+        let live = match self.foxglove {
+            Some(address) => {
+                let live =
+                    LiveServer::start(address, &options, Some(camera.clone()), target.cloned())
+                        .map_err(|e| anyhow!("--foxglove {address}: {e}"))?;
+                eprintln!(
+                    "roitrack: live view on ws://{} (Foxglove: Open connection, Foxglove WebSocket)",
+                    live.address()
+                );
+                if let Some(wait_s) = self.foxglove_wait_s {
+                    eprintln!("roitrack: waiting up to {wait_s} s for a viewer to subscribe");
+                    if !live.wait_for_subscriber(Duration::from_secs_f64(wait_s)) {
+                        eprintln!("roitrack: no viewer subscribed; tracking anyway");
+                    }
+                }
+                Some(live)
+            }
+            None => None,
+        };
         if self.mcap.is_some() {
             stop_on_interrupt();
         }
-        Ok(Bag(match &self.mcap {
+        let bag = match &self.mcap {
             Some(path) => Some(BackgroundBag::spawn(
                 BagWriter::create(path, &options, Some(camera.clone()))?,
                 target.cloned(),
             )),
             None => None,
-        }))
+        };
+        Ok(Bag { bag, live })
     }
 
-    /// Whether frames are to be copied for the bag.
+    /// Whether frames are to be copied for the bag or the live view.
     pub fn wants_frames(&self) -> bool {
-        self.mcap.is_some()
+        self.mcap.is_some() || self.foxglove.is_some()
     }
 }
 
 impl Bag {
     pub fn estimate(&mut self, e: &Estimate) -> Result<(), roitrack::formats::FormatError> {
-        match &mut self.0 {
+        if let Some(live) = &mut self.live {
+            live.publish_estimate(e)?;
+        }
+        match &mut self.bag {
             Some(bag) => {
                 check_interrupt(bag)?;
                 bag.write_estimate(e)
@@ -106,17 +183,24 @@ impl Bag {
         frame: Option<Frame>,
         state: Option<&MotionState>,
     ) -> Result<(), roitrack::formats::FormatError> {
-        match (&mut self.0, frame) {
-            (Some(bag), Some(frame)) => {
+        let Some(frame) = frame else {
+            return Ok(());
+        };
+        match (&mut self.bag, &mut self.live) {
+            (Some(bag), live) => {
                 check_interrupt(bag)?;
+                if let Some(live) = live {
+                    live.publish_frame(frame.clone(), state)?;
+                }
                 bag.write_frame(frame, state)
             }
-            _ => Ok(()),
+            (None, Some(live)) => live.publish_frame(frame, state),
+            (None, None) => Ok(()),
         }
     }
 
     pub fn finish(self) -> Result<()> {
-        if let Some(bag) = self.0 {
+        if let Some(bag) = self.bag {
             let path = bag.path().to_path_buf();
             let messages = bag.finish()?;
             eprintln!(
@@ -124,7 +208,53 @@ impl Bag {
                 path.display()
             );
         }
+        if let Some(live) = self.live {
+            finish_live(live)?;
+        }
         Ok(())
+    }
+
+    /// Takes the live view out, to be fed from another thread while tracking (see `finish_live`); the bag stays.
+    pub fn take_live(&mut self) -> Option<LiveServer> {
+        self.live.take()
+    }
+}
+
+/// Stops the live view, saying what it served.
+pub fn finish_live(live: LiveServer) -> Result<()> {
+    let address = live.address();
+    let report = live.finish()?;
+    eprintln!(
+        "roitrack: live view on ws://{address}: {} estimates and frames, {} while no viewer subscribed, {} \
+         published, {} dropped (the publishing thread was behind)",
+        report.handed, report.unseen, report.published, report.dropped
+    );
+    Ok(())
+}
+
+/// `track --paced [FACTOR]`: the recording at its own speed.
+#[derive(Debug, Args)]
+pub struct PaceArgs {
+    /// Replay the input at its own speed (FACTOR times it; default 1): each estimate (each frame with --images) is
+    /// released when its time, counted from the first one's, has passed on the wall clock, so that a viewer of
+    /// --foxglove follows the run as it was recorded. Default: as fast as possible.
+    #[arg(long, value_name = "FACTOR", num_args = 0..=1, default_missing_value = "1", value_parser = parse_factor)]
+    pub paced: Option<f64>,
+}
+
+fn parse_factor(text: &str) -> Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(f) if f.is_finite() && f > 0.0 => Ok(f),
+        _ => Err(
+            "expected a speed factor, a positive number (1: real time, 2: twice as fast)".into(),
+        ),
+    }
+}
+
+impl PaceArgs {
+    /// The pacer, if --paced was given.
+    pub fn pacer(&self) -> Option<Pacer> {
+        self.paced.and_then(Pacer::new)
     }
 }
 

@@ -80,6 +80,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         indicatif::ProgressStyle::with_template("{bar:40} {percent:>3}% ROIs {msg} ({elapsed})")
             .expect("valid progress template"),
     );
+    // Opened before the runs, so that a live viewer (--foxglove, --foxglove-wait-s) is there from the start.
+    let mut bag = Some(args.ros.open(&demo.run.camera, None)?);
+    // The live view follows the default estimator's run from the loop's estimation thread, as it tracks.
+    let mut live = bag.as_mut().and_then(|b| b.take_live());
     let mut runs = Vec::new();
     for (k, estimator) in lineup.iter().enumerate() {
         bar.set_message(estimator.label);
@@ -92,7 +96,23 @@ pub fn run(args: &DemoArgs) -> Result<()> {
                     std::thread::sleep(Duration::from_millis(100));
                 }
             });
-            let run = demo.from_images(estimator, Some(&done));
+            let run = match (k, &mut live) {
+                (0, Some(live)) => {
+                    let mut failed = None;
+                    let run = demo.from_images_with(estimator, Some(&done), &mut |e| {
+                        if failed.is_none() {
+                            failed = live.publish_estimate(e).err();
+                        }
+                    });
+                    match failed {
+                        Some(e) => Err(e.into()),
+                        None => run.map_err(anyhow::Error::from),
+                    }
+                }
+                _ => demo
+                    .from_images(estimator, Some(&done))
+                    .map_err(anyhow::Error::from),
+            };
             finished.store(true, Ordering::Relaxed);
             run
         })?;
@@ -106,12 +126,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             writer.write(e)?;
         }
         writer.finish()?;
-        if k == 0 {
-            let mut bag = args.ros.open(&demo.run.camera, None)?;
+        if let Some(mut bag) = bag.take() {
             for e in &from_images.scored.estimates {
                 bag.estimate(e)?;
             }
             bag.finish()?;
+        }
+        if let Some(live) = live.take() {
+            crate::ros::finish_live(live)?;
         }
         runs.push(from_images);
         runs.push(demo.from_centroids(estimator)?);

@@ -111,6 +111,8 @@ pub struct TrackArgs {
     #[command(flatten)]
     pub ros: crate::ros::McapArgs,
     #[command(flatten)]
+    pub pace: crate::ros::PaceArgs,
+    #[command(flatten)]
     pub mcap_in: crate::ros::McapInArgs,
 }
 
@@ -143,8 +145,14 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         }
     };
     let mut bag = args.ros.open(&camera, None)?;
+    let mut pacer = args.pace.pacer();
     let start = Instant::now();
-    let mut sink = |e: &roitrack::Estimate| writer.write(e).and_then(|()| bag.estimate(e));
+    let mut sink = |e: &roitrack::Estimate| {
+        if let Some(pacer) = &mut pacer {
+            pacer.wait_until(e.t_ref_s);
+        }
+        writer.write(e).and_then(|()| bag.estimate(e))
+    };
     let (path, report, rois) = match (&args.measurements, &args.rois) {
         (Some(path), _) => {
             // Checked: known ids, centroids on the camera's image, times in seconds (or converted).
@@ -275,6 +283,7 @@ fn run_frames(
                 .expect("valid progress template"),
         ),
     };
+    let mut pacer = args.pace.pacer();
     let start = Instant::now();
     let result = roitrack::pipeline::track_frame_stream(
         &mut tracker,
@@ -289,8 +298,11 @@ fn run_frames(
                 })
             })
         },
-        |(_info, frame), outcome| {
+        |(info, frame), outcome| {
             progress.inc(1);
+            if let Some(pacer) = &mut pacer {
+                pacer.wait_until(info.t_s);
+            }
             bag.frame(frame.take(), outcome.estimate.as_ref().map(|e| &e.state))?;
             match &outcome.estimate {
                 Some(e) => writer.write(e).and_then(|()| bag.estimate(e)),
