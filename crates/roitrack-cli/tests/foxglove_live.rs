@@ -373,3 +373,58 @@ fn an_address_that_does_not_parse_or_is_taken_is_refused_naming_the_flag_before_
     }
     drop(taken);
 }
+
+#[test]
+fn the_demo_publishes_its_default_estimators_poses_from_its_loop() {
+    let dir = tempfile::tempdir().unwrap();
+    let dir = dir.path();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_roitrack"))
+        .args([
+            "demo",
+            "--out",
+            p(dir),
+            "--foxglove",
+            "127.0.0.1:0",
+            "--foxglove-wait-s",
+            "120",
+        ])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut stderr = BufReader::new(child.stderr.take().unwrap());
+    let address: SocketAddr = loop {
+        let mut line = String::new();
+        assert!(stderr.read_line(&mut line).unwrap() > 0, "no live view");
+        if let Some(rest) = line.split("live view on ws://").nth(1) {
+            break rest.split_whitespace().next().unwrap().parse().unwrap();
+        }
+    };
+    let reader = std::thread::spawn(move || {
+        let mut rest = String::new();
+        std::io::Read::read_to_string(&mut stderr, &mut rest).unwrap();
+        rest
+    });
+    let (received, _) = view(
+        address,
+        &[("/roitrack/pose", "geometry_msgs/msg/PoseWithCovarianceStamped")],
+    );
+    let status = child.wait().unwrap();
+    let rest = reader.join().unwrap();
+    assert!(status.success(), "roitrack demo failed: {rest}");
+    let tum = tum_rows(&dir.join("kalman_poses.tum"));
+    let poses = &received["/roitrack/pose"];
+    assert!(!poses.is_empty());
+    for message in poses {
+        let pose = decode_pose(&message.data);
+        assert_eq!(pose.frame_id, "camera");
+        let row = tum
+            .iter()
+            .find(|r| (r[0] - pose.t_s).abs() < 1e-9)
+            .unwrap_or_else(|| panic!("no TUM row at {}", pose.t_s));
+        for (a, b) in pose.values.iter().zip(&row[1..]) {
+            assert!((a - b).abs() < 1e-9, "t {}: {a} against {b}", pose.t_s);
+        }
+    }
+    eprintln!("{} of {} poses received", poses.len(), tum.len());
+}
