@@ -407,7 +407,10 @@ fn the_demo_publishes_its_default_estimators_poses_from_its_loop() {
     });
     let (received, _) = view(
         address,
-        &[("/roitrack/pose", "geometry_msgs/msg/PoseWithCovarianceStamped")],
+        &[(
+            "/roitrack/pose",
+            "geometry_msgs/msg/PoseWithCovarianceStamped",
+        )],
     );
     let status = child.wait().unwrap();
     let rest = reader.join().unwrap();
