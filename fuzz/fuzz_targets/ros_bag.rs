@@ -1,6 +1,6 @@
-//! The ROS 2 bag reader (roitrack_ros::BagFrameSource) on arbitrary bytes: the camera info and every frame of the
-//! image topic read: frames or an error naming the bag, never a panic, a hang or an allocation driven by a corrupt
-//! size field.
+//! The ROS 2 bag readers (roitrack_ros::BagFrameSource, BagMeasurementSource) on arbitrary bytes: the camera info,
+//! every frame of the image topic and every measurement of the measurement topic read: frames, measurements or an
+//! error naming the bag, never a panic, a hang or an allocation driven by a corrupt size field.
 //!
 //! The reader runs mcap's chunk decoding under `catch_unwind` (mcap 0.26 panics on some corrupt records) and turns
 //! such a panic into an error naming the bag. libFuzzer's panic hook aborts on every panic, caught or not, so this
@@ -9,7 +9,7 @@
 #![no_main]
 use libfuzzer_sys::fuzz_target;
 use roitrack_image::Frame;
-use roitrack_ros::BagFrameSource;
+use roitrack_ros::{BagFrameSource, BagMeasurementSource};
 
 static STANDARD_PANIC_HOOK: std::sync::Once = std::sync::Once::new();
 
@@ -20,6 +20,17 @@ fuzz_target!(|data: &[u8]| {
     let check = |e: roitrack_formats::FormatError| {
         assert!(e.to_string().starts_with("b.mcap"), "{e}");
     };
+    match BagMeasurementSource::from_bytes("b.mcap", data.to_vec(), "/roitrack/measurements") {
+        Err(e) => check(e),
+        Ok(source) => {
+            for m in source.with_known_ids([1, 2, 3]).with_image_size(640, 480) {
+                match m {
+                    Ok(m) => assert!(m.t_s.is_finite() && m.u_px.is_finite() && m.v_px.is_finite()),
+                    Err(e) => check(e),
+                }
+            }
+        }
+    }
     match BagFrameSource::from_bytes("b.mcap", data.to_vec(), "/roitrack/image") {
         Err(e) => check(e),
         Ok(mut source) => {

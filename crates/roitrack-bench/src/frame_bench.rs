@@ -369,7 +369,7 @@ where
     I: Send + Debug,
     S: Send + Debug,
 {
-    track_frame_stream(tracker, next, |_, outcome| {
+    track_frame_stream(tracker, next, |_, outcome, _| {
         black_box(outcome);
         Ok::<_, std::convert::Infallible>(())
     })

@@ -9,10 +9,12 @@ use std::time::Duration;
 use anyhow::{Result, anyhow, bail};
 use clap::Args;
 use roitrack::formats::{FormatError, FrameInfo, FrameSource, FrameTiming};
+use roitrack::image::RoiImage;
 use roitrack::ros::{
-    BackgroundBag, BagFrameSource, BagOptions, BagWriter, DEFAULT_LIVE_ADDRESS, LiveServer, Pacer,
+    BackgroundBag, BagFrameSource, BagMeasurementSource, BagOptions, BagWriter,
+    DEFAULT_LIVE_ADDRESS, LiveServer, Pacer,
 };
-use roitrack::{CameraModel, Estimate, Frame, MotionState, Target};
+use roitrack::{CameraModel, Estimate, Frame, Measurement, MotionState, Target};
 
 /// The options of the ROS 2 outputs: the bag and the live view.
 #[derive(Debug, Args)]
@@ -57,6 +59,11 @@ pub struct McapArgs {
         requires = "ros_output"
     )]
     pub child_frame_id: String,
+    /// With --mcap and `track --rois`: also every ROI image as recorded, with where it sits on the sensor and the
+    /// centroid measured in it (/roitrack/roi/image, /roitrack/roi/camera_info, /roitrack/roi/annotations;
+    /// docs/ros2.md). Off by default: three messages per ROI, about twice the bag's size and writing time.
+    #[arg(long, requires = "mcap")]
+    pub mcap_rois: bool,
 }
 
 fn parse_live_address(text: &str) -> Result<SocketAddr, String> {
@@ -77,10 +84,12 @@ fn parse_wait_s(text: &str) -> Result<f64, String> {
     }
 }
 
-/// The bag (--mcap) and the live view (--foxglove), each if asked for.
+/// The bag (--mcap) and the live view (--foxglove), each if asked for, and whether the bag takes the ROI images
+/// (--mcap-rois).
 pub struct Bag {
     bag: Option<BackgroundBag>,
     live: Option<LiveServer>,
+    rois: bool,
 }
 
 /// Set by the first Ctrl-C (SIGINT) of a run that writes a bag: the run then stops at its next estimate or frame,
@@ -118,8 +127,19 @@ fn check_interrupt(bag: &BackgroundBag) -> Result<(), FormatError> {
 }
 
 impl McapArgs {
-    /// Opens the bag on a writing thread of its own; `target` is drawn on the frames by each estimate.
+    /// Opens the bag on a writing thread of its own; `target` is drawn on the frames by each estimate. Refuses
+    /// --mcap-rois, which only `track --rois` takes ([`Self::open_for_rois`]).
     pub fn open(&self, camera: &CameraModel, target: Option<&Target>) -> Result<Bag> {
+        if self.mcap_rois {
+            bail!(
+                "--mcap-rois is for the ROI images of `track --rois`: this run has none to write"
+            );
+        }
+        self.open_for_rois(camera, target)
+    }
+
+    /// [`Self::open`] for a run from ROI images, which --mcap-rois writes to the bag.
+    pub fn open_for_rois(&self, camera: &CameraModel, target: Option<&Target>) -> Result<Bag> {
         let options = BagOptions {
             frame_id: self.frame_id.clone(),
             child_frame_id: self.child_frame_id.clone(),
@@ -155,7 +175,11 @@ impl McapArgs {
             )),
             None => None,
         };
-        Ok(Bag { bag, live })
+        Ok(Bag {
+            bag,
+            live,
+            rois: self.mcap_rois,
+        })
     }
 
     /// Whether frames are to be copied for the bag or the live view.
@@ -178,10 +202,13 @@ impl Bag {
         }
     }
 
+    /// A frame, the state of its estimate and the centroids measured in it (drawn on it and written to
+    /// /roitrack/measurements).
     pub fn frame(
         &mut self,
         frame: Option<Frame>,
         state: Option<&MotionState>,
+        measured: &[Measurement],
     ) -> Result<(), roitrack::formats::FormatError> {
         let Some(frame) = frame else {
             return Ok(());
@@ -190,13 +217,41 @@ impl Bag {
             (Some(bag), live) => {
                 check_interrupt(bag)?;
                 if let Some(live) = live {
-                    live.publish_frame(frame.clone(), state)?;
+                    live.publish_frame(frame.clone(), state, measured)?;
                 }
-                bag.write_frame(frame, state)
+                bag.write_frame(frame, state, measured)?;
+                bag.write_measurements(measured)
             }
-            (None, Some(live)) => live.publish_frame(frame, state),
+            (None, Some(live)) => live.publish_frame(frame, state, measured),
             (None, None) => Ok(()),
         }
+    }
+
+    /// Measured centroids, for /roitrack/measurements.
+    pub fn measurements(&mut self, measured: &[Measurement]) -> Result<(), FormatError> {
+        match &mut self.bag {
+            Some(bag) => bag.write_measurements(measured),
+            None => Ok(()),
+        }
+    }
+
+    /// A ROI image and the centroid measured in it: its measurement to /roitrack/measurements, and with
+    /// --mcap-rois, the image and its annotations.
+    pub fn roi(
+        &mut self,
+        image: &RoiImage,
+        measured: Option<&Measurement>,
+    ) -> Result<(), FormatError> {
+        let Some(bag) = &mut self.bag else {
+            return Ok(());
+        };
+        if let Some(m) = measured {
+            bag.write_measurements(std::slice::from_ref(m))?;
+        }
+        if self.rois {
+            bag.write_roi(image, measured)?;
+        }
+        Ok(())
     }
 
     pub fn finish(self) -> Result<()> {
@@ -268,8 +323,46 @@ pub struct McapInArgs {
     pub image_topic: Option<String>,
     /// With --mcap-in: the sensor_msgs/msg/CameraInfo topic giving the camera when no --camera is given (Default:
     /// camera_info beside the image topic, `/ns/image_raw` -> `/ns/camera_info`); every frame must have its size.
-    #[arg(long, value_name = "TOPIC", requires = "image_topic")]
+    #[arg(long, value_name = "TOPIC")]
     pub camera_info_topic: Option<String>,
+    /// With --mcap-in BAG: instead of frames, replay the blob centroids recorded on this topic
+    /// (roitrack_msgs/msg/BlobMeasurements, as `track --mcap` writes to /roitrack/measurements; docs/ros2.md),
+    /// tracked as a measurements file would be. The camera from --camera, else from the bag's CameraInfo
+    /// (--camera-info-topic, default camera_info beside the topic: /roitrack/camera_info). Default: none.
+    #[arg(long, value_name = "TOPIC", conflicts_with = "image_topic")]
+    pub measurement_topic: Option<String>,
+}
+
+impl McapInArgs {
+    /// The topic whose camera info gives the camera (beside the image or measurement topic by default).
+    fn info_topic(&self, topic: &str) -> String {
+        self.camera_info_topic
+            .clone()
+            .unwrap_or_else(|| BagFrameSource::camera_info_topic_of(topic))
+    }
+
+    /// The recorded measurements to replay: `--mcap-in BAG --measurement-topic TOPIC`, checked against the
+    /// target's ids and the camera's image; `None` without --measurement-topic.
+    pub fn measurement_replay(
+        &self,
+        source: Option<&Path>,
+        known_ids: Vec<u32>,
+        camera: &CameraModel,
+    ) -> Result<Option<BagMeasurementSource>> {
+        let Some(topic) = &self.measurement_topic else {
+            return Ok(None);
+        };
+        let Some(bag) = source.filter(|s| is_bag(s)) else {
+            bail!(
+                "--measurement-topic is for the measurements of a ROS 2 bag: --mcap-in BAG (a .mcap file or a rosbag2 folder)"
+            );
+        };
+        Ok(Some(
+            BagMeasurementSource::open(bag, topic)?
+                .with_known_ids(known_ids)
+                .with_image_size(camera.width_px, camera.height_px),
+        ))
+    }
 }
 
 /// Whether a frame source is a ROS 2 bag: a `.mcap` file, or a folder holding one (rosbag2).
@@ -291,15 +384,24 @@ pub fn camera(
     if source.is_none() && mcap_in.image_topic.is_some() {
         bail!("--image-topic is for the frames of a bag: --mcap-in BAG");
     }
+    if mcap_in.camera_info_topic.is_some()
+        && mcap_in.image_topic.is_none()
+        && mcap_in.measurement_topic.is_none()
+    {
+        bail!("--camera-info-topic goes with --image-topic or --measurement-topic");
+    }
     match (camera, source, &mcap_in.image_topic) {
         (Some(camera), _, _) => camera.read(),
         (None, Some(bag), Some(image_topic)) if is_bag(bag) => {
             let mut source = BagFrameSource::open(bag, image_topic)?;
-            let info_topic = mcap_in
-                .camera_info_topic
-                .clone()
-                .unwrap_or_else(|| BagFrameSource::camera_info_topic_of(image_topic));
-            Ok(source.camera_info(&info_topic)?)
+            Ok(source.camera_info(&mcap_in.info_topic(image_topic))?)
+        }
+        (None, Some(bag), None) if is_bag(bag) && mcap_in.measurement_topic.is_some() => {
+            let topic = mcap_in.measurement_topic.as_deref().unwrap_or_default();
+            Ok(roitrack::ros::read_camera_info(
+                bag,
+                &mcap_in.info_topic(topic),
+            )?)
         }
         _ => bail!(
             "--camera is required (only the frames of a bag, --mcap-in, may take the camera from the bag)"

@@ -2,7 +2,10 @@
 //! reader and ROS 2 Humble type store) and `mcap` with `mcap-ros2-support`, through `crates/roitrack-ros/tests/
 //! check_bag.py`: every pose equal to the TUM file's, twists to the twists CSV's, covariances symmetric, positive
 //! semi-definite and those of the covariance CSV in ROS's order and each message's frame, stamps and frame ids right;
-//! the bag of a run that fails midway readable up to its last estimate.
+//! the bag of a run that fails midway readable up to its last estimate; the measured centroids of
+//! `/roitrack/measurements` (roitrack's own message) those of the measurements CSV, replayed by `track --mcap-in BAG
+//! --measurement-topic` to the same estimates (also from a bag `rosbags` wrote); the annotations of frames and of ROI
+//! images (`--mcap-rois`); the camera info's distortion model the camera's own.
 //!
 //! The readers live in the virtual environment that scripts/setup-test-deps makes (`target/ros-venv`, or
 //! `ROITRACK_ROS_VENV`). Without it the tests say they were skipped, unless `ROITRACK_REQUIRE_ROS_PY` is set (as
@@ -109,8 +112,12 @@ fn a_bag_from_measurements_reads_back_equal_to_the_tum_and_csv_files() {
     let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
     args.extend(["--frame-id", "cam0", "--child-frame-id", "tool"].map(String::from));
     ok(&strs(&args));
-    let report = check_bag(&python, dir, ["cam0", "tool"], &[]);
-    assert!(report.contains("read back by mcap and rosbags"), "{report}");
+    let csv = dir.join("measurements.csv");
+    let report = check_bag(&python, dir, ["cam0", "tool"], &["--measurements", p(&csv)]);
+    assert!(
+        report.contains("read back by mcap and rosbags") && report.contains("equal to the CSV's"),
+        "{report}"
+    );
     // A checker that cannot fail would prove nothing: a bag held against another run's files is refused.
     ok(&[
         "simulate",
@@ -544,4 +551,288 @@ fn ctrl_c_completes_the_bag() {
         estimates * 2 >= tracked && estimates <= tracked,
         "{estimates} of {tracked}"
     );
+}
+
+fn max_difference(a: &[Vec<f64>], b: &[Vec<f64>]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .flat_map(|(x, y)| x.iter().zip(y).map(|(x, y)| (x - y).abs()))
+        .fold(0.0, f64::max)
+}
+
+/// `track --mcap-in BAG --measurement-topic TOPIC` with the target of `dir` (the camera from the bag unless given):
+/// the poses of the replay.
+fn replay(
+    dir: &Path,
+    bag: &Path,
+    topic: &str,
+    camera: Option<&Path>,
+    poses: &str,
+) -> Vec<Vec<f64>> {
+    let target = dir.join("target.csv");
+    let mut args = vec![
+        "track",
+        "--target",
+        p(&target),
+        "--mcap-in",
+        p(bag),
+        "--measurement-topic",
+        topic,
+    ];
+    if let Some(camera) = camera {
+        args.extend(["--camera", p(camera)]);
+    }
+    let (tum, twists) = (dir.join(poses), dir.join(format!("{poses}.twists.csv")));
+    args.extend(["--poses", p(&tum), "--twists", p(&twists)]);
+    ok(&args);
+    read_poses(&tum)
+}
+
+#[test]
+fn recorded_measurements_replay_from_a_bag_to_the_estimates_of_the_csv() {
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    ok(&[
+        "simulate",
+        "--scenario",
+        "orthoglide",
+        "--duration-s",
+        "1.5",
+        "--out",
+        p(dir),
+    ]);
+    ok(&strs(&track_args(dir, &dir.join("measurements.csv"), dir)));
+    let expected = read_poses(&dir.join("poses.tum"));
+    assert!(expected.len() > 500);
+    // roitrack's own bag, the camera from its camera info.
+    let got = replay(
+        dir,
+        &dir.join("run.mcap"),
+        "/roitrack/measurements",
+        None,
+        "own.tum",
+    );
+    let difference = max_difference(&got, &expected);
+    assert!(difference <= 1e-9, "{difference}");
+    // A bag written by rosbags from the message's documented definition, 7 centroids a message (not roitrack's
+    // batches), with sigmas.
+    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../roitrack-ros/tests/write_measurement_bag.py");
+    let write = |bag: &Path, damage: Option<&str>| {
+        let mut command = Command::new(&python);
+        command
+            .arg(&script)
+            .args([p(bag), p(&dir.join("measurements.csv")), "/cam/blobs", "7"]);
+        command.args(damage);
+        let out = command.output().unwrap();
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+    };
+    let theirs = dir.join("theirs");
+    write(&theirs, None);
+    let camera = dir.join("camera.yaml");
+    let got = replay(dir, &theirs, "/cam/blobs", Some(&camera), "theirs.tum");
+    let difference = max_difference(&got, &expected);
+    assert!(difference <= 1e-9, "{difference}");
+
+    // Bad input: each error names the bag, the topic and, for a bad message, its index and field.
+    let track = |bag: &Path, topic: &str| {
+        fails(&[
+            "track",
+            "--camera",
+            p(&camera),
+            "--target",
+            p(&dir.join("target.csv")),
+            "--mcap-in",
+            p(bag),
+            "--measurement-topic",
+            topic,
+            "--poses",
+            p(&dir.join("bad.tum")),
+            "--twists",
+            p(&dir.join("bad.csv")),
+        ])
+    };
+    let run = dir.join("run.mcap");
+    let error = track(&run, "/roitrack/blobs");
+    assert!(
+        error.contains(p(&run))
+            && error.contains("/roitrack/blobs")
+            && error.contains("no such topic"),
+        "{error}"
+    );
+    assert!(
+        error.contains("/roitrack/measurements (roitrack_msgs/msg/BlobMeasurements)"),
+        "{error}"
+    );
+    let error = track(&run, "/roitrack/pose");
+    assert!(
+        error.contains("/roitrack/pose")
+            && error.contains("not roitrack_msgs/msg/BlobMeasurements"),
+        "{error}"
+    );
+    for (damage, expected) in [
+        (
+            "unknown-id",
+            "message 2, field point_ids[1]: unknown point id 9999",
+        ),
+        (
+            "short-u",
+            "message 2, field u_px: 6 entries for 7 point ids",
+        ),
+    ] {
+        let bag = dir.join(damage);
+        write(&bag, Some(damage));
+        let error = track(&bag, "/cam/blobs");
+        assert!(
+            error.contains(p(&bag)) && error.contains("/cam/blobs") && error.contains(expected),
+            "{error}"
+        );
+    }
+    let bytes = std::fs::read(&run).unwrap();
+    let truncated = dir.join("truncated.mcap");
+    std::fs::write(&truncated, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let error = track(&truncated, "/roitrack/measurements");
+    assert!(
+        error.contains(p(&truncated))
+            && error.contains("/roitrack/measurements")
+            && error.contains("truncated"),
+        "{error}"
+    );
+    // Options that do not go with a replay.
+    let (target, csv) = (dir.join("target.csv"), dir.join("measurements.csv"));
+    let (bad_tum, bad_csv) = (dir.join("bad.tum"), dir.join("bad.csv"));
+    let mut args = vec![
+        "track",
+        "--target",
+        p(&target),
+        "--measurement-topic",
+        "/roitrack/measurements",
+        "--measurements",
+        p(&csv),
+        "--camera",
+        p(&camera),
+        "--poses",
+        p(&bad_tum),
+        "--twists",
+        p(&bad_csv),
+    ];
+    let error = fails(&args);
+    assert!(
+        error.contains("--measurement-topic is for the measurements of a ROS 2 bag"),
+        "{error}"
+    );
+    args.truncate(5);
+    args.extend(["--mcap-in", p(&run), "--image-topic", "/roitrack/image"]);
+    assert!(fails(&args).contains("cannot be used with"));
+}
+
+#[test]
+fn roi_images_go_to_the_bag_with_their_place_and_centroid() {
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    // Reflections: some ROIs' blobs are rejected (not centrally symmetric), and annotated so.
+    ok(&[
+        "simulate",
+        "--scenario",
+        "orthoglide",
+        "--duration-s",
+        "0.5",
+        "--rois",
+        "--reflections",
+        "0.1",
+        "--out",
+        p(dir),
+    ]);
+    let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
+    let at = args.iter().position(|a| a == "--measurements").unwrap();
+    args[at] = "--rois".into();
+    args[at + 1] = p(&dir.join("rois.bin")).into();
+    let mut with_rois = args.clone();
+    with_rois.push("--mcap-rois".into());
+    ok(&strs(&with_rois));
+    let rois = std::fs::read_to_string(dir.join("measurements.csv"))
+        .unwrap()
+        .lines()
+        .count()
+        - 1;
+    let report = check_bag(
+        &python,
+        dir,
+        ["camera", "target"],
+        &["--rois", &rois.to_string()],
+    );
+    let centroids: usize = report
+        .split("ROI images, ")
+        .nth(1)
+        .and_then(|rest| rest.split_whitespace().next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{report}"));
+    assert!(
+        centroids > rois / 2 && centroids < rois,
+        "{centroids} of {rois}: {report}"
+    );
+    // Without --mcap-rois: the measurements, not the images.
+    ok(&strs(&args));
+    check_bag(&python, dir, ["camera", "target"], &[]);
+    // --mcap-rois where there are no ROIs is refused, not ignored.
+    let mut measurements = track_args(dir, &dir.join("measurements.csv"), dir);
+    measurements.push("--mcap-rois".into());
+    assert!(
+        fails(&strs(&measurements)).contains("--mcap-rois is for the ROI images of `track --rois`")
+    );
+}
+
+#[test]
+fn the_camera_info_names_a_fisheye_cameras_own_model() {
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let camera = dir.join("fisheye.yaml");
+    std::fs::write(
+        &camera,
+        "%YAML:1.0\n---\nimage_width: 1280\nimage_height: 1024\ncamera_matrix: !!opencv-matrix\n   rows: 3\n   \
+         cols: 3\n   dt: d\n   data: [ 900., 0., 639.5, 0., 900., 511.5, 0., 0., 1. ]\n\
+         distortion_model: equidistant\ndistortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 4\n   \
+         dt: d\n   data: [ 0.05, -0.01, 0.002, 0. ]\n",
+    )
+    .unwrap();
+    let sim = dir.join("sim");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "orthoglide",
+        "--camera",
+        p(&camera),
+        "--distance-m",
+        "0.9",
+        "--duration-s",
+        "1",
+        "--out",
+        p(&sim),
+    ]);
+    ok(&strs(&track_args(&sim, &sim.join("measurements.csv"), dir)));
+    check_bag(
+        &python,
+        dir,
+        ["camera", "target"],
+        &["--distortion", "equidistant:4"],
+    );
+    // The replay takes the camera from the bag, fisheye and all: the same estimates.
+    let expected = read_poses(&dir.join("poses.tum"));
+    std::fs::copy(sim.join("target.csv"), dir.join("target.csv")).unwrap();
+    let got = replay(
+        dir,
+        &dir.join("run.mcap"),
+        "/roitrack/measurements",
+        None,
+        "replay.tum",
+    );
+    assert!(max_difference(&got, &expected) <= 1e-9);
 }

@@ -652,7 +652,8 @@ const FRAMES_IN_FLIGHT: usize = 4;
 /// Runs `tracker` over the frames `next_frame` decodes, the decoding on a thread of its own beside the tracker (the
 /// two-thread loop): `next_frame` fills the frame it is given (a reused buffer, its `t_s` set) and returns what the
 /// caller wants to know of it (a file name, say), `None` at the end. `sink` gets every frame's outcome with that
-/// information, in order. Returns the tracker's report; on an error, what was handed to `sink` stays handed.
+/// information and the centroids measured in the frame ([`FrameTracker::measurements`]: what the tracker saw, the
+/// measurements its estimate rests on), in order. Returns the tracker's report; on an error, what was handed to `sink` stays handed.
 ///
 /// ```
 /// use roitrack_core::{CameraModel, Target};
@@ -673,7 +674,8 @@ const FRAMES_IN_FLIGHT: usize = 4;
 ///     })
 /// };
 /// let mut seen = Vec::new();
-/// let report = track_frame_stream(&mut tracker, next, |k, outcome| {
+/// let report = track_frame_stream(&mut tracker, next, |k, outcome, measured| {
+///     assert!(measured.is_empty());
 ///     seen.push((*k, outcome.estimate.is_some()));
 ///     Ok::<_, std::convert::Infallible>(())
 /// })
@@ -684,7 +686,7 @@ const FRAMES_IN_FLIGHT: usize = 4;
 pub fn track_frame_stream<I, S, K>(
     tracker: &mut FrameTracker,
     mut next_frame: impl FnMut(&mut Frame) -> Option<Result<I, S>> + Send,
-    mut sink: impl FnMut(&I, &FrameOutcome) -> Result<(), K>,
+    mut sink: impl FnMut(&I, &FrameOutcome, &[Measurement]) -> Result<(), K>,
 ) -> Result<FrameTrackReport, FrameStreamError<S, K, I>>
 where
     I: Send,
@@ -733,7 +735,7 @@ where
                     break;
                 }
             };
-            if let Err(e) = sink(&info, &outcome) {
+            if let Err(e) = sink(&info, &outcome, tracker.measurements()) {
                 result = Err(FrameStreamError::Sink(e));
                 break;
             }

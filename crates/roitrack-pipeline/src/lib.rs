@@ -21,7 +21,7 @@ pub use frames::{
 };
 pub use identify::{Identification, identify};
 pub use matching::{MatchError, TargetDetection, find_target, match_full_frame};
-pub use offline::{RoiTrackReport, track_rois};
+pub use offline::{RoiEvent, RoiTrackReport, track_rois, track_rois_with};
 pub use photo::{
     PhotoDetection, PhotoError, PhotoOptions, PhotoPoint, PolarityChoice, detect_target,
 };

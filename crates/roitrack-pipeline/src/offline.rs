@@ -1,9 +1,10 @@
 //! Tracking recorded ROI images offline: each ROI's blob centroided and timed ([`roitrack_image::measure_roi`]), then
 //! handed to an estimator, as the real-time loop does, but from a stream of images instead of a live camera.
 
+use roitrack_core::Measurement;
 use roitrack_core::TimeModel;
 use roitrack_core::estimator::{Estimate, Estimator, EstimatorReport, StreamError, TrackError};
-use roitrack_image::{CentroidOptions, RejectionCounts, RoiImage, measure_roi};
+use roitrack_image::{BlobRejection, CentroidOptions, RejectionCounts, RoiImage, measure_roi};
 
 /// What [`track_rois`] did.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -49,6 +50,61 @@ pub fn track_rois<S, K>(
     images: impl IntoIterator<Item = Result<RoiImage, S>>,
     mut sink: impl FnMut(&Estimate) -> Result<(), K>,
 ) -> Result<RoiTrackReport, StreamError<S, K>> {
+    track_rois_with(estimator, options, time, images, |event| match event {
+        RoiEvent::Estimate(e) => sink(e),
+        RoiEvent::Roi { .. } => Ok(()),
+    })
+}
+
+/// What [`track_rois_with`] hands its observer, in the order it happens.
+#[derive(Debug, Clone, Copy)]
+pub enum RoiEvent<'a> {
+    /// A ROI image read and centroided, before its measurement goes to the estimator: `measured` is the measurement
+    /// (the centroid in the sensor's pixels, at its time) or why the blob was rejected.
+    Roi {
+        image: &'a RoiImage,
+        measured: Result<&'a Measurement, BlobRejection>,
+    },
+    /// An estimate.
+    Estimate(&'a Estimate),
+}
+
+/// [`track_rois`], with every ROI (its image and what its centroid gave) as well as every estimate handed to
+/// `observe`, so that a consumer can record what the tracker saw (the ROS 2 bag's ROI images and measurements).
+///
+/// ```
+/// use roitrack_core::TimeModel;
+/// use roitrack_core::estimator::{Tracker, TrackerConfig};
+/// use roitrack_core::{CameraModel, Target};
+/// use roitrack_image::{CentroidOptions, Roi, RoiImage};
+/// use roitrack_pipeline::offline::{RoiEvent, track_rois_with};
+///
+/// let mut tracker = Tracker::new(CameraModel::canonical(), Target::grid4x4(), TrackerConfig::default()).unwrap();
+/// let mut dark = RoiImage::default();
+/// dark.set(0.0, 5, Roi::new(500, 500, 24, 24), 8);
+/// let mut rejected = 0;
+/// track_rois_with(
+///     &mut tracker,
+///     &CentroidOptions::default(),
+///     &TimeModel::default(),
+///     [Ok::<_, std::io::Error>(dark)],
+///     |event| {
+///         if let RoiEvent::Roi { measured: Err(_), .. } = event {
+///             rejected += 1;
+///         }
+///         Ok::<_, std::io::Error>(())
+///     },
+/// )
+/// .unwrap();
+/// assert_eq!(rejected, 1);
+/// ```
+pub fn track_rois_with<S, K>(
+    estimator: &mut dyn Estimator,
+    options: &CentroidOptions,
+    time: &TimeModel,
+    images: impl IntoIterator<Item = Result<RoiImage, S>>,
+    mut observe: impl FnMut(RoiEvent<'_>) -> Result<(), K>,
+) -> Result<RoiTrackReport, StreamError<S, K>> {
     let mut report = RoiTrackReport::default();
     for (index, image) in images.into_iter().enumerate() {
         let image = image.map_err(StreamError::Source)?;
@@ -62,7 +118,13 @@ pub fn track_rois<S, K>(
                 },
             });
         }
-        let m = match measure_roi(&image, options, time) {
+        let measured = measure_roi(&image, options, time);
+        observe(RoiEvent::Roi {
+            image: &image,
+            measured: measured.as_ref().map_err(|r| *r),
+        })
+        .map_err(StreamError::Sink)?;
+        let m = match measured {
             Ok(m) => m,
             Err(rejection) => {
                 report.rejections.count(&rejection);
@@ -73,7 +135,7 @@ pub fn track_rois<S, K>(
             .push(&m)
             .map_err(|source| StreamError::Refused { index, source })?
         {
-            sink(&estimate).map_err(StreamError::Sink)?;
+            observe(RoiEvent::Estimate(&estimate)).map_err(StreamError::Sink)?;
         }
     }
     report.estimator = estimator.report();

@@ -6,9 +6,9 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 
 use roitrack_core::estimator::Estimate;
-use roitrack_core::{MotionState, Target};
+use roitrack_core::{Measurement, MotionState, Target};
 use roitrack_formats::FormatError;
-use roitrack_image::Frame;
+use roitrack_image::{Frame, RoiImage};
 
 use crate::BagWriter;
 
@@ -18,13 +18,18 @@ const BATCH: usize = 32;
 /// Batches in flight between the tracking thread and the writing thread; when the writer falls this far behind, the
 /// tracking thread waits (nothing is dropped).
 const IN_FLIGHT: usize = 64;
+/// Most centroids in one measurements message: a run whose tracker has not started yet gives no estimate to close
+/// the batch at.
+const MAX_MEASUREMENTS_PER_MESSAGE: usize = 256;
 
 // Estimates travel unboxed, by batches in a `Vec`: boxing each would cost an allocation per estimate.
 #[allow(clippy::large_enum_variant)]
 #[derive(Debug)]
 enum Item {
     Estimate(Estimate),
-    Frame(Box<Frame>, Option<MotionState>),
+    Frame(Box<Frame>, Option<MotionState>, Vec<Measurement>),
+    Measurements(Vec<Measurement>),
+    Roi(RoiImage, Option<Measurement>),
 }
 
 /// A [`BagWriter`] driven from another thread: [`write_estimate`](Self::write_estimate) and
@@ -54,6 +59,8 @@ pub struct BackgroundBag {
     path: PathBuf,
     sender: Option<SyncSender<Vec<Item>>>,
     pending: Vec<Item>,
+    /// The measurements since the last message of them.
+    measurements: Vec<Measurement>,
     thread: Option<JoinHandle<Result<u64, FormatError>>>,
 }
 
@@ -71,6 +78,7 @@ impl BackgroundBag {
             path,
             sender: Some(sender),
             pending: Vec::with_capacity(BATCH),
+            measurements: Vec::new(),
             thread: Some(thread),
         }
     }
@@ -86,6 +94,15 @@ impl BackgroundBag {
             return Ok(());
         }
         self.flush()
+    }
+
+    /// Closes the open batch of measurements: one message of them.
+    fn close_measurements(&mut self) -> Result<(), FormatError> {
+        if self.measurements.is_empty() {
+            return Ok(());
+        }
+        let batch = std::mem::take(&mut self.measurements);
+        self.send(Item::Measurements(batch))
     }
 
     /// Hands the pending items over.
@@ -108,22 +125,51 @@ impl BackgroundBag {
         }
     }
 
-    /// Hands an estimate over (see [`BagWriter::write_estimate`]).
+    /// Hands an estimate over (see [`BagWriter::write_estimate`]), after the measurements handed over before it as
+    /// one message.
     pub fn write_estimate(&mut self, estimate: &Estimate) -> Result<(), FormatError> {
+        self.close_measurements()?;
         self.send(Item::Estimate(*estimate))
     }
 
-    /// Hands a frame over, with the state of its estimate if it has one (see [`BagWriter::write_frame`]).
+    /// Adds measured centroids to the open batch of `/roitrack/measurements`: a batch is written as one message
+    /// (see [`BagWriter::write_measurements`]) when the next estimate or frame is handed over, when it holds 256
+    /// centroids, and at the end.
+    pub fn write_measurements(&mut self, measurements: &[Measurement]) -> Result<(), FormatError> {
+        self.measurements.extend_from_slice(measurements);
+        if self.measurements.len() >= MAX_MEASUREMENTS_PER_MESSAGE {
+            self.close_measurements()?;
+        }
+        Ok(())
+    }
+
+    /// Hands a frame over, with the state of its estimate if it has one and the centroids measured in it (see
+    /// [`BagWriter::write_frame`]); the measurements handed over before it are closed into one message first.
     pub fn write_frame(
         &mut self,
         frame: Frame,
         state: Option<&MotionState>,
+        measured: &[Measurement],
     ) -> Result<(), FormatError> {
-        self.send(Item::Frame(Box::new(frame), state.copied()))
+        self.close_measurements()?;
+        self.send(Item::Frame(
+            Box::new(frame),
+            state.copied(),
+            measured.to_vec(),
+        ))
+    }
+
+    /// Hands a ROI image over with the centroid measured in it, if any (see [`BagWriter::write_roi`]).
+    pub fn write_roi(
+        &mut self,
+        image: &RoiImage,
+        measured: Option<&Measurement>,
+    ) -> Result<(), FormatError> {
+        self.send(Item::Roi(image.clone(), measured.copied()))
     }
 
     fn join(&mut self) -> Result<u64, FormatError> {
-        let flushed = self.flush();
+        let flushed = self.close_measurements().and_then(|()| self.flush());
         self.sender = None;
         let joined = match self.thread.take() {
             Some(thread) => thread.join().unwrap_or_else(|_| {
@@ -167,10 +213,12 @@ fn run(
     for item in receiver.into_iter().flatten() {
         match item {
             Item::Estimate(estimate) => bag.write_estimate(&estimate)?,
-            Item::Frame(frame, state) => {
+            Item::Frame(frame, state, measured) => {
                 let projection = state.as_ref().zip(target.as_ref());
-                bag.write_frame(&frame, projection)?;
+                bag.write_frame(&frame, projection, &measured)?;
             }
+            Item::Measurements(batch) => bag.write_measurements(&batch)?,
+            Item::Roi(image, measured) => bag.write_roi(&image, measured.as_ref())?,
         }
     }
     bag.finish()

@@ -13,7 +13,8 @@
 //! `ws://127.0.0.1:8765` in Foxglove); [`Pacer`] replays a recording at its own speed so that a viewer can follow it.
 //!
 //! [`BagFrameSource`] reads the other way: the image frames of a bag's topic, as a timed frame stream, and the camera
-//! of its CameraInfo. [`BackgroundBag`] runs a [`BagWriter`] on a thread of its own, beside the tracker. [`convert`]
+//! of its CameraInfo; [`BagMeasurementSource`] replays the blob centroids of `/roitrack/measurements`
+//! (`roitrack_msgs/msg/BlobMeasurements`, roitrack's own message, which [`BagWriter::write_measurements`] writes). [`BackgroundBag`] runs a [`BagWriter`] on a thread of its own, beside the tracker. [`convert`]
 //! holds the conversions (stamps, quaternions, the covariances in ROS's order and each message's frame), [`msg`] the
 //! messages and their definitions. docs/ros2.md documents the bag.
 //!
@@ -29,6 +30,7 @@ mod background;
 pub mod convert;
 #[cfg(feature = "live")]
 mod live;
+mod measurement_reader;
 pub mod msg;
 mod output;
 mod reader;
@@ -37,5 +39,6 @@ mod writer;
 pub use background::BackgroundBag;
 #[cfg(feature = "live")]
 pub use live::{DEFAULT_LIVE_ADDRESS, LIVE_SUBPROTOCOL, LiveError, LiveReport, LiveServer, Pacer};
-pub use reader::{BagFrameSource, IMAGE_ENCODINGS, IMAGE_TYPES};
+pub use measurement_reader::BagMeasurementSource;
+pub use reader::{BagFrameSource, IMAGE_ENCODINGS, IMAGE_TYPES, read_camera_info};
 pub use writer::{BagOptions, BagWriter, diagnostic_level, topics};

@@ -10,7 +10,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use roitrack_core::estimator::Estimate;
-use roitrack_core::{CameraModel, MotionState, Target};
+use roitrack_core::{CameraModel, Measurement, MotionState, Target};
 use roitrack_formats::FormatError;
 use roitrack_image::Frame;
 
@@ -55,7 +55,7 @@ pub enum LiveError {
 #[derive(Debug)]
 enum Item {
     Estimate(Estimate),
-    Frame(Box<Frame>, Option<MotionState>),
+    Frame(Box<Frame>, Option<MotionState>, Vec<Measurement>),
 }
 
 /// What the server's listener sees of the clients.
@@ -303,14 +303,18 @@ impl LiveServer {
         self.hand_over(Item::Estimate(*estimate), false)
     }
 
-    /// Hands a frame over (never waits), with the state of its estimate if it has one; see
-    /// [`BagWriter::write_frame`].
+    /// Hands a frame over (never waits), with the state of its estimate if it has one and the centroids measured in
+    /// it; see [`BagWriter::write_frame`].
     pub fn publish_frame(
         &mut self,
         frame: Frame,
         state: Option<&MotionState>,
+        measured: &[Measurement],
     ) -> Result<(), FormatError> {
-        self.hand_over(Item::Frame(Box::new(frame), state.copied()), true)
+        self.hand_over(
+            Item::Frame(Box::new(frame), state.copied(), measured.to_vec()),
+            true,
+        )
     }
 
     fn join(&mut self) -> Result<u64, FormatError> {
@@ -384,9 +388,9 @@ fn run(
         }
         match item {
             Item::Estimate(estimate) => writer.write_estimate(&estimate)?,
-            Item::Frame(frame, state) => {
+            Item::Frame(frame, state, measured) => {
                 let projection = state.as_ref().zip(target.as_ref());
-                writer.write_frame(&frame, projection)?;
+                writer.write_frame(&frame, projection, &measured)?;
             }
         }
         published += 1;

@@ -271,6 +271,23 @@ pub struct ImageAnnotations {
     pub texts: Vec<TextAnnotation>,
 }
 
+/// `roitrack_msgs/msg/BlobMeasurements`: roitrack's own message, the blob centroids it measured (docs/ros2.md). The
+/// arrays are parallel, one entry per centroid; `sigma_px` is empty when the centroids' noise is not known.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
+pub struct BlobMeasurements<'a> {
+    /// Stamped with the time of the first centroid; the camera's frame.
+    pub header: Header<'a>,
+    pub point_ids: Seq<'a, u32>,
+    pub u_px: Seq<'a, f64>,
+    pub v_px: Seq<'a, f64>,
+    /// Each centroid's time less the header stamp (s).
+    pub dt_s: Seq<'a, f64>,
+    pub sigma_px: Seq<'a, f64>,
+}
+
+/// The full name of [`BlobMeasurements`].
+pub const BLOB_MEASUREMENTS: &str = "roitrack_msgs/msg/BlobMeasurements";
+
 /// The `.msg` text of every type roitrack writes, by full name (`pkg/msg/Type`), without comments.
 const DEFINITIONS: &[(&str, &str)] = &[
     ("builtin_interfaces/msg/Time", "int32 sec\nuint32 nanosec\n"),
@@ -386,6 +403,11 @@ const DEFINITIONS: &[(&str, &str)] = &[
         "foxglove_msgs/msg/ImageAnnotations",
         "foxglove_msgs/CircleAnnotation[] circles\nfoxglove_msgs/PointsAnnotation[] points\n\
          foxglove_msgs/TextAnnotation[] texts\n",
+    ),
+    (
+        BLOB_MEASUREMENTS,
+        "std_msgs/Header header\nuint32[] point_ids\nfloat64[] u_px\nfloat64[] v_px\nfloat64[] dt_s\n\
+         float64[] sigma_px\n",
     ),
 ];
 

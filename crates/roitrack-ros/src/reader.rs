@@ -5,7 +5,7 @@ use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 
 use roitrack_core::CameraModel;
-use roitrack_core::camera::{PinholeIntrinsics, PlumbBob};
+use roitrack_core::camera::PinholeIntrinsics;
 use roitrack_formats::{FormatError, FrameInfo};
 use roitrack_image::Frame;
 
@@ -16,13 +16,13 @@ pub const IMAGE_ENCODINGS: [&str; 4] = ["mono8", "mono16", "bgr8", "rgb8"];
 
 /// A little-endian CDR reader over one message (after its 4-byte encapsulation header): alignment is relative to
 /// the start of the payload, as in ROS 2.
-struct Cdr<'a> {
+pub(crate) struct Cdr<'a> {
     bytes: &'a [u8],
     at: usize,
 }
 
 impl<'a> Cdr<'a> {
-    fn new(message: &'a [u8]) -> Result<Self, String> {
+    pub(crate) fn new(message: &'a [u8]) -> Result<Self, String> {
         match message {
             [0, 1, _, _, ..] => Ok(Self {
                 bytes: &message[4..],
@@ -47,7 +47,7 @@ impl<'a> Cdr<'a> {
         Ok(self.take(1, 1)?[0])
     }
 
-    fn u32(&mut self) -> Result<u32, String> {
+    pub(crate) fn u32(&mut self) -> Result<u32, String> {
         Ok(u32::from_le_bytes(
             self.take(4, 4)?.try_into().expect("4 bytes"),
         ))
@@ -59,7 +59,7 @@ impl<'a> Cdr<'a> {
         ))
     }
 
-    fn f64(&mut self) -> Result<f64, String> {
+    pub(crate) fn f64(&mut self) -> Result<f64, String> {
         Ok(f64::from_le_bytes(
             self.take(8, 8)?.try_into().expect("8 bytes"),
         ))
@@ -78,19 +78,19 @@ impl<'a> Cdr<'a> {
     }
 
     /// `std_msgs/Header`: the stamp (s) and the frame id.
-    fn header(&mut self) -> Result<(f64, String), String> {
+    pub(crate) fn header(&mut self) -> Result<(f64, String), String> {
         let sec = self.i32()?;
         let nanosec = self.u32()?;
         Ok((f64::from(sec) + 1e-9 * f64::from(nanosec), self.string()?))
     }
 }
 
-fn bag_error(bag: &Path, topic: &str, message: impl Into<String>) -> FormatError {
+pub(crate) fn bag_error(bag: &Path, topic: &str, message: impl Into<String>) -> FormatError {
     FormatError::new(bag, message).with_field(topic.to_string())
 }
 
 /// The `.mcap` file of a bag: the file itself, or the one `.mcap` file of a rosbag2 folder.
-fn mcap_file(bag: &Path) -> Result<PathBuf, FormatError> {
+pub(crate) fn mcap_file(bag: &Path) -> Result<PathBuf, FormatError> {
     if !bag.is_dir() {
         return Ok(bag.to_path_buf());
     }
@@ -114,8 +114,8 @@ fn mcap_file(bag: &Path) -> Result<PathBuf, FormatError> {
     }
 }
 
-struct Channel {
-    id: u16,
+pub(crate) struct Channel {
+    pub(crate) id: u16,
     type_name: String,
 }
 
@@ -164,7 +164,11 @@ impl std::fmt::Debug for BagFrameSource {
     }
 }
 
-fn read_summary(bag: &Path, topic: &str, bytes: &[u8]) -> Result<mcap::read::Summary, FormatError> {
+pub(crate) fn read_summary(
+    bag: &Path,
+    topic: &str,
+    bytes: &[u8],
+) -> Result<mcap::read::Summary, FormatError> {
     let read = std::panic::catch_unwind(|| mcap::read::Summary::read(bytes)).map_err(|_| {
         bag_error(
             bag,
@@ -187,7 +191,7 @@ fn read_summary(bag: &Path, topic: &str, bytes: &[u8]) -> Result<mcap::read::Sum
     }
 }
 
-fn find_channel(
+pub(crate) fn find_channel(
     bag: &Path,
     summary: &mcap::read::Summary,
     topic: &str,
@@ -265,20 +269,11 @@ impl BagFrameSource {
         })
     }
 
-    /// The camera of the bag's first `sensor_msgs/msg/CameraInfo` on `topic` (plumb_bob or no distortion); from then
+    /// The camera of the bag's first `sensor_msgs/msg/CameraInfo` on `topic` (plumb_bob, rational_polynomial,
+    /// equidistant or no distortion); from then
     /// on, every frame must have its size.
     pub fn camera_info(&mut self, topic: &str) -> Result<CameraModel, FormatError> {
-        let channel = find_channel(
-            &self.bag,
-            &self.summary,
-            topic,
-            &["sensor_msgs/msg/CameraInfo"],
-        )?;
-        let message = self
-            .first_message(channel.id, topic)?
-            .ok_or_else(|| bag_error(&self.bag, topic, "no message on the topic"))?;
-        let camera = camera_from_info(&message)
-            .map_err(|e| bag_error(&self.bag, topic, format!("camera info: {e}")))?;
+        let camera = camera_info_in(&self.bag, &self.summary, &self.bytes, topic)?;
         self.expected_size = Some((camera.width_px, camera.height_px));
         Ok(camera)
     }
@@ -300,23 +295,6 @@ impl BagFrameSource {
     /// Whether the bag has a topic.
     pub fn has_topic(&self, topic: &str) -> bool {
         self.summary.channels.values().any(|c| c.topic == topic)
-    }
-
-    fn first_message(&self, channel_id: u16, topic: &str) -> Result<Option<Vec<u8>>, FormatError> {
-        for chunk in &self.summary.chunk_indexes {
-            let messages = chunk_messages(
-                &self.bag,
-                &self.summary,
-                &self.bytes,
-                chunk,
-                topic,
-                channel_id,
-            )?;
-            if let Some((_, data)) = messages.into_iter().next() {
-                return Ok(Some(data));
-            }
-        }
-        Ok(None)
     }
 
     /// Fills `pending` from the next chunks that hold messages of the topic; false at the end of the bag.
@@ -391,10 +369,45 @@ impl BagFrameSource {
     }
 }
 
+/// The camera of the first `sensor_msgs/msg/CameraInfo` on `topic` of `bag` (a `.mcap` file or a rosbag2 folder):
+/// size, intrinsics and distortion, as [`BagFrameSource::camera_info`] reads it; for a bag without frames (a replay
+/// of its measurements).
+///
+/// ```no_run
+/// let camera = roitrack_ros::read_camera_info("run.mcap", "/roitrack/camera_info").unwrap();
+/// println!("{} x {} px", camera.width_px, camera.height_px);
+/// ```
+pub fn read_camera_info(bag: impl AsRef<Path>, topic: &str) -> Result<CameraModel, FormatError> {
+    let bag = bag.as_ref();
+    let file = mcap_file(bag)?;
+    let bytes = std::fs::read(&file).map_err(|e| FormatError::io(&file, "cannot read", e))?;
+    let summary = read_summary(bag, topic, &bytes)?;
+    camera_info_in(bag, &summary, &bytes, topic)
+}
+
+fn camera_info_in(
+    bag: &Path,
+    summary: &mcap::read::Summary,
+    bytes: &[u8],
+    topic: &str,
+) -> Result<CameraModel, FormatError> {
+    let channel = find_channel(bag, summary, topic, &["sensor_msgs/msg/CameraInfo"])?;
+    let mut message = None;
+    for chunk in &summary.chunk_indexes {
+        let messages = chunk_messages(bag, summary, bytes, chunk, topic, channel.id)?;
+        if let Some((_, data)) = messages.into_iter().next() {
+            message = Some(data);
+            break;
+        }
+    }
+    let message = message.ok_or_else(|| bag_error(bag, topic, "no message on the topic"))?;
+    camera_from_info(&message).map_err(|e| bag_error(bag, topic, format!("camera info: {e}")))
+}
+
 /// The messages of one channel in one chunk: (log time, data), in the chunk's order. The chunk index is checked
 /// first (mcap 0.26 slices the file by it unchecked, and panics on an index whose offset and length overflow), and
 /// the reading runs under `catch_unwind`, so that a corrupt bag gives an error naming it, never a crash.
-fn chunk_messages(
+pub(crate) fn chunk_messages(
     bag: &Path,
     summary: &mcap::read::Summary,
     bytes: &[u8],
@@ -506,7 +519,8 @@ fn compressed_image(message: &[u8]) -> Result<(f64, String, &[u8]), String> {
     Ok((t_s, format, cdr.bytes()?))
 }
 
-/// The camera of a `sensor_msgs/msg/CameraInfo`: size, `k` (fx, skew, cx, fy, cy) and plumb_bob distortion (or none).
+/// The camera of a `sensor_msgs/msg/CameraInfo`: size, `k` (fx, skew, cx, fy, cy) and its distortion (plumb_bob,
+/// rational_polynomial, equidistant, or none).
 fn camera_from_info(message: &[u8]) -> Result<CameraModel, String> {
     let mut cdr = Cdr::new(message)?;
     let (_, frame_id) = cdr.header()?;
@@ -521,19 +535,8 @@ fn camera_from_info(message: &[u8]) -> Result<CameraModel, String> {
         .map(|_| cdr.f64())
         .collect::<Result<Vec<_>, _>>()?;
     let k = (0..9).map(|_| cdr.f64()).collect::<Result<Vec<_>, _>>()?;
-    let distortion = match (model.as_str(), d.as_slice()) {
-        (_, []) | ("", _) if d.iter().all(|&c| c == 0.0) => PlumbBob::default(),
-        ("plumb_bob", [k1, k2, p1, p2, k3]) => {
-            PlumbBob::from_coefficients([*k1, *k2, *p1, *p2, *k3])
-        }
-        _ => {
-            return Err(format!(
-                "distortion model {model:?} with {} coefficients is not read (plumb_bob with 5, or none): give \
-                 --camera",
-                d.len()
-            ));
-        }
-    };
+    let distortion = crate::convert::distortion_from_camera_info(&model, &d)
+        .map_err(|e| format!("{e}: give --camera"))?;
     let intrinsics = PinholeIntrinsics {
         fx_px: k[0],
         skew_px: k[1],

@@ -6,9 +6,9 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use roitrack_core::estimator::{Estimate, TrackStatus};
-use roitrack_core::{CameraModel, MotionState, Target};
+use roitrack_core::{CameraModel, Measurement, MotionState, Target};
 use roitrack_formats::FormatError;
-use roitrack_image::Frame;
+use roitrack_image::{Frame, RoiImage};
 
 use crate::convert;
 use crate::msg::{self, Header};
@@ -24,6 +24,13 @@ pub mod topics {
     pub const STATUS: &str = "/roitrack/status";
     pub const IMAGE: &str = "/roitrack/image";
     pub const ANNOTATIONS: &str = "/roitrack/annotations";
+    pub const MEASUREMENTS: &str = "/roitrack/measurements";
+    /// Each ROI image, as recorded (optional: `track --rois --mcap-rois`).
+    pub const ROI_IMAGE: &str = "/roitrack/roi/image";
+    /// Beside each ROI image, at its stamp: the camera info with `roi` set to where the ROI sits on the sensor.
+    pub const ROI_CAMERA_INFO: &str = "/roitrack/roi/camera_info";
+    /// The centroid measured in each ROI, in the ROI image's pixels.
+    pub const ROI_ANNOTATIONS: &str = "/roitrack/roi/annotations";
 }
 
 /// How the bag is written.
@@ -107,6 +114,11 @@ pub struct BagWriter {
     camera_info: Option<Channel>,
     image: Option<Channel>,
     annotations: Option<Channel>,
+    measurements: Option<Channel>,
+    /// `/roitrack/roi/image`, `/roitrack/roi/camera_info`, `/roitrack/roi/annotations`.
+    roi_channels: [Option<Channel>; 3],
+    /// The columns of a measurements message, reused.
+    columns: Columns,
     buffer: Vec<u8>,
     bytes: Vec<u8>,
     text: String,
@@ -189,6 +201,9 @@ impl BagWriter {
             camera_info,
             image: None,
             annotations: None,
+            measurements: None,
+            roi_channels: [None; 3],
+            columns: Columns::default(),
             buffer: Vec::with_capacity(1024),
             bytes: Vec::new(),
             text: String::with_capacity(128),
@@ -253,27 +268,15 @@ impl BagWriter {
         };
         let (stamp, ns) = self.stamp(t_s, topics::CAMERA_INFO)?;
         let frame_id = self.options.frame_id.clone();
-        let i = &camera.intrinsics;
-        let message = msg::CameraInfo {
-            header: Header {
-                stamp,
-                frame_id: &frame_id,
-            },
-            height: camera.height_px,
-            width: camera.width_px,
-            distortion_model: "plumb_bob",
-            d: camera.distortion.coefficients().to_vec(),
-            k: msg::Fixed([
-                i.fx_px, i.skew_px, i.cx_px, 0.0, i.fy_px, i.cy_px, 0.0, 0.0, 1.0,
-            ]),
-            r: msg::Fixed([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
-            p: msg::Fixed([
-                i.fx_px, i.skew_px, i.cx_px, 0.0, 0.0, i.fy_px, i.cy_px, 0.0, 0.0, 0.0, 1.0, 0.0,
-            ]),
-            binning_x: 0,
-            binning_y: 0,
-            roi: msg::RegionOfInterest::default(),
-        };
+        let (distortion_model, d) = convert::camera_info_distortion(&camera.distortion);
+        let message = camera_info(
+            &camera,
+            stamp,
+            &frame_id,
+            distortion_model,
+            d,
+            msg::RegionOfInterest::default(),
+        );
         let channel = self.put(channel, topics::CAMERA_INFO, ns, &message)?;
         self.camera_info = Some(channel);
         self.camera_info_written = true;
@@ -380,13 +383,16 @@ impl BagWriter {
         Ok(())
     }
 
-    /// Writes a frame to `/roitrack/image` (mono8 for 8-bit frames, else mono16, little endian) and, when the
-    /// frame has an estimate, the target's points projected by it to `/roitrack/annotations` (circles of the blobs'
-    /// diameters where the target has them, and each point's id), stamped with the frame's time.
+    /// Writes a frame to `/roitrack/image` (mono8 for 8-bit frames, else mono16, little endian) and its
+    /// `/roitrack/annotations`, stamped with the frame's time: the centroids the tracker measured in the frame
+    /// (`measured`, green points labelled with their point ids) and, when the frame has an estimate and the bag a
+    /// camera, the target's points projected by it (magenta circles of the blobs' diameters where the target has
+    /// them, labelled with the ids). A frame with neither gets no annotations message.
     pub fn write_frame(
         &mut self,
         frame: &Frame,
         projection: Option<(&MotionState, &Target)>,
+        measured: &[Measurement],
     ) -> Result<(), FormatError> {
         self.camera_info_at(frame.t_s)?;
         let image = match self.image {
@@ -430,12 +436,18 @@ impl BagWriter {
         );
         self.bytes = bytes;
         self.image = Some(written?);
-        let Some((state, target)) = projection else {
-            return Ok(());
+        let mut annotations = msg::ImageAnnotations {
+            circles: Vec::new(),
+            points: Vec::new(),
+            texts: Vec::new(),
         };
-        let Some(camera) = self.camera.clone() else {
+        measured_annotations(measured, stamp, &mut annotations);
+        if let (Some((state, target)), Some(camera)) = (projection, self.camera.as_ref()) {
+            projected_annotations(camera, target, state, stamp, &mut annotations);
+        }
+        if annotations.points.is_empty() && annotations.circles.is_empty() {
             return Ok(());
-        };
+        }
         let annotations_channel = match self.annotations {
             Some(channel) => channel,
             None => add_channel(
@@ -446,10 +458,205 @@ impl BagWriter {
                 false,
             )?,
         };
-        let annotations = predicted_annotations(&camera, target, state, stamp);
         self.annotations =
             Some(self.put(annotations_channel, topics::ANNOTATIONS, ns, &annotations)?);
         Ok(())
+    }
+
+    /// Writes a batch of measured centroids as one `roitrack_msgs/msg/BlobMeasurements` on `/roitrack/measurements`,
+    /// stamped with the time of its first centroid, each centroid's time as its offset from that stamp (so that
+    /// `stamp + dt_s` gives it back to within a rounding of the sum). An empty batch writes nothing. Times must be
+    /// finite and in [0, 2^31) s.
+    ///
+    /// ```
+    /// use roitrack_core::{CameraModel, Measurement};
+    /// use roitrack_ros::{BagMeasurementSource, BagOptions, BagWriter, topics};
+    ///
+    /// let dir = tempfile::tempdir().unwrap();
+    /// let path = dir.path().join("m.mcap");
+    /// let mut bag = BagWriter::create(&path, &BagOptions::default(), Some(CameraModel::canonical())).unwrap();
+    /// let batch = [
+    ///     Measurement { t_s: 0.25, id: 3, u_px: 512.25, v_px: 400.5 },
+    ///     Measurement { t_s: 0.25025, id: 4, u_px: 600.0, v_px: 401.0 },
+    /// ];
+    /// bag.write_measurements(&batch).unwrap();
+    /// bag.finish().unwrap();
+    /// let read: Vec<Measurement> =
+    ///     BagMeasurementSource::open(&path, topics::MEASUREMENTS).unwrap().map(Result::unwrap).collect();
+    /// assert_eq!(read.len(), 2);
+    /// assert!((read[1].t_s - 0.25025).abs() < 1e-15 && read[1].id == 4 && read[1].u_px == 600.0);
+    /// ```
+    pub fn write_measurements(&mut self, batch: &[Measurement]) -> Result<(), FormatError> {
+        let Some(first) = batch.first() else {
+            return Ok(());
+        };
+        self.camera_info_at(first.t_s)?;
+        let channel = match self.measurements {
+            Some(channel) => channel,
+            None => add_channel(
+                &mut self.writer,
+                &self.path,
+                topics::MEASUREMENTS,
+                msg::BLOB_MEASUREMENTS,
+                false,
+            )?,
+        };
+        let (stamp, ns) = self.stamp(first.t_s, topics::MEASUREMENTS)?;
+        let stamp_s = f64::from(stamp.sec) + 1e-9 * f64::from(stamp.nanosec);
+        let mut columns = std::mem::take(&mut self.columns);
+        columns.clear();
+        for m in batch {
+            if !m.t_s.is_finite() {
+                self.columns = columns;
+                return Err(FormatError::new(
+                    &self.path,
+                    format!("measurement of point {} at time {} s", m.id, m.t_s),
+                )
+                .with_field(topics::MEASUREMENTS.to_string()));
+            }
+            columns.ids.push(m.id);
+            columns.u_px.push(m.u_px);
+            columns.v_px.push(m.v_px);
+            columns.dt_s.push(m.t_s - stamp_s);
+        }
+        let frame_id = self.options.frame_id.clone();
+        let written = self.put(
+            channel,
+            topics::MEASUREMENTS,
+            ns,
+            &msg::BlobMeasurements {
+                header: Header {
+                    stamp,
+                    frame_id: &frame_id,
+                },
+                point_ids: msg::Seq(&columns.ids),
+                u_px: msg::Seq(&columns.u_px),
+                v_px: msg::Seq(&columns.v_px),
+                dt_s: msg::Seq(&columns.dt_s),
+                sigma_px: msg::Seq(&[]),
+            },
+        );
+        self.columns = columns;
+        self.measurements = Some(written?);
+        Ok(())
+    }
+
+    /// Writes a ROI image as recorded, stamped with the ROI's time (that of its first row): to `/roitrack/roi/image`
+    /// (`mono8` for 8-bit ROIs, else `mono16` little endian, the ROI's own size), with, at the same stamp,
+    /// `/roitrack/roi/camera_info` (the bag's camera, with `roi` the window's offset and size on the sensor, ROS's
+    /// own way of saying which part of the sensor an image holds; only when the bag has a camera) and
+    /// `/roitrack/roi/annotations`: the centroid measured in it (`measured`, in the ROI's pixels: the sensor's less
+    /// the window's offset), a green point labelled with the point id, or, for a ROI whose blob was rejected, the
+    /// point id and `rejected` in red at its corner.
+    pub fn write_roi(
+        &mut self,
+        image: &RoiImage,
+        measured: Option<&Measurement>,
+    ) -> Result<(), FormatError> {
+        self.camera_info_at(image.t_s)?;
+        let (stamp, ns) = self.stamp(image.t_s, topics::ROI_IMAGE)?;
+        let frame_id = self.options.frame_id.clone();
+        let header = Header {
+            stamp,
+            frame_id: &frame_id,
+        };
+        let roi = image.roi;
+        if !image.is_consistent() {
+            return Err(FormatError::new(
+                &self.path,
+                format!(
+                    "ROI of point {} at {} s: {} pixel values for {} x {} px",
+                    image.point_id,
+                    image.t_s,
+                    image.pixels.len(),
+                    roi.width,
+                    roi.height
+                ),
+            )
+            .with_field(topics::ROI_IMAGE.to_string()));
+        }
+        let channel = self.roi_channel(0, topics::ROI_IMAGE, "sensor_msgs/msg/Image")?;
+        let mut bytes = std::mem::take(&mut self.bytes);
+        bytes.clear();
+        let (encoding, step) = if image.bit_depth <= 8 {
+            bytes.extend(image.pixels.iter().map(|&p| p.min(255) as u8));
+            ("mono8", roi.width)
+        } else {
+            bytes.extend(image.pixels.iter().flat_map(|p| p.to_le_bytes()));
+            ("mono16", 2 * roi.width)
+        };
+        let written = self.put(
+            channel,
+            topics::ROI_IMAGE,
+            ns,
+            &msg::Image {
+                header,
+                height: roi.height,
+                width: roi.width,
+                encoding,
+                is_bigendian: 0,
+                step,
+                data: msg::Bytes(&bytes),
+            },
+        );
+        self.bytes = bytes;
+        self.roi_channels[0] = Some(written?);
+        if let Some(camera) = &self.camera {
+            let (distortion_model, d) = convert::camera_info_distortion(&camera.distortion);
+            let region = msg::RegionOfInterest {
+                x_offset: roi.x0,
+                y_offset: roi.y0,
+                height: roi.height,
+                width: roi.width,
+                do_rectify: false,
+            };
+            let info = camera_info(camera, stamp, &frame_id, distortion_model, d, region);
+            let channel =
+                self.roi_channel(1, topics::ROI_CAMERA_INFO, "sensor_msgs/msg/CameraInfo")?;
+            self.roi_channels[1] = Some(self.put(channel, topics::ROI_CAMERA_INFO, ns, &info)?);
+        }
+        let mut annotations = msg::ImageAnnotations {
+            circles: Vec::new(),
+            points: Vec::new(),
+            texts: Vec::new(),
+        };
+        match measured {
+            Some(m) => {
+                let in_roi = Measurement {
+                    u_px: m.u_px - f64::from(roi.x0),
+                    v_px: m.v_px - f64::from(roi.y0),
+                    ..*m
+                };
+                measured_annotations(std::slice::from_ref(&in_roi), stamp, &mut annotations);
+            }
+            None => annotations.texts.push(label(
+                format!("{} rejected", image.point_id),
+                msg::Point2 { x: 0.0, y: 10.0 },
+                REJECTED_COLOR,
+                stamp,
+            )),
+        }
+        let channel = self.roi_channel(
+            2,
+            topics::ROI_ANNOTATIONS,
+            "foxglove_msgs/msg/ImageAnnotations",
+        )?;
+        self.roi_channels[2] =
+            Some(self.put(channel, topics::ROI_ANNOTATIONS, ns, &annotations)?);
+        Ok(())
+    }
+
+    /// The channel `k` of the ROI topics, added when first used.
+    fn roi_channel(
+        &mut self,
+        k: usize,
+        topic: &str,
+        type_name: &str,
+    ) -> Result<Channel, FormatError> {
+        match self.roi_channels[k] {
+            Some(channel) => Ok(channel),
+            None => add_channel(&mut self.writer, &self.path, topic, type_name, false),
+        }
     }
 
     /// Completes the bag (the last chunk, the summary and its index) and says how many messages it holds.
@@ -458,6 +665,53 @@ impl BagWriter {
             .finish()
             .map_err(|e| mcap_error(&self.path, "cannot complete the bag", e))?;
         Ok(self.messages)
+    }
+}
+
+/// The columns of a `BlobMeasurements` message.
+#[derive(Debug, Default)]
+struct Columns {
+    ids: Vec<u32>,
+    u_px: Vec<f64>,
+    v_px: Vec<f64>,
+    dt_s: Vec<f64>,
+}
+
+impl Columns {
+    fn clear(&mut self) {
+        self.ids.clear();
+        self.u_px.clear();
+        self.v_px.clear();
+        self.dt_s.clear();
+    }
+}
+
+/// The camera info of `camera`; `roi`: the part of the sensor an image holds (all zeros: the whole).
+fn camera_info<'a>(
+    camera: &CameraModel,
+    stamp: msg::Time,
+    frame_id: &'a str,
+    distortion_model: &'a str,
+    d: Vec<f64>,
+    roi: msg::RegionOfInterest,
+) -> msg::CameraInfo<'a> {
+    let i = &camera.intrinsics;
+    msg::CameraInfo {
+        header: Header { stamp, frame_id },
+        height: camera.height_px,
+        width: camera.width_px,
+        distortion_model,
+        d,
+        k: msg::Fixed([
+            i.fx_px, i.skew_px, i.cx_px, 0.0, i.fy_px, i.cy_px, 0.0, 0.0, 1.0,
+        ]),
+        r: msg::Fixed([1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0]),
+        p: msg::Fixed([
+            i.fx_px, i.skew_px, i.cx_px, 0.0, 0.0, i.fy_px, i.cy_px, 0.0, 0.0, 0.0, 1.0, 0.0,
+        ]),
+        binning_x: 0,
+        binning_y: 0,
+        roi,
     }
 }
 
@@ -557,26 +811,100 @@ fn status_values(estimate: &Estimate, text: &mut String) -> [(&'static str, usiz
     );
     spans
 }
-fn predicted_annotations(
+/// The colour of the measured centroids in the annotations: green.
+pub const MEASURED_COLOR: msg::Color = msg::Color {
+    r: 0.1,
+    g: 0.9,
+    b: 0.2,
+    a: 1.0,
+};
+/// The colour of the target's points projected by the estimate: magenta.
+pub const PROJECTED_COLOR: msg::Color = msg::Color {
+    r: 1.0,
+    g: 0.2,
+    b: 0.9,
+    a: 1.0,
+};
+/// The colour of the label of a ROI whose blob was rejected: red.
+pub const REJECTED_COLOR: msg::Color = msg::Color {
+    r: 1.0,
+    g: 0.2,
+    b: 0.1,
+    a: 1.0,
+};
+const CLEAR: msg::Color = msg::Color {
+    r: 0.0,
+    g: 0.0,
+    b: 0.0,
+    a: 0.0,
+};
+/// Foxglove draws a `POINTS` annotation's points with `thickness` as their diameter (px).
+const MEASURED_POINT_PX: f64 = 5.0;
+
+fn label(
+    text: String,
+    position: msg::Point2,
+    color: msg::Color,
+    stamp: msg::Time,
+) -> msg::TextAnnotation {
+    msg::TextAnnotation {
+        timestamp: stamp,
+        position,
+        text,
+        font_size: 12.0,
+        text_color: color,
+        background_color: CLEAR,
+    }
+}
+
+/// The measured centroids: one `POINTS` annotation (green dots), each labelled with its point id below and to the
+/// left of it (the projected point's label goes to the right, so the two stay apart).
+fn measured_annotations(
+    measured: &[Measurement],
+    stamp: msg::Time,
+    annotations: &mut msg::ImageAnnotations,
+) {
+    if measured.is_empty() {
+        return;
+    }
+    let points: Vec<msg::Point2> = measured
+        .iter()
+        .map(|m| msg::Point2 {
+            x: m.u_px,
+            y: m.v_px,
+        })
+        .collect();
+    annotations.points.push(msg::PointsAnnotation {
+        timestamp: stamp,
+        r#type: 1, // POINTS
+        points,
+        outline_color: MEASURED_COLOR,
+        outline_colors: Vec::new(),
+        fill_color: MEASURED_COLOR,
+        thickness: MEASURED_POINT_PX,
+    });
+    for m in measured {
+        annotations.texts.push(label(
+            m.id.to_string(),
+            msg::Point2 {
+                x: m.u_px - 14.0,
+                y: m.v_px + 14.0,
+            },
+            MEASURED_COLOR,
+            stamp,
+        ));
+    }
+}
+
+/// The target's points projected by `state` through the camera model (lens distortion included): magenta circles,
+/// the size of the blob's disk where the target gives its diameter, each labelled with its point id to the right.
+fn projected_annotations(
     camera: &CameraModel,
     target: &Target,
     state: &MotionState,
     stamp: msg::Time,
-) -> msg::ImageAnnotations {
-    const PREDICTED: msg::Color = msg::Color {
-        r: 0.1,
-        g: 0.9,
-        b: 0.2,
-        a: 1.0,
-    };
-    const CLEAR: msg::Color = msg::Color {
-        r: 0.0,
-        g: 0.0,
-        b: 0.0,
-        a: 0.0,
-    };
-    let mut circles = Vec::new();
-    let mut texts = Vec::new();
+    annotations: &mut msg::ImageAnnotations,
+) {
     let focal_px = camera.intrinsics.fx_px;
     for point in target.points() {
         let in_cam = state.cam_r_obj * point.point_in_obj_m + state.cam_t_obj_m;
@@ -591,29 +919,58 @@ fn predicted_annotations(
         let diameter = point
             .diameter_m
             .map_or(8.0, |d| focal_px * d / in_cam.z.max(1e-6));
-        circles.push(msg::CircleAnnotation {
+        annotations.circles.push(msg::CircleAnnotation {
             timestamp: stamp,
             position,
             diameter,
             thickness: 1.5,
             fill_color: CLEAR,
-            outline_color: PREDICTED,
+            outline_color: PROJECTED_COLOR,
         });
-        texts.push(msg::TextAnnotation {
-            timestamp: stamp,
-            position: msg::Point2 {
+        annotations.texts.push(label(
+            point.id.to_string(),
+            msg::Point2 {
                 x: pixel.x + 0.5 * diameter + 2.0,
                 y: pixel.y,
             },
-            text: point.id.to_string(),
-            font_size: 12.0,
-            text_color: PREDICTED,
-            background_color: CLEAR,
-        });
+            PROJECTED_COLOR,
+            stamp,
+        ));
     }
-    msg::ImageAnnotations {
-        circles,
-        points: Vec::new(),
-        texts,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::BagFrameSource;
+    use roitrack_core::camera::{Distortion, Equidistant, RationalPolynomial};
+
+    #[test]
+    fn the_camera_info_names_the_cameras_own_distortion_model() {
+        let dir = tempfile::tempdir().unwrap();
+        let canonical = CameraModel::canonical();
+        for distortion in [
+            canonical.distortion,
+            Distortion::from(RationalPolynomial::from_coefficients([
+                0.1, -0.2, 1e-3, -2e-3, 0.05, 0.3, -0.1, 0.02,
+            ])),
+            Distortion::from(Equidistant::from_coefficients([0.1, -0.02, 3e-3, -4e-4])),
+        ] {
+            let camera = CameraModel {
+                distortion,
+                ..canonical.clone()
+            };
+            let path = dir.path().join(format!("{}.mcap", distortion.model_name()));
+            let mut bag =
+                BagWriter::create(&path, &BagOptions::default(), Some(camera.clone())).unwrap();
+            let mut frame = Frame::default();
+            frame.resize(camera.width_px, camera.height_px, 8);
+            bag.write_frame(&frame, None, &[]).unwrap();
+            bag.finish().unwrap();
+            let mut source = BagFrameSource::open(&path, topics::IMAGE).unwrap();
+            let read = source.camera_info(topics::CAMERA_INFO).unwrap();
+            assert_eq!(read.distortion, distortion, "{}", distortion.model_name());
+            assert_eq!(read.intrinsics, camera.intrinsics);
+        }
     }
 }

@@ -1,6 +1,7 @@
 """Reads a roitrack bag back with two readers that are not roitrack's, and checks it against the run's other files.
 
     python check_bag.py BAG.mcap POSES.tum TWISTS.csv COVARIANCE.csv FRAME_ID CHILD_FRAME_ID [--images N] [--prefix]
+        [--measurements MEASUREMENTS.csv] [--rois N] [--distortion MODEL:N]
 
 1. `mcap` with `mcap-ros2-support`: the header profile `ros2`; every channel CDR with a `ros2msg` schema and its QoS
    profiles; every message decoded by the decoder built from the bag's own schemas.
@@ -11,8 +12,14 @@
 Then, on what both decoded (they must agree): one pose, twist, odometry, tf and status message per line of the TUM
 file, each pose equal to it to 1e-9, the twist to the twists CSV, stamps equal to the times to 1.5 ns, frame ids as
 given, covariances symmetric and positive semi-definite and equal to the covariance CSV's blocks (the pose's) or
-its first-order transformation (the odometry's twist, in the target frame), the camera info once. Prints a
-summary; exits non-zero with the reason on the first failure.
+its first-order transformation (the odometry's twist, in the target frame), the camera info once, its distortion
+model and number of coefficients those given. `/roitrack/measurements` (roitrack_msgs/msg/BlobMeasurements, decoded
+by `rosbags` from the bag's own definition): parallel arrays, and with --measurements, every centroid of the CSV,
+in order, at `stamp + dt_s`. With --images, the annotations of each frame: green points (the measured centroids, each
+labelled with its id) near the magenta circles of the same ids (the target projected by the estimate). With --rois,
+each ROI image with its camera info (the `roi` its offset and size) and annotation (a centroid inside the image, at
+a measurement of /roitrack/measurements less the offset, or a rejection). Prints a summary; exits non-zero with the
+reason on the first failure.
 """
 
 import argparse
@@ -136,6 +143,88 @@ def read_with_rosbags(path):
     return messages
 
 
+ESTIMATE_TOPICS = ["/roitrack/pose", "/roitrack/twist", "/roitrack/odometry", "/tf", "/roitrack/status"]
+MEASURED_COLOR = (0.1, 0.9, 0.2)
+PROJECTED_COLOR = (1.0, 0.2, 0.9)
+
+
+def color(c):
+    return (round(c.r, 6), round(c.g, 6), round(c.b, 6))
+
+
+def measurements_of(messages, frame_id):
+    """The centroids of /roitrack/measurements as (t, id, u, v), in the order written."""
+    rows = []
+    for _, log_time, m in messages:
+        n = len(m.point_ids)
+        check(len(m.u_px) == n and len(m.v_px) == n and len(m.dt_s) == n, "measurements: arrays of unequal length")
+        check(len(m.sigma_px) in (0, n), "measurements: sigma_px")
+        check(m.header.frame_id == frame_id, f"measurements: frame_id {m.header.frame_id!r}")
+        t0 = stamp_s(m.header.stamp)
+        check(abs(log_time * 1e-9 - t0) <= 1.5e-9, "measurements: log time is not the stamp")
+        check(n > 0 and abs(m.dt_s[0]) <= 1e-9, "measurements: stamped with the first centroid's time")
+        rows.extend((t0 + float(m.dt_s[k]), int(m.point_ids[k]), float(m.u_px[k]), float(m.v_px[k])) for k in range(n))
+    return rows
+
+
+def check_frame_annotations(annotations):
+    """Measured points (green, labelled) near the projected circles (magenta, labelled) of the same ids."""
+    worst = 0.0
+    measured_total = 0
+    for _, _, a in annotations:
+        circles = [c for c in a.circles if color(c.outline_color) == PROJECTED_COLOR]
+        projected_labels = [t for t in a.texts if color(t.text_color) == PROJECTED_COLOR]
+        measured_labels = [t for t in a.texts if color(t.text_color) == MEASURED_COLOR]
+        points = [p for group in a.points if color(group.outline_color) == MEASURED_COLOR and group.type == 1
+                  for p in group.points]
+        check(len(projected_labels) == len(circles), "annotations: a projected circle without its label")
+        check(len(measured_labels) == len(points), "annotations: a measured point without its label")
+        measured_total += len(points)
+        projected = {t.text: c.position for t, c in zip(projected_labels, circles)}
+        for label, p in zip(measured_labels, points):
+            if projected:
+                check(label.text in projected, f"annotations: measured point {label.text} has no projection")
+                q = projected[label.text]
+                worst = max(worst, math.hypot(p.x - q.x, p.y - q.y))
+    check(measured_total > 0, "annotations: no measured point drawn")
+    check(worst < 3.0, f"annotations: a measured point {worst:.2f} px from its projection")
+    return worst, measured_total
+
+
+def check_rois(images, infos, annotations, measured, camera_info):
+    """Each ROI image with its camera info (roi = offset and size) and its centroid's annotation."""
+    check(len(images) == len(infos) == len(annotations), "ROI topics of unequal length")
+    by_time = {}
+    for t, point_id, u, v in measured:
+        by_time.setdefault(round(t * 1e9), []).append((point_id, u, v))
+    centroids = 0
+    for (_, log_a, image), (_, log_b, info), (_, log_c, a) in zip(images, infos, annotations):
+        check(log_a == log_b == log_c, "ROI image, camera info and annotations at different times")
+        check(stamp_s(image.header.stamp) == stamp_s(info.header.stamp), "ROI image and camera info stamps differ")
+        check(image.encoding in ("mono8", "mono16") and len(image.data) == image.step * image.height, "ROI image")
+        roi = info.roi
+        check((roi.width, roi.height) == (image.width, image.height), "ROI camera info: roi size is not the image's")
+        check(roi.x_offset + roi.width <= info.width and roi.y_offset + roi.height <= info.height, "ROI off the sensor")
+        check((info.width, info.height) == (camera_info.width, camera_info.height), "ROI camera info: sensor size")
+        check(list(info.k) == list(camera_info.k), "ROI camera info: intrinsics")
+        points = [p for group in a.points for p in group.points]
+        if not points:
+            check(any("rejected" in t.text for t in a.texts), "a ROI without a centroid nor a rejection")
+            continue
+        check(len(points) == 1, "a ROI annotated with more than one centroid")
+        p = points[0]
+        check(0 <= p.x < image.width and 0 <= p.y < image.height, "a ROI's centroid is outside its image")
+        u, v = p.x + roi.x_offset, p.y + roi.y_offset
+        candidates = [m for key in (log_a - 1, log_a, log_a + 1) for m in by_time.get(key, [])]
+        # A rolling shutter's centroid is later than its ROI's first row: then match by place only.
+        if not candidates:
+            candidates = [m for ms in by_time.values() for m in ms]
+        best = min(math.hypot(u - cu, v - cv) for _, cu, cv in candidates)
+        check(best <= 1e-9, f"a ROI's centroid ({u}, {v}) is no measurement of /roitrack/measurements")
+        centroids += 1
+    return centroids
+
+
 def main():
     parser = argparse.ArgumentParser()
     parser.add_argument("bag")
@@ -150,6 +239,9 @@ def main():
         action="store_true",
         help="the bag of a run that failed: its estimates are the first of the files' (at least one)",
     )
+    parser.add_argument("--measurements", help="the measurements CSV the bag's /roitrack/measurements must hold")
+    parser.add_argument("--rois", type=int, default=0, help="ROI images expected on /roitrack/roi/image")
+    parser.add_argument("--distortion", default="plumb_bob:5", help="the camera info's model and coefficient count")
     args = parser.parse_args()
 
     poses = read_tum(args.poses)
@@ -170,6 +262,11 @@ def main():
     if args.images:
         expected_types["/roitrack/image"] = "sensor_msgs/msg/Image"
         expected_types["/roitrack/annotations"] = "foxglove_msgs/msg/ImageAnnotations"
+    if args.rois:
+        expected_types["/roitrack/roi/image"] = "sensor_msgs/msg/Image"
+        expected_types["/roitrack/roi/camera_info"] = "sensor_msgs/msg/CameraInfo"
+        expected_types["/roitrack/roi/annotations"] = "foxglove_msgs/msg/ImageAnnotations"
+    expected_types["/roitrack/measurements"] = "roitrack_msgs/msg/BlobMeasurements"
     if args.prefix:
         n = len(by_reader["mcap"].get("/roitrack/pose", []))
         check(0 < n <= len(poses), f"{n} poses in the bag of a failed run, {len(poses)} in the files")
@@ -187,8 +284,7 @@ def main():
     worst = {"pose": 0.0, "twist": 0.0, "stamp": 0.0, "covariance": 0.0}
     for k in range(n):
         t, tx, ty, tz, qx, qy, qz, qw = poses[k]
-        decoded = {topic: (mcap_messages[topic][k], rosbags_messages[topic][k]) for topic in expected_types
-                   if topic not in ("/roitrack/camera_info", "/roitrack/image", "/roitrack/annotations")}
+        decoded = {topic: (mcap_messages[topic][k], rosbags_messages[topic][k]) for topic in ESTIMATE_TOPICS}
         for topic, ((_, log_a, a), (_, log_b, b)) in decoded.items():
             check(log_a == log_b, f"{topic} {k}: log times differ between the readers")
             check(abs(log_a * 1e-9 - t) <= 1.5e-9, f"{topic} {k}: log time {log_a} ns for t = {t}")
@@ -266,7 +362,9 @@ def main():
     info_a, info_b = mcap_messages["/roitrack/camera_info"][0][2], rosbags_messages["/roitrack/camera_info"][0][2]
     for info in (info_a, info_b):
         check(info.header.frame_id == args.frame_id, "camera info frame")
-        check(info.distortion_model == "plumb_bob" and len(info.d) == 5, "camera info distortion")
+        model, count = args.distortion.split(":")
+        check(info.distortion_model == model and len(info.d) == int(count),
+              f"camera info distortion {info.distortion_model} with {len(info.d)} coefficients, not {args.distortion}")
         check(info.width > 0 and info.height > 0 and info.k[8] == 1.0, "camera info size and matrix")
     if args.images:
         for (_, _, a), (_, _, b) in zip(mcap_messages["/roitrack/image"], rosbags_messages["/roitrack/image"]):
@@ -276,8 +374,31 @@ def main():
                 check(len(image.data) == image.step * image.height, "image data size")
                 check(image.header.frame_id == args.frame_id, "image frame")
             check(bytes(a.data) == bytes(b.data), "the readers disagree on an image")
+    measured = measurements_of(mcap_messages["/roitrack/measurements"], args.frame_id)
+    check(measured == measurements_of(rosbags_messages["/roitrack/measurements"], args.frame_id),
+          "the readers disagree on the measurements")
+    extra = f"; {len(measured)} measurements"
+    if args.measurements:
+        with open(args.measurements, newline="") as f:
+            rows = [(float(r["t"]), int(r["id"]), float(r["u"]), float(r["v"])) for r in csv.DictReader(f)]
+        check(len(measured) == len(rows), f"{len(measured)} measurements in the bag, {len(rows)} in the CSV")
+        worst_t = max(abs(a[0] - b[0]) for a, b in zip(measured, rows))
+        check(worst_t <= 1e-12, f"measurement times differ by {worst_t} s")
+        check(all(a[1:] == b[1:] for a, b in zip(measured, rows)), "measurements differ from the CSV")
+        extra += f" equal to the CSV's (times to {worst_t:.1e} s)"
+    if args.images:
+        worst_px, drawn = check_frame_annotations(mcap_messages["/roitrack/annotations"])
+        check_frame_annotations(rosbags_messages["/roitrack/annotations"])
+        extra += f"; {drawn} measured centroids drawn, at most {worst_px:.2f} px from their projections"
+    if args.rois:
+        check(len(mcap_messages["/roitrack/roi/image"]) == args.rois, f"{len(mcap_messages['/roitrack/roi/image'])} ROIs")
+        centroids = check_rois(mcap_messages["/roitrack/roi/image"], mcap_messages["/roitrack/roi/camera_info"],
+                               mcap_messages["/roitrack/roi/annotations"], measured, info_a)
+        check(centroids == len(measured), f"{centroids} ROI centroids, {len(measured)} measurements")
+        check(len(rosbags_messages["/roitrack/roi/image"]) == args.rois, "rosbags: ROI count")
+        extra += f"; {args.rois} ROI images, {centroids} with their centroid"
     print(
-        f"check_bag: {args.bag}: {n} estimates read back by mcap and rosbags; worst differences: pose "
+        f"check_bag: {args.bag}: {n} estimates read back by mcap and rosbags{extra}; worst differences: pose "
         f"{worst['pose']:.2e}, twist {worst['twist']:.2e}, stamp {worst['stamp']:.2e} s, covariance "
         f"{worst['covariance']:.2e} (relative)"
     )

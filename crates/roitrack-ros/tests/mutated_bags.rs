@@ -1,10 +1,11 @@
-//! The bag reader on damaged input: a valid bag of image frames (written by roitrack's own writer), truncated at
-//! every length of a sample and with bytes changed at random, read from start to end. Every outcome must be frames
-//! or an error naming the bag and the topic; never a panic, never a hang.
+//! The bag readers on damaged input: a valid bag of image frames and of their measured centroids (written by
+//! roitrack's own writer), truncated at every length of a sample and with bytes changed at random, read from start to
+//! end by the frame reader and by the measurement reader. Every outcome must be frames and measurements or an error
+//! naming the bag and the topic; never a panic, never a hang.
 
-use roitrack_core::CameraModel;
+use roitrack_core::{CameraModel, Measurement};
 use roitrack_image::Frame;
-use roitrack_ros::{BagFrameSource, BagOptions, BagWriter};
+use roitrack_ros::{BagFrameSource, BagMeasurementSource, BagOptions, BagWriter};
 
 fn valid_bag() -> Vec<u8> {
     let dir = tempfile::tempdir().unwrap();
@@ -20,15 +21,24 @@ fn valid_bag() -> Vec<u8> {
             *p = (i as u16 * 7 + k) % 200;
         }
         frame.t_s = 0.1 * f64::from(k);
-        bag.write_frame(&frame, None).unwrap();
+        let measured: Vec<Measurement> = (0..3)
+            .map(|i| Measurement {
+                t_s: frame.t_s,
+                id: i + 1,
+                u_px: 4.0 + 8.0 * f64::from(i),
+                v_px: 12.5,
+            })
+            .collect();
+        bag.write_frame(&frame, None, &measured).unwrap();
+        bag.write_measurements(&measured).unwrap();
     }
     bag.finish().unwrap();
     std::fs::read(&path).unwrap()
 }
 
-/// Reads every frame of the topic; the number read, or the error's text.
+/// Reads every frame of the topic, then every measurement; the number of frames read, or the first error's text.
 fn read_all(bytes: Vec<u8>) -> Result<usize, String> {
-    let mut source = BagFrameSource::from_bytes("damaged.mcap", bytes, "/roitrack/image")
+    let mut source = BagFrameSource::from_bytes("damaged.mcap", bytes.clone(), "/roitrack/image")
         .map_err(|e| e.to_string())?;
     let _ = source.camera_info("/roitrack/camera_info");
     let mut frame = Frame::default();
@@ -38,7 +48,16 @@ fn read_all(bytes: Vec<u8>) -> Result<usize, String> {
         count += 1;
         assert!(count <= 12, "more frames than were written");
     }
-    Ok(count)
+    let source = BagMeasurementSource::from_bytes("damaged.mcap", bytes, "/roitrack/measurements")
+        .map_err(|e| e.to_string())?;
+    let mut measurements = 0;
+    for m in source.with_known_ids([1, 2, 3]) {
+        let m = m.map_err(|e| e.to_string())?;
+        assert!(m.t_s.is_finite() && m.u_px.is_finite() && m.v_px.is_finite());
+        measurements += 1;
+        assert!(measurements <= 36, "more measurements than were written");
+    }
+    Ok(count + measurements)
 }
 
 fn check_error(error: &str) {
@@ -50,7 +69,7 @@ fn check_error(error: &str) {
 
 #[test]
 fn the_valid_bag_reads_back() {
-    assert_eq!(read_all(valid_bag()), Ok(12));
+    assert_eq!(read_all(valid_bag()), Ok(12 + 36));
 }
 
 #[test]

@@ -11,6 +11,7 @@ use roitrack::formats::{
     open_input,
 };
 use roitrack::image::CentroidOptions;
+use roitrack::pipeline::RoiEvent;
 use roitrack::{EstimatorReport, TrackStatus, Tracker};
 
 use crate::args::{CameraArgs, CameraPath, EstimatorArgs, ShutterArg, TargetArgs, TimeUnitArg};
@@ -120,11 +121,18 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     check_paths(args)?;
     let camera = crate::ros::camera(args.camera.as_ref(), args.images.as_deref(), &args.mcap_in)?;
     let target = args.target.read()?;
-    if let Some(source) = &args.images {
+    if let Some(source) = &args.images
+        && args.mcap_in.measurement_topic.is_none()
+    {
         return run_frames(args, source, camera, target);
     }
     if args.line_delay_s.is_some() {
         bail!("--line-delay-s is for --images with --shutter rolling");
+    }
+    if args.timestamps.is_some() || args.fps.is_some() || args.distance_m.is_some() {
+        bail!(
+            "--timestamps, --fps and --distance-m are for frames, not for replayed measurements (--measurement-topic)"
+        );
     }
     let known_ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
     let mut tracker = Tracker::new(camera.clone(), target, args.estimator.config())
@@ -144,31 +152,61 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             progress.set_position(count as u64);
         }
     };
-    let mut bag = args.ros.open(&camera, None)?;
+    let replay =
+        args.mcap_in
+            .measurement_replay(args.images.as_deref(), known_ids.clone(), &camera)?;
+    let mut bag = if args.rois.is_some() {
+        args.ros.open_for_rois(&camera, None)?
+    } else {
+        args.ros.open(&camera, None)?
+    };
     let mut pacer = args.pace.pacer();
-    let start = Instant::now();
-    let mut sink = |e: &roitrack::Estimate| {
+    // Every estimate: paced (--paced), then to the files and the bag.
+    let mut on_estimate = |e: &roitrack::Estimate, bag: &mut crate::ros::Bag| {
         if let Some(pacer) = &mut pacer {
             pacer.wait_until(e.t_ref_s);
         }
         writer.write(e).and_then(|()| bag.estimate(e))
     };
-    let (path, report, rois) = match (&args.measurements, &args.rois) {
-        (Some(path), _) => {
+    let start = Instant::now();
+    let (path, report, rois) = match (&args.measurements, &args.rois, replay) {
+        (_, _, Some(source)) => {
+            let path = source.bag().to_path_buf();
+            // Each measurement also goes to the bag's /roitrack/measurements (a RefCell: the estimates' sink
+            // writes to the bag too).
+            let bag = std::cell::RefCell::new(&mut bag);
+            let measurements = source.enumerate().map(|(k, m)| {
+                tick(k);
+                let m = m?;
+                bag.borrow_mut().measurements(std::slice::from_ref(&m))?;
+                Ok::<_, roitrack::formats::FormatError>(m)
+            });
+            let report = roitrack::track(&mut tracker, measurements, |e| {
+                on_estimate(e, &mut bag.borrow_mut())
+            })
+            .with_context(|| format!("tracking {} failed", path.display()))?;
+            (path, report, None)
+        }
+        (Some(path), _, None) => {
             // Checked: known ids, centroids on the camera's image, times in seconds (or converted).
             let reader = MeasurementReader::from_reader(open_input(path)?, path)?
                 .with_known_ids(known_ids)
                 .with_image_size(camera.width_px, camera.height_px);
             let reader = TimedMeasurements::new(reader, args.time_units.map(Into::into));
+            let bag = std::cell::RefCell::new(&mut bag);
             let measurements = reader.enumerate().map(|(k, m)| {
                 tick(k);
-                m
+                let m = m?;
+                bag.borrow_mut().measurements(std::slice::from_ref(&m))?;
+                Ok::<_, roitrack::formats::FormatError>(m)
             });
-            let report = roitrack::track(&mut tracker, measurements, &mut sink)
-                .with_context(|| format!("tracking {} failed", path.display()))?;
-            (path, report, None)
+            let report = roitrack::track(&mut tracker, measurements, |e| {
+                on_estimate(e, &mut bag.borrow_mut())
+            })
+            .with_context(|| format!("tracking {} failed", path.display()))?;
+            (path.clone(), report, None)
         }
-        (None, Some(path)) => {
+        (None, Some(path), None) => {
             let reader = RoiRecordingReader::open(path)?.with_known_ids(known_ids);
             let mut options = CentroidOptions::default();
             if args.no_symmetry_check {
@@ -178,17 +216,23 @@ pub fn run(args: &TrackArgs) -> Result<()> {
                 tick(k);
                 image
             });
-            let report = roitrack::pipeline::track_rois(
+            // Every ROI and what its centroid gave goes to the bag (its measurement; with --mcap-rois, the image).
+            let report = roitrack::pipeline::track_rois_with(
                 &mut tracker,
                 &options,
                 &camera.time,
                 images,
-                &mut sink,
+                |event| match event {
+                    RoiEvent::Roi { image, measured } => bag.roi(image, measured.ok()),
+                    RoiEvent::Estimate(e) => on_estimate(e, &mut bag),
+                },
             )
             .with_context(|| format!("tracking {} failed", path.display()))?;
-            (path, report.estimator, Some(report))
+            (path.clone(), report.estimator, Some(report))
         }
-        (None, None) => bail!("give --measurements or --rois"),
+        (None, None, None) => {
+            bail!("give --measurements, --rois or --mcap-in BAG --measurement-topic TOPIC")
+        }
     };
     let seconds = start.elapsed().as_secs_f64();
     progress.finish_and_clear();
@@ -298,12 +342,16 @@ fn run_frames(
                 })
             })
         },
-        |(info, frame), outcome| {
+        |(info, frame), outcome, measured| {
             progress.inc(1);
             if let Some(pacer) = &mut pacer {
                 pacer.wait_until(info.t_s);
             }
-            bag.frame(frame.take(), outcome.estimate.as_ref().map(|e| &e.state))?;
+            bag.frame(
+                frame.take(),
+                outcome.estimate.as_ref().map(|e| &e.state),
+                measured,
+            )?;
             match &outcome.estimate {
                 Some(e) => writer.write(e).and_then(|()| bag.estimate(e)),
                 None => Ok(()),
