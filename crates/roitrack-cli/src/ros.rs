@@ -227,6 +227,27 @@ impl Bag {
         }
     }
 
+    /// The measurements and estimates of a finished run, in the order they came: the measurements up to each
+    /// estimate's time, then the estimate (so that each /roitrack/measurements message holds those of one estimate).
+    pub fn run(
+        &mut self,
+        measured: &[Measurement],
+        estimates: &[Estimate],
+    ) -> Result<(), FormatError> {
+        let mut next = 0;
+        for e in estimates {
+            let end = next
+                + measured[next..]
+                    .iter()
+                    .take_while(|m| m.t_s <= e.t_ref_s)
+                    .count();
+            self.measurements(&measured[next..end])?;
+            next = end;
+            self.estimate(e)?;
+        }
+        self.measurements(&measured[next..])
+    }
+
     /// Measured centroids, for /roitrack/measurements.
     pub fn measurements(&mut self, measured: &[Measurement]) -> Result<(), FormatError> {
         match &mut self.bag {

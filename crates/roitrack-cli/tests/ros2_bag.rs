@@ -836,3 +836,54 @@ fn the_camera_info_names_a_fisheye_cameras_own_model() {
     );
     assert!(max_difference(&got, &expected) <= 1e-9);
 }
+
+#[test]
+fn demo_writes_the_centroids_its_loop_measured() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let bag = dir.join("demo.mcap");
+    ok(&[
+        "demo",
+        "--scenario",
+        "static",
+        "--out",
+        p(&dir.join("out")),
+        "--mcap",
+        p(&bag),
+    ]);
+    let target = roitrack::formats::read_target_csv(dir.join("out/target.csv")).unwrap();
+    let ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
+    let measured: Vec<roitrack::Measurement> =
+        roitrack::ros::BagMeasurementSource::open(&bag, "/roitrack/measurements")
+            .unwrap()
+            .with_known_ids(ids)
+            .collect::<Result<_, _>>()
+            .unwrap();
+    // The loop's 4,000 ROI slots, less the full frame's and the ROIs whose blob was rejected.
+    assert!(
+        measured.len() > 3900 && measured.len() < 4000,
+        "{}",
+        measured.len()
+    );
+    let estimates = std::fs::read_to_string(dir.join("out/kalman_poses.tum"))
+        .unwrap()
+        .lines()
+        .count();
+    let last_estimate_s = read_poses(&dir.join("out/kalman_poses.tum"))[estimates - 1][0];
+    assert!(measured.last().unwrap().t_s >= last_estimate_s);
+    // --mcap-rois is refused where the ROIs stay inside the loop.
+    let error = fails(&[
+        "demo",
+        "--scenario",
+        "static",
+        "--out",
+        p(&dir.join("out2")),
+        "--mcap",
+        p(&bag),
+        "--mcap-rois",
+    ]);
+    assert!(
+        error.contains("--mcap-rois is for the ROI images of `track --rois`"),
+        "{error}"
+    );
+}

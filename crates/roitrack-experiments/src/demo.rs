@@ -236,6 +236,8 @@ impl Demo {
             rate_hz: self.simulation.rate_hz,
             paced: self.options.paced,
             roi_slots: self.slots(),
+            // The measurements go to the run's ROS 2 bag (`demo --mcap`).
+            keep_measurements: true,
             ..LoopConfig::default()
         };
         loop_config.scheduler.order = self.options.order;

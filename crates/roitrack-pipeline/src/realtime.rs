@@ -41,6 +41,10 @@ pub struct LoopConfig {
     pub max_queued: usize,
     pub scheduler: SchedulerConfig,
     pub centroid: CentroidOptions,
+    /// Keep every measurement handed to the estimator in [`LoopReport::measured`] (for a record of what the tracker
+    /// saw, the ROS 2 bag's `/roitrack/measurements`); room for `roi_slots` is reserved before the run, so the loop
+    /// still does not allocate. Default: false.
+    pub keep_measurements: bool,
 }
 
 impl LoopConfig {
@@ -93,6 +97,7 @@ impl Default for LoopConfig {
             max_queued: 16,
             scheduler: SchedulerConfig::default(),
             centroid: CentroidOptions::default(),
+            keep_measurements: false,
         }
     }
 }
@@ -123,6 +128,8 @@ pub struct LoopReport {
     pub stopped_by: Option<GrabError>,
     /// Wall time of the whole run (s).
     pub wall_s: f64,
+    /// With [`LoopConfig::keep_measurements`]: the measurements handed to the estimator, in order (else empty).
+    pub measured: Vec<Measurement>,
 }
 
 impl LoopReport {
@@ -299,11 +306,19 @@ pub fn run_loop_with_sink<C: RoiCamera>(
             let mut estimates = Vec::with_capacity(expected_estimates);
             let mut latencies_us = Vec::with_capacity(expected_estimates);
             let mut refused = 0usize;
+            let mut measured = Vec::with_capacity(if config.keep_measurements {
+                config.roi_slots
+            } else {
+                0
+            });
             let mut spins = 0u32;
             loop {
                 match measurement_rx.pop() {
                     Ok(Event::Measurement { m, grabbed }) => {
                         spins = 0;
+                        if config.keep_measurements && measured.len() < measured.capacity() {
+                            measured.push(m);
+                        }
                         match tracker.push(&m) {
                             Ok(Some(e)) => {
                                 on_estimate(&e);
@@ -334,7 +349,7 @@ pub fn run_loop_with_sink<C: RoiCamera>(
                     }
                 }
             }
-            (estimates, latencies_us, refused)
+            (estimates, latencies_us, refused, measured)
         });
 
         // The acquisition side runs on this thread.
@@ -515,7 +530,7 @@ pub fn run_loop_with_sink<C: RoiCamera>(
         let estimation = estimation.join();
         (report, estimation)
     });
-    let (estimates, latencies_us, refused) =
+    let (estimates, latencies_us, refused, measured) =
         estimation_side.map_err(|_| PipelineError::EstimatorPanicked)?;
     Ok(LoopReport {
         estimates,
@@ -531,6 +546,7 @@ pub fn run_loop_with_sink<C: RoiCamera>(
         camera_errors: camera_side.camera_errors,
         stopped_by: camera_side.stopped_by,
         wall_s: start.elapsed().as_secs_f64(),
+        measured,
     })
 }
 

@@ -101,7 +101,9 @@ impl BackgroundBag {
         if self.measurements.is_empty() {
             return Ok(());
         }
-        let batch = std::mem::take(&mut self.measurements);
+        // The next batch starts at this one's size: one allocation per message.
+        let capacity = self.measurements.capacity();
+        let batch = std::mem::replace(&mut self.measurements, Vec::with_capacity(capacity));
         self.send(Item::Measurements(batch))
     }
 

@@ -127,9 +127,11 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         }
         writer.finish()?;
         if let Some(mut bag) = bag.take() {
-            for e in &from_images.scored.estimates {
-                bag.estimate(e)?;
-            }
+            let measured = from_images
+                .loop_report
+                .as_ref()
+                .map_or(&[][..], |r| &r.measured);
+            bag.run(measured, &from_images.scored.estimates)?;
             bag.finish()?;
         }
         if let Some(live) = live.take() {
