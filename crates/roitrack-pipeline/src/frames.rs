@@ -85,12 +85,14 @@ impl FrameTrackerConfig {
     ///
     /// let config = FrameTrackerConfig::frame_estimator(TrackerConfig::default());
     /// let EstimatorConfig::Kalman(tuning) = config.estimator else { unreachable!() };
-    /// assert!(!tuning.adapt_noise && !tuning.adapt_motion);
+    /// assert!(!tuning.adapt_noise && !tuning.adapt_motion && !tuning.calibrate_twist_covariance);
     /// ```
     pub fn frame_estimator(mut config: TrackerConfig) -> TrackerConfig {
         if let EstimatorConfig::Kalman(tuning) = &mut config.estimator {
             tuning.adapt_noise = false;
             tuning.adapt_motion = false;
+            // Its reference, the poses 8 estimates either side, spans half a second at 30 Hz: too long.
+            tuning.calibrate_twist_covariance = false;
         }
         config
     }

@@ -25,6 +25,7 @@
 
 use nalgebra::{Matrix2, SMatrix, Vector2, Vector3};
 
+use super::calibration::TwistCalibration;
 use super::problem::{Observation, ResidualFigures, ResidualTally};
 use super::track::{Law, Step, Track, TrackCore};
 use super::{
@@ -83,6 +84,11 @@ pub struct KalmanTuning {
     /// values, lowered while the innovations show the filter over-reacting (a still target is averaged down) and
     /// raised while they show it lagging. Off, they are fixed (a hand-tuned filter).
     pub adapt_motion: bool,
+    /// Scale the reported covariance of the linear and the angular velocity (default) by how far the estimates'
+    /// twists actually stray from the mean twist of the poses around them (see docs/estimation.md): the process noise
+    /// the filter needs to follow manoeuvres makes it claim a velocity uncertainty two to four times too wide on
+    /// smooth motion. Only the reported covariance changes, never the estimate.
+    pub calibrate_twist_covariance: bool,
 }
 
 impl Default for KalmanTuning {
@@ -94,6 +100,7 @@ impl Default for KalmanTuning {
             huber_sigma: 2.5,
             adapt_noise: true,
             adapt_motion: true,
+            calibrate_twist_covariance: true,
         }
     }
 }
@@ -372,6 +379,8 @@ struct KalmanLaw {
     /// Natural logarithms of the factors applied to the linear and the angular acceleration density (when
     /// `tuning.adapt_motion`).
     process_log_scale: [f64; 2],
+    /// The scales of the reported twist covariance (when `tuning.calibrate_twist_covariance`).
+    calibration: TwistCalibration,
 }
 
 impl Law for KalmanLaw {
@@ -388,6 +397,13 @@ impl Law for KalmanLaw {
             // carries over from the previous track.
             noise: NoiseEstimate::new(core.noise_px, 2.0 * core.target.len() as f64),
             process_log_scale: self.process_log_scale,
+            // The scales carry over too; the history of poses starts again.
+            calibration: {
+                let mut calibration =
+                    std::mem::replace(&mut self.calibration, TwistCalibration::new());
+                calibration.restart();
+                calibration
+            },
             gated_at: {
                 let mut gated_at = std::mem::take(&mut self.gated_at);
                 gated_at.clear();
@@ -474,12 +490,23 @@ impl Law for KalmanLaw {
         } else {
             TrackStatus::Tracking
         };
+        let covariance = if self.filter.tuning.calibrate_twist_covariance {
+            self.calibration.record(
+                t_new_s,
+                &core.state,
+                &self.filter.covariance,
+                status == TrackStatus::Tracking,
+            );
+            self.calibration.apply(&self.filter.covariance)
+        } else {
+            self.filter.covariance
+        };
         Step {
             inverse_condition,
             measurements_used: ne.count(),
             iterations: core.step_measurements,
             status,
-            covariance: Some(self.filter.covariance),
+            covariance: Some(covariance),
         }
     }
 
@@ -534,6 +561,7 @@ impl KalmanLaw {
             noise: NoiseEstimate::new(1.0, 0.0),
             process_log_scale: [0.0; 2],
             gated_at: Vec::new(),
+            calibration: TwistCalibration::new(),
         }
     }
 

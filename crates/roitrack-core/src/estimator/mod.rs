@@ -49,6 +49,7 @@
 //! ```
 
 pub mod batch;
+mod calibration;
 pub mod kalman;
 mod options;
 mod problem;
