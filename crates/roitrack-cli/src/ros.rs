@@ -59,9 +59,9 @@ pub struct McapArgs {
         requires = "ros_output"
     )]
     pub child_frame_id: String,
-    /// With --mcap and `track --rois`: also every ROI image as recorded, with where it sits on the sensor and the
-    /// centroid measured in it (/roitrack/roi/image, /roitrack/roi/camera_info, /roitrack/roi/annotations;
-    /// docs/ros2.md). Off by default: three messages per ROI, about twice the bag's size and writing time.
+    /// With --mcap, on `track --rois` and `demo`: also every ROI image as recorded (demo: of the default estimator's
+    /// run), with where it sits on the sensor and the centroid measured in it (/roitrack/roi/image, /roitrack/roi/camera_info, /roitrack/roi/annotations;
+    /// docs/ros2.md). Off by default: three messages per ROI, about ten times the bag's size.
     #[arg(long, requires = "mcap")]
     pub mcap_rois: bool,
 }
@@ -132,13 +132,13 @@ impl McapArgs {
     pub fn open(&self, camera: &CameraModel, target: Option<&Target>) -> Result<Bag> {
         if self.mcap_rois {
             bail!(
-                "--mcap-rois is for the ROI images of `track --rois`: this run has none to write"
+                "--mcap-rois is for the ROI images of `track --rois` and `demo`: this run has none to write"
             );
         }
         self.open_for_rois(camera, target)
     }
 
-    /// [`Self::open`] for a run from ROI images, which --mcap-rois writes to the bag.
+    /// [`Self::open`] for a run from ROI images (`track --rois`, `demo`), which --mcap-rois writes to the bag.
     pub fn open_for_rois(&self, camera: &CameraModel, target: Option<&Target>) -> Result<Bag> {
         let options = BagOptions {
             frame_id: self.frame_id.clone(),
@@ -263,16 +263,27 @@ impl Bag {
         image: &RoiImage,
         measured: Option<&Measurement>,
     ) -> Result<(), FormatError> {
-        let Some(bag) = &mut self.bag else {
-            return Ok(());
-        };
-        if let Some(m) = measured {
+        if let (Some(bag), Some(m)) = (&mut self.bag, measured) {
             bag.write_measurements(std::slice::from_ref(m))?;
         }
-        if self.rois {
-            bag.write_roi(image, measured)?;
+        self.roi_image(image, measured)
+    }
+
+    /// With --mcap-rois: a ROI image, its place and its centroid's annotation (not its measurement).
+    pub fn roi_image(
+        &mut self,
+        image: &RoiImage,
+        measured: Option<&Measurement>,
+    ) -> Result<(), FormatError> {
+        match &mut self.bag {
+            Some(bag) if self.rois => bag.write_roi(image, measured),
+            _ => Ok(()),
         }
-        Ok(())
+    }
+
+    /// Whether the bag takes the ROI images (--mcap-rois).
+    pub fn wants_rois(&self) -> bool {
+        self.bag.is_some() && self.rois
     }
 
     pub fn finish(self) -> Result<()> {

@@ -838,20 +838,23 @@ fn the_camera_info_names_a_fisheye_cameras_own_model() {
 }
 
 #[test]
-fn demo_writes_the_centroids_its_loop_measured() {
+fn demo_writes_the_centroids_and_rois_its_loop_measured() {
+    let Some(python) = python() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let bag = dir.join("demo.mcap");
+    let out = dir.join("out");
+    let bag = dir.join("run.mcap");
     ok(&[
         "demo",
         "--scenario",
         "static",
         "--out",
-        p(&dir.join("out")),
+        p(&out),
         "--mcap",
         p(&bag),
+        "--mcap-rois",
     ]);
-    let target = roitrack::formats::read_target_csv(dir.join("out/target.csv")).unwrap();
+    let target = roitrack::formats::read_target_csv(out.join("target.csv")).unwrap();
     let ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
     let measured: Vec<roitrack::Measurement> =
         roitrack::ros::BagMeasurementSource::open(&bag, "/roitrack/measurements")
@@ -865,25 +868,53 @@ fn demo_writes_the_centroids_its_loop_measured() {
         "{}",
         measured.len()
     );
-    let estimates = std::fs::read_to_string(dir.join("out/kalman_poses.tum"))
-        .unwrap()
-        .lines()
-        .count();
-    let last_estimate_s = read_poses(&dir.join("out/kalman_poses.tum"))[estimates - 1][0];
-    assert!(measured.last().unwrap().t_s >= last_estimate_s);
-    // --mcap-rois is refused where the ROIs stay inside the loop.
-    let error = fails(&[
-        "demo",
-        "--scenario",
-        "static",
-        "--out",
-        p(&dir.join("out2")),
-        "--mcap",
-        p(&bag),
-        "--mcap-rois",
-    ]);
+    let poses = read_poses(&out.join("kalman_poses.tum"));
+    assert!(measured.last().unwrap().t_s >= poses.last().unwrap()[0]);
+    // The ROI images, read by roitrack's own frame reader (they are sensor_msgs/msg/Image), then by check_bag.
+    let mut rois = roitrack::ros::BagFrameSource::open(&bag, "/roitrack/roi/image").unwrap();
+    let mut frame = roitrack::Frame::default();
+    let mut count = 0;
+    while let Some(info) = rois.next_frame(&mut frame) {
+        info.unwrap();
+        count += 1;
+    }
+    assert!(count >= measured.len(), "{count} ROI images");
+    for file in ["kalman_poses.tum", "kalman_twists.csv"] {
+        std::fs::copy(out.join(file), dir.join(file)).unwrap();
+    }
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/check_bag.py");
+    let checked = Command::new(&python)
+        .arg(script)
+        .args([
+            p(&bag),
+            p(&dir.join("kalman_poses.tum")),
+            p(&dir.join("kalman_twists.csv")),
+            "-",
+            "camera",
+            "target",
+            "--rois",
+            &count.to_string(),
+        ])
+        .output()
+        .unwrap();
+    let report = String::from_utf8_lossy(&checked.stdout);
     assert!(
-        error.contains("--mcap-rois is for the ROI images of `track --rois`"),
-        "{error}"
+        checked.status.success(),
+        "{report}{}",
+        String::from_utf8_lossy(&checked.stderr)
+    );
+    assert!(
+        report.contains(&format!(
+            "{count} ROI images, {} with their centroid",
+            measured.len()
+        )),
+        "{report}"
+    );
+    // --mcap-rois is refused where the ROIs are not at hand (live, or track from measurements).
+    let mut args = track_args(&out, &out.join("measurements.csv"), dir);
+    args.push("--mcap-rois".into());
+    assert!(
+        fails(&strs(&args))
+            .contains("--mcap-rois is for the ROI images of `track --rois` and `demo`")
     );
 }

@@ -9,17 +9,24 @@
 use std::sync::atomic::AtomicUsize;
 
 use roitrack_core::JacobianKind;
+use roitrack_core::Measurement;
 use roitrack_core::estimator::{
     Estimate, EstimatorConfig, KalmanTuning, TrackStatus, TrackerConfig, VvsSettings,
 };
+use roitrack_image::camera::ObservedCamera;
 use roitrack_image::{
-    CentroidAccuracy, CentroidOptions, RoiRenderer, SensorModel, SimulatedCamera, centroid_accuracy,
+    CentroidAccuracy, CentroidOptions, RoiImage, RoiRenderer, SensorModel, SimulatedCamera,
+    centroid_accuracy, measure_roi,
 };
 use roitrack_pipeline::{LoopConfig, LoopReport, ScheduleOrder, run_loop_with_sink};
 use roitrack_plot::{TrackSeries, TruthSeries};
 use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simulate};
 
 use crate::ExperimentError;
+
+/// What [`Demo::from_images_observed`] hands each ROI the camera grabs: the image, and the centroid the loop measures
+/// in it (`None`: its blob was rejected).
+pub type RoiObserver<'a> = dyn FnMut(&RoiImage, Option<&Measurement>) + Send + 'a;
 use crate::scoring::{Scored, score, track_and_score};
 
 /// ROIs rendered to measure the image side's centroid noise, and their side (px).
@@ -223,8 +230,21 @@ impl Demo {
         progress: Option<&AtomicUsize>,
         on_estimate: &mut (dyn FnMut(&Estimate) + Send),
     ) -> Result<DemoRun, ExperimentError> {
+        self.from_images_observed(estimator, progress, on_estimate, None)
+    }
+
+    /// [`from_images_with`](Self::from_images_with), also handing every ROI the camera grabs to `on_roi`, with the
+    /// centroid the loop measures in it (the same options and time model: `None` for a rejected blob), on the
+    /// camera's thread as it is grabbed (the ROI images of `demo --mcap --mcap-rois`).
+    pub fn from_images_observed(
+        &self,
+        estimator: &DemoEstimator,
+        progress: Option<&AtomicUsize>,
+        on_estimate: &mut (dyn FnMut(&Estimate) + Send),
+        on_roi: Option<&mut RoiObserver<'_>>,
+    ) -> Result<DemoRun, ExperimentError> {
         let config = self.config(estimator);
-        let mut camera = SimulatedCamera::new(
+        let camera = SimulatedCamera::new(
             self.renderer.clone(),
             {
                 let s = self.scenario.clone();
@@ -241,15 +261,33 @@ impl Demo {
             ..LoopConfig::default()
         };
         loop_config.scheduler.order = self.options.order;
-        let report = run_loop_with_sink(
-            &mut camera,
-            &self.scenario.camera,
-            &self.scenario.target,
-            config,
-            &loop_config,
-            progress,
-            on_estimate,
-        )?;
+        let report = match on_roi {
+            None => run_loop_with_sink(
+                &mut { camera },
+                &self.scenario.camera,
+                &self.scenario.target,
+                config,
+                &loop_config,
+                progress,
+                on_estimate,
+            )?,
+            Some(on_roi) => {
+                let (centroid, time) = (loop_config.centroid, self.scenario.camera.time);
+                let mut observed = ObservedCamera::new(camera, |image: &RoiImage| {
+                    let measured = measure_roi(image, &centroid, &time).ok();
+                    on_roi(image, measured.as_ref());
+                });
+                run_loop_with_sink(
+                    &mut observed,
+                    &self.scenario.camera,
+                    &self.scenario.target,
+                    config,
+                    &loop_config,
+                    progress,
+                    on_estimate,
+                )?
+            }
+        };
         if report.estimates.is_empty() {
             return Err(ExperimentError::NeverStarted {
                 attempts: report.failed_initialisations,

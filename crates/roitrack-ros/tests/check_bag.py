@@ -1,6 +1,6 @@
 """Reads a roitrack bag back with two readers that are not roitrack's, and checks it against the run's other files.
 
-    python check_bag.py BAG.mcap POSES.tum TWISTS.csv COVARIANCE.csv FRAME_ID CHILD_FRAME_ID [--images N] [--prefix]
+    python check_bag.py BAG.mcap POSES.tum TWISTS.csv COVARIANCE.csv|- FRAME_ID CHILD_FRAME_ID [--images N] [--prefix]
         [--measurements MEASUREMENTS.csv] [--rois N] [--distortion MODEL:N]
 
 1. `mcap` with `mcap-ros2-support`: the header profile `ros2`; every channel CDR with a `ros2msg` schema and its QoS
@@ -246,9 +246,11 @@ def main():
 
     poses = read_tum(args.poses)
     twists = read_csv(args.twists)
-    covariances = read_csv(args.covariance)
+    # "-": the run wrote no covariance file (demo); the covariances are then checked symmetric and PSD only.
+    covariances = read_csv(args.covariance) if args.covariance != "-" else None
     n = len(poses)
-    check(n > 0 and len(twists) == n and len(covariances) == n, "the run's files disagree in length")
+    check(n > 0 and len(twists) == n and (covariances is None or len(covariances) == n),
+          "the run's files disagree in length")
 
     by_reader = {"mcap": read_with_mcap(args.bag), "rosbags": read_with_rosbags(args.bag)}
     expected_types = {
@@ -329,7 +331,7 @@ def main():
             check(np.max(np.abs(v_obj - r.T @ v)) <= 1e-9 and np.max(np.abs(w_obj - r.T @ w)) <= 1e-9,
                   f"/roitrack/odometry {k}: twist not in the target frame")
 
-            c = full_covariance(covariances[k])
+            c = full_covariance(covariances[k]) if covariances is not None else None
             pose_cov = np.array(pose_msg.pose.covariance).reshape(6, 6)
             twist_cov = np.array(twist_msg.twist.covariance).reshape(6, 6)
             odo_pose_cov = np.array(odometry.pose.covariance).reshape(6, 6)
@@ -337,7 +339,9 @@ def main():
             for m, what in ((pose_cov, "pose"), (twist_cov, "twist"), (odo_pose_cov, "odometry pose"),
                             (odo_twist_cov, "odometry twist")):
                 check_psd(m, f"{what} covariance {k}")
-            if np.all(np.isfinite(c)):
+            if c is None:
+                pass
+            elif np.all(np.isfinite(c)):
                 j = np.zeros((6, 12))
                 j[0:3, 3:6] = r.T @ hat(v)
                 j[0:3, 6:9] = r.T

@@ -8,8 +8,10 @@ use std::time::Duration;
 
 use anyhow::Result;
 use clap::Args;
+use roitrack::Measurement;
 use roitrack::experiments::demo::{self, Demo, DemoOptions, Source};
 use roitrack::formats::EstimateWriter;
+use roitrack::image::RoiImage;
 
 use super::simulate::write_run;
 use crate::args::{ScenarioArg, ScheduleOrderArg};
@@ -81,7 +83,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             .expect("valid progress template"),
     );
     // Opened before the runs, so that a live viewer (--foxglove, --foxglove-wait-s) is there from the start.
-    let mut bag = Some(args.ros.open(&demo.run.camera, None)?);
+    let mut bag = Some(args.ros.open_for_rois(&demo.run.camera, None)?);
     // The live view follows the default estimator's run from the loop's estimation thread, as it tracks.
     let mut live = bag.as_mut().and_then(|b| b.take_live());
     let mut runs = Vec::new();
@@ -96,22 +98,36 @@ pub fn run(args: &DemoArgs) -> Result<()> {
                     std::thread::sleep(Duration::from_millis(100));
                 }
             });
-            let run = match (k, &mut live) {
-                (0, Some(live)) => {
-                    let mut failed = None;
-                    let run = demo.from_images_with(estimator, Some(&done), &mut |e| {
-                        if failed.is_none() {
-                            failed = live.publish_estimate(e).err();
-                        }
-                    });
-                    match failed {
-                        Some(e) => Err(e.into()),
-                        None => run.map_err(anyhow::Error::from),
+            let run = if k > 0 {
+                demo.from_images(estimator, Some(&done))
+                    .map_err(anyhow::Error::from)
+            } else {
+                // The default estimator's run: each estimate to the live view as the loop makes it, and with
+                // --mcap-rois each ROI to the bag as the camera grabs it (on two threads: an error slot each).
+                let (mut live_error, mut roi_error) = (None, None);
+                let wants_rois = bag.as_ref().is_some_and(|b| b.wants_rois());
+                let mut on_roi = |image: &RoiImage, measured: Option<&Measurement>| {
+                    if let (None, Some(bag)) = (&roi_error, bag.as_mut()) {
+                        roi_error = bag.roi_image(image, measured).err();
                     }
+                };
+                let run = demo.from_images_observed(
+                    estimator,
+                    Some(&done),
+                    &mut |e| {
+                        if let (None, Some(live)) = (&live_error, live.as_mut()) {
+                            live_error = live.publish_estimate(e).err();
+                        }
+                    },
+                    match wants_rois {
+                        true => Some(&mut on_roi),
+                        false => None,
+                    },
+                );
+                match (live_error, roi_error) {
+                    (Some(e), _) | (None, Some(e)) => Err(e.into()),
+                    (None, None) => run.map_err(anyhow::Error::from),
                 }
-                _ => demo
-                    .from_images(estimator, Some(&done))
-                    .map_err(anyhow::Error::from),
             };
             finished.store(true, Ordering::Relaxed);
             run

@@ -5,11 +5,13 @@
 //! Grabbing is fallible, because real cameras time out, drop buffers and disconnect, and it fills buffers the caller
 //! owns ([`RoiImage`], [`Frame`]), so that a loop running at kHz rates allocates nothing.
 
+mod observed;
 mod replay;
 mod simulated;
 
 use thiserror::Error;
 
+pub use observed::ObservedCamera;
 pub use replay::ReplayCamera;
 pub use simulated::SimulatedCamera;
 
