@@ -6,7 +6,7 @@ use std::sync::atomic::AtomicBool;
 use roitrack_core::estimator::TrackerConfig;
 use roitrack_core::{CameraModel, PoseSample, Target, TwistSample};
 use roitrack_image::SensorModel;
-use roitrack_pipeline::{LoopConfig, LoopReport, run_loop};
+use roitrack_pipeline::{LoopConfig, LoopReport, run_loop_with_sink};
 use roitrack_sim::Scenario;
 
 use crate::{
@@ -51,7 +51,7 @@ impl Default for LiveOptions {
 /// use roitrack_sim::{Scenario, ScenarioKind};
 /// let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
 /// let options = LiveOptions { duration_s: 1.0, ..LiveOptions::default() };
-/// let report = run_fake(&scenario, &options, 1, Arc::new(AtomicBool::new(false)), |_| {}).unwrap();
+/// let report = run_fake(&scenario, &options, 1, Arc::new(AtomicBool::new(false)), |_| {}, &mut |_| {}).unwrap();
 /// println!("{}", report.summary());
 /// assert!(report.camera.moved_fraction() > 0.95);
 /// ```
@@ -196,20 +196,22 @@ impl LiveReport {
 ///     ..LiveOptions::default()
 /// };
 /// let mut camera = GenicamCamera::open(&options.camera, (1024, 1024)).unwrap();
-/// let report = run_live(&mut camera, &camera_model, &target, &options, true).unwrap();
+/// let report = run_live(&mut camera, &camera_model, &target, &options, true, &mut |_| {}).unwrap();
 /// println!("{}", report.summary());
 /// ```
 ///
 /// Runs the loop on `camera` for `options.duration_s`: the full-frame start (and re-initialisations), then one ROI a
 /// slot where the tracker predicts each blob. `paced`: slots at their wall-clock times (a real camera); otherwise as
 /// fast as the camera delivers. A camera that stops (disconnected, Ctrl-C) ends the run with the estimates so far
-/// ([`LoopReport::stopped_by`]).
+/// ([`LoopReport::stopped_by`]). `on_estimate` gets each estimate on the loop's estimation thread as it is made (a
+/// live view); it must not block.
 pub fn run_live(
     camera: &mut GenicamCamera,
     camera_model: &CameraModel,
     target: &Target,
     options: &LiveOptions,
     paced: bool,
+    on_estimate: &mut (dyn FnMut(&roitrack_core::estimator::Estimate) + Send),
 ) -> Result<LiveReport, GenicamError> {
     let (w, h) = camera.window();
     let side = w.min(h);
@@ -222,7 +224,15 @@ pub fn run_live(
     // Every ROI is the camera's window: the scheduler places windows of that size.
     config.scheduler.min_size_px = side;
     config.scheduler.max_size_px = side;
-    let loop_report = run_loop(camera, camera_model, target, options.tracker, &config)?;
+    let loop_report = run_loop_with_sink(
+        camera,
+        camera_model,
+        target,
+        options.tracker,
+        &config,
+        None,
+        on_estimate,
+    )?;
     let stats = camera.stats();
     let t_ref_s: Vec<f64> = loop_report.estimates.iter().map(|e| e.t_ref_s).collect();
     let timestamp_to_estimate_us =
@@ -242,13 +252,14 @@ pub fn run_live(
 /// through the protocol like a real camera (its serial number checked) and runs the loop free on it for
 /// `options.duration_s` of scenario time (at most the scenario's). `stop` ends the run early (Ctrl-C); `on_start`
 /// gets the fake camera once the run is about to start (a test stops it from there to play a camera that
-/// disappears).
+/// disappears); `on_estimate` each estimate as it is made (see [`run_live`]).
 pub fn run_fake(
     scenario: &Scenario,
     options: &LiveOptions,
     seed: u64,
     stop: Arc<AtomicBool>,
     on_start: impl FnOnce(Arc<FakeGigeCamera>),
+    on_estimate: &mut (dyn FnMut(&roitrack_core::estimator::Estimate) + Send),
 ) -> Result<LiveReport, GenicamError> {
     let fake = Arc::new(FakeGigeCamera::start(
         scenario,
@@ -283,6 +294,7 @@ pub fn run_fake(
         &scenario.target,
         &options,
         false,
+        on_estimate,
     )
     .map(|mut report| {
         report.true_clock_offset_s = camera
@@ -333,7 +345,7 @@ pub fn truth_samples(
 ///     rate_hz: 1000.0,
 ///     ..LiveOptions::default()
 /// };
-/// let report = run_device(&camera_model, &target, &options, Arc::new(AtomicBool::new(false))).unwrap();
+/// let report = run_device(&camera_model, &target, &options, Arc::new(AtomicBool::new(false)), &mut |_| {}).unwrap();
 /// println!("{}", report.summary());
 /// ```
 ///
@@ -345,8 +357,16 @@ pub fn run_device(
     target: &Target,
     options: &LiveOptions,
     stop: Arc<AtomicBool>,
+    on_estimate: &mut (dyn FnMut(&roitrack_core::estimator::Estimate) + Send),
 ) -> Result<LiveReport, GenicamError> {
     let full_size = (camera_model.width_px, camera_model.height_px);
     let mut camera = GenicamCamera::open(&options.camera, full_size)?.with_stop_flag(stop);
-    run_live(&mut camera, camera_model, target, options, true)
+    run_live(
+        &mut camera,
+        camera_model,
+        target,
+        options,
+        true,
+        on_estimate,
+    )
 }

@@ -60,14 +60,24 @@ fn track_like_the_demo(camera: GenicamOptions, duration_s: f64) -> LiveReport {
         rate_hz: demo.simulation.rate_hz,
         tracker: demo.config(kalman),
     };
+    // Each estimate is also handed over as it is made (the live view's hook): all of them, in order.
+    let mut handed = Vec::new();
     let report = run_fake(
         scenario,
         &options,
         1,
         Arc::new(AtomicBool::new(false)),
         |_| {},
+        &mut |e| handed.push(e.t_ref_s),
     )
     .unwrap();
+    let t_ref_s: Vec<f64> = report
+        .loop_report
+        .estimates
+        .iter()
+        .map(|e| e.t_ref_s)
+        .collect();
+    assert_eq!(handed, t_ref_s);
     println!("{}", report.summary());
     let reference_estimates = &reference.loop_report.as_ref().unwrap().estimates;
     let (demo_mm, demo_n) = position_rmse_mm(reference_estimates, scenario, duration_s);
@@ -359,12 +369,19 @@ fn ctrl_c_stops_cleanly_with_the_estimates_so_far() {
         ..LiveOptions::default()
     };
     let flag = stop.clone();
-    let report = run_fake(&scenario, &options, 1, stop, move |fake| {
-        std::thread::spawn(move || {
-            wait_for_rois(&fake, 1000);
-            flag.store(true, Ordering::SeqCst);
-        });
-    })
+    let report = run_fake(
+        &scenario,
+        &options,
+        1,
+        stop,
+        move |fake| {
+            std::thread::spawn(move || {
+                wait_for_rois(&fake, 1000);
+                flag.store(true, Ordering::SeqCst);
+            });
+        },
+        &mut |_| {},
+    )
     .unwrap();
     assert!(
         matches!(
@@ -404,6 +421,7 @@ fn a_camera_that_disappears_ends_the_run_with_a_clear_error_and_the_estimates_ke
                 fake.stop();
             });
         },
+        &mut |_| {},
     )
     .unwrap();
     let stopped = report.loop_report.stopped_by.clone();

@@ -234,6 +234,17 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     // The bag is opened before our Ctrl-C handler is installed, which then takes the signal: the run stops at its
     // next ROI and the bag is completed below with every estimate.
     let mut bag = args.ros.open(&camera_model, Some(&target))?;
+    // The live view follows the run from the loop's estimation thread, as it tracks; the bag takes the estimates
+    // at the end.
+    let mut live = bag.take_live();
+    let mut live_failed = None;
+    let mut on_estimate = |e: &roitrack::Estimate| {
+        if let Some(live) = live.as_mut()
+            && live_failed.is_none()
+        {
+            live_failed = live.publish_estimate(e).err();
+        }
+    };
     let stop = stop_flag();
     let report = if args.fake {
         let options = LiveOptions {
@@ -250,7 +261,14 @@ pub fn run(args: &LiveArgs) -> Result<()> {
                 &twists,
             )?;
         }
-        run_fake(&scenario, &options, args.seed, stop, |_| {})?
+        run_fake(
+            &scenario,
+            &options,
+            args.seed,
+            stop,
+            |_| {},
+            &mut on_estimate,
+        )?
     } else {
         let options = LiveOptions {
             camera,
@@ -258,8 +276,14 @@ pub fn run(args: &LiveArgs) -> Result<()> {
             rate_hz: args.rate_hz.unwrap_or(1000.0),
             ..LiveOptions::default()
         };
-        run_device(&camera_model, &target, &options, stop)?
+        run_device(&camera_model, &target, &options, stop, &mut on_estimate)?
     };
+    if let Some(e) = live_failed {
+        return Err(e.into());
+    }
+    if let Some(live) = live {
+        crate::ros::finish_live(live)?;
+    }
     for e in &report.loop_report.estimates {
         writer.write(e)?;
         bag.estimate(e)?;
@@ -296,6 +320,7 @@ pub fn bench_fake_camera(duration_s: f64) -> Result<super::bench::FakeCameraFigu
         1,
         Arc::new(AtomicBool::new(false)),
         |_| {},
+        &mut |_| {},
     )?;
     if let Some(e) = &report.loop_report.stopped_by {
         bail!("the fake camera's run stopped early: {e}");
