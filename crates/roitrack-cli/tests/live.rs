@@ -58,6 +58,12 @@ fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
         "{} bytes",
         bytes.len()
     );
+    // With the centroids the tracker used (their channel is in the bag's summary).
+    assert!(
+        bytes
+            .windows(b"/roitrack/measurements".len())
+            .any(|w| w == b"/roitrack/measurements")
+    );
     let eval = roitrack()
         .args(["eval", "--json", "--truth"])
         .arg(&truth)

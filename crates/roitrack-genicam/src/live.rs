@@ -30,6 +30,9 @@ pub struct LiveOptions {
     /// their slots, so the camera must sustain it); the fake camera runs free, each ROI at its slot's scenario time.
     pub rate_hz: f64,
     pub tracker: TrackerConfig,
+    /// Keep every measurement handed to the estimator in the report's [`LoopReport::measured`] (a record of what
+    /// the tracker saw, the ROS 2 bag's `/roitrack/measurements`). Default: false.
+    pub keep_measurements: bool,
 }
 
 impl Default for LiveOptions {
@@ -39,6 +42,7 @@ impl Default for LiveOptions {
             duration_s: 10.0,
             rate_hz: 4000.0,
             tracker: TrackerConfig::default(),
+            keep_measurements: false,
         }
     }
 }
@@ -219,6 +223,7 @@ pub fn run_live(
         rate_hz: options.rate_hz,
         paced,
         roi_slots: (options.duration_s * options.rate_hz).round().max(0.0) as usize,
+        keep_measurements: options.keep_measurements,
         ..LoopConfig::default()
     };
     // Every ROI is the camera's window: the scheduler places windows of that size.

@@ -59,6 +59,7 @@ fn track_like_the_demo(camera: GenicamOptions, duration_s: f64) -> LiveReport {
         duration_s,
         rate_hz: demo.simulation.rate_hz,
         tracker: demo.config(kalman),
+        keep_measurements: true,
     };
     // Each estimate is also handed over as it is made (the live view's hook): all of them, in order.
     let mut handed = Vec::new();
@@ -78,6 +79,10 @@ fn track_like_the_demo(camera: GenicamOptions, duration_s: f64) -> LiveReport {
         .map(|e| e.t_ref_s)
         .collect();
     assert_eq!(handed, t_ref_s);
+    // Every measurement the estimator got is kept (for the bag), in time order, up to the last estimate.
+    let measured = &report.loop_report.measured;
+    assert!(measured.len() > 4 * t_ref_s.len(), "{}", measured.len());
+    assert!(measured.windows(2).all(|m| m[0].t_s <= m[1].t_s));
     println!("{}", report.summary());
     let reference_estimates = &reference.loop_report.as_ref().unwrap().estimates;
     let (demo_mm, demo_n) = position_rmse_mm(reference_estimates, scenario, duration_s);

@@ -251,6 +251,7 @@ pub fn run(args: &LiveArgs) -> Result<()> {
             camera,
             duration_s: args.duration.unwrap_or(scenario.duration_s),
             rate_hz: args.rate_hz.unwrap_or(4000.0),
+            keep_measurements: args.ros.mcap.is_some(),
             ..LiveOptions::default()
         };
         if let Some(dir) = &args.truth_out {
@@ -274,6 +275,7 @@ pub fn run(args: &LiveArgs) -> Result<()> {
             camera,
             duration_s: args.duration.unwrap_or(10.0),
             rate_hz: args.rate_hz.unwrap_or(1000.0),
+            keep_measurements: args.ros.mcap.is_some(),
             ..LiveOptions::default()
         };
         run_device(&camera_model, &target, &options, stop, &mut on_estimate)?
@@ -286,8 +288,8 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     }
     for e in &report.loop_report.estimates {
         writer.write(e)?;
-        bag.estimate(e)?;
     }
+    bag.run(&report.loop_report.measured, &report.loop_report.estimates)?;
     writer.finish()?;
     bag.finish()?;
     println!("{}", report.summary());
