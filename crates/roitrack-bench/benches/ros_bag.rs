@@ -248,10 +248,14 @@ fn roi_costs(
     let cpu: Vec<Option<Duration>> = kinds
         .into_iter()
         .map(|kind| {
-            cpu_time_of(3, || {
-                fresh();
-                std::hint::black_box(track_rois_run(scene, &rois, kind, path));
-            })
+            (0..3)
+                .map(|_| {
+                    fresh();
+                    cpu_time_of(1, || {
+                        std::hint::black_box(track_rois_run(scene, &rois, kind, path));
+                    })
+                })
+                .sum::<Option<Duration>>()
         })
         .collect();
     let ratio = |a: Duration, b: Duration| 100.0 * (a.as_secs_f64() / b.as_secs_f64() - 1.0);
@@ -353,19 +357,20 @@ fn ros_bag(c: &mut Criterion) {
     // passes alternating (alone, the estimates only, the estimates and the measurements).
     let mut cpu = [Some(Duration::ZERO); 3];
     for _ in 0..20 {
-        let passes = [
-            cpu_time_of(1, || {
-                std::hint::black_box(track_all(&scene));
-            }),
-            cpu_time_of(1, || {
-                fresh();
-                std::hint::black_box(track_with_bag_compressed(&scene, &path, None, false));
-            }),
-            cpu_time_of(1, || {
-                fresh();
-                std::hint::black_box(track_with_bag(&scene, &path));
-            }),
-        ];
+        // The previous pass's bag is removed outside the timed part: freeing its 4.8 MB of page cache (about 3 % of
+        // the whole bench's samples in `perf`) is not the tracking's work, and a run writes its bag once.
+        let alone = cpu_time_of(1, || {
+            std::hint::black_box(track_all(&scene));
+        });
+        fresh();
+        let estimates_only = cpu_time_of(1, || {
+            std::hint::black_box(track_with_bag_compressed(&scene, &path, None, false));
+        });
+        fresh();
+        let beside = cpu_time_of(1, || {
+            std::hint::black_box(track_with_bag(&scene, &path));
+        });
+        let passes = [alone, estimates_only, beside];
         for (total, pass) in cpu.iter_mut().zip(passes) {
             *total = total.zip(pass).map(|(a, b)| a + b);
         }
