@@ -378,16 +378,25 @@ fn an_address_that_does_not_parse_or_is_taken_is_refused_naming_the_flag_before_
 fn the_demo_publishes_its_default_estimators_poses_from_its_loop() {
     let dir = tempfile::tempdir().unwrap();
     let dir = dir.path();
-    let mut child = Command::new(env!("CARGO_BIN_EXE_roitrack"))
-        .args([
-            "demo",
-            "--out",
-            p(dir),
-            "--foxglove",
-            "127.0.0.1:0",
-            "--foxglove-wait-s",
-            "120",
-        ])
+    let poses = viewed_poses(Command::new(env!("CARGO_BIN_EXE_roitrack")).args([
+        "demo",
+        "--out",
+        p(dir),
+        "--foxglove",
+        "127.0.0.1:0",
+        "--foxglove-wait-s",
+        "120",
+    ]));
+    let tum = tum_rows(&dir.join("kalman_poses.tum"));
+    assert!(!poses.is_empty());
+    assert_poses_are_rows(&poses, &tum);
+    eprintln!("{} of {} poses received", poses.len(), tum.len());
+}
+
+/// Runs `command` (a roitrack run with `--foxglove 127.0.0.1:0`), views its poses as they come, and returns them
+/// once the run has ended successfully.
+fn viewed_poses(command: &mut Command) -> Vec<Received> {
+    let mut child = command
         .stdout(Stdio::null())
         .stderr(Stdio::piped())
         .spawn()
@@ -405,7 +414,7 @@ fn the_demo_publishes_its_default_estimators_poses_from_its_loop() {
         std::io::Read::read_to_string(&mut stderr, &mut rest).unwrap();
         rest
     });
-    let (received, _) = view(
+    let (mut received, _) = view(
         address,
         &[(
             "/roitrack/pose",
@@ -414,10 +423,12 @@ fn the_demo_publishes_its_default_estimators_poses_from_its_loop() {
     );
     let status = child.wait().unwrap();
     let rest = reader.join().unwrap();
-    assert!(status.success(), "roitrack demo failed: {rest}");
-    let tum = tum_rows(&dir.join("kalman_poses.tum"));
-    let poses = &received["/roitrack/pose"];
-    assert!(!poses.is_empty());
+    assert!(status.success(), "the run failed: {rest}");
+    received.remove("/roitrack/pose").unwrap_or_default()
+}
+
+/// Every pose received is the TUM file's row at its time, to 1e-9, in the camera frame.
+fn assert_poses_are_rows(poses: &[Received], tum: &[[f64; 8]]) {
     for message in poses {
         let pose = decode_pose(&message.data);
         assert_eq!(pose.frame_id, "camera");
@@ -429,7 +440,6 @@ fn the_demo_publishes_its_default_estimators_poses_from_its_loop() {
             assert!((a - b).abs() < 1e-9, "t {}: {a} against {b}", pose.t_s);
         }
     }
-    eprintln!("{} of {} poses received", poses.len(), tum.len());
 }
 
 /// `live --fake --foxglove`: the poses come while the camera runs (spread over the run, not all at its end), and they
@@ -440,40 +450,14 @@ fn the_live_camera_publishes_its_poses_while_it_runs() {
     let dir = tempfile::tempdir().unwrap();
     let dir = dir.path();
     let (poses, twists) = (dir.join("p.tum"), dir.join("t.csv"));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_roitrack"))
-        .args(["live", "--fake", "--duration", "2", "--poses"])
-        .arg(&poses)
-        .arg("--twists")
-        .arg(&twists)
-        .args(["--foxglove", "127.0.0.1:0", "--foxglove-wait-s", "120"])
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let mut stderr = BufReader::new(child.stderr.take().unwrap());
-    let address: SocketAddr = loop {
-        let mut line = String::new();
-        assert!(stderr.read_line(&mut line).unwrap() > 0, "no live view");
-        if let Some(rest) = line.split("live view on ws://").nth(1) {
-            break rest.split_whitespace().next().unwrap().parse().unwrap();
-        }
-    };
-    let reader = std::thread::spawn(move || {
-        let mut rest = String::new();
-        std::io::Read::read_to_string(&mut stderr, &mut rest).unwrap();
-        rest
-    });
-    let (received, _) = view(
-        address,
-        &[(
-            "/roitrack/pose",
-            "geometry_msgs/msg/PoseWithCovarianceStamped",
-        )],
+    let messages = viewed_poses(
+        Command::new(env!("CARGO_BIN_EXE_roitrack"))
+            .args(["live", "--fake", "--duration", "2", "--poses"])
+            .arg(&poses)
+            .arg("--twists")
+            .arg(&twists)
+            .args(["--foxglove", "127.0.0.1:0", "--foxglove-wait-s", "120"]),
     );
-    let status = child.wait().unwrap();
-    let rest = reader.join().unwrap();
-    assert!(status.success(), "roitrack live failed: {rest}");
-    let messages = &received["/roitrack/pose"];
     let tum = tum_rows(&poses);
     assert!(
         messages.len() > tum.len() / 2,
@@ -481,16 +465,7 @@ fn the_live_camera_publishes_its_poses_while_it_runs() {
         messages.len(),
         tum.len()
     );
-    for message in messages {
-        let pose = decode_pose(&message.data);
-        let row = tum
-            .iter()
-            .find(|r| (r[0] - pose.t_s).abs() < 1e-9)
-            .unwrap_or_else(|| panic!("no TUM row at {}", pose.t_s));
-        for (a, b) in pose.values.iter().zip(&row[1..]) {
-            assert!((a - b).abs() < 1e-9, "t {}: {a} against {b}", pose.t_s);
-        }
-    }
+    assert_poses_are_rows(&messages, &tum);
     // 2 s of the scenario at the fake camera's rate (about 2,000 ROIs/s for 8,000 ROIs): seconds of wall time; poses
     // published only at the end would all arrive within milliseconds.
     let spread = messages.last().unwrap().at - messages.first().unwrap().at;
