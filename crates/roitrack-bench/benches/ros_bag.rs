@@ -26,6 +26,7 @@
 use std::time::{Duration, Instant};
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
+use roitrack_bench::cpu_time_of;
 use roitrack_core::estimator::{Estimate, Tracker, TrackerConfig, track};
 use roitrack_core::{CameraModel, Measurement, Target};
 use roitrack_image::{CentroidOptions, RoiImage, SensorModel};
@@ -128,22 +129,6 @@ fn write_all(
     bag.write_measurements(&scene.measurements[next..])
         .expect("the measurements are written");
     bag.finish().expect("the bag completes")
-}
-
-/// The calling thread's time on a CPU so far (Linux: `/proc/thread-self/schedstat`, ns), if the system tells it.
-fn thread_cpu_time() -> Option<Duration> {
-    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    let ns: u64 = text.split_whitespace().next()?.parse().ok()?;
-    Some(Duration::from_nanos(ns))
-}
-
-/// The calling thread's CPU time over `passes` runs of `pass`.
-fn cpu_time_of(passes: usize, mut pass: impl FnMut()) -> Option<Duration> {
-    let start = thread_cpu_time()?;
-    for _ in 0..passes {
-        pass();
-    }
-    Some(thread_cpu_time()? - start)
 }
 
 fn best_of(passes: usize, mut pass: impl FnMut()) -> Duration {

@@ -21,6 +21,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use criterion::{Criterion, criterion_group, criterion_main};
+use roitrack_bench::cpu_time_of;
 use roitrack_core::estimator::{Estimate, Tracker, TrackerConfig, track};
 use roitrack_core::{CameraModel, Measurement, Target};
 use roitrack_ros::{BagOptions, LIVE_SUBPROTOCOL, LiveServer};
@@ -123,21 +124,6 @@ fn spawn_client(
             }
         }
     })
-}
-
-/// The calling thread's time on a CPU so far (Linux: `/proc/thread-self/schedstat`, ns), if the system tells it.
-fn thread_cpu_time() -> Option<Duration> {
-    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    let ns: u64 = text.split_whitespace().next()?.parse().ok()?;
-    Some(Duration::from_nanos(ns))
-}
-
-fn cpu_time_of(passes: usize, mut pass: impl FnMut()) -> Option<Duration> {
-    let start = thread_cpu_time()?;
-    for _ in 0..passes {
-        pass();
-    }
-    Some(thread_cpu_time()? - start)
 }
 
 fn timed(pass: impl FnOnce()) -> Duration {

@@ -698,6 +698,40 @@ pub fn time_all(hot: &mut HotPaths, budget: Duration) -> Vec<(Item, Timing)> {
         .collect()
 }
 
+/// The calling thread's time on a CPU so far (Linux: `/proc/thread-self/schedstat`, ns), if the system tells it:
+/// what a thread pays for its own work, whatever else runs beside it.
+///
+/// ```
+/// let before = roitrack_bench::thread_cpu_time();
+/// let sum: u64 = (0..1_000_000u64).map(std::hint::black_box).sum();
+/// if let (Some(a), Some(b)) = (before, roitrack_bench::thread_cpu_time()) {
+///     assert!(b >= a && sum > 0);
+/// }
+/// ```
+pub fn thread_cpu_time() -> Option<Duration> {
+    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let ns: u64 = text.split_whitespace().next()?.parse().ok()?;
+    Some(Duration::from_nanos(ns))
+}
+
+/// The calling thread's CPU time over `passes` runs of `pass` ([`thread_cpu_time`]), if the system tells it.
+///
+/// ```
+/// let cpu = roitrack_bench::cpu_time_of(3, || {
+///     std::hint::black_box((0..100_000u64).sum::<u64>());
+/// });
+/// if let Some(cpu) = cpu {
+///     println!("{cpu:?} on a CPU");
+/// }
+/// ```
+pub fn cpu_time_of(passes: usize, mut pass: impl FnMut()) -> Option<Duration> {
+    let start = thread_cpu_time()?;
+    for _ in 0..passes {
+        pass();
+    }
+    Some(thread_cpu_time()? - start)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

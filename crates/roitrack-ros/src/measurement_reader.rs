@@ -7,7 +7,7 @@ use roitrack_core::Measurement;
 use roitrack_formats::{CENTROID_EDGE_TOLERANCE_PX, FormatError};
 
 use crate::msg::BLOB_MEASUREMENTS;
-use crate::reader::{Cdr, bag_error, chunk_messages, find_channel, mcap_file, read_summary};
+use crate::reader::{Cdr, bag_error, chunk_messages, find_channel, read_bag_bytes, read_summary};
 
 /// Fewest bytes a measurement takes in a message (an id and three float64): bounds the array lengths a corrupt
 /// message may claim before anything is allocated for them.
@@ -64,9 +64,7 @@ impl BagMeasurementSource {
     /// Opens `bag` and checks that `topic` is a `roitrack_msgs/msg/BlobMeasurements` topic of it.
     pub fn open(bag: impl AsRef<Path>, topic: &str) -> Result<Self, FormatError> {
         let bag = bag.as_ref();
-        let file = mcap_file(bag)?;
-        let bytes = std::fs::read(&file).map_err(|e| FormatError::io(&file, "cannot read", e))?;
-        Self::from_bytes(bag, bytes, topic)
+        Self::from_bytes(bag, read_bag_bytes(bag)?, topic)
     }
 
     /// [`open`](Self::open) on the bytes of a `.mcap` file; `bag` names it in errors.

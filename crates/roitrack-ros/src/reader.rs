@@ -89,6 +89,12 @@ pub(crate) fn bag_error(bag: &Path, topic: &str, message: impl Into<String>) -> 
     FormatError::new(bag, message).with_field(topic.to_string())
 }
 
+/// The bytes of the bag's `.mcap` file (see [`mcap_file`]).
+pub(crate) fn read_bag_bytes(bag: &Path) -> Result<Vec<u8>, FormatError> {
+    let file = mcap_file(bag)?;
+    std::fs::read(&file).map_err(|e| FormatError::io(&file, "cannot read", e))
+}
+
 /// The `.mcap` file of a bag: the file itself, or the one `.mcap` file of a rosbag2 folder.
 pub(crate) fn mcap_file(bag: &Path) -> Result<PathBuf, FormatError> {
     if !bag.is_dir() {
@@ -241,9 +247,7 @@ impl BagFrameSource {
     /// Opens `bag` and checks that `topic` is one of its image topics.
     pub fn open(bag: impl AsRef<Path>, topic: &str) -> Result<Self, FormatError> {
         let bag = bag.as_ref();
-        let file = mcap_file(bag)?;
-        let bytes = std::fs::read(&file).map_err(|e| FormatError::io(&file, "cannot read", e))?;
-        Self::from_bytes(bag, bytes, topic)
+        Self::from_bytes(bag, read_bag_bytes(bag)?, topic)
     }
 
     /// [`open`](Self::open) on the bytes of a `.mcap` file; `bag` names it in errors.
@@ -379,8 +383,7 @@ impl BagFrameSource {
 /// ```
 pub fn read_camera_info(bag: impl AsRef<Path>, topic: &str) -> Result<CameraModel, FormatError> {
     let bag = bag.as_ref();
-    let file = mcap_file(bag)?;
-    let bytes = std::fs::read(&file).map_err(|e| FormatError::io(&file, "cannot read", e))?;
+    let bytes = read_bag_bytes(bag)?;
     let summary = read_summary(bag, topic, &bytes)?;
     camera_info_in(bag, &summary, &bytes, topic)
 }
