@@ -280,18 +280,21 @@ pub fn run(args: &LiveArgs) -> Result<()> {
         };
         run_device(&camera_model, &target, &options, stop, &mut on_estimate)?
     };
-    if let Some(e) = live_failed {
-        return Err(e.into());
-    }
-    if let Some(live) = live {
-        crate::ros::finish_live(live)?;
-    }
     for e in &report.loop_report.estimates {
         writer.write(e)?;
     }
     bag.run(&report.loop_report.measured, &report.loop_report.estimates)?;
     writer.finish()?;
     bag.finish()?;
+    // A live view that failed does not cost the outputs: they are written first.
+    if let Some(e) = live_failed {
+        return Err(
+            anyhow::Error::from(e).context("the live view failed (the outputs are written)")
+        );
+    }
+    if let Some(live) = live {
+        crate::ros::finish_live(live)?;
+    }
     println!("{}", report.summary());
     println!(
         "wrote {} estimates to {} and {}",
