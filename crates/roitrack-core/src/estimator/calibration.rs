@@ -11,7 +11,7 @@
 //! reference follows manoeuvres, the long one averages the poses' noise down on slow motion, and the smaller of the
 //! two scales the twist's rows and columns of the reported covariance (by its square root on each side, so that the
 //! cross-covariances with the pose keep the matrix positive semi-definite). It errs on the wide side. The filter
-//! itself is not changed. On the built-in scenes at 0.03 to 1 px the velocity's mean NEES / 3 becomes 0.66-1.18.
+//! itself is not changed. On the built-in scenes at 0.03 to 1 px the velocity's mean NEES / 3 becomes 0.57-1.18.
 
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
