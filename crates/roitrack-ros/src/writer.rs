@@ -152,7 +152,7 @@ impl BagWriter {
             // Compressed on the writing thread itself: roitrack runs it beside the tracker (BackgroundBag), and
             // zstd's own workers would compete with both for the cores.
             .compression_threads(0)
-            .create(BufWriter::new(file))
+            .create(BufWriter::with_capacity(1 << 18, file))
             .map_err(|e| mcap_error(&path, "cannot start the bag", e))?;
         Self::with_output(path, Output::Mcap(writer), options, camera)
     }
