@@ -2,8 +2,10 @@
 //! off the tracking thread.
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
+use std::time::Duration;
 
 use roitrack_core::estimator::Estimate;
 use roitrack_core::{Measurement, MotionState, Target};
@@ -12,17 +14,18 @@ use roitrack_image::{Frame, RoiImage};
 
 use crate::BagWriter;
 
-/// Items handed over together: one wake-up of the writing thread per batch, not per estimate (a wake-up costs the
-/// tracking thread more than copying an estimate).
-const BATCH: usize = 32;
-/// Batches in flight between the tracking thread and the writing thread; when the writer falls this far behind, the
-/// tracking thread waits (nothing is dropped).
-const IN_FLIGHT: usize = 64;
+/// Items in flight between the tracking thread and the writing thread (about 1.4 KB each); when the writer falls
+/// this far behind, the tracking thread waits (nothing is dropped).
+const IN_FLIGHT: usize = 1024;
+/// How long the writing thread sleeps when it has written everything handed over. It is never woken by the
+/// tracking thread while there is room: a wake-up (a futex call and, on a virtual machine, an interrupt to the other
+/// core) cost the tracking thread more than the whole hand-over when the queue was a channel woken per batch.
+const IDLE_SLEEP: Duration = Duration::from_millis(1);
 /// Most centroids in one measurements message: a run whose tracker has not started yet gives no estimate to close
 /// the batch at.
 const MAX_MEASUREMENTS_PER_MESSAGE: usize = 256;
 
-// Estimates travel unboxed, by batches in a `Vec`: boxing each would cost an allocation per estimate.
+// Estimates travel unboxed in a ring allocated once: boxing each would cost an allocation per estimate.
 #[allow(clippy::large_enum_variant)]
 #[derive(Debug)]
 enum Item {
@@ -57,8 +60,9 @@ enum Item {
 #[derive(Debug)]
 pub struct BackgroundBag {
     path: PathBuf,
-    sender: Option<SyncSender<Vec<Item>>>,
-    pending: Vec<Item>,
+    queue: rtrb::Producer<Item>,
+    /// Set when nothing more will be handed over: the writing thread then empties the queue and completes the bag.
+    closed: Arc<AtomicBool>,
     /// The measurements since the last message of them.
     measurements: Vec<Measurement>,
     thread: Option<JoinHandle<Result<u64, FormatError>>>,
@@ -69,15 +73,19 @@ impl BackgroundBag {
     /// annotations (see [`BagWriter::write_frame`]).
     pub fn spawn(bag: BagWriter, target: Option<Target>) -> Self {
         let path = bag.path().to_path_buf();
-        let (sender, receiver) = sync_channel(IN_FLIGHT);
-        let thread = std::thread::Builder::new()
-            .name("roitrack-bag".into())
-            .spawn(move || run(bag, target, receiver))
-            .expect("a thread can be started");
+        let (queue, receiver) = rtrb::RingBuffer::new(IN_FLIGHT);
+        let closed = Arc::new(AtomicBool::new(false));
+        let thread = {
+            let closed = Arc::clone(&closed);
+            std::thread::Builder::new()
+                .name("roitrack-bag".into())
+                .spawn(move || run(bag, target, receiver, &closed))
+                .expect("a thread can be started")
+        };
         Self {
             path,
-            sender: Some(sender),
-            pending: Vec::with_capacity(BATCH),
+            queue,
+            closed,
             measurements: Vec::new(),
             thread: Some(thread),
         }
@@ -88,12 +96,34 @@ impl BackgroundBag {
         &self.path
     }
 
-    fn send(&mut self, item: Item) -> Result<(), FormatError> {
-        self.pending.push(item);
-        if self.pending.len() < BATCH {
-            return Ok(());
+    fn send(&mut self, mut item: Item) -> Result<(), FormatError> {
+        let mut waits = 0u32;
+        loop {
+            if self.queue.is_abandoned() {
+                // The writing thread stopped: its error says why.
+                return Err(self.join().err().unwrap_or_else(|| {
+                    FormatError::new(&self.path, "the bag's writing thread has stopped")
+                }));
+            }
+            match self.queue.push(item) {
+                Ok(()) => return Ok(()),
+                Err(rtrb::PushError::Full(back)) => {
+                    item = back;
+                    // The writer is behind: wake it if it sleeps, then wait for room.
+                    if waits == 0
+                        && let Some(thread) = &self.thread
+                    {
+                        thread.thread().unpark();
+                    }
+                    if waits < 64 {
+                        std::hint::spin_loop();
+                    } else {
+                        std::thread::sleep(Duration::from_micros(50));
+                    }
+                    waits = waits.saturating_add(1);
+                }
+            }
         }
-        self.flush()
     }
 
     /// Closes the open batch of measurements: one message of them.
@@ -105,26 +135,6 @@ impl BackgroundBag {
         let capacity = self.measurements.capacity();
         let batch = std::mem::replace(&mut self.measurements, Vec::with_capacity(capacity));
         self.send(Item::Measurements(batch))
-    }
-
-    /// Hands the pending items over.
-    fn flush(&mut self) -> Result<(), FormatError> {
-        if self.pending.is_empty() {
-            return Ok(());
-        }
-        let batch = std::mem::replace(&mut self.pending, Vec::with_capacity(BATCH));
-        let sent = match &self.sender {
-            Some(sender) => sender.send(batch).is_ok(),
-            None => false,
-        };
-        if sent {
-            Ok(())
-        } else {
-            // The writing thread stopped: its error says why.
-            Err(self.join().err().unwrap_or_else(|| {
-                FormatError::new(&self.path, "the bag's writing thread has stopped")
-            }))
-        }
     }
 
     /// Hands an estimate over (see [`BagWriter::write_estimate`]), after the measurements handed over before it as
@@ -171,15 +181,18 @@ impl BackgroundBag {
     }
 
     fn join(&mut self) -> Result<u64, FormatError> {
-        let flushed = self.close_measurements().and_then(|()| self.flush());
-        self.sender = None;
+        let flushed = self.close_measurements();
+        self.closed.store(true, Ordering::Release);
         let joined = match self.thread.take() {
-            Some(thread) => thread.join().unwrap_or_else(|_| {
-                Err(FormatError::new(
-                    &self.path,
-                    "the bag's writing thread panicked",
-                ))
-            }),
+            Some(thread) => {
+                thread.thread().unpark();
+                thread.join().unwrap_or_else(|_| {
+                    Err(FormatError::new(
+                        &self.path,
+                        "the bag's writing thread panicked",
+                    ))
+                })
+            }
             None => Err(FormatError::new(
                 &self.path,
                 "the bag was already completed",
@@ -209,19 +222,27 @@ impl Drop for BackgroundBag {
 fn run(
     mut bag: BagWriter,
     target: Option<Target>,
-    receiver: Receiver<Vec<Item>>,
+    mut queue: rtrb::Consumer<Item>,
+    closed: &AtomicBool,
 ) -> Result<u64, FormatError> {
     // On an error the bag is dropped here, which completes it up to the last message written.
-    for item in receiver.into_iter().flatten() {
-        match item {
-            Item::Estimate(estimate) => bag.write_estimate(&estimate)?,
-            Item::Frame(frame, state, measured) => {
-                let projection = state.as_ref().zip(target.as_ref());
-                bag.write_frame(&frame, projection, &measured)?;
+    loop {
+        // Read before emptying the queue: what was handed over before the close is then written too.
+        let last = closed.load(Ordering::Acquire);
+        while let Ok(item) = queue.pop() {
+            match item {
+                Item::Estimate(estimate) => bag.write_estimate(&estimate)?,
+                Item::Frame(frame, state, measured) => {
+                    let projection = state.as_ref().zip(target.as_ref());
+                    bag.write_frame(&frame, projection, &measured)?;
+                }
+                Item::Measurements(batch) => bag.write_measurements(&batch)?,
+                Item::Roi(image, measured) => bag.write_roi(&image, measured.as_ref())?,
             }
-            Item::Measurements(batch) => bag.write_measurements(&batch)?,
-            Item::Roi(image, measured) => bag.write_roi(&image, measured.as_ref())?,
         }
+        if last {
+            return bag.finish();
+        }
+        std::thread::park_timeout(IDLE_SLEEP);
     }
-    bag.finish()
 }
