@@ -87,8 +87,8 @@ pub use image_file::{
     FRAME_IMAGE_FORMATS, check_frame_size, decode_frame, read_frame, write_frame_png,
 };
 pub use measurements::{
-    CENTROID_EDGE_TOLERANCE_PX, MeasurementReader, MeasurementWriter, read_measurements_csv,
-    write_measurements_csv,
+    CENTROID_EDGE_TOLERANCE_PX, MeasurementChecks, MeasurementField, MeasurementProblem,
+    MeasurementReader, MeasurementWriter, read_measurements_csv, write_measurements_csv,
 };
 pub use overlay::{MarkKind, OverlayMark, write_overlay_png};
 pub use roi_recording::{

@@ -12,30 +12,217 @@ use csv::StringRecord;
 use roitrack_core::Measurement;
 
 use crate::FormatError;
-use crate::csv_util::{Row, check_time_order, csv_reader, read_header, read_row};
+use crate::csv_util::{Row, csv_reader, read_header, read_row};
 use crate::row_writer::RowWriter;
 
 const COLUMNS: [&str; 4] = ["t", "id", "u", "v"];
 
 /// How far (px) a centroid may lie beyond the sensor's edge (at -0.5 and size - 0.5) before
-/// [`MeasurementReader::with_image_size`] refuses it: centroid noise on a blob cut by the edge.
+/// [`MeasurementChecks::with_image_size`] refuses it: centroid noise on a blob cut by the edge.
 pub const CENTROID_EDGE_TOLERANCE_PX: f64 = 1.0;
+
+/// A field of a [`Measurement`], as a [`MeasurementProblem`] names it; each reader names it its own way (a CSV
+/// column `t`, `id`, `u`, `v`; a bag message's array `dt_s`, `point_ids`, `u_px`, `v_px`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MeasurementField {
+    /// `t_s`: the time (s).
+    Time,
+    /// `id`: the target point id.
+    Id,
+    /// `u_px`: the centroid's column (raw pixels).
+    U,
+    /// `v_px`: the centroid's row (raw pixels).
+    V,
+}
+
+/// What is wrong with a measurement, as [`MeasurementChecks::check`] finds it. Its text (`Display`) says what is
+/// wrong and not where: each reader adds the place its own way (a file's line and column, a bag's message index and
+/// array entry).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MeasurementProblem {
+    /// A time or centroid that is NaN or infinite.
+    NotFinite {
+        /// The field ([`MeasurementField::Time`], [`MeasurementField::U`] or [`MeasurementField::V`]).
+        field: MeasurementField,
+        /// Its value.
+        value: f64,
+    },
+    /// An id the target does not have (with [`MeasurementChecks::with_known_ids`]).
+    UnknownId {
+        /// The id.
+        id: u32,
+    },
+    /// A centroid more than [`CENTROID_EDGE_TOLERANCE_PX`] off the image (with
+    /// [`MeasurementChecks::with_image_size`]).
+    OffImage {
+        /// [`MeasurementField::U`] or [`MeasurementField::V`].
+        field: MeasurementField,
+        /// The centroid's coordinate (px).
+        value_px: f64,
+        /// The image's width (for `u`) or height (for `v`), px.
+        size_px: u32,
+    },
+    /// A time earlier than the previous measurement's.
+    OutOfOrder {
+        /// The measurement's time (s).
+        t_s: f64,
+        /// The previous measurement's time (s).
+        previous_t_s: f64,
+    },
+}
+
+impl MeasurementProblem {
+    /// The field the problem is in.
+    pub fn field(&self) -> MeasurementField {
+        match *self {
+            Self::NotFinite { field, .. } | Self::OffImage { field, .. } => field,
+            Self::UnknownId { .. } => MeasurementField::Id,
+            Self::OutOfOrder { .. } => MeasurementField::Time,
+        }
+    }
+}
+
+impl std::fmt::Display for MeasurementProblem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Self::NotFinite { value, .. } => write!(f, "must be a finite number, got {value}"),
+            Self::UnknownId { id } => {
+                write!(f, "unknown point id {id}: the target has no such point")
+            }
+            Self::OffImage {
+                field,
+                value_px,
+                size_px,
+            } => {
+                let axis = if field == MeasurementField::U {
+                    "wide"
+                } else {
+                    "high"
+                };
+                write!(
+                    f,
+                    "{value_px} px is outside the image, which is {size_px} px {axis} (0 to {} px, from the \
+                     camera): the measurements are not from this camera, or their pixels are scaled or offset (a \
+                     ROI's own coordinates instead of the image's?)",
+                    size_px.saturating_sub(1)
+                )
+            }
+            Self::OutOfOrder { t_s, previous_t_s } => write!(
+                f,
+                "time {t_s} s is earlier than {previous_t_s} s, the previous measurement's: measurements must be \
+                 in time order"
+            ),
+        }
+    }
+}
+
+/// The checks every measurement gets, whichever reader it comes from ([`MeasurementReader`], the ROS 2 bag reader):
+/// time and centroid finite; with [`with_known_ids`](Self::with_known_ids), an id of the target; with
+/// [`with_image_size`](Self::with_image_size), the centroid on the image; the time not before the previous
+/// measurement's. [`check`](Self::check) says what is wrong, so that each reader names the place its own way.
+///
+/// ```
+/// use roitrack_core::Measurement;
+/// use roitrack_formats::{MeasurementChecks, MeasurementField};
+///
+/// let mut checks = MeasurementChecks::new().with_known_ids([1, 2]).with_image_size(640, 480);
+/// let m = Measurement { t_s: 0.5, id: 1, u_px: 320.0, v_px: 240.0 };
+/// assert!(checks.check(&m).is_ok());
+/// let problem = checks.check(&Measurement { t_s: 0.25, ..m }).unwrap_err();
+/// assert_eq!(problem.field(), MeasurementField::Time);
+/// assert!(problem.to_string().starts_with("time 0.25 s is earlier than 0.5 s"));
+/// let problem = checks.check(&Measurement { id: 9, ..m }).unwrap_err();
+/// assert_eq!(problem.to_string(), "unknown point id 9: the target has no such point");
+/// ```
+#[derive(Debug, Clone, Default)]
+pub struct MeasurementChecks {
+    known_ids: Option<HashSet<u32>>,
+    /// The image (px) every centroid must lie on.
+    image_size: Option<(u32, u32)>,
+    /// The time (s) of the last measurement that passed.
+    previous_t_s: Option<f64>,
+}
+
+impl MeasurementChecks {
+    /// Checks that accept any id, any finite centroid and times that never go back.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Makes an id outside `ids` (the target's point ids) a problem.
+    #[must_use]
+    pub fn with_known_ids(mut self, ids: impl IntoIterator<Item = u32>) -> Self {
+        self.known_ids = Some(ids.into_iter().collect());
+        self
+    }
+
+    /// Makes a centroid off an image of `width_px` x `height_px` (the camera's) a problem. A centroid may lie up to
+    /// [`CENTROID_EDGE_TOLERANCE_PX`] beyond the sensor's edge (noise on a blob cut by the edge), not more.
+    #[must_use]
+    pub fn with_image_size(mut self, width_px: u32, height_px: u32) -> Self {
+        self.image_size = Some((width_px, height_px));
+        self
+    }
+
+    /// Checks `m`, the measurement after those that passed before, and returns its first problem (in the order of
+    /// [`MeasurementProblem`]'s variants). A measurement that passes becomes the previous one for the time order.
+    pub fn check(&mut self, m: &Measurement) -> Result<(), MeasurementProblem> {
+        for (field, value) in [
+            (MeasurementField::Time, m.t_s),
+            (MeasurementField::U, m.u_px),
+            (MeasurementField::V, m.v_px),
+        ] {
+            if !value.is_finite() {
+                return Err(MeasurementProblem::NotFinite { field, value });
+            }
+        }
+        if let Some(known) = &self.known_ids
+            && !known.contains(&m.id)
+        {
+            return Err(MeasurementProblem::UnknownId { id: m.id });
+        }
+        if let Some((width_px, height_px)) = self.image_size {
+            for (field, value_px, size_px) in [
+                (MeasurementField::U, m.u_px, width_px),
+                (MeasurementField::V, m.v_px, height_px),
+            ] {
+                let edge = -0.5 - CENTROID_EDGE_TOLERANCE_PX;
+                if !(edge..=f64::from(size_px) - edge - 1.0).contains(&value_px) {
+                    return Err(MeasurementProblem::OffImage {
+                        field,
+                        value_px,
+                        size_px,
+                    });
+                }
+            }
+        }
+        if let Some(previous_t_s) = self.previous_t_s
+            && m.t_s < previous_t_s
+        {
+            return Err(MeasurementProblem::OutOfOrder {
+                t_s: m.t_s,
+                previous_t_s,
+            });
+        }
+        self.previous_t_s = Some(m.t_s);
+        Ok(())
+    }
+}
 
 /// A streaming reader of a measurements CSV: one [`Measurement`] per row, in constant memory.
 ///
-/// It checks every row: four fields, `t`, `u`, `v` finite numbers, `id` a non-negative integer (and, with
-/// [`Self::with_known_ids`], an id of the target), times not decreasing. The first error is returned as an `Err` item
-/// naming the line and field, after which the iterator ends.
+/// It checks every row: four fields, `t`, `u`, `v` finite numbers, `id` a non-negative integer, then the
+/// [`MeasurementChecks`] (with [`Self::with_known_ids`], an id of the target; with [`Self::with_image_size`], a
+/// centroid on the image; times not decreasing). The first error is returned as an `Err` item naming the line and
+/// field, after which the iterator ends.
 #[derive(Debug)]
 pub struct MeasurementReader<R: Read> {
     csv: csv::Reader<R>,
     record: StringRecord,
     path: PathBuf,
-    known_ids: Option<HashSet<u32>>,
-    /// Time (s) and line of the previous row.
-    previous: Option<(f64, u64)>,
-    /// With [`Self::with_image_size`]: the image (px) every centroid must lie on.
-    image_size: Option<(u32, u32)>,
+    checks: MeasurementChecks,
+    /// The line of the last row read (0 before the first).
+    line: u64,
     done: bool,
 }
 
@@ -59,26 +246,24 @@ impl<R: Read> MeasurementReader<R> {
             csv,
             record: StringRecord::new(),
             path,
-            known_ids: None,
-            previous: None,
-            image_size: None,
+            checks: MeasurementChecks::new(),
+            line: 0,
             done: false,
         })
     }
 
-    /// Makes an id outside `ids` (the target's point ids) an error.
+    /// Makes an id outside `ids` (the target's point ids) an error (see [`MeasurementChecks::with_known_ids`]).
     #[must_use]
     pub fn with_known_ids(mut self, ids: impl IntoIterator<Item = u32>) -> Self {
-        self.known_ids = Some(ids.into_iter().collect());
+        self.checks = self.checks.with_known_ids(ids);
         self
     }
 
-    /// Makes a centroid off an image of `width_px` x `height_px` (the camera's) an error naming its line and field.
-    /// A centroid may lie up to [`CENTROID_EDGE_TOLERANCE_PX`] beyond the sensor's edge (noise on a blob cut by
-    /// the edge), not more.
+    /// Makes a centroid off an image of `width_px` x `height_px` (the camera's) an error naming its line and field
+    /// (see [`MeasurementChecks::with_image_size`]).
     #[must_use]
     pub fn with_image_size(mut self, width_px: u32, height_px: u32) -> Self {
-        self.image_size = Some((width_px, height_px));
+        self.checks = self.checks.with_image_size(width_px, height_px);
         self
     }
 
@@ -89,7 +274,7 @@ impl<R: Read> MeasurementReader<R> {
 
     /// The line of the last row read (0 before the first).
     pub fn line(&self) -> u64 {
-        self.previous.map_or(0, |(_, line)| line)
+        self.line
     }
 
     fn next_measurement(&mut self) -> Result<Option<Measurement>, FormatError> {
@@ -102,45 +287,34 @@ impl<R: Read> MeasurementReader<R> {
             path: &self.path,
             columns: &COLUMNS,
         };
-        let t_s = row.finite(0)?;
-        let id = row.id(1)?;
-        let u_px = row.finite(2)?;
-        let v_px = row.finite(3)?;
-        if let Some(known) = &self.known_ids
-            && !known.contains(&id)
-        {
-            return Err(row.error(
-                1,
-                format!("unknown point id {id}: the target has no such point"),
-            ));
-        }
-        if let Some((width_px, height_px)) = self.image_size {
-            for (i, value, size, axis) in
-                [(2, u_px, width_px, "wide"), (3, v_px, height_px, "high")]
-            {
-                let edge = -0.5 - CENTROID_EDGE_TOLERANCE_PX;
-                if !(edge..=f64::from(size) - edge - 1.0).contains(&value) {
-                    return Err(row.error(
-                        i,
-                        format!(
-                            "centroid {} = {value} px is outside the image, which is {size} px {axis} (0 to {} px, \
-                             from the camera file): the measurements are not from this camera, or their pixels are \
-                             scaled or offset (a ROI's own coordinates instead of the image's?)",
-                            COLUMNS[i],
-                            size - 1
-                        ),
-                    ));
+        let m = Measurement {
+            t_s: row.finite(0)?,
+            id: row.id(1)?,
+            u_px: row.finite(2)?,
+            v_px: row.finite(3)?,
+        };
+        if let Err(problem) = self.checks.check(&m) {
+            let column = match problem.field() {
+                MeasurementField::Time => 0,
+                MeasurementField::Id => 1,
+                MeasurementField::U => 2,
+                MeasurementField::V => 3,
+            };
+            let message = match problem {
+                MeasurementProblem::OffImage { .. } => {
+                    format!("centroid {} = {problem}", COLUMNS[column])
                 }
-            }
+                // As every CSV file of roitrack words it: the earlier row by its line.
+                MeasurementProblem::OutOfOrder { t_s, previous_t_s } => format!(
+                    "time {t_s} s is earlier than {previous_t_s} s on line {}: rows must be in time order",
+                    self.line
+                ),
+                _ => problem.to_string(),
+            };
+            return Err(row.error(column, message));
         }
-        check_time_order(self.previous, t_s, false, &self.path, line, "t")?;
-        self.previous = Some((t_s, line));
-        Ok(Some(Measurement {
-            t_s,
-            id,
-            u_px,
-            v_px,
-        }))
+        self.line = line;
+        Ok(Some(m))
     }
 }
 

@@ -4,7 +4,7 @@ use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
 
 use roitrack_core::Measurement;
-use roitrack_formats::{CENTROID_EDGE_TOLERANCE_PX, FormatError};
+use roitrack_formats::{FormatError, MeasurementChecks, MeasurementField};
 
 use crate::msg::BLOB_MEASUREMENTS;
 use crate::reader::{Cdr, bag_error, chunk_messages, find_channel, read_bag_bytes, read_summary};
@@ -19,9 +19,9 @@ const MIN_BYTES_PER_MEASUREMENT: usize = 4 + 3 * 8;
 ///
 /// Checked, each error naming the bag, the topic, the message (its index on the topic) and the field: the topic is
 /// in the bag and of that type; the arrays `point_ids`, `u_px`, `v_px`, `dt_s` have one entry per centroid and
-/// `sigma_px` one or none; times and centroids are finite; with [`with_known_ids`](Self::with_known_ids), every id
-/// is the target's; with [`with_image_size`](Self::with_image_size), every centroid is on the image; times never
-/// go back. `sigma_px` is read and checked (finite, positive) but not used: the estimator has its own noise model.
+/// `sigma_px` one or none; then the [`MeasurementChecks`] of a measurements CSV: times and centroids are finite;
+/// with [`with_known_ids`](Self::with_known_ids), every id is the target's; with
+/// [`with_image_size`](Self::with_image_size), every centroid is on the image; times never go back. `sigma_px` is read and checked (finite, positive) but not used: the estimator has its own noise model.
 ///
 /// ```no_run
 /// use roitrack_ros::BagMeasurementSource;
@@ -44,9 +44,7 @@ pub struct BagMeasurementSource {
     decoded: VecDeque<Measurement>,
     /// Index on the topic of the next message to decode.
     message_index: usize,
-    known_ids: Option<Vec<u32>>,
-    image_size: Option<(u32, u32)>,
-    previous_t_s: Option<f64>,
+    checks: MeasurementChecks,
     done: bool,
 }
 
@@ -86,25 +84,23 @@ impl BagMeasurementSource {
             messages: VecDeque::new(),
             decoded: VecDeque::new(),
             message_index: 0,
-            known_ids: None,
-            image_size: None,
-            previous_t_s: None,
+            checks: MeasurementChecks::new(),
             done: false,
         })
     }
 
-    /// Makes an id outside `ids` (the target's point ids) an error.
+    /// Makes an id outside `ids` (the target's point ids) an error (see [`MeasurementChecks::with_known_ids`]).
     #[must_use]
     pub fn with_known_ids(mut self, ids: impl IntoIterator<Item = u32>) -> Self {
-        self.known_ids = Some(ids.into_iter().collect());
+        self.checks = self.checks.with_known_ids(ids);
         self
     }
 
-    /// Makes a centroid off an image of `width_px` x `height_px` an error (up to
-    /// [`CENTROID_EDGE_TOLERANCE_PX`] beyond its edge is accepted, as in a measurements CSV).
+    /// Makes a centroid off an image of `width_px` x `height_px` an error, as in a measurements CSV (see
+    /// [`MeasurementChecks::with_image_size`]).
     #[must_use]
     pub fn with_image_size(mut self, width_px: u32, height_px: u32) -> Self {
-        self.image_size = Some((width_px, height_px));
+        self.checks = self.checks.with_image_size(width_px, height_px);
         self
     }
 
@@ -155,55 +151,22 @@ impl BagMeasurementSource {
         Ok(self.decoded.pop_front())
     }
 
-    /// Checks the centroids of message `index` just decoded.
+    /// Checks the centroids of message `index` just decoded; an error names the message's array and entry.
     fn check(&mut self, index: usize) -> Result<(), FormatError> {
-        let at = |k: usize, field: &str, e: String| {
-            bag_error(
-                &self.bag,
-                &self.topic,
-                format!("message {index}, field {field}[{k}]: {e}"),
-            )
-        };
         for (k, m) in self.decoded.iter().enumerate() {
-            if let Some(known) = &self.known_ids
-                && !known.contains(&m.id)
-            {
-                return Err(at(
-                    k,
-                    "point_ids",
-                    format!("unknown point id {}: the target has no such point", m.id),
-                ));
-            }
-            if let Some((width_px, height_px)) = self.image_size {
-                for (field, value, size) in
-                    [("u_px", m.u_px, width_px), ("v_px", m.v_px, height_px)]
-                {
-                    let edge = -0.5 - CENTROID_EDGE_TOLERANCE_PX;
-                    if !(edge..=f64::from(size) - edge - 1.0).contains(&value) {
-                        return Err(at(
-                            k,
-                            field,
-                            format!(
-                                "{value} px is outside the image (0 to {} px, from the camera)",
-                                size - 1
-                            ),
-                        ));
-                    }
-                }
-            }
-            if let Some(previous) = self.previous_t_s
-                && m.t_s < previous
-            {
-                return Err(at(
-                    k,
-                    "dt_s",
-                    format!(
-                        "time {} s comes before the previous measurement's, {previous} s: times must not go back",
-                        m.t_s
-                    ),
-                ));
-            }
-            self.previous_t_s = Some(m.t_s);
+            self.checks.check(m).map_err(|problem| {
+                let array = match problem.field() {
+                    MeasurementField::Time => "dt_s",
+                    MeasurementField::Id => "point_ids",
+                    MeasurementField::U => "u_px",
+                    MeasurementField::V => "v_px",
+                };
+                bag_error(
+                    &self.bag,
+                    &self.topic,
+                    format!("message {index}, field {array}[{k}]: {problem}"),
+                )
+            })?;
         }
         Ok(())
     }
