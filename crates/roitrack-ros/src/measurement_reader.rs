@@ -1,13 +1,13 @@
 //! [`BagMeasurementSource`]: recorded blob centroids (`roitrack_msgs/msg/BlobMeasurements`) replayed from a ROS 2 bag.
 
 use std::collections::VecDeque;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use roitrack_core::Measurement;
 use roitrack_formats::{FormatError, MeasurementChecks, MeasurementField};
 
 use crate::msg::BLOB_MEASUREMENTS;
-use crate::reader::{Cdr, bag_error, chunk_messages, find_channel, read_bag_bytes, read_summary};
+use crate::reader::{Cdr, TopicMessages, open_topic, read_bag_bytes};
 
 /// Fewest bytes a measurement takes in a message (an id and three float64): bounds the array lengths a corrupt
 /// message may claim before anything is allocated for them.
@@ -33,14 +33,7 @@ const MIN_BYTES_PER_MEASUREMENT: usize = 4 + 3 * 8;
 /// }
 /// ```
 pub struct BagMeasurementSource {
-    bag: PathBuf,
-    topic: String,
-    bytes: Vec<u8>,
-    summary: mcap::read::Summary,
-    channel_id: u16,
-    /// Chunks not yet read, in file order.
-    next_chunk: usize,
-    messages: VecDeque<Vec<u8>>,
+    messages: TopicMessages,
     decoded: VecDeque<Measurement>,
     /// Index on the topic of the next message to decode.
     message_index: usize,
@@ -51,8 +44,8 @@ pub struct BagMeasurementSource {
 impl std::fmt::Debug for BagMeasurementSource {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("BagMeasurementSource")
-            .field("bag", &self.bag)
-            .field("topic", &self.topic)
+            .field("bag", &self.messages.bag)
+            .field("topic", &self.messages.topic)
             .field("message_index", &self.message_index)
             .finish_non_exhaustive()
     }
@@ -71,17 +64,8 @@ impl BagMeasurementSource {
         bytes: Vec<u8>,
         topic: &str,
     ) -> Result<Self, FormatError> {
-        let bag = bag.as_ref().to_path_buf();
-        let summary = read_summary(&bag, topic, &bytes)?;
-        let channel = find_channel(&bag, &summary, topic, &[BLOB_MEASUREMENTS])?;
         Ok(Self {
-            bag,
-            topic: topic.to_string(),
-            bytes,
-            summary,
-            channel_id: channel.id,
-            next_chunk: 0,
-            messages: VecDeque::new(),
+            messages: open_topic(bag.as_ref(), bytes, topic, &[BLOB_MEASUREMENTS])?,
             decoded: VecDeque::new(),
             message_index: 0,
             checks: MeasurementChecks::new(),
@@ -106,45 +90,19 @@ impl BagMeasurementSource {
 
     /// The bag, as named by the caller.
     pub fn bag(&self) -> &Path {
-        &self.bag
-    }
-
-    /// Fills `messages` from the next chunks holding messages of the topic; false at the end of the bag.
-    fn fill(&mut self) -> Result<bool, FormatError> {
-        while self.messages.is_empty() {
-            let Some(chunk) = self.summary.chunk_indexes.get(self.next_chunk) else {
-                return Ok(false);
-            };
-            self.next_chunk += 1;
-            let mut in_chunk = chunk_messages(
-                &self.bag,
-                &self.summary,
-                &self.bytes,
-                chunk,
-                &self.topic,
-                self.channel_id,
-            )?;
-            in_chunk.sort_by_key(|(log_time, _)| *log_time);
-            self.messages
-                .extend(in_chunk.into_iter().map(|(_, data)| data));
-        }
-        Ok(true)
+        &self.messages.bag
     }
 
     fn next_measurement(&mut self) -> Result<Option<Measurement>, FormatError> {
         while self.decoded.is_empty() {
-            if !self.fill()? {
+            let Some(data) = self.messages.next_message()? else {
                 return Ok(None);
-            }
-            let data = self.messages.pop_front().expect("filled");
+            };
             let index = self.message_index;
             self.message_index += 1;
             decode(&data, &mut self.decoded).map_err(|(field, e)| {
-                bag_error(
-                    &self.bag,
-                    &self.topic,
-                    format!("message {index}, field {field}: {e}"),
-                )
+                self.messages
+                    .error(format!("message {index}, field {field}: {e}"))
             })?;
             self.check(index)?;
         }
@@ -161,11 +119,8 @@ impl BagMeasurementSource {
                     MeasurementField::U => "u_px",
                     MeasurementField::V => "v_px",
                 };
-                bag_error(
-                    &self.bag,
-                    &self.topic,
-                    format!("message {index}, field {array}[{k}]: {problem}"),
-                )
+                self.messages
+                    .error(format!("message {index}, field {array}[{k}]: {problem}"))
             })?;
         }
         Ok(())

@@ -85,7 +85,7 @@ impl<'a> Cdr<'a> {
     }
 }
 
-pub(crate) fn bag_error(bag: &Path, topic: &str, message: impl Into<String>) -> FormatError {
+fn bag_error(bag: &Path, topic: &str, message: impl Into<String>) -> FormatError {
     FormatError::new(bag, message).with_field(topic.to_string())
 }
 
@@ -120,8 +120,8 @@ pub(crate) fn mcap_file(bag: &Path) -> Result<PathBuf, FormatError> {
     }
 }
 
-pub(crate) struct Channel {
-    pub(crate) id: u16,
+struct Channel {
+    id: u16,
     type_name: String,
 }
 
@@ -147,14 +147,7 @@ pub(crate) struct Channel {
 /// }
 /// ```
 pub struct BagFrameSource {
-    bag: PathBuf,
-    topic: String,
-    bytes: Vec<u8>,
-    summary: mcap::read::Summary,
-    channel: Channel,
-    /// Chunks not yet read, in file order.
-    next_chunk: usize,
-    pending: VecDeque<Vec<u8>>,
+    messages: TopicMessages,
     index: usize,
     expected_size: Option<(u32, u32)>,
     done: bool,
@@ -163,18 +156,14 @@ pub struct BagFrameSource {
 impl std::fmt::Debug for BagFrameSource {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("BagFrameSource")
-            .field("bag", &self.bag)
-            .field("topic", &self.topic)
+            .field("bag", &self.messages.bag)
+            .field("topic", &self.messages.topic)
             .field("index", &self.index)
             .finish_non_exhaustive()
     }
 }
 
-pub(crate) fn read_summary(
-    bag: &Path,
-    topic: &str,
-    bytes: &[u8],
-) -> Result<mcap::read::Summary, FormatError> {
+fn read_summary(bag: &Path, topic: &str, bytes: &[u8]) -> Result<mcap::read::Summary, FormatError> {
     let read = std::panic::catch_unwind(|| mcap::read::Summary::read(bytes)).map_err(|_| {
         bag_error(
             bag,
@@ -197,7 +186,7 @@ pub(crate) fn read_summary(
     }
 }
 
-pub(crate) fn find_channel(
+fn find_channel(
     bag: &Path,
     summary: &mcap::read::Summary,
     topic: &str,
@@ -243,6 +232,73 @@ pub(crate) fn find_channel(
     })
 }
 
+/// The messages of one topic of a bag, read one chunk at a time: what the bag readers of frames and of measurements
+/// share.
+pub(crate) struct TopicMessages {
+    pub(crate) bag: PathBuf,
+    pub(crate) topic: String,
+    bytes: Vec<u8>,
+    summary: mcap::read::Summary,
+    channel: Channel,
+    /// Chunks not yet read, in file order.
+    next_chunk: usize,
+    pending: VecDeque<Vec<u8>>,
+}
+
+/// The messages of `topic` in the bag whose `.mcap` file holds `bytes` (`bag` names it in errors): the bag's summary
+/// read, the topic's channel found and checked to be of one of `types` in CDR, each error naming the bag and the
+/// topic.
+pub(crate) fn open_topic(
+    bag: &Path,
+    bytes: Vec<u8>,
+    topic: &str,
+    types: &[&str],
+) -> Result<TopicMessages, FormatError> {
+    let summary = read_summary(bag, topic, &bytes)?;
+    let channel = find_channel(bag, &summary, topic, types)?;
+    Ok(TopicMessages {
+        bag: bag.to_path_buf(),
+        topic: topic.to_string(),
+        bytes,
+        summary,
+        channel,
+        next_chunk: 0,
+        pending: VecDeque::new(),
+    })
+}
+
+impl TopicMessages {
+    /// The next message's data, in the order of the messages' log times within each chunk; `None` at the end of
+    /// the bag.
+    pub(crate) fn next_message(&mut self) -> Result<Option<Vec<u8>>, FormatError> {
+        while self.pending.is_empty() {
+            let Some(chunk) = self.summary.chunk_indexes.get(self.next_chunk) else {
+                return Ok(None);
+            };
+            self.next_chunk += 1;
+            let mut in_chunk = chunk_messages(
+                &self.bag,
+                &self.summary,
+                &self.bytes,
+                chunk,
+                &self.topic,
+                self.channel.id,
+            )?;
+            // A chunk holds its messages in the order they were written; a writer may interleave channels, so order
+            // by log time (a stable sort keeps equal times as written).
+            in_chunk.sort_by_key(|(log_time, _)| *log_time);
+            self.pending
+                .extend(in_chunk.into_iter().map(|(_, data)| data));
+        }
+        Ok(self.pending.pop_front())
+    }
+
+    /// An error about the topic, naming the bag and the topic.
+    pub(crate) fn error(&self, message: impl Into<String>) -> FormatError {
+        bag_error(&self.bag, &self.topic, message)
+    }
+}
+
 impl BagFrameSource {
     /// Opens `bag` and checks that `topic` is one of its image topics.
     pub fn open(bag: impl AsRef<Path>, topic: &str) -> Result<Self, FormatError> {
@@ -256,17 +312,8 @@ impl BagFrameSource {
         bytes: Vec<u8>,
         topic: &str,
     ) -> Result<Self, FormatError> {
-        let bag = bag.as_ref().to_path_buf();
-        let summary = read_summary(&bag, topic, &bytes)?;
-        let channel = find_channel(&bag, &summary, topic, &IMAGE_TYPES)?;
         Ok(Self {
-            bag,
-            topic: topic.to_string(),
-            bytes,
-            summary,
-            channel,
-            next_chunk: 0,
-            pending: VecDeque::new(),
+            messages: open_topic(bag.as_ref(), bytes, topic, &IMAGE_TYPES)?,
             index: 0,
             expected_size: None,
             done: false,
@@ -277,7 +324,13 @@ impl BagFrameSource {
     /// equidistant or no distortion); from then
     /// on, every frame must have its size.
     pub fn camera_info(&mut self, topic: &str) -> Result<CameraModel, FormatError> {
-        let camera = camera_info_in(&self.bag, &self.summary, &self.bytes, topic)?;
+        let TopicMessages {
+            bag,
+            summary,
+            bytes,
+            ..
+        } = &self.messages;
+        let camera = camera_info_in(bag, summary, bytes, topic)?;
         self.expected_size = Some((camera.width_px, camera.height_px));
         Ok(camera)
     }
@@ -298,31 +351,11 @@ impl BagFrameSource {
 
     /// Whether the bag has a topic.
     pub fn has_topic(&self, topic: &str) -> bool {
-        self.summary.channels.values().any(|c| c.topic == topic)
-    }
-
-    /// Fills `pending` from the next chunks that hold messages of the topic; false at the end of the bag.
-    fn fill(&mut self) -> Result<bool, FormatError> {
-        while self.pending.is_empty() {
-            let Some(chunk) = self.summary.chunk_indexes.get(self.next_chunk) else {
-                return Ok(false);
-            };
-            self.next_chunk += 1;
-            let mut in_chunk = chunk_messages(
-                &self.bag,
-                &self.summary,
-                &self.bytes,
-                chunk,
-                &self.topic,
-                self.channel.id,
-            )?;
-            // A chunk holds its messages in the order they were written; a writer may interleave channels, so order
-            // by log time (a stable sort keeps equal times as written).
-            in_chunk.sort_by_key(|(log_time, _)| *log_time);
-            self.pending
-                .extend(in_chunk.into_iter().map(|(_, data)| data));
-        }
-        Ok(true)
+        self.messages
+            .summary
+            .channels
+            .values()
+            .any(|c| c.topic == topic)
     }
 
     /// Reads the next frame into `frame` (its pixel buffer reused), sets its `t_s` to the header stamp and says
@@ -339,23 +372,25 @@ impl BagFrameSource {
     }
 
     fn read_next(&mut self, frame: &mut Frame) -> Result<Option<FrameInfo>, FormatError> {
-        if !self.fill()? {
+        let Some(data) = self.messages.next_message()? else {
             return Ok(None);
-        }
-        let data = self.pending.pop_front().expect("filled");
+        };
         let index = self.index;
         self.index += 1;
-        let name = format!("message {index} of {}", self.topic);
-        let at = |e: String| bag_error(&self.bag, &self.topic, format!("{name}: {e}"));
-        let t_s = if self.channel.type_name == IMAGE_TYPES[0] {
+        let TopicMessages {
+            bag,
+            topic,
+            channel,
+            ..
+        } = &self.messages;
+        let name = format!("message {index} of {topic}");
+        let at = |e: String| self.messages.error(format!("{name}: {e}"));
+        let t_s = if channel.type_name == IMAGE_TYPES[0] {
             decode_image(&data, frame).map_err(at)?
         } else {
             let (t_s, format, bytes) = compressed_image(&data).map_err(at)?;
-            let pseudo_path = PathBuf::from(format!(
-                "{}:{} {name} ({format})",
-                self.bag.display(),
-                self.topic
-            ));
+            let pseudo_path =
+                PathBuf::from(format!("{}:{topic} {name} ({format})", bag.display(),));
             let decoded = roitrack_formats::decode_frame(bytes, &pseudo_path)?;
             *frame = decoded;
             t_s
@@ -410,7 +445,7 @@ fn camera_info_in(
 /// The messages of one channel in one chunk: (log time, data), in the chunk's order. The chunk index is checked
 /// first (mcap 0.26 slices the file by it unchecked, and panics on an index whose offset and length overflow), and
 /// the reading runs under `catch_unwind`, so that a corrupt bag gives an error naming it, never a crash.
-pub(crate) fn chunk_messages(
+fn chunk_messages(
     bag: &Path,
     summary: &mcap::read::Summary,
     bytes: &[u8],
