@@ -7,15 +7,19 @@ use std::time::Instant;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use roitrack::formats::{
-    EstimateWriter, MeasurementReader, RoiRecordingReader, TimedMeasurements, check_output_paths,
-    open_input,
+    EstimateWriter, FormatError, MeasurementReader, RoiRecordingReader, TimedMeasurements,
+    check_output_paths, open_input,
 };
 use roitrack::image::CentroidOptions;
 use roitrack::pipeline::RoiEvent;
-use roitrack::{EstimatorReport, TrackStatus, Tracker};
+use roitrack::{EstimatorReport, Measurement, TrackStatus, Tracker};
 
 use crate::args::{CameraArgs, CameraPath, EstimatorArgs, ShutterArg, TargetArgs, TimeUnitArg};
 use crate::commands::detect::{PolarityArg, distance_range};
+
+/// Checked measurements in time order, from a measurements CSV or replayed from a bag: the two differ only in how
+/// they are opened.
+type MeasurementSource = Box<dyn Iterator<Item = Result<Measurement, FormatError>>>;
 
 /// Track pose and velocity from a measurements file (t,id,u,v), a ROI recording, or frames (an image folder, a
 /// numbered pattern, a glob or a video): one pose and one twist per control step (per frame with --images).
@@ -169,9 +173,21 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         writer.write(e).and_then(|()| bag.estimate(e))
     };
     let start = Instant::now();
-    let (path, report, rois) = match (&args.measurements, &args.rois, replay) {
-        (_, _, Some(source)) => {
-            let path = source.bag().to_path_buf();
+    // Measurements replayed from a bag or read from a CSV; checked either way: known ids, centroids on the camera's
+    // image, times in order (and, from a CSV, in seconds or converted).
+    let measurements: Option<(PathBuf, MeasurementSource)> = match (replay, &args.measurements) {
+        (Some(source), _) => Some((source.bag().to_path_buf(), Box::new(source))),
+        (None, Some(path)) => {
+            let reader = MeasurementReader::from_reader(open_input(path)?, path)?
+                .with_known_ids(known_ids.iter().copied())
+                .with_image_size(camera.width_px, camera.height_px);
+            let reader = TimedMeasurements::new(reader, args.time_units.map(Into::into));
+            Some((path.clone(), Box::new(reader)))
+        }
+        (None, None) => None,
+    };
+    let (path, report, rois) = match (measurements, &args.rois) {
+        (Some((path, source)), _) => {
             // Each measurement also goes to the bag's /roitrack/measurements (a RefCell: the estimates' sink
             // writes to the bag too).
             let bag = std::cell::RefCell::new(&mut bag);
@@ -179,7 +195,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
                 tick(k);
                 let m = m?;
                 bag.borrow_mut().measurements(std::slice::from_ref(&m))?;
-                Ok::<_, roitrack::formats::FormatError>(m)
+                Ok::<_, FormatError>(m)
             });
             let report = roitrack::track(&mut tracker, measurements, |e| {
                 on_estimate(e, &mut bag.borrow_mut())
@@ -187,26 +203,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             .with_context(|| format!("tracking {} failed", path.display()))?;
             (path, report, None)
         }
-        (Some(path), _, None) => {
-            // Checked: known ids, centroids on the camera's image, times in seconds (or converted).
-            let reader = MeasurementReader::from_reader(open_input(path)?, path)?
-                .with_known_ids(known_ids)
-                .with_image_size(camera.width_px, camera.height_px);
-            let reader = TimedMeasurements::new(reader, args.time_units.map(Into::into));
-            let bag = std::cell::RefCell::new(&mut bag);
-            let measurements = reader.enumerate().map(|(k, m)| {
-                tick(k);
-                let m = m?;
-                bag.borrow_mut().measurements(std::slice::from_ref(&m))?;
-                Ok::<_, roitrack::formats::FormatError>(m)
-            });
-            let report = roitrack::track(&mut tracker, measurements, |e| {
-                on_estimate(e, &mut bag.borrow_mut())
-            })
-            .with_context(|| format!("tracking {} failed", path.display()))?;
-            (path.clone(), report, None)
-        }
-        (None, Some(path), None) => {
+        (None, Some(path)) => {
             let reader = RoiRecordingReader::open(path)?.with_known_ids(known_ids);
             let mut options = CentroidOptions::default();
             if args.no_symmetry_check {
@@ -230,7 +227,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             .with_context(|| format!("tracking {} failed", path.display()))?;
             (path.clone(), report.estimator, Some(report))
         }
-        (None, None, None) => {
+        (None, None) => {
             bail!("give --measurements, --rois or --mcap-in BAG --measurement-topic TOPIC")
         }
     };
