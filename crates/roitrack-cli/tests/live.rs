@@ -4,9 +4,14 @@
 //! Only one fake camera can own 127.0.0.1: the tests take turns (a lock here; CI also runs them on one test thread).
 #![cfg(all(feature = "genicam", unix))]
 
+use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::{Mutex, MutexGuard};
 use std::time::{Duration, Instant};
+
+#[path = "common/process.rs"]
+mod process;
+use process::{interrupt, roitrack_command as roitrack, simulate, succeeded};
 
 static ONE_FAKE_CAMERA: Mutex<()> = Mutex::new(());
 
@@ -14,37 +19,29 @@ fn turn() -> MutexGuard<'static, ()> {
     ONE_FAKE_CAMERA.lock().unwrap_or_else(|e| e.into_inner())
 }
 
-fn roitrack() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_roitrack"))
+/// `roitrack live --fake --duration SECONDS` writing its poses, twists and bag into `dir`; the command and those
+/// three files.
+fn live_fake(dir: &Path, seconds: &str) -> (Command, [PathBuf; 3]) {
+    let files = ["p.tum", "t.csv", "live.mcap"].map(|name| dir.join(name));
+    let mut command = roitrack();
+    command
+        .args(["live", "--fake", "--duration", seconds])
+        .arg("--poses")
+        .arg(&files[0])
+        .arg("--twists")
+        .arg(&files[1])
+        .arg("--mcap")
+        .arg(&files[2]);
+    (command, files)
 }
 
 #[test]
 fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
     let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
-    let (poses, twists, truth, bag) = (
-        dir.path().join("p.tum"),
-        dir.path().join("t.csv"),
-        dir.path().join("truth"),
-        dir.path().join("live.mcap"),
-    );
-    let out = roitrack()
-        .args(["live", "--fake", "--duration", "1.5", "--truth-out"])
-        .arg(&truth)
-        .arg("--poses")
-        .arg(&poses)
-        .arg("--twists")
-        .arg(&twists)
-        .arg("--mcap")
-        .arg(&bag)
-        .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let truth = dir.path().join("truth");
+    let (mut live, [poses, twists, bag]) = live_fake(dir.path(), "1.5");
+    let stdout = succeeded(live.arg("--truth-out").arg(&truth).output().unwrap());
     assert!(stdout.contains("moved as asked 100.00 %"), "{stdout}");
     assert!(
         stdout.contains("latency from buffer timestamp to estimate p50/p99"),
@@ -73,12 +70,7 @@ fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
         .arg(&twists)
         .output()
         .unwrap();
-    assert!(
-        eval.status.success(),
-        "{}",
-        String::from_utf8_lossy(&eval.stderr)
-    );
-    let metrics: serde_json::Value = serde_json::from_slice(&eval.stdout).unwrap();
+    let metrics: serde_json::Value = serde_json::from_str(&succeeded(eval)).unwrap();
     let rmse_mm = metrics["position_rmse_mm"].as_f64().unwrap();
     // The demo's default estimator on orthoglide: about 0.02 mm.
     assert!(rmse_mm < 0.1, "{metrics}");
@@ -88,36 +80,16 @@ fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
 fn ctrl_c_stops_the_run_and_writes_every_output() {
     let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
-    let (poses, twists, bag) = (
-        dir.path().join("p.tum"),
-        dir.path().join("t.csv"),
-        dir.path().join("live.mcap"),
-    );
-    let child = roitrack()
-        .args(["live", "--fake", "--duration", "60", "--poses"])
-        .arg(&poses)
-        .arg("--twists")
-        .arg(&twists)
-        .arg("--mcap")
-        .arg(&bag)
+    let (mut live, [poses, twists, bag]) = live_fake(dir.path(), "60");
+    let child = live
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_millis(2500));
-    // SAFETY: sends SIGINT to the child we spawned.
-    assert_eq!(
-        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
-        0
-    );
+    interrupt(&child);
     let start = Instant::now();
-    let out = child.wait_with_output().unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let stdout = succeeded(child.wait_with_output().unwrap());
     assert!(start.elapsed() < Duration::from_secs(10));
     assert!(stdout.contains("stopped: interrupted (Ctrl-C)"), "{stdout}");
     let rows = std::fs::read_to_string(&poses).unwrap().lines().count();
@@ -161,19 +133,11 @@ fn a_pixel_format_the_fake_camera_does_not_offer_is_refused_listing_those_it_doe
     );
 }
 
-/// `roitrack live --device ADDRESS` on a simulated run's calibration and target; its output and how long it took.
-fn live_device(address: &str) -> (std::process::Output, Duration) {
+/// `roitrack live --device ADDRESS` on a simulated run's calibration and target, which must fail: its standard error
+/// and how long it took.
+fn live_device_fails(address: &str) -> (String, Duration) {
     let dir = tempfile::tempdir().unwrap();
-    let sim = roitrack()
-        .args(["simulate", "--scenario", "static", "--out"])
-        .arg(dir.path())
-        .output()
-        .unwrap();
-    assert!(
-        sim.status.success(),
-        "{}",
-        String::from_utf8_lossy(&sim.stderr)
-    );
+    simulate(dir.path(), &["--scenario", "static"]);
     let start = Instant::now();
     let out = roitrack()
         .args(["live", "--device", address, "--duration", "1", "--camera"])
@@ -186,15 +150,15 @@ fn live_device(address: &str) -> (std::process::Output, Duration) {
         .arg(dir.path().join("t.csv"))
         .output()
         .unwrap();
-    (out, start.elapsed())
+    let took = start.elapsed();
+    assert!(!out.status.success());
+    (String::from_utf8_lossy(&out.stderr).into_owned(), took)
 }
 
 #[test]
 fn a_device_id_is_refused_without_allow_discovery_and_nothing_is_sent() {
     let _turn = turn();
-    let (out, took) = live_device("Aravis-Fake-GV01");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let (stderr, took) = live_device_fails("Aravis-Fake-GV01");
     assert!(
         stderr.contains("'Aravis-Fake-GV01'") && stderr.contains("--allow-discovery"),
         "{stderr}"
@@ -206,9 +170,7 @@ fn a_device_id_is_refused_without_allow_discovery_and_nothing_is_sent() {
 fn a_device_address_where_no_camera_answers_fails_fast_with_a_clear_error() {
     let _turn = turn();
     // No fake camera runs: nothing answers on 127.0.0.2.
-    let (out, took) = live_device("127.0.0.2");
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success());
+    let (stderr, took) = live_device_fails("127.0.0.2");
     assert!(
         stderr
             .contains("cannot open the camera at '127.0.0.2': no GigE Vision camera answers there"),
@@ -235,12 +197,7 @@ fn bench_measures_the_fake_camera_rate_and_latency_from_buffer_timestamp_to_esti
         ])
         .output()
         .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let m: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let m: serde_json::Value = serde_json::from_str(&succeeded(out)).unwrap();
     let f = |key: &str| m[key].as_f64().unwrap_or_else(|| panic!("{key} in {m}"));
     assert!(f("fake_camera_rois") >= 3600.0, "{m}");
     for key in [

@@ -12,10 +12,13 @@
 //! `.ci/run` does), when its absence is a failure.
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
+use std::process::{Command, Output};
 
 mod common;
 use common::{fails, ok};
+#[path = "common/process.rs"]
+mod process;
+use process::{simulate, succeeded};
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -45,28 +48,59 @@ fn python() -> Option<PathBuf> {
     None
 }
 
-fn check_bag(python: &Path, dir: &Path, frame_ids: [&str; 2], extra: &[&str]) -> String {
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/check_bag.py");
-    let out = Command::new(python)
-        .arg(script)
-        .args([
-            p(&dir.join("run.mcap")),
-            p(&dir.join("poses.tum")),
-            p(&dir.join("twists.csv")),
-            p(&dir.join("covariance.csv")),
-            frame_ids[0],
-            frame_ids[1],
-        ])
+/// A script of roitrack-ros' tests (run by the readers' Python).
+fn ros_script(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../roitrack-ros/tests/{name}"))
+}
+
+/// `check_bag.py BAG POSES TWISTS COVARIANCE FRAME CHILD_FRAME EXTRA...` (COVARIANCE `-`: none).
+fn run_check_bag(python: &Path, files: [&Path; 4], frame_ids: [&str; 2], extra: &[&str]) -> Output {
+    Command::new(python)
+        .arg(ros_script("check_bag.py"))
+        .args(files)
+        .args(frame_ids)
         .args(extra)
         .output()
-        .unwrap();
-    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(
-        out.status.success(),
-        "{stdout}{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    stdout
+        .unwrap()
+}
+
+/// check_bag.py on `dir`'s run.mcap against its poses.tum, twists.csv and covariance.csv; its report.
+fn check_bag(python: &Path, dir: &Path, frame_ids: [&str; 2], extra: &[&str]) -> String {
+    let files = ["run.mcap", "poses.tum", "twists.csv", "covariance.csv"].map(|f| dir.join(f));
+    succeeded(run_check_bag(
+        python,
+        files.each_ref().map(PathBuf::as_path),
+        frame_ids,
+        extra,
+    ))
+}
+
+fn line_count(path: &Path) -> usize {
+    std::fs::read_to_string(path).unwrap().lines().count()
+}
+
+/// The bag of a run of `dir`'s simulation that stopped early (`stopped`/run.mcap), checked by check_bag.py against
+/// a whole run of the measurements it got (`lines`, the header first) tracked into `dir`: the number of estimates in
+/// the bag, and in the whole run.
+fn stopped_bag_estimates(
+    python: &Path,
+    dir: &Path,
+    lines: &[&str],
+    stopped: &Path,
+) -> (usize, usize) {
+    let measurements = dir.join("measurements_read.csv");
+    std::fs::write(&measurements, lines.join("\n") + "\n").unwrap();
+    ok(&strs(&track_args(dir, &measurements, dir)));
+    std::fs::rename(stopped.join("run.mcap"), dir.join("run.mcap")).unwrap();
+    let report = check_bag(python, dir, ["camera", "target"], &["--prefix"]);
+    // The number after the bag's name in the report.
+    let estimates = report
+        .split_whitespace()
+        .skip_while(|w| !w.ends_with(".mcap:"))
+        .nth(1)
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{report}"));
+    (estimates, line_count(&dir.join("poses.tum")))
 }
 
 fn track_args(dir: &Path, measurements: &Path, out: &Path) -> Vec<String> {
@@ -100,15 +134,7 @@ fn a_bag_from_measurements_reads_back_equal_to_the_tum_and_csv_files() {
     let Some(python) = python() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&[
-        "simulate",
-        "--scenario",
-        "random",
-        "--seed",
-        "2",
-        "--out",
-        p(dir),
-    ]);
+    simulate(dir, &["--scenario", "random", "--seed", "2"]);
     let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
     args.extend(["--frame-id", "cam0", "--child-frame-id", "tool"].map(String::from));
     ok(&strs(&args));
@@ -119,35 +145,21 @@ fn a_bag_from_measurements_reads_back_equal_to_the_tum_and_csv_files() {
         "{report}"
     );
     // A checker that cannot fail would prove nothing: a bag held against another run's files is refused.
-    ok(&[
-        "simulate",
-        "--scenario",
-        "random",
-        "--seed",
-        "3",
-        "--out",
-        p(&dir.join("other")),
-    ]);
     let other = dir.join("other");
+    simulate(&other, &["--scenario", "random", "--seed", "3"]);
     ok(&strs(&track_args(
         &other,
         &other.join("measurements.csv"),
         &other,
     )));
     std::fs::copy(dir.join("run.mcap"), other.join("run.mcap")).unwrap();
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/check_bag.py");
-    let refused = Command::new(&python)
-        .arg(script)
-        .args([
-            p(&other.join("run.mcap")),
-            p(&other.join("poses.tum")),
-            p(&other.join("twists.csv")),
-            p(&other.join("covariance.csv")),
-            "cam0",
-            "tool",
-        ])
-        .output()
-        .unwrap();
+    let files = ["run.mcap", "poses.tum", "twists.csv", "covariance.csv"].map(|f| other.join(f));
+    let refused = run_check_bag(
+        &python,
+        files.each_ref().map(PathBuf::as_path),
+        ["cam0", "tool"],
+        &[],
+    );
     assert!(!refused.status.success());
 }
 
@@ -157,16 +169,10 @@ fn a_bag_from_frames_holds_the_images_and_their_annotations() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let sim = dir.join("sim");
-    ok(&[
-        "simulate",
-        "--frames",
-        "--scenario",
-        "sweep",
-        "--frame-count",
-        "8",
-        "--out",
-        p(&sim),
-    ]);
+    simulate(
+        &sim,
+        &["--frames", "--scenario", "sweep", "--frame-count", "8"],
+    );
     ok(&[
         "track",
         "--camera",
@@ -188,11 +194,7 @@ fn a_bag_from_frames_holds_the_images_and_their_annotations() {
         "--mcap",
         p(&dir.join("run.mcap")),
     ]);
-    let estimates = std::fs::read_to_string(dir.join("poses.tum"))
-        .unwrap()
-        .lines()
-        .count();
-    assert_eq!(estimates, 8);
+    assert_eq!(line_count(&dir.join("poses.tum")), 8);
     check_bag(&python, dir, ["camera", "target"], &["--images", "8"]);
 }
 
@@ -201,7 +203,7 @@ fn the_bag_of_a_run_that_fails_midway_is_readable_up_to_its_last_estimate() {
     let Some(python) = python() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&["simulate", "--scenario", "orthoglide", "--out", p(dir)]);
+    simulate(dir, &["--scenario", "orthoglide"]);
     // A bad field two thirds of the way through: the run fails there.
     let text = std::fs::read_to_string(dir.join("measurements.csv")).unwrap();
     let lines: Vec<&str> = text.lines().collect();
@@ -215,21 +217,8 @@ fn the_bag_of_a_run_that_fails_midway_is_readable_up_to_its_last_estimate() {
     assert!(error.contains("broken.csv"), "{error}");
     assert!(!failed.join("poses.tum").exists());
     // The same measurements up to the bad line, tracked to the end: the failed run's bag holds their first estimates.
-    std::fs::write(dir.join("good.csv"), lines[..cut].join("\n") + "\n").unwrap();
-    ok(&strs(&track_args(dir, &dir.join("good.csv"), dir)));
-    std::fs::rename(failed.join("run.mcap"), dir.join("run.mcap")).unwrap();
-    let report = check_bag(&python, dir, ["camera", "target"], &["--prefix"]);
-    let estimates: usize = report
-        .split_whitespace()
-        .skip_while(|w| !w.ends_with(".mcap:"))
-        .nth(1)
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("{report}"));
+    let (estimates, tracked) = stopped_bag_estimates(&python, dir, &lines[..cut], &failed);
     // 4 kHz measurements, an estimate every 10: all but the last few before the bad line.
-    let tracked = std::fs::read_to_string(dir.join("poses.tum"))
-        .unwrap()
-        .lines()
-        .count();
     assert!(
         estimates + 2 >= tracked && estimates <= tracked,
         "{estimates} of {tracked}"
@@ -240,7 +229,7 @@ fn the_bag_of_a_run_that_fails_midway_is_readable_up_to_its_last_estimate() {
 fn bag_options_are_refused_with_a_reason() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&["simulate", "--scenario", "static", "--out", p(dir)]);
+    simulate(dir, &["--scenario", "static"]);
     let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
     args.extend(["--frame-id", ""].map(String::from));
     let error = fails(&strs(&args));
@@ -266,16 +255,16 @@ fn bag_options_are_refused_with_a_reason() {
 /// Simulated frames (`roitrack simulate --frames`), each also as raw 8-bit pixels beside its PNG for the bag writer.
 fn simulate_frames(dir: &Path, count: usize) -> PathBuf {
     let sim = dir.join("sim");
-    ok(&[
-        "simulate",
-        "--frames",
-        "--scenario",
-        "sweep",
-        "--frame-count",
-        &count.to_string(),
-        "--out",
-        p(&sim),
-    ]);
+    simulate(
+        &sim,
+        &[
+            "--frames",
+            "--scenario",
+            "sweep",
+            "--frame-count",
+            &count.to_string(),
+        ],
+    );
     let frames = sim.join("frames");
     // Frame times on whole nanoseconds, written as a bag's stamp reads back (sec + 1e-9 nanosec), so that the files
     // and the bag give the tracker the very same times.
@@ -318,17 +307,12 @@ fn write_bag(python: &Path, sim: &Path, bag: &Path, encoding: &str, info_size: O
     if let Some((w, h)) = info_size {
         args.extend([w.to_string(), h.to_string()]);
     }
-    let script =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/write_image_bag.py");
-    let out = Command::new(python)
-        .arg(script)
-        .args(&args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    succeeded(
+        Command::new(python)
+            .arg(ros_script("write_image_bag.py"))
+            .args(&args)
+            .output()
+            .unwrap(),
     );
 }
 
@@ -498,7 +482,7 @@ fn ctrl_c_completes_the_bag() {
     let Some(python) = python() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&["simulate", "--scenario", "orthoglide", "--out", p(dir)]);
+    simulate(dir, &["--scenario", "orthoglide"]);
     let text = std::fs::read_to_string(dir.join("measurements.csv")).unwrap();
     let lines: Vec<&str> = text.lines().collect();
     let cut = lines.len() / 2;
@@ -506,7 +490,7 @@ fn ctrl_c_completes_the_bag() {
     std::fs::create_dir(&interrupted).unwrap();
     let mut args = track_args(dir, Path::new("-"), &interrupted);
     args.remove(0);
-    let mut child = Command::new(env!("CARGO_BIN_EXE_roitrack"))
+    let mut child = process::roitrack_command()
         .arg("track")
         .args(&args)
         .stdin(std::process::Stdio::piped())
@@ -520,11 +504,7 @@ fn ctrl_c_completes_the_bag() {
         .unwrap();
     stdin.flush().unwrap();
     std::thread::sleep(std::time::Duration::from_millis(1500));
-    // SAFETY: sends SIGINT to the child we spawned.
-    assert_eq!(
-        unsafe { libc::kill(child.id() as libc::pid_t, libc::SIGINT) },
-        0
-    );
+    process::interrupt(&child);
     // The rest: the next estimate finds the interruption.
     let _ = stdin.write_all((lines[cut..].join("\n") + "\n").as_bytes());
     drop(stdin);
@@ -533,20 +513,7 @@ fn ctrl_c_completes_the_bag() {
     assert!(!out.status.success(), "{stderr}");
     assert!(stderr.contains("interrupted (Ctrl-C)"), "{stderr}");
     assert!(!interrupted.join("poses.tum").exists());
-    std::fs::write(dir.join("half.csv"), lines[..cut].join("\n") + "\n").unwrap();
-    ok(&strs(&track_args(dir, &dir.join("half.csv"), dir)));
-    std::fs::rename(interrupted.join("run.mcap"), dir.join("run.mcap")).unwrap();
-    let report = check_bag(&python, dir, ["camera", "target"], &["--prefix"]);
-    let estimates: usize = report
-        .split_whitespace()
-        .skip_while(|w| !w.ends_with(".mcap:"))
-        .nth(1)
-        .and_then(|n| n.parse().ok())
-        .unwrap_or_else(|| panic!("{report}"));
-    let tracked = std::fs::read_to_string(dir.join("poses.tum"))
-        .unwrap()
-        .lines()
-        .count();
+    let (estimates, tracked) = stopped_bag_estimates(&python, dir, &lines[..cut], &interrupted);
     assert!(
         estimates * 2 >= tracked && estimates <= tracked,
         "{estimates} of {tracked}"
@@ -594,15 +561,7 @@ fn recorded_measurements_replay_from_a_bag_to_the_estimates_of_the_csv() {
     let Some(python) = python() else { return };
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    ok(&[
-        "simulate",
-        "--scenario",
-        "orthoglide",
-        "--duration-s",
-        "1.5",
-        "--out",
-        p(dir),
-    ]);
+    simulate(dir, &["--scenario", "orthoglide", "--duration-s", "1.5"]);
     ok(&strs(&track_args(dir, &dir.join("measurements.csv"), dir)));
     let expected = read_poses(&dir.join("poses.tum"));
     assert!(expected.len() > 500);
@@ -618,20 +577,14 @@ fn recorded_measurements_replay_from_a_bag_to_the_estimates_of_the_csv() {
     assert!(difference <= 1e-9, "{difference}");
     // A bag written by rosbags from the message's documented definition, 7 centroids a message (not roitrack's
     // batches), with sigmas.
-    let script = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../roitrack-ros/tests/write_measurement_bag.py");
+    let script = ros_script("write_measurement_bag.py");
     let write = |bag: &Path, damage: Option<&str>| {
         let mut command = Command::new(&python);
         command
             .arg(&script)
             .args([p(bag), p(&dir.join("measurements.csv")), "/cam/blobs", "7"]);
         command.args(damage);
-        let out = command.output().unwrap();
-        assert!(
-            out.status.success(),
-            "{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        succeeded(command.output().unwrap());
     };
     let theirs = dir.join("theirs");
     write(&theirs, None);
@@ -738,18 +691,18 @@ fn roi_images_go_to_the_bag_with_their_place_and_centroid() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     // Reflections: some ROIs' blobs are rejected (not centrally symmetric), and annotated so.
-    ok(&[
-        "simulate",
-        "--scenario",
-        "orthoglide",
-        "--duration-s",
-        "0.5",
-        "--rois",
-        "--reflections",
-        "0.1",
-        "--out",
-        p(dir),
-    ]);
+    simulate(
+        dir,
+        &[
+            "--scenario",
+            "orthoglide",
+            "--duration-s",
+            "0.5",
+            "--rois",
+            "--reflections",
+            "0.1",
+        ],
+    );
     let mut args = track_args(dir, &dir.join("measurements.csv"), dir);
     let at = args.iter().position(|a| a == "--measurements").unwrap();
     args[at] = "--rois".into();
@@ -757,11 +710,7 @@ fn roi_images_go_to_the_bag_with_their_place_and_centroid() {
     let mut with_rois = args.clone();
     with_rois.push("--mcap-rois".into());
     ok(&strs(&with_rois));
-    let rois = std::fs::read_to_string(dir.join("measurements.csv"))
-        .unwrap()
-        .lines()
-        .count()
-        - 1;
+    let rois = line_count(&dir.join("measurements.csv")) - 1;
     let report = check_bag(
         &python,
         dir,
@@ -804,19 +753,19 @@ fn the_camera_info_names_a_fisheye_cameras_own_model() {
     )
     .unwrap();
     let sim = dir.join("sim");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "orthoglide",
-        "--camera",
-        p(&camera),
-        "--distance-m",
-        "0.9",
-        "--duration-s",
-        "1",
-        "--out",
-        p(&sim),
-    ]);
+    simulate(
+        &sim,
+        &[
+            "--scenario",
+            "orthoglide",
+            "--camera",
+            p(&camera),
+            "--distance-m",
+            "0.9",
+            "--duration-s",
+            "1",
+        ],
+    );
     ok(&strs(&track_args(&sim, &sim.join("measurements.csv"), dir)));
     check_bag(
         &python,
@@ -882,27 +831,17 @@ fn demo_writes_the_centroids_and_rois_its_loop_measured() {
     for file in ["kalman_poses.tum", "kalman_twists.csv"] {
         std::fs::copy(out.join(file), dir.join(file)).unwrap();
     }
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/check_bag.py");
-    let checked = Command::new(&python)
-        .arg(script)
-        .args([
-            p(&bag),
-            p(&dir.join("kalman_poses.tum")),
-            p(&dir.join("kalman_twists.csv")),
-            "-",
-            "camera",
-            "target",
-            "--rois",
-            &count.to_string(),
-        ])
-        .output()
-        .unwrap();
-    let report = String::from_utf8_lossy(&checked.stdout);
-    assert!(
-        checked.status.success(),
-        "{report}{}",
-        String::from_utf8_lossy(&checked.stderr)
-    );
+    let report = succeeded(run_check_bag(
+        &python,
+        [
+            &bag,
+            &dir.join("kalman_poses.tum"),
+            &dir.join("kalman_twists.csv"),
+            Path::new("-"),
+        ],
+        ["camera", "target"],
+        &["--rois", &count.to_string()],
+    ));
     assert!(
         report.contains(&format!(
             "{count} ROI images, {} with their centroid",
