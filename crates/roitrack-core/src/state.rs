@@ -1,6 +1,6 @@
 //! The 12-dof state: pose and constant twist of the object at a reference time.
 
-use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Matrix3, Rotation3, SMatrix, Translation3, UnitQuaternion, Vector3};
 
 use crate::{Vector12, so3};
 
@@ -64,6 +64,41 @@ impl MotionState {
         }
     }
 
+    /// The Jacobian `F` of [`Self::predicted`]`(dt_s)` in error-state coordinates: a correction `δ` of this state
+    /// becomes, to first order, the correction `F δ` of the predicted one. With `E = Exp(W dt)` and
+    /// `B = J_l(W dt) dt` (the left Jacobian of SO(3)):
+    ///
+    /// ```text
+    /// F = [ I  0  dt·I  0 ]
+    ///     [ 0  E  0     B ]
+    ///     [ 0  0  I     0 ]
+    ///     [ 0  0  0     I ]
+    /// ```
+    ///
+    /// A covariance `P` of this state's error is `F P Fᵀ` for the predicted state (without process noise); `dt_s`
+    /// may be negative, to carry an estimate back in time.
+    ///
+    /// ```
+    /// use roitrack_core::MotionState;
+    /// use nalgebra::{Rotation3, Vector3};
+    ///
+    /// let state = MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.6));
+    /// let f = state.transition_jacobian(0.01);
+    /// // An error in the velocity becomes, 10 ms later, an error in the position too.
+    /// assert_eq!(f[(0, 6)], 0.01);
+    /// ```
+    pub fn transition_jacobian(&self, dt_s: f64) -> SMatrix<f64, 12, 12> {
+        let increment = self.angular_velocity_radps * dt_s;
+        let mut f = SMatrix::<f64, 12, 12>::identity();
+        f.fixed_view_mut::<3, 3>(0, 6)
+            .copy_from(&(Matrix3::identity() * dt_s));
+        f.fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(so3::exp(&increment).matrix());
+        f.fixed_view_mut::<3, 3>(3, 9)
+            .copy_from(&(so3::left_jacobian(&increment) * dt_s));
+        f
+    }
+
     /// The state after a correction `δ = (v, w, dV, dW)`.
     #[inline]
     pub fn corrected(&self, delta: &Vector12) -> Self {
@@ -117,6 +152,31 @@ impl MotionState {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_transition_jacobian_matches_central_differences() {
+        let state = moving();
+        for dt_s in [0.015, -0.02] {
+            let f = state.transition_jacobian(dt_s);
+            let nominal = state.predicted(dt_s);
+            let h = 1e-6;
+            for j in 0..12 {
+                let mut delta = Vector12::zeros();
+                delta[j] = h;
+                let plus =
+                    MotionState::difference(&nominal, &state.corrected(&delta).predicted(dt_s));
+                let minus =
+                    MotionState::difference(&nominal, &state.corrected(&-delta).predicted(dt_s));
+                let column = (plus - minus) / (2.0 * h);
+                let error = (column - f.column(j)).amax();
+                assert!(
+                    error < 1e-7,
+                    "dt {dt_s}, column {j}: {error:e}\n{column}\n{}",
+                    f.column(j)
+                );
+            }
+        }
+    }
 
     fn moving() -> MotionState {
         MotionState {

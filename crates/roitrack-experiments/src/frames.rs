@@ -5,7 +5,7 @@
 //! Each sequence ([`FrameSequence`]) is rendered once per seed and tracked by a [`FrameTracker`] per time model
 //! ([`CASES`]): the rolling-shutter frames are tracked both with the rolling model (each blob at its row's time) and
 //! with the global model (every blob at the frame's time), so the two see the very same pixels. Every estimate is
-//! scored by [`roitrack_eval`] against the true state at its own time (the time of the frame's newest blob), except
+//! scored by [`roitrack_eval`] against the true state at its own time (the mean time of the frame's blobs), except
 //! the first [`FrameStudyOptions::settling_estimates`] of each run, while the velocity converges from a static start.
 //! Figures of several seeds are pooled: an RMSE over all the scored estimates of every seed, the worst over all.
 //!

@@ -15,7 +15,9 @@
 //!    fails, the target is searched for and identified with no prior ([`detect_target`]: either polarity, clutter,
 //!    partial views), and a new track starts from its static pose.
 //! 3. The frame's measurements, in time order, are one batch for the estimator ([`Estimator::push_batch`] with
-//!    [`Emit::EachBatch`]): one estimate per frame, at the time of its newest measurement.
+//!    [`Emit::EachBatch`]): one estimate per frame, at the mean time of its measurements (the estimator's state at the
+//!    newest one, carried back by its twist: with a rolling shutter the pose is pinned best in the middle of the
+//!    target's readout).
 //!
 //! A track the estimator declares lost is dropped, and the next frame is searched whole.
 //!
@@ -226,6 +228,8 @@ pub struct FrameTracker {
     measurements: Vec<Measurement>,
     window: Vec<u16>,
     last_time_s: Option<f64>,
+    /// The time of the last estimate given.
+    last_estimate_s: Option<f64>,
     report: FrameTrackReport,
 }
 
@@ -285,6 +289,7 @@ impl FrameTracker {
             predictor: None,
             polarity,
             last_time_s: None,
+            last_estimate_s: None,
             report: FrameTrackReport {
                 polarity,
                 ..FrameTrackReport::default()
@@ -350,7 +355,11 @@ impl FrameTracker {
             self.measurements.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
             self.tracker
                 .push_batch(&self.measurements, Emit::EachBatch)?
+                .map(|e| self.at_measurements_mean_time(e))
         };
+        if let Some(e) = &estimate {
+            self.last_estimate_s = Some(e.t_ref_s);
+        }
         match method {
             FrameMethod::Windows => self.report.by_windows += 1,
             FrameMethod::FullFrame => self.report.by_full_frame += 1,
@@ -374,6 +383,32 @@ impl FrameTracker {
             // A frame whose target was not found leaves no measurement.
             measured: self.measurements.len(),
         })
+    }
+
+    /// The estimate carried back by its own twist from its newest measurement's time to the mean time of the
+    /// frame's measurements, where they pin the pose best: a rolling shutter reads the target's blobs over the rows
+    /// it spans (150 rows at 30 µs: 4.5 ms), and the state at the last of them is the pose at their middle
+    /// extrapolated by the velocity, with the velocity's error times half that span added. With a global shutter the
+    /// two times are one. The covariance goes back with the state
+    /// ([`roitrack_core::MotionState::transition_jacobian`]). An estimate is never moved to or before the previous
+    /// one's time.
+    fn at_measurements_mean_time(&self, mut estimate: Estimate) -> Estimate {
+        let count = self.measurements.len();
+        if count == 0 {
+            return estimate;
+        }
+        let mean_s = self.measurements.iter().map(|m| m.t_s).sum::<f64>() / count as f64;
+        let dt_s = mean_s - estimate.t_ref_s;
+        if dt_s >= 0.0 || self.last_estimate_s.is_some_and(|last| mean_s <= last) {
+            return estimate;
+        }
+        if let Some(covariance) = &mut estimate.covariance {
+            let f = estimate.state.transition_jacobian(dt_s);
+            *covariance = f * *covariance * f.transpose();
+        }
+        estimate.state = estimate.state.predicted(dt_s);
+        estimate.t_ref_s = mean_s;
+        estimate
     }
 
     fn min_window_points(&self) -> usize {

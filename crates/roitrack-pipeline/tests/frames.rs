@@ -144,3 +144,59 @@ fn dark_blobs_on_uneven_light_are_tracked() {
     assert_eq!(run.errors.len(), run.frames);
     assert!(pos < 0.5e-3 && vel < 0.1, "{pos} m, {vel} m/s");
 }
+
+#[test]
+fn rolling_shutter_estimates_are_timed_in_the_middle_of_their_frames_blobs() {
+    let rolling = Readout::RollingShutter {
+        line_delay_s: 30e-6,
+    };
+    let mut frames = sequence_of(ScenarioKind::Sweep, rolling, Polarity::Bright, 2);
+    let mut tracker = FrameTracker::new(
+        frames.camera().clone(),
+        frames.scenario().target.clone(),
+        FrameTrackerConfig::default(),
+    )
+    .unwrap();
+    let mut frame = Frame::default();
+    let (mut middle_m2, mut newest_m2, mut scored) = (0.0, 0.0, 0);
+    let mut previous_s = f64::NEG_INFINITY;
+    for k in 0..90 {
+        frames.render(k, &mut frame);
+        let Some(e) = tracker.process(&frame).unwrap().estimate else {
+            continue;
+        };
+        let times: Vec<f64> = tracker.measurements().iter().map(|m| m.t_s).collect();
+        let mean_s = times.iter().sum::<f64>() / times.len() as f64;
+        let newest_s = times.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        // The target's rows are read over about 4 ms: the estimate sits at its blobs' mean time, inside the readout.
+        assert!(newest_s - times[0] > 3e-3, "frame {k}: {times:?}");
+        assert!(
+            (e.t_ref_s - mean_s).abs() < 1e-12,
+            "frame {k}: {} vs {mean_s}",
+            e.t_ref_s
+        );
+        assert!(e.t_ref_s > previous_s);
+        previous_s = e.t_ref_s;
+        let covariance = e
+            .covariance
+            .expect("the Kalman filter gives its covariance");
+        assert!(covariance.symmetric_eigen().eigenvalues.min() > 0.0);
+        if k >= 5 {
+            // The same estimate carried forward to the frame's newest blob, as it was given before.
+            let at_newest = e.state.predicted(newest_s - e.t_ref_s);
+            middle_m2 +=
+                (e.state.cam_t_obj_m - frames.state_at(e.t_ref_s).cam_t_obj_m).norm_squared();
+            newest_m2 +=
+                (at_newest.cam_t_obj_m - frames.state_at(newest_s).cam_t_obj_m).norm_squared();
+            scored += 1;
+        }
+    }
+    let (middle_mm, newest_mm) = (
+        1e3 * (middle_m2 / scored as f64).sqrt(),
+        1e3 * (newest_m2 / scored as f64).sqrt(),
+    );
+    eprintln!(
+        "position RMSE at the blobs' mean time {middle_mm:.3} mm, at the newest blob's {newest_mm:.3} mm"
+    );
+    assert!(middle_mm < newest_mm, "{middle_mm} vs {newest_mm}");
+}

@@ -421,7 +421,7 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
     roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scenario.target)?;
     render_frames(&sequence, &frames_dir)?;
     write_timestamps(&sequence, &dir.join(TIMESTAMPS_FILE))?;
-    // Dense, so that `roitrack eval` interpolates the truth at each estimate's own time (its newest blob's row).
+    // Dense, so that `roitrack eval` interpolates the truth at each estimate's own time (the mean time of its frame's blobs).
     let truth = sequence
         .truth_samples(DEFAULT_TRUTH_RATE_HZ)
         .context("cannot sample the ground truth")?;
@@ -577,8 +577,8 @@ fn frames_readme(args: &SimulateArgs, sequence: &FrameSequence, track: &str) -> 
          {poses:<16} the true poses (TUM, camera_T_object) every {dt:e} s and at every frame's time, from {start:.6} s \
          to {end:.6} s (the last frame's last row)\n\
          {twists:<16} the true twists (t,vx,vy,vz,wx,wy,wz) at the same times\n\n\
-         Track and score them (`roitrack eval` interpolates the truth at each estimate's own time, that of its frame's \
-         newest blob):\n\n    {track}\n    roitrack eval --truth {out} --poses poses.tum --twists twists.csv\n",
+         Track and score them (`roitrack eval` interpolates the truth at each estimate's own time, the mean time of its \
+         frame's blobs):\n\n    {track}\n    roitrack eval --truth {out} --poses poses.tum --twists twists.csv\n",
         scenario = sequence.scenario().kind.name(),
         seed = args.seed,
         command = args.frames_command(),
