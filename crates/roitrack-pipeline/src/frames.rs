@@ -593,10 +593,15 @@ impl FrameTracker {
 }
 
 /// Copies the window `roi` of `frame` into `out` with its background taken away, so that the blob stands bright on
-/// a flat, dark background whatever the light: the background is the least-squares plane through the window's border
-/// pixels. Bright blobs: `value - plane`; dark blobs: the contrast `1 - value / plane`, scaled to the frame's range
-/// (under uneven light a printed circle keeps its contrast, not its difference in grey level). An offset of 1/16 of
-/// the range keeps the background's noise above zero. The frame tracker measures every window through it.
+/// a flat, dark background whatever the light: the background is a least-squares plane through the border pixels
+/// that belong to it, not to the blob or its neighbours (see `border_plane`). Bright blobs: `value - plane`; dark
+/// blobs: the contrast `1 - value / plane`, scaled to the frame's range (under uneven light a printed circle keeps
+/// its contrast, not its difference in grey level). An offset of 1/16 of the range keeps the background's noise above
+/// zero. The frame tracker measures every window through it. Windows up to 64 x 64 px, the largest the centroid
+/// takes: the border pixels of a larger one beyond the first 256 are not used.
+///
+/// # Panics
+/// If `roi` does not lie inside `frame`.
 ///
 /// ```
 /// use roitrack_image::{Frame, Polarity, Roi};
@@ -672,8 +677,9 @@ const MAX_BORDER_PX: usize = 4 * 64;
 /// The background plane `a + b x + c y` (x, y from the window's centre) through the border pixels of a `w` x `h`
 /// window whose pixel (i, j) is `at(i, j)` and whose blob's extreme value (the darkest pixel for dark blobs, the
 /// brightest for bright ones) is `blob_extreme`. Only the border pixels on the background's side of the midpoint
-/// between the border's other extreme and the blob's are fitted, then, once more, those within a tenth of the blob's
-/// contrast (or 3 robust standard deviations of the residuals, if more) of the first plane: a dense grid puts parts of the neighbouring circles on a window's border,
+/// between the border's other extreme and the blob's are fitted, then, once more, those that stand towards the blob
+/// less than a tenth of the blob's contrast (or 3 robust standard deviations of the residuals, if more) from the
+/// first plane (a pixel away from the blob, a highlight on a dark blob's border, stays in): a dense grid puts parts of the neighbouring circles on a window's border,
 /// often most of it, and a plane fitted through them tilts and sinks towards them, which gives the flattened blob a
 /// slant that moves its centroid. On the 7 photographs of a 24 x 28 hexagonal grid of printed circles (gaps of a
 /// fifth of a circle's diameter), the plane through the whole border put the window centroids a median 0.59 px from
@@ -718,24 +724,48 @@ fn border_plane(
         .fold(f64::INFINITY, f64::min);
     let midpoint = 0.5 * (background_level + towards_blob * blob_extreme);
     let fit = |is_background: &dyn Fn(&(f64, f64, f64)) -> bool| {
-        // Least squares: the 3 x 3 normal equations (a subset of the border need not be symmetric about the
-        // centre); the mean alone when the subset does not determine a plane (one side of the window).
-        let (mut normal, mut rhs) = (
-            nalgebra::Matrix3::<f64>::zeros(),
-            nalgebra::Vector3::<f64>::zeros(),
-        );
+        // Least squares from the chosen pixels' centred moments. Their rank decides what they determine: a plane, a
+        // slope along one line (the pixels of one border row or column: the plane's other slope is unknown and taken
+        // as 0, rather than computed from round-off), or, for one pixel, a level.
+        let (mut count, mut sum) = (0.0f64, nalgebra::Vector3::<f64>::zeros());
         for p in border.iter().filter(|p| is_background(p)) {
-            let row = nalgebra::Vector3::new(1.0, p.0, p.1);
-            normal += row * row.transpose();
-            rhs += row * p.2;
+            count += 1.0;
+            sum += nalgebra::Vector3::new(p.0, p.1, p.2);
         }
-        match normal.cholesky() {
-            Some(c) if normal[(0, 0)] >= 3.0 => Some(c.solve(&rhs)),
-            _ if normal[(0, 0)] > 0.0 => {
-                Some(nalgebra::Vector3::new(rhs[0] / normal[(0, 0)], 0.0, 0.0))
-            }
-            _ => None,
+        if count == 0.0 {
+            return None;
         }
+        let mean = sum / count;
+        let (mut sxx, mut syy, mut sxy, mut sxv, mut syv) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
+        for p in border.iter().filter(|p| is_background(p)) {
+            let (x, y, v) = (p.0 - mean[0], p.1 - mean[1], p.2 - mean[2]);
+            sxx += x * x;
+            syy += y * y;
+            sxy += x * y;
+            sxv += x * v;
+            syv += y * v;
+        }
+        let det = sxx * syy - sxy * sxy;
+        // Border pixels sit on whole-pixel coordinates: spreads below a thousandth of a pixel squared are zero.
+        let (b, c) = if sxx > 1e-3 && syy > 1e-3 && det > 1e-6 * sxx * syy {
+            ((syy * sxv - sxy * syv) / det, (sxx * syv - sxy * sxv) / det)
+        } else if sxx >= syy && sxx > 1e-3 {
+            // Along a line: the slope along its direction (1, sxy / sxx), none across it.
+            let (dx, dy) = (1.0, sxy / sxx);
+            let g = (sxv * dx + syv * dy) / (sxx * dx * dx + 2.0 * sxy * dx * dy + syy * dy * dy);
+            (g * dx, g * dy)
+        } else if syy > 1e-3 {
+            let (dx, dy) = (sxy / syy, 1.0);
+            let g = (sxv * dx + syv * dy) / (sxx * dx * dx + 2.0 * sxy * dx * dy + syy * dy * dy);
+            (g * dx, g * dy)
+        } else {
+            (0.0, 0.0)
+        };
+        Some(nalgebra::Vector3::new(
+            mean[2] - b * mean[0] - c * mean[1],
+            b,
+            c,
+        ))
     };
     let Some(first) = fit(&|p| towards_blob * p.2 <= midpoint) else {
         let mean = border.iter().map(|p| p.2).sum::<f64>() / n.max(1) as f64;

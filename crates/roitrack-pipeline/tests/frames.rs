@@ -200,3 +200,48 @@ fn rolling_shutter_estimates_are_timed_in_the_middle_of_their_frames_blobs() {
     );
     assert!(middle_mm < newest_mm, "{middle_mm} vs {newest_mm}");
 }
+
+#[test]
+fn a_window_whose_background_is_one_border_row_is_flattened_level() {
+    // A dense grid of dark circles: only the window's top row is paper (200); the rest of its border, and all but
+    // the blob's core (40) inside, lies on neighbouring circles (70). The background is then known along one row
+    // only: the plane must be level across it, not tilted by round-off.
+    for side in [7u32, 10, 19, 34, 40, 51, 60, 63, 64] {
+        for noisy in [false, true] {
+            let mut frame = Frame {
+                t_s: 0.0,
+                width: side,
+                height: side,
+                bit_depth: 8,
+                pixels: vec![70; (side * side) as usize],
+            };
+            for i in 0..side as usize {
+                // Paper with ±2 of noise, or flat.
+                frame.pixels[i] = if noisy { 198 + (i * 7 % 5) as u16 } else { 200 };
+            }
+            let centre = (side / 2 * side + side / 2) as usize;
+            frame.pixels[centre] = 40;
+            let mut window = Vec::new();
+            roitrack_pipeline::frames::flatten_window(
+                &frame,
+                &roitrack_image::Roi::new(0, 0, side, side),
+                Polarity::Dark,
+                &mut window,
+            );
+            let below: Vec<u16> = (side as usize..window.len())
+                .filter(|&k| k != centre)
+                .map(|k| window[k])
+                .collect();
+            let (low, high) = (*below.iter().min().unwrap(), *below.iter().max().unwrap());
+            // 70 on paper of 200 is a contrast of 0.65: 166 + the offset of 16.
+            assert!(
+                high - low <= if noisy { 4 } else { 0 } && (low as i32 - 182).abs() <= 3,
+                "side {side}, noisy {noisy}: the neighbours' pixels flatten to {low}..{high}"
+            );
+            assert!(
+                window[centre] > high,
+                "side {side}: the blob is not the brightest"
+            );
+        }
+    }
+}

@@ -395,8 +395,7 @@ fn covariance_entries(e: &RustEstimate) -> [f64; 144] {
 
 #[pymethods]
 impl Estimate {
-    /// Time of the estimate (s): that of the newest measurement it used; for a frame tracker, the mean time of its
-    /// frame's blobs (the t of the TUM file).
+    /// Time of the estimate (s): that of the newest measurement it used (the t of the TUM file).
     #[getter]
     fn t_s(&self) -> f64 {
         self.inner.t_ref_s

@@ -305,7 +305,8 @@ impl TrackStatus {
 /// One output of an estimator.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Estimate {
-    /// Reference time (s): the time of the newest measurement used.
+    /// Reference time (s): the time of the newest measurement used (the frame tracker moves its estimates to the
+    /// mean time of each frame's measurements).
     pub t_ref_s: f64,
     pub state: MotionState,
     /// RMS of the window's reprojection residual at the emitted state (px, per coordinate); for the Kalman filter,
