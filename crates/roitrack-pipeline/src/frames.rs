@@ -149,6 +149,8 @@ pub struct FrameTrackReport {
     pub estimates: usize,
     /// Blobs not found in their windows, by reason.
     pub window_rejections: RejectionCounts,
+    /// Blobs found in a smaller window around their prediction after something reached their window's edge.
+    pub shrunk_windows: usize,
     /// The polarity in use (decided by the first full-frame search with [`PolarityChoice::Auto`]).
     pub polarity: Option<Polarity>,
     pub estimator: EstimatorReport,
@@ -226,6 +228,8 @@ pub struct FrameTracker {
     polarity: Option<Polarity>,
     /// The frame's measurements, in time order.
     measurements: Vec<Measurement>,
+    /// Each point's window in the frame being measured (reused).
+    requests: Vec<Option<RoiRequest>>,
     window: Vec<u16>,
     last_time_s: Option<f64>,
     /// The time of the last estimate given.
@@ -278,6 +282,7 @@ impl FrameTracker {
         let blob_options = config.detection.blob_options(&camera, &target);
         Ok(Self {
             measurements: Vec::with_capacity(target.len()),
+            requests: Vec::with_capacity(target.len()),
             window: Vec::with_capacity(max_side * max_side),
             camera,
             target,
@@ -446,24 +451,53 @@ impl FrameTracker {
         self.measurements.clear();
         let polarity = self.polarity.unwrap_or(Polarity::Bright);
         let time = self.camera.time;
+        let mut requests = std::mem::take(&mut self.requests);
+        requests.clear();
         for i in 0..self.target.len() {
             let request = self.request_at_row_time(predictor, i, frame.t_s);
-            let Some(request) = request else {
-                continue;
-            };
             // A prediction too uncertain for the largest window (the velocity right after a new track, before a
             // second frame has measured it) could put a neighbouring blob in the window: search the frame instead.
             let largest = f64::from(self.config.windows.max_size_px);
-            if request
-                .sigma_px
-                .is_some_and(|sigma| 2.0 * self.config.windows.sigma_margin * sigma > largest)
-            {
-                self.measurements.clear();
+            if request.is_some_and(|r| {
+                r.sigma_px
+                    .is_some_and(|sigma| 2.0 * self.config.windows.sigma_margin * sigma > largest)
+            }) {
+                self.requests = requests;
                 return 0;
             }
+            requests.push(request);
+        }
+        for (i, request) in requests.iter().enumerate() {
+            let Some(request) = request else {
+                continue;
+            };
             let roi = request.roi;
             flatten_window(frame, &roi, polarity, &mut self.window);
-            match measure_blob(&self.window, &roi, &self.config.centroid) {
+            let mut measured = measure_blob(&self.window, &roi, &self.config.centroid);
+            if measured == Err(BlobRejection::TouchesBorder)
+                && let Some(smaller) = shrunk_window(
+                    &roi,
+                    &request.predicted_px,
+                    frame,
+                    self.config.windows.min_size_px,
+                )
+            {
+                // Something reaches the window's edge. In a dense target it is most often a neighbour: a window
+                // sized for an uncertain prediction holds the rims of the blobs next to it, and one of them may be
+                // the brightest. Once more in a window 0.6 times as wide around the prediction, which leaves them
+                // out when the prediction is good; the blob found there counts only if it is nearer this point's
+                // prediction than any other point's.
+                flatten_window(frame, &smaller, polarity, &mut self.window);
+                measured = match measure_blob(&self.window, &smaller, &self.config.centroid) {
+                    Ok(c) if nearest_request(&requests, c.u_px, c.v_px) == Some(i) => {
+                        self.report.shrunk_windows += 1;
+                        Ok(c)
+                    }
+                    Ok(_) => Err(BlobRejection::TouchesBorder),
+                    Err(e) => Err(e),
+                };
+            }
+            match measured {
                 Ok(c) => {
                     self.scheduler.report(i, true);
                     self.measurements.push(Measurement {
@@ -476,15 +510,17 @@ impl FrameTracker {
                 Err(r) => {
                     self.scheduler.report(i, false);
                     self.report.window_rejections.count(&r);
-                    // A blob cut by its window's edge: the prediction is off by about half a window, and the other
-                    // windows may hold cut blobs too, or a neighbour. Measure the frame whole instead.
+                    // A blob cut by its window's edge even after moving the window: the other windows may hold cut
+                    // blobs too, or a neighbour. Measure the frame whole instead.
                     if r == BlobRejection::TouchesBorder {
                         self.measurements.clear();
+                        self.requests = requests;
                         return 0;
                     }
                 }
             }
         }
+        self.requests = requests;
         self.measurements.len()
     }
 
@@ -592,6 +628,49 @@ impl FrameTracker {
     }
 }
 
+/// A window 0.6 times as wide as `roi` (at least `min_side_px`) centred on `predicted_px`, within `frame`; `None`
+/// when it would not be smaller.
+fn shrunk_window(
+    roi: &Roi,
+    predicted_px: &Vector2<f64>,
+    frame: &Frame,
+    min_side_px: u32,
+) -> Option<Roi> {
+    let side = |s: u32| ((f64::from(s) * 0.6).round() as u32).max(min_side_px) | 1;
+    let (width, height) = (side(roi.width), side(roi.height));
+    if width >= roi.width && height >= roi.height {
+        return None;
+    }
+    let start = |centre: f64, side: u32, limit: u32| {
+        ((centre.round() - f64::from(side / 2)).max(0.0) as u32).min(limit.saturating_sub(side))
+    };
+    Some(Roi::new(
+        start(predicted_px.x, width, frame.width),
+        start(predicted_px.y, height, frame.height),
+        width.min(frame.width),
+        height.min(frame.height),
+    ))
+}
+
+/// The point whose predicted blob centre is nearest to `(u_px, v_px)`.
+fn nearest_request(requests: &[Option<RoiRequest>], u_px: f64, v_px: f64) -> Option<usize> {
+    requests
+        .iter()
+        .enumerate()
+        .filter_map(|(i, r)| {
+            r.as_ref()
+                .map(|r| (i, (r.predicted_px.x - u_px).hypot(r.predicted_px.y - v_px)))
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i)
+}
+
+/// The level a flattened window's background is lifted to (1/16 of the frame's range): see [`flatten_window`].
+fn window_offset(frame: &Frame) -> u16 {
+    let max_value = (1u32 << frame.bit_depth.clamp(1, 16)) - 1;
+    ((max_value + 1) / 16) as u16
+}
+
 /// Copies the window `roi` of `frame` into `out` with its background taken away, so that the blob stands bright on
 /// a flat, dark background whatever the light: the background is a least-squares plane through the border pixels
 /// that belong to it, not to the blob or its neighbours (see `border_plane`). Bright blobs: `value - plane`; dark
@@ -623,7 +702,7 @@ pub fn flatten_window(frame: &Frame, roi: &Roi, polarity: Polarity, out: &mut Ve
     out.clear();
     out.resize(w * h, 0);
     let max_value = ((1u32 << frame.bit_depth.clamp(1, 16)) - 1) as f64;
-    let offset = (max_value + 1.0) / 16.0;
+    let offset = f64::from(window_offset(frame));
     let at = |i: usize, j: usize| {
         f64::from(frame.pixels[(roi.y0 as usize + j) * frame.width as usize + roi.x0 as usize + i])
     };
