@@ -10,6 +10,15 @@ fn the_dense_scene_is_tracked_in_its_windows() {
     for readout in [Readout::GlobalShutter, rolling_shutter()] {
         let bench = FrameBench::new(readout, 180).expect("the sweep renders");
         let check = bench.check();
+        let mut tracker = bench.tracker();
+        for frame in bench.frames() {
+            tracker.process(frame).unwrap();
+        }
+        let report = tracker.report();
+        eprintln!(
+            "{readout:?}: {} frames, {} blobs measured again in a smaller window, window rejections {:?}",
+            report.frames, report.shrunk_windows, report.window_rejections
+        );
         assert_eq!(
             check.by_windows, check.steady_frames,
             "{readout:?}: {check:?}"

@@ -671,6 +671,47 @@ fn window_offset(frame: &Frame) -> u16 {
     ((max_value + 1) / 16) as u16
 }
 
+/// The least-squares plane `[a, b, c]` (`a + b x + c y`) through the `border` pixels `(x, y, value)` that `keep`
+/// marks, from their centred moments (one pass over raw sums). Their rank decides what they determine: a plane, a
+/// slope along one line (the pixels of one border row or column: the plane's other slope is unknown and taken as 0,
+/// rather than computed from round-off), or, for one pixel, a level. `None` when none is kept.
+fn fit_plane(border: &[(f64, f64, f64)], keep: &[bool]) -> Option<[f64; 3]> {
+    let mut sums = [0.0f64; 9];
+    for (p, _) in border.iter().zip(keep).filter(|(_, k)| **k) {
+        let (x, y, v) = *p;
+        for (sum, term) in sums
+            .iter_mut()
+            .zip([1.0, x, y, v, x * x, y * y, x * y, x * v, y * v])
+        {
+            *sum += term;
+        }
+    }
+    let [count, sx, sy, sv, sxx, syy, sxy, sxv, syv] = sums;
+    if count == 0.0 {
+        return None;
+    }
+    let (mx, my, mv) = (sx / count, sy / count, sv / count);
+    let (sxx, syy, sxy) = (sxx - sx * mx, syy - sy * my, sxy - sx * my);
+    let (sxv, syv) = (sxv - sx * mv, syv - sy * mv);
+    let det = sxx * syy - sxy * sxy;
+    // Border pixels sit on whole-pixel coordinates: spreads below a thousandth of a pixel squared are zero.
+    let along = |dx: f64, dy: f64| {
+        let g = (sxv * dx + syv * dy) / (sxx * dx * dx + 2.0 * sxy * dx * dy + syy * dy * dy);
+        (g * dx, g * dy)
+    };
+    let (b, c) = if sxx > 1e-3 && syy > 1e-3 && det > 1e-6 * sxx * syy {
+        ((syy * sxv - sxy * syv) / det, (sxx * syv - sxy * sxv) / det)
+    } else if sxx >= syy && sxx > 1e-3 {
+        // Along a line: the slope along its direction, none across it.
+        along(1.0, sxy / sxx)
+    } else if syy > 1e-3 {
+        along(sxy / syy, 1.0)
+    } else {
+        (0.0, 0.0)
+    };
+    Some([mv - b * mx - c * my, b, c])
+}
+
 /// Copies the window `roi` of `frame` into `out` with its background taken away, so that the blob stands bright on
 /// a flat, dark background whatever the light: the background is a least-squares plane through the border pixels
 /// that belong to it, not to the blob or its neighbours (see `border_plane`). Bright blobs: `value - plane`; dark
@@ -706,20 +747,21 @@ pub fn flatten_window(frame: &Frame, roi: &Roi, polarity: Polarity, out: &mut Ve
     let at = |i: usize, j: usize| {
         f64::from(frame.pixels[(roi.y0 as usize + j) * frame.width as usize + roi.x0 as usize + i])
     };
-    // The blob's extreme value: where the contrast is measured from.
-    let blob_extreme = (0..h)
-        .flat_map(|j| (0..w).map(move |i| (i, j)))
-        .map(|(i, j)| at(i, j))
-        .fold(
-            match polarity {
-                Polarity::Dark => f64::INFINITY,
-                Polarity::Bright => f64::NEG_INFINITY,
-            },
-            |extreme, v| match polarity {
-                Polarity::Dark => extreme.min(v),
-                Polarity::Bright => extreme.max(v),
-            },
-        );
+    // The blob's extreme value: where the contrast is measured from (row slices, integer extremes).
+    let rows = (0..h).map(|j| {
+        let start = (roi.y0 as usize + j) * frame.width as usize + roi.x0 as usize;
+        &frame.pixels[start..start + w]
+    });
+    let blob_extreme = f64::from(match polarity {
+        Polarity::Dark => rows
+            .map(|row| row.iter().copied().min().unwrap_or(u16::MAX))
+            .min()
+            .unwrap_or(0),
+        Polarity::Bright => rows
+            .map(|row| row.iter().copied().max().unwrap_or(0))
+            .max()
+            .unwrap_or(0),
+    });
     let (a, b, c) = border_plane(w, h, polarity, blob_extreme, at);
     let (cx, cy) = ((w as f64 - 1.0) / 2.0, (h as f64 - 1.0) / 2.0);
     let frame_width = frame.width as usize;
@@ -802,62 +844,21 @@ fn border_plane(
         .map(|p| towards_blob * p.2)
         .fold(f64::INFINITY, f64::min);
     let midpoint = 0.5 * (background_level + towards_blob * blob_extreme);
-    let fit = |is_background: &dyn Fn(&(f64, f64, f64)) -> bool| {
-        // Least squares from the chosen pixels' centred moments. Their rank decides what they determine: a plane, a
-        // slope along one line (the pixels of one border row or column: the plane's other slope is unknown and taken
-        // as 0, rather than computed from round-off), or, for one pixel, a level.
-        let (mut count, mut sum) = (0.0f64, nalgebra::Vector3::<f64>::zeros());
-        for p in border.iter().filter(|p| is_background(p)) {
-            count += 1.0;
-            sum += nalgebra::Vector3::new(p.0, p.1, p.2);
-        }
-        if count == 0.0 {
-            return None;
-        }
-        let mean = sum / count;
-        let (mut sxx, mut syy, mut sxy, mut sxv, mut syv) = (0.0f64, 0.0, 0.0, 0.0, 0.0);
-        for p in border.iter().filter(|p| is_background(p)) {
-            let (x, y, v) = (p.0 - mean[0], p.1 - mean[1], p.2 - mean[2]);
-            sxx += x * x;
-            syy += y * y;
-            sxy += x * y;
-            sxv += x * v;
-            syv += y * v;
-        }
-        let det = sxx * syy - sxy * sxy;
-        // Border pixels sit on whole-pixel coordinates: spreads below a thousandth of a pixel squared are zero.
-        let (b, c) = if sxx > 1e-3 && syy > 1e-3 && det > 1e-6 * sxx * syy {
-            ((syy * sxv - sxy * syv) / det, (sxx * syv - sxy * sxv) / det)
-        } else if sxx >= syy && sxx > 1e-3 {
-            // Along a line: the slope along its direction (1, sxy / sxx), none across it.
-            let (dx, dy) = (1.0, sxy / sxx);
-            let g = (sxv * dx + syv * dy) / (sxx * dx * dx + 2.0 * sxy * dx * dy + syy * dy * dy);
-            (g * dx, g * dy)
-        } else if syy > 1e-3 {
-            let (dx, dy) = (sxy / syy, 1.0);
-            let g = (sxv * dx + syv * dy) / (sxx * dx * dx + 2.0 * sxy * dx * dy + syy * dy * dy);
-            (g * dx, g * dy)
-        } else {
-            (0.0, 0.0)
-        };
-        Some(nalgebra::Vector3::new(
-            mean[2] - b * mean[0] - c * mean[1],
-            b,
-            c,
-        ))
-    };
-    let Some(first) = fit(&|p| towards_blob * p.2 <= midpoint) else {
+    let mut background = [false; MAX_BORDER_PX];
+    for (keep, p) in background.iter_mut().zip(border) {
+        *keep = towards_blob * p.2 <= midpoint;
+    }
+    let Some(first) = fit_plane(border, &background[..n]) else {
         let mean = border.iter().map(|p| p.2).sum::<f64>() / n.max(1) as f64;
         return (mean, 0.0, 0.0);
     };
-    let plane_at = |plane: &nalgebra::Vector3<f64>, p: &(f64, f64, f64)| {
-        plane[0] + plane[1] * p.0 + plane[2] * p.1
-    };
+    let plane_at =
+        |plane: &[f64; 3], p: &(f64, f64, f64)| plane[0] + plane[1] * p.0 + plane[2] * p.1;
     // The refit keeps the pixels within a tenth of the blob's contrast of the first plane, or 3 robust standard
     // deviations of the first fit's residuals (1.4826 times their median absolute value) when the noise is larger.
     let mut deviations = [0.0f64; MAX_BORDER_PX];
     let mut m = 0;
-    for p in border.iter().filter(|p| towards_blob * p.2 <= midpoint) {
+    for (p, _) in border.iter().zip(&background).filter(|(_, keep)| **keep) {
         deviations[m] = (p.2 - plane_at(&first, p)).abs();
         m += 1;
     }
@@ -865,7 +866,10 @@ fn border_plane(
         .select_nth_unstable_by(m / 2, f64::total_cmp)
         .1;
     let limit = (0.1 * towards_blob * (blob_extreme - first[0])).max(3.0 * 1.4826 * median);
-    let plane = fit(&|p| towards_blob * (p.2 - plane_at(&first, p)) <= limit).unwrap_or(first);
+    for (keep, p) in background.iter_mut().zip(border) {
+        *keep = towards_blob * (p.2 - plane_at(&first, p)) <= limit;
+    }
+    let plane = fit_plane(border, &background[..n]).unwrap_or(first);
     (plane[0], plane[1], plane[2])
 }
 
