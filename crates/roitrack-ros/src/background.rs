@@ -40,8 +40,9 @@ enum Item {
 
 /// A [`BagWriter`] driven from another thread: [`write_estimate`](Self::write_estimate) and
 /// [`write_frame`](Self::write_frame) hand a copy over a bounded queue, the writing thread serialises and writes it.
-/// Messages keep their order. An error of the writing thread (a full disk) is reported by the next call or by
-/// [`finish`](Self::finish); the bag is completed (chunks, summary) by `finish`, or when this is dropped (an early
+/// Messages keep their order. An error of the writing thread (a full disk) is reported by the next estimate, frame or
+/// ROI handed over (centroids are only gathered until then) or by [`finish`](Self::finish), and every call after
+/// that says it again; the bag is completed (chunks, summary) by `finish`, or when this is dropped (an early
 /// return, a panic), after every message handed over so far.
 ///
 /// ```
@@ -183,9 +184,6 @@ impl BackgroundBag {
     /// (see [`BagWriter::write_measurements`]) when the next estimate or frame is handed over, when it holds 256
     /// centroids, and at the end.
     pub fn write_measurements(&mut self, measurements: &[Measurement]) -> Result<(), FormatError> {
-        if self.queue.is_abandoned() {
-            return Err(self.stopped_error());
-        }
         self.measurements.extend_from_slice(measurements);
         if self.measurements.len() >= MAX_MEASUREMENTS_PER_MESSAGE {
             self.close_measurements()?;
@@ -345,11 +343,13 @@ mod tests {
             u_px: 1.0,
             v_px: 1.0,
         };
-        // Refused at once: the writer has stopped.
-        let refused = bag.write_measurements(&[m]).unwrap_err();
+        // Measurements are only gathered (no check per centroid, which would cost the tracking thread): the next
+        // estimate handed over reports the writer's error.
+        bag.write_measurements(&[m]).unwrap();
+        let refused = bag.write_estimate(&estimate_at(1.0)).unwrap_err();
         assert!(is_the_stamp_error(&refused), "{refused}");
         // Later calls say what it said.
-        let later = bag.write_estimate(&estimate_at(1.0)).unwrap_err();
+        let later = bag.write_estimate(&estimate_at(2.0)).unwrap_err();
         assert!(
             later.to_string().contains("stopped earlier") && later.to_string().contains("stamp"),
             "{later}"
