@@ -510,7 +510,7 @@ impl FrameTracker {
                 Err(r) => {
                     self.scheduler.report(i, false);
                     self.report.window_rejections.count(&r);
-                    // A blob cut by its window's edge even after moving the window: the other windows may hold cut
+                    // A blob cut by its window's edge even in the smaller window: the other windows may hold cut
                     // blobs too, or a neighbour. Measure the frame whole instead.
                     if r == BlobRejection::TouchesBorder {
                         self.measurements.clear();
