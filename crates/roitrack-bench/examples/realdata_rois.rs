@@ -18,8 +18,8 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
-use roitrack_image::{BlobRejection, CentroidOptions, Frame, Roi, measure_blob};
-use roitrack_pipeline::frames::flatten_window;
+use roitrack_image::{BlobRejection, CentroidOptions, Frame, Roi};
+use roitrack_pipeline::frames::{FlatWindow, flatten_window, measure_flat_window};
 use roitrack_pipeline::photo::{PhotoDetection, PhotoOptions, detect_target};
 use roitrack_pipeline::scheduler::SchedulerConfig;
 
@@ -38,8 +38,9 @@ struct Counts {
 struct BlobWindow {
     id: u32,
     roi: Roi,
-    /// The window's pixels, the blob bright.
+    /// The window's pixels, the blob bright, and what flattening them found.
     pixels: Vec<u16>,
+    flat: FlatWindow,
     /// The centre `detect` measured from the blob's outline (px).
     outline_centre: (f64, f64),
 }
@@ -71,11 +72,12 @@ fn rois(frame: &Frame, found: &PhotoDetection) -> Vec<BlobWindow> {
         let (x0, y0) = (x0 as u32, y0 as u32);
         let roi = Roi::new(x0, y0, side, side);
         let mut pixels = Vec::with_capacity(roi.len());
-        flatten_window(frame, &roi, found.polarity, &mut pixels);
+        let flat = flatten_window(frame, &roi, found.polarity, &mut pixels);
         out.push(BlobWindow {
             id: point.id,
             roi,
             pixels,
+            flat,
             outline_centre: (blob.u_px, blob.v_px),
         });
     }
@@ -123,10 +125,11 @@ fn run(data: &Path, verbose: bool) -> Result<usize, String> {
                 id,
                 roi,
                 pixels,
+                flat,
                 outline_centre,
             } in rois(&frame, &found)
             {
-                match measure_blob(&pixels, &roi, &CentroidOptions::default()) {
+                match measure_flat_window(&pixels, &roi, &flat, &CentroidOptions::default()) {
                     Ok(c) => {
                         counts.accepted += 1;
                         let offset = (c.u_px - outline_centre.0).hypot(c.v_px - outline_centre.1);

@@ -245,3 +245,74 @@ fn a_window_whose_background_is_one_border_row_is_flattened_level() {
         }
     }
 }
+
+#[test]
+fn a_window_in_a_dense_grid_of_dark_circles_gives_its_centre() {
+    // A hexagonal grid of dark circles (radius 7 px, centres 16 px apart: gaps of 2 px) on paper lit unevenly, the
+    // window's border crossing the six neighbours. Each circle anti-aliased (16 samples a pixel), a little noise.
+    let (side, radius, spacing) = (31u32, 7.0f64, 16.0f64);
+    for (k, (cx, cy)) in [(15.0, 15.0), (15.3, 14.8), (14.6, 15.45)]
+        .into_iter()
+        .enumerate()
+    {
+        let mut centres = vec![(cx, cy)];
+        for n in 0..6 {
+            let angle = std::f64::consts::FRAC_PI_3 * n as f64;
+            centres.push((cx + spacing * angle.cos(), cy + spacing * angle.sin()));
+        }
+        let mut frame = Frame {
+            t_s: 0.0,
+            width: side,
+            height: side,
+            bit_depth: 8,
+            pixels: vec![0; (side * side) as usize],
+        };
+        for j in 0..side {
+            for i in 0..side {
+                let mut covered = 0.0;
+                for s in 0..16 {
+                    let (x, y) = (
+                        f64::from(i) + (f64::from(s % 4) + 0.5) / 4.0 - 0.5,
+                        f64::from(j) + (f64::from(s / 4) + 0.5) / 4.0 - 0.5,
+                    );
+                    if centres.iter().any(|c| (x - c.0).hypot(y - c.1) < radius) {
+                        covered += 1.0 / 16.0;
+                    }
+                }
+                let paper = 170.0 + 0.8 * f64::from(i) + 0.4 * f64::from(j);
+                let noise = f64::from((i * 7 + j * 13 + k as u32) % 5) - 2.0;
+                // The window's own circle a little darker than its neighbours, so that it is the window's
+                // extreme: which blob a window measures is the frame tracker's business (it retries in a smaller
+                // window when a neighbour wins), not the flattening's.
+                let darkness = if centres[1..]
+                    .iter()
+                    .any(|c| (f64::from(i) - c.0).hypot(f64::from(j) - c.1) < radius + 1.0)
+                {
+                    0.75
+                } else {
+                    0.8
+                };
+                let value = paper * (1.0 - darkness * covered) + noise;
+                frame.pixels[(j * side + i) as usize] = value.round() as u16;
+            }
+        }
+        let roi = roitrack_image::Roi::new(0, 0, side, side);
+        let mut window = Vec::new();
+        let flat =
+            roitrack_pipeline::frames::flatten_window(&frame, &roi, Polarity::Dark, &mut window);
+        let c = roitrack_pipeline::frames::measure_flat_window(
+            &window,
+            &roi,
+            &flat,
+            &roitrack_image::CentroidOptions::default(),
+        )
+        .unwrap_or_else(|e| panic!("circle {k}: {e} ({flat:?})"));
+        let error = (c.u_px - cx).hypot(c.v_px - cy);
+        assert!(
+            error < 0.05,
+            "circle {k}: centroid ({}, {}) is {error} px from ({cx}, {cy})",
+            c.u_px,
+            c.v_px
+        );
+    }
+}
