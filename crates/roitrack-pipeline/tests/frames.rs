@@ -201,6 +201,17 @@ fn rolling_shutter_estimates_are_timed_in_the_middle_of_their_frames_blobs() {
     assert!(middle_mm < newest_mm, "{middle_mm} vs {newest_mm}");
 }
 
+/// An 8-bit `side` x `side` frame at time 0, every pixel `value`.
+fn square_frame(side: u32, value: u16) -> Frame {
+    Frame {
+        t_s: 0.0,
+        width: side,
+        height: side,
+        bit_depth: 8,
+        pixels: vec![value; (side * side) as usize],
+    }
+}
+
 #[test]
 fn a_window_whose_background_is_one_border_row_is_flattened_level() {
     // A dense grid of dark circles: only the window's top row is paper (200); the rest of its border, and all but
@@ -208,13 +219,7 @@ fn a_window_whose_background_is_one_border_row_is_flattened_level() {
     // only: the plane must be level across it, not tilted by round-off.
     for side in [7u32, 10, 19, 34, 40, 51, 60, 63, 64] {
         for noisy in [false, true] {
-            let mut frame = Frame {
-                t_s: 0.0,
-                width: side,
-                height: side,
-                bit_depth: 8,
-                pixels: vec![70; (side * side) as usize],
-            };
+            let mut frame = square_frame(side, 70);
             for i in 0..side as usize {
                 // Paper with ±2 of noise, or flat.
                 frame.pixels[i] = if noisy { 198 + (i * 7 % 5) as u16 } else { 200 };
@@ -260,13 +265,7 @@ fn a_window_in_a_dense_grid_of_dark_circles_gives_its_centre() {
             let angle = std::f64::consts::FRAC_PI_3 * n as f64;
             centres.push((cx + spacing * angle.cos(), cy + spacing * angle.sin()));
         }
-        let mut frame = Frame {
-            t_s: 0.0,
-            width: side,
-            height: side,
-            bit_depth: 8,
-            pixels: vec![0; (side * side) as usize],
-        };
+        let mut frame = square_frame(side, 0);
         for j in 0..side {
             for i in 0..side {
                 let mut covered = 0.0;
