@@ -25,12 +25,9 @@ use roitrack_pipeline::scheduler::SchedulerConfig;
 
 #[derive(Debug, Default)]
 struct Counts {
-    accepted: usize,
     asymmetric: usize,
     other: usize,
-    /// Largest distance between the ROI centroid and the detection's outline centre (px).
-    worst_offset_px: f64,
-    /// Every such distance.
+    /// Per accepted blob: the distance between the ROI centroid and the detection's outline centre (px).
     offsets_px: Vec<f64>,
 }
 
@@ -130,12 +127,9 @@ fn run(data: &Path, verbose: bool) -> Result<usize, String> {
             } in rois(&frame, &found)
             {
                 match measure_flat_window(&pixels, &roi, &flat, &CentroidOptions::default()) {
-                    Ok(c) => {
-                        counts.accepted += 1;
-                        let offset = (c.u_px - outline_centre.0).hypot(c.v_px - outline_centre.1);
-                        counts.worst_offset_px = counts.worst_offset_px.max(offset);
-                        counts.offsets_px.push(offset);
-                    }
+                    Ok(c) => counts
+                        .offsets_px
+                        .push((c.u_px - outline_centre.0).hypot(c.v_px - outline_centre.1)),
                     Err(BlobRejection::Asymmetric) => {
                         counts.asymmetric += 1;
                         println!("  asymmetric: {} point {id}", photo.display());
@@ -149,17 +143,17 @@ fn run(data: &Path, verbose: bool) -> Result<usize, String> {
                 }
             }
         }
+        let mut o = counts.offsets_px;
+        o.sort_by(f64::total_cmp);
         println!(
             "{set:<26} {:>7} {:>9} {:>10} {:>6} {:>12.3}",
             photos.len(),
-            counts.accepted,
+            o.len(),
             counts.asymmetric,
             counts.other,
-            counts.worst_offset_px
+            o.last().copied().unwrap_or(0.0)
         );
         rejected += counts.asymmetric;
-        let mut o = counts.offsets_px;
-        o.sort_by(f64::total_cmp);
         let q = |f: f64| {
             o.get(((o.len() as f64 - 1.0) * f) as usize)
                 .copied()
