@@ -101,8 +101,9 @@ pub struct EstimatorArgs {
     pub noise_px: f64,
     /// Kalman: what the filter learns online: the centroid noise and the process noise (both), one of them, or none
     /// (--noise-px, --accel-psd and --angular-accel-psd taken as the truth: a hand-tuned filter). Default: both for
-    /// measurements and ROI recordings, none for --images (a frame's blobs span one instant or one readout, too
-    /// short for the noise estimate).
+    /// measurements and ROI recordings, the noise alone for --images (a process noise that follows the motion
+    /// chases the jitter between frames at frame rates). With --images, the twist covariance is never calibrated
+    /// against the poses around each estimate, whatever --adapt says.
     #[arg(long, value_enum)]
     pub adapt: Option<AdaptArg>,
     /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise. Default: 1
@@ -126,9 +127,20 @@ pub struct EstimatorArgs {
 }
 
 impl EstimatorArgs {
+    /// What `--adapt` asks the Kalman filter to learn; `None` without it (the source's default).
+    pub fn adaptation(&self) -> Option<roitrack::math::estimator::Adaptation> {
+        use roitrack::math::estimator::Adaptation;
+        self.adapt.map(|a| match a {
+            AdaptArg::Both => Adaptation::Both,
+            AdaptArg::Noise => Adaptation::Noise,
+            AdaptArg::Motion => Adaptation::Motion,
+            AdaptArg::None => Adaptation::None,
+        })
+    }
+
     /// The options by name, translated into a configuration by the library (as the Python package does).
     pub fn config(&self) -> TrackerConfig {
-        use roitrack::math::estimator::{Adaptation, EstimatorKind};
+        use roitrack::math::estimator::EstimatorKind;
         TrackerOptions {
             estimator: match self.estimator {
                 EstimatorArg::Kalman => EstimatorKind::Kalman,
@@ -142,12 +154,7 @@ impl EstimatorArgs {
             window: self.window,
             every: self.every,
             noise_px: self.noise_px,
-            adapt: self.adapt.map(|a| match a {
-                AdaptArg::Both => Adaptation::Both,
-                AdaptArg::Noise => Adaptation::Noise,
-                AdaptArg::Motion => Adaptation::Motion,
-                AdaptArg::None => Adaptation::None,
-            }),
+            adapt: self.adaptation(),
             accel_psd: self.accel_psd,
             angular_accel_psd: self.angular_accel_psd,
             robust: match self.robust {

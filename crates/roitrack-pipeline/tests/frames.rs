@@ -1,8 +1,10 @@
 //! The frame tracker on simulated image sequences with ground truth: global and rolling shutters, bright and dark
 //! blobs, fast motion, losses and bad frames.
 
-use roitrack_core::so3;
+use nalgebra::Vector3;
+use roitrack_core::estimator::{Adaptation, EstimatorConfig, NoiseSample};
 use roitrack_core::time::Readout;
+use roitrack_core::{CameraModel, Target, TargetPoint, so3};
 use roitrack_image::{Frame, Polarity};
 use roitrack_pipeline::frames::{FrameMethod, FrameTracker, FrameTrackerConfig};
 use roitrack_sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
@@ -12,6 +14,8 @@ struct Run {
     errors: Vec<(f64, f64, f64)>,
     methods: Vec<FrameMethod>,
     frames: usize,
+    /// The centroid noise the estimator worked with at its last estimate (px).
+    last_noise_px: f64,
 }
 
 fn run(frames: &mut FrameSequence, tracker_camera_readout: Option<Readout>, count: usize) -> Run {
@@ -19,17 +23,28 @@ fn run(frames: &mut FrameSequence, tracker_camera_readout: Option<Readout>, coun
     if let Some(readout) = tracker_camera_readout {
         camera.time.readout = readout;
     }
+    run_with(frames, camera, FrameTrackerConfig::default(), count)
+}
+
+fn run_with(
+    frames: &mut FrameSequence,
+    camera: CameraModel,
+    config: FrameTrackerConfig,
+    count: usize,
+) -> Run {
     let target = frames.scenario().target.clone();
-    let mut tracker = FrameTracker::new(camera, target, FrameTrackerConfig::default()).unwrap();
+    let mut tracker = FrameTracker::new(camera, target, config).unwrap();
     let mut frame = Frame::default();
     let mut errors = Vec::new();
     let mut methods = Vec::new();
+    let mut last_noise_px = f64::NAN;
     let count = count.min(frames.len());
     for k in 0..count {
         frames.render(k, &mut frame);
         let outcome = tracker.process(&frame).unwrap();
         methods.push(outcome.method);
         if let Some(e) = outcome.estimate {
+            last_noise_px = e.noise_px;
             let truth = frames.state_at(e.t_ref_s);
             errors.push((
                 (e.state.cam_t_obj_m - truth.cam_t_obj_m).norm(),
@@ -42,6 +57,7 @@ fn run(frames: &mut FrameSequence, tracker_camera_readout: Option<Readout>, coun
         errors,
         methods,
         frames: count,
+        last_noise_px,
     }
 }
 
@@ -81,7 +97,10 @@ fn sequence_of(
     polarity: Polarity,
     seed: u64,
 ) -> FrameSequence {
-    let scenario = Scenario::new(kind, seed);
+    frames_of(Scenario::new(kind, seed), readout, polarity, seed)
+}
+
+fn frames_of(scenario: Scenario, readout: Readout, polarity: Polarity, seed: u64) -> FrameSequence {
     let options = FrameOptions {
         readout,
         polarity,
@@ -134,6 +153,72 @@ fn rolling_shutter_model_beats_the_global_model_on_rolling_frames() {
     // Close to what a global shutter gives on the same motion.
     assert!(pos_r <= (1.5 * pos_gs).max(0.3e-3), "{pos_r} vs {pos_gs}");
     assert!(vel_r <= (1.5 * vel_gs).max(0.03), "{vel_r} vs {vel_gs}");
+}
+
+#[test]
+fn a_four_point_target_learns_its_centroid_noise_frame_by_frame() {
+    // Four dots, as on a hand-made target: a control step's window of two cycles of points would span 7 frames
+    // (233 ms at 30 Hz), over which a constant twist is far from the sweep's motion.
+    let dot = |id: u32, x: f64, y: f64| TargetPoint {
+        id,
+        point_in_obj_m: Vector3::new(x, y, 0.0),
+        diameter_m: Some(if id == 0 { 0.014 } else { 0.012 }),
+    };
+    let target = Target::new(vec![
+        dot(0, -0.04, -0.03),
+        dot(1, 0.04, -0.03),
+        dot(2, 0.04, 0.03),
+        dot(3, -0.03, 0.03),
+    ])
+    .unwrap();
+    let rolling = Readout::RollingShutter {
+        line_delay_s: 30e-6,
+    };
+    let scenario = Scenario::new(ScenarioKind::Sweep, 2).with_target(target);
+    let mut frames = frames_of(scenario, rolling, Polarity::Bright, 2);
+    let camera = frames.camera().clone();
+    let learnt = run_with(
+        &mut frames,
+        camera.clone(),
+        FrameTrackerConfig::default(),
+        90,
+    );
+    let mut held = FrameTrackerConfig::default();
+    held.tracker = FrameTrackerConfig::frame_estimator(held.tracker, Some(Adaptation::None));
+    let held = run_with(&mut frames, camera.clone(), held, 90);
+    let mut windowed = FrameTrackerConfig::default();
+    if let EstimatorConfig::Kalman(tuning) = &mut windowed.tracker.estimator {
+        tuning.noise_sample = NoiseSample::Window;
+    }
+    let windowed = run_with(&mut frames, camera, windowed, 90);
+    let (pos_learnt, _) = summary("noise learnt frame by frame", &learnt);
+    let (pos_held, _) = summary("noise held at 0.1 px", &held);
+    let (pos_windowed, _) = summary("noise learnt from constant-twist windows", &windowed);
+    eprintln!(
+        "noise: {:.4} px learnt frame by frame, {:.4} px from windows",
+        learnt.last_noise_px, windowed.last_noise_px
+    );
+    assert_eq!(learnt.errors.len(), learnt.frames);
+    let windows = |run: &Run| {
+        run.methods
+            .iter()
+            .filter(|m| **m == FrameMethod::Windows)
+            .count()
+    };
+    assert!(
+        windows(&learnt) + 3 >= learnt.frames,
+        "{:?}",
+        learnt.methods
+    );
+    // The rendered centroids are good to a few hundredths of a pixel; the filter starts from 0.1 px.
+    assert!(learnt.last_noise_px < 0.05, "{} px", learnt.last_noise_px);
+    assert!(pos_learnt < pos_held, "{pos_learnt} vs {pos_held} m");
+    // The constant-twist windows take the motion's change over 7 frames for noise, and the windows lose the blobs.
+    assert!(windowed.last_noise_px > 10.0 * learnt.last_noise_px);
+    assert!(
+        pos_windowed > 3.0 * pos_learnt,
+        "{pos_windowed} vs {pos_learnt} m"
+    );
 }
 
 #[test]

@@ -286,11 +286,11 @@ fn run_frames(
         .validate()
         .context("invalid --line-delay-s or --exposure-s")?;
     let config = FrameTrackerConfig {
-        // Without --adapt, the frame tracker's own default: no online learning.
-        tracker: match args.estimator.adapt {
-            Some(_) => args.estimator.config(),
-            None => FrameTrackerConfig::frame_estimator(args.estimator.config()),
-        },
+        // Without --adapt, the frame tracker's own default: the noise learnt, the process noise as given.
+        tracker: FrameTrackerConfig::frame_estimator(
+            args.estimator.config(),
+            args.estimator.adaptation(),
+        ),
         detection: PhotoOptions {
             polarity: args.polarity.into(),
             distance_range_m: distance_range(args.distance_m.as_deref())?,

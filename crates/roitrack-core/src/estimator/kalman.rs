@@ -89,6 +89,31 @@ pub struct KalmanTuning {
     /// the filter needs to follow manoeuvres makes it claim a velocity uncertainty two to four times too wide on
     /// smooth motion. Only the reported covariance changes, never the estimate.
     pub calibrate_twist_covariance: bool,
+    /// Which residual the noise estimate samples (with [`Self::adapt_noise`]). Default [`NoiseSample::Window`].
+    pub noise_sample: NoiseSample,
+}
+
+/// Which residual the Kalman filter's noise estimate samples at each control step.
+///
+/// ```
+/// use roitrack_core::estimator::{KalmanTuning, NoiseSample};
+///
+/// assert_eq!(KalmanTuning::default().noise_sample, NoiseSample::Window);
+/// // What the frame tracker uses: each frame's blobs alone.
+/// let frames = KalmanTuning { noise_sample: NoiseSample::StepPose, ..KalmanTuning::default() };
+/// assert!(frames.adapt_noise);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NoiseSample {
+    /// The control step's window (two cycles of the target's points, longer for small targets) under one constant
+    /// twist, all 12 parameters fitted: right for ROIs, a few milliseconds apart.
+    Window,
+    /// The step's own measurements alone (a frame's blobs), only the pose fitted, the twist held at the filter's:
+    /// right for frames. Several frames are tens of milliseconds apart, and a constant twist over them takes the
+    /// motion's change for noise (a 4-point target's window of 7 frames at 30 Hz learnt 4 px instead of 0.01 px);
+    /// and a global-shutter frame alone cannot tell the twist. The sample's redundancy is `2 m - 6`. With a rolling
+    /// shutter the twist's error over the readout adds to it: the estimate errs on the wide side.
+    StepPose,
 }
 
 impl Default for KalmanTuning {
@@ -101,6 +126,7 @@ impl Default for KalmanTuning {
             adapt_noise: true,
             adapt_motion: true,
             calibrate_twist_covariance: true,
+            noise_sample: NoiseSample::Window,
         }
     }
 }
@@ -588,9 +614,13 @@ impl KalmanLaw {
         ne: &crate::solver::NormalEquations<12>,
         step: Option<crate::Vector12>,
     ) {
+        let step_pose = self.filter.tuning.noise_sample == NoiseSample::StepPose;
         let min_measurements = (12 + MIN_NOISE_DOF).div_ceil(2);
         let mut rebuilt = false;
-        if ne.count() < min_measurements {
+        if step_pose {
+            core.fill_scratch(super::WindowMode::Last(core.step_measurements));
+            rebuilt = true;
+        } else if ne.count() < min_measurements {
             core.fill_scratch(super::WindowMode::Last(min_measurements));
             rebuilt = true;
         }
@@ -601,7 +631,13 @@ impl KalmanLaw {
             core.scratch.retain(|o| !is_gated(o));
             rebuilt = true;
         }
-        let (cost_px2, count) = if rebuilt {
+        let (cost_px2, count) = if step_pose {
+            let window = core.window_problem(t_new_s).normal_equations(&core.state);
+            let Some(cost_px2) = pose_only_optimum_cost_px2(&window) else {
+                return;
+            };
+            (cost_px2, window.count())
+        } else if rebuilt {
             let window = core.window_problem(t_new_s).normal_equations(&core.state);
             let Some((step, _)) = window.solve_with_conditioning() else {
                 return;
@@ -611,10 +647,12 @@ impl KalmanLaw {
             let Some(step) = step else { return };
             (ne.cost_px2() + step.dot(ne.jte()), ne.count())
         };
-        if 2 * count < 12 + MIN_NOISE_DOF {
+        let fitted = if step_pose { 6 } else { 12 };
+        let min_dof = if step_pose { 2 } else { MIN_NOISE_DOF };
+        if 2 * count < fitted + min_dof {
             return;
         }
-        let dof = (2 * count - 12) as f64;
+        let dof = (2 * count - fitted) as f64;
         // Every measurement left in lies inside the gate: the sample is that of a noise truncated at the gate's
         // Mahalanobis radius g, whose variance is a fraction (1 - (1 + g²/2) e^(-g²/2)) / (1 - e^(-g²/2)) of the
         // noise's (0.949 at 3 σ; measured on clean orthoglide without this: 0.92).
@@ -625,6 +663,26 @@ impl KalmanLaw {
             .add(cost_px2.max(0.0) / dof / truncated_fraction, dof);
         core.noise_px = self.noise.noise_px();
     }
+}
+
+/// The least-squares residual `eᵀe - gᵀ H⁻¹ g` of `window` at its optimum over the pose alone (the first six
+/// parameters; `H` and `g` their block of `JᵀJ` and `Jᵀe`), the twist held; `None` when that block is singular.
+fn pose_only_optimum_cost_px2(window: &crate::solver::NormalEquations<12>) -> Option<f64> {
+    let jtj = window.symmetric_jtj();
+    let h = jtj.fixed_view::<6, 6>(0, 0).into_owned();
+    let g = window.jte().fixed_rows::<6>(0).into_owned();
+    // Scaled to a unit diagonal: the position (m) and rotation (rad) columns differ by orders of magnitude.
+    let scale = h
+        .diagonal()
+        .map(|d| if d > 0.0 { 1.0 / d.sqrt() } else { 0.0 });
+    if scale.iter().any(|&s| s == 0.0) {
+        return None;
+    }
+    let scaled = SMatrix::<f64, 6, 6>::from_fn(|i, j| h[(i, j)] * scale[i] * scale[j]);
+    let scaled_g = g.component_mul(&scale);
+    let reduction = scaled.cholesky()?.solve(&scaled_g).dot(&scaled_g);
+    let cost = window.cost_px2() - reduction;
+    cost.is_finite().then_some(cost.max(0.0))
 }
 
 /// The default estimator: an error-state Kalman filter, every centroid one update at its own time (see the

@@ -63,7 +63,7 @@ use thiserror::Error;
 
 use crate::{CameraModel, Measurement, MotionState, Target};
 pub use batch::BatchEstimator;
-pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12};
+pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12, NoiseSample};
 pub use options::{Adaptation, EstimatorKind, TrackerOptions, UnknownName};
 pub use problem::{Observation, RobustLoss, WindowProblem};
 pub use static_baseline::StaticEstimator;
