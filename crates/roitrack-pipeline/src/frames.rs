@@ -81,16 +81,16 @@ impl FrameTrackerConfig {
     /// `config` made for frames. The Kalman filter learns the centroid noise from the residual of each frame's own
     /// blobs, the pose alone fitted ([`NoiseSample::StepPose`]), unless `adapt` says otherwise; it keeps
     /// the process noise it is given unless `adapt` asks for it to follow the motion (that adaptation was tuned at
-    /// ROI rates: at 30 Hz it chased the frame-to-frame jitter, and `roitrack frame-study` had 313 of 540
-    /// global-shutter frames fall back to whole-frame searches, 1.08 mm off); and its twist covariance is never
+    /// ROI rates: at 30 Hz it chased the frame-to-frame jitter, and `roitrack frame-study` had 288 of 540
+    /// global-shutter frames fall back to whole-frame searches, 15.6 mm off); and its twist covariance is never
     /// calibrated against the poses around each estimate (8 estimates either side are half a second at 30 Hz).
     /// `adapt` is the user's choice (`track --adapt`); `None`: the frame default, the noise alone.
     ///
     /// Learning the noise matters most for rolling shutters: a frame's blobs then pin the twist too (through the
     /// image's stretch over the readout), and how much the filter trusts them against its motion model sets how
     /// well the depth is found. Measured with `roitrack frame-study` (sweep, 3 seeds, 30 Hz, 30 µs a row): the
-    /// filter learns 0.01-0.02 px (it starts from 0.1 px), and the rolling-shutter position error falls from 0.175 to
-    /// 0.150 mm (seed 3 alone 0.224 to 0.153 mm), velocity 15.1 to 13.6 mm/s; global shutter 0.0179 to 0.0170 mm.
+    /// filter learns about 0.02 px (it starts from 0.1 px), and the rolling-shutter position error falls from 0.175
+    /// to 0.153 mm (seed 3 alone 0.224 to 0.155 mm), velocity 15.1 to 14.4 mm/s; global shutter 0.0179 and 0.0183 mm.
     ///
     /// ```
     /// use roitrack_core::estimator::{Adaptation, EstimatorConfig, NoiseSample, TrackerConfig};
