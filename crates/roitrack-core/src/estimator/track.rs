@@ -245,6 +245,14 @@ impl TrackCore {
         }
     }
 
+    /// Whether the current step's measurements (since the last estimate) share one instant: the blobs of a
+    /// global-shutter frame.
+    pub fn step_is_one_instant(&self) -> bool {
+        let mut times = self.window.last(self.step_measurements).map(|o| o.t_s);
+        let first = times.next();
+        self.step_measurements >= 2 && times.all(|t| Some(t) == first)
+    }
+
     /// Whether a window fit's residual RMS at its emitted state is beyond [`MAX_RESIDUAL_NOISE_RATIO`] times the
     /// centroid noise: the state does not explain its window.
     pub fn residual_inconsistent(&self, residuals: &ResidualFigures) -> bool {
