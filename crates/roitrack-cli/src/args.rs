@@ -101,9 +101,10 @@ pub struct EstimatorArgs {
     pub noise_px: f64,
     /// Kalman: what the filter learns online: the centroid noise and the process noise (both), one of them, or none
     /// (--noise-px, --accel-psd and --angular-accel-psd taken as the truth: a hand-tuned filter). Default: both for
-    /// measurements and ROI recordings, the noise alone for --images (a process noise that follows the motion
-    /// chases the jitter between frames at frame rates). With --images, the twist covariance is never calibrated
-    /// against the poses around each estimate, whatever --adapt says.
+    /// measurements and ROI recordings; for --images, the noise, learnt from global-shutter frames and held for
+    /// rolling-shutter ones (a process noise that follows the motion chases the jitter between frames at frame rates).
+    /// Frames whose blobs share one instant never adapt the process noise, and with --images the twist covariance is
+    /// never calibrated against the poses around each estimate, whatever --adapt says.
     #[arg(long, value_enum)]
     pub adapt: Option<AdaptArg>,
     /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise. Default: 1

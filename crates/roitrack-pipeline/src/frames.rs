@@ -78,19 +78,14 @@ impl Default for FrameTrackerConfig {
 }
 
 impl FrameTrackerConfig {
-    /// `config` made for frames. The Kalman filter learns the centroid noise from the residual of each frame's own
-    /// blobs, the pose alone fitted ([`NoiseSample::StepPose`]), unless `adapt` says otherwise; it keeps
-    /// the process noise it is given unless `adapt` asks for it to follow the motion (that adaptation was tuned at
-    /// ROI rates: at 30 Hz it chased the frame-to-frame jitter, and `roitrack frame-study` had 288 of 540
-    /// global-shutter frames fall back to whole-frame searches, 15.6 mm off); and its twist covariance is never
+    /// `config` made for frames, unless `adapt` (the user's choice, `track --adapt`) says otherwise: the Kalman
+    /// filter learns the centroid noise from global-shutter frames, each from the residual of its own blobs with the
+    /// pose alone fitted, and holds it for rolling-shutter frames ([`NoiseSample::Frames`] says why); it keeps the
+    /// process noise it is given (that adaptation follows the innovations from one measurement to the next: within a
+    /// global-shutter frame they share one instant, and the filter leaves it alone there whatever `adapt` says; on
+    /// rolling-shutter frames at 30 Hz it chases the jitter between frames, and `roitrack frame-study` had 79 of 540
+    /// of them fall back to whole-frame searches, 0.208 mm off against 0.175 mm); and its twist covariance is never
     /// calibrated against the poses around each estimate (8 estimates either side are half a second at 30 Hz).
-    /// `adapt` is the user's choice (`track --adapt`); `None`: the frame default, the noise alone.
-    ///
-    /// Learning the noise matters most for rolling shutters: a frame's blobs then pin the twist too (through the
-    /// image's stretch over the readout), and how much the filter trusts them against its motion model sets how
-    /// well the depth is found. Measured with `roitrack frame-study` (sweep, 3 seeds, 30 Hz, 30 µs a row): the
-    /// filter learns about 0.02 px (it starts from 0.1 px), and the rolling-shutter position error falls from 0.175
-    /// to 0.153 mm (seed 3 alone 0.224 to 0.155 mm), velocity 15.1 to 14.4 mm/s; global shutter 0.0179 and 0.0183 mm.
     ///
     /// ```
     /// use roitrack_core::estimator::{Adaptation, EstimatorConfig, NoiseSample, TrackerConfig};
@@ -99,7 +94,7 @@ impl FrameTrackerConfig {
     /// let config = FrameTrackerConfig::frame_estimator(TrackerConfig::default(), None);
     /// let EstimatorConfig::Kalman(tuning) = config.estimator else { unreachable!() };
     /// assert!(tuning.adapt_noise && !tuning.adapt_motion && !tuning.calibrate_twist_covariance);
-    /// assert_eq!(tuning.noise_sample, NoiseSample::StepPose);
+    /// assert_eq!(tuning.noise_sample, NoiseSample::Frames);
     ///
     /// // A hand-tuned filter: nothing learnt.
     /// let config = FrameTrackerConfig::frame_estimator(TrackerConfig::default(), Some(Adaptation::None));
@@ -112,7 +107,7 @@ impl FrameTrackerConfig {
             tuning.adapt_noise = matches!(adapt, Adaptation::Both | Adaptation::Noise);
             tuning.adapt_motion = matches!(adapt, Adaptation::Both | Adaptation::Motion);
             tuning.calibrate_twist_covariance = false;
-            tuning.noise_sample = NoiseSample::StepPose;
+            tuning.noise_sample = NoiseSample::Frames;
         }
         config
     }

@@ -2,7 +2,7 @@
 //! blobs, fast motion, losses and bad frames.
 
 use nalgebra::Vector3;
-use roitrack_core::estimator::{Adaptation, EstimatorConfig, NoiseSample};
+use roitrack_core::estimator::Adaptation;
 use roitrack_core::time::Readout;
 use roitrack_core::{CameraModel, Target, TargetPoint, so3};
 use roitrack_image::{Frame, Polarity};
@@ -245,58 +245,52 @@ fn a_four_dot_target_in_clutter_is_tracked_on_every_frame_more_smoothly_than_fra
 }
 
 #[test]
-fn a_four_point_target_learns_its_centroid_noise_frame_by_frame() {
+fn the_noise_is_learnt_from_global_shutter_frames_and_held_for_rolling_ones() {
     // Four dots, as on a hand-made target: a control step's window of two cycles of points would span 7 frames
-    // (233 ms at 30 Hz), over which a constant twist is far from the sweep's motion.
-    let target = four_dots();
-    let rolling = Readout::RollingShutter {
-        line_delay_s: 30e-6,
-    };
-    let scenario = Scenario::new(ScenarioKind::Sweep, 2).with_target(target);
-    let mut frames = frames_of(scenario, rolling, Polarity::Bright, 2);
-    let camera = frames.camera().clone();
-    let learnt = run_with(
-        &mut frames,
-        camera.clone(),
-        FrameTrackerConfig::default(),
-        90,
-    );
-    let mut held = FrameTrackerConfig::default();
-    held.tracker = FrameTrackerConfig::frame_estimator(held.tracker, Some(Adaptation::None));
-    let held = run_with(&mut frames, camera.clone(), held, 90);
-    let mut windowed = FrameTrackerConfig::default();
-    if let EstimatorConfig::Kalman(tuning) = &mut windowed.tracker.estimator {
-        tuning.noise_sample = NoiseSample::Window;
+    // (233 ms at 30 Hz), over which a constant twist is far from the sweep's motion; each global-shutter frame is
+    // sampled alone.
+    for readout in [
+        Readout::GlobalShutter,
+        Readout::RollingShutter {
+            line_delay_s: 30e-6,
+        },
+    ] {
+        let scenario = Scenario::new(ScenarioKind::Sweep, 2).with_target(four_dots());
+        let mut frames = frames_of(scenario, readout, Polarity::Bright, 2);
+        let camera = frames.camera().clone();
+        let learnt = run_with(
+            &mut frames,
+            camera.clone(),
+            FrameTrackerConfig::default(),
+            90,
+        );
+        let mut held = FrameTrackerConfig::default();
+        held.tracker = FrameTrackerConfig::frame_estimator(held.tracker, Some(Adaptation::None));
+        let held = run_with(&mut frames, camera, held, 90);
+        let (pos_learnt, _) = summary(&format!("{readout:?}, default"), &learnt);
+        let (pos_held, _) = summary(&format!("{readout:?}, noise held at 0.1 px"), &held);
+        eprintln!("noise at the end: {:.4} px", learnt.last_noise_px);
+        assert_eq!(learnt.errors.len(), learnt.frames);
+        let windows = |run: &Run| {
+            run.methods
+                .iter()
+                .filter(|m| **m == FrameMethod::Windows)
+                .count()
+        };
+        assert!(
+            windows(&learnt) + 3 >= learnt.frames,
+            "{:?}",
+            learnt.methods
+        );
+        if readout == Readout::GlobalShutter {
+            // The rendered centroids are good to a few hundredths of a pixel; the filter starts from 0.1 px.
+            assert!(learnt.last_noise_px < 0.05, "{} px", learnt.last_noise_px);
+            assert!(pos_learnt < 1.05 * pos_held, "{pos_learnt} vs {pos_held} m");
+        } else {
+            assert_eq!(learnt.last_noise_px, 0.1);
+            assert_eq!(pos_learnt, pos_held);
+        }
     }
-    let windowed = run_with(&mut frames, camera, windowed, 90);
-    let (pos_learnt, _) = summary("noise learnt frame by frame", &learnt);
-    let (pos_held, _) = summary("noise held at 0.1 px", &held);
-    let (pos_windowed, _) = summary("noise learnt from constant-twist windows", &windowed);
-    eprintln!(
-        "noise: {:.4} px learnt frame by frame, {:.4} px from windows",
-        learnt.last_noise_px, windowed.last_noise_px
-    );
-    assert_eq!(learnt.errors.len(), learnt.frames);
-    let windows = |run: &Run| {
-        run.methods
-            .iter()
-            .filter(|m| **m == FrameMethod::Windows)
-            .count()
-    };
-    assert!(
-        windows(&learnt) + 3 >= learnt.frames,
-        "{:?}",
-        learnt.methods
-    );
-    // The rendered centroids are good to a few hundredths of a pixel; the filter starts from 0.1 px.
-    assert!(learnt.last_noise_px < 0.05, "{} px", learnt.last_noise_px);
-    assert!(pos_learnt < pos_held, "{pos_learnt} vs {pos_held} m");
-    // The constant-twist windows take the motion's change over 7 frames for noise, and the windows lose the blobs.
-    assert!(windowed.last_noise_px > 10.0 * learnt.last_noise_px);
-    assert!(
-        pos_windowed > 3.0 * pos_learnt,
-        "{pos_windowed} vs {pos_learnt} m"
-    );
 }
 
 #[test]

@@ -12,7 +12,8 @@
 //!   noise; an exponential memory of about 2,000 degrees of freedom averages them, each window moving the estimate by
 //!   at most a factor 4 (an outlier does not drag it). The initialisation starts it from the median residual of its
 //!   two-cycle fit, so that a noise ten times the configured one still initialises. Steps whose measurements share
-//!   one instant (frames) sample their own measurements instead, the pose alone fitted ([`NoiseSample::StepPose`]).
+//!   one instant (global-shutter frames) sample their own measurements instead, the pose alone fitted
+//!   ([`NoiseSample`]).
 //! - **Process noise**: the linear and the angular density are each scaled by a factor that follows the
 //!   *persistence* of the innovations: the innovation projected on the displacement that the recent corrections
 //!   (their exponential average over two cycles) predict for the measured point, normalised to a standard normal
@@ -95,28 +96,35 @@ pub struct KalmanTuning {
     pub noise_sample: NoiseSample,
 }
 
-/// Which residual the Kalman filter's noise estimate samples at each control step.
+/// Which residuals the Kalman filter's noise estimate samples.
+///
+/// A control step whose measurements share one instant (the blobs of a global-shutter frame) is sampled alone in
+/// either case: the residual of its own measurements with the pose alone fitted and the twist held at the filter's,
+/// of redundancy `2 m - 6` (a frame alone cannot tell the twist, and a window over several frames, tens of
+/// milliseconds apart, would take the motion's change for noise: a 4-point target's window of 7 frames at 30 Hz learnt
+/// 4.6 px instead of 0.3).
 ///
 /// ```
 /// use roitrack_core::estimator::{KalmanTuning, NoiseSample};
 ///
 /// assert_eq!(KalmanTuning::default().noise_sample, NoiseSample::Window);
-/// // What the frame tracker uses: each frame's blobs alone.
-/// let frames = KalmanTuning { noise_sample: NoiseSample::StepPose, ..KalmanTuning::default() };
+/// // What the frame tracker uses.
+/// let frames = KalmanTuning { noise_sample: NoiseSample::Frames, ..KalmanTuning::default() };
 /// assert!(frames.adapt_noise);
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum NoiseSample {
-    /// The control step's window (two cycles of the target's points, longer for small targets) under one constant
-    /// twist, all 12 parameters fitted: right for ROIs, a few milliseconds apart. A step whose measurements share
-    /// one instant (a global-shutter frame's blobs) is sampled as with [`Self::StepPose`].
+    /// Every other control step: its window (two cycles of the target's points, longer for small targets) under one
+    /// constant twist, all 12 parameters fitted: right for ROIs, a few milliseconds apart.
     Window,
-    /// The step's own measurements alone (a frame's blobs), only the pose fitted, the twist held at the filter's:
-    /// right for frames. Several frames are tens of milliseconds apart, and a constant twist over them takes the
-    /// motion's change for noise (a 4-point target's window of 7 frames at 30 Hz learnt 4 px instead of 0.01 px);
-    /// and a global-shutter frame alone cannot tell the twist. The sample's redundancy is `2 m - 6`. With a rolling
-    /// shutter the twist's error over the readout adds to it: the estimate errs on the wide side.
-    StepPose,
+    /// Only the steps of one instant: the measurements come a frame at a time, and a rolling-shutter frame (whose
+    /// blobs are not simultaneous) leaves the noise as it is. Its own residual misses what matters there: its blobs
+    /// also pin the twist, through the image's stretch over the readout, and an error of the twist over the readout
+    /// bends the frame in ways the pose absorbs. Learnt from rolling-shutter frames that way, the noise came out near
+    /// the centroids' (0.01-0.02 px), and that helped on one simulated camera (1024 x 1024 px, 30 µs a row: position
+    /// 0.175 to 0.153 mm) but hurt on another (640 x 480 px, 60 µs a row, three seeds: 0.165-0.273 to 0.246-0.295
+    /// mm), whose best setting was 0.05 px.
+    Frames,
 }
 
 impl Default for KalmanTuning {
@@ -404,7 +412,7 @@ struct KalmanLaw {
     /// The learnt centroid noise (when `tuning.adapt_noise`).
     noise: NoiseEstimate,
     /// Whether the last control step's measurements shared one instant (the blobs of a global-shutter frame): such
-    /// steps sample the noise from their own blobs ([`NoiseSample::StepPose`]) and do not adapt the process noise.
+    /// steps sample the noise from their own blobs ([`NoiseSample`]) and do not adapt the process noise.
     one_instant_steps: bool,
     /// Per point: the time of its newest measurement if the gate rejected it.
     gated_at: Vec<Option<f64>>,
@@ -629,10 +637,12 @@ impl KalmanLaw {
         ne: &crate::solver::NormalEquations<12>,
         step: Option<crate::Vector12>,
     ) {
-        // A step whose measurements share one instant (the blobs of a global-shutter frame, from a centroid file) is a
-        // frame too: the window over several of them holds the motion's change for noise.
-        let step_pose =
-            self.filter.tuning.noise_sample == NoiseSample::StepPose || self.one_instant_steps;
+        // A step whose measurements share one instant (the blobs of a global-shutter frame, from a centroid file too)
+        // is sampled alone; with frames, other steps are rolling-shutter frames, which are not sampled.
+        let step_pose = self.one_instant_steps;
+        if !step_pose && self.filter.tuning.noise_sample == NoiseSample::Frames {
+            return;
+        }
         let min_measurements = (12 + MIN_NOISE_DOF).div_ceil(2);
         let mut rebuilt = false;
         if step_pose {
