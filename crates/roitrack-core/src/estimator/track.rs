@@ -245,12 +245,37 @@ impl TrackCore {
         }
     }
 
-    /// Whether the current step's measurements (since the last estimate) share one instant: the blobs of a
-    /// global-shutter frame.
-    pub fn step_is_one_instant(&self) -> bool {
-        let mut times = self.window.last(self.step_measurements).map(|o| o.t_s);
-        let first = times.next();
-        self.step_measurements >= 2 && times.all(|t| Some(t) == first)
+    /// Measurements in the window.
+    pub fn window_len(&self) -> usize {
+        self.window.len()
+    }
+
+    /// Whether the newest `n` measurements come a frame at a time: on average at least two of them share each time
+    /// (the blobs of global-shutter frames), where the measurements of ROIs or of a rolling shutter each have their
+    /// own.
+    pub fn recent_are_frames(&self, n: usize) -> bool {
+        let (mut instants, mut previous_s) = (0, None);
+        for o in self.window.last(n) {
+            if Some(o.t_s) != previous_s {
+                instants += 1;
+                previous_s = Some(o.t_s);
+            }
+        }
+        n >= 2 && self.window.len() >= n && 2 * instants <= n
+    }
+
+    /// Fills the scratch window with the measurements of one instant: those of the newest `n` that share the time of
+    /// the one `skip` places back from the newest, which must start its instant (the first call skips 0, each next
+    /// one the count returned so far). Returns how many there are (0 past the `n`).
+    pub fn fill_scratch_with_instant(&mut self, n: usize, skip: usize) -> usize {
+        let scratch = &mut self.scratch;
+        scratch.clear();
+        let mut newest_first = self.window.last(n).skip(skip);
+        if let Some(first) = newest_first.next() {
+            scratch.push(*first);
+            scratch.extend(newest_first.take_while(|o| o.t_s == first.t_s).copied());
+        }
+        scratch.len()
     }
 
     /// Whether a window fit's residual RMS at its emitted state is beyond [`MAX_RESIDUAL_NOISE_RATIO`] times the
