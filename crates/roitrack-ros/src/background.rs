@@ -328,6 +328,15 @@ mod tests {
         bag
     }
 
+    fn a_measurement() -> Measurement {
+        Measurement {
+            t_s: 0.0,
+            id: 0,
+            u_px: 1.0,
+            v_px: 1.0,
+        }
+    }
+
     fn is_the_stamp_error(error: &FormatError) -> bool {
         let text = error.to_string();
         text.contains("run.mcap") && text.contains("stamp") && !text.contains("already completed")
@@ -337,12 +346,7 @@ mod tests {
     fn the_writing_threads_error_is_what_finish_reports_with_measurements_pending() {
         let dir = tempfile::tempdir().unwrap();
         let mut bag = failed_bag(&dir);
-        let m = Measurement {
-            t_s: 0.0,
-            id: 0,
-            u_px: 1.0,
-            v_px: 1.0,
-        };
+        let m = a_measurement();
         // Measurements are only gathered (no check per centroid, which would cost the tracking thread): the next
         // estimate handed over reports the writer's error.
         bag.write_measurements(&[m]).unwrap();
@@ -362,12 +366,7 @@ mod tests {
     fn finish_reports_the_writing_threads_error() {
         let dir = tempfile::tempdir().unwrap();
         let mut bag = failed_bag(&dir);
-        bag.measurements.push(Measurement {
-            t_s: 0.0,
-            id: 0,
-            u_px: 1.0,
-            v_px: 1.0,
-        });
+        bag.measurements.push(a_measurement());
         let error = bag.finish().unwrap_err();
         assert!(is_the_stamp_error(&error), "{error}");
     }

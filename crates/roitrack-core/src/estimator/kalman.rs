@@ -661,13 +661,7 @@ impl KalmanLaw {
             core.fill_scratch(super::WindowMode::Last(min_measurements));
             rebuilt = true;
         }
-        let gated_at = &self.gated_at;
-        let is_gated = |o: &Observation| gated_at.get(o.point_index) == Some(&Some(o.t_s));
-        let gated = core.scratch.iter().filter(|o| is_gated(o)).count();
-        if gated > 0 && 4 * gated <= core.scratch.len() {
-            core.scratch.retain(|o| !is_gated(o));
-            rebuilt = true;
-        }
+        rebuilt |= drop_gated(&self.gated_at, &mut core.scratch);
         let (cost_px2, count) = if rebuilt {
             let window = core.window_problem(t_new_s).normal_equations(&core.state);
             let Some((step, _)) = window.solve_with_conditioning() else {
@@ -714,12 +708,7 @@ impl KalmanLaw {
                 break;
             }
             taken += count;
-            let gated_at = &self.gated_at;
-            let is_gated = |o: &Observation| gated_at.get(o.point_index) == Some(&Some(o.t_s));
-            let gated = core.scratch.iter().filter(|o| is_gated(o)).count();
-            if gated > 0 && 4 * gated <= core.scratch.len() {
-                core.scratch.retain(|o| !is_gated(o));
-            }
+            drop_gated(&self.gated_at, &mut core.scratch);
             if core.scratch.len() < 4 {
                 continue;
             }
@@ -735,6 +724,20 @@ impl KalmanLaw {
             core.noise_px = self.noise.noise_px();
         }
     }
+}
+
+/// Leaves out of a noise sample's `scratch` the measurements the gate rejected (per point, the time of its newest
+/// rejected one, `gated_at`): an outlier of 5-20 px would count as much noise as a hundred good centroids. Unless they
+/// are more than a quarter of it: then the noise itself has grown beyond the estimate, and they must count for the
+/// estimate to follow. Returns whether any was left out.
+fn drop_gated(gated_at: &[Option<f64>], scratch: &mut Vec<Observation>) -> bool {
+    let is_gated = |o: &Observation| gated_at.get(o.point_index) == Some(&Some(o.t_s));
+    let gated = scratch.iter().filter(|o| is_gated(o)).count();
+    let drop = gated > 0 && 4 * gated <= scratch.len();
+    if drop {
+        scratch.retain(|o| !is_gated(o));
+    }
+    drop
 }
 
 /// The least-squares residual `eᵀe - gᵀ H⁻¹ g` of `window` at its optimum over the pose alone (the first six
