@@ -40,7 +40,7 @@ pub use camera::{
 pub use projection::{JacobianKind, SpatioTemporalModel};
 pub use roi_order::RoiOrder;
 pub use samples::{Measurement, PoseSample, TwistSample};
-pub use state::MotionState;
+pub use state::{Acceleration, MotionState};
 pub use target::{Target, TargetError, TargetPlane, TargetPoint};
 pub use time::{Readout, TimeModel};
 

@@ -149,6 +149,44 @@ impl MotionState {
     }
 }
 
+/// Linear and angular acceleration of the object in the camera frame (the derivatives of [`MotionState`]'s
+/// `velocity_mps` and `angular_velocity_radps`), as a constant-acceleration Kalman filter estimates them.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::{Acceleration, MotionState};
+///
+/// let state = MotionState { velocity_mps: Vector3::new(1.0, 0.0, 0.0), ..MotionState::at_rest(Rotation3::identity(), Vector3::z()) };
+/// let braking = Acceleration { linear_mps2: Vector3::new(-10.0, 0.0, 0.0), angular_radps2: Vector3::zeros() };
+/// let later = braking.predicted(&state, 0.1);
+/// assert!((later.velocity_mps.x - 0.0).abs() < 1e-12);
+/// assert!((later.cam_t_obj_m.x - 0.05).abs() < 1e-12);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Acceleration {
+    pub linear_mps2: Vector3<f64>,
+    pub angular_radps2: Vector3<f64>,
+}
+
+impl Acceleration {
+    /// `state` moved `dt_s` later (or earlier, when negative) under this constant acceleration: `t + V dt + ½ A dt²`,
+    /// `Exp(W dt + ½ Α dt²) R`, `V + A dt`, `W + Α dt` (a rotation that is a first-order approximation when the
+    /// angular velocity turns during `dt_s`).
+    pub fn predicted(&self, state: &MotionState, dt_s: f64) -> MotionState {
+        let half_dt2 = 0.5 * dt_s * dt_s;
+        MotionState {
+            cam_r_obj: so3::exp(
+                &(state.angular_velocity_radps * dt_s + self.angular_radps2 * half_dt2),
+            ) * state.cam_r_obj,
+            cam_t_obj_m: state.cam_t_obj_m
+                + state.velocity_mps * dt_s
+                + self.linear_mps2 * half_dt2,
+            velocity_mps: state.velocity_mps + self.linear_mps2 * dt_s,
+            angular_velocity_radps: state.angular_velocity_radps + self.angular_radps2 * dt_s,
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

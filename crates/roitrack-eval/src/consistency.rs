@@ -30,6 +30,7 @@
 //!     // 1 mm and 10 mm/s standard deviations.
 //!     covariance: Some(Matrix12::from_diagonal(&Vector12::from_fn(|i, _| if i < 3 { 1e-6 } else { 1e-4 }))),
 //!     noise_px: 0.1,
+//!     acceleration: None,
 //! };
 //! let n = nees(&estimate, &truth).unwrap();
 //! assert!((n.position - 4.0).abs() < 1e-9 && (n.velocity - 1.0).abs() < 1e-9);
@@ -93,6 +94,7 @@ pub struct BlockNees {
 ///     status: TrackStatus::Tracking,
 ///     covariance: Some(Matrix12::identity() * 1e-6),
 ///     noise_px: 0.1,
+///     acceleration: None,
 /// };
 /// estimate.state.cam_t_obj_m.z += 3e-3; // 3 mm off, 1 mm standard deviation: NEES 9
 /// assert!((nees(&estimate, &truth).unwrap().position - 9.0).abs() < 1e-9);
@@ -180,7 +182,7 @@ impl Consistency {
     ///     state.cam_t_obj_m.x += x_mm * 1e-3;
     ///     Estimate {
     ///         t_ref_s: 0.0, state, residual_rms_px: 0.1, inverse_condition: 0.3, measurements_used: 16,
-    ///         iterations: 1, status: TrackStatus::Tracking, covariance, noise_px: 0.1,
+    ///         iterations: 1, status: TrackStatus::Tracking, covariance, noise_px: 0.1, acceleration: None,
     ///     }
     /// };
     /// let one_mm = Some(Matrix12::identity() * 1e-6);
@@ -355,6 +357,7 @@ mod tests {
                     status: TrackStatus::Tracking,
                     covariance: Some(covariance * reported_scale),
                     noise_px: 0.1,
+                    acceleration: None,
                 };
                 (estimate, truth)
             })

@@ -459,6 +459,7 @@ pub fn evaluate_estimates(
 ///     status: TrackStatus::Tracking,
 ///     covariance: None,
 ///     noise_px: 0.1,
+///     acceleration: None,
 /// };
 /// let (poses, twists) = samples_of(&[e]);
 /// assert_eq!((poses[0].t_s, twists[0].t_s), (0.5, 0.5));

@@ -54,6 +54,7 @@ pub const DIAGNOSTICS_HEADER: &str = "t,status,residual_rms_px,inverse_condition
 ///     status: TrackStatus::Tracking,
 ///     covariance: None,
 ///     noise_px: 0.1,
+///     acceleration: None,
 /// })?;
 /// writer.finish()?;
 /// let text = std::fs::read_to_string(&diagnostics).unwrap();

@@ -95,7 +95,7 @@ struct Channel {
 /// let state = MotionState::at_rest(Default::default(), nalgebra::Vector3::new(0.0, 0.0, 0.6));
 /// let estimate = Estimate {
 ///     t_ref_s: 0.5, state, residual_rms_px: 0.1, inverse_condition: 0.2, measurements_used: 16,
-///     iterations: 1, status: TrackStatus::Tracking, covariance: None, noise_px: 0.1,
+///     iterations: 1, status: TrackStatus::Tracking, covariance: None, noise_px: 0.1, acceleration: None,
 /// };
 /// bag.write_estimate(&estimate).unwrap();
 /// assert_eq!(bag.finish().unwrap(), 6); // pose, twist, odometry, tf, status and the camera info

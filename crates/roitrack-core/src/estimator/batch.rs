@@ -44,6 +44,7 @@ impl Law for BatchLaw {
             iterations: fit.report.iterations,
             status,
             covariance: core.window_covariance(&ne, inverse_condition),
+            acceleration: None,
         }
     }
 

@@ -36,7 +36,8 @@ use super::{
     TrackerConfig,
 };
 use crate::{
-    CameraModel, JacobianKind, Measurement, MotionState, SpatioTemporalModel, Target, Vector12, so3,
+    Acceleration, CameraModel, JacobianKind, Measurement, MotionState, SpatioTemporalModel, Target,
+    Vector12, so3,
 };
 
 /// A 12 x 12 matrix: covariances of the error state (v, w, dV, dW).
@@ -94,7 +95,49 @@ pub struct KalmanTuning {
     pub calibrate_twist_covariance: bool,
     /// Which residual the noise estimate samples (with [`Self::adapt_noise`]). Default [`NoiseSample::Window`].
     pub noise_sample: NoiseSample,
+    /// How the filter expects the target to move between measurements. Default
+    /// [`MotionModel::ConstantVelocity`], driven by [`Self::linear_accel_psd`] and [`Self::angular_accel_psd`].
+    pub motion_model: MotionModel,
 }
+
+/// The Kalman filter's process model.
+///
+/// ```
+/// use roitrack_core::estimator::{KalmanTuning, MotionModel};
+///
+/// assert_eq!(KalmanTuning::default().motion_model, MotionModel::ConstantVelocity);
+/// let tuning = KalmanTuning { motion_model: MotionModel::constant_acceleration(), ..KalmanTuning::default() };
+/// assert!(matches!(tuning.motion_model, MotionModel::ConstantAcceleration { .. }));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MotionModel {
+    /// The twist drifts as a random walk driven by white acceleration of the tuning's densities
+    /// ([`KalmanTuning::linear_accel_psd`], [`KalmanTuning::angular_accel_psd`]); the 12-state filter.
+    ConstantVelocity,
+    /// The state also carries the linear and the angular acceleration (18 states), which drift as a random walk
+    /// driven by white jerk of these spectral densities ((m/s³)²/Hz and (rad/s³)²/Hz). It predicts across the gaps
+    /// where a constant twist falls behind a changing one: between rolling-shutter frames, whose blobs are read one
+    /// row band after the other, a turn that speeds up between two frames leaves a constant-twist filter a twist
+    /// that is wrong over the next frame's readout, which the frame's depth absorbs. About twice the work per update.
+    ConstantAcceleration {
+        linear_jerk_psd: f64,
+        angular_jerk_psd: f64,
+    },
+}
+
+impl MotionModel {
+    /// [`Self::ConstantAcceleration`] with its default densities.
+    pub fn constant_acceleration() -> Self {
+        Self::ConstantAcceleration {
+            linear_jerk_psd: DEFAULT_LINEAR_JERK_PSD,
+            angular_jerk_psd: DEFAULT_ANGULAR_JERK_PSD,
+        }
+    }
+}
+
+/// The constant-acceleration model's default white jerk densities ((m/s³)²/Hz and (rad/s³)²/Hz).
+const DEFAULT_LINEAR_JERK_PSD: f64 = 100.0;
+const DEFAULT_ANGULAR_JERK_PSD: f64 = 300.0;
 
 /// Which residuals the Kalman filter's noise estimate samples.
 ///
@@ -139,16 +182,21 @@ impl Default for KalmanTuning {
             adapt_motion: true,
             calibrate_twist_covariance: true,
             noise_sample: NoiseSample::Window,
+            motion_model: MotionModel::ConstantVelocity,
         }
     }
 }
 
-/// The filter's covariance; the state itself lives in the tracker.
+/// The filter's covariance and, with [`MotionModel::ConstantAcceleration`], its accelerations; the pose and the twist
+/// live in the tracker. `N` is 12 (pose, twist) or 18 (pose, twist, linear and angular acceleration).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct ErrorStateKalman {
-    covariance: Matrix12,
+struct ErrorStateKalman<const N: usize> {
+    covariance: SMatrix<f64, N, N>,
+    /// Linear (m/s²) and angular (rad/s²) acceleration in the camera frame; zero and unused when `N` is 12.
+    acceleration: [Vector3<f64>; 2],
     tuning: KalmanTuning,
-    /// Exponential average of the recent corrections (error-state units), and its weight per update.
+    /// Exponential average of the recent corrections of the pose and the twist (error-state units), and its weight
+    /// per update.
     trend: Vector12,
     trend_rate: f64,
     /// Updates applied, to symmetrise the covariance every [`SYMMETRISE_EVERY_UPDATES`].
@@ -170,10 +218,31 @@ enum UpdateOutcome {
     Invalid,
 }
 
-impl ErrorStateKalman {
-    fn new(covariance: Matrix12, tuning: KalmanTuning, trend_rate: f64) -> Self {
+/// The standard deviations of the accelerations at the start of a track (linear in m/s², angular in rad/s²), and
+/// the widening of a covariance reset (scaled as the pose's and twist's). Wider is not safer: a start knows the twist
+/// only to 1 m/s and 10 rad/s, and with 10 m/s² and 30 rad/s² the first rolling-shutter frames could trade twist
+/// for acceleration until the track was lost (`roitrack frame-study`, jerk densities 30 and 300: seed 1 at 3.1 mm
+/// against 0.041 mm with these).
+const ACCELERATION_PRIOR_SIGMAS: [f64; 2] = [3.0, 10.0];
+
+impl<const N: usize> ErrorStateKalman<N> {
+    /// Whether the state carries the accelerations (known at compile time).
+    const WITH_ACCELERATION: bool = N == 18;
+
+    /// A filter whose pose and twist have the covariance `pose_twist` (and, with accelerations, the acceleration
+    /// prior, uncorrelated), accelerations zero.
+    fn new(pose_twist: Matrix12, tuning: KalmanTuning, trend_rate: f64) -> Self {
+        let mut covariance = SMatrix::<f64, N, N>::zeros();
+        covariance
+            .fixed_view_mut::<12, 12>(0, 0)
+            .copy_from(&pose_twist);
+        for i in 12..N {
+            let sigma = ACCELERATION_PRIOR_SIGMAS[(i - 12) / 3];
+            covariance[(i, i)] = sigma * sigma;
+        }
         Self {
             covariance,
+            acceleration: [Vector3::zeros(); 2],
             tuning,
             trend: Vector12::zeros(),
             trend_rate,
@@ -182,57 +251,98 @@ impl ErrorStateKalman {
         }
     }
 
-    /// Moves the state `dt_s` ahead and grows the covariance, with the acceleration densities scaled by
-    /// `process_scale`.
+    /// The covariance of the pose and the twist.
+    fn pose_twist_covariance(&self) -> Matrix12 {
+        self.covariance.fixed_view::<12, 12>(0, 0).into_owned()
+    }
+
+    /// Adds `scale` times `prior` (of the pose and the twist) and of the acceleration prior: a covariance reset.
+    fn widen(&mut self, prior: &Matrix12, scale: f64) {
+        let mut block = self.covariance.fixed_view_mut::<12, 12>(0, 0);
+        block += prior * scale;
+        for i in 12..N {
+            let sigma = ACCELERATION_PRIOR_SIGMAS[(i - 12) / 3];
+            self.covariance[(i, i)] += sigma * sigma * scale;
+        }
+    }
+
+    /// Moves the state `dt_s` ahead and grows the covariance, with the process densities scaled by `process_scale`.
     fn predict(&mut self, state: &mut MotionState, dt_s: f64, process_scale: [f64; 2]) {
         if dt_s == 0.0 {
             return;
         }
-        // F = [I 0 dt·I 0; 0 E 0 B; 0 0 I 0; 0 0 0 I] with E = Exp(W dt) and B = J_l(W dt) dt: F P Fᵀ by blocks of
-        // three rows, then three columns (a seventh of the dense product's work).
-        let rotation_increment = state.angular_velocity_radps * dt_s;
+        let [linear_acceleration, angular_acceleration] = self.acceleration;
+        let half_dt2 = 0.5 * dt_s * dt_s;
+        let rotation_increment =
+            state.angular_velocity_radps * dt_s + angular_acceleration * half_dt2;
         let e_rotation = so3::exp(&rotation_increment);
-        let e = *e_rotation.matrix();
-        let b = so3::left_jacobian(&rotation_increment) * dt_s;
-        // In place on the column-major entries (p[i + 12 j] is row i, column j): no 12 x 12 temporaries.
-        let p = self.covariance.as_mut_slice();
-        for column in p.chunks_exact_mut(12) {
-            let old: [f64; 12] = column.try_into().expect("12 rows");
-            for k in 0..3 {
-                column[k] = old[k] + old[6 + k] * dt_s;
-                column[3 + k] = (0..3)
-                    .map(|l| e[(k, l)] * old[3 + l] + b[(k, l)] * old[9 + l])
-                    .sum();
-            }
+        let j_l = so3::left_jacobian(&rotation_increment);
+        let transition = Transition {
+            dt_s,
+            e: *e_rotation.matrix(),
+            b: j_l * dt_s,
+            b_half_dt: j_l * half_dt2,
+            half_dt2,
+        };
+        // F P Fᵀ: F applied to every column, then Fᵀ from the right, by whole columns. F is sparse (a few 3 x 3
+        // blocks beside the identity), so this is a fraction of a dense product's work, in place.
+        for column in self.covariance.as_mut_slice().chunks_exact_mut(N) {
+            transition.apply::<N>(column);
         }
-        let old_translation: [f64; 36] = p[..36].try_into().expect("3 columns");
-        let old_rotation: [f64; 36] = p[36..72].try_into().expect("3 columns");
-        for k in 0..3 {
-            for i in 0..12 {
-                p[i + 12 * k] = old_translation[i + 12 * k] + p[i + 12 * (6 + k)] * dt_s;
-                p[i + 12 * (3 + k)] = (0..3)
-                    .map(|l| old_rotation[i + 12 * l] * e[(k, l)] + p[i + 12 * (9 + l)] * b[(k, l)])
-                    .sum();
-            }
-        }
-        // Q of white acceleration: per axis [dt³/3 dt²/2; dt²/2 dt] times the density.
+        transition.apply_from_the_right::<N>(self.covariance.as_mut_slice());
         let dt = dt_s.abs();
         let p = &mut self.covariance;
-        for (pos, vel, psd) in [
-            (0, 6, self.tuning.linear_accel_psd * process_scale[0]),
-            (3, 9, self.tuning.angular_accel_psd * process_scale[1]),
-        ] {
-            let (qpp, qpv, qvv) = (psd * dt * dt * dt / 3.0, psd * dt * dt / 2.0, psd * dt);
-            for i in 0..3 {
-                p[(pos + i, pos + i)] += qpp;
-                p[(pos + i, vel + i)] += qpv;
-                p[(vel + i, pos + i)] += qpv;
-                p[(vel + i, vel + i)] += qvv;
+        match self.tuning.motion_model {
+            MotionModel::ConstantVelocity => {
+                // Q of white acceleration: per axis [dt³/3 dt²/2; dt²/2 dt] times the density.
+                for (pos, vel, psd) in [
+                    (0, 6, self.tuning.linear_accel_psd * process_scale[0]),
+                    (3, 9, self.tuning.angular_accel_psd * process_scale[1]),
+                ] {
+                    let (qpp, qpv, qvv) = (psd * dt * dt * dt / 3.0, psd * dt * dt / 2.0, psd * dt);
+                    for i in 0..3 {
+                        p[(pos + i, pos + i)] += qpp;
+                        p[(pos + i, vel + i)] += qpv;
+                        p[(vel + i, pos + i)] += qpv;
+                        p[(vel + i, vel + i)] += qvv;
+                    }
+                }
+            }
+            MotionModel::ConstantAcceleration {
+                linear_jerk_psd,
+                angular_jerk_psd,
+            } if Self::WITH_ACCELERATION => {
+                // Q of white jerk: per axis, over (pose, twist, acceleration), the density times
+                // [dt⁵/20 dt⁴/8 dt³/6; dt⁴/8 dt³/3 dt²/2; dt³/6 dt²/2 dt].
+                let (dt2, dt3) = (dt * dt, dt * dt * dt);
+                let q = [
+                    [dt2 * dt3 / 20.0, dt2 * dt2 / 8.0, dt3 / 6.0],
+                    [dt2 * dt2 / 8.0, dt3 / 3.0, dt2 / 2.0],
+                    [dt3 / 6.0, dt2 / 2.0, dt],
+                ];
+                for (offset, psd) in [
+                    (0, linear_jerk_psd * process_scale[0]),
+                    (3, angular_jerk_psd * process_scale[1]),
+                ] {
+                    for axis in 0..3 {
+                        for (r, q_row) in q.iter().enumerate() {
+                            for (c, q_rc) in q_row.iter().enumerate() {
+                                p[(offset + 6 * r + axis, offset + 6 * c + axis)] += psd * q_rc;
+                            }
+                        }
+                    }
+                }
+            }
+            MotionModel::ConstantAcceleration { .. } => {
+                unreachable!("a constant-acceleration model has an 18-state filter")
             }
         }
-        // The state's own prediction (`MotionState::predicted`), with the rotation increment already at hand.
+        // The state's own prediction (`MotionState::predicted` when there is no acceleration), with the rotation
+        // increment already at hand.
         state.cam_r_obj = e_rotation * state.cam_r_obj;
-        state.cam_t_obj_m += state.velocity_mps * dt_s;
+        state.cam_t_obj_m += state.velocity_mps * dt_s + linear_acceleration * half_dt2;
+        state.velocity_mps += linear_acceleration * dt_s;
+        state.angular_velocity_radps += angular_acceleration * dt_s;
     }
 
     /// Updates with one centroid (ideal pixel) of `point_in_obj_m`, observed at the state's reference time.
@@ -249,10 +359,26 @@ impl ErrorStateKalman {
         else {
             return UpdateOutcome::Invalid;
         };
+        // The centroid depends on the pose alone (at its own time); the accelerations' columns of H are zero.
         let h = projected.jacobian;
         let innovation = ideal_px - projected.pixel;
-        let ph_t: SMatrix<f64, 12, 2> = self.covariance * h.transpose();
-        let s = h * ph_t + Matrix2::identity() * (sigma_px * sigma_px);
+        // P Hᵀ over the pose's and twist's columns, by whole columns of P (a strided view's product is slower).
+        let mut ph_t = SMatrix::<f64, N, 2>::zeros();
+        for (j, column) in self
+            .covariance
+            .as_slice()
+            .chunks_exact(N)
+            .take(12)
+            .enumerate()
+        {
+            let (h0, h1) = (h[(0, j)], h[(1, j)]);
+            for (i, entry) in column.iter().enumerate() {
+                ph_t[(i, 0)] += entry * h0;
+                ph_t[(i, 1)] += entry * h1;
+            }
+        }
+        let hph_t = h * ph_t.fixed_rows::<12>(0);
+        let s = hph_t + Matrix2::identity() * (sigma_px * sigma_px);
         let Some(s_inv) = s.try_inverse() else {
             return UpdateOutcome::Invalid;
         };
@@ -285,7 +411,7 @@ impl ErrorStateKalman {
         let distance = mahalanobis2.sqrt();
         let (sigma2, s_inv) = if distance > self.tuning.huber_sigma {
             let inflated = sigma_px * sigma_px * distance / self.tuning.huber_sigma;
-            match (h * ph_t + Matrix2::identity() * inflated).try_inverse() {
+            match (hph_t + Matrix2::identity() * inflated).try_inverse() {
                 Some(inv) => (inflated, inv),
                 None => return UpdateOutcome::Invalid,
             }
@@ -294,19 +420,23 @@ impl ErrorStateKalman {
         };
         let gain = ph_t * s_inv;
         let correction = gain * innovation;
-        let corrected = state.corrected(&correction);
+        let pose_twist_correction: Vector12 = correction.fixed_rows::<12>(0).into_owned();
+        let corrected = state.corrected(&pose_twist_correction);
         if !corrected.is_finite() {
             return UpdateOutcome::Invalid;
         }
         *state = corrected;
-        self.trend += (correction - self.trend) * self.trend_rate;
+        for i in 12..N {
+            self.acceleration[(i - 12) / 3][(i - 12) % 3] += correction[i];
+        }
+        self.trend += (pose_twist_correction - self.trend) * self.trend_rate;
         // P - K S Kᵀ = P - (P Hᵀ) S⁻¹ (P Hᵀ)ᵀ with the gain that is optimal for S (the Huber-inflated one included):
         // a twelfth of the Joseph form's work, as a rank-2 downdate in place, symmetrised every few updates against
         // round-off. Should rounding ever leave a variance that is not positive, the Joseph form takes over.
         for (j, column) in self
             .covariance
             .as_mut_slice()
-            .chunks_exact_mut(12)
+            .chunks_exact_mut(N)
             .enumerate()
         {
             let (a, b) = (ph_t[(j, 0)], ph_t[(j, 1)]);
@@ -318,15 +448,172 @@ impl ErrorStateKalman {
         if self.updates.is_multiple_of(SYMMETRISE_EVERY_UPDATES) {
             self.covariance = (self.covariance + self.covariance.transpose()) * 0.5;
         }
-        if (0..12).any(|i| self.covariance[(i, i)] <= 0.0) {
+        if (0..N).any(|i| self.covariance[(i, i)] <= 0.0) {
             let before = self.covariance + gain * ph_t.transpose();
-            let i_kh = Matrix12::identity() - gain * h;
+            let mut h_full = SMatrix::<f64, 2, N>::zeros();
+            h_full.fixed_columns_mut::<12>(0).copy_from(&h);
+            let i_kh = SMatrix::<f64, N, N>::identity() - gain * h_full;
             self.covariance = i_kh * before * i_kh.transpose() + gain * gain.transpose() * sigma2;
         }
         UpdateOutcome::Accepted {
             norm_px: innovation.norm(),
             nis: mahalanobis2,
         }
+    }
+}
+
+/// The transition `F` of the error state over `dt_s`, applied to one column. With `E = Exp(φ)`, `φ = W dt + ½ Α dt²`
+/// the rotation increment and `J = J_l(φ)` (the left Jacobian of SO(3)), on (v, w, dV, dW, dA, dΑ):
+///
+/// ```text
+/// F = [ I  0  dt·I  0      ½dt²·I  0       ]
+///     [ 0  E  0     J·dt   0       J·½dt²  ]
+///     [ 0  0  I     0      dt·I    0       ]
+///     [ 0  0  0     I      0       dt·I    ]
+///     [ 0  0  0     0      I       0       ]
+///     [ 0  0  0     0      0       I       ]
+/// ```
+///
+/// and its top-left 12 x 12 block without the accelerations ([`MotionState::transition_jacobian`]).
+struct Transition {
+    dt_s: f64,
+    half_dt2: f64,
+    /// `E`, `J dt` and `J ½dt²`.
+    e: nalgebra::Matrix3<f64>,
+    b: nalgebra::Matrix3<f64>,
+    b_half_dt: nalgebra::Matrix3<f64>,
+}
+
+impl Transition {
+    /// `F x` in place.
+    #[inline]
+    fn apply<const N: usize>(&self, column: &mut [f64]) {
+        let old: [f64; N] = column.try_into().expect("a column of N rows");
+        for k in 0..3 {
+            let mut translation = old[k] + old[6 + k] * self.dt_s;
+            let mut rotation = 0.0;
+            for l in 0..3 {
+                rotation += self.e[(k, l)] * old[3 + l] + self.b[(k, l)] * old[9 + l];
+            }
+            if N == 18 {
+                translation += old[12 + k] * self.half_dt2;
+                for l in 0..3 {
+                    rotation += self.b_half_dt[(k, l)] * old[15 + l];
+                }
+                column[6 + k] = old[6 + k] + old[12 + k] * self.dt_s;
+                column[9 + k] = old[9 + k] + old[15 + k] * self.dt_s;
+            }
+            column[k] = translation;
+            column[3 + k] = rotation;
+        }
+    }
+
+    /// `P Fᵀ` in place, `p` the column-major entries of an `N x N` matrix (`p[i + N j]` is row i, column j): column
+    /// j of the product is the combination of P's columns that row j of F holds.
+    #[inline]
+    fn apply_from_the_right<const N: usize>(&self, p: &mut [f64]) {
+        let old_rotation: [f64; 54] =
+            std::array::from_fn(|k| if k < 3 * N { p[3 * N + k] } else { 0.0 });
+        for k in 0..3 {
+            for i in 0..N {
+                let mut translation = p[i + N * k] + p[i + N * (6 + k)] * self.dt_s;
+                let mut rotation = 0.0;
+                for l in 0..3 {
+                    rotation += old_rotation[i + N * l] * self.e[(k, l)]
+                        + p[i + N * (9 + l)] * self.b[(k, l)];
+                }
+                if N == 18 {
+                    translation += p[i + N * (12 + k)] * self.half_dt2;
+                    for l in 0..3 {
+                        rotation += p[i + N * (15 + l)] * self.b_half_dt[(k, l)];
+                    }
+                }
+                p[i + N * k] = translation;
+                p[i + N * (3 + k)] = rotation;
+            }
+        }
+        if N == 18 {
+            for k in 0..3 {
+                for i in 0..N {
+                    p[i + N * (6 + k)] += p[i + N * (12 + k)] * self.dt_s;
+                    p[i + N * (9 + k)] += p[i + N * (15 + k)] * self.dt_s;
+                }
+            }
+        }
+    }
+}
+
+/// The Kalman filter of one motion model.
+// Unboxed: the filter lives in its track and is not moved per measurement; a box would cost an allocation at every
+// track start and an indirection at every update.
+#[allow(clippy::large_enum_variant)]
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Filter {
+    ConstantVelocity(ErrorStateKalman<12>),
+    ConstantAcceleration(ErrorStateKalman<18>),
+}
+
+/// `$body` with `$f` bound to the filter, whichever its motion model.
+macro_rules! with_filter {
+    ($filter:expr, $f:ident => $body:expr) => {
+        match $filter {
+            Filter::ConstantVelocity($f) => $body,
+            Filter::ConstantAcceleration($f) => $body,
+        }
+    };
+}
+
+impl Filter {
+    fn new(pose_twist: Matrix12, tuning: KalmanTuning, trend_rate: f64) -> Self {
+        match tuning.motion_model {
+            MotionModel::ConstantVelocity => {
+                Self::ConstantVelocity(ErrorStateKalman::new(pose_twist, tuning, trend_rate))
+            }
+            MotionModel::ConstantAcceleration { .. } => {
+                Self::ConstantAcceleration(ErrorStateKalman::new(pose_twist, tuning, trend_rate))
+            }
+        }
+    }
+
+    fn tuning(&self) -> &KalmanTuning {
+        with_filter!(self, f => &f.tuning)
+    }
+
+    fn persistence(&self) -> [f64; 2] {
+        with_filter!(self, f => f.persistence)
+    }
+
+    fn pose_twist_covariance(&self) -> Matrix12 {
+        with_filter!(self, f => f.pose_twist_covariance())
+    }
+
+    fn acceleration(&self) -> Option<Acceleration> {
+        match self {
+            Self::ConstantVelocity(_) => None,
+            Self::ConstantAcceleration(f) => Some(Acceleration {
+                linear_mps2: f.acceleration[0],
+                angular_radps2: f.acceleration[1],
+            }),
+        }
+    }
+
+    fn widen(&mut self, prior: &Matrix12, scale: f64) {
+        with_filter!(self, f => f.widen(prior, scale))
+    }
+
+    fn predict(&mut self, state: &mut MotionState, dt_s: f64, process_scale: [f64; 2]) {
+        with_filter!(self, f => f.predict(state, dt_s, process_scale))
+    }
+
+    fn update(
+        &mut self,
+        model: &SpatioTemporalModel,
+        state: &mut MotionState,
+        point_in_obj_m: &Vector3<f64>,
+        ideal_px: &Vector2<f64>,
+        sigma_px: f64,
+    ) -> UpdateOutcome {
+        with_filter!(self, f => f.update(model, state, point_in_obj_m, ideal_px, sigma_px))
     }
 }
 
@@ -394,7 +681,7 @@ impl NoiseEstimate {
 /// The Kalman filter's part of a track: the filter's covariance, its gate counters and what it learns online.
 #[derive(Debug, Clone)]
 struct KalmanLaw {
-    filter: ErrorStateKalman,
+    filter: Filter,
     /// Measurements rejected by the gate in a row, and covariance resets since the last estimate.
     gated_in_a_row: usize,
     covariance_resets: usize,
@@ -428,9 +715,9 @@ struct KalmanLaw {
 impl Law for KalmanLaw {
     fn begin_track(&mut self, core: &TrackCore, covariance: Option<Matrix12>) {
         *self = Self {
-            filter: ErrorStateKalman::new(
+            filter: Filter::new(
                 covariance.unwrap_or_else(|| core.prior_covariance()),
-                self.filter.tuning,
+                *self.filter.tuning(),
                 1.0 / (TREND_CYCLES * core.target.len() as f64),
             ),
             gated_total: self.gated_total,
@@ -459,12 +746,12 @@ impl Law for KalmanLaw {
                 gated_at.resize(core.target.len(), None);
                 gated_at
             },
-            ..Self::new(self.filter.tuning)
+            ..Self::new(*self.filter.tuning())
         };
     }
 
     fn adapts_noise(&self) -> bool {
-        self.filter.tuning.adapt_noise
+        self.filter.tuning().adapt_noise
     }
 
     fn on_measurement(&mut self, core: &mut TrackCore, obs: &Observation) {
@@ -492,12 +779,12 @@ impl Law for KalmanLaw {
         // next, which within a frame are one instant, and from one frame to the next tens of milliseconds apart (on
         // 16-point frames at 30 Hz, 0.03 px, the adaptation chased them to 14.6 mm). Nor does a measurement at the
         // time of the one before it, before the first step has told the stream's kind.
-        if self.filter.tuning.adapt_motion
+        if self.filter.tuning().adapt_motion
             && !self.frame_steps
             && dt != 0.0
             && matches!(outcome, UpdateOutcome::Accepted { .. })
         {
-            self.adapt_process_scale(self.filter.persistence);
+            self.adapt_process_scale(self.filter.persistence());
         }
         // Outliers are rare and scattered; a run of gated measurements means the filter itself is off (after a jump
         // of the target, or an outlier that got through): widen its covariance so the measurements pull it back,
@@ -522,7 +809,7 @@ impl Law for KalmanLaw {
             // lets the measurements correct it without exposing the filter to every outlier, and if the runs go on
             // (a jump), the next resets widen it to the broad prior.
             let scale = RESET_SCALES[self.reset_level.min(RESET_SCALES.len() - 1)];
-            self.filter.covariance += core.prior_covariance() * scale;
+            self.filter.widen(&core.prior_covariance(), scale);
             self.reset_level += 1;
             self.gated_in_a_row = 0;
             self.covariance_resets += 1;
@@ -536,7 +823,7 @@ impl Law for KalmanLaw {
         let solved = ne.solve_with_conditioning();
         let inverse_condition = solved.map_or(0.0, |(_, c)| c);
         self.frame_steps = core.recent_are_frames(core.step_measurements);
-        if self.filter.tuning.adapt_noise {
+        if self.filter.tuning().adapt_noise {
             self.learn_noise(core, t_new_s, &ne, solved.map(|(step, _)| step));
         }
         // After a covariance reset the filter is re-converging: say so.
@@ -548,16 +835,17 @@ impl Law for KalmanLaw {
         } else {
             TrackStatus::Tracking
         };
-        let covariance = if self.filter.tuning.calibrate_twist_covariance {
+        let pose_twist_covariance = self.filter.pose_twist_covariance();
+        let covariance = if self.filter.tuning().calibrate_twist_covariance {
             self.calibration.record(
                 t_new_s,
                 &core.state,
-                &self.filter.covariance,
+                &pose_twist_covariance,
                 status == TrackStatus::Tracking,
             );
-            self.calibration.apply(&self.filter.covariance)
+            self.calibration.apply(&pose_twist_covariance)
         } else {
-            self.filter.covariance
+            pose_twist_covariance
         };
         Step {
             inverse_condition,
@@ -565,6 +853,7 @@ impl Law for KalmanLaw {
             iterations: core.step_measurements,
             status,
             covariance: Some(covariance),
+            acceleration: self.filter.acceleration(),
         }
     }
 
@@ -606,7 +895,7 @@ const DISPUTED_NIS: f64 = 25.0;
 impl KalmanLaw {
     fn new(tuning: KalmanTuning) -> Self {
         Self {
-            filter: ErrorStateKalman::new(Matrix12::identity(), tuning, 0.0),
+            filter: Filter::new(Matrix12::identity(), tuning, 0.0),
             gated_in_a_row: 0,
             covariance_resets: 0,
             reset_level: 0,
@@ -652,7 +941,7 @@ impl KalmanLaw {
             return;
         }
         // With frames, the other steps are rolling-shutter frames, which are not sampled.
-        if self.filter.tuning.noise_sample == NoiseSample::Frames {
+        if self.filter.tuning().noise_sample == NoiseSample::Frames {
             return;
         }
         let min_measurements = (12 + MIN_NOISE_DOF).div_ceil(2);
@@ -687,7 +976,7 @@ impl KalmanLaw {
     /// gate's Mahalanobis radius g, whose variance is this fraction, (1 - (1 + g²/2) e^(-g²/2)) / (1 - e^(-g²/2)),
     /// of the noise's (0.949 at 3 σ; measured on clean orthoglide without the correction: 0.92).
     fn gate_truncated_fraction(&self) -> f64 {
-        let g2 = self.filter.tuning.gate_sigma * self.filter.tuning.gate_sigma;
+        let g2 = self.filter.tuning().gate_sigma * self.filter.tuning().gate_sigma;
         let tail = (-g2 / 2.0).exp();
         (1.0 - (1.0 + g2 / 2.0) * tail) / (1.0 - tail)
     }
@@ -803,3 +1092,151 @@ impl KalmanEstimator {
 }
 
 super::delegate_estimator!(KalmanEstimator);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Rotation3;
+
+    type Matrix18 = SMatrix<f64, 18, 18>;
+    type Vector18 = SMatrix<f64, 18, 1>;
+
+    fn moving() -> (MotionState, Acceleration) {
+        (
+            MotionState {
+                cam_r_obj: Rotation3::from_euler_angles(0.1, -0.2, 0.3),
+                cam_t_obj_m: Vector3::new(0.02, -0.01, 0.6),
+                velocity_mps: Vector3::new(0.5, -0.3, 0.1),
+                angular_velocity_radps: Vector3::new(2.0, -6.0, 1.0),
+            },
+            Acceleration {
+                linear_mps2: Vector3::new(3.0, -12.0, 5.0),
+                angular_radps2: Vector3::new(-40.0, 25.0, 60.0),
+            },
+        )
+    }
+
+    fn transition(state: &MotionState, acceleration: &Acceleration, dt_s: f64) -> Transition {
+        let half_dt2 = 0.5 * dt_s * dt_s;
+        let rotation_increment =
+            state.angular_velocity_radps * dt_s + acceleration.angular_radps2 * half_dt2;
+        let j_l = so3::left_jacobian(&rotation_increment);
+        Transition {
+            dt_s,
+            half_dt2,
+            e: *so3::exp(&rotation_increment).matrix(),
+            b: j_l * dt_s,
+            b_half_dt: j_l * half_dt2,
+        }
+    }
+
+    /// F, column by column: F applied to the unit vectors.
+    fn dense<const N: usize>(transition: &Transition) -> SMatrix<f64, N, N> {
+        let mut f = SMatrix::<f64, N, N>::identity();
+        for column in f.as_mut_slice().chunks_exact_mut(N) {
+            transition.apply::<N>(column);
+        }
+        f
+    }
+
+    /// The 18-vector error between two (state, acceleration) pairs: `MotionState::difference`, then the
+    /// accelerations' difference.
+    fn difference(a: &(MotionState, Acceleration), b: &(MotionState, Acceleration)) -> Vector18 {
+        let mut delta = Vector18::zeros();
+        delta
+            .fixed_rows_mut::<12>(0)
+            .copy_from(&MotionState::difference(&a.0, &b.0));
+        delta
+            .fixed_rows_mut::<3>(12)
+            .copy_from(&(b.1.linear_mps2 - a.1.linear_mps2));
+        delta
+            .fixed_rows_mut::<3>(15)
+            .copy_from(&(b.1.angular_radps2 - a.1.angular_radps2));
+        delta
+    }
+
+    fn corrected(
+        (state, acceleration): &(MotionState, Acceleration),
+        delta: &Vector18,
+    ) -> (MotionState, Acceleration) {
+        (
+            state.corrected(&delta.fixed_rows::<12>(0).into_owned()),
+            Acceleration {
+                linear_mps2: acceleration.linear_mps2 + delta.fixed_rows::<3>(12),
+                angular_radps2: acceleration.angular_radps2 + delta.fixed_rows::<3>(15),
+            },
+        )
+    }
+
+    #[test]
+    fn the_constant_acceleration_transition_matches_central_differences() {
+        let start = moving();
+        let predicted = |(state, acceleration): &(MotionState, Acceleration), dt_s: f64| {
+            (acceleration.predicted(state, dt_s), *acceleration)
+        };
+        for dt_s in [0.015, -0.02, 1e-4] {
+            let f = dense::<18>(&transition(&start.0, &start.1, dt_s));
+            let nominal = predicted(&start, dt_s);
+            let h = 1e-6;
+            for j in 0..18 {
+                let mut delta = Vector18::zeros();
+                delta[j] = h;
+                let plus = difference(&nominal, &predicted(&corrected(&start, &delta), dt_s));
+                let minus = difference(&nominal, &predicted(&corrected(&start, &-delta), dt_s));
+                let column = (plus - minus) / (2.0 * h);
+                let error = (column - f.column(j)).amax();
+                assert!(
+                    error < 1e-7,
+                    "dt {dt_s}, column {j}: {error:e}\n{column}\n{}",
+                    f.column(j)
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn without_accelerations_the_transition_is_the_states_own() {
+        let (state, _) = moving();
+        let still = Acceleration {
+            linear_mps2: Vector3::zeros(),
+            angular_radps2: Vector3::zeros(),
+        };
+        for dt_s in [0.015, -0.02] {
+            let f = dense::<12>(&transition(&state, &still, dt_s));
+            assert!((f - state.transition_jacobian(dt_s)).amax() < 1e-15);
+        }
+    }
+
+    #[test]
+    fn the_covariance_moves_as_f_p_f_transposed() {
+        let (state, acceleration) = moving();
+        let a = Matrix18::from_fn(|i, j| ((i * 7 + j * 3) % 11) as f64 * 0.1 - 0.4);
+        let p = a * a.transpose() + Matrix18::identity();
+        for dt_s in [0.015, -0.02] {
+            let transition = transition(&state, &acceleration, dt_s);
+            let f = dense::<18>(&transition);
+            let mut moved = p;
+            for column in moved.as_mut_slice().chunks_exact_mut(18) {
+                transition.apply::<18>(column);
+            }
+            transition.apply_from_the_right::<18>(moved.as_mut_slice());
+            let expected = f * p * f.transpose();
+            assert!((moved - expected).amax() < 1e-12 * expected.amax());
+        }
+    }
+
+    #[test]
+    fn the_filter_predicts_its_state_as_the_acceleration_does() {
+        let (state, acceleration) = moving();
+        let tuning = KalmanTuning {
+            motion_model: MotionModel::constant_acceleration(),
+            ..KalmanTuning::default()
+        };
+        let mut filter = ErrorStateKalman::<18>::new(Matrix12::identity(), tuning, 0.0);
+        filter.acceleration = [acceleration.linear_mps2, acceleration.angular_radps2];
+        let mut moved = state;
+        filter.predict(&mut moved, 0.01, [1.0, 1.0]);
+        let expected = acceleration.predicted(&state, 0.01);
+        assert!(MotionState::difference(&moved, &expected).amax() < 1e-14);
+    }
+}

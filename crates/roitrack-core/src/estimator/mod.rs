@@ -63,8 +63,8 @@ use thiserror::Error;
 
 use crate::{CameraModel, Measurement, MotionState, Target};
 pub use batch::BatchEstimator;
-pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12, NoiseSample};
-pub use options::{Adaptation, EstimatorKind, TrackerOptions, UnknownName};
+pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12, MotionModel, NoiseSample};
+pub use options::{Adaptation, EstimatorKind, MotionModelKind, TrackerOptions, UnknownName};
 pub use problem::{Observation, RobustLoss, WindowProblem};
 pub use static_baseline::StaticEstimator;
 pub use static_pose::{InitError, PoseFit, refine_static_pose, solve_static_pose};
@@ -211,6 +211,24 @@ impl TrackerConfig {
                     "positive",
                     k.angular_accel_psd > 0.0,
                 )?;
+                if let MotionModel::ConstantAcceleration {
+                    linear_jerk_psd,
+                    angular_jerk_psd,
+                } = k.motion_model
+                {
+                    check(
+                        "kalman.linear_jerk_psd",
+                        linear_jerk_psd,
+                        "positive",
+                        linear_jerk_psd > 0.0,
+                    )?;
+                    check(
+                        "kalman.angular_jerk_psd",
+                        angular_jerk_psd,
+                        "positive",
+                        angular_jerk_psd > 0.0,
+                    )?;
+                }
                 check(
                     "kalman.gate_sigma",
                     k.gate_sigma,
@@ -326,6 +344,9 @@ pub struct Estimate {
     /// The centroid noise (px, standard deviation per coordinate) the estimate was computed with: the adaptive
     /// Kalman filter's online estimate, else [`TrackerConfig::noise_px`].
     pub noise_px: f64,
+    /// The accelerations at `t_ref_s`, when the estimator has them in its state (the Kalman filter with
+    /// [`MotionModel::ConstantAcceleration`]).
+    pub acceleration: Option<crate::Acceleration>,
 }
 
 impl Estimate {

@@ -4,7 +4,9 @@
 
 use thiserror::Error;
 
-use super::{EstimatorConfig, KalmanTuning, RobustLoss, TrackerConfig, VvsSettings, WindowMode};
+use super::{
+    EstimatorConfig, KalmanTuning, MotionModel, RobustLoss, TrackerConfig, VvsSettings, WindowMode,
+};
 use crate::JacobianKind;
 
 /// Which estimator, by its user-facing name.
@@ -42,6 +44,18 @@ pub enum Adaptation {
     Noise,
     Motion,
     None,
+}
+
+/// The Kalman filter's process model by name (see [`MotionModel`]).
+///
+/// ```
+/// use roitrack_core::estimator::MotionModelKind;
+/// assert_eq!(MotionModelKind::from_name("constant-acceleration"), Ok(MotionModelKind::ConstantAcceleration));
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MotionModelKind {
+    ConstantVelocity,
+    ConstantAcceleration,
 }
 
 /// A name that is not one of an option's values.
@@ -85,6 +99,9 @@ named_values!(EstimatorKind, "estimator", [
 named_values!(Adaptation, "adapt", [
     Both => "both", Noise => "noise", Motion => "motion", None => "none",
 ]);
+named_values!(MotionModelKind, "motion-model", [
+    ConstantVelocity => "constant-velocity", ConstantAcceleration => "constant-acceleration",
+]);
 named_values!(RobustLoss, "robust", [None => "none", Huber => "huber", Tukey => "tukey"]);
 
 /// The tracker's options by name, with the command line's defaults (`roitrack track --help`); [`Self::config`]
@@ -124,6 +141,14 @@ pub struct TrackerOptions {
     pub accel_psd: Option<f64>,
     /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz); `None` for the default.
     pub angular_accel_psd: Option<f64>,
+    /// Kalman: the process model; `None` means the default of the caller's source (constant velocity for
+    /// measurements, constant acceleration for frames, see `FrameTrackerConfig::frame_estimator`), and a jerk
+    /// density given without it means constant acceleration.
+    pub motion_model: Option<MotionModelKind>,
+    /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz); `None` for the default.
+    pub jerk_psd: Option<f64>,
+    /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz); `None` for the default.
+    pub angular_jerk_psd: Option<f64>,
     /// M-estimator of the window fits; `None` also turns off the Kalman filter's Huber weighting.
     pub robust: RobustLoss,
     /// Degeneracy gate on the window's reciprocal condition number; `None` for the default.
@@ -142,6 +167,9 @@ impl Default for TrackerOptions {
             adapt: None,
             accel_psd: None,
             angular_accel_psd: None,
+            motion_model: None,
+            jerk_psd: None,
+            angular_jerk_psd: None,
             robust: RobustLoss::Tukey,
             min_conditioning: None,
         }
@@ -149,6 +177,36 @@ impl Default for TrackerOptions {
 }
 
 impl TrackerOptions {
+    /// The Kalman filter's process model these options name: [`Self::motion_model`], or constant acceleration when
+    /// only a jerk density is given; constant velocity otherwise.
+    ///
+    /// ```
+    /// use roitrack_core::estimator::{MotionModel, TrackerOptions};
+    /// let options = TrackerOptions { jerk_psd: Some(50.0), ..TrackerOptions::default() };
+    /// let MotionModel::ConstantAcceleration { linear_jerk_psd, .. } = options.kalman_motion_model() else { panic!() };
+    /// assert_eq!(linear_jerk_psd, 50.0);
+    /// assert_eq!(TrackerOptions::default().kalman_motion_model(), MotionModel::ConstantVelocity);
+    /// ```
+    pub fn kalman_motion_model(&self) -> MotionModel {
+        let jerk_given = self.jerk_psd.is_some() || self.angular_jerk_psd.is_some();
+        match (self.motion_model, jerk_given) {
+            (Some(MotionModelKind::ConstantAcceleration), _) | (None, true) => {
+                let MotionModel::ConstantAcceleration {
+                    linear_jerk_psd,
+                    angular_jerk_psd,
+                } = MotionModel::constant_acceleration()
+                else {
+                    unreachable!("constant_acceleration is the constant-acceleration model")
+                };
+                MotionModel::ConstantAcceleration {
+                    linear_jerk_psd: self.jerk_psd.unwrap_or(linear_jerk_psd),
+                    angular_jerk_psd: self.angular_jerk_psd.unwrap_or(angular_jerk_psd),
+                }
+            }
+            _ => MotionModel::ConstantVelocity,
+        }
+    }
+
     /// The configuration these options name ([`TrackerConfig::validate`] checks the values).
     pub fn config(&self) -> TrackerConfig {
         let defaults = KalmanTuning::default();
@@ -168,6 +226,7 @@ impl TrackerOptions {
                 self.adapt,
                 None | Some(Adaptation::Both | Adaptation::Motion)
             ),
+            motion_model: self.kalman_motion_model(),
             ..defaults
         };
         let vvs = |jacobian| VvsSettings {

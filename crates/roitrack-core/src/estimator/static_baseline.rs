@@ -57,6 +57,7 @@ impl Law for StaticLaw {
             iterations: fit.iterations,
             status,
             covariance: None,
+            acceleration: None,
         }
     }
 

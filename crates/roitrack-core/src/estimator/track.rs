@@ -78,6 +78,7 @@ pub(crate) struct Step {
     pub iterations: usize,
     pub status: TrackStatus,
     pub covariance: Option<Matrix12>,
+    pub acceleration: Option<crate::Acceleration>,
 }
 
 /// The part of an estimator that differs from the others.
@@ -604,6 +605,7 @@ impl<L: Law> Track<L> {
                     TrackStatus::Degenerate
                 },
                 covariance,
+                acceleration: None,
             },
         })
     }
@@ -663,6 +665,7 @@ impl<L: Law> Track<L> {
             status,
             covariance: step.covariance,
             noise_px,
+            acceleration: step.acceleration,
         }
     }
 }

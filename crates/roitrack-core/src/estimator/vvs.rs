@@ -87,6 +87,7 @@ impl Law for VvsLaw {
                 TrackStatus::Tracking
             },
             covariance: core.window_covariance(&fit.normal_equations, inverse_condition),
+            acceleration: None,
         }
     }
 
