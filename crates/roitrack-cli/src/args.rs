@@ -116,6 +116,22 @@ pub struct EstimatorArgs {
     /// --accel-psd.
     #[arg(long)]
     pub angular_accel_psd: Option<f64>,
+    /// Kalman: the process model. constant-velocity: the twist drifts under white acceleration (--accel-psd,
+    /// --angular-accel-psd). constant-acceleration: the state also carries the linear and angular accelerations, which
+    /// drift under white jerk (--jerk-psd, --angular-jerk-psd); about twice the work per update. Default: constant
+    /// velocity for measurements and ROI recordings, constant acceleration for --images (frames tens of
+    /// milliseconds apart, where the twist changes from one frame to the next); a jerk density given alone means
+    /// constant acceleration.
+    #[arg(long, value_enum)]
+    pub motion_model: Option<MotionModelArg>,
+    /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz). Default: 100, a starting
+    /// value that the filter adapts unless --adapt leaves the motion out.
+    #[arg(long)]
+    pub jerk_psd: Option<f64>,
+    /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz). Default: 1000, a starting
+    /// value as for --jerk-psd.
+    #[arg(long)]
+    pub angular_jerk_psd: Option<f64>,
     /// M-estimator against outliers: tukey (default), huber (window fits; the Kalman filter uses Huber either way)
     /// or none (plain least squares, and no Huber weighting in the Kalman filter).
     #[arg(long, value_enum, default_value = "tukey")]
@@ -139,6 +155,15 @@ impl EstimatorArgs {
         })
     }
 
+    /// What `--motion-model` asks for; `None` without it (the source's default).
+    pub fn motion_model(&self) -> Option<roitrack::math::estimator::MotionModelKind> {
+        use roitrack::math::estimator::MotionModelKind;
+        self.motion_model.map(|m| match m {
+            MotionModelArg::ConstantVelocity => MotionModelKind::ConstantVelocity,
+            MotionModelArg::ConstantAcceleration => MotionModelKind::ConstantAcceleration,
+        })
+    }
+
     /// The options by name, translated into a configuration by the library (as the Python package does).
     pub fn config(&self) -> TrackerConfig {
         use roitrack::math::estimator::EstimatorKind;
@@ -158,6 +183,9 @@ impl EstimatorArgs {
             adapt: self.adaptation(),
             accel_psd: self.accel_psd,
             angular_accel_psd: self.angular_accel_psd,
+            motion_model: self.motion_model(),
+            jerk_psd: self.jerk_psd,
+            angular_jerk_psd: self.angular_jerk_psd,
             robust: match self.robust {
                 RobustArg::None => RobustLoss::None,
                 RobustArg::Huber => RobustLoss::Huber,
@@ -167,6 +195,15 @@ impl EstimatorArgs {
         }
         .config()
     }
+}
+
+/// The Kalman filter's process model (`--motion-model`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum MotionModelArg {
+    /// The twist drifts under white acceleration.
+    ConstantVelocity,
+    /// The accelerations are states too, drifting under white jerk.
+    ConstantAcceleration,
 }
 
 /// How a frame camera reads its rows (`--shutter`).

@@ -2,7 +2,7 @@
 //! blobs, fast motion, losses and bad frames.
 
 use nalgebra::Vector3;
-use roitrack_core::estimator::Adaptation;
+use roitrack_core::estimator::{Adaptation, MotionModelKind, TrackerConfig};
 use roitrack_core::time::Readout;
 use roitrack_core::{CameraModel, Target, TargetPoint, so3};
 use roitrack_image::{Frame, Polarity};
@@ -157,6 +157,44 @@ fn rolling_shutter_model_beats_the_global_model_on_rolling_frames() {
     assert!(vel_r <= (1.5 * vel_gs).max(0.03), "{vel_r} vs {vel_gs}");
 }
 
+#[test]
+fn the_frame_default_follows_accelerations_that_a_constant_twist_misses() {
+    // The sweep's third seed turns at up to ~4 rad/s² about the vertical: between two frames 33 ms apart the twist
+    // changes, and a constant-twist filter carries last frame's twist over the next readout, where the rows it pins
+    // the depth with are read milliseconds apart. The frame default carries the accelerations too.
+    let rolling = Readout::RollingShutter {
+        line_delay_s: 30e-6,
+    };
+    let mut frames = sequence_of(ScenarioKind::Sweep, rolling, Polarity::Bright, 3);
+    let camera = frames.camera().clone();
+    let acceleration = run_with(
+        &mut frames,
+        camera.clone(),
+        FrameTrackerConfig::default(),
+        120,
+    );
+    let velocity_config = FrameTrackerConfig {
+        tracker: FrameTrackerConfig::frame_estimator(
+            TrackerConfig::default(),
+            None,
+            Some(MotionModelKind::ConstantVelocity),
+        ),
+        ..FrameTrackerConfig::default()
+    };
+    let velocity = run_with(&mut frames, camera, velocity_config, 120);
+    let (pos_a, vel_a) = summary("constant acceleration (default)", &acceleration);
+    let (pos_v, vel_v) = summary("constant velocity", &velocity);
+    assert_eq!(acceleration.errors.len(), acceleration.frames);
+    assert!(
+        pos_a < 0.1e-3 && 2.0 * pos_a < pos_v,
+        "{pos_a} vs {pos_v} m"
+    );
+    assert!(
+        vel_a < 0.01 && 2.0 * vel_a < vel_v,
+        "{vel_a} vs {vel_v} m/s"
+    );
+}
+
 /// Four dots 8 x 6 cm apart, one of them larger (the key), as on a hand-made target.
 fn four_dots() -> Target {
     let dot = |id: u32, x: f64, y: f64| TargetPoint {
@@ -265,7 +303,8 @@ fn the_noise_is_learnt_from_global_shutter_frames_and_held_for_rolling_ones() {
             90,
         );
         let mut held = FrameTrackerConfig::default();
-        held.tracker = FrameTrackerConfig::frame_estimator(held.tracker, Some(Adaptation::None));
+        held.tracker =
+            FrameTrackerConfig::frame_estimator(held.tracker, Some(Adaptation::None), None);
         let held = run_with(&mut frames, camera, held, 90);
         let (pos_learnt, _) = summary(&format!("{readout:?}, default"), &learnt);
         let (pos_held, _) = summary(&format!("{readout:?}, noise held at 0.1 px"), &held);

@@ -22,7 +22,7 @@ use pyo3::types::{PyDict, PyList};
 use roitrack::formats::FormatError;
 use roitrack::math::camera::PinholeIntrinsics;
 use roitrack::math::estimator::{
-    Adaptation, EstimatorKind, RobustLoss, TrackerOptions, UnknownName,
+    Adaptation, EstimatorKind, MotionModelKind, RobustLoss, TrackerOptions, UnknownName,
 };
 use roitrack::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use roitrack::pipeline::{PhotoError, PhotoOptions, PolarityChoice};
@@ -477,6 +477,9 @@ fn tracker_options(
     adapt: Option<&str>,
     accel_psd: Option<f64>,
     angular_accel_psd: Option<f64>,
+    motion_model: Option<&str>,
+    jerk_psd: Option<f64>,
+    angular_jerk_psd: Option<f64>,
     robust: &str,
     min_conditioning: Option<f64>,
 ) -> PyResult<TrackerOptions> {
@@ -493,6 +496,12 @@ fn tracker_options(
             .map_err(name_error)?,
         accel_psd,
         angular_accel_psd,
+        motion_model: motion_model
+            .map(MotionModelKind::from_name)
+            .transpose()
+            .map_err(name_error)?,
+        jerk_psd,
+        angular_jerk_psd,
         robust: RobustLoss::from_name(robust).map_err(name_error)?,
         min_conditioning,
     })
@@ -509,8 +518,8 @@ fn new_tracker(
 
 /// A streaming tracker: push centroids one at a time, get an Estimate every `every` measurements once initialised.
 /// The keywords are those of `roitrack track` (see its --help): estimator kalman|exact|paper|static|batch, every,
-/// gain, iterations, window, noise_px, adapt both|noise|motion|none, accel_psd, angular_accel_psd, robust
-/// none|huber|tukey, min_conditioning.
+/// gain, iterations, window, noise_px, adapt both|noise|motion|none, accel_psd, angular_accel_psd, motion_model
+/// constant-velocity|constant-acceleration, jerk_psd, angular_jerk_psd, robust none|huber|tukey, min_conditioning.
 ///
 /// >>> tr = roitrack.Tracker(cam, tgt, estimator="kalman", every=10)
 /// >>> est = tr.push(0.0, 3, 512.2, 498.7)   # None until an estimate is due
@@ -523,7 +532,8 @@ struct Tracker {
 impl Tracker {
     #[new]
     #[pyo3(signature = (camera, target, estimator = "kalman", every = 10, gain = 1.0, iterations = 1, window = 0,
-        noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, robust = "tukey",
+        noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, motion_model = None, jerk_psd = None,
+    angular_jerk_psd = None, robust = "tukey",
         min_conditioning = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
@@ -538,6 +548,9 @@ impl Tracker {
         adapt: Option<&str>,
         accel_psd: Option<f64>,
         angular_accel_psd: Option<f64>,
+        motion_model: Option<&str>,
+        jerk_psd: Option<f64>,
+        angular_jerk_psd: Option<f64>,
         robust: &str,
         min_conditioning: Option<f64>,
     ) -> PyResult<Self> {
@@ -551,6 +564,9 @@ impl Tracker {
             adapt,
             accel_psd,
             angular_accel_psd,
+            motion_model,
+            jerk_psd,
+            angular_jerk_psd,
             robust,
             min_conditioning,
         )?;
@@ -701,7 +717,8 @@ fn measurements_of(argument: &Bound<'_, PyAny>) -> PyResult<Vec<Measurement>> {
 /// conditioning (M,). Releases the GIL while tracking.
 #[pyfunction]
 #[pyo3(signature = (camera, target, measurements, estimator = "kalman", every = 10, gain = 1.0, iterations = 1,
-    window = 0, noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, robust = "tukey",
+    window = 0, noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, motion_model = None, jerk_psd = None,
+    angular_jerk_psd = None, robust = "tukey",
     min_conditioning = None))]
 #[allow(clippy::too_many_arguments)]
 fn track<'py>(
@@ -718,6 +735,9 @@ fn track<'py>(
     adapt: Option<&str>,
     accel_psd: Option<f64>,
     angular_accel_psd: Option<f64>,
+    motion_model: Option<&str>,
+    jerk_psd: Option<f64>,
+    angular_jerk_psd: Option<f64>,
     robust: &str,
     min_conditioning: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
@@ -731,6 +751,9 @@ fn track<'py>(
         adapt,
         accel_psd,
         angular_accel_psd,
+        motion_model,
+        jerk_psd,
+        angular_jerk_psd,
         robust,
         min_conditioning,
     )?;

@@ -120,6 +120,10 @@ def test_tracker_refuses_bad_options(sim: dict) -> None:
         roitrack.Tracker(cam, tgt, adapt="always")
     with pytest.raises(ValueError, match="robust: unknown value"):
         roitrack.Tracker(cam, tgt, robust="cauchy")
+    with pytest.raises(ValueError, match="motion-model: unknown value 'jerk' .*constant-velocity, constant-acceleration"):
+        roitrack.Tracker(cam, tgt, motion_model="jerk")
+    with pytest.raises(roitrack.RoitrackError, match="linear_jerk_psd must be positive"):
+        roitrack.Tracker(cam, tgt, jerk_psd=-1.0)
     with pytest.raises(roitrack.RoitrackError, match="invalid tracker options: every must be at least 1"):
         roitrack.Tracker(cam, tgt, every=0)
     with pytest.raises(roitrack.RoitrackError, match="noise_px must be positive"):

@@ -14,6 +14,8 @@ CASES = [
     ({}, []),
     ({"adapt": "none", "accel_psd": 5.0, "noise_px": 0.2}, ["--adapt", "none", "--accel-psd", "5", "--noise-px", "0.2"]),
     ({"estimator": "paper", "gain": 0.5}, ["--estimator", "paper", "--gain", "0.5"]),
+    ({"motion_model": "constant-acceleration", "angular_jerk_psd": 500.0},
+     ["--motion-model", "constant-acceleration", "--angular-jerk-psd", "500"]),
     ({"estimator": "exact", "iterations": 2, "window": 32}, ["--estimator", "exact", "--iterations", "2", "--window", "32"]),
     ({"estimator": "batch", "every": 20, "robust": "huber"}, ["--estimator", "batch", "--every", "20", "--robust", "huber"]),
     ({"estimator": "static", "min_conditioning": 1e-3}, ["--estimator", "static", "--min-conditioning", "0.001"]),

@@ -286,10 +286,12 @@ fn run_frames(
         .validate()
         .context("invalid --line-delay-s or --exposure-s")?;
     let config = FrameTrackerConfig {
-        // Without --adapt, the frame tracker's own default: the noise learnt, the process noise as given.
+        // Without --adapt or --motion-model, the frame tracker's own defaults: the noise learnt, the process noise as
+        // given, constant acceleration.
         tracker: FrameTrackerConfig::frame_estimator(
             args.estimator.config(),
             args.estimator.adaptation(),
+            args.estimator.motion_model(),
         ),
         detection: PhotoOptions {
             polarity: args.polarity.into(),

@@ -124,6 +124,9 @@ class Tracker:
         adapt: Optional[str] = None,
         accel_psd: Optional[float] = None,
         angular_accel_psd: Optional[float] = None,
+        motion_model: Optional[str] = None,
+        jerk_psd: Optional[float] = None,
+        angular_jerk_psd: Optional[float] = None,
         robust: str = "tukey",
         min_conditioning: Optional[float] = None,
     ) -> "Tracker": ...
@@ -145,6 +148,9 @@ def track(
     adapt: Optional[str] = None,
     accel_psd: Optional[float] = None,
     angular_accel_psd: Optional[float] = None,
+    motion_model: Optional[str] = None,
+    jerk_psd: Optional[float] = None,
+    angular_jerk_psd: Optional[float] = None,
     robust: str = "tukey",
     min_conditioning: Optional[float] = None,
 ) -> dict[str, Any]: ...
