@@ -28,6 +28,9 @@ fn hot_paths(c: &mut Criterion) {
     c.bench_function(Item::Centroid24.key(), |b| b.iter(|| hot.centroid()));
     c.bench_function(Item::RenderRoi.key(), |b| b.iter(|| hot.render_roi()));
     c.bench_function(Item::KalmanUpdate.key(), |b| b.iter(|| hot.kalman_update()));
+    c.bench_function(Item::KalmanUpdateConstantAcceleration.key(), |b| {
+        b.iter(|| hot.kalman_update_constant_acceleration())
+    });
 }
 
 fn config() -> Criterion {

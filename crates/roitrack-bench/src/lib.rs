@@ -35,7 +35,8 @@
 //!   ([`RoiRenderer::render_roi_with_scratch`], scratch buffers reused);
 //! - `kalman_update`: one measurement pushed into the default Kalman filter ([`KalmanEstimator`], default options but
 //!   an estimate period so long that none is due) on a running track of the bench scene: the prediction, the update
-//!   and the window's bookkeeping of one centroid, the per-measurement cost of tracking ([`KalmanStream`]).
+//!   and the window's bookkeeping of one centroid, the per-measurement cost of tracking ([`KalmanStream`]);
+//! - `kalman_update_constant_acceleration`: the same with [`MotionModel::ConstantAcceleration`] (18 states).
 
 pub mod frame_bench;
 pub mod loop_bench;
@@ -51,8 +52,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use roitrack_core::estimator::{
-    self, Estimate, Estimator, InitError, KalmanEstimator, KalmanTuning, Observation, PoseFit,
-    TrackError, TrackerConfig, WindowProblem,
+    self, Estimate, Estimator, InitError, KalmanEstimator, KalmanTuning, MotionModel, Observation,
+    PoseFit, TrackError, TrackerConfig, WindowProblem,
 };
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::solver::{self, NormalEquations, Solution, SolverOptions};
@@ -327,6 +328,20 @@ impl KalmanStream {
     /// [`TrackerConfig::default`] but an estimate every `every` measurements) fed until it is initialised, then
     /// [`KALMAN_WARM_UP_MEASUREMENTS`] more. `usize::MAX` for `every`: no estimate after the initialisation.
     pub fn new(scene: &Scene, seed: u64, every: usize) -> Self {
+        Self::with_tuning(scene, seed, every, KalmanTuning::default())
+    }
+
+    /// [`Self::new`] with the filter's `tuning` instead of the default (the constant-acceleration model, say).
+    ///
+    /// ```
+    /// use roitrack_bench::{KalmanStream, SEED, scene};
+    /// use roitrack_core::estimator::{KalmanTuning, MotionModel};
+    ///
+    /// let tuning = KalmanTuning { motion_model: MotionModel::constant_acceleration(), ..KalmanTuning::default() };
+    /// let mut stream = KalmanStream::with_tuning(&scene(), SEED, usize::MAX, tuning);
+    /// assert_eq!(stream.push(), Ok(None));
+    /// ```
+    pub fn with_tuning(scene: &Scene, seed: u64, every: usize, tuning: KalmanTuning) -> Self {
         let origin = scene.truth;
         let n = (KALMAN_STREAM_PERIOD_S / ROI_PERIOD_S).round() as usize;
         let order = bit_reversed_indices(scene.target.len());
@@ -353,13 +368,9 @@ impl KalmanStream {
             every,
             ..TrackerConfig::default()
         };
-        let estimator = KalmanEstimator::new(
-            scene.camera.clone(),
-            scene.target.clone(),
-            config,
-            KalmanTuning::default(),
-        )
-        .expect("the default Kalman options are valid");
+        let estimator =
+            KalmanEstimator::new(scene.camera.clone(), scene.target.clone(), config, tuning)
+                .expect("the bench's Kalman options are valid");
         let mut stream = Self {
             estimator,
             period,
@@ -436,6 +447,8 @@ pub struct HotPaths {
     pub roi: RoiProblem,
     /// The running Kalman filter of `kalman_update`, no estimate due.
     pub kalman: KalmanStream,
+    /// The same with the constant-acceleration model (`kalman_update_constant_acceleration`).
+    pub kalman_constant_acceleration: KalmanStream,
 }
 
 impl Default for HotPaths {
@@ -453,6 +466,15 @@ impl HotPaths {
             static_observations: scene.static_observations(SEED + 1),
             roi: RoiProblem::new(&scene, SEED + 2),
             kalman: KalmanStream::new(&scene, SEED + 3, usize::MAX),
+            kalman_constant_acceleration: KalmanStream::with_tuning(
+                &scene,
+                SEED + 3,
+                usize::MAX,
+                KalmanTuning {
+                    motion_model: MotionModel::constant_acceleration(),
+                    ..KalmanTuning::default()
+                },
+            ),
             scene,
         }
     }
@@ -552,6 +574,12 @@ impl HotPaths {
     pub fn kalman_update(&mut self) -> Result<Option<Estimate>, TrackError> {
         self.kalman.push()
     }
+
+    /// The same into the constant-acceleration filter.
+    #[inline(never)]
+    pub fn kalman_update_constant_acceleration(&mut self) -> Result<Option<Estimate>, TrackError> {
+        self.kalman_constant_acceleration.push()
+    }
 }
 
 /// A timed hot path. [`Item::key`] is the prefix of its `roitrack bench --json` keys and its criterion benchmark id.
@@ -566,10 +594,11 @@ pub enum Item {
     Centroid24Moments,
     RenderRoi,
     KalmanUpdate,
+    KalmanUpdateConstantAcceleration,
 }
 
 impl Item {
-    pub const ALL: [Item; 9] = [
+    pub const ALL: [Item; 10] = [
         Item::JacobianResidualW16,
         Item::ControlStepW16,
         Item::ControlStepW32,
@@ -579,6 +608,7 @@ impl Item {
         Item::Centroid24Moments,
         Item::RenderRoi,
         Item::KalmanUpdate,
+        Item::KalmanUpdateConstantAcceleration,
     ];
 
     /// Stable name: `roitrack bench --json` reports `<key>_us_median` and `<key>_us_p99`.
@@ -593,6 +623,7 @@ impl Item {
             Item::Centroid24Moments => "centroid_24_moments",
             Item::RenderRoi => "render_roi",
             Item::KalmanUpdate => "kalman_update",
+            Item::KalmanUpdateConstantAcceleration => "kalman_update_constant_acceleration",
         }
     }
 
@@ -608,6 +639,9 @@ impl Item {
             Item::Centroid24Moments => "ROI centroid, 24x24 8-bit, moments only",
             Item::RenderRoi => "ROI rendering (simulator), 24x24, one blob",
             Item::KalmanUpdate => "Kalman filter, one measurement, running track",
+            Item::KalmanUpdateConstantAcceleration => {
+                "Kalman filter, constant acceleration, one measurement, running track"
+            }
         }
     }
 }
@@ -692,6 +726,9 @@ pub fn time_all(hot: &mut HotPaths, budget: Duration) -> Vec<(Item, Timing)> {
                 Item::Centroid24Moments => time_item(|| hot.centroid_moments(), budget),
                 Item::RenderRoi => time_item(|| hot.render_roi(), budget),
                 Item::KalmanUpdate => time_item(|| hot.kalman_update(), budget),
+                Item::KalmanUpdateConstantAcceleration => {
+                    time_item(|| hot.kalman_update_constant_acceleration(), budget)
+                }
             };
             (item, timing)
         })

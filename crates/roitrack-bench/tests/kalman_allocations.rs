@@ -7,7 +7,7 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
 use roitrack_bench::{KalmanStream, SEED, scene};
-use roitrack_core::estimator::Estimator;
+use roitrack_core::estimator::{Estimator, KalmanTuning, MotionModel};
 
 struct CountingAllocator;
 
@@ -94,4 +94,20 @@ fn kalman_push_with_estimates_does_not_allocate() {
     );
     let report = stream.estimator().report();
     assert_eq!(report.initialisations, 1, "{report:?}");
+}
+
+#[test]
+fn the_constant_acceleration_filter_does_not_allocate_either() {
+    let tuning = KalmanTuning {
+        motion_model: MotionModel::constant_acceleration(),
+        ..KalmanTuning::default()
+    };
+    let mut stream = KalmanStream::with_tuning(&scene(), SEED, 10, tuning);
+    let (allocated, estimates) = push(&mut stream, 1000);
+    assert_eq!(estimates, 100);
+    assert_eq!(
+        allocated, 0,
+        "allocations in 1,000 pushes with 100 estimates"
+    );
+    assert_eq!(stream.estimator().report().initialisations, 1);
 }

@@ -29,6 +29,8 @@
 //! - `kalman_update_us_median`, `kalman_update_us_p99`: one measurement into the default Kalman filter on a running
 //!   track of the bench scene (oscillating about the bench pose), with an estimate period so long that none is due:
 //!   prediction, update and window bookkeeping, the per-measurement cost of tracking (target 1 µs);
+//!   `kalman_update_constant_acceleration_us_median`, `kalman_update_constant_acceleration_us_p99`: the same with the
+//!   constant-acceleration model (18 states, the frame tracker's default);
 //! - `item_ms`: the timing budget of each of those items (ms);
 //! - `loop_k10_rois_per_s`, `loop_k1_rois_per_s`: free-running loop throughput with an estimate every 10 ROIs and at
 //!   every ROI (best of `--repeats`); `loop_k10_dropped`, `loop_k1_dropped`: ROIs dropped in those runs;
