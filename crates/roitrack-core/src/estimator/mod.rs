@@ -525,7 +525,8 @@ pub trait Estimator: Send + std::fmt::Debug {
     fn reset(&mut self);
 
     /// Starts tracking from a known state at time `t_s` (e.g. a static pose from a full frame, velocity zero) with
-    /// its covariance (error-state order v, w, dV, dW), instead of initialising from the first two cycles.
+    /// its covariance (error-state order v, w, dV, dW), instead of initialising from the first two cycles. The new
+    /// track takes measurements from `t_s` on, even if the old one had later ones.
     fn start_from(&mut self, t_s: f64, state: MotionState, covariance: Option<Matrix12>);
 
     /// The current state and its time (that of the newest measurement processed), once initialised.

@@ -497,10 +497,12 @@ impl<L: Law> Track<L> {
         self.core.since_estimate = 0;
     }
 
-    /// Starts tracking from a known state at time `t_s` with its covariance (error-state order v, w, dV, dW).
+    /// Starts tracking from a known state at time `t_s` with its covariance (error-state order v, w, dV, dW). The
+    /// new track takes measurements from `t_s` on, even if the old one had later ones: a frame tracker that finds its
+    /// running track wrong on a frame starts a new one from the same frame's blobs.
     pub fn start_from(&mut self, t_s: f64, state: MotionState, covariance: Option<Matrix12>) {
         self.core.window.clear();
-        self.core.last_t_s = Some(self.core.last_t_s.map_or(t_s, |last| last.max(t_s)));
+        self.core.last_t_s = Some(t_s);
         self.begin_track(t_s, state, covariance);
     }
 
