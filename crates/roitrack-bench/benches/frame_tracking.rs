@@ -5,7 +5,7 @@
 //!
 //! - `frame_tracking/track_640x480_16_blobs` (global shutter) and `frame_tracking/track_640x480_16_blobs_rolling`
 //!   (rolling shutter, 60 µs a row): one frame processed by a tracker in its steady state, each blob measured in its
-//!   predicted window; frames that fall back to the whole-frame association are processed but not timed (checked
+//!   predicted window; frames that fall back to the whole-frame search are processed but not timed (checked
 //!   before timing: at least 90 % of the frames by windows, 16 blobs each, every estimate within 1 mm of the truth;
 //!   the counts are printed). `frame_tracking/track_640x480_16_blobs_all_frames`: every frame after the warm-up
 //!   timed, fallbacks included. Throughput in frames/s (criterion's `elem/s`).
@@ -46,7 +46,7 @@ fn frame_tracking(c: &mut Criterion) {
         let check = bench.check();
         eprintln!(
             "{id}: of {} frames per pass after the warm-up, {} measured in their windows (the others by whole-frame \
-             association), at least {} blobs each, position error RMS {:.3} mm, worst {:.3} mm",
+             search), at least {} blobs each, position error RMS {:.3} mm, worst {:.3} mm",
             check.steady_frames,
             check.by_windows,
             check.min_blobs,

@@ -14,10 +14,10 @@
 //! noise), 1 ms exposure, a global shutter or a rolling shutter reading a row every [`ROLLING_LINE_DELAY_S`].
 //!
 //! The tracker measured is in its steady state: the first [`WARM_UP_FRAMES`] frames of each pass (the search of the
-//! first frame with no prior, the whole-frame association of the second, the velocity settling) are processed outside
+//! first frame with no prior, the whole-frame search of the second, the velocity settling) are processed outside
 //! the timing. [`FrameBench::time_steady`] times the later frames measured in their predicted windows
 //! ([`FrameMethod::Windows`], the path whose speed is the target), each frame on its own clock: a frame measured
-//! otherwise (a blob rejected in its window sends the frame to the whole-frame association) is processed, so that the
+//! otherwise (a blob rejected in its window sends the frame to the whole-frame search) is processed, so that the
 //! track goes on as it would, but not counted; [`FrameBench::time_all`] counts every frame after the warm-up.
 //! [`FrameBench::check`] makes sure that the timed path is the real one: nearly every frame after the warm-up
 //! measured in its windows ([`MIN_WINDOWS_FRACTION`]), all 16 blobs measured, every estimate within
