@@ -118,17 +118,17 @@ pub struct EstimatorArgs {
     pub angular_accel_psd: Option<f64>,
     /// Kalman: the process model. constant-velocity: the twist drifts under white acceleration (--accel-psd,
     /// --angular-accel-psd). constant-acceleration: the state also carries the linear and angular accelerations, which
-    /// drift under white jerk (--jerk-psd, --angular-jerk-psd); about twice the work per update. Default: constant
+    /// drift under white jerk (--jerk-psd, --angular-jerk-psd); about 1.45 times the work per update. Default: constant
     /// velocity for measurements and ROI recordings, constant acceleration for --images (frames tens of
     /// milliseconds apart, where the twist changes from one frame to the next); a jerk density given alone means
     /// constant acceleration.
     #[arg(long, value_enum)]
     pub motion_model: Option<MotionModelArg>,
     /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz). Default: 100, a starting
-    /// value that the filter adapts unless --adapt leaves the motion out.
+    /// value that the filter adapts where it adapts the process noise (see --adapt).
     #[arg(long)]
     pub jerk_psd: Option<f64>,
-    /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz). Default: 1000, a starting
+    /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz). Default: 300, a starting
     /// value as for --jerk-psd.
     #[arg(long)]
     pub angular_jerk_psd: Option<f64>,

@@ -366,9 +366,8 @@ impl FrameTracker {
     /// What the tracker has done so far.
     pub fn report(&self) -> FrameTrackReport {
         let estimator = self.tracker.report();
+        // The estimator's own counts include the estimates of frames taken again by a new track.
         FrameTrackReport {
-            // One batch per frame, so one estimate at most per frame: the estimator's count is the frames'.
-            estimates: estimator.estimates.total(),
             estimator,
             ..self.report
         }
@@ -407,26 +406,39 @@ impl FrameTracker {
         {
             method = FrameMethod::Windows;
         }
+        // The target's static pose in this frame, when it was identified whole.
+        let mut found = None;
         if method == FrameMethod::NotFound {
-            method = self.search_whole_frame(frame);
+            (method, found) = self.search_whole_frame(frame);
         }
         let mut estimate = self.estimate_frame(method)?;
         // The running track could not vouch for the frame (its filter rejected the blobs, or lost them): a frame the
-        // target moved through faster than the track predicts. The frame is found whole instead and a new track
-        // starts from it, rather than one more estimate far from what the frame shows.
+        // target moved through faster than the track predicts. The target identified whole starts a new track
+        // instead, rather than one more estimate far from what the frame shows.
         if matches!(method, FrameMethod::Windows | FrameMethod::FullFrame)
             && estimate.as_ref().is_some_and(|e| {
                 matches!(e.status, TrackStatus::Disputed | TrackStatus::Lost)
                     || self.frame_residual_rms_px(e) > RESTART_RESIDUAL_PX
             })
         {
-            self.measurements.clear();
-            if self.restart_from_detection(frame) == FrameMethod::Restart {
+            if method == FrameMethod::Windows {
+                // The windows' blobs stay the frame's if the target cannot be identified whole.
+                let windowed = std::mem::take(&mut self.measurements);
+                found = self.find_whole(frame);
+                if found.is_none() {
+                    self.measurements = windowed;
+                }
+            }
+            // (A frame matched to the predictions is one where the identification has already failed.)
+            if let Some(pose) = found {
+                self.scheduler.reset();
+                self.restart(frame.t_s, pose);
                 method = FrameMethod::Restart;
                 estimate = self.estimate_frame(method)?;
             }
         }
         if let Some(e) = &estimate {
+            self.report.estimates += 1;
             self.last_estimate_s = Some(e.t_ref_s);
             if method == FrameMethod::Restart || e.status.is_vouched_for() {
                 self.last_pose = Some((e.t_ref_s, e.state));
@@ -461,9 +473,11 @@ impl FrameTracker {
     /// frame's measurements, where they pin the pose best: a rolling shutter reads the target's blobs over the rows
     /// it spans (150 rows at 30 µs: 4.5 ms), and the state at the last of them is the pose at their middle
     /// extrapolated by the velocity, with the velocity's error times half that span added. With a global shutter the
-    /// two times are one. The covariance goes back with the state
-    /// ([`roitrack_core::MotionState::transition_jacobian`]). An estimate is never moved to or before the previous
-    /// one's time.
+    /// two times are one. The state goes back with its accelerations when it has them
+    /// ([`Estimate::state_at`]); the covariance goes back under the constant twist
+    /// ([`roitrack_core::MotionState::transition_jacobian`]: the estimate reports no covariance of the accelerations,
+    /// whose part over a few milliseconds is left out). An estimate is never moved to or before the previous one's
+    /// time.
     fn at_measurements_mean_time(&self, mut estimate: Estimate) -> Estimate {
         let count = self.measurements.len();
         if count == 0 {
@@ -480,10 +494,7 @@ impl FrameTracker {
         }
         // With accelerations, the twist goes back too: under a constant twist, the velocity at the mean time would
         // be the last blob's, which an acceleration of 1.5 m/s² leaves 4.5 mm/s off across 3 ms of rows.
-        estimate.state = match &estimate.acceleration {
-            Some(acceleration) => acceleration.predicted(&estimate.state, dt_s),
-            None => estimate.state.predicted(dt_s),
-        };
+        estimate.state = estimate.state_at(dt_s);
         estimate.t_ref_s = mean_s;
         estimate
     }
@@ -596,30 +607,31 @@ impl FrameTracker {
     }
 
     /// Searches the whole frame; fills `self.measurements` and says whether the track goes on, restarts, or the
-    /// target was not found. The target identified whole comes first: blobs matched to the running track's
-    /// predictions are only as right as those predictions, and a grid that moved by one spacing more than predicted
-    /// matches its neighbours (orthoglide's 16 points at 30 Hz: an estimate 20 mm off that agreed with its blobs).
-    /// Identified blobs continue a running track (whose estimate [`Self::process`] then checks against the frame);
-    /// matching is for frames where the target cannot be identified whole (part of it hidden or out of the image).
-    fn search_whole_frame(&mut self, frame: &Frame) -> FrameMethod {
+    /// target was not found, with the target's static pose when it was identified. The target identified whole comes
+    /// first: blobs matched to the running track's predictions are only as right as those predictions, and a grid
+    /// that moved by one spacing more than predicted matches its neighbours (orthoglide's 16 points at 30 Hz: an
+    /// estimate 20 mm off that agreed with its blobs). Identified blobs continue a running track (whose estimate
+    /// [`Self::process`] then checks against the frame); matching is for frames where the target cannot be
+    /// identified whole (part of it hidden or out of the image).
+    fn search_whole_frame(&mut self, frame: &Frame) -> (FrameMethod, Option<MotionState>) {
         self.measurements.clear();
         let running = self.predictor.is_some() && self.tracker.state().is_some();
         if let Some(found) = self.find_whole(frame) {
             self.scheduler.reset();
             if running {
-                return FrameMethod::FullFrame;
+                return (FrameMethod::FullFrame, Some(found));
             }
             self.restart(frame.t_s, found);
-            return FrameMethod::Restart;
+            return (FrameMethod::Restart, Some(found));
         }
         if let (true, Some(predictor), Some(polarity)) = (running, self.predictor, self.polarity)
             && self.associate_blobs(frame, &predictor, polarity) >= self.min_window_points()
         {
             self.scheduler.reset();
-            return FrameMethod::FullFrame;
+            return (FrameMethod::FullFrame, None);
         }
         self.measurements.clear();
-        FrameMethod::NotFound
+        (FrameMethod::NotFound, None)
     }
 
     /// The RMS distance (px) between the frame's blobs and where `estimate` puts their points at their own times:
@@ -628,11 +640,7 @@ impl FrameTracker {
     fn frame_residual_rms_px(&self, estimate: &Estimate) -> f64 {
         let mut sum_px2 = 0.0;
         for m in &self.measurements {
-            let dt_s = m.t_s - estimate.t_ref_s;
-            let state = match &estimate.acceleration {
-                Some(acceleration) => acceleration.predicted(&estimate.state, dt_s),
-                None => estimate.state.predicted(dt_s),
-            };
+            let state = estimate.state_at(m.t_s - estimate.t_ref_s);
             let projected = self
                 .target
                 .index_of(m.id)
@@ -656,20 +664,6 @@ impl FrameTracker {
             .tracker
             .push_batch(&self.measurements, Emit::EachBatch)?
             .map(|e| self.at_measurements_mean_time(e)))
-    }
-
-    /// Finds and identifies the target in the whole frame and starts a new track from its static pose
-    /// ([`Self::restart_state`]); `NotFound` if it is not there.
-    fn restart_from_detection(&mut self, frame: &Frame) -> FrameMethod {
-        self.measurements.clear();
-        match self.find_whole(frame) {
-            Some(found) => {
-                self.scheduler.reset();
-                self.restart(frame.t_s, found);
-                FrameMethod::Restart
-            }
-            None => FrameMethod::NotFound,
-        }
     }
 
     /// Finds and identifies the target in the whole frame: its blobs into `self.measurements` (each at its row's
@@ -698,12 +692,21 @@ impl FrameTracker {
         Some(detection.state)
     }
 
-    /// A new track from the static pose `found`, at the frame's time `t_s`; the frame's measurements follow at their
-    /// own times.
+    /// A new track from the static pose `found` of the frame whose row 0 is read at `t_s`; the frame's measurements
+    /// (`self.measurements`, those the pose was found from) follow at their own times. The pose is that of their mean
+    /// time (a rolling shutter reads them over the rows the target spans); the track starts at `t_s`, carried back by
+    /// its twist.
     fn restart(&mut self, t_s: f64, found: MotionState) {
-        let (state, covariance) = self.restart_state(t_s, found);
+        let count = self.measurements.len();
+        let found_s = if count == 0 {
+            t_s
+        } else {
+            self.measurements.iter().map(|m| m.t_s).sum::<f64>() / count as f64
+        };
+        let (state, covariance) = self.restart_state(found_s, found);
         self.tracker.reset();
-        self.tracker.start_from(t_s, state, Some(covariance));
+        self.tracker
+            .start_from(t_s, state.predicted(t_s - found_s), Some(covariance));
     }
 
     /// The state and covariance a new track starts from at `t_s`, given the static pose `found` there: with the
@@ -714,6 +717,7 @@ impl FrameTracker {
     /// scenario's 16 points at 30 Hz: 65 new tracks in 121 frames, 21 mm RMSE against 0.03 mm for the poses found
     /// frame by frame).
     fn restart_state(&self, t_s: f64, found: MotionState) -> (MotionState, Matrix12) {
+        // (For a rolling shutter, `t_s` is the mean time of the blobs the pose was found from.)
         let mut covariance = full_frame_covariance();
         let Some((t_last_s, last)) = self.last_pose else {
             return (found, covariance);

@@ -532,9 +532,8 @@ struct Tracker {
 impl Tracker {
     #[new]
     #[pyo3(signature = (camera, target, estimator = "kalman", every = 10, gain = 1.0, iterations = 1, window = 0,
-        noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, motion_model = None, jerk_psd = None,
-    angular_jerk_psd = None, robust = "tukey",
-        min_conditioning = None))]
+        noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, motion_model = None,
+        jerk_psd = None, angular_jerk_psd = None, robust = "tukey", min_conditioning = None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         camera: PyRef<'_, Camera>,
@@ -717,9 +716,8 @@ fn measurements_of(argument: &Bound<'_, PyAny>) -> PyResult<Vec<Measurement>> {
 /// conditioning (M,). Releases the GIL while tracking.
 #[pyfunction]
 #[pyo3(signature = (camera, target, measurements, estimator = "kalman", every = 10, gain = 1.0, iterations = 1,
-    window = 0, noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, motion_model = None, jerk_psd = None,
-    angular_jerk_psd = None, robust = "tukey",
-    min_conditioning = None))]
+    window = 0, noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, motion_model = None,
+    jerk_psd = None, angular_jerk_psd = None, robust = "tukey", min_conditioning = None))]
 #[allow(clippy::too_many_arguments)]
 fn track<'py>(
     py: Python<'py>,

@@ -350,6 +350,15 @@ pub struct Estimate {
 }
 
 impl Estimate {
+    /// The state `dt_s` after `t_ref_s` (before, if negative): with the accelerations when the estimate has them
+    /// ([`crate::Acceleration::predicted`]), else under its constant twist ([`MotionState::predicted`]).
+    pub fn state_at(&self, dt_s: f64) -> MotionState {
+        match &self.acceleration {
+            Some(acceleration) => acceleration.predicted(&self.state, dt_s),
+            None => self.state.predicted(dt_s),
+        }
+    }
+
     /// 1-sigma standard deviations of the covariance, in the order (v, w, dV, dW); NaN without a covariance.
     pub fn standard_deviations(&self) -> [f64; 12] {
         self.covariance

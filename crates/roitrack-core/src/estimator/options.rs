@@ -191,17 +191,7 @@ impl TrackerOptions {
         let jerk_given = self.jerk_psd.is_some() || self.angular_jerk_psd.is_some();
         match (self.motion_model, jerk_given) {
             (Some(MotionModelKind::ConstantAcceleration), _) | (None, true) => {
-                let MotionModel::ConstantAcceleration {
-                    linear_jerk_psd,
-                    angular_jerk_psd,
-                } = MotionModel::constant_acceleration()
-                else {
-                    unreachable!("constant_acceleration is the constant-acceleration model")
-                };
-                MotionModel::ConstantAcceleration {
-                    linear_jerk_psd: self.jerk_psd.unwrap_or(linear_jerk_psd),
-                    angular_jerk_psd: self.angular_jerk_psd.unwrap_or(angular_jerk_psd),
-                }
+                MotionModel::constant_acceleration_with(self.jerk_psd, self.angular_jerk_psd)
             }
             _ => MotionModel::ConstantVelocity,
         }
