@@ -124,12 +124,13 @@ pub struct EstimatorArgs {
     /// constant acceleration.
     #[arg(long, value_enum)]
     pub motion_model: Option<MotionModelArg>,
-    /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz). Default: 100, a starting
-    /// value that the filter adapts where it adapts the process noise (see --adapt).
+    /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz). Default: 100 (1000 for
+    /// rolling-shutter frames), a starting value that the filter adapts where it adapts the process noise (see
+    /// --adapt).
     #[arg(long)]
     pub jerk_psd: Option<f64>,
-    /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz). Default: 300, a starting
-    /// value as for --jerk-psd.
+    /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz). Default: 300 (3000 for
+    /// rolling-shutter frames), a starting value as for --jerk-psd.
     #[arg(long)]
     pub angular_jerk_psd: Option<f64>,
     /// M-estimator against outliers: tukey (default), huber (window fits; the Kalman filter uses Huber either way)

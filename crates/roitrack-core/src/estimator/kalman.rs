@@ -132,6 +132,17 @@ impl MotionModel {
         Self::constant_acceleration_with(None, None)
     }
 
+    /// [`Self::ConstantAcceleration`] with the frame tracker's densities for rolling-shutter frames, ten times the
+    /// defaults': a rolling-shutter frame's blobs, read over milliseconds, show the motion within the frame, so the
+    /// filter can follow faster changes of acceleration without taking each frame's noise for motion (global-shutter
+    /// frames, one instant each, cannot tell the two apart).
+    pub fn constant_acceleration_for_rolling_shutter() -> Self {
+        Self::ConstantAcceleration {
+            linear_jerk_psd: 10.0 * DEFAULT_LINEAR_JERK_PSD,
+            angular_jerk_psd: 10.0 * DEFAULT_ANGULAR_JERK_PSD,
+        }
+    }
+
     /// [`Self::ConstantAcceleration`] with these densities, the defaults where `None`.
     pub fn constant_acceleration_with(
         linear_jerk_psd: Option<f64>,
