@@ -1,10 +1,12 @@
-//! The default estimator: an error-state extended Kalman filter on the 12-dof state with a constant-velocity process
-//! model; every centroid updates the state once, at its own time.
+//! The default estimator: an error-state extended Kalman filter on the 12-dof state with a constant-velocity (or a
+//! constant-acceleration) process model; every centroid updates the state once, at its own time.
 //!
 //! The error state is the correction `δ = (v, w, dV, dW)` of [`MotionState::corrected`]. Between measurements the
 //! state moves with its twist; the twist drifts as a random walk driven by white linear and angular acceleration of
 //! spectral densities `q_a` ((m/s²)²/Hz) and `q_α` ((rad/s²)²/Hz). Innovations beyond the gate are rejected as
 //! outliers; a run of rejections widens the covariance (a jump of the target, or a bad update), by escalating steps.
+//! With [`MotionModel::ConstantAcceleration`] the state also carries the linear and angular accelerations (18 error
+//! states), which drift under white jerk; the frame tracker uses it.
 //!
 //! By default the filter is told neither the noise of the centroids nor how the target moves; it learns both:
 //! - **Centroid noise**: at each control step, the window's least-squares residual at its own optimum divided by its
