@@ -120,8 +120,8 @@ pub struct EstimatorArgs {
     /// --angular-accel-psd). constant-acceleration: the state also carries the linear and angular accelerations, which
     /// drift under white jerk (--jerk-psd, --angular-jerk-psd); about 1.45 times the work per update. Default: constant
     /// velocity for measurements and ROI recordings, constant acceleration for --images (frames tens of
-    /// milliseconds apart, where the twist changes from one frame to the next); a jerk density given alone means
-    /// constant acceleration.
+    /// milliseconds apart, where the twist changes from one frame to the next). A jerk density given alone means
+    /// constant acceleration, an acceleration density constant velocity; the other model's densities are refused.
     #[arg(long, value_enum)]
     pub motion_model: Option<MotionModelArg>,
     /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz). Default: 100 (1000 for
@@ -157,7 +157,7 @@ impl EstimatorArgs {
     }
 
     /// What `--motion-model` asks for; `None` without it (the source's default).
-    pub fn motion_model(&self) -> Option<roitrack::math::estimator::MotionModelKind> {
+    fn motion_model(&self) -> Option<roitrack::math::estimator::MotionModelKind> {
         use roitrack::math::estimator::MotionModelKind;
         self.motion_model.map(|m| match m {
             MotionModelArg::ConstantVelocity => MotionModelKind::ConstantVelocity,
@@ -165,8 +165,22 @@ impl EstimatorArgs {
         })
     }
 
-    /// The options by name, translated into a configuration by the library (as the Python package does).
-    pub fn config(&self) -> TrackerConfig {
+    /// The options by name, checked and translated into a configuration by the library (as the Python package
+    /// does).
+    pub fn config(&self) -> anyhow::Result<TrackerConfig> {
+        let options = self.options();
+        options.check()?;
+        Ok(options.config())
+    }
+
+    /// The process model the options name (`--motion-model`, or implied by the densities given); `None`: the
+    /// source's default.
+    pub fn named_motion_model(&self) -> Option<roitrack::math::estimator::MotionModelKind> {
+        self.options().named_motion_model()
+    }
+
+    /// The options by name, as the library takes them.
+    fn options(&self) -> TrackerOptions {
         use roitrack::math::estimator::EstimatorKind;
         TrackerOptions {
             estimator: match self.estimator {
@@ -194,7 +208,6 @@ impl EstimatorArgs {
             },
             min_conditioning: self.min_conditioning,
         }
-        .config()
     }
 }
 

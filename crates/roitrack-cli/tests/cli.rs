@@ -456,3 +456,53 @@ fn bench_prints_the_loop_figures_as_json() {
     }
     assert_eq!(m["loop_k10_dropped"].as_u64(), Some(0));
 }
+
+#[test]
+fn densities_of_the_other_motion_model_are_refused() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    simulate(dir, "static", &["--duration-s", "0.1"]);
+    let (camera, target) = (dir.join("camera.yaml"), dir.join("target.csv"));
+    let measurements = dir.join("measurements.csv");
+    let (poses, twists) = (dir.join("p.tum"), dir.join("t.csv"));
+    let base = [
+        "track",
+        "--camera",
+        p(&camera),
+        "--target",
+        p(&target),
+        "--measurements",
+        p(&measurements),
+        "--poses",
+        p(&poses),
+        "--twists",
+        p(&twists),
+    ];
+    for (options, given) in [
+        (
+            &["--motion-model", "constant-velocity", "--jerk-psd", "50"][..],
+            "jerk-psd",
+        ),
+        (
+            &[
+                "--motion-model",
+                "constant-acceleration",
+                "--accel-psd",
+                "5",
+            ][..],
+            "accel-psd",
+        ),
+        (
+            &["--jerk-psd", "50", "--angular-accel-psd", "5"][..],
+            "angular-accel-psd",
+        ),
+    ] {
+        let err = fails(&[&base[..], options].concat());
+        assert!(
+            err.contains(&format!("{given} does not apply")),
+            "{options:?}: {err}"
+        );
+    }
+    // A jerk density alone names constant acceleration: accepted.
+    ok(&[&base[..], &["--jerk-psd", "50"][..]].concat());
+}

@@ -483,7 +483,7 @@ fn tracker_options(
     robust: &str,
     min_conditioning: Option<f64>,
 ) -> PyResult<TrackerOptions> {
-    Ok(TrackerOptions {
+    let options = TrackerOptions {
         estimator: EstimatorKind::from_name(estimator).map_err(name_error)?,
         gain,
         iterations,
@@ -504,7 +504,11 @@ fn tracker_options(
         angular_jerk_psd,
         robust: RobustLoss::from_name(robust).map_err(name_error)?,
         min_conditioning,
-    })
+    };
+    options
+        .check()
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(options)
 }
 
 fn new_tracker(

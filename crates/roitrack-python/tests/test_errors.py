@@ -124,6 +124,8 @@ def test_tracker_refuses_bad_options(sim: dict) -> None:
         roitrack.Tracker(cam, tgt, motion_model="jerk")
     with pytest.raises(roitrack.RoitrackError, match="linear_jerk_psd must be positive"):
         roitrack.Tracker(cam, tgt, jerk_psd=-1.0)
+    with pytest.raises(ValueError, match="jerk-psd does not apply to the constant-velocity motion model"):
+        roitrack.Tracker(cam, tgt, motion_model="constant-velocity", jerk_psd=5.0)
     with pytest.raises(roitrack.RoitrackError, match="invalid tracker options: every must be at least 1"):
         roitrack.Tracker(cam, tgt, every=0)
     with pytest.raises(roitrack.RoitrackError, match="noise_px must be positive"):

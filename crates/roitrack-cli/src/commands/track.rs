@@ -139,7 +139,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         );
     }
     let known_ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
-    let mut tracker = Tracker::new(camera.clone(), target, args.estimator.config())
+    let mut tracker = Tracker::new(camera.clone(), target, args.estimator.config()?)
         .context("invalid tracker options")?;
     let mut writer =
         EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
@@ -289,9 +289,9 @@ fn run_frames(
         // Without --adapt or --motion-model, the frame tracker's own defaults: the noise learnt, the process noise as
         // given, constant acceleration.
         tracker: FrameTrackerConfig::frame_estimator(
-            args.estimator.config(),
+            args.estimator.config()?,
             args.estimator.adaptation(),
-            args.estimator.motion_model(),
+            args.estimator.named_motion_model(),
         ),
         detection: PhotoOptions {
             polarity: args.polarity.into(),

@@ -64,7 +64,9 @@ use thiserror::Error;
 use crate::{CameraModel, Measurement, MotionState, Target};
 pub use batch::BatchEstimator;
 pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12, MotionModel, NoiseSample};
-pub use options::{Adaptation, EstimatorKind, MotionModelKind, TrackerOptions, UnknownName};
+pub use options::{
+    Adaptation, EstimatorKind, MotionModelKind, OptionConflict, TrackerOptions, UnknownName,
+};
 pub use problem::{Observation, RobustLoss, WindowProblem};
 pub use static_baseline::StaticEstimator;
 pub use static_pose::{InitError, PoseFit, refine_static_pose, solve_static_pose};

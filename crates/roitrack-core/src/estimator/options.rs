@@ -58,6 +58,31 @@ pub enum MotionModelKind {
     ConstantAcceleration,
 }
 
+/// Options that set the densities of one motion model given with the other (`--motion-model constant-velocity
+/// --jerk-psd 50`, say), or densities of both models at once: refused rather than one of them ignored.
+///
+/// ```
+/// use roitrack_core::estimator::{MotionModelKind, TrackerOptions};
+/// let options = TrackerOptions {
+///     motion_model: Some(MotionModelKind::ConstantVelocity),
+///     jerk_psd: Some(50.0),
+///     ..TrackerOptions::default()
+/// };
+/// assert_eq!(
+///     options.check().unwrap_err().to_string(),
+///     "jerk-psd does not apply to the constant-velocity motion model (it is a density of constant-acceleration)"
+/// );
+/// ```
+#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[error("{given} does not apply to the {model} motion model (it is a density of {other})")]
+pub struct OptionConflict {
+    /// The option given (its command-line name).
+    pub given: &'static str,
+    /// The model in force, and the model the option belongs to.
+    pub model: &'static str,
+    pub other: &'static str,
+}
+
 /// A name that is not one of an option's values.
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error("{option}: unknown value '{value}' (expected one of {expected})")]
@@ -142,8 +167,8 @@ pub struct TrackerOptions {
     /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz); `None` for the default.
     pub angular_accel_psd: Option<f64>,
     /// Kalman: the process model; `None` means the default of the caller's source (constant velocity for
-    /// measurements, constant acceleration for frames, see `FrameTrackerConfig::frame_estimator`), and a jerk
-    /// density given without it means constant acceleration.
+    /// measurements, constant acceleration for frames, see `FrameTrackerConfig::frame_estimator`), unless densities
+    /// name one ([`Self::named_motion_model`]).
     pub motion_model: Option<MotionModelKind>,
     /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz); `None` for the default.
     pub jerk_psd: Option<f64>,
@@ -188,12 +213,60 @@ impl TrackerOptions {
     /// assert_eq!(TrackerOptions::default().kalman_motion_model(), MotionModel::ConstantVelocity);
     /// ```
     pub fn kalman_motion_model(&self) -> MotionModel {
-        let jerk_given = self.jerk_psd.is_some() || self.angular_jerk_psd.is_some();
-        match (self.motion_model, jerk_given) {
-            (Some(MotionModelKind::ConstantAcceleration), _) | (None, true) => {
+        match self.named_motion_model() {
+            Some(MotionModelKind::ConstantAcceleration) => {
                 MotionModel::constant_acceleration_with(self.jerk_psd, self.angular_jerk_psd)
             }
             _ => MotionModel::ConstantVelocity,
+        }
+    }
+
+    /// The process model these options name: [`Self::motion_model`], else the one whose densities are given (a jerk
+    /// density means constant acceleration, an acceleration density constant velocity), else `None` (the source's
+    /// default). [`Self::check`] refuses options that name both.
+    ///
+    /// ```
+    /// use roitrack_core::estimator::{MotionModelKind, TrackerOptions};
+    /// let options = TrackerOptions { accel_psd: Some(5.0), ..TrackerOptions::default() };
+    /// assert_eq!(options.named_motion_model(), Some(MotionModelKind::ConstantVelocity));
+    /// assert_eq!(TrackerOptions::default().named_motion_model(), None);
+    /// ```
+    pub fn named_motion_model(&self) -> Option<MotionModelKind> {
+        let jerk = self.jerk_psd.is_some() || self.angular_jerk_psd.is_some();
+        let accel = self.accel_psd.is_some() || self.angular_accel_psd.is_some();
+        self.motion_model.or(match (jerk, accel) {
+            (true, _) => Some(MotionModelKind::ConstantAcceleration),
+            (false, true) => Some(MotionModelKind::ConstantVelocity),
+            (false, false) => None,
+        })
+    }
+
+    /// Refuses densities of the motion model not in force (see [`OptionConflict`]).
+    pub fn check(&self) -> Result<(), OptionConflict> {
+        let jerk = [
+            ("jerk-psd", self.jerk_psd),
+            ("angular-jerk-psd", self.angular_jerk_psd),
+        ];
+        let accel = [
+            ("accel-psd", self.accel_psd),
+            ("angular-accel-psd", self.angular_accel_psd),
+        ];
+        let (model, other, foreign) = match self.named_motion_model() {
+            Some(MotionModelKind::ConstantAcceleration) => {
+                ("constant-acceleration", "constant-velocity", accel)
+            }
+            Some(MotionModelKind::ConstantVelocity) => {
+                ("constant-velocity", "constant-acceleration", jerk)
+            }
+            None => return Ok(()),
+        };
+        match foreign.iter().find(|(_, value)| value.is_some()) {
+            Some(&(given, _)) => Err(OptionConflict {
+                given,
+                model,
+                other,
+            }),
+            None => Ok(()),
         }
     }
 
