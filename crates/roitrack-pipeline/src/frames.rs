@@ -34,7 +34,7 @@ use roitrack_core::estimator::{
     Adaptation, ConfigError, Emit, Estimate, Estimator, EstimatorConfig, EstimatorReport,
     MotionModel, MotionModelKind, NoiseSample, TrackError, TrackStatus, Tracker, TrackerConfig,
 };
-use roitrack_core::{CameraModel, Measurement, MotionState, Target, so3};
+use roitrack_core::{CameraModel, Measurement, MotionState, Target};
 use roitrack_image::centroid::{
     AUTO_MIN_CONTRAST_DN, AUTO_MIN_CONTRAST_SIGMAS, AUTO_THRESHOLD_FRACTION,
 };
@@ -747,9 +747,11 @@ impl FrameTracker {
         if !(dt_s > 0.0 && dt_s <= RESTART_TWIST_MAX_GAP_S) {
             return (found, covariance);
         }
+        // The pose's change over the gap, in the error state's terms (translation, rotation vector on the left).
+        let moved = MotionState::difference(&last, &found) / dt_s;
         let state = MotionState {
-            velocity_mps: (found.cam_t_obj_m - last.cam_t_obj_m) / dt_s,
-            angular_velocity_radps: so3::log(&(found.cam_r_obj * last.cam_r_obj.inverse())) / dt_s,
+            velocity_mps: moved.fixed_rows::<3>(0).into_owned(),
+            angular_velocity_radps: moved.fixed_rows::<3>(3).into_owned(),
             ..found
         };
         if !state.is_finite() {

@@ -28,7 +28,7 @@
 //! With [`KalmanTuning::adapt_noise`] and [`KalmanTuning::adapt_motion`] off, the filter takes
 //! [`TrackerConfig::noise_px`] and the densities as the truth: a hand-tuned filter.
 
-use nalgebra::{Matrix2, SMatrix, Vector2, Vector3};
+use nalgebra::{Matrix2, Rotation3, SMatrix, Vector2, Vector3};
 
 use super::calibration::TwistCalibration;
 use super::problem::{Observation, ResidualFigures, ResidualTally};
@@ -214,8 +214,8 @@ impl Default for KalmanTuning {
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct ErrorStateKalman<const N: usize> {
     covariance: SMatrix<f64, N, N>,
-    /// Linear (m/s²) and angular (rad/s²) acceleration in the camera frame; zero and unused when `N` is 12.
-    acceleration: [Vector3<f64>; 2],
+    /// The accelerations in the camera frame; zero and unused when `N` is 12.
+    acceleration: Acceleration,
     tuning: KalmanTuning,
     /// Exponential average of the recent corrections of the pose and the twist (error-state units), and its weight
     /// per update.
@@ -269,7 +269,10 @@ impl<const N: usize> ErrorStateKalman<N> {
         }
         Self {
             covariance,
-            acceleration: [Vector3::zeros(); 2],
+            acceleration: Acceleration {
+                linear_mps2: Vector3::zeros(),
+                angular_radps2: Vector3::zeros(),
+            },
             tuning,
             trend: Vector12::zeros(),
             trend_rate,
@@ -297,19 +300,7 @@ impl<const N: usize> ErrorStateKalman<N> {
         if dt_s == 0.0 {
             return;
         }
-        let [linear_acceleration, angular_acceleration] = self.acceleration;
-        let half_dt2 = 0.5 * dt_s * dt_s;
-        let rotation_increment =
-            state.angular_velocity_radps * dt_s + angular_acceleration * half_dt2;
-        let e_rotation = so3::exp(&rotation_increment);
-        let j_l = so3::left_jacobian(&rotation_increment);
-        let transition = Transition {
-            dt_s,
-            e: *e_rotation.matrix(),
-            b: j_l * dt_s,
-            b_half_dt: j_l * half_dt2,
-            half_dt2,
-        };
+        let transition = Transition::new(state, &self.acceleration, dt_s);
         // F P Fᵀ: F applied to every column, then Fᵀ from the right, by whole columns. F is sparse (a few 3 x 3
         // blocks beside the identity), so this is a fraction of a dense product's work, in place.
         for column in self.covariance.as_mut_slice().chunks_exact_mut(N) {
@@ -365,10 +356,14 @@ impl<const N: usize> ErrorStateKalman<N> {
         }
         // The state's own prediction (`MotionState::predicted` when there is no acceleration), with the rotation
         // increment already at hand.
-        state.cam_r_obj = e_rotation * state.cam_r_obj;
-        state.cam_t_obj_m += state.velocity_mps * dt_s + linear_acceleration * half_dt2;
-        state.velocity_mps += linear_acceleration * dt_s;
-        state.angular_velocity_radps += angular_acceleration * dt_s;
+        let Acceleration {
+            linear_mps2,
+            angular_radps2,
+        } = self.acceleration;
+        state.cam_r_obj = Rotation3::from_matrix_unchecked(transition.e) * state.cam_r_obj;
+        state.cam_t_obj_m += state.velocity_mps * dt_s + linear_mps2 * transition.half_dt2;
+        state.velocity_mps += linear_mps2 * dt_s;
+        state.angular_velocity_radps += angular_radps2 * dt_s;
     }
 
     /// Updates with one centroid (ideal pixel) of `point_in_obj_m`, observed at the state's reference time.
@@ -452,8 +447,9 @@ impl<const N: usize> ErrorStateKalman<N> {
             return UpdateOutcome::Invalid;
         }
         *state = corrected;
-        for i in 12..N {
-            self.acceleration[(i - 12) / 3][(i - 12) % 3] += correction[i];
+        if Self::WITH_ACCELERATION {
+            self.acceleration.linear_mps2 += correction.fixed_rows::<3>(12);
+            self.acceleration.angular_radps2 += correction.fixed_rows::<3>(15);
         }
         self.trend += (pose_twist_correction - self.trend) * self.trend_rate;
         // P - K S Kᵀ = P - (P Hᵀ) S⁻¹ (P Hᵀ)ᵀ with the gain that is optimal for S (the Huber-inflated one included):
@@ -511,6 +507,21 @@ struct Transition {
 }
 
 impl Transition {
+    /// The transition of `state`, with the accelerations `acceleration`, over `dt_s`.
+    fn new(state: &MotionState, acceleration: &Acceleration, dt_s: f64) -> Self {
+        let half_dt2 = 0.5 * dt_s * dt_s;
+        let rotation_increment =
+            state.angular_velocity_radps * dt_s + acceleration.angular_radps2 * half_dt2;
+        let j_l = so3::left_jacobian(&rotation_increment);
+        Self {
+            dt_s,
+            half_dt2,
+            e: *so3::exp(&rotation_increment).matrix(),
+            b: j_l * dt_s,
+            b_half_dt: j_l * half_dt2,
+        }
+    }
+
     /// `F x` in place.
     #[inline]
     fn apply<const N: usize>(&self, column: &mut [f64]) {
@@ -618,10 +629,7 @@ impl Filter {
     fn acceleration(&self) -> Option<Acceleration> {
         match self {
             Self::ConstantVelocity(_) => None,
-            Self::ConstantAcceleration(f) => Some(Acceleration {
-                linear_mps2: f.acceleration[0],
-                angular_radps2: f.acceleration[1],
-            }),
+            Self::ConstantAcceleration(f) => Some(f.acceleration),
         }
     }
 
@@ -1124,7 +1132,6 @@ super::delegate_estimator!(KalmanEstimator);
 #[cfg(test)]
 mod tests {
     use super::*;
-    use nalgebra::Rotation3;
 
     type Matrix18 = SMatrix<f64, 18, 18>;
     type Vector18 = SMatrix<f64, 18, 1>;
@@ -1142,20 +1149,6 @@ mod tests {
                 angular_radps2: Vector3::new(-40.0, 25.0, 60.0),
             },
         )
-    }
-
-    fn transition(state: &MotionState, acceleration: &Acceleration, dt_s: f64) -> Transition {
-        let half_dt2 = 0.5 * dt_s * dt_s;
-        let rotation_increment =
-            state.angular_velocity_radps * dt_s + acceleration.angular_radps2 * half_dt2;
-        let j_l = so3::left_jacobian(&rotation_increment);
-        Transition {
-            dt_s,
-            half_dt2,
-            e: *so3::exp(&rotation_increment).matrix(),
-            b: j_l * dt_s,
-            b_half_dt: j_l * half_dt2,
-        }
     }
 
     /// F, column by column: F applied to the unit vectors.
@@ -1203,7 +1196,7 @@ mod tests {
             (acceleration.predicted(state, dt_s), *acceleration)
         };
         for dt_s in [0.015, -0.02, 1e-4] {
-            let f = dense::<18>(&transition(&start.0, &start.1, dt_s));
+            let f = dense::<18>(&Transition::new(&start.0, &start.1, dt_s));
             let nominal = predicted(&start, dt_s);
             let h = 1e-6;
             for j in 0..18 {
@@ -1230,7 +1223,7 @@ mod tests {
             angular_radps2: Vector3::zeros(),
         };
         for dt_s in [0.015, -0.02] {
-            let f = dense::<12>(&transition(&state, &still, dt_s));
+            let f = dense::<12>(&Transition::new(&state, &still, dt_s));
             assert!((f - state.transition_jacobian(dt_s)).amax() < 1e-15);
         }
     }
@@ -1241,7 +1234,7 @@ mod tests {
         let a = Matrix18::from_fn(|i, j| ((i * 7 + j * 3) % 11) as f64 * 0.1 - 0.4);
         let p = a * a.transpose() + Matrix18::identity();
         for dt_s in [0.015, -0.02] {
-            let transition = transition(&state, &acceleration, dt_s);
+            let transition = Transition::new(&state, &acceleration, dt_s);
             let f = dense::<18>(&transition);
             let mut moved = p;
             for column in moved.as_mut_slice().chunks_exact_mut(18) {
@@ -1261,7 +1254,7 @@ mod tests {
             ..KalmanTuning::default()
         };
         let mut filter = ErrorStateKalman::<18>::new(Matrix12::identity(), tuning, 0.0);
-        filter.acceleration = [acceleration.linear_mps2, acceleration.angular_radps2];
+        filter.acceleration = acceleration;
         let mut moved = state;
         filter.predict(&mut moved, 0.01, [1.0, 1.0]);
         let expected = acceleration.predicted(&state, 0.01);
