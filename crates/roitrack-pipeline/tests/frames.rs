@@ -246,6 +246,65 @@ fn four_dots() -> Target {
     .unwrap()
 }
 
+/// After the first 5 frames (the velocity converging from a static start): the RMS error of `positions` against
+/// `truths` (mm), and their jitter: the RMS of their second differences, the truth's own taken away (mm).
+fn error_and_jitter_mm(positions: &[Vector3<f64>], truths: &[Vector3<f64>]) -> (f64, f64) {
+    let count = positions.len();
+    let error = rms((5..count).map(|k| (positions[k] - truths[k]).norm()));
+    let second = |p: &[Vector3<f64>], k: usize| p[k + 1] - 2.0 * p[k] + p[k - 1];
+    let jitter = rms((5..count - 1).map(|k| (second(positions, k) - second(truths, k)).norm()));
+    (1e3 * error, 1e3 * jitter)
+}
+
+#[test]
+fn four_dots_moving_fast_at_30_hz_are_tracked_as_closely_as_frame_by_frame_and_more_smoothly() {
+    // The random scenario (up to 1.5 m/s and 4 rad/s; the twist changes by up to 2 rad/s between frames) seen by a
+    // global shutter at 30 Hz, with four dots: the frames after a new track have a wide prior, and with four dots the
+    // depth hardly shows in the pixels. The blobs updated one after the other stopped pixels short of their frame
+    // (and rejected the last as outliers): 0.21 mm and a jitter of 0.52 mm, against 0.027 and 0.061 mm for the
+    // poses found frame by frame. Each frame's blobs are now fitted together, iterated.
+    let target = four_dots();
+    let scenario = Scenario::new(ScenarioKind::Random, 1).with_target(target.clone());
+    let mut frames = frames_of(scenario, Readout::GlobalShutter, Polarity::Bright, 1);
+    let camera = frames.camera().clone();
+    let mut tracker = FrameTracker::new(
+        camera.clone(),
+        target.clone(),
+        FrameTrackerConfig::default(),
+    )
+    .unwrap();
+    let mut frame = Frame::default();
+    let (mut tracked, mut alone, mut truths) = (Vec::new(), Vec::new(), Vec::new());
+    for k in 0..frames.len() {
+        frames.render(k, &mut frame);
+        let estimate = tracker
+            .process(&frame)
+            .unwrap()
+            .estimate
+            .unwrap_or_else(|| panic!("frame {k}: no estimate"));
+        tracked.push(estimate.state.cam_t_obj_m);
+        truths.push(frames.state_at(estimate.t_ref_s).cam_t_obj_m);
+        let single = detect_target(&camera, &target, &frame, &PhotoOptions::default())
+            .unwrap_or_else(|e| panic!("frame {k}: {e}"));
+        alone.push(single.state.cam_t_obj_m);
+    }
+    let (tracked_error, tracked_jitter) = error_and_jitter_mm(&tracked, &truths);
+    let (alone_error, alone_jitter) = error_and_jitter_mm(&alone, &truths);
+    eprintln!(
+        "tracked: {tracked_error:.3} mm, jitter {tracked_jitter:.3} mm; frame by frame: {alone_error:.3} mm, \
+         jitter {alone_jitter:.3} mm; {:?}",
+        tracker.report()
+    );
+    assert!(
+        tracked_error < 1.25 * alone_error,
+        "{tracked_error} vs {alone_error} mm"
+    );
+    assert!(
+        tracked_jitter < alone_jitter,
+        "{tracked_jitter} vs {alone_jitter} mm"
+    );
+}
+
 #[test]
 fn a_four_dot_target_in_clutter_is_tracked_on_every_frame_more_smoothly_than_frame_by_frame() {
     // Bright dots on a dark board, moving at up to 0.5 m/s before a cluttered background (bright, dark and grey
@@ -285,20 +344,8 @@ fn a_four_dot_target_in_clutter_is_tracked_on_every_frame_more_smoothly_than_fra
         alone.push(single.state.cam_t_obj_m);
         truths.push(truth.cam_t_obj_m);
     }
-    // After the first frames (the velocity converging from a static start): error against the truth, and jitter
-    // (the RMS of the second differences of the positions, the truth's own taken away).
-    let settled = 5..count;
-    let error_mm = |positions: &[Vector3<f64>]| {
-        1e3 * rms(settled.clone().map(|k| (positions[k] - truths[k]).norm()))
-    };
-    let jitter_mm = |positions: &[Vector3<f64>]| {
-        let second = |p: &[Vector3<f64>], k: usize| p[k + 1] - 2.0 * p[k] + p[k - 1];
-        1e3 * rms(
-            (settled.start..count - 1).map(|k| (second(positions, k) - second(&truths, k)).norm())
-        )
-    };
-    let (tracked_error, alone_error) = (error_mm(&tracked), error_mm(&alone));
-    let (tracked_jitter, alone_jitter) = (jitter_mm(&tracked), jitter_mm(&alone));
+    let (tracked_error, tracked_jitter) = error_and_jitter_mm(&tracked, &truths);
+    let (alone_error, alone_jitter) = error_and_jitter_mm(&alone, &truths);
     eprintln!(
         "tracked: {tracked_error:.3} mm, jitter {tracked_jitter:.3} mm; frame by frame: {alone_error:.3} mm, \
          jitter {alone_jitter:.3} mm; {:?}",

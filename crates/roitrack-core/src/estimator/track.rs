@@ -87,6 +87,13 @@ pub(crate) trait Law: Clone + std::fmt::Debug + Send {
     fn begin_track(&mut self, core: &TrackCore, covariance: Option<Matrix12>);
     /// A measurement of a running track, already in the window.
     fn on_measurement(&mut self, _core: &mut TrackCore, _obs: &Observation) {}
+    /// The measurements of one readout (a frame's blobs, in time order) of a running track, already in the window:
+    /// each in turn, unless the law takes them together.
+    fn on_batch(&mut self, core: &mut TrackCore, batch: &[Observation]) {
+        for obs in batch {
+            self.on_measurement(core, obs);
+        }
+    }
     /// The control step at `t_new_s` (the newest measurement's time); `core.scratch` holds the window it uses.
     fn control_step(&mut self, core: &mut TrackCore, t_new_s: f64) -> Step;
     /// Whether the estimate just computed rests on the older measurements only: the newest was rejected.
@@ -425,7 +432,11 @@ impl<L: Law> Track<L> {
             previous_s = Some(m.t_s);
         }
         for obs in &pending {
-            self.apply(*obs);
+            self.core.commit(*obs);
+        }
+        if self.core.phase == Phase::Running {
+            self.law.on_batch(&mut self.core, &pending);
+            self.core.since_estimate += pending.len();
         }
         self.core.pending = pending;
         let initialisations = self.core.report.initialisations;
