@@ -3,12 +3,14 @@
 //!
 //! Per frame ([`FrameTracker::process`]):
 //!
-//! 1. With a running track, each target point's blob is predicted from the last estimate (pose and twist) at the
-//!    time its row is read (for a rolling shutter, row `v` is read `v * line_delay_s` after row 0: the predicted row
+//! 1. With a running track, each target point's blob is predicted from the last estimate (pose, twist and, with the
+//!    constant-acceleration filter, accelerations) at the time its row is read (for a rolling shutter, row `v` is read `v * line_delay_s` after row 0: the predicted row
 //!    gives the time, the time the row), and measured in a small window there, the ROI path of the paper: the window
 //!    is sized by the [`RoiScheduler`] (blob size, motion blur, the prediction's uncertainty), its background is a
 //!    plane fitted to its border and taken away (for dark blobs the window is divided by it: printed circles under
-//!    uneven light keep their contrast, not their difference), and the centroid is [`measure_blob`]'s.
+//!    uneven light keep their contrast, not their difference). The blob's centre is a weighted mean of the window's
+//!    moments ([`measure_blob`]) and of its outline's centre (`CentreBlend`), less the perspective displacement of a
+//!    disk's centre.
 //! 2. When fewer than [`FrameTrackerConfig::min_window_points`] blobs were found in their windows (the target
 //!    accelerated out of them, or was hidden), the target is searched for and identified in the whole frame with no
 //!    prior ([`detect_target`]: either polarity, clutter, partial views) and its blobs continue the track; only if
@@ -19,8 +21,10 @@
 //!    [`Emit::EachBatch`]): one estimate per frame, at the mean time of its measurements (the estimator's state at the
 //!    newest one, carried back by its twist: with a rolling shutter the pose is pinned best in the middle of the
 //!    target's readout).
-//! 4. An estimate that is disputed or lost, or that puts the frame's blobs more than 5 px from where they were
-//!    measured, is replaced: the frame is found whole and a new track starts from it.
+//!    The estimator fits the frame's blobs together (an iterated update, for the Kalman filter).
+//! 4. An estimate that is disputed or lost, that puts the frame's blobs more than 5 px from where they were measured,
+//!    or whose filter widened its covariance within the frame, is replaced: the frame is found whole and a new track
+//!    starts from it.
 //!
 //! A track the estimator declares lost is dropped, and the next frame is searched whole.
 //!
@@ -599,8 +603,6 @@ impl FrameTracker {
     fn measure_windows(&mut self, frame: &Frame, predictor: &Predictor) -> usize {
         self.measurements.clear();
         self.window_centres.clear();
-        // The outlines cost more than the moments: measured when they are in use or compared.
-        let compare = self.centre_blend.compares_now();
         let polarity = self.polarity.unwrap_or(Polarity::Bright);
         let time = self.camera.time;
         self.requests.clear();
@@ -680,14 +682,16 @@ impl FrameTracker {
                 }
             }
         }
-        self.take_window_centres(predictor, compare);
+        self.take_window_centres(predictor);
         self.measurements.len()
     }
 
     /// The frame's window centres into `self.measurements`: the mean of their outlines' and their moments' centres,
-    /// weighted by [`CentreBlend`] after comparing them on this frame if `compare`.
-    fn take_window_centres(&mut self, predictor: &Predictor, compare: bool) {
-        if compare && let Some(rms2) = self.static_fit_rms2_px2(predictor) {
+    /// weighted by [`CentreBlend`] (after comparing them on this frame, if it is one it compares).
+    fn take_window_centres(&mut self, predictor: &Predictor) {
+        if self.centre_blend.compares_now()
+            && let Some(rms2) = self.static_fit_rms2_px2(predictor)
+        {
             self.centre_blend.add(rms2);
         }
         let weight = self.centre_blend.outline_weight();
@@ -1003,21 +1007,23 @@ const CENTRE_BLEND_EVERY_FRAMES: usize = 5;
 /// true centres); on the soft blobs of `roitrack simulate --frames`, the moments are the better (four dots 1.5 m
 /// away: a position jitter of 0.34 mm with the moments, 0.48 mm with the outlines). Their errors are far from equal,
 /// so their weighted mean beats both: each is weighted by the inverse of its mean squared residual in static poses
-/// fitted to each frame's centres of that kind, averaged over the last [`CENTRE_BLEND_MEMORY_FRAMES`] compared
-/// frames. Both kinds are fitted on the same blobs at the same poses, so what differs is the centres' own noise.
+/// fitted to each frame's centres of that kind, in an exponential average with a memory of
+/// [`CENTRE_BLEND_MEMORY_FRAMES`] compared frames. Both kinds are fitted on the same blobs at the same poses, so what
+/// differs is mostly the centres' own noise (the two come from the same pixels, and their errors are not independent:
+/// the weights are those of independent errors, which is what the measurements above bear out, not an optimum).
 /// With the mean: 0.029 px on the clutter's frames (as the detector), and on the simulated sequences a jitter of 0.28
 /// instead of 0.31 mm (four dots 1.5 m away), 0.041 instead of 0.048 mm (0.5 m away).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 struct CentreBlend {
     /// The averaged mean squared residuals (px²): by the moments, by the outlines.
     mean_rms2_px2: [f64; 2],
-    /// Frames compared, and frames measured in windows.
+    /// Frames compared, and frames whose windows gave their centres.
     compared: usize,
     offered: usize,
 }
 
 impl CentreBlend {
-    /// Whether this frame, measured in windows, compares the two kinds (counts the frame).
+    /// Whether this frame, whose windows gave their centres, compares the two kinds (counts the frame).
     fn compares_now(&mut self) -> bool {
         self.offered += 1;
         self.offered as f64 <= CENTRE_BLEND_MEMORY_FRAMES

@@ -368,9 +368,17 @@ fn run_frames(
     };
     let bag_finished = bag.finish();
     let polarity = report.polarity.map_or("none", |p| p.name());
+    let blend = if report.by_windows > 0 {
+        format!(
+            "; window centres {:.0} % by the blobs' outlines",
+            100.0 * report.outline_weight
+        )
+    } else {
+        String::new()
+    };
     eprintln!(
         "roitrack: {} frames -> {} estimates in {seconds:.3} s ({:.0} frames/s); measured in windows {}, whole \
-         {}, new tracks {}, target not found in {}; polarity {polarity}; window centres {:.0} % by the blobs' outlines",
+         {}, new tracks {}, target not found in {}; polarity {polarity}{blend}",
         report.frames,
         report.estimates,
         report.frames as f64 / seconds.max(1e-9),
@@ -378,7 +386,6 @@ fn run_frames(
         report.by_full_frame,
         report.restarts,
         report.not_found,
-        100.0 * report.outline_weight,
     );
     if let Err(e) = result {
         let kept = if report.estimates > 0 {

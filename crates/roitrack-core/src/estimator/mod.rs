@@ -523,8 +523,10 @@ pub trait Estimator: Send + std::fmt::Debug {
     /// Takes the measurements of one readout at once (the blobs of a frame, in time order: one time for a global
     /// shutter, one per row for a rolling shutter) and returns at most one estimate, at the newest measurement's time,
     /// after the last of them (see [`Emit`]). Each measurement updates the state at its own time, as with
-    /// [`Self::push`]; measurements that share a time are one readout, never an error. Every measurement is checked
-    /// before any is used: a refused batch leaves the estimator as it was.
+    /// [`Self::push`]; the Kalman filter then fits a readout of three or more together, iterated, and may use blobs
+    /// its updates one by one had rejected ([`KalmanEstimator`]). Measurements that share a time are one readout,
+    /// never an error. Every measurement is checked before any is used: a refused batch leaves the estimator as it
+    /// was.
     fn push_batch(
         &mut self,
         measurements: &[Measurement],
@@ -653,9 +655,10 @@ pub enum StreamError<S, K = S> {
 /// Runs `estimator` over a stream of measurements (times not decreasing), handing every estimate to `sink` as it
 /// comes: constant memory whatever the stream's length. Returns the estimator's report.
 ///
-/// Consecutive measurements that share a time (the blobs of a global-shutter frame) are pushed together
-/// ([`Estimator::push_batch`] with [`Emit::Every`]): an estimate comes only after the last of them, so no two
-/// estimates share a time and none rests on half a frame.
+/// Consecutive measurements that share a time (the blobs of a global-shutter frame) are held together
+/// ([`Estimator::push_batch`] with [`Emit::Hold`], then [`Emit::Every`]): an estimate comes only after the last of
+/// them, so no two estimates share a time and none rests on half a frame. They are pushed one at a time, so the Kalman
+/// filter takes them one by one, without the iterated update of a readout pushed whole (the frame tracker's).
 ///
 /// ```
 /// use roitrack_core::estimator::{Tracker, TrackerConfig, track};
