@@ -1673,6 +1673,11 @@ mod tests {
         assert!(MotionState::difference(&moved, &expected).amax() < 1e-14);
     }
 
+    /// The error-state correction (translation, rotation, velocity, angular velocity).
+    fn error_state(parts: [[f64; 3]; 4]) -> Vector12 {
+        Vector12::from_iterator(parts.into_iter().flatten())
+    }
+
     fn readout_blob(point_in_obj_m: Vector3<f64>, dt_s: f64) -> ReadoutMeasurement {
         ReadoutMeasurement {
             point_index: 0,
@@ -1745,14 +1750,12 @@ mod tests {
             angular_velocity_radps: Vector3::zeros(),
             ..truth
         };
-        let mut offset = Vector12::zeros();
-        offset
-            .fixed_rows_mut::<3>(0)
-            .copy_from(&Vector3::new(0.004, -0.003, 0.015));
-        offset
-            .fixed_rows_mut::<3>(3)
-            .copy_from(&Vector3::new(0.06, 0.05, -0.06));
-        let prior_state = truth.corrected(&offset);
+        let prior_state = truth.corrected(&error_state([
+            [0.004, -0.003, 0.015],
+            [0.06, 0.05, -0.06],
+            [0.0; 3],
+            [0.0; 3],
+        ]));
         let mut pose_twist = Matrix12::identity();
         for i in 6..12 {
             pose_twist[(i, i)] = 1e-4;
@@ -1843,20 +1846,12 @@ mod tests {
             angular_velocity_radps: Vector3::new(1.0, -2.5, 1.0),
             ..truth
         };
-        let mut offset = Vector12::zeros();
-        offset
-            .fixed_rows_mut::<3>(0)
-            .copy_from(&Vector3::new(0.003, 0.002, 0.01));
-        offset
-            .fixed_rows_mut::<3>(3)
-            .copy_from(&Vector3::new(-0.03, 0.04, 0.02));
-        offset
-            .fixed_rows_mut::<3>(6)
-            .copy_from(&Vector3::new(0.03, -0.02, 0.02));
-        offset
-            .fixed_rows_mut::<3>(9)
-            .copy_from(&Vector3::new(0.1, 0.1, -0.1));
-        let prior_state = truth.corrected(&offset);
+        let prior_state = truth.corrected(&error_state([
+            [0.003, 0.002, 0.01],
+            [-0.03, 0.04, 0.02],
+            [0.03, -0.02, 0.02],
+            [0.1, 0.1, -0.1],
+        ]));
         let mut pose_twist = Matrix12::identity();
         for i in 6..12 {
             pose_twist[(i, i)] = if i < 9 { 0.05 * 0.05 } else { 0.2 * 0.2 };
