@@ -291,15 +291,11 @@ pub struct FrameTracker {
     /// has them.
     predictor: Option<Predictor>,
     predictor_acceleration: Option<Acceleration>,
-    /// The normal of the target's plane (object frame), if its points lie in one: their disks' centres are corrected
-    /// for perspective ([`Self::disk_centre_px`]).
-    disk_normal_in_obj: Option<Vector3<f64>>,
     outline: OutlineScratch,
     /// The frame's window centres of both kinds, their weights, and the static fits' observations.
     window_centres: Vec<WindowCentres>,
     centre_blend: CentreBlend,
     fit_observations: Vec<Observation>,
-    model: SpatioTemporalModel,
     polarity: Option<Polarity>,
     /// The frame's measurements, in time order.
     measurements: Vec<Measurement>,
@@ -362,10 +358,7 @@ impl FrameTracker {
         };
         let max_side = windows.max_size_px as usize;
         let blob_options = config.detection.blob_options(&camera, &target);
-        let (model, points) = (SpatioTemporalModel::new(camera.intrinsics), target.len());
-        let disk_normal_in_obj = target
-            .plane()
-            .map(|plane| plane.obj_r_plane.column(2).into_owned());
+        let points = target.len();
         Ok(Self {
             measurements: Vec::with_capacity(target.len()),
             requests: Vec::with_capacity(target.len()),
@@ -379,12 +372,10 @@ impl FrameTracker {
             photo_scratch: PhotoScratch::default(),
             predictor: None,
             predictor_acceleration: None,
-            disk_normal_in_obj,
             outline: OutlineScratch::default(),
             window_centres: Vec::with_capacity(points),
             centre_blend: CentreBlend::default(),
             fit_observations: Vec::with_capacity(points),
-            model,
             polarity,
             last_time_s: None,
             last_estimate_s: None,
@@ -724,14 +715,14 @@ impl FrameTracker {
         let count = self.window_centres.len() as f64;
         let mean_s = self.window_centres.iter().map(|w| w.t_s).sum::<f64>() / count;
         let at_mean = predictor.state.predicted(mean_s - predictor.t_ref_s);
+        let model = SpatioTemporalModel::new(self.camera.intrinsics);
         let mut rms2 = [0.0; 2];
         for (k, rms2) in rms2.iter_mut().enumerate() {
             self.fit_observations.clear();
             for w in &self.window_centres {
                 let p = &self.target.points()[w.point_index].point_in_obj_m;
                 let at_blob = predictor.state.predicted(w.t_s - predictor.t_ref_s);
-                let moved =
-                    self.model.project(&at_mean, p, 0.0)? - self.model.project(&at_blob, p, 0.0)?;
+                let moved = model.project(&at_mean, p, 0.0)? - model.project(&at_blob, p, 0.0)?;
                 let raw = if k == 0 { w.moments_px } else { w.outline_px };
                 let ideal = self.camera.undistort_pixel(&raw).ok()?;
                 self.fit_observations.push(Observation {
@@ -741,7 +732,7 @@ impl FrameTracker {
                 });
             }
             let fit = refine_static_pose(
-                &self.model,
+                &model,
                 &self.target,
                 &self.fit_observations,
                 &at_mean,
@@ -762,9 +753,10 @@ impl FrameTracker {
     /// `roitrack frame-study` the global-shutter position RMSE fell from 0.0152 to 0.0137 mm with it.
     fn disk_centre_shift_px(&self, predictor: &Predictor, i: usize, t_s: f64) -> Vector2<f64> {
         let point = &self.target.points()[i];
-        let (Some(normal), Some(diameter_m)) = (self.disk_normal_in_obj, point.diameter_m) else {
+        let (Some(plane), Some(diameter_m)) = (self.target.plane(), point.diameter_m) else {
             return Vector2::zeros();
         };
+        let normal: Vector3<f64> = plane.obj_r_plane.column(2).into_owned();
         let state = predictor.state.predicted(t_s - predictor.t_ref_s);
         disk_centre_displacement_px(
             &self.camera,

@@ -934,6 +934,41 @@ impl Filter {
     ) -> UpdateOutcome {
         with_filter!(self, f => f.update(model, state, point_in_obj_m, ideal_px, sigma_px))
     }
+
+    /// [`ErrorStateKalman::refine`] from `prior`, a copy of this filter before the readout (`false` if it is of
+    /// the other motion model, which no filter changes into).
+    #[allow(clippy::too_many_arguments)]
+    fn refine(
+        &mut self,
+        prior: &Self,
+        prior_state: &MotionState,
+        state: &mut MotionState,
+        span_s: f64,
+        model: &SpatioTemporalModel,
+        readout: &mut [ReadoutMeasurement],
+        noise_px: f64,
+        process_scale: [f64; 2],
+    ) -> bool {
+        macro_rules! refine_from {
+            ($f:expr, $p:expr) => {
+                $f.refine(
+                    $p,
+                    prior_state,
+                    state,
+                    span_s,
+                    model,
+                    readout,
+                    noise_px,
+                    process_scale,
+                )
+            };
+        }
+        match (self, prior) {
+            (Self::ConstantVelocity(f), Self::ConstantVelocity(p)) => refine_from!(f, p),
+            (Self::ConstantAcceleration(f), Self::ConstantAcceleration(p)) => refine_from!(f, p),
+            _ => false,
+        }
+    }
 }
 
 /// How fast the process-noise scales follow the persistence of the innovations: their logarithms move by this much
@@ -1130,29 +1165,16 @@ impl Law for KalmanLaw {
         if accepted >= MIN_READOUT_TO_REFINE && self.resets_total == resets {
             let span_s = core.t_ref_s - first.t_s;
             let process_scale = self.process_log_scale.map(f64::exp);
-            let refined = match (&mut self.filter, &prior.0) {
-                (Filter::ConstantVelocity(f), Filter::ConstantVelocity(p)) => f.refine(
-                    p,
-                    &prior.1,
-                    &mut core.state,
-                    span_s,
-                    &core.model,
-                    &mut readout,
-                    core.noise_px,
-                    process_scale,
-                ),
-                (Filter::ConstantAcceleration(f), Filter::ConstantAcceleration(p)) => f.refine(
-                    p,
-                    &prior.1,
-                    &mut core.state,
-                    span_s,
-                    &core.model,
-                    &mut readout,
-                    core.noise_px,
-                    process_scale,
-                ),
-                _ => false,
-            };
+            let refined = self.filter.refine(
+                &prior.0,
+                &prior.1,
+                &mut core.state,
+                span_s,
+                &core.model,
+                &mut readout,
+                core.noise_px,
+                process_scale,
+            );
             if refined {
                 self.forgive_recovered(&readout, gated_in_a_row, accepted_in_a_row);
             }
