@@ -253,6 +253,16 @@ impl TrackCore {
         }
     }
 
+    /// Time from the oldest to the newest of the window's newest `n` measurements (s); 0 for fewer than two.
+    pub fn window_span_s(&self, n: usize) -> f64 {
+        let mut times = self.window.last(n).map(|o| o.t_s);
+        let first = times.next();
+        match (first, times.last()) {
+            (Some(a), Some(b)) => (b - a).abs(),
+            _ => 0.0,
+        }
+    }
+
     /// Measurements in the window.
     pub fn window_len(&self) -> usize {
         self.window.len()
