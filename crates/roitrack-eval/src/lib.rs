@@ -42,8 +42,9 @@ pub struct EvalOptions {
     /// interpolated at its time, which must then lie inside the truth's time span. Also the tolerance on twist times
     /// matching pose times. Default 1e-6 s.
     pub max_time_gap_s: f64,
-    /// The velocity lag is searched in `-max_lag_samples..=max_lag_samples` estimator samples (and within half the
-    /// series). Default 40.
+    /// The velocity lag is searched in `-max_lag_samples..=max_lag_samples` estimator samples (and within a quarter
+    /// of the series), every shift scored on the same estimates: all but the first and the last `max_lag_samples`.
+    /// Default 40.
     pub max_lag_samples: usize,
     /// The clock offset added to the estimates' times before they are paired with the truth, or
     /// [`TimeOffset::Auto`] to find it ([`trajectory::find_time_offset`]). Default 0.
