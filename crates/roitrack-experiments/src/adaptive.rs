@@ -1180,6 +1180,22 @@ impl SweepOptions {
             ..Self::full()
         }
     }
+
+    /// Every case simulated with these seeds instead of its own, its figures pooled over them (the lag: the largest
+    /// over the seeds).
+    ///
+    /// ```
+    /// use roitrack_experiments::adaptive::SweepOptions;
+    ///
+    /// let options = SweepOptions::full().with_seeds(&[2, 3]);
+    /// assert!(options.cases.iter().all(|c| c.seeds == [2, 3]));
+    /// ```
+    pub fn with_seeds(mut self, seeds: &[u64]) -> Self {
+        for case in &mut self.cases {
+            case.seeds = seeds.to_vec();
+        }
+        self
+    }
 }
 
 /// Why the sweep could not run.
@@ -1189,6 +1205,8 @@ pub enum SweepError {
     Grid(String),
     #[error("the sweep needs at least one thread")]
     NoThreads,
+    #[error("case {case} has no seed to simulate")]
+    NoSeeds { case: &'static str },
     #[error("case {case}: {source}")]
     Case {
         case: &'static str,
@@ -1227,6 +1245,9 @@ pub fn sweep(options: &SweepOptions, progress: Option<&AtomicUsize>) -> Result<S
     options.grid.validate().map_err(SweepError::Grid)?;
     if options.threads == 0 {
         return Err(SweepError::NoThreads);
+    }
+    if let Some(case) = options.cases.iter().find(|c| c.seeds.is_empty()) {
+        return Err(SweepError::NoSeeds { case: case.name });
     }
     let start = Instant::now();
     // The longest cases first, so that the last to finish is a short one.

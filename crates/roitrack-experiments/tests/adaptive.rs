@@ -1,7 +1,7 @@
 //! The issue-15 harness in quick mode: what must hold whatever the default estimator does (the targets themselves are
 //! the estimator's job, and are not asserted here).
 
-use roitrack_experiments::adaptive::{Goal, Purpose, SweepOptions, cases, sweep};
+use roitrack_experiments::adaptive::{Goal, Purpose, SweepError, SweepOptions, cases, sweep};
 
 #[test]
 fn every_case_keeps_its_blobs_in_the_image_and_simulates() {
@@ -201,4 +201,23 @@ fn the_figures_do_not_depend_on_the_number_of_threads() {
         assert_eq!(a.visited.len(), b.visited.len());
     }
     assert_eq!(one.markdown(), two.markdown());
+}
+
+#[test]
+fn other_seeds_are_simulated_and_pooled() {
+    let mut options = SweepOptions::quick();
+    options.cases.retain(|c| c.name == "static, 0.3 px");
+    options.max_duration_s = Some(0.3);
+    let one = sweep(&options.clone().with_seeds(&[2]), None).unwrap();
+    let two = sweep(&options.clone().with_seeds(&[2, 3]), None).unwrap();
+    let (one, two) = (&one.cases[0].default, &two.cases[0].default);
+    // Two seeds: twice the estimates, and another RMSE (the second seed's noise is another draw).
+    assert_eq!(two.estimates, 2 * one.estimates);
+    assert_ne!(two.position_rmse_mm, one.position_rmse_mm);
+    assert!(matches!(
+        sweep(&options.with_seeds(&[]), None),
+        Err(SweepError::NoSeeds {
+            case: "static, 0.3 px"
+        })
+    ));
 }

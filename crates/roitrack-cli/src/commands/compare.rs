@@ -45,6 +45,10 @@ pub struct CompareArgs {
     /// With --sweep: exit with a failure naming the targets that do not hold (after printing everything).
     #[arg(long, requires = "sweep")]
     pub check: bool,
+    /// With --sweep: simulate every case with these seeds (comma-separated) and pool each case's figures over them.
+    /// Default: each case's own seed (1), the table of record.
+    #[arg(long, requires = "sweep", value_delimiter = ',', num_args = 1..)]
+    pub seeds: Option<Vec<u64>>,
 }
 
 pub fn run(args: &CompareArgs) -> Result<()> {
@@ -73,11 +77,14 @@ pub fn run(args: &CompareArgs) -> Result<()> {
 }
 
 fn run_sweep(args: &CompareArgs) -> Result<()> {
-    let options = if args.quick {
+    let mut options = if args.quick {
         SweepOptions::quick()
     } else {
         SweepOptions::full()
     };
+    if let Some(seeds) = &args.seeds {
+        options = options.with_seeds(seeds);
+    }
     // Drawn on stderr, only when it is a terminal: the table on stdout stays clean.
     let bar = indicatif::ProgressBar::new(options.cases.len() as u64).with_style(
         indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} cases ({elapsed})")
