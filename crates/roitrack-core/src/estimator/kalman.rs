@@ -7,7 +7,9 @@
 //! outliers; a run of rejections widens the covariance (a jump of the target, or a bad update), by escalating steps.
 //! With [`MotionModel::ConstantAcceleration`] the state also carries the linear and angular accelerations (18 error
 //! states), which drift under white jerk; the frame tracker uses it. After their updates one by one, the blobs of
-//! one readout (a frame) are also fitted together by an iterated update (`ErrorStateKalman::refine`).
+//! one readout (a frame) are also fitted together by an iterated update (`ErrorStateKalman::refine`); a readout of
+//! one instant half or more of whose blobs are rejected is taken again from a covariance widened at once to the broad
+//! prior (the filter no longer predicts the target).
 //!
 //! By default the filter is told neither the noise of the centroids nor how the target moves; it learns both:
 //! - **Centroid noise**: at each control step, the window's least-squares residual at its own optimum divided by its
@@ -32,7 +34,7 @@
 use nalgebra::{Matrix2, Rotation3, SMatrix, SVector, Vector2, Vector3};
 
 use super::calibration::TwistCalibration;
-use super::problem::{Observation, ResidualFigures, ResidualTally};
+use super::problem::{Observation, ResidualFigures, ResidualTally, TallyMark};
 use super::track::{Law, Step, Track, TrackCore};
 use super::{
     ConfigError, Estimate, Estimator, EstimatorConfig, EstimatorReport, TrackError, TrackStatus,
@@ -1151,57 +1153,31 @@ impl Law for KalmanLaw {
         }
         let first = &batch[0];
         let dt = self.predict_to(core, first.t_s);
-        let prior = (self.filter, core.state);
-        let (resets, gated_in_a_row, accepted_in_a_row) = (
-            self.resets_total,
-            self.gated_in_a_row,
-            self.accepted_in_a_row,
-        );
-        let mut readout = std::mem::take(&mut self.readout);
-        readout.clear();
-        for (i, obs) in batch.iter().enumerate() {
-            let dt = if i == 0 {
-                dt
-            } else {
-                self.predict_to(core, obs.t_s)
-            };
-            let outcome = self.take(core, obs, dt);
-            let huber = self.filter.tuning().huber_sigma;
-            let nis = match outcome {
-                UpdateOutcome::Accepted { nis, .. } | UpdateOutcome::Gated { nis, .. } => nis,
-                UpdateOutcome::Invalid => continue,
-            };
-            let gated = matches!(outcome, UpdateOutcome::Gated { .. });
-            readout.push(ReadoutMeasurement {
-                point_index: obs.point_index,
-                point_in_obj_m: core.target.points()[obs.point_index].point_in_obj_m,
-                ideal_px: obs.ideal_px,
-                dt_s: obs.t_s - first.t_s,
-                variance_px2: core.noise_px * core.noise_px * (nis.sqrt() / huber).max(1.0),
-                gated,
-                used: !gated,
-            });
-        }
-        // A covariance reset within the readout has already said the prior was wrong: what it widened is no prior.
-        let accepted = readout.iter().filter(|m| m.used).count();
-        if accepted >= MIN_READOUT_TO_REFINE && self.resets_total == resets {
-            let span_s = core.t_ref_s - first.t_s;
-            let process_scale = self.process_log_scale.map(f64::exp);
-            let refined = self.filter.refine(
-                &prior.0,
-                &prior.1,
-                &mut core.state,
-                span_s,
-                &core.model,
-                &mut readout,
-                core.noise_px,
-                process_scale,
-            );
-            if refined {
-                self.forgive_recovered(&readout, gated_in_a_row, accepted_in_a_row);
+        let before = self.counters(core);
+        let used = self.take_readout(core, batch, dt);
+        // Half or more of the blobs of one instant rejected: not a few outliers but a filter that no longer predicts
+        // the target (a turn faster than its process noise allows between frames). The readout is taken again from the prior
+        // widened at once to the broad one, as the escalating resets would after several frames of rejections, so
+        // that its blobs, which pin the pose, set it.
+        let one_instant = batch.iter().all(|obs| obs.t_s == first.t_s);
+        let pins_a_pose = batch.len() >= if core.target.is_planar() { 4 } else { 6 };
+        if one_instant && 2 * used <= batch.len() && pins_a_pose {
+            self.restore(core, before);
+            self.filter.widen(&core.prior_covariance(), 1.0);
+            self.covariance_resets += 1;
+            self.resets_total += 1;
+            self.take_readout(core, batch, dt);
+            // What judges the track (lost, or following its measurements) is then how well the state the readout
+            // set explains it, not its innovations against the prediction it has just overruled: those stay pixels
+            // off however right the new state is, and three such estimates in a row dropped the track.
+            self.innovations.rewind(before.innovations);
+            for obs in batch {
+                let p = &core.target.points()[obs.point_index].point_in_obj_m;
+                if let Some(pixel) = core.model.project(&core.state, p, 0.0) {
+                    self.innovations.add((obs.ideal_px - pixel).norm());
+                }
             }
         }
-        self.readout = readout;
     }
 
     fn control_step(&mut self, core: &mut TrackCore, t_new_s: f64) -> Step {
@@ -1279,7 +1255,116 @@ const DISPUTED_AFTER_GATED_IN_A_ROW: usize = 3;
 /// measurements) disputes the estimate on its own.
 const DISPUTED_NIS: f64 = 25.0;
 
+/// What [`KalmanLaw::take_readout`] changes besides the readout's points, to take a readout again.
+#[derive(Debug, Clone, Copy)]
+struct LawCounters {
+    filter: Filter,
+    state: MotionState,
+    gated_in_a_row: usize,
+    covariance_resets: usize,
+    reset_level: usize,
+    accepted_in_a_row: usize,
+    innovations: TallyMark,
+    gated_since_estimate: usize,
+    gated_total: usize,
+    resets_total: usize,
+    newest_nis: f64,
+    process_log_scale: [f64; 2],
+}
+
 impl KalmanLaw {
+    fn counters(&self, core: &TrackCore) -> LawCounters {
+        LawCounters {
+            filter: self.filter,
+            state: core.state,
+            gated_in_a_row: self.gated_in_a_row,
+            covariance_resets: self.covariance_resets,
+            reset_level: self.reset_level,
+            accepted_in_a_row: self.accepted_in_a_row,
+            innovations: self.innovations.mark(),
+            gated_since_estimate: self.gated_since_estimate,
+            gated_total: self.gated_total,
+            resets_total: self.resets_total,
+            newest_nis: self.newest_nis,
+            process_log_scale: self.process_log_scale,
+        }
+    }
+
+    fn restore(&mut self, core: &mut TrackCore, c: LawCounters) {
+        self.filter = c.filter;
+        core.state = c.state;
+        self.gated_in_a_row = c.gated_in_a_row;
+        self.covariance_resets = c.covariance_resets;
+        self.reset_level = c.reset_level;
+        self.accepted_in_a_row = c.accepted_in_a_row;
+        self.innovations.rewind(c.innovations);
+        self.gated_since_estimate = c.gated_since_estimate;
+        self.gated_total = c.gated_total;
+        self.resets_total = c.resets_total;
+        self.newest_nis = c.newest_nis;
+        self.process_log_scale = c.process_log_scale;
+    }
+
+    /// Takes a readout (the filter already at its first time, `dt` after the measurement before): its blobs one by
+    /// one, then, for three or more, fitted together with the prior ([`Filter::refine`]). Returns how many blobs the
+    /// result uses.
+    fn take_readout(&mut self, core: &mut TrackCore, batch: &[Observation], dt: f64) -> usize {
+        let first = &batch[0];
+        let prior = (self.filter, core.state);
+        let (resets, gated_in_a_row, accepted_in_a_row) = (
+            self.resets_total,
+            self.gated_in_a_row,
+            self.accepted_in_a_row,
+        );
+        let mut readout = std::mem::take(&mut self.readout);
+        readout.clear();
+        for (i, obs) in batch.iter().enumerate() {
+            let dt = if i == 0 {
+                dt
+            } else {
+                self.predict_to(core, obs.t_s)
+            };
+            let outcome = self.take(core, obs, dt);
+            let huber = self.filter.tuning().huber_sigma;
+            let nis = match outcome {
+                UpdateOutcome::Accepted { nis, .. } | UpdateOutcome::Gated { nis, .. } => nis,
+                UpdateOutcome::Invalid => continue,
+            };
+            let gated = matches!(outcome, UpdateOutcome::Gated { .. });
+            readout.push(ReadoutMeasurement {
+                point_index: obs.point_index,
+                point_in_obj_m: core.target.points()[obs.point_index].point_in_obj_m,
+                ideal_px: obs.ideal_px,
+                dt_s: obs.t_s - first.t_s,
+                variance_px2: core.noise_px * core.noise_px * (nis.sqrt() / huber).max(1.0),
+                gated,
+                used: !gated,
+            });
+        }
+        // A covariance reset within the readout has already said the prior was wrong: what it widened is no prior.
+        let accepted = readout.iter().filter(|m| m.used).count();
+        if accepted >= MIN_READOUT_TO_REFINE && self.resets_total == resets {
+            let span_s = core.t_ref_s - first.t_s;
+            let process_scale = self.process_log_scale.map(f64::exp);
+            let refined = self.filter.refine(
+                &prior.0,
+                &prior.1,
+                &mut core.state,
+                span_s,
+                &core.model,
+                &mut readout,
+                core.noise_px,
+                process_scale,
+            );
+            if refined {
+                self.forgive_recovered(&readout, gated_in_a_row, accepted_in_a_row);
+            }
+        }
+        let used = readout.iter().filter(|m| m.used).count();
+        self.readout = readout;
+        used
+    }
+
     fn new(tuning: KalmanTuning) -> Self {
         Self {
             filter: Filter::new(Matrix12::identity(), tuning, 0.0),

@@ -98,6 +98,14 @@ pub(crate) struct ResidualFigures {
     pub newest_px: f64,
 }
 
+/// A [`ResidualTally`]'s state, to rewind it to.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct TallyMark {
+    count: usize,
+    sum_squares: f64,
+    newest_px: f64,
+}
+
 /// Residual norms gathered one at a time (a filter's innovations), summed into [`ResidualFigures`]: no allocation.
 #[derive(Debug, Clone)]
 pub(crate) struct ResidualTally {
@@ -136,6 +144,22 @@ impl ResidualTally {
         self.count = 0;
         self.sum_squares = 0.0;
         self.newest_px = 0.0;
+    }
+
+    /// Where the tally stands, to [`Self::rewind`] to.
+    pub fn mark(&self) -> TallyMark {
+        TallyMark {
+            count: self.count,
+            sum_squares: self.sum_squares,
+            newest_px: self.newest_px,
+        }
+    }
+
+    /// Forgets the norms added since `mark`.
+    pub fn rewind(&mut self, mark: TallyMark) {
+        self.count = mark.count;
+        self.sum_squares = mark.sum_squares;
+        self.newest_px = mark.newest_px;
     }
 
     /// RMS per coordinate, median and newest norm; `None` before the first residual.
