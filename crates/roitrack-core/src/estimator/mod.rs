@@ -533,6 +533,10 @@ pub trait Estimator: Send + std::fmt::Debug {
         emit: Emit,
     ) -> Result<Option<Estimate>, TrackError>;
 
+    /// Which measurement of `measurements` [`Self::push_batch`] would refuse first (its offset in them), and why;
+    /// `None` if it would take them all. Takes nothing and counts nothing.
+    fn first_refused(&self, measurements: &[Measurement]) -> Option<(usize, TrackError)>;
+
     /// Drops the current track: the next measurements initialise a new one (after a re-initialisation from a full
     /// frame, say). Measurement times must still not decrease.
     fn reset(&mut self);
@@ -568,6 +572,12 @@ macro_rules! delegate_estimator {
                 emit: $crate::estimator::Emit,
             ) -> Result<Option<Estimate>, TrackError> {
                 self.0.push_batch(measurements, emit)
+            }
+            fn first_refused(
+                &self,
+                measurements: &[Measurement],
+            ) -> Option<(usize, $crate::estimator::TrackError)> {
+                self.0.first_refused(measurements)
             }
             fn reset(&mut self) {
                 self.0.reset()
@@ -655,10 +665,13 @@ pub enum StreamError<S, K = S> {
 /// Runs `estimator` over a stream of measurements (times not decreasing), handing every estimate to `sink` as it
 /// comes: constant memory whatever the stream's length. Returns the estimator's report.
 ///
-/// Consecutive measurements that share a time (the blobs of a global-shutter frame) are held together
-/// ([`Estimator::push_batch`] with [`Emit::Hold`], then [`Emit::Every`]): an estimate comes only after the last of
-/// them, so no two estimates share a time and none rests on half a frame. They are pushed one at a time, so the Kalman
-/// filter takes them one by one, without the iterated update of a readout pushed whole (the frame tracker's).
+/// Consecutive measurements that share a time (the blobs of a global-shutter frame) are one readout, pushed whole
+/// ([`Estimator::push_batch`] with [`Emit::Every`]): an estimate comes only after the last of them, so no two
+/// estimates share a time and none rests on half a frame, and the Kalman filter fits a readout of three or more
+/// together, as the frame tracker's does. A readout longer than [`MAX_READOUT`] measurements is pushed in parts
+/// ([`Emit::Hold`] until its last), so memory stays bounded. When the estimator refuses a measurement of a readout
+/// (which leaves it as it was), the ones before it are taken, as they would have been one by one, and the error
+/// names the measurement refused by its place in the stream.
 ///
 /// ```
 /// use roitrack_core::estimator::{Tracker, TrackerConfig, track};
@@ -681,34 +694,64 @@ pub fn track<S, K>(
     measurements: impl IntoIterator<Item = Result<Measurement, S>>,
     mut sink: impl FnMut(&Estimate) -> Result<(), K>,
 ) -> Result<EstimatorReport, StreamError<S, K>> {
-    // Measurements that share a time are held; the readout they form is closed (and an estimate given if one is
-    // due) when a later time comes, or the stream ends.
-    let mut open_time_s: Option<f64> = None;
-    // `index`: the readout's last measurement, named if the estimate it closes is refused (a first pose out of range).
-    let mut close =
-        |estimator: &mut dyn Estimator, index: usize| -> Result<(), StreamError<S, K>> {
-            match estimator.push_batch(&[], Emit::Every) {
-                Ok(Some(estimate)) => sink(&estimate).map_err(StreamError::Sink),
-                Ok(None) => Ok(()),
-                Err(source) => Err(StreamError::Refused { index, source }),
-            }
-        };
-    let mut last_index = 0;
+    // Measurements that share a time are gathered; the readout they form is pushed (and an estimate given if one is
+    // due) when a later time comes, or the stream ends. `first_index`: the stream index of its first measurement.
+    let mut readout: Vec<Measurement> = Vec::with_capacity(64);
+    let mut first_index = 0;
     for (index, m) in measurements.into_iter().enumerate() {
         let m = m.map_err(StreamError::Source)?;
-        if open_time_s.is_some_and(|t_s| t_s != m.t_s) {
-            close(estimator, last_index)?;
+        let same_time = readout.first().is_some_and(|r| r.t_s == m.t_s);
+        if !readout.is_empty() && (!same_time || readout.len() == MAX_READOUT) {
+            let emit = if same_time { Emit::Hold } else { Emit::Every };
+            push_readout(estimator, &readout, first_index, emit, &mut sink)?;
+            readout.clear();
         }
-        last_index = index;
-        estimator
-            .push_batch(std::slice::from_ref(&m), Emit::Hold)
-            .map_err(|source| StreamError::Refused { index, source })?;
-        open_time_s = Some(m.t_s);
+        if readout.is_empty() {
+            first_index = index;
+        }
+        readout.push(m);
     }
-    if open_time_s.is_some() {
-        close(estimator, last_index)?;
+    if !readout.is_empty() {
+        push_readout(estimator, &readout, first_index, Emit::Every, &mut sink)?;
     }
     Ok(estimator.report())
+}
+
+/// The longest readout (measurements that share a time) that [`track`] pushes at once; a longer one goes in parts.
+pub const MAX_READOUT: usize = 4096;
+
+/// Pushes one readout of [`track`]'s stream (`first_index`: the stream index of its first measurement) and hands on
+/// its estimate.
+fn push_readout<S, K>(
+    estimator: &mut dyn Estimator,
+    readout: &[Measurement],
+    first_index: usize,
+    emit: Emit,
+    sink: &mut impl FnMut(&Estimate) -> Result<(), K>,
+) -> Result<(), StreamError<S, K>> {
+    let refused_at = |index: usize| move |source| StreamError::Refused { index, source };
+    let last_index = first_index + readout.len().saturating_sub(1);
+    let result = match estimator.push_batch(readout, emit) {
+        // A measurement was refused before any was taken: the ones before it are taken (as they would have been one
+        // by one) and the error names it.
+        Err(error) if !matches!(error, TrackError::ImplausibleFirstPose { .. }) => {
+            let offset = estimator
+                .first_refused(readout)
+                .map_or(0, |(offset, _)| offset);
+            if offset > 0 {
+                estimator
+                    .push_batch(&readout[..offset], Emit::Hold)
+                    .map_err(refused_at(first_index + offset - 1))?;
+            }
+            return Err(refused_at(first_index + offset)(error));
+        }
+        // Taken; or taken and the estimate it closes refused (a first pose out of range): the readout's last.
+        result => result,
+    };
+    match result.map_err(refused_at(last_index))? {
+        Some(estimate) => sink(&estimate).map_err(StreamError::Sink),
+        None => Ok(()),
+    }
 }
 
 /// Runs the estimator that `config` chooses over measurements held in memory; returns every estimate and the report.

@@ -310,6 +310,21 @@ impl TrackCore {
 
     /// Checks a raw measurement against the previous time `previous_s` and undistorts it, without changing
     /// anything: a refused measurement leaves the estimator as it was.
+    /// Checks `measurements` in order (times must not decrease from the newest taken, nor within them), pushing
+    /// each checked one onto `checked`; stops at the first refused, with its offset.
+    fn check_all(
+        &self,
+        measurements: &[Measurement],
+        checked: &mut Vec<Observation>,
+    ) -> Result<(), (usize, TrackError)> {
+        let mut previous_s = self.last_t_s;
+        for (offset, m) in measurements.iter().enumerate() {
+            checked.push(self.check(m, previous_s).map_err(|e| (offset, e))?);
+            previous_s = Some(m.t_s);
+        }
+        Ok(())
+    }
+
     fn check(&self, m: &Measurement, previous_s: Option<f64>) -> Result<Observation, TrackError> {
         for (field, value) in [("t", m.t_s), ("u", m.u_px), ("v", m.v_px)] {
             if !value.is_finite() {
@@ -429,17 +444,10 @@ impl<L: Law> Track<L> {
     ) -> Result<Option<Estimate>, TrackError> {
         let mut pending = std::mem::take(&mut self.core.pending);
         pending.clear();
-        let mut previous_s = self.core.last_t_s;
-        for m in measurements {
-            match self.core.check(m, previous_s) {
-                Ok(obs) => pending.push(obs),
-                Err(e) => {
-                    self.core.report.refused += 1;
-                    self.core.pending = pending;
-                    return Err(e);
-                }
-            }
-            previous_s = Some(m.t_s);
+        if let Err((_, e)) = self.core.check_all(measurements, &mut pending) {
+            self.core.report.refused += 1;
+            self.core.pending = pending;
+            return Err(e);
         }
         for obs in &pending {
             self.core.commit(*obs);
@@ -452,6 +460,13 @@ impl<L: Law> Track<L> {
         let initialisations = self.core.report.initialisations;
         let estimate = self.estimate_if_due(emit);
         self.check_first_pose(initialisations, estimate)
+    }
+
+    /// Which measurement of `measurements` [`Self::push_batch`] would refuse first (its offset), and why; `None` if it
+    /// would take them all. Takes nothing and counts nothing.
+    pub fn first_refused(&self, measurements: &[Measurement]) -> Option<(usize, TrackError)> {
+        let mut checked = Vec::with_capacity(measurements.len());
+        self.core.check_all(measurements, &mut checked).err()
     }
 
     /// Adds a checked measurement to the window and, on a running track, to the state.
