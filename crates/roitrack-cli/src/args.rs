@@ -92,7 +92,8 @@ pub struct EstimatorArgs {
     /// Window: 0 = the newest measurement of each point (the paper), N = the last N measurements.
     #[arg(long, default_value_t = 0)]
     pub window: usize,
-    /// Control period k: one estimate every K measurements.
+    /// Control period k: one estimate every K measurements. Measurements that share a time (the blobs of a frame)
+    /// give one estimate per frame instead.
     #[arg(long, default_value_t = 10)]
     pub every: usize,
     /// Centroid noise standard deviation (px): the window fits' covariance scale, and the Kalman filter's starting

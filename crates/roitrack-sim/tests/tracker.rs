@@ -737,3 +737,41 @@ fn a_centroid_file_of_frames_is_tracked_as_closely_as_frame_by_frame_and_more_sm
         assert!(grouped.0 <= one_by_one.0, "{kind:?}");
     }
 }
+
+#[test]
+fn a_centroid_file_of_frames_gives_an_estimate_per_frame() {
+    // Four blobs a frame and the default control period (an estimate every 10 measurements): one estimate per
+    // frame all the same, at the frame's time, from the second frame on (the initial fit takes two cycles).
+    let (_, target, measurements) = four_dot_frames(ScenarioKind::Orthoglide, 1);
+    let frames: Vec<f64> = measurements.chunks(4).map(|f| f[0].t_s).collect();
+    let (estimates, _) = track_all(
+        &CameraModel::canonical(),
+        &target,
+        TrackerConfig::default(),
+        &measurements,
+    )
+    .unwrap();
+    let times: Vec<f64> = estimates.iter().map(|e| e.t_ref_s).collect();
+    assert_eq!(times, frames[1..]);
+    // Measurements one at a time keep the control period.
+    let one_at_a_time: Vec<Measurement> = measurements
+        .iter()
+        .enumerate()
+        .map(|(i, m)| Measurement {
+            t_s: m.t_s + i as f64 * 1e-6,
+            ..*m
+        })
+        .collect();
+    let (estimates, _) = track_all(
+        &CameraModel::canonical(),
+        &target,
+        TrackerConfig::default(),
+        &one_at_a_time,
+    )
+    .unwrap();
+    assert!(
+        estimates.len() < measurements.len() / 10 + 2,
+        "{}",
+        estimates.len()
+    );
+}

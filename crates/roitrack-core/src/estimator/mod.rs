@@ -124,7 +124,8 @@ pub struct TrackerConfig {
     pub estimator: EstimatorConfig,
     /// Which measurements a control step uses (VVS, batch, and the conditioning figure of every estimator).
     pub window: WindowMode,
-    /// Control period k: an estimate every `every` measurements (the paper: 10, i.e. 400 Hz at 4 kHz).
+    /// Control period k: an estimate every `every` measurements (the paper: 10, i.e. 400 Hz at 4 kHz). [`track`]
+    /// gives one per frame for measurements that share a time.
     pub every: usize,
     /// Centroid noise standard deviation (px): the covariance scale of the window fits and, for the Kalman filter,
     /// the measurement noise; the default Kalman filter learns the noise online and takes this only as its starting
@@ -666,9 +667,11 @@ pub enum StreamError<S, K = S> {
 /// comes: constant memory whatever the stream's length. Returns the estimator's report.
 ///
 /// Consecutive measurements that share a time (the blobs of a global-shutter frame) are one readout, pushed whole
-/// ([`Estimator::push_batch`] with [`Emit::Every`]): an estimate comes only after the last of them, so no two
-/// estimates share a time and none rests on half a frame, and the Kalman filter fits a readout of three or more
-/// together, as the frame tracker's does. A readout longer than [`MAX_READOUT`] measurements is pushed in parts
+/// ([`Estimator::push_batch`]): its estimate comes after the last of them, so no two estimates share a time and none
+/// rests on half a frame, and the Kalman filter fits a readout of three or more together, as the frame tracker's
+/// does. A readout of several measurements gives one estimate ([`Emit::EachBatch`]: one per frame, as the frame
+/// tracker gives them, whatever [`TrackerConfig::every`] says); measurements that come one at a time (ROIs, a rolling
+/// shutter's rows) one every `every` ([`Emit::Every`]). A readout longer than [`MAX_READOUT`] measurements is pushed in parts
 /// ([`Emit::Hold`] until its last), so memory stays bounded. When the estimator refuses a measurement of a readout
 /// (which leaves it as it was), the ones before it are taken, as they would have been one by one, and the error
 /// names the measurement refused by its place in the stream.
@@ -698,13 +701,26 @@ pub fn track<S, K>(
     // due) when a later time comes, or the stream ends. `first_index`: the stream index of its first measurement.
     let mut readout: Vec<Measurement> = Vec::with_capacity(64);
     let mut first_index = 0;
+    // Whether the open readout holds several measurements (a frame), some of them maybe pushed already.
+    let mut frame = false;
+    // A frame's estimate comes with the frame, whatever `every` says (an estimate every 10 measurements would give
+    // one every two or three frames of four dots); one measurement at a time, every `every`.
+    let closing = |frame: bool| if frame { Emit::EachBatch } else { Emit::Every };
     for (index, m) in measurements.into_iter().enumerate() {
         let m = m.map_err(StreamError::Source)?;
         let same_time = readout.first().is_some_and(|r| r.t_s == m.t_s);
+        if same_time {
+            frame = true;
+        }
         if !readout.is_empty() && (!same_time || readout.len() == MAX_READOUT) {
-            let emit = if same_time { Emit::Hold } else { Emit::Every };
+            let emit = if same_time {
+                Emit::Hold
+            } else {
+                closing(frame)
+            };
             push_readout(estimator, &readout, first_index, emit, &mut sink)?;
             readout.clear();
+            frame &= same_time;
         }
         if readout.is_empty() {
             first_index = index;
@@ -712,7 +728,7 @@ pub fn track<S, K>(
         readout.push(m);
     }
     if !readout.is_empty() {
-        push_readout(estimator, &readout, first_index, Emit::Every, &mut sink)?;
+        push_readout(estimator, &readout, first_index, closing(frame), &mut sink)?;
     }
     Ok(estimator.report())
 }
