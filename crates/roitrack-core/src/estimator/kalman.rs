@@ -9,7 +9,7 @@
 //! states), which drift under white jerk; the frame tracker uses it. After their updates one by one, the blobs of
 //! one readout (a frame) are also fitted together by an iterated update (`ErrorStateKalman::refine`); a readout of
 //! one instant half or more of whose blobs are rejected is taken again from a covariance widened at once to the broad
-//! prior (the filter no longer predicts the target).
+//! prior (the filter no longer predicts the target), and kept if it explains more of them than the first pass.
 //!
 //! By default the filter is told neither the noise of the centroids nor how the target moves; it learns both:
 //! - **Centroid noise**: at each control step, the window's least-squares residual at its own optimum divided by its
@@ -1155,27 +1155,40 @@ impl Law for KalmanLaw {
         let dt = self.predict_to(core, first.t_s);
         let before = self.counters(core);
         let used = self.take_readout(core, batch, dt);
-        // Half or more of the blobs of one instant rejected: not a few outliers but a filter that no longer predicts
-        // the target (a turn faster than its process noise allows between frames). The readout is taken again from the prior
-        // widened at once to the broad one, as the escalating resets would after several frames of rejections, so
-        // that its blobs, which pin the pose, set it.
+        // Half or more of the blobs of one instant rejected: a filter that no longer predicts the target (a turn
+        // faster than its process noise allows between frames), or half the blobs outliers. The readout is taken
+        // again from the prior widened at once to the broad one, as the escalating resets would after several frames
+        // of rejections, so that its blobs, which pin the pose, set it; and that is kept if it explains more of them
+        // (within the gate of their noise) than the first pass did, which it does not when they were outliers.
         let one_instant = batch.iter().all(|obs| obs.t_s == first.t_s);
-        let pins_a_pose = batch.len() >= if core.target.is_planar() { 4 } else { 6 };
-        if one_instant && 2 * used <= batch.len() && pins_a_pose {
+        let pose_points = if core.target.is_planar() { 4 } else { 6 };
+        if one_instant && 2 * used <= batch.len() && distinct_points(batch, pose_points) {
+            let first_pass = (self.counters(core), self.innovations.clone());
+            let explained_first = self.explained(core, batch);
             self.restore(core, before);
             self.filter.widen(&core.prior_covariance(), 1.0);
             self.covariance_resets += 1;
             self.resets_total += 1;
             self.take_readout(core, batch, dt);
-            // What judges the track (lost, or following its measurements) is then how well the state the readout
-            // set explains it, not its innovations against the prediction it has just overruled: those stay pixels
-            // off however right the new state is, and three such estimates in a row dropped the track.
-            self.innovations.rewind(before.innovations);
-            for obs in batch {
-                let p = &core.target.points()[obs.point_index].point_in_obj_m;
-                if let Some(pixel) = core.model.project(&core.state, p, 0.0) {
-                    self.innovations.add((obs.ideal_px - pixel).norm());
+            if self.explained(core, batch) > explained_first {
+                // What judges the track (lost, or following its measurements) is then how well the new state
+                // explains the readout, not the blobs' innovations against the prediction it overruled: those stay
+                // pixels off however right the state is, and three such estimates in a row dropped the track. The
+                // residuals are scaled up by the pose's six fitted parameters (four dots: 8 equations, 2 redundant),
+                // so that a frame the pose cannot explain still shows.
+                let n = 2.0 * batch.len() as f64;
+                let unbiased = (n / (n - 6.0)).sqrt();
+                self.innovations.rewind(before.innovations);
+                for obs in batch {
+                    let p = &core.target.points()[obs.point_index].point_in_obj_m;
+                    if let Some(pixel) = core.model.project(&core.state, p, 0.0) {
+                        self.innovations
+                            .add((obs.ideal_px - pixel).norm() * unbiased);
+                    }
                 }
+            } else {
+                self.restore(core, first_pass.0);
+                self.innovations = first_pass.1;
             }
         }
     }
@@ -1303,6 +1316,20 @@ impl KalmanLaw {
         self.resets_total = c.resets_total;
         self.newest_nis = c.newest_nis;
         self.process_log_scale = c.process_log_scale;
+    }
+
+    /// How many blobs of a readout of one instant the current state puts within the gate of their noise.
+    fn explained(&self, core: &TrackCore, batch: &[Observation]) -> usize {
+        let radius_px = self.filter.tuning().gate_sigma * core.noise_px;
+        batch
+            .iter()
+            .filter(|obs| {
+                let p = &core.target.points()[obs.point_index].point_in_obj_m;
+                core.model
+                    .project(&core.state, p, 0.0)
+                    .is_some_and(|pixel| (obs.ideal_px - pixel).norm() < radius_px)
+            })
+            .count()
     }
 
     /// Takes a readout (the filter already at its first time, `dt` after the measurement before): its blobs one by
@@ -1590,6 +1617,20 @@ impl KalmanLaw {
             core.noise_px = self.noise.noise_px();
         }
     }
+}
+
+/// Whether `batch` measures at least `needed` distinct points.
+fn distinct_points(batch: &[Observation], needed: usize) -> bool {
+    let mut distinct = 0;
+    for (i, obs) in batch.iter().enumerate() {
+        if batch[..i].iter().all(|o| o.point_index != obs.point_index) {
+            distinct += 1;
+            if distinct >= needed {
+                return true;
+            }
+        }
+    }
+    false
 }
 
 /// Leaves out of a noise sample's `scratch` the measurements the gate rejected (per point, the time of its newest
