@@ -166,7 +166,7 @@ pub fn umeyama(
 }
 
 /// How many of the estimates' first speeds [`find_time_offset`] leaves out.
-pub const CONVERGING_SPEEDS: usize = 10;
+const CONVERGING_SPEEDS: usize = 10;
 
 /// Angular speed (rad/s) and linear speed of the object's origin (m/s) between consecutive poses, at their midpoints:
 /// figures that do not depend on the frame the poses are expressed in (nor on a clock offset).
@@ -228,7 +228,7 @@ fn correlation(a: &[f64], b: &[f64]) -> f64 {
 /// estimates' median period over ± `max_offset_s` (at most half of either trajectory's duration), then refined by a
 /// parabola through the peak.
 ///
-/// The estimates' first [`CONVERGING_SPEEDS`] speeds are left out when there are at least ten times as many: a
+/// The estimates' first 10 speeds are left out when there are at least 100: a
 /// tracker's first poses converge from its initial fit, and their jumps (0.4 m/s on a still target) are large
 /// against the noise. Which of them a shift keeps inside the truth's span changed the correlation enough to move the
 /// peak by five periods (25 against 37 ms on the built-in scene).

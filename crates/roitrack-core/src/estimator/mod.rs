@@ -535,8 +535,22 @@ pub trait Estimator: Send + std::fmt::Debug {
     ) -> Result<Option<Estimate>, TrackError>;
 
     /// Which measurement of `measurements` [`Self::push_batch`] would refuse first (its offset in them), and why;
-    /// `None` if it would take them all. Takes nothing and counts nothing.
-    fn first_refused(&self, measurements: &[Measurement]) -> Option<(usize, TrackError)>;
+    /// `None` if it would take them all. Takes nothing and counts nothing. [`track`] names a refused measurement of
+    /// a readout by it; an estimator that cannot tell (the default) leaves it the readout's first.
+    ///
+    /// ```
+    /// use roitrack_core::estimator::{Estimator, Tracker, TrackerConfig, TrackError};
+    /// use roitrack_core::{CameraModel, Measurement, Target};
+    ///
+    /// let tracker = Tracker::new(CameraModel::canonical(), Target::grid4x4(), TrackerConfig::default()).unwrap();
+    /// let good = Measurement { t_s: 0.0, id: 0, u_px: 500.0, v_px: 400.0 };
+    /// let readout = [good, Measurement { id: 1, ..good }, Measurement { id: 99, ..good }];
+    /// assert!(matches!(tracker.first_refused(&readout), Some((2, TrackError::UnknownId { id: 99, .. }))));
+    /// assert!(tracker.first_refused(&readout[..2]).is_none());
+    /// ```
+    fn first_refused(&self, _measurements: &[Measurement]) -> Option<(usize, TrackError)> {
+        None
+    }
 
     /// Drops the current track: the next measurements initialise a new one (after a re-initialisation from a full
     /// frame, say). Measurement times must still not decrease.
@@ -671,10 +685,10 @@ pub enum StreamError<S, K = S> {
 /// rests on half a frame, and the Kalman filter fits a readout of three or more together, as the frame tracker's
 /// does. A readout of several measurements gives one estimate ([`Emit::EachBatch`]: one per frame, as the frame
 /// tracker gives them, whatever [`TrackerConfig::every`] says); measurements that come one at a time (ROIs, a rolling
-/// shutter's rows) one every `every` ([`Emit::Every`]). A readout longer than [`MAX_READOUT`] measurements is pushed in parts
-/// ([`Emit::Hold`] until its last), so memory stays bounded. When the estimator refuses a measurement of a readout
-/// (which leaves it as it was), the ones before it are taken, as they would have been one by one, and the error
-/// names the measurement refused by its place in the stream.
+/// shutter's rows) one every `every` ([`Emit::Every`]). A readout longer than 4,096 measurements is pushed in
+/// parts ([`Emit::Hold`] until its last), so memory stays bounded. When the estimator refuses a measurement of a readout
+/// (which leaves it as it was), the ones before it are taken (as one readout, [`Estimator::first_refused`]) and the
+/// error names the measurement refused by its place in the stream.
 ///
 /// ```
 /// use roitrack_core::estimator::{Tracker, TrackerConfig, track};
@@ -734,7 +748,7 @@ pub fn track<S, K>(
 }
 
 /// The longest readout (measurements that share a time) that [`track`] pushes at once; a longer one goes in parts.
-pub const MAX_READOUT: usize = 4096;
+const MAX_READOUT: usize = 4096;
 
 /// Pushes one readout of [`track`]'s stream (`first_index`: the stream index of its first measurement) and hands on
 /// its estimate.

@@ -308,8 +308,6 @@ impl TrackCore {
         self.scratch.extend(self.window.select(mode).copied());
     }
 
-    /// Checks a raw measurement against the previous time `previous_s` and undistorts it, without changing
-    /// anything: a refused measurement leaves the estimator as it was.
     /// Checks `measurements` in order (times must not decrease from the newest taken, nor within them), pushing
     /// each checked one onto `checked`; stops at the first refused, with its offset.
     fn check_all(
@@ -325,6 +323,8 @@ impl TrackCore {
         Ok(())
     }
 
+    /// Checks a raw measurement against the previous time `previous_s` and undistorts it, without changing
+    /// anything: a refused measurement leaves the estimator as it was.
     fn check(&self, m: &Measurement, previous_s: Option<f64>) -> Result<Observation, TrackError> {
         for (field, value) in [("t", m.t_s), ("u", m.u_px), ("v", m.v_px)] {
             if !value.is_finite() {
