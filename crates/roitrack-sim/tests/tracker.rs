@@ -316,54 +316,40 @@ fn a_refused_measurement_of_a_readout_is_named_by_its_place_in_the_stream() {
     let frames = frames_of(&start, 0.0, 2);
     let mut stream: Vec<Measurement> = frames.iter().flat_map(|f| f[..4].to_vec()).collect();
     stream[6].id = 99;
-    let mut tracker = Tracker::new(
-        CameraModel::canonical(),
-        Target::grid4x4(),
-        TrackerConfig::default(),
-    )
-    .unwrap();
-    let error = roitrack_core::estimator::track(
-        &mut tracker,
-        stream.iter().map(|m| Ok::<_, std::convert::Infallible>(*m)),
-        |_| Ok::<_, std::convert::Infallible>(()),
-    )
-    .unwrap_err();
+    // The stream tracked from the start: the tracker, and the place and reason of the refusal.
+    let refused = |stream: &[Measurement]| {
+        let mut tracker = Tracker::new(
+            CameraModel::canonical(),
+            Target::grid4x4(),
+            TrackerConfig::default(),
+        )
+        .unwrap();
+        let error = roitrack_core::estimator::track(
+            &mut tracker,
+            stream.iter().map(|m| Ok::<_, std::convert::Infallible>(*m)),
+            |_| Ok::<_, std::convert::Infallible>(()),
+        )
+        .unwrap_err();
+        // (The source and the sink cannot fail: refused is the only error.)
+        let roitrack_core::estimator::StreamError::Refused { index, source } = error;
+        (tracker, index, source)
+    };
+    let (tracker, index, source) = refused(&stream);
+    assert_eq!(index, 6);
     assert!(
-        matches!(
-            error,
-            roitrack_core::estimator::StreamError::Refused {
-                index: 6,
-                source: TrackError::UnknownId { id: 99, .. }
-            }
-        ),
-        "{error:?}"
+        matches!(source, TrackError::UnknownId { id: 99, .. }),
+        "{source:?}"
     );
     let report = tracker.report();
     assert_eq!((report.measurements, report.refused), (6, 1));
     // A readout whose time goes back is refused at its first measurement, with nothing of it taken.
-    let mut tracker = Tracker::new(
-        CameraModel::canonical(),
-        Target::grid4x4(),
-        TrackerConfig::default(),
-    )
-    .unwrap();
     let mut stream: Vec<Measurement> = frames.iter().rev().flat_map(|f| f[..4].to_vec()).collect();
     stream.truncate(8);
-    let error = roitrack_core::estimator::track(
-        &mut tracker,
-        stream.iter().map(|m| Ok::<_, std::convert::Infallible>(*m)),
-        |_| Ok::<_, std::convert::Infallible>(()),
-    )
-    .unwrap_err();
+    let (tracker, index, source) = refused(&stream);
+    assert_eq!(index, 4);
     assert!(
-        matches!(
-            error,
-            roitrack_core::estimator::StreamError::Refused {
-                index: 4,
-                source: TrackError::TimeOutOfOrder { .. }
-            }
-        ),
-        "{error:?}"
+        matches!(source, TrackError::TimeOutOfOrder { .. }),
+        "{source:?}"
     );
     assert_eq!(tracker.report().measurements, 4);
 }
