@@ -53,7 +53,9 @@ fn refusals(target: &Target, cycles: usize) -> usize {
             Ok(_) => {}
         }
     }
+    // Neither the tracks nor the estimates refused count.
     assert_eq!(tracker.report().initialisations, 0);
+    assert_eq!(tracker.report().estimates.total(), 0);
     refused
 }
 

@@ -513,6 +513,18 @@ impl EstimatorReport {
     fn count(&mut self, status: TrackStatus) {
         self.estimates.add(status);
     }
+
+    /// Takes back an estimate counted but not given (a first pose refused).
+    fn uncount(&mut self, status: TrackStatus) {
+        let count = match status {
+            TrackStatus::Converging => &mut self.estimates.converging,
+            TrackStatus::Tracking => &mut self.estimates.tracking,
+            TrackStatus::Degenerate => &mut self.estimates.degenerate,
+            TrackStatus::Disputed => &mut self.estimates.disputed,
+            TrackStatus::Lost => &mut self.estimates.lost,
+        };
+        *count = count.saturating_sub(1);
+    }
 }
 
 /// A streaming pose-and-velocity estimator (see the [module documentation](self)).

@@ -501,6 +501,7 @@ impl<L: Law> Track<L> {
         }
         self.reset();
         self.core.report.initialisations = initialisations;
+        self.core.report.uncount(e.status);
         Err(TrackError::ImplausibleFirstPose {
             t_s: e.t_ref_s,
             x_m: t.x,
