@@ -1164,13 +1164,13 @@ impl Law for KalmanLaw {
         let pose_points = if core.target.is_planar() { 4 } else { 6 };
         if one_instant && 2 * used <= batch.len() && distinct_points(batch, pose_points) {
             let first_pass = (self.counters(core), self.innovations.clone());
-            let explained_first = self.explained(core, batch);
+            let explained_first = explained(self.filter.tuning(), core, batch);
             self.restore(core, before);
             self.filter.widen(&core.prior_covariance(), 1.0);
             self.covariance_resets += 1;
             self.resets_total += 1;
             self.take_readout(core, batch, dt);
-            if self.explained(core, batch) > explained_first {
+            if explained(self.filter.tuning(), core, batch) > explained_first {
                 // What judges the track (lost, or following its measurements) is then how well the new state
                 // explains the readout, not the blobs' innovations against the prediction it overruled: those stay
                 // pixels off however right the state is, and three such estimates in a row dropped the track. The
@@ -1179,12 +1179,8 @@ impl Law for KalmanLaw {
                 let n = 2.0 * batch.len() as f64;
                 let unbiased = (n / (n - 6.0)).sqrt();
                 self.innovations.rewind(before.innovations);
-                for obs in batch {
-                    let p = &core.target.points()[obs.point_index].point_in_obj_m;
-                    if let Some(pixel) = core.model.project(&core.state, p, 0.0) {
-                        self.innovations
-                            .add((obs.ideal_px - pixel).norm() * unbiased);
-                    }
+                for residual_px in residuals_px(core, batch) {
+                    self.innovations.add(residual_px * unbiased);
                 }
             } else {
                 self.restore(core, first_pass.0);
@@ -1316,20 +1312,6 @@ impl KalmanLaw {
         self.resets_total = c.resets_total;
         self.newest_nis = c.newest_nis;
         self.process_log_scale = c.process_log_scale;
-    }
-
-    /// How many blobs of a readout of one instant the current state puts within the gate of their noise.
-    fn explained(&self, core: &TrackCore, batch: &[Observation]) -> usize {
-        let radius_px = self.filter.tuning().gate_sigma * core.noise_px;
-        batch
-            .iter()
-            .filter(|obs| {
-                let p = &core.target.points()[obs.point_index].point_in_obj_m;
-                core.model
-                    .project(&core.state, p, 0.0)
-                    .is_some_and(|pixel| (obs.ideal_px - pixel).norm() < radius_px)
-            })
-            .count()
     }
 
     /// Takes a readout (the filter already at its first time, `dt` after the measurement before): its blobs one by
@@ -1617,6 +1599,26 @@ impl KalmanLaw {
             core.noise_px = self.noise.noise_px();
         }
     }
+}
+
+/// The distance (px) of each blob of a readout of one instant from where the current state projects its point
+/// (blobs whose point does not project left out).
+fn residuals_px<'a>(
+    core: &'a TrackCore,
+    batch: &'a [Observation],
+) -> impl Iterator<Item = f64> + 'a {
+    batch.iter().filter_map(|obs| {
+        let p = &core.target.points()[obs.point_index].point_in_obj_m;
+        core.model
+            .project(&core.state, p, 0.0)
+            .map(|pixel| (obs.ideal_px - pixel).norm())
+    })
+}
+
+/// How many blobs of a readout of one instant the current state puts within the gate of their noise.
+fn explained(tuning: &KalmanTuning, core: &TrackCore, batch: &[Observation]) -> usize {
+    let radius_px = tuning.gate_sigma * core.noise_px;
+    residuals_px(core, batch).filter(|&r| r < radius_px).count()
 }
 
 /// Whether `batch` measures at least `needed` distinct points.

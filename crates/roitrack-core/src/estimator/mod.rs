@@ -470,13 +470,17 @@ impl StatusCounts {
 
     /// Counts one more estimate with `status`.
     pub fn add(&mut self, status: TrackStatus) {
-        *match status {
+        *self.count_mut(status) += 1;
+    }
+
+    fn count_mut(&mut self, status: TrackStatus) -> &mut usize {
+        match status {
             TrackStatus::Converging => &mut self.converging,
             TrackStatus::Tracking => &mut self.tracking,
             TrackStatus::Degenerate => &mut self.degenerate,
             TrackStatus::Disputed => &mut self.disputed,
             TrackStatus::Lost => &mut self.lost,
-        } += 1;
+        }
     }
 
     /// Every estimate counted.
@@ -516,13 +520,7 @@ impl EstimatorReport {
 
     /// Takes back an estimate counted but not given (a first pose refused).
     fn uncount(&mut self, status: TrackStatus) {
-        let count = match status {
-            TrackStatus::Converging => &mut self.estimates.converging,
-            TrackStatus::Tracking => &mut self.estimates.tracking,
-            TrackStatus::Degenerate => &mut self.estimates.degenerate,
-            TrackStatus::Disputed => &mut self.estimates.disputed,
-            TrackStatus::Lost => &mut self.estimates.lost,
-        };
+        let count = self.estimates.count_mut(status);
         *count = count.saturating_sub(1);
     }
 }
@@ -774,8 +772,8 @@ fn push_readout<S, K>(
     let refused_at = |index: usize| move |source| StreamError::Refused { index, source };
     let last_index = first_index + readout.len().saturating_sub(1);
     let result = match estimator.push_batch(readout, emit) {
-        // A measurement was refused before any was taken: the ones before it are taken (as they would have been one
-        // by one) and the error names it.
+        // A measurement was refused before any was taken: the ones before it are taken (as one readout) and the
+        // error names it.
         Err(error) if !matches!(error, TrackError::ImplausibleFirstPose { .. }) => {
             let offset = estimator
                 .first_refused(readout)
