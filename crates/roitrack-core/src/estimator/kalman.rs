@@ -18,7 +18,9 @@
 //!   at most a factor 4 (an outlier does not drag it). The initialisation starts it from the median residual of its
 //!   two-cycle fit, so that a noise ten times the configured one still initialises. Steps whose measurements share
 //!   one instant (global-shutter frames) sample their own measurements instead, the pose alone fitted
-//!   ([`NoiseSample`]).
+//!   ([`NoiseSample`]). On streams of measurements one at a time, each point also learns its share of that noise
+//!   from the second differences of its own innovations (`point_noise`): a noisier blob is weighted down and gated
+//!   by its own noise.
 //! - **Process noise**: the linear and the angular density are each scaled by a factor that follows the
 //!   *persistence* of the innovations: the innovation projected on the displacement that the recent corrections
 //!   (their exponential average over the filter's own time constant, at least two cycles) predict for the measured
@@ -34,6 +36,7 @@
 use nalgebra::{Matrix2, Rotation3, SMatrix, SVector, Vector2, Vector3};
 
 use super::calibration::TwistCalibration;
+use super::point_noise::PointNoise;
 use super::problem::{Observation, ResidualFigures, ResidualTally, TallyMark};
 use super::track::{Law, Step, Track, TrackCore};
 use super::{
@@ -232,6 +235,8 @@ struct ErrorStateKalman<const N: usize> {
     /// The persistence of the newest innovation along the translational and the rotational part of the trend (see
     /// [`Self::update`]); 0 when there is no trend yet.
     persistence: [f64; 2],
+    /// The newest update's innovation (px), gated or not.
+    innovation_px: Vector2<f64>,
 }
 
 /// What one measurement update did.
@@ -284,6 +289,7 @@ impl<const N: usize> ErrorStateKalman<N> {
             trend_rate,
             last_dt_s: 0.0,
             persistence: [0.0; 2],
+            innovation_px: Vector2::zeros(),
             updates: 0,
         }
     }
@@ -418,6 +424,7 @@ impl<const N: usize> ErrorStateKalman<N> {
         // The centroid depends on the pose alone (at its own time); the accelerations' columns of H are zero.
         let h = projected.jacobian;
         let innovation = ideal_px - projected.pixel;
+        self.innovation_px = innovation;
         // P Hᵀ over the pose's and twist's columns, by whole columns of P (a strided view's product is slower).
         let mut ph_t = SMatrix::<f64, N, 2>::zeros();
         for (j, column) in self
@@ -948,6 +955,10 @@ impl Filter {
         with_filter!(self, f => f.persistence)
     }
 
+    fn innovation_px(&self) -> Vector2<f64> {
+        with_filter!(self, f => f.innovation_px)
+    }
+
     fn pose_twist_covariance(&self) -> Matrix12 {
         with_filter!(self, f => f.pose_twist_covariance())
     }
@@ -1112,6 +1123,8 @@ struct KalmanLaw {
     process_log_scale: [f64; 2],
     /// The scales of the reported twist covariance (when `tuning.calibrate_twist_covariance`).
     calibration: TwistCalibration,
+    /// Per point: its share of the learnt noise (when `tuning.adapt_noise`).
+    point_noise: PointNoise,
     /// The blobs of the readout being taken, but those that do not project (kept to reuse its allocation).
     readout: Vec<ReadoutMeasurement>,
 }
@@ -1151,6 +1164,12 @@ impl Law for KalmanLaw {
                 gated_at
             },
             readout: std::mem::take(&mut self.readout),
+            // The points' shares of the noise carry over too (for the same target).
+            point_noise: {
+                let mut point_noise = std::mem::take(&mut self.point_noise);
+                point_noise.restart(core.target.len());
+                point_noise
+            },
             ..Self::new(*self.filter.tuning())
         };
         // A track initialised from a window fit holds the twist constant over the window, so its twist is the
@@ -1233,6 +1252,7 @@ impl Law for KalmanLaw {
         self.frame_steps = core.recent_are_frames(core.step_measurements);
         if self.filter.tuning().adapt_noise {
             self.learn_noise(core, t_new_s, &ne, solved.map(|(step, _)| step));
+            self.point_noise.update_factors();
         }
         // After a covariance reset the filter is re-converging: say so.
         let status = if self.covariance_resets > 0 {
@@ -1381,7 +1401,8 @@ impl KalmanLaw {
                 point_in_obj_m: core.target.points()[obs.point_index].point_in_obj_m,
                 ideal_px: obs.ideal_px,
                 dt_s: obs.t_s - first.t_s,
-                variance_px2: core.noise_px * core.noise_px * (nis.sqrt() / huber).max(1.0),
+                variance_px2: self.point_noise_px(core, obs.point_index).powi(2)
+                    * (nis.sqrt() / huber).max(1.0),
                 gated,
                 used: !gated,
             });
@@ -1427,6 +1448,7 @@ impl KalmanLaw {
             frame_steps: false,
             gated_at: Vec::new(),
             calibration: TwistCalibration::new(),
+            point_noise: PointNoise::default(),
             readout: Vec::new(),
         }
     }
@@ -1440,17 +1462,23 @@ impl KalmanLaw {
         dt
     }
 
+    /// The centroid noise of `point` (px): the target's, times the point's share when the noise is learnt.
+    fn point_noise_px(&self, core: &TrackCore, point: usize) -> f64 {
+        if self.filter.tuning().adapt_noise {
+            core.noise_px * self.point_noise.factor(point)
+        } else {
+            core.noise_px
+        }
+    }
+
     /// Updates the filter, already at its time, with `obs`, `dt` after the measurement before, and keeps the
     /// counters and what the filter learns from it.
     fn take(&mut self, core: &mut TrackCore, obs: &Observation, dt: f64) -> UpdateOutcome {
         let p = core.target.points()[obs.point_index].point_in_obj_m;
-        let outcome = self.filter.update(
-            &core.model,
-            &mut core.state,
-            &p,
-            &obs.ideal_px,
-            core.noise_px,
-        );
+        let sigma_px = self.point_noise_px(core, obs.point_index);
+        let outcome = self
+            .filter
+            .update(&core.model, &mut core.state, &p, &obs.ideal_px, sigma_px);
         if let UpdateOutcome::Accepted { norm_px, nis } | UpdateOutcome::Gated { norm_px, nis } =
             outcome
         {
@@ -1469,6 +1497,19 @@ impl KalmanLaw {
             && matches!(outcome, UpdateOutcome::Accepted { .. })
         {
             self.adapt_process_scale(self.filter.persistence());
+        }
+        // Every innovation, gated or not, teaches the points' shares of the noise (a point much noisier than the
+        // target's noise has many of its innovations gated; the shares' medians are robust to real outliers), on
+        // streams of measurements one at a time only: frames, global- or rolling-shutter, measure each point once a
+        // frame, and the second differences would span 100 ms at 30 Hz, too long for a lag to cancel.
+        if self.filter.tuning().adapt_noise
+            && self.filter.tuning().noise_sample == NoiseSample::Window
+            && !self.frame_steps
+            && dt != 0.0
+            && !matches!(outcome, UpdateOutcome::Invalid)
+        {
+            self.point_noise
+                .observe(obs.point_index, self.filter.innovation_px());
         }
         // Outliers are rare and scattered; a run of gated measurements means the filter itself is off (after a jump
         // of the target, or an outlier that got through): widen its covariance so the measurements pull it back,

@@ -52,6 +52,7 @@ pub mod batch;
 mod calibration;
 pub mod kalman;
 mod options;
+mod point_noise;
 mod problem;
 pub mod static_baseline;
 mod static_pose;

@@ -1,0 +1,233 @@
+//! Per point: how noisy its centroids are compared with the target's other points, learnt from the Kalman filter's
+//! innovations.
+//!
+//! Blobs of one target are not equally well measured: a small or far blob, one in a shadow or near the image's edge
+//! has noisier centroids than the rest. A single noise for all of them lets the noisy ones pull the estimate as much
+//! as the good ones, and gates the noisy ones as outliers. The innovations tell them apart, but not directly: a filter
+//! that lags a manoeuvre has innovations larger than its noise, and larger for the points the manoeuvre moves most
+//! (the far points under a rotation). So each point's innovations are taken in *second differences* over its own
+//! successive measurements, `d = ν(k) - 2 ν(k-1) + ν(k-2)`: a lag varies slowly over three cycles of the target and
+//! cancels, white innovations of variance `S` give `6 S` per axis. Each point keeps the running median of `|d|²`
+//! (a median, so that outliers, which enter three differences each, move it little), on a logarithmic scale: the
+//! logarithm steps up or down by a fixed amount at each sample, which settles where half the samples lie below. A
+//! point's noise factor is the square root of its median relative to the others', shrunk towards 1 as far as the
+//! medians' own sampling error explains their spread. The target's noise itself is learnt elsewhere (from the window's residual); the factors only
+//! share it out, their squares averaging 1 over the points.
+
+use nalgebra::Vector2;
+
+/// The step of a median's logarithm per sample once it has settled (before, `2 / (samples + 2)`): its relative
+/// error is then about `sqrt(1.4 * step)` in the variance (10 %), and it follows a change within about
+/// `1 / (0.69 * step)` samples (200 cycles of the target: 0.8 s at 4 kHz with 16 points).
+const MEDIAN_STEP: f64 = 0.007;
+/// The sampling variance of a median's logarithm: about `1.4 * step` once settled (`0.72 * step` for independent
+/// samples of a 2-dof chi-square, times 1.94 for the correlation of overlapping second differences), and about
+/// `3.2 / samples` before (the variance of a chi-square's logarithm, 1.64, times the same 1.94).
+fn log_median_variance(samples: u32) -> f64 {
+    (1.4 * MEDIAN_STEP).max(3.2 / f64::from(samples.max(1)))
+}
+/// Points whose median has fewer samples keep a factor of 1 and do not count: a track's first innovations, while the
+/// filter converges, are neither white nor alike across points (on orthoglide at 0.1 px, factors of 0.55-1.40 in its
+/// first 40 ms).
+const MIN_SAMPLES: u32 = 20;
+/// Bounds of a point's noise factor.
+const FACTOR_RANGE: (f64, f64) = (0.2, 5.0);
+
+#[derive(Debug, Clone, Copy, Default)]
+struct PointHistory {
+    /// The point's two newest innovations (px), newest last.
+    previous: [Option<Vector2<f64>>; 2],
+    /// Natural logarithm of the running median of `|d|²` (px²), once `samples > 0`.
+    log_median_px2: f64,
+    samples: u32,
+}
+
+/// The per-point noise factors (see the module's documentation).
+#[derive(Debug, Clone, Default)]
+pub(crate) struct PointNoise {
+    points: Vec<PointHistory>,
+    factors: Vec<f64>,
+}
+
+impl PointNoise {
+    /// Sizes the tables for `points` points, keeping what was learnt when the count is unchanged (a new track of the
+    /// same target) but not the innovations, which belong to the old track.
+    pub(crate) fn restart(&mut self, points: usize) {
+        if self.points.len() != points {
+            self.points = vec![PointHistory::default(); points];
+            self.factors = vec![1.0; points];
+        }
+        for point in &mut self.points {
+            point.previous = [None; 2];
+        }
+    }
+
+    /// The factor on the target's noise for `point` (1 for an unknown point).
+    pub(crate) fn factor(&self, point: usize) -> f64 {
+        self.factors.get(point).copied().unwrap_or(1.0)
+    }
+
+    /// Takes the newest innovation of `point` (px).
+    pub(crate) fn observe(&mut self, point: usize, innovation_px: Vector2<f64>) {
+        let Some(history) = self.points.get_mut(point) else {
+            return;
+        };
+        if let [Some(oldest), Some(middle)] = history.previous {
+            let d2 = (innovation_px - 2.0 * middle + oldest).norm_squared();
+            if d2 > 0.0 && d2.is_finite() {
+                let log_d2 = d2.ln();
+                if history.samples == 0 {
+                    history.log_median_px2 = log_d2;
+                } else {
+                    let step = MEDIAN_STEP.max(2.0 / (f64::from(history.samples) + 2.0));
+                    history.log_median_px2 += if log_d2 > history.log_median_px2 {
+                        step
+                    } else {
+                        -step
+                    };
+                }
+                history.samples = history.samples.saturating_add(1);
+            }
+        }
+        history.previous = [history.previous[1], Some(innovation_px)];
+    }
+
+    /// Recomputes the factors from the medians (see the module's documentation). The logarithms of the medians, taken
+    /// from their mean, are shrunk towards 0 by the share of their spread that their own sampling error does not
+    /// explain (an empirical Bayes estimate): equally noisy points, whose medians differ by their sampling error
+    /// alone, all get factors near 1 (weighting them by that error cost about 1 % of position RMSE), a point far
+    /// noisier than the others keeps its factor.
+    pub(crate) fn update_factors(&mut self) {
+        let learnt = || self.points.iter().filter(|p| p.samples >= MIN_SAMPLES);
+        let count = learnt().count();
+        if count < 2 {
+            return;
+        }
+        let n = count as f64;
+        let mean_log = learnt().map(|p| p.log_median_px2).sum::<f64>() / n;
+        let spread = learnt()
+            .map(|p| (p.log_median_px2 - mean_log).powi(2))
+            .sum::<f64>()
+            / (n - 1.0);
+        let sampling = learnt()
+            .map(|p| log_median_variance(p.samples))
+            .sum::<f64>()
+            / n;
+        let between = (spread - sampling).max(0.0);
+        for (factor, point) in self.factors.iter_mut().zip(&self.points) {
+            *factor = if point.samples >= MIN_SAMPLES {
+                let shrink = between / (between + log_median_variance(point.samples));
+                // The median is of a variance: the factor on the noise is its square root.
+                (0.5 * shrink * (point.log_median_px2 - mean_log)).exp()
+            } else {
+                1.0
+            };
+        }
+        // Squares averaging 1: the factors share the target's noise out.
+        let mean_square =
+            self.factors.iter().map(|f| f * f).sum::<f64>() / self.factors.len() as f64;
+        for factor in &mut self.factors {
+            *factor = (*factor / mean_square.sqrt()).clamp(FACTOR_RANGE.0, FACTOR_RANGE.1);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Standard normal samples from a fixed linear congruential generator (Box-Muller): the test needs no crate.
+    fn normals(seed: u64) -> impl FnMut() -> f64 {
+        let mut state = seed;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        move || (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos()
+    }
+
+    /// Innovations of `points` points in turn, point `i` with noise `sigmas[i]`, plus a slow drift per point that a
+    /// lagging filter leaves (larger for some points than for others).
+    fn learn(sigmas: &[f64], cycles: usize, drift_px: f64) -> PointNoise {
+        let mut noise = PointNoise::default();
+        noise.restart(sigmas.len());
+        let mut normal = normals(7);
+        for k in 0..cycles {
+            for (i, sigma) in sigmas.iter().enumerate() {
+                let slow = drift_px * (i as f64 + 1.0) * (k as f64 * 0.01).sin();
+                let innovation = Vector2::new(sigma * normal() + slow, sigma * normal() - slow);
+                noise.observe(i, innovation);
+            }
+            noise.update_factors();
+        }
+        noise
+    }
+
+    #[test]
+    fn equally_noisy_points_get_factors_near_one_even_with_a_lag_larger_than_the_noise() {
+        let noise = learn(&[0.1; 16], 2000, 0.05);
+        for i in 0..16 {
+            let f = noise.factor(i);
+            assert!((0.85..1.15).contains(&f), "point {i}: {f}");
+        }
+    }
+
+    #[test]
+    fn noisier_points_get_their_share_of_the_noise() {
+        let mut sigmas = [0.1; 16];
+        sigmas[3] = 0.4;
+        sigmas[12] = 0.2;
+        let noise = learn(&sigmas, 2000, 0.02);
+        // The mean variance is (14 * 0.01 + 0.16 + 0.04) / 16 = 0.02125 px²: factors sqrt(σ² / 0.02125).
+        let expected = |s: f64| (s * s / 0.02125f64).sqrt();
+        for (i, &s) in sigmas.iter().enumerate() {
+            let f = noise.factor(i);
+            assert!(
+                (f / expected(s) - 1.0).abs() < 0.15,
+                "point {i}: {f} against {}",
+                expected(s)
+            );
+        }
+    }
+
+    #[test]
+    fn outliers_shared_by_all_points_leave_the_factors_near_one() {
+        let mut noise = PointNoise::default();
+        noise.restart(8);
+        let mut normal = normals(3);
+        for k in 0..2000 {
+            for i in 0..8 {
+                // One measurement in ten (a normal beyond 1.28) is 15 px off, on every point alike.
+                let outlier = if normal() > 1.2816 { 15.0 } else { 0.0 };
+                noise.observe(i, Vector2::new(0.1 * normal() + outlier, 0.1 * normal()));
+            }
+            noise.update_factors();
+        }
+        for i in 0..8 {
+            assert!(
+                (0.8..1.25).contains(&noise.factor(i)),
+                "{}",
+                noise.factor(i)
+            );
+        }
+    }
+
+    #[test]
+    fn a_new_track_keeps_the_factors_but_not_the_innovations() {
+        let mut sigmas = [0.1; 4];
+        sigmas[0] = 0.5;
+        let mut noise = learn(&sigmas, 1000, 0.0);
+        // sqrt(0.25 / ((0.25 + 3 * 0.01) / 4)) = 1.89.
+        let before = noise.factor(0);
+        assert!((before - 1.89).abs() < 0.2, "{before}");
+        noise.restart(4);
+        assert_eq!(noise.factor(0), before);
+        assert!(noise.points.iter().all(|p| p.previous == [None, None]));
+        // Another target: everything starts again.
+        noise.restart(5);
+        assert_eq!(noise.factor(0), 1.0);
+        assert_eq!(noise.factor(99), 1.0);
+    }
+}
