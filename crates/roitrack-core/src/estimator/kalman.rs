@@ -1509,7 +1509,7 @@ impl KalmanLaw {
             && !matches!(outcome, UpdateOutcome::Invalid)
         {
             self.point_noise
-                .observe(obs.point_index, self.filter.innovation_px());
+                .observe(obs.point_index, self.filter.innovation_px(), core.noise_px);
         }
         // Outliers are rare and scattered; a run of gated measurements means the filter itself is off (after a jump
         // of the target, or an outlier that got through): widen its covariance so the measurements pull it back,
