@@ -24,8 +24,9 @@
 //! - **Process noise**: the linear and the angular density are each scaled by a factor that follows the
 //!   *persistence* of the innovations: the innovation projected on the displacement that the recent corrections
 //!   (their exponential average over the filter's own time constant, at least two cycles) predict for the measured
-//!   point, normalised to a standard normal variable. Innovations of a filter with the right gain are white and their persistence averages zero; a lagging
-//!   filter keeps correcting one way (positive), a filter that chases the noise undoes its corrections (negative).
+//!   point, normalised to a standard normal variable. Innovations of a filter with the right gain are white and
+//!   their persistence averages zero; a lagging filter keeps correcting one way (positive), a filter that chases the
+//!   noise undoes its corrections (negative).
 //!   The logarithm of each factor moves by 0.05 times the persistence per measurement: a still target is averaged
 //!   down, a manoeuvre raises the process noise within tens of measurements. Steps whose measurements share one
 //!   instant (frames) leave the factors as they are.
@@ -103,6 +104,10 @@ pub struct KalmanTuning {
     pub calibrate_twist_covariance: bool,
     /// Which residual the noise estimate samples (with [`Self::adapt_noise`]). Default [`NoiseSample::Window`].
     pub noise_sample: NoiseSample,
+    /// With [`Self::adapt_noise`], let each point learn its share of the noise on streams of measurements one at a
+    /// time (default; docs/estimation.md): a blob noisier than the others is weighted down and gated by its own noise.
+    /// Off, every point takes the target's noise.
+    pub learn_point_noise: bool,
     /// How the filter expects the target to move between measurements. Default
     /// [`MotionModel::ConstantVelocity`], driven by [`Self::linear_accel_psd`] and [`Self::angular_accel_psd`].
     pub motion_model: MotionModel,
@@ -210,6 +215,7 @@ impl Default for KalmanTuning {
             adapt_motion: true,
             calibrate_twist_covariance: true,
             noise_sample: NoiseSample::Window,
+            learn_point_noise: true,
             motion_model: MotionModel::ConstantVelocity,
         }
     }
@@ -235,8 +241,10 @@ struct ErrorStateKalman<const N: usize> {
     /// The persistence of the newest innovation along the translational and the rotational part of the trend (see
     /// [`Self::update`]); 0 when there is no trend yet.
     persistence: [f64; 2],
-    /// The newest update's innovation (px), gated or not.
+    /// The newest update's innovation (px), gated or not, and the part of its variance per axis that the state's
+    /// uncertainty makes (px², `tr(H P Hᵀ) / 2`).
     innovation_px: Vector2<f64>,
+    predicted_variance_px2: f64,
 }
 
 /// What one measurement update did.
@@ -290,6 +298,7 @@ impl<const N: usize> ErrorStateKalman<N> {
             last_dt_s: 0.0,
             persistence: [0.0; 2],
             innovation_px: Vector2::zeros(),
+            predicted_variance_px2: 0.0,
             updates: 0,
         }
     }
@@ -391,15 +400,16 @@ impl<const N: usize> ErrorStateKalman<N> {
     /// pose and twist variances are `√2 r^¾ q^¼` and `√2 r^¼ q^¾` for measurement and process densities `r` and
     /// `q`), but never more than [`Self::trend_rate`] (two cycles of the target's points). A lagging filter's
     /// innovations stay correlated over its time constant (for the translation at 1 px, 12 to 35 ms on the built-in
-    /// scenes), and a trend of two cycles (8 ms at 4 kHz with 16 points) missed most of its lag (random motion at 1 px: 94.6 % of the
-    /// positions inside their 99 % bound, 96.3 % with this).
+    /// scenes), and a trend of two cycles (8 ms at 4 kHz with 16 points) missed most of its lag (random motion at
+    /// 1 px: 94.6 % of the positions inside their 99 % bound, 96.3 % with this).
     fn trend_rates(&self) -> [f64; 2] {
         let p = &self.covariance;
         [0, 3].map(|first| {
             let pose: f64 = (first..first + 3).map(|i| p[(i, i)]).sum();
             let twist: f64 = (first + 6..first + 9).map(|i| p[(i, i)]).sum();
             let rate = self.last_dt_s / (pose / twist).sqrt();
-            if rate.is_finite() {
+            // No step yet, or no twist uncertainty: nothing to scale by.
+            if rate.is_finite() && rate > 0.0 {
                 rate.min(self.trend_rate)
             } else {
                 self.trend_rate
@@ -441,6 +451,7 @@ impl<const N: usize> ErrorStateKalman<N> {
             }
         }
         let hph_t = h * ph_t.fixed_rows::<12>(0);
+        self.predicted_variance_px2 = 0.5 * (hph_t[(0, 0)] + hph_t[(1, 1)]);
         let s = hph_t + Matrix2::identity() * (sigma_px * sigma_px);
         let Some(s_inv) = s.try_inverse() else {
             return UpdateOutcome::Invalid;
@@ -955,8 +966,9 @@ impl Filter {
         with_filter!(self, f => f.persistence)
     }
 
-    fn innovation_px(&self) -> Vector2<f64> {
-        with_filter!(self, f => f.innovation_px)
+    /// The newest update's innovation (px) and the part of its variance per axis the state's uncertainty makes (px²).
+    fn innovation_px(&self) -> (Vector2<f64>, f64) {
+        with_filter!(self, f => (f.innovation_px, f.predicted_variance_px2))
     }
 
     fn pose_twist_covariance(&self) -> Matrix12 {
@@ -1192,7 +1204,7 @@ impl Law for KalmanLaw {
 
     fn on_measurement(&mut self, core: &mut TrackCore, obs: &Observation) {
         let dt = self.predict_to(core, obs.t_s);
-        self.take(core, obs, dt);
+        self.take(core, obs, dt, true);
     }
 
     /// Each blob of the readout in turn, then, if at least [`MIN_READOUT_TO_REFINE`] were accepted, their iterated
@@ -1389,7 +1401,9 @@ impl KalmanLaw {
             } else {
                 self.predict_to(core, obs.t_s)
             };
-            let outcome = self.take(core, obs, dt);
+            // A readout's blobs (a frame's, or a rolling-shutter frame's rows) do not teach the points' shares: each
+            // point comes once a frame, and a readout may be taken twice (see `on_batch`).
+            let outcome = self.take(core, obs, dt, false);
             let huber = self.filter.tuning().huber_sigma;
             let nis = match outcome {
                 UpdateOutcome::Accepted { nis, .. } | UpdateOutcome::Gated { nis, .. } => nis,
@@ -1464,7 +1478,8 @@ impl KalmanLaw {
 
     /// The centroid noise of `point` (px): the target's, times the point's share when the noise is learnt.
     fn point_noise_px(&self, core: &TrackCore, point: usize) -> f64 {
-        if self.filter.tuning().adapt_noise {
+        let tuning = self.filter.tuning();
+        if tuning.adapt_noise && tuning.learn_point_noise {
             core.noise_px * self.point_noise.factor(point)
         } else {
             core.noise_px
@@ -1472,8 +1487,14 @@ impl KalmanLaw {
     }
 
     /// Updates the filter, already at its time, with `obs`, `dt` after the measurement before, and keeps the
-    /// counters and what the filter learns from it.
-    fn take(&mut self, core: &mut TrackCore, obs: &Observation, dt: f64) -> UpdateOutcome {
+    /// counters and what the filter learns from it (the points' shares of the noise only if `learn_points`).
+    fn take(
+        &mut self,
+        core: &mut TrackCore,
+        obs: &Observation,
+        dt: f64,
+        learn_points: bool,
+    ) -> UpdateOutcome {
         let p = core.target.points()[obs.point_index].point_in_obj_m;
         let sigma_px = self.point_noise_px(core, obs.point_index);
         let outcome = self
@@ -1502,14 +1523,23 @@ impl KalmanLaw {
         // target's noise has many of its innovations gated; the shares' medians are robust to real outliers), on
         // streams of measurements one at a time only: frames, global- or rolling-shutter, measure each point once a
         // frame, and the second differences would span 100 ms at 30 Hz, too long for a lag to cancel.
-        if self.filter.tuning().adapt_noise
-            && self.filter.tuning().noise_sample == NoiseSample::Window
+        let tuning = self.filter.tuning();
+        if learn_points
+            && tuning.adapt_noise
+            && tuning.learn_point_noise
+            && tuning.noise_sample == NoiseSample::Window
             && !self.frame_steps
             && dt != 0.0
             && !matches!(outcome, UpdateOutcome::Invalid)
         {
-            self.point_noise
-                .observe(obs.point_index, self.filter.innovation_px(), core.noise_px);
+            let (innovation_px, predicted_variance_px2) = self.filter.innovation_px();
+            self.point_noise.observe(
+                obs.point_index,
+                obs.t_s,
+                innovation_px,
+                predicted_variance_px2,
+                sigma_px,
+            );
         }
         // Outliers are rare and scattered; a run of gated measurements means the filter itself is off (after a jump
         // of the target, or an outlier that got through): widen its covariance so the measurements pull it back,
