@@ -967,7 +967,7 @@ impl Filter {
     }
 
     /// The newest update's innovation (px) and the part of its variance per axis the state's uncertainty makes (px²).
-    fn innovation_px(&self) -> (Vector2<f64>, f64) {
+    fn newest_innovation(&self) -> (Vector2<f64>, f64) {
         with_filter!(self, f => (f.innovation_px, f.predicted_variance_px2))
     }
 
@@ -1264,6 +1264,8 @@ impl Law for KalmanLaw {
         self.frame_steps = core.recent_are_frames(core.step_measurements);
         if self.filter.tuning().adapt_noise {
             self.learn_noise(core, t_new_s, &ne, solved.map(|(step, _)| step));
+        }
+        if self.shares_noise() {
             self.point_noise.update_factors();
         }
         // After a covariance reset the filter is re-converging: say so.
@@ -1476,10 +1478,15 @@ impl KalmanLaw {
         dt
     }
 
-    /// The centroid noise of `point` (px): the target's, times the point's share when the noise is learnt.
-    fn point_noise_px(&self, core: &TrackCore, point: usize) -> f64 {
+    /// Whether the points learn their shares of the learnt noise (`KalmanTuning::learn_point_noise`).
+    fn shares_noise(&self) -> bool {
         let tuning = self.filter.tuning();
-        if tuning.adapt_noise && tuning.learn_point_noise {
+        tuning.adapt_noise && tuning.learn_point_noise
+    }
+
+    /// The centroid noise of `point` (px): the target's, times the point's share when the points learn theirs.
+    fn point_noise_px(&self, core: &TrackCore, point: usize) -> f64 {
+        if self.shares_noise() {
             core.noise_px * self.point_noise.factor(point)
         } else {
             core.noise_px
@@ -1523,16 +1530,14 @@ impl KalmanLaw {
         // target's noise has many of its innovations gated; the shares' medians are robust to real outliers), on
         // streams of measurements one at a time only: frames, global- or rolling-shutter, measure each point once a
         // frame, and the second differences would span 100 ms at 30 Hz, too long for a lag to cancel.
-        let tuning = self.filter.tuning();
         if learn_points
-            && tuning.adapt_noise
-            && tuning.learn_point_noise
-            && tuning.noise_sample == NoiseSample::Window
+            && self.shares_noise()
+            && self.filter.tuning().noise_sample == NoiseSample::Window
             && !self.frame_steps
             && dt != 0.0
             && !matches!(outcome, UpdateOutcome::Invalid)
         {
-            let (innovation_px, predicted_variance_px2) = self.filter.innovation_px();
+            let (innovation_px, predicted_variance_px2) = self.filter.newest_innovation();
             self.point_noise.observe(
                 obs.point_index,
                 obs.t_s,

@@ -68,6 +68,26 @@ struct PointHistory {
 }
 
 impl PointHistory {
+    /// Moves the median one step towards a sample `log_d2` (the logarithm of a scaled `|d|²`), unless it is an
+    /// outlier's (see [`OUTLIER_RATIO`]).
+    fn take_sample(&mut self, log_d2: f64) {
+        let outlier = log_d2 > self.log_median_px2 + OUTLIER_RATIO.ln();
+        if outlier && self.skipped_in_a_row < MAX_SKIPPED_IN_A_ROW {
+            self.skipped_in_a_row += 1;
+            return;
+        }
+        if !outlier {
+            self.skipped_in_a_row = 0;
+        }
+        let step = MEDIAN_STEP.max(2.0 / (f64::from(self.samples) + 10.0));
+        self.log_median_px2 += if log_d2 > self.log_median_px2 {
+            step
+        } else {
+            -step
+        };
+        self.samples = self.samples.saturating_add(1);
+    }
+
     /// Moves the newest innovation and its state part into `previous`.
     fn shift(&mut self, innovation_px: Vector2<f64>, predicted_variance_px2: f64) {
         self.previous = [self.previous[1], Some(innovation_px)];
@@ -102,8 +122,7 @@ impl PointNoise {
 
     /// Takes the newest innovation of `point` (px), measured at `t_s`, and the part of its variance per axis that
     /// the state's uncertainty makes (px², `tr(H P Hᵀ) / 2`); `noise_px` is the point's noise as the filter now
-    /// takes it.
-    /// A point's median starts from it: started from its first sample instead, a point whose first sample was an
+    /// takes it. A point's median starts from it: started from its first sample instead, a point whose first sample was an
     /// outlier's kept a factor of 2.7 for half a second.
     pub(crate) fn observe(
         &mut self,
@@ -134,23 +153,7 @@ impl PointNoise {
             let d2 = (innovation_px - 2.0 * middle + oldest).norm_squared() * from_noise_px2
                 / (from_noise_px2 + from_state_px2.max(0.0));
             if d2 > 0.0 && d2.is_finite() {
-                let log_d2 = d2.ln();
-                let outlier = log_d2 > history.log_median_px2 + OUTLIER_RATIO.ln();
-                if outlier && history.skipped_in_a_row < MAX_SKIPPED_IN_A_ROW {
-                    history.skipped_in_a_row += 1;
-                    history.shift(innovation_px, predicted_variance_px2);
-                    return;
-                }
-                let step = MEDIAN_STEP.max(2.0 / (f64::from(history.samples) + 10.0));
-                history.log_median_px2 += if log_d2 > history.log_median_px2 {
-                    step
-                } else {
-                    -step
-                };
-                history.samples = history.samples.saturating_add(1);
-                if !outlier {
-                    history.skipped_in_a_row = 0;
-                }
+                history.take_sample(d2.ln());
             }
         }
         history.shift(innovation_px, predicted_variance_px2);
@@ -162,34 +165,28 @@ impl PointNoise {
     /// sampling error alone, all get factors near 1 (weighting them by that error cost about 1 % of position RMSE), a
     /// point far noisier than the others keeps its factor. Points with fewer than [`MIN_SAMPLES`] keep 1.
     pub(crate) fn update_factors(&mut self) {
-        let learnt = || {
-            self.points
-                .iter()
-                .filter(|p| p.samples >= MIN_SAMPLES)
-                .map(|p| (p.log_median_px2.exp(), log_median_variance(p.samples)))
-        };
+        let learnt = || self.points.iter().filter(|p| p.samples >= MIN_SAMPLES);
         let count = learnt().count();
         if count < 2 {
             return;
         }
         let n = count as f64;
-        let mean_log = learnt().map(|(v, _)| v.ln()).sum::<f64>() / n;
+        let mean_log = learnt().map(|p| p.log_median_px2).sum::<f64>() / n;
         let spread = learnt()
-            .map(|(v, _)| (v.ln() - mean_log).powi(2))
+            .map(|p| (p.log_median_px2 - mean_log).powi(2))
             .sum::<f64>()
             / (n - 1.0);
-        let sampling = learnt().map(|(_, s)| s).sum::<f64>() / n;
+        let sampling = learnt()
+            .map(|p| log_median_variance(p.samples))
+            .sum::<f64>()
+            / n;
         let between = (spread - sampling).max(0.0);
         let mut sum_squares = 0.0;
         for (factor, point) in self.factors.iter_mut().zip(&self.points) {
             *factor = if point.samples >= MIN_SAMPLES {
-                let (variance, sampling) = (
-                    point.log_median_px2.exp(),
-                    log_median_variance(point.samples),
-                );
-                let shrink = between / (between + sampling);
+                let shrink = between / (between + log_median_variance(point.samples));
                 // A variance's logarithm: the factor on the noise is its square root.
-                let f = (0.5 * shrink * (variance.ln() - mean_log)).exp();
+                let f = (0.5 * shrink * (point.log_median_px2 - mean_log)).exp();
                 sum_squares += f * f;
                 f
             } else {
