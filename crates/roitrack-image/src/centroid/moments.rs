@@ -111,22 +111,24 @@ impl ShapeSums {
 
 /// The [`ShapeSums`] of the component of rows `lo..=hi` and columns `first..=last`, x from column `origin`
 /// (`<= first`), y from row `lo`, a pixel at a time: of the pixels of `comp` (bit i column i), or with `None` of every
-/// above-threshold pixel of those rows and columns (a simple component's).
-pub(super) fn scalar_shape_sums(
+/// above-threshold pixel of those rows and columns (a simple component's); each pixel weighs `value - threshold`, at
+/// most `cap`.
+pub(crate) fn scalar_shape_sums(
     pixels: &[u16],
     w: usize,
     comp: Option<&[u64]>,
     (lo, hi): (usize, usize),
     (first, last): (usize, usize),
     origin: usize,
-    threshold: u16,
+    (threshold, cap): (u16, u16),
 ) -> ShapeSums {
     let mut s = [0u64; 10];
     for j in lo..=hi {
         let y = (j - lo) as u64;
         let bits = comp.map_or(u64::MAX, |c| c[j]);
         for i in first..=last {
-            let v = u64::from(pixels[j * w + i].saturating_sub(threshold)) * ((bits >> i) & 1);
+            let v =
+                u64::from(pixels[j * w + i].saturating_sub(threshold).min(cap)) * ((bits >> i) & 1);
             let x = (i - origin) as u64;
             let (vx, vy) = (v * x, v * y);
             s[0] += v;

@@ -200,7 +200,15 @@ pub(super) fn shape_sums(
         }
     }
     let _ = (isa, peak);
-    scalar_shape_sums(pixels, w, comp, rows, (first, last), origin, threshold)
+    scalar_shape_sums(
+        pixels,
+        w,
+        comp,
+        rows,
+        (first, last),
+        origin,
+        (threshold, u16::MAX),
+    )
 }
 
 /// The seed's component (its moments, first and last rows and union of columns) when it is simple, found and
@@ -360,8 +368,15 @@ mod tests {
                 let first = union.trailing_zeros() as usize;
                 let last = 63 - union.leading_zeros() as usize;
                 let origin = shape_origin(first, last, w);
-                let expected =
-                    scalar_shape_sums(pixels, w, None, (lo, hi), (first, last), origin, threshold);
+                let expected = scalar_shape_sums(
+                    pixels,
+                    w,
+                    None,
+                    (lo, hi),
+                    (first, last),
+                    origin,
+                    (threshold, u16::MAX),
+                );
                 for &isa in isas {
                     let found = shape_sums(isa, pixels, w, None, (lo, hi), union, levels);
                     assert_eq!(found, expected, "{isa:?} {case}");
@@ -386,7 +401,7 @@ mod tests {
                 (lo, hi),
                 (first, last),
                 origin,
-                threshold,
+                (threshold, u16::MAX),
             );
             for &isa in isas {
                 let found = shape_sums(isa, pixels, w, Some(&comp), (lo, hi), cols, levels);

@@ -449,8 +449,15 @@ mod tests {
                 } else {
                     (Some(comp.as_slice()), (first, last))
                 };
-                let expected =
-                    scalar_shape_sums(&pixels, w, component, (lo, hi), span, s, threshold);
+                let expected = scalar_shape_sums(
+                    &pixels,
+                    w,
+                    component,
+                    (lo, hi),
+                    span,
+                    s,
+                    (threshold, u16::MAX),
+                );
                 for (k, wide) in [false, true].into_iter().enumerate() {
                     if wide && !avx2 {
                         continue;
