@@ -52,7 +52,7 @@
 //! (printed circles in JPEG photographs) go beyond them in two ways that a merged spot does not explain, and a float
 //! pass over the component, run only for the blobs the moment test flags, tells these apart:
 //!
-//! - *A trefoil with no five-fold moment* ([`trefoil_is_a_spot`]). A spot, a lump, adds `m d^k e^{ikθ}` to every
+//! - *A trefoil with no five-fold moment* (`trefoil_is_a_spot`). A spot, a lump, adds `m d^k e^{ikθ}` to every
 //!   harmonic moment `M E[z^k]`, so its five-fold moment `E[z⁵]` is `(d / sigma)²` times its trefoil (about 1.4 to 6
 //!   times on rendered spots); a smooth three-fold wobble of the outline, which a print, a lens and a JPEG encoder
 //!   leave, has a trefoil and nearly no five-fold moment (0.04 to 0.74 times its trefoil on the 13 real circles the
@@ -63,9 +63,10 @@
 //!   plateau by a few percent a radius; the weights `value - threshold` follow the light and pull the centroid by
 //!   about `ramp * radius / 4` (0.12 to 0.63 px on the 3 real circles the coma rejected, against the centre of their
 //!   outlines), which the coma rightly flags. Capped at 70 % of the peak (`PLATEAU_FRACTION` in `centroid`), the
-//!   weights of a flat top no longer see the light: the capped weights are tested again (against the allowances of
-//!   a blurred edge, the stricter ones), and if they pass, their centroid is the blob's (0.008 to 0.12 px from those
-//!   outline centres, measured in Python on the same windows). A merged spot still skews the capped weights and is rejected.
+//!   weights of a flat top no longer see the light: the capped weights are tested again, against the uncapped blob's
+//!   allowances (stricter than the capped weights' own, whose edge looks sharper), and if they pass, their centroid
+//!   is the blob's (about 0.01 to 0.12 px from those outline centres). A merged spot still skews the capped weights
+//!   and is rejected. Binary centroids ([`crate::CentroidOptions::binary`]) are rejected as before.
 //!
 //! On the rendered spots of `tests/rendered.rs` the second look changes none of the outcomes that matter (11 of 2,000
 //! spots that move the centroid by more than 0.1 px pass, as without it; worst 0.14 px), and on real blobs it takes
