@@ -86,28 +86,28 @@ pub(crate) enum Skew {
 
 /// Whether the component's whitened trefoil or coma exceeds what a clean disk can show (see the module's
 /// documentation): `sums` its [`ShapeSums`], `n` its pixel count, `vmax` its peak above the threshold (DN),
-/// `noise_range` the range of the border pixels that set the background (DN). Degenerate weights (all on a line) are
-/// not tested.
+/// `noise_ranges` the range of the border pixels that set the background (DN), or twice the background's measured
+/// noise, for the trefoil and for the coma. Degenerate weights (all on a line) are not tested.
 #[inline(always)]
 pub(crate) fn skew(
     sums: &ShapeSums,
     n: f64,
     vmax: f64,
-    noise_range: f64,
+    (trefoil_range, coma_range): (f64, f64),
     check: &SymmetryCheck,
 ) -> Skew {
     let Some((trefoil_a3, coma_a3, a3)) = trefoil_and_coma_a3(sums) else {
         return Skew::Within;
     };
-    let (per_sampling, noise) = allowances(
-        n,
-        sums.s[0] as i64 as f64,
-        vmax,
-        noise_range,
-        check.noise_sigmas,
-    );
+    let weight = sums.s[0] as i64 as f64;
+    let (per_sampling, noise) = allowances(n, weight, vmax, trefoil_range, check.noise_sigmas);
+    let coma_noise = if coma_range == trefoil_range {
+        noise
+    } else {
+        allowances(n, weight, vmax, coma_range, check.noise_sigmas).1
+    };
     let trefoil_max = check.trefoil_sampling * per_sampling + noise + check.trefoil_floor;
-    let coma_max = check.coma_sampling * per_sampling + noise;
+    let coma_max = check.coma_sampling * per_sampling + coma_noise;
     if coma_a3 > coma_max * coma_max * a3 {
         Skew::Coma
     } else if trefoil_a3 > trefoil_max * trefoil_max * a3 {
@@ -400,7 +400,7 @@ mod tests {
             &sums_of(64, weights),
             n,
             vmax,
-            6.0,
+            (6.0, 6.0),
             &SymmetryCheck::default(),
         ) != Skew::Within
     }
@@ -423,7 +423,7 @@ mod tests {
             ..SymmetryCheck::default()
         };
         assert_eq!(
-            skew(&sums_of(64, &wobbly), n, 120.0, 6.0, &no_floor),
+            skew(&sums_of(64, &wobbly), n, 120.0, (6.0, 6.0), &no_floor),
             Skew::Trefoil
         );
         // A spot as bright as the disk on its rim, which moves the centroid by about a quarter of a pixel, still is
@@ -446,7 +446,7 @@ mod tests {
         let n = weights.iter().filter(|&&v| v > 0.0).count() as f64;
         let vmax = weights.iter().cloned().fold(0.0, f64::max);
         let check = SymmetryCheck::default();
-        match skew(&sums_of(64, weights), n, vmax, 6.0, &check) {
+        match skew(&sums_of(64, weights), n, vmax, (6.0, 6.0), &check) {
             Skew::Within => false,
             Skew::Coma => true,
             Skew::Trefoil => {

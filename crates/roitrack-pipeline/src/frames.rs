@@ -1328,6 +1328,7 @@ pub fn measure_flat_window(
     let threshold = (flat.background_dn + AUTO_THRESHOLD_FRACTION * contrast) as u16;
     let options = CentroidOptions {
         threshold: Threshold::Fixed(threshold),
+        background_noise_dn: Some(flat.noise_dn),
         ..*options
     };
     measure_blob(window, roi, &options)

@@ -664,3 +664,72 @@ fn a_window_in_a_dense_grid_of_dark_circles_gives_its_centre() {
         );
     }
 }
+
+#[test]
+fn a_large_dark_circle_under_uneven_light_is_measured_from_its_plateau() {
+    // A printed circle of radius 15 px whose ink is lit unevenly (glare: its darkness falls by 8 % a radius towards
+    // +x), in a 45 px window whose corner a shadow's edge crosses (the paper 10 % darker beyond it). The flattened
+    // blob's plateau tilts with the light, which pulls its weighted centroid towards the darker side by a third of a
+    // pixel. The window's border then has a wide range (the shadow's step); judged by it, the shape check would let
+    // that pass. Judged by the noise the flattening measured, the coma is flagged and the capped weights measure it.
+    let (side, radius) = (45u32, 15.0f64);
+    for (k, (cx, cy)) in [(22.0, 22.0), (22.3, 21.7), (21.6, 22.45)]
+        .into_iter()
+        .enumerate()
+    {
+        let mut frame = square_frame(side, 0);
+        for j in 0..side {
+            for i in 0..side {
+                let mut covered = 0.0;
+                for s in 0..16 {
+                    let (x, y) = (
+                        f64::from(i) + (f64::from(s % 4) + 0.5) / 4.0 - 0.5,
+                        f64::from(j) + (f64::from(s / 4) + 0.5) / 4.0 - 0.5,
+                    );
+                    if (x - cx).hypot(y - cy) < radius {
+                        covered += 1.0 / 16.0;
+                    }
+                }
+                let shadow = if i + j > 2 * side - 12 { 0.9 } else { 1.0 };
+                let paper = 200.0 * shadow;
+                let darkness = 0.8 * (1.0 - 0.08 * (f64::from(i) - cx) / radius);
+                let noise = f64::from((i * 7 + j * 13 + k as u32) % 5) - 2.0;
+                let value = paper * (1.0 - darkness * covered) + noise;
+                frame.pixels[(j * side + i) as usize] = value.round() as u16;
+            }
+        }
+        let roi = roitrack_image::Roi::new(0, 0, side, side);
+        let mut window = Vec::new();
+        let flat =
+            roitrack_pipeline::frames::flatten_window(&frame, &roi, Polarity::Dark, &mut window);
+        let measure = |options: roitrack_image::CentroidOptions| {
+            let c = roitrack_pipeline::frames::measure_flat_window(&window, &roi, &flat, &options)
+                .unwrap_or_else(|e| panic!("circle {k}: {e} ({flat:?})"));
+            (c.u_px - cx).hypot(c.v_px - cy)
+        };
+        let weighted = measure(roitrack_image::CentroidOptions {
+            symmetry: None,
+            ..Default::default()
+        });
+        let checked = measure(roitrack_image::CentroidOptions::default());
+        // The threshold measure_flat_window uses, with the border's range for the noise instead.
+        let threshold = flat.background_dn
+            + roitrack_image::centroid::AUTO_THRESHOLD_FRACTION
+                * (f64::from(flat.peak_dn) - flat.background_dn);
+        let by_range = roitrack_image::measure_blob(
+            &window,
+            &roi,
+            &roitrack_image::CentroidOptions {
+                threshold: roitrack_image::Threshold::Fixed(threshold as u16),
+                ..Default::default()
+            },
+        )
+        .map(|c| (c.u_px - cx).hypot(c.v_px - cy));
+        println!(
+            "circle {k}: weighted {weighted:.3} px, checked {checked:.3} px, by the border's range {by_range:?}"
+        );
+        assert!(weighted > 0.25, "circle {k}: {weighted}");
+        assert!(checked < 0.1, "circle {k}: {checked}");
+        assert!(by_range.is_ok_and(|e| e > 0.25), "circle {k}: {by_range:?}");
+    }
+}

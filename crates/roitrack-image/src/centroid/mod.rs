@@ -101,6 +101,13 @@ pub struct CentroidOptions {
     pub max_area_px: u32,
     /// Reject blobs that are not centrally symmetric (see [`SymmetryCheck`]). Default on.
     pub symmetry: Option<SymmetryCheck>,
+    /// The background's noise (DN, one standard deviation) when the caller has measured it, as the frame tracker
+    /// does on the windows it flattens; `None` (the default): bounded by half the range of the ROI's border pixels
+    /// below the threshold. Sets the shape check's allowance for noise in the coma: a border that crosses a shadow's
+    /// edge or a neighbour's rim has a wide range, and with it the check passed blobs lit unevenly enough to move
+    /// their weighted centroids by up to 0.6 px (real printed circles); with the measured noise they are flagged and
+    /// measured from their capped weights (see [`SymmetryCheck`]). The trefoil's allowance keeps the border's range.
+    pub background_noise_dn: Option<f64>,
 }
 
 /// A test that the blob is the image of a disk, and nothing merged with it: a reflection or a glint touching the blob,
@@ -131,7 +138,10 @@ pub struct CentroidOptions {
 /// 0.63 px from the centres of their outlines, their capped ones about 0.01 to 0.12 px); on the spots above it
 /// changes nothing that matters (11 of 2,000 spots that move the centroid by more than 0.1 px pass either way).
 /// Large flat-topped blobs lit unevenly by 4 to 8 % a radius (`tests/clean_disks.rs`) are all accepted, at an RMS error of
-/// 0.076 px where their weighted centroids were 0.244 px off. It adds about half to the centroid's time (24 x 24
+/// 0.076 px where their weighted centroids were 0.244 px off. Where the caller has measured the background's noise
+/// ([`CentroidOptions::background_noise_dn`], as the frame tracker's flattened windows do), the coma is judged
+/// against it: on the real circles above the worst window centroid went from 0.616 to 0.155 px off its outline's
+/// centre. It adds about half to the centroid's time (24 x 24
 /// ROI, on a 2-core AMD EPYC development VM: 0.19 µs against 0.13 µs without it, `roitrack bench`, 2026-11-27); the
 /// second look costs nothing on blobs it does not see.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -181,6 +191,7 @@ impl Default for CentroidOptions {
             min_area_px: 4,
             max_area_px: 4096,
             symmetry: Some(SymmetryCheck::default()),
+            background_noise_dn: None,
         }
     }
 }
@@ -341,6 +352,13 @@ fn measure_blob_with(
             63 - cols.leading_zeros() as usize,
         );
         let vmax = peak - threshold;
+        // The coma's allowance for noise from the background's measured noise where the caller gives it (s² =
+        // (r / 2)² + 1/12 in the allowance: a range of 2 s stands for a standard deviation s); the trefoil's from the
+        // border's range either way (see `CentroidOptions::background_noise_dn`).
+        let noise_ranges = (
+            noise_range,
+            opts.background_noise_dn.map_or(noise_range, |s| 2.0 * s),
+        );
         // Err: rejected; Ok(None): the centroid stands; Ok(Some): the centroid of the plateau-capped weights replaces
         // it (ROI coordinates).
         let judge = |comp: Option<&[u64]>| -> Result<Option<(f64, f64)>, BlobRejection> {
@@ -348,7 +366,7 @@ fn measure_blob_with(
             let spotted = |cap: u16| {
                 trefoil_is_a_spot(pixels, w, comp, (lo, hi), columns, (threshold, cap), check)
             };
-            match skew(&sums, n, f64::from(vmax), noise_range, check) {
+            match skew(&sums, n, f64::from(vmax), noise_ranges, check) {
                 Skew::Within => Ok(None),
                 Skew::Trefoil if !spotted(u16::MAX) => Ok(None),
                 Skew::Coma if opts.intensity_weighted => {
@@ -363,7 +381,7 @@ fn measure_blob_with(
                         (threshold, cap),
                     );
                     let [m, sx, sy, ..] = capped.s.map(|x| x as f64);
-                    let clean = match skew(&capped, n, f64::from(vmax), noise_range, check) {
+                    let clean = match skew(&capped, n, f64::from(vmax), noise_ranges, check) {
                         Skew::Within => true,
                         Skew::Trefoil => !spotted(cap),
                         Skew::Coma => false,
