@@ -1328,7 +1328,8 @@ pub fn measure_flat_window(
     let threshold = (flat.background_dn + AUTO_THRESHOLD_FRACTION * contrast) as u16;
     let options = CentroidOptions {
         threshold: Threshold::Fixed(threshold),
-        background_noise_dn: Some(flat.noise_dn),
+        // 0 where the flattening could not measure it (no plane, or a black background): the border's range then.
+        background_noise_dn: (flat.noise_dn > 0.0).then_some(flat.noise_dn),
         ..*options
     };
     measure_blob(window, roi, &options)
