@@ -367,6 +367,31 @@ fn uneven_brightness_is_accepted() {
     }
 }
 
+/// A flat-topped blob 24 to 32 px across (radius 12 to 16 px, aspect 0.8 to 1), blurred by 0.6 to 1.2 px, near the
+/// centre of a 48 px ROI, 220 DN above a background of 16 DN in 8 bits, its brightness falling by `slope` a radius
+/// along the angle `u`.
+fn large_flat_disk(rng: &mut impl Rng, slope: f64, u: f64) -> Disk {
+    let radius = rng.random_range(12.0..16.0);
+    Disk {
+        roi: 48,
+        centre: (
+            23.5 + rng.random_range(-1.0..1.0),
+            23.5 + rng.random_range(-1.0..1.0),
+        ),
+        axes: (radius, radius * rng.random_range(0.8..1.0)),
+        angle: rng.random_range(0.0..std::f64::consts::PI),
+        blur: rng.random_range(0.6..1.2),
+        bits: 8,
+        background: 16.0,
+        signal: 220.0,
+        gradient: (0.0, 0.0),
+        curvature: 0.0,
+        ramp: (slope * u.cos(), slope * u.sin()),
+        read_dn: 1.0,
+        gain: 0.0,
+    }
+}
+
 /// A large flat-topped blob lit unevenly (a printed circle under glare or a shadow's edge: 4 to 8 % a radius) shows a
 /// coma beyond what a clean disk of its size can: the weights `value - threshold` of its plateau follow the light and
 /// pull the centroid by `ramp * radius / 4`, 0.1 to 0.3 px here. It is measured by its weights capped at the plateau
@@ -383,25 +408,7 @@ fn a_large_blob_lit_unevenly_is_measured_from_its_plateau() {
     for _ in 0..300 {
         let u = rng.random_range(0.0..std::f64::consts::TAU);
         let slope = rng.random_range(0.04..0.08);
-        let radius = rng.random_range(12.0..16.0);
-        let disk = Disk {
-            roi: 48,
-            centre: (
-                23.5 + rng.random_range(-1.0..1.0),
-                23.5 + rng.random_range(-1.0..1.0),
-            ),
-            axes: (radius, radius * rng.random_range(0.8..1.0)),
-            angle: rng.random_range(0.0..std::f64::consts::PI),
-            blur: rng.random_range(0.6..1.2),
-            bits: 8,
-            background: 16.0,
-            signal: 220.0,
-            gradient: (0.0, 0.0),
-            curvature: 0.0,
-            ramp: (slope * u.cos(), slope * u.sin()),
-            read_dn: 1.0,
-            gain: 0.0,
-        };
+        let disk = large_flat_disk(&mut rng, slope, u);
         let (pixels, roi) = disk.render(&mut rng);
         let error = |c: roitrack_image::Centroid| {
             (c.u_px - f64::from(roi.x0) - disk.centre.0)
@@ -436,25 +443,7 @@ fn spots_merged_with_large_blobs_are_still_rejected() {
         } else {
             0.0
         };
-        let radius = rng.random_range(12.0..16.0);
-        let disk = Disk {
-            roi: 48,
-            centre: (
-                23.5 + rng.random_range(-1.0..1.0),
-                23.5 + rng.random_range(-1.0..1.0),
-            ),
-            axes: (radius, radius * rng.random_range(0.8..1.0)),
-            angle: rng.random_range(0.0..std::f64::consts::PI),
-            blur: rng.random_range(0.6..1.2),
-            bits: 8,
-            background: 16.0,
-            signal: 220.0,
-            gradient: (0.0, 0.0),
-            curvature: 0.0,
-            ramp: (slope * u.cos(), slope * u.sin()),
-            read_dn: 1.0,
-            gain: 0.0,
-        };
+        let disk = large_flat_disk(&mut rng, slope, u);
         let (mut pixels, roi) = disk.render(&mut rng);
         let add_spot = |pixels: &mut [u16], (sx, sy): (f64, f64), peak: f64, sigma: f64| {
             for (p, v) in pixels.iter_mut().enumerate() {
@@ -471,7 +460,7 @@ fn spots_merged_with_large_blobs_are_still_rejected() {
             continue;
         };
         let angle = rng.random_range(0.0..std::f64::consts::TAU);
-        let distance = radius + rng.random_range(-2.0..3.0);
+        let distance = disk.axes.0 + rng.random_range(-2.0..3.0);
         let spot = (
             disk.centre.0 + distance * angle.cos(),
             disk.centre.1 + distance * angle.sin(),

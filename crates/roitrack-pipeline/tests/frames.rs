@@ -600,6 +600,19 @@ fn a_window_whose_background_is_one_border_row_is_flattened_level() {
     }
 }
 
+/// The share of pixel (i, j) that `inside` covers, sampled 4 x 4 times (x, y in pixels, pixel centres on integers).
+fn coverage(i: u32, j: u32, inside: impl Fn(f64, f64) -> bool) -> f64 {
+    let covered = (0..16)
+        .filter(|s| {
+            inside(
+                f64::from(i) + (f64::from(s % 4) + 0.5) / 4.0 - 0.5,
+                f64::from(j) + (f64::from(s / 4) + 0.5) / 4.0 - 0.5,
+            )
+        })
+        .count();
+    covered as f64 / 16.0
+}
+
 #[test]
 fn a_window_in_a_dense_grid_of_dark_circles_gives_its_centre() {
     // A hexagonal grid of dark circles (radius 7 px, centres 16 px apart: gaps of 2 px) on paper lit unevenly, the
@@ -617,16 +630,9 @@ fn a_window_in_a_dense_grid_of_dark_circles_gives_its_centre() {
         let mut frame = square_frame(side, 0);
         for j in 0..side {
             for i in 0..side {
-                let mut covered = 0.0;
-                for s in 0..16 {
-                    let (x, y) = (
-                        f64::from(i) + (f64::from(s % 4) + 0.5) / 4.0 - 0.5,
-                        f64::from(j) + (f64::from(s / 4) + 0.5) / 4.0 - 0.5,
-                    );
-                    if centres.iter().any(|c| (x - c.0).hypot(y - c.1) < radius) {
-                        covered += 1.0 / 16.0;
-                    }
-                }
+                let covered = coverage(i, j, |x, y| {
+                    centres.iter().any(|c| (x - c.0).hypot(y - c.1) < radius)
+                });
                 let paper = 170.0 + 0.8 * f64::from(i) + 0.4 * f64::from(j);
                 let noise = f64::from((i * 7 + j * 13 + k as u32) % 5) - 2.0;
                 // The window's own circle a little darker than its neighbours, so that it is the window's
@@ -680,16 +686,7 @@ fn a_large_dark_circle_under_uneven_light_is_measured_from_its_plateau() {
         let mut frame = square_frame(side, 0);
         for j in 0..side {
             for i in 0..side {
-                let mut covered = 0.0;
-                for s in 0..16 {
-                    let (x, y) = (
-                        f64::from(i) + (f64::from(s % 4) + 0.5) / 4.0 - 0.5,
-                        f64::from(j) + (f64::from(s / 4) + 0.5) / 4.0 - 0.5,
-                    );
-                    if (x - cx).hypot(y - cy) < radius {
-                        covered += 1.0 / 16.0;
-                    }
-                }
+                let covered = coverage(i, j, |x, y| (x - cx).hypot(y - cy) < radius);
                 let shadow = if i + j > 2 * side - 12 { 0.9 } else { 1.0 };
                 let paper = 200.0 * shadow;
                 let darkness = 0.8 * (1.0 - 0.08 * (f64::from(i) - cx) / radius);
