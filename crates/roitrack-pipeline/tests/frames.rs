@@ -600,6 +600,21 @@ fn a_window_whose_background_is_one_border_row_is_flattened_level() {
     }
 }
 
+/// The whole of a square `frame` as a window, flattened for dark blobs: the window, its pixels and what flattening
+/// found.
+fn flattened_dark(
+    frame: &Frame,
+) -> (
+    roitrack_image::Roi,
+    Vec<u16>,
+    roitrack_pipeline::frames::FlatWindow,
+) {
+    let roi = roitrack_image::Roi::new(0, 0, frame.width, frame.height);
+    let mut window = Vec::new();
+    let flat = roitrack_pipeline::frames::flatten_window(frame, &roi, Polarity::Dark, &mut window);
+    (roi, window, flat)
+}
+
 /// The share of pixel (i, j) that `inside` covers, sampled 4 x 4 times (x, y in pixels, pixel centres on integers).
 fn coverage(i: u32, j: u32, inside: impl Fn(f64, f64) -> bool) -> f64 {
     let covered = (0..16)
@@ -650,10 +665,7 @@ fn a_window_in_a_dense_grid_of_dark_circles_gives_its_centre() {
                 frame.pixels[(j * side + i) as usize] = value.round() as u16;
             }
         }
-        let roi = roitrack_image::Roi::new(0, 0, side, side);
-        let mut window = Vec::new();
-        let flat =
-            roitrack_pipeline::frames::flatten_window(&frame, &roi, Polarity::Dark, &mut window);
+        let (roi, window, flat) = flattened_dark(&frame);
         let c = roitrack_pipeline::frames::measure_flat_window(
             &window,
             &roi,
@@ -695,10 +707,7 @@ fn a_large_dark_circle_under_uneven_light_is_measured_from_its_plateau() {
                 frame.pixels[(j * side + i) as usize] = value.round() as u16;
             }
         }
-        let roi = roitrack_image::Roi::new(0, 0, side, side);
-        let mut window = Vec::new();
-        let flat =
-            roitrack_pipeline::frames::flatten_window(&frame, &roi, Polarity::Dark, &mut window);
+        let (roi, window, flat) = flattened_dark(&frame);
         let measure = |options: roitrack_image::CentroidOptions| {
             let c = roitrack_pipeline::frames::measure_flat_window(&window, &roi, &flat, &options)
                 .unwrap_or_else(|e| panic!("circle {k}: {e} ({flat:?})"));
