@@ -122,29 +122,27 @@ pub struct CentroidOptions {
 /// both, spots inside the blob mostly in the coma. On the ROIs of `tests/rendered.rs` (default sensor, a spot of 0.5 to
 /// 1.5 times the blob's peak 6 to 10 px from the ROI's centre in every ROI) it leaves 11 of 2,000 spots that move the
 /// centroid by more than 0.1 px (worst 0.14 px; without the check, 1,748, up to 0.69 px); on 100,000 rendered clean
-/// blobs (`tests/clean_disks.rs`: 3 to 20 px across, any sub-pixel position, blur 0 to 1.5 px, read and shot noise,
-/// 8 and 12 bits, clipped cores, ellipses up to 1.5:1, background gradients, brightness uneven by up to 2 % a radius)
-/// it rejects none, its allowances at least 1.7 times the largest skew any showed. The allowances fall with the
-/// blob's size, and large real blobs go beyond them in two ways a spot does not explain; a second look, a float pass
-/// run only for the flagged blobs, tells them apart (see [`crate::symmetry`]): a trefoil with no matching five-fold
-/// moment is an outline that is not quite an ellipse, and accepted ([`SymmetryCheck::five_fold_ratio`]); a coma that
-/// goes once the weights are capped at 70 % of the peak is uneven light on a flat top, which pulled the weighted
-/// centroid (by `ramp * radius / 4`), and the capped weights' centroid is returned. On real blobs (the circles of 18
-/// JPEG photographs of printed grids, 60 to 1,400 px each, inverted, in windows sized as the tracker sizes them and
-/// flattened as the frame tracker does; the example `realdata_rois` of roitrack-bench) it rejects none of 1,244
-/// (without the second look, 16: 13 for their trefoil, 3 for their coma, whose weighted centroids were 0.12 to
-/// 0.63 px from the centres of their outlines, their capped ones about 0.01 to 0.12 px); on the spots above it
-/// changes nothing that matters (11 of 2,000 spots that move the centroid by more than 0.1 px pass either way), and
-/// on spots merged with 24-32 px blobs, half of them lit unevenly (`tests/clean_disks.rs`), 3 of 1,000 that move the
-/// centroid by more than 0.1 px pass, by at most 0.122 px (without the second look, 480 of those blobs were rejected
-/// clean).
-/// Large flat-topped blobs lit unevenly by 4 to 8 % a radius (`tests/clean_disks.rs`) are all accepted, at an RMS error of
-/// 0.076 px where their weighted centroids were 0.244 px off. Where the caller has measured the background's noise
-/// ([`CentroidOptions::background_noise_dn`], as the frame tracker's flattened windows do), the coma is judged
-/// against it: on the real circles above the worst window centroid went from 0.616 to 0.155 px off its outline's
-/// centre. It adds about half to the centroid's time (24 x 24
-/// ROI, on a 2-core AMD EPYC development VM: 0.19 µs against 0.13 µs without it, `roitrack bench`, 2026-11-27); the
-/// second look costs nothing on blobs it does not see.
+/// blobs (`tests/clean_disks.rs`: 3 to 20 px across, any sub-pixel position, blur 0 to 1.5 px, read and shot noise, 8
+/// and 12 bits, clipped cores, ellipses up to 1.5:1, background gradients, brightness uneven by up to 2 % a radius) it
+/// rejects none, its allowances at least 1.7 times the largest skew any showed. The allowances fall with the blob's
+/// size, and large real blobs go beyond them in two ways a spot does not explain; a second look, a float pass run only
+/// for the flagged blobs, tells them apart (see [`crate::symmetry`]): a trefoil with no matching five-fold moment is an
+/// outline that is not quite an ellipse, and accepted ([`SymmetryCheck::five_fold_ratio`]); a coma that goes once the
+/// weights are capped at 70 % of the peak is uneven light on a flat top, which pulled the weighted centroid (by `ramp *
+/// radius / 4`), and the capped weights' centroid is returned. On real blobs (the circles of 18 JPEG photographs of
+/// printed grids, 60 to 1,400 px each, inverted, in windows sized as the tracker sizes them and flattened as the frame
+/// tracker does; the example `realdata_rois` of roitrack-bench) it rejects none of 1,244 (without the second look, 16:
+/// 13 for their trefoil, 3 for their coma, whose weighted centroids were 0.12 to 0.63 px from the centres of their
+/// outlines, their capped ones about 0.01 to 0.12 px); on the spots above it changes nothing that matters (11 of 2,000
+/// spots that move the centroid by more than 0.1 px pass either way), and on spots merged with 24-32 px blobs, half of
+/// them lit unevenly (`tests/clean_disks.rs`), 3 of 1,000 that move the centroid by more than 0.1 px pass, by at most
+/// 0.122 px (without the second look, 480 of those blobs were rejected clean). Large flat-topped blobs lit unevenly by
+/// 4 to 8 % a radius (`tests/clean_disks.rs`) are all accepted, at an RMS error of 0.076 px where their weighted
+/// centroids were 0.244 px off. Where the caller has measured the background's noise
+/// ([`CentroidOptions::background_noise_dn`], as the frame tracker's flattened windows do), the coma is judged against
+/// it: on the real circles above the worst window centroid went from 0.616 to 0.155 px off its outline's centre. It
+/// adds about half to the centroid's time (24 x 24 ROI, on a 2-core AMD EPYC development VM: 0.19 µs against 0.13 µs
+/// without it, `roitrack bench`, 2026-11-27); the second look costs nothing on blobs it does not see.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SymmetryCheck {
     /// The trefoil allowed for pixel sampling, times the blob's pixel count, for a blurred edge (1.5 px or wider;
