@@ -52,8 +52,8 @@
 //! (printed circles in JPEG photographs) go beyond them in two ways that a merged spot does not explain, and a float
 //! pass over the component, run only for the blobs the moment test flags, tells these apart:
 //!
-//! - *A trefoil with no five-fold moment* (`trefoil_rejected_on_second_look`). A spot, a lump, adds `m d^k e^{ikθ}` to every
-//!   harmonic moment `M E[z^k]`, so its five-fold moment `E[z⁵]` is `(d / sigma)²` times its trefoil (about 1.4 to 6
+//! - *A trefoil with no five-fold moment* (`trefoil_rejected_on_second_look`). A spot, a lump, adds `m d^k e^{ikθ}`
+//!   to every harmonic moment `M E[z^k]`, so its five-fold moment `E[z⁵]` is `(d / sigma)²` times its trefoil (about 1.4 to 6
 //!   times on rendered spots); a smooth three-fold wobble of the outline, which a print, a lens and a JPEG encoder
 //!   leave, has a trefoil and nearly no five-fold moment (0.04 to 0.74 times its trefoil on the 13 real circles the
 //!   trefoil alone rejected), and it does not move the centroid. Accepted when `|E[z⁵]|` is at most
@@ -62,8 +62,8 @@
 //! - *A coma from uneven light on a flat top.* Glare on ink or a shadow's edge across a printed circle tilts its
 //!   plateau by a few percent a radius; the weights `value - threshold` follow the light and pull the centroid by
 //!   about `ramp * radius / 4` (0.12 to 0.63 px on the 3 real circles the coma rejected, against the centre of their
-//!   outlines), which the coma rightly flags. Capped at 70 % of the peak ([`crate::SymmetryCheck::plateau_fraction`]), the
-//!   weights of a flat top no longer see the light: the capped weights are tested again, against the uncapped blob's
+//!   outlines), which the coma rightly flags. Capped at 70 % of the peak
+//!   ([`crate::SymmetryCheck::plateau_fraction`]), the weights of a flat top no longer see the light: the capped weights are tested again, against the uncapped blob's
 //!   allowances (stricter than the capped weights' own, whose edge looks sharper), and if they pass, their centroid
 //!   is the blob's (about 0.01 to 0.12 px from those outline centres). A merged spot still skews the capped weights
 //!   and is rejected. Binary centroids ([`crate::CentroidOptions::binary`]) are rejected as before.
@@ -121,8 +121,8 @@ pub(crate) fn skew(
 }
 
 /// Whether a component whose trefoil exceeds what pixel sampling and noise give a clean disk (see [`skew`]) owes it
-/// to a spot merged with it (or is no disk) rather than to an outline that is not a perfect ellipse: `pixels` the ROI (`w` wide),
-/// `comp` the component's row masks (`None`: every pixel above `threshold` in its rows and columns), `rows` and
+/// to a spot merged with it (or is no disk) rather than to an outline that is not a perfect ellipse: `pixels` the
+/// ROI (`w` wide), `comp` the component's row masks (`None`: every pixel above `threshold` in its rows and columns), `rows` and
 /// `cols` its first and last row and column, each pixel weighing `value - threshold`, at most `cap`.
 ///
 /// A rotationally symmetric lump of weight `m` at `d` from the centroid adds `m d^k e^{ikθ}` to every harmonic moment
@@ -132,8 +132,8 @@ pub(crate) fn skew(
 /// (0.04 to 0.74 times its trefoil on the 13 real printed circles of 30 to 40 px that the trefoil alone rejected); and
 /// it does not move the centroid, a three-fold shape keeping its centre. So the blob is taken for spotted when its
 /// five-fold moment exceeds [`SymmetryCheck::five_fold_ratio`] times its trefoil, or its trefoil exceeds
-/// [`SymmetryCheck::trefoil_ceiling`] (no disk). A float pass over the component, twice: it runs only for the blobs
-/// the moment test flags for their trefoil.
+/// [`SymmetryCheck::trefoil_ceiling`] (no disk). An integer pass and a float pass over the component: it runs only
+/// for the blobs the moment test flags for their trefoil.
 pub(crate) fn trefoil_rejected_on_second_look(
     pixels: &[u16],
     w: usize,

@@ -512,8 +512,8 @@ fn a_large_blob_with_a_wobbly_outline_is_accepted_on_its_centre() {
         .into_iter()
         .enumerate()
     {
-        // A disk of radius 15 px whose outline wobbles by 0.2 px (a trefoil of about 0.1), sampled 4 x 4 times a pixel, on a background of
-        // 16 DN, 220 DN bright, with a little deterministic noise.
+        // A disk of radius 15 px whose outline wobbles by 0.2 px (a trefoil of about 0.1), sampled 4 x 4 times a
+        // pixel, on a background of 16 DN, 220 DN bright, with a little deterministic noise.
         let pixels: Vec<u16> = (0..side * side)
             .map(|p| {
                 let (i, j) = ((p % side) as f64, (p / side) as f64);
