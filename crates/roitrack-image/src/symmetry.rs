@@ -75,7 +75,7 @@
 //! any check); on real blobs it takes the rejections from 16 of 1,244 to none (`realdata_rois` in roitrack-bench).
 
 use crate::centroid::SymmetryCheck;
-use crate::centroid::moments::{ShapeSums, scalar_shape_sums};
+use crate::centroid::moments::{ShapeSums, scalar_shape_sums, visit_shape_weights};
 
 /// What the moment test found in a component: nothing a clean disk cannot show, a trefoil beyond it (and no coma),
 /// or a coma beyond it.
@@ -143,14 +143,6 @@ pub(crate) fn trefoil_rejected_on_second_look(
     (threshold, cap): (u16, u16),
     check: &SymmetryCheck,
 ) -> bool {
-    let weight = |i: usize, j: usize| {
-        let inside = comp.is_none_or(|c| (c[j] >> i) & 1 == 1);
-        if inside {
-            f64::from(pixels[j * w + i].saturating_sub(threshold).min(cap))
-        } else {
-            0.0
-        }
-    };
     // The centroid and covariance from the integer sums, as the moment test has them.
     let sums = scalar_shape_sums(
         pixels,
@@ -176,14 +168,20 @@ pub(crate) fn trefoil_rejected_on_second_look(
     let (inv_sa, inv_sad) = (1.0 / a.sqrt(), 1.0 / (a * d).sqrt());
     // Sums of v z³ and v z⁵ (real and imaginary parts).
     let (mut t_re, mut t_im, mut f_re, mut f_im) = (0.0, 0.0, 0.0, 0.0);
-    for j in lo..=hi {
-        let y = (j - lo) as f64 - cy;
-        for i in first..=last {
-            let v = weight(i, j);
-            if v == 0.0 {
-                continue;
+    let levels = (threshold, cap);
+    visit_shape_weights(
+        pixels,
+        w,
+        comp,
+        (lo, hi),
+        (first, last),
+        levels,
+        |i, j, v| {
+            if v == 0 {
+                return;
             }
-            let x = (i - first) as f64 - cx;
+            let v = v as f64;
+            let (x, y) = ((i - first) as f64 - cx, (j - lo) as f64 - cy);
             let (z_re, z_im) = (x * inv_sa, (a * y - b * x) * inv_sad);
             let (z2_re, z2_im) = (z_re * z_re - z_im * z_im, 2.0 * z_re * z_im);
             let (z3_re, z3_im) = (z2_re * z_re - z2_im * z_im, z2_re * z_im + z2_im * z_re);
@@ -192,8 +190,8 @@ pub(crate) fn trefoil_rejected_on_second_look(
             t_im += v * z3_im;
             f_re += v * z5_re;
             f_im += v * z5_im;
-        }
-    }
+        },
+    );
     let (trefoil, five_fold) = (t_re.hypot(t_im) / m, f_re.hypot(f_im) / m);
     trefoil > check.trefoil_ceiling || five_fold > check.five_fold_ratio * trefoil
 }

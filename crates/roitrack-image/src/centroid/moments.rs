@@ -109,10 +109,33 @@ impl ShapeSums {
     }
 }
 
+/// Calls `visit(i, j, v)` for every pixel of rows `lo..=hi` and columns `first..=last` with its weight in the shape
+/// sums: `value - threshold`, at most `cap`, and 0 outside `comp` (bit i column i; `None`: every pixel counts, those
+/// at or below the threshold weighing 0).
+#[inline(always)]
+pub(crate) fn visit_shape_weights(
+    pixels: &[u16],
+    w: usize,
+    comp: Option<&[u64]>,
+    (lo, hi): (usize, usize),
+    (first, last): (usize, usize),
+    (threshold, cap): (u16, u16),
+    mut visit: impl FnMut(usize, usize, u64),
+) {
+    for j in lo..=hi {
+        let bits = comp.map_or(u64::MAX, |c| c[j]);
+        for i in first..=last {
+            let v =
+                u64::from(pixels[j * w + i].saturating_sub(threshold).min(cap)) * ((bits >> i) & 1);
+            visit(i, j, v);
+        }
+    }
+}
+
 /// The [`ShapeSums`] of the component of rows `lo..=hi` and columns `first..=last`, x from column `origin`
 /// (`<= first`), y from row `lo`, a pixel at a time: of the pixels of `comp` (bit i column i), or with `None` of every
 /// above-threshold pixel of those rows and columns (a simple component's); each pixel weighs `value - threshold`, at
-/// most `cap`.
+/// most `cap` (see [`visit_shape_weights`]).
 pub(crate) fn scalar_shape_sums(
     pixels: &[u16],
     w: usize,
@@ -120,16 +143,18 @@ pub(crate) fn scalar_shape_sums(
     (lo, hi): (usize, usize),
     (first, last): (usize, usize),
     origin: usize,
-    (threshold, cap): (u16, u16),
+    levels: (u16, u16),
 ) -> ShapeSums {
     let mut s = [0u64; 10];
-    for j in lo..=hi {
-        let y = (j - lo) as u64;
-        let bits = comp.map_or(u64::MAX, |c| c[j]);
-        for i in first..=last {
-            let v =
-                u64::from(pixels[j * w + i].saturating_sub(threshold).min(cap)) * ((bits >> i) & 1);
-            let x = (i - origin) as u64;
+    visit_shape_weights(
+        pixels,
+        w,
+        comp,
+        (lo, hi),
+        (first, last),
+        levels,
+        |i, j, v| {
+            let (x, y) = ((i - origin) as u64, (j - lo) as u64);
             let (vx, vy) = (v * x, v * y);
             s[0] += v;
             s[1] += vx;
@@ -141,7 +166,7 @@ pub(crate) fn scalar_shape_sums(
             s[7] += vx * x * y;
             s[8] += vx * y * y;
             s[9] += vy * y * y;
-        }
-    }
+        },
+    );
     ShapeSums { s }
 }
