@@ -53,7 +53,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use roitrack_core::estimator::{
     self, Estimate, Estimator, InitError, KalmanEstimator, KalmanTuning, MotionModel, Observation,
-    PoseFit, TrackError, TrackerConfig, WindowProblem,
+    StaticPoses, TrackError, TrackerConfig, WindowProblem,
 };
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::solver::{self, NormalEquations, Solution, SolverOptions};
@@ -521,11 +521,12 @@ impl HotPaths {
 
     /// The static pose from scratch (16 points, no prior), refined to convergence.
     #[inline(never)]
-    pub fn static_pose(&self) -> Result<PoseFit, InitError> {
+    pub fn static_pose(&self) -> Result<StaticPoses, InitError> {
         estimator::solve_static_pose(
             black_box(&self.scene.model),
             black_box(&self.scene.target),
             black_box(&self.static_observations),
+            black_box(NOISE_PX),
         )
     }
 
@@ -807,7 +808,9 @@ mod tests {
         assert!((fit.params.cam_t_obj_m - hot.scene.truth.cam_t_obj_m).norm() < 3e-3);
 
         // The static pose from scratch is the converged 6-dof VVS from the truth.
-        let fit = hot.static_pose().unwrap();
+        let poses = hot.static_pose().unwrap();
+        assert!(!poses.is_ambiguous());
+        let fit = poses.best();
         assert!(fit.converged);
         let vvs = estimator::refine_static_pose(
             &hot.scene.model,

@@ -18,7 +18,8 @@
 //! ```
 //!
 //! `pixels[i]` is the noisy ideal (undistorted) pixel of `model_points[i]`; `cam_r_obj`, `cam_t_obj_m` is the true pose
-//! (object to camera, row-major rotation). Other keys are ignored.
+//! (object to camera, row-major rotation). An optional `"noise_px"` gives the pixels' noise (px per coordinate; the
+//! tracker's default noise when absent), which the solver judges ambiguity against. Other keys are ignored.
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -57,6 +58,7 @@ struct ProblemFile {
     intrinsics: IntrinsicsJson,
     model_points: Vec<ModelPointJson>,
     instances: Vec<InstanceJson>,
+    noise_px: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -95,6 +97,8 @@ pub struct PnpProblem {
     pub model: SpatioTemporalModel,
     pub target: Target,
     pub instances: Vec<PnpInstance>,
+    /// The pixels' noise (px per coordinate).
+    pub noise_px: f64,
 }
 
 impl PnpProblem {
@@ -151,10 +155,19 @@ fn validate(file: ProblemFile) -> Result<PnpProblem, PnpError> {
                 .map_err(|e| PnpError::new(format!("instance {k}: {}", e.message)))
         })
         .collect::<Result<Vec<_>, _>>()?;
+    let noise_px = file
+        .noise_px
+        .unwrap_or(roitrack_core::estimator::TrackerConfig::default().noise_px);
+    if !(noise_px.is_finite() && noise_px > 0.0) {
+        return Err(PnpError::new(format!(
+            "noise_px must be a positive number, got {noise_px}"
+        )));
+    }
     Ok(PnpProblem {
         model: SpatioTemporalModel::new(intrinsics),
         target,
         instances,
+        noise_px,
     })
 }
 
@@ -257,11 +270,14 @@ pub fn run(problem: &PnpProblem, repeats: usize) -> PnpReport {
         model,
         target,
         instances,
+        noise_px,
     } = problem;
     let solved: Vec<Solved> = instances
         .iter()
-        .map(
-            |instance| match solve_static_pose(model, target, &instance.observations) {
+        .map(|instance| {
+            match solve_static_pose(model, target, &instance.observations, *noise_px)
+                .map(|poses| *poses.best())
+            {
                 Ok(fit) => Solved {
                     pose: Some(fit.state),
                     error: None,
@@ -290,15 +306,20 @@ pub fn run(problem: &PnpProblem, repeats: usize) -> PnpReport {
                     iterations: 0,
                     converged: false,
                 },
-            },
-        )
+            }
+        })
         .collect();
     let mut times_us = Vec::with_capacity(instances.len() * repeats);
     for _ in 0..repeats {
         for instance in instances {
             let observations = black_box(instance.observations.as_slice());
             let start = Instant::now();
-            let result = solve_static_pose(black_box(model), black_box(target), observations);
+            let result = solve_static_pose(
+                black_box(model),
+                black_box(target),
+                observations,
+                black_box(*noise_px),
+            );
             let elapsed = start.elapsed();
             black_box(&result);
             times_us.push(elapsed.as_secs_f64() * 1e6);
@@ -474,8 +495,14 @@ mod tests {
     fn exact_problem_is_solved_exactly() {
         let problem = PnpProblem::from_json(&problem_json(16)).unwrap();
         let instance = &problem.instances[0];
-        let fit =
-            solve_static_pose(&problem.model, &problem.target, &instance.observations).unwrap();
+        let fit = *solve_static_pose(
+            &problem.model,
+            &problem.target,
+            &instance.observations,
+            problem.noise_px,
+        )
+        .unwrap()
+        .best();
         assert!((fit.state.cam_t_obj_m - instance.truth.cam_t_obj_m).norm() < 1e-9);
         assert!(so3::angle_between(&fit.state.cam_r_obj, &instance.truth.cam_r_obj) < 1e-9);
         let report = run(&problem, 2);

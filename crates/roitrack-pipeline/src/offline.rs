@@ -7,7 +7,7 @@ use roitrack_core::estimator::{Estimate, Estimator, EstimatorReport, StreamError
 use roitrack_image::{BlobRejection, CentroidOptions, RejectionCounts, RoiImage, measure_roi};
 
 /// What [`track_rois`] did.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RoiTrackReport {
     /// ROI images read.
     pub rois: usize,

@@ -131,7 +131,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let mut hot = HotPaths::new();
     let timings = time_all(&mut hot, item_budget);
     let gauss_newton_iterations = hot.gauss_newton_solve(32).report.iterations;
-    let static_pose_iterations = hot.static_pose().map_or(0, |fit| fit.iterations);
+    let static_pose_iterations = hot.static_pose().map_or(0, |poses| poses.best().iterations);
 
     let bench = LoopBench::new(args.rois)?;
     let k10 = bench.measure(10, None, args.repeats)?;

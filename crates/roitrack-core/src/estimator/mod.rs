@@ -70,7 +70,10 @@ pub use options::{
 };
 pub use problem::{Observation, RobustLoss, WindowProblem};
 pub use static_baseline::StaticEstimator;
-pub use static_pose::{InitError, PoseFit, refine_static_pose, solve_static_pose};
+pub use static_pose::{
+    AMBIGUITY_CHI2, InitError, MAX_STATIC_POSES, PoseFit, StaticPoses, refine_static_pose,
+    solve_static_pose,
+};
 pub use vvs::{VvsEstimator, VvsSettings};
 pub use window::WindowMode;
 
@@ -499,8 +502,27 @@ impl StatusCounts {
     }
 }
 
+/// Why the newest attempt to start a track from the measurements started none ([`EstimatorReport::start_failure`]).
+#[derive(Debug, Clone, Copy, PartialEq, Error)]
+pub enum StartFailure {
+    /// No static pose from the newest centroid of each point.
+    #[error("{0}")]
+    NoPose(InitError),
+    /// Several poses fit the measurements as well as the best, within the noise: a target of 3 points, a symmetric
+    /// layout, or a small target far away whose tilt the view cannot tell from its mirror tilt. The track waits for
+    /// measurements that decide.
+    #[error(
+        "{poses} poses fit the measurements equally well within the noise (3 points, a symmetric target, or a small \
+         target far away whose tilt cannot be told from its mirror tilt)"
+    )]
+    Ambiguous { poses: usize },
+    /// The 12-dof fit of the first cycles left residuals above the noise (a wrong correspondence, or bad data).
+    #[error("the first cycles fit no motion: median residual {median_px:.2} px")]
+    Residual { median_px: f64 },
+}
+
 /// What an estimator has done since it was built.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct EstimatorReport {
     /// Measurements accepted, and refused ([`TrackError`]).
     pub measurements: usize,
@@ -509,6 +531,8 @@ pub struct EstimatorReport {
     pub estimates: StatusCounts,
     /// Tracks started: initialisations from the measurements and starts from a given state.
     pub initialisations: usize,
+    /// Why the newest attempt to start a track from the measurements started none (`None` once one has started).
+    pub start_failure: Option<StartFailure>,
     /// Kalman: measurements rejected by the innovation gate, and covariance resets after runs of them.
     pub gated: usize,
     pub covariance_resets: usize,

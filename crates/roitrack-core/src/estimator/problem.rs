@@ -304,6 +304,19 @@ impl<'a> WindowProblem<'a> {
         Some(*median)
     }
 
+    /// `Σ min(|e|², limit²)` over the window at `state` (px²), a point that does not project counting the limit: a
+    /// cost that rival states can be compared on, whatever outliers the window holds.
+    pub(crate) fn truncated_cost_px2(&self, state: &MotionState, limit_px: f64) -> f64 {
+        let limit2 = limit_px * limit_px;
+        self.window
+            .iter()
+            .map(|o| {
+                self.project(state, o)
+                    .map_or(limit2, |px| (px - o.ideal_px).norm_squared().min(limit2))
+            })
+            .sum()
+    }
+
     /// The robust scale (px per axis) of the window's residuals at `state` ([`scale_from_median_px`] of the median
     /// residual), never below `floor_px`.
     pub fn robust_scale_px(&self, state: &MotionState, floor_px: f64) -> f64 {

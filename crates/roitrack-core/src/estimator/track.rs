@@ -13,9 +13,10 @@ use super::problem::{Observation, ResidualFigures, WindowProblem, scale_from_med
 use super::window::ObservationWindow;
 use super::{
     ConfigError, Emit, Estimate, EstimatorConfig, EstimatorReport, Matrix12, RobustLoss,
-    TrackError, TrackStatus, TrackerConfig, WindowMode, static_pose::solve_static_pose,
+    StartFailure, TrackError, TrackStatus, TrackerConfig, WindowMode,
+    static_pose::{AMBIGUITY_CHI2, StaticPoses, solve_static_pose},
 };
-use crate::solver::NormalEquations;
+use crate::solver::{NormalEquations, Solution};
 use crate::{CameraModel, Measurement, MotionState, SpatioTemporalModel, Target};
 
 /// Consecutive good steps needed before a widened window shrinks back; doubled at every degenerate window since the
@@ -63,6 +64,12 @@ pub(crate) const ADAPTIVE_INIT_MAX_MEDIAN_PX: f64 = 2.5;
 pub(crate) const MIN_NOISE_PX: f64 = 0.005;
 /// The median of the norm of a 2-d Gaussian residual of σ = 1 per axis (Rayleigh: √(2 ln 2)).
 const RAYLEIGH_MEDIAN: f64 = 1.177_410_022_515_474_7;
+
+/// Whether two poses agree to `tolerance` (rad, and that fraction of the distance).
+fn same_pose_to(a: &MotionState, b: &MotionState, tolerance: f64) -> bool {
+    crate::so3::angle_between(&a.cam_r_obj, &b.cam_r_obj) < tolerance
+        && (a.cam_t_obj_m - b.cam_t_obj_m).norm() <= tolerance * a.cam_t_obj_m.norm()
+}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -300,6 +307,66 @@ impl TrackCore {
     /// centroid noise: the state does not explain its window.
     pub fn residual_inconsistent(&self, residuals: &ResidualFigures) -> bool {
         residuals.rms_px > MAX_RESIDUAL_NOISE_RATIO * self.noise_px
+    }
+
+    /// The 12-dof fit that starts a track, from each static pose that fits the newest centroids (with the static
+    /// pose it came from): fitted over the last `init_len` measurements (two cycles) and, while more than one fit
+    /// explains them as well as the best within the noise ([`AMBIGUITY_CHI2`]), over the whole window. The scratch
+    /// window holds the measurements of the fit returned. Ambiguous when the whole window cannot decide either.
+    fn start_from_poses(
+        &mut self,
+        poses: &StaticPoses,
+        t_ref_s: f64,
+        init_len: usize,
+    ) -> Result<(MotionState, Solution<MotionState, 12>), StartFailure> {
+        let mut rivals = poses.as_slice().len();
+        let mut fitted = 0;
+        for len in [init_len, self.window.len()] {
+            if len <= fitted {
+                continue;
+            }
+            fitted = len;
+            self.fill_scratch(WindowMode::Last(len));
+            let problem = self
+                .window_problem(t_ref_s)
+                .with_loss(self.config.robust, 1.0);
+            let fits: Vec<(MotionState, Solution<MotionState, 12>)> = poses
+                .as_slice()
+                .iter()
+                .map(|p| (p.state, problem.fit_robustly(p.state, INIT_MAX_ITERATIONS)))
+                .collect();
+            if fits.len() == 1 {
+                return Ok(fits[0]);
+            }
+            // The fits compared on one truncated cost: residuals beyond 5 sigma (outliers) count alike for all.
+            let median_px = fits
+                .iter()
+                .filter_map(|(_, f)| problem.median_residual_px(&f.params))
+                .fold(f64::INFINITY, f64::min);
+            let sigma_px = self.noise_px.max(median_px / RAYLEIGH_MEDIAN);
+            let costs: Vec<f64> = fits
+                .iter()
+                .map(|(_, f)| problem.truncated_cost_px2(&f.params, 5.0 * sigma_px))
+                .collect();
+            let best = (0..fits.len())
+                .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
+                .unwrap_or(0);
+            let dof = (2 * self.scratch.len()).saturating_sub(12).max(1) as f64;
+            let variance_px2 = (sigma_px * sigma_px).max(costs[best] / dof);
+            let best_state = fits[best].1.params;
+            rivals = 1
+                + (0..fits.len())
+                    .filter(|&k| {
+                        k != best
+                            && costs[k] - costs[best] <= AMBIGUITY_CHI2 * variance_px2
+                            && !same_pose_to(&fits[k].1.params, &best_state, 1e-3)
+                    })
+                    .count();
+            if rivals == 1 {
+                return Ok(fits[best]);
+            }
+        }
+        Err(StartFailure::Ambiguous { poses: rivals })
     }
 
     /// Fills the scratch window with the measurements `mode` selects.
@@ -595,13 +662,29 @@ impl<L: Law> Track<L> {
             return None;
         }
         core.fill_scratch(WindowMode::NewestPerPoint);
-        let pose = solve_static_pose(&core.model, &core.target, &core.scratch).ok()?;
+        let poses = match solve_static_pose(
+            &core.model,
+            &core.target,
+            &core.scratch,
+            core.config.noise_px,
+        ) {
+            Ok(poses) => poses,
+            Err(e) => {
+                core.report.start_failure = Some(StartFailure::NoPose(e));
+                return None;
+            }
+        };
         let t_ref_s = core.window.last(1).next()?.t_s;
-        core.fill_scratch(WindowMode::Last(init_len));
+        let (pose, fit) = match core.start_from_poses(&poses, t_ref_s, init_len) {
+            Ok(start) => start,
+            Err(failure) => {
+                core.report.start_failure = Some(failure);
+                return None;
+            }
+        };
         let problem = core
             .window_problem(t_ref_s)
             .with_loss(core.config.robust, 1.0);
-        let fit = problem.fit_robustly(pose.state, INIT_MAX_ITERATIONS);
         let (state, ne) = (fit.params, fit.normal_equations);
         let inverse_condition = ne.fast_inverse_condition();
         let well_posed = !core.is_degenerate(inverse_condition);
@@ -615,8 +698,10 @@ impl<L: Law> Track<L> {
             (3.0 * core.config.noise_px).max(0.3)
         };
         if ne.residual_rms_px() > core.config.lost_residual_px || median_px > max_median_px {
+            core.report.start_failure = Some(StartFailure::Residual { median_px });
             return None;
         }
+        core.report.start_failure = None;
         if self.law.adapts_noise() {
             // The noise from the median residual (which outliers do not move), corrected for the 12 fitted
             // parameters; never below a hundredth of a pixel, the floor of any centroid.
@@ -627,7 +712,7 @@ impl<L: Law> Track<L> {
         let state = if well_posed {
             state
         } else {
-            MotionState::at_rest(pose.state.cam_r_obj, pose.state.cam_t_obj_m)
+            MotionState::at_rest(pose.cam_r_obj, pose.cam_t_obj_m)
         };
         let covariance = core.window_covariance(&ne, inverse_condition);
         Some(Initial {

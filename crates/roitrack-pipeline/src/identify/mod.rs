@@ -49,6 +49,9 @@ use spatial::quadruple_hypotheses;
 /// noise of real photographs (0.1 to 0.35 px), well below what a wrong labelling leaves (a pixel or more).
 pub const MAX_IDENTIFY_RESIDUAL_PX: f64 = 1.0;
 
+/// The centroid noise (px) a hypothesis's static pose is judged against: that of real photographs' centres.
+const IDENTIFY_NOISE_PX: f64 = 0.3;
+
 /// Blobs (in the order given: strongest first from the photo detector) that seed the triple and quadruple searches.
 pub const MAX_SEED_BLOBS: usize = 200;
 
@@ -137,7 +140,9 @@ impl Verifier<'_> {
                 ideal_px: *c,
             })
             .collect();
-        let fit = solve_static_pose(&self.model, self.target, &obs).ok()?;
+        let fit = *solve_static_pose(&self.model, self.target, &obs, IDENTIFY_NOISE_PX)
+            .ok()?
+            .best();
         let state = fit.state;
         if state.cam_t_obj_m.z <= 0.0 || !state.cam_t_obj_m.iter().all(|x| x.is_finite()) {
             return None;

@@ -1,0 +1,640 @@
+//! The static pose (6 dof, velocity zero) from one set of correspondences with no prior, for every target of three or
+//! more points that are not on one line: planar, nearly planar or spread in depth, with no switch between them.
+//!
+//! Hypothesise and verify, then refine:
+//!
+//! 1. **Hypotheses**: the minimal solver ([`p3p`], at most four poses) on the triple of points whose images span the
+//!    largest triangle (the best conditioned), then on further triples while no hypothesis fits the noise.
+//! 2. **Verification**: each hypothesis is taken to the nearest minimum of the object-space error over every point
+//!    ([`object_space`]: the squared distances of the posed points from their rays, the translation eliminated),
+//!    at a cost that does not depend on the number of points.
+//! 3. **Refinement**: the minima that could rival the best are refined by Gauss-Newton on the reprojection error (the
+//!    maximum-likelihood pose for Gaussian centroid noise), i.e. 6-dof virtual visual servoing to convergence.
+//!
+//! A pose can be ambiguous: three points are posed exactly by up to four poses, and a small or distant target (planar
+//! or not) can be fitted about as well by its mirror tilt. Every refined minimum whose cost exceeds the best's by
+//! less than [`AMBIGUITY_CHI2`] times the noise variance is returned beside it, best first; the caller decides with
+//! more data (the next cycle or frame) and never takes the first silently.
+
+mod object_space;
+mod p3p;
+
+use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, Vector2, Vector3};
+use thiserror::Error;
+
+use super::Observation;
+use crate::solver::{
+    self, DampingSchedule, LeastSquaresProblem, Method, ResidualSink, SolverOptions,
+};
+use crate::{MotionState, SpatioTemporalModel, Target};
+use object_space::ObjectSpaceCost;
+
+/// Why no static pose could be found.
+#[derive(Debug, Clone, Copy, PartialEq, Error)]
+pub enum InitError {
+    #[error("a static pose needs at least {required} distinct points, got {actual}")]
+    TooFewPoints { required: usize, actual: usize },
+    #[error("no static pose: {reason}")]
+    Degenerate { reason: &'static str },
+}
+
+/// A fitted static pose and how well it fits.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PoseFit {
+    /// Pose, velocity zero.
+    pub state: MotionState,
+    /// Σ |e|² over the observations (px², ideal pixels).
+    pub cost_px2: f64,
+    /// RMS reprojection residual (px, per coordinate).
+    pub residual_rms_px: f64,
+    pub inverse_condition: f64,
+    pub iterations: usize,
+    pub converged: bool,
+}
+
+/// Twice the log-likelihood ratio (the cost difference in units of the noise variance) below which a second minimum
+/// is as good as the best: at 16 (4 sigma) a pose that is wrong but fits better than the truth by more than this has
+/// a chance of about Φ(-4) ≈ 3e-5, whatever its distance from the truth.
+pub const AMBIGUITY_CHI2: f64 = 16.0;
+
+/// At most this many poses are returned (the minimal problem's four solutions).
+pub const MAX_STATIC_POSES: usize = 4;
+
+/// The static poses that fit the observations, best first ([`solve_static_pose`]): one, or several when the pose is
+/// ambiguous.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StaticPoses {
+    fits: [PoseFit; MAX_STATIC_POSES],
+    len: usize,
+}
+
+impl StaticPoses {
+    /// The best fit (smallest reprojection cost).
+    pub fn best(&self) -> &PoseFit {
+        &self.fits[0]
+    }
+
+    /// Every fit that is as good as the best within the noise, best first (the best included).
+    pub fn as_slice(&self) -> &[PoseFit] {
+        &self.fits[..self.len]
+    }
+
+    /// Whether more than one pose fits as well as the best: the observations cannot tell them apart.
+    pub fn is_ambiguous(&self) -> bool {
+        self.len > 1
+    }
+}
+
+/// The nearest rotation to `m` (polar decomposition by SVD).
+fn nearest_rotation(m: &Matrix3<f64>) -> Option<Rotation3<f64>> {
+    let svd = m.svd(true, true);
+    let (u, v_t) = (svd.u?, svd.v_t?);
+    let mut r = u * v_t;
+    if r.determinant() < 0.0 {
+        let mut u = u;
+        u.column_mut(2).neg_mut();
+        r = u * v_t;
+    }
+    Some(Rotation3::from_matrix_unchecked(r))
+}
+
+/// The 6-dof static problem: the pose that best projects the model points onto the observations, every observation
+/// taken at the same pose (its time ignored, the velocity zero).
+struct StaticPoseProblem<'a> {
+    model: &'a SpatioTemporalModel,
+    target: &'a Target,
+    obs: &'a [Observation],
+}
+
+impl LeastSquaresProblem<6> for StaticPoseProblem<'_> {
+    type Params = MotionState;
+
+    fn linearize<S: ResidualSink<6>>(&self, state: &MotionState, sink: &mut S) {
+        let points = self.target.points();
+        let r = state.cam_r_obj.matrix();
+        for o in self.obs {
+            let op = r * points[o.point_index].point_in_obj_m;
+            let p = op + state.cam_t_obj_m;
+            let Some(pixel) = self.model.intrinsics.pixel_from_cam(&p) else {
+                sink.add_unevaluable();
+                continue;
+            };
+            // d(u,v)/dP [I, -[OP]x]
+            let d = self.model.intrinsics.pixel_jacobian_wrt_cam(&p);
+            let rot = -(d * crate::so3::hat(&op));
+            let mut j = SMatrix::<f64, 2, 6>::zeros();
+            j.fixed_view_mut::<2, 3>(0, 0).copy_from(&d);
+            j.fixed_view_mut::<2, 3>(0, 3).copy_from(&rot);
+            sink.add(&j, &(pixel - o.ideal_px), 1.0);
+        }
+    }
+
+    fn apply_step(&self, state: &MotionState, step: &SVector<f64, 6>) -> MotionState {
+        let mut delta = crate::Vector12::zeros();
+        delta.fixed_rows_mut::<6>(0).copy_from(step);
+        state.corrected(&delta)
+    }
+
+    /// Gauss-Newton converges about quadratically here: after a step this small (1e-6 m and rad) the next is about
+    /// 1e-9, far below the noise, so it is taken without checking the cost.
+    fn step_is_negligible(&self, step: &SVector<f64, 6>) -> bool {
+        step.fixed_rows::<3>(0).norm() < 1e-6 && step.fixed_rows::<3>(3).norm() < 1e-6
+    }
+}
+
+/// Gauss-Newton on the 6-dof pose, all observations taken as simultaneous, with Levenberg-Marquardt safeguarding
+/// ([`DampingSchedule::GAUSS_NEWTON_FIRST`]): a step that raises the cost is retried with damping. Converged to the
+/// accuracy of a converged VVS (about 1e-9 m and rad, far below the noise) after 2 to 4 iterations from the closed
+/// form.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::estimator::{Observation, refine_static_pose};
+/// use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+///
+/// let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+/// let target = Target::grid4x4();
+/// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.2, -0.1, 0.3), Vector3::new(0.01, 0.0, 0.6));
+/// let obs: Vec<Observation> = (0..16)
+///     .map(|i| Observation {
+///         t_s: 0.0,
+///         point_index: i,
+///         ideal_px: model.project(&truth, &target.points()[i].point_in_obj_m, 0.0).unwrap(),
+///     })
+///     .collect();
+/// let start = MotionState::at_rest(Rotation3::from_euler_angles(0.25, -0.1, 0.3), Vector3::new(0.0, 0.0, 0.65));
+/// let fit = refine_static_pose(&model, &target, &obs, &start, 20);
+/// assert!(fit.converged);
+/// assert!((fit.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-9);
+/// ```
+pub fn refine_static_pose(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    obs: &[Observation],
+    initial: &MotionState,
+    max_iterations: usize,
+) -> PoseFit {
+    let mut problem = StaticPoseProblem { model, target, obs };
+    let options = SolverOptions {
+        max_iterations,
+        method: Method::LevenbergMarquardt(DampingSchedule::GAUSS_NEWTON_FIRST),
+    };
+    let fit = solver::solve(
+        &mut problem,
+        MotionState::at_rest(initial.cam_r_obj, initial.cam_t_obj_m),
+        &options,
+    );
+    let ne = fit.normal_equations;
+    PoseFit {
+        state: fit.params,
+        cost_px2: ne.cost_px2(),
+        residual_rms_px: ne.residual_rms_px(),
+        inverse_condition: ne.fast_inverse_condition(),
+        iterations: fit.report.iterations,
+        converged: fit.report.converged,
+    }
+}
+
+/// Triples of points tried at most (each gives up to four hypotheses).
+const MAX_TRIPLES: usize = 8;
+
+/// Points the triples are drawn from: the best-spread few in the image.
+const SPREAD_POINTS: usize = 6;
+
+/// The static pose from scratch (see the module's docs): every pose that fits the observations as well as the best
+/// within the noise, best first. `noise_px` is the centroid noise (px per coordinate) the fits are judged against;
+/// a larger residual (the user's model off the truth) widens the judgement to what the residual shows. Observation
+/// times are ignored (as if simultaneous); each point should appear once.
+///
+/// Needs 3 distinct points whose images are not on one line; 3 points are posed exactly by up to four poses, all
+/// returned.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::estimator::{Observation, solve_static_pose};
+/// use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+///
+/// let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+/// let target = Target::grid4x4();
+/// // Seen from any side, with no prior.
+/// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.5, -0.3, 2.0), Vector3::new(-0.02, 0.01, 0.7));
+/// let obs: Vec<Observation> = (0..16)
+///     .map(|i| Observation {
+///         t_s: 0.0,
+///         point_index: i,
+///         ideal_px: model.project(&truth, &target.points()[i].point_in_obj_m, 0.0).unwrap(),
+///     })
+///     .collect();
+/// let poses = solve_static_pose(&model, &target, &obs, 0.1).unwrap();
+/// assert!(!poses.is_ambiguous());
+/// let fit = poses.best();
+/// assert!(fit.converged && (fit.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-9);
+/// ```
+pub fn solve_static_pose(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    obs: &[Observation],
+    noise_px: f64,
+) -> Result<StaticPoses, InitError> {
+    let too_few = || InitError::TooFewPoints {
+        required: 3,
+        actual: distinct_points(obs),
+    };
+    if obs.len() < 3 {
+        return Err(too_few());
+    }
+    let points = target.points();
+    let n = obs.len();
+    // Model points centred on their centroid and scaled to unit RMS: every quantity of the hypotheses is of order one.
+    let centre_m = obs
+        .iter()
+        .map(|o| points[o.point_index].point_in_obj_m)
+        .sum::<Vector3<f64>>()
+        / n as f64;
+    let scale_m = (obs
+        .iter()
+        .map(|o| (points[o.point_index].point_in_obj_m - centre_m).norm_squared())
+        .sum::<f64>()
+        / n as f64)
+        .sqrt();
+    if !(scale_m > 0.0 && scale_m.is_finite()) {
+        return Err(InitError::Degenerate {
+            reason: "the observed points are all at one place",
+        });
+    }
+    let centred: Vec<Vector3<f64>> = obs
+        .iter()
+        .map(|o| (points[o.point_index].point_in_obj_m - centre_m) / scale_m)
+        .collect();
+    let image: Vec<Vector2<f64>> = obs
+        .iter()
+        .map(|o| model.intrinsics.normalized_from_pixel(&o.ideal_px))
+        .collect();
+    if !image.iter().all(|m| m.x.is_finite() && m.y.is_finite()) {
+        return Err(InitError::Degenerate {
+            reason: "an observation is not a finite pixel",
+        });
+    }
+    let bearings: Vec<Vector3<f64>> = image.iter().map(|m| Vector3::new(m.x, m.y, 1.0)).collect();
+    let cost = ObjectSpaceCost::new(&centred, &bearings).ok_or(InitError::Degenerate {
+        reason: "the observations' rays are parallel",
+    })?;
+    let mut triples = match Triples::new(obs, &image) {
+        Ok(triples) => triples,
+        Err(TriplesError::TooFewPoints) => return Err(too_few()),
+        Err(TriplesError::OnALine) => {
+            return Err(InitError::Degenerate {
+                reason: "the points are seen on one line (the target edge-on)",
+            });
+        }
+    };
+    // A normalised-image error of 1 is this many pixels.
+    let focal_px = model.intrinsics.fx_px.max(model.intrinsics.fy_px);
+    let noise_normalised = noise_px / focal_px;
+    let dof = (2 * n).saturating_sub(6).max(1) as f64;
+    let mut minima = Minima::default();
+    let mut stale = 0;
+    while let Some(triple) = triples.next(&image) {
+        let solutions = p3p::p3p(&triple.map(|k| bearings[k]), &triple.map(|k| centred[k]));
+        let previous_best = minima.best_cost();
+        for (r, _) in solutions.as_slice() {
+            let (r, e) = cost.minimise(r, 30);
+            minima.add(r, e);
+        }
+        let Some(best) = minima.best() else { continue };
+        // The object-space error that the noise alone explains: each coordinate's noise times the point's distance.
+        let t = cost.translation(&best.0);
+        let depth2 = centred
+            .iter()
+            .map(|x| (best.0 * x + t).norm_squared())
+            .sum::<f64>()
+            / n as f64;
+        let noise_cost = noise_normalised.powi(2) * depth2;
+        if best.1 <= noise_cost * (dof + 6.0 * (2.0 * dof).sqrt() + 10.0) {
+            break;
+        }
+        // No hypothesis fits the noise (a gross error in the data, or a user's model off the truth): more triples,
+        // until two in a row find nothing better.
+        let improved = previous_best.is_none_or(|p| best.1 < p * (1.0 - 1e-9));
+        stale = if improved { 0 } else { stale + 1 };
+        if stale >= 2 {
+            break;
+        }
+    }
+    let Some(best) = minima.best() else {
+        return Err(InitError::Degenerate {
+            reason: "no pose puts the points in front of the camera",
+        });
+    };
+    // Refine, in the image, every minimum that could rival the best there; the object-space error only ranks them.
+    let t = cost.translation(&best.0);
+    let depth2 = centred
+        .iter()
+        .map(|x| (best.0 * x + t).norm_squared())
+        .sum::<f64>()
+        / n as f64;
+    let margin = 4.0 * AMBIGUITY_CHI2;
+    let keep_below = best.1 * (1.0 + margin / dof) + margin * noise_normalised.powi(2) * depth2;
+    let mut fits: Vec<PoseFit> = Vec::with_capacity(MAX_STATIC_POSES + 1);
+    for &(r, _) in minima
+        .sorted()
+        .iter()
+        .filter(|(_, e)| *e <= keep_below)
+        .take(MAX_STATIC_POSES + 1)
+    {
+        let t_m = cost.translation(&r) * scale_m - r * centre_m;
+        let fit = refine_static_pose(model, target, obs, &MotionState::at_rest(r, t_m), 50);
+        let finite = fit.cost_px2.is_finite() && fit.state.is_finite();
+        let duplicate = fits.iter().any(|f| same_pose(&f.state, &fit.state));
+        if finite && !duplicate {
+            fits.push(fit);
+        }
+    }
+    fits.sort_by(|a, b| a.cost_px2.total_cmp(&b.cost_px2));
+    let Some(&best_fit) = fits.first() else {
+        return Err(InitError::Degenerate {
+            reason: "no pose puts the points in front of the camera",
+        });
+    };
+    // The rivals: minima whose cost is within the ambiguity bound of the best, against the larger of the noise and the
+    // residual the best leaves (a model off the truth widens both minima alike).
+    let variance_px2 = (noise_px * noise_px).max(if 2 * n > 6 {
+        best_fit.cost_px2 / dof
+    } else {
+        0.0
+    });
+    let mut poses = StaticPoses {
+        fits: [best_fit; MAX_STATIC_POSES],
+        len: 1,
+    };
+    for fit in &fits[1..] {
+        if poses.len < MAX_STATIC_POSES
+            && fit.cost_px2 - best_fit.cost_px2 <= AMBIGUITY_CHI2 * variance_px2
+        {
+            poses.fits[poses.len] = *fit;
+            poses.len += 1;
+        }
+    }
+    Ok(poses)
+}
+
+/// How many distinct points the observations hold.
+fn distinct_points(obs: &[Observation]) -> usize {
+    let mut seen: Vec<usize> = obs.iter().map(|o| o.point_index).collect();
+    seen.sort_unstable();
+    seen.dedup();
+    seen.len()
+}
+
+/// Two poses equal to well below any noise (the same minimum reached twice).
+fn same_pose(a: &MotionState, b: &MotionState) -> bool {
+    crate::so3::angle_between(&a.cam_r_obj, &b.cam_r_obj) < 1e-6
+        && (a.cam_t_obj_m - b.cam_t_obj_m).norm() <= 1e-6 * a.cam_t_obj_m.norm().max(1e-9)
+}
+
+/// The distinct minima of the object-space error found so far, with their costs.
+#[derive(Default)]
+struct Minima {
+    found: Vec<(Rotation3<f64>, f64)>,
+}
+
+impl Minima {
+    fn add(&mut self, r: Rotation3<f64>, cost: f64) {
+        if !cost.is_finite() {
+            return;
+        }
+        match self
+            .found
+            .iter_mut()
+            .find(|(q, _)| crate::so3::angle_between(q, &r) < 1e-6)
+        {
+            Some(same) if cost < same.1 => *same = (r, cost),
+            Some(_) => {}
+            None => self.found.push((r, cost)),
+        }
+    }
+
+    fn best(&self) -> Option<(Rotation3<f64>, f64)> {
+        self.found
+            .iter()
+            .copied()
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+    }
+
+    fn best_cost(&self) -> Option<f64> {
+        self.best().map(|(_, c)| c)
+    }
+
+    fn sorted(&self) -> Vec<(Rotation3<f64>, f64)> {
+        let mut v = self.found.clone();
+        v.sort_by(|a, b| a.1.total_cmp(&b.1));
+        v
+    }
+}
+
+/// The triples of observations the hypotheses come from, best conditioned first: the largest image triangle (the
+/// point farthest from the centroid, the point farthest from it, the point farthest from their line), then (made
+/// only if asked for) the other triples of a few well-spread points by decreasing image area. Triples of one point
+/// twice, or whose images are nearly on a line, are left out.
+struct Triples<'a> {
+    obs: &'a [Observation],
+    first: Option<[usize; 3]>,
+    /// The other triples, best last (taken by `pop`); made at the first request after the first triple.
+    others: Option<Vec<[usize; 3]>>,
+    largest_area: f64,
+}
+
+enum TriplesError {
+    TooFewPoints,
+    OnALine,
+}
+
+/// Twice the signed area of the image triangle `a, b, c`.
+fn signed_area(image: &[Vector2<f64>], a: usize, b: usize, c: usize) -> f64 {
+    let (e1, e2) = (image[b] - image[a], image[c] - image[a]);
+    e1.x * e2.y - e1.y * e2.x
+}
+
+/// The observation that maximises `score` among those of points not in `skip`.
+fn farthest(obs: &[Observation], score: impl Fn(usize) -> f64, skip: &[usize]) -> Option<usize> {
+    (0..obs.len())
+        .filter(|&k| {
+            skip.iter()
+                .all(|&s| obs[s].point_index != obs[k].point_index)
+        })
+        .max_by(|&a, &b| score(a).total_cmp(&score(b)))
+}
+
+impl<'a> Triples<'a> {
+    fn new(obs: &'a [Observation], image: &[Vector2<f64>]) -> Result<Self, TriplesError> {
+        let centroid = image.iter().sum::<Vector2<f64>>() / image.len() as f64;
+        let i0 = farthest(obs, |k| (image[k] - centroid).norm_squared(), &[])
+            .ok_or(TriplesError::TooFewPoints)?;
+        let i1 = farthest(obs, |k| (image[k] - image[i0]).norm_squared(), &[i0])
+            .ok_or(TriplesError::TooFewPoints)?;
+        let i2 = farthest(obs, |k| signed_area(image, i0, i1, k).abs(), &[i0, i1])
+            .ok_or(TriplesError::TooFewPoints)?;
+        let largest_area = signed_area(image, i0, i1, i2).abs();
+        // Nearly on a line: a triangle whose height is below a millionth of its base.
+        if largest_area.is_nan() || largest_area <= 1e-6 * (image[i1] - image[i0]).norm_squared() {
+            return Err(TriplesError::OnALine);
+        }
+        Ok(Self {
+            obs,
+            first: Some([i0, i1, i2]),
+            others: None,
+            largest_area,
+        })
+    }
+
+    fn next(&mut self, image: &[Vector2<f64>]) -> Option<[usize; 3]> {
+        if let Some(first) = self.first.take() {
+            return Some(first);
+        }
+        if self.others.is_none() {
+            self.others = Some(self.make_others(image));
+        }
+        self.others.as_mut()?.pop()
+    }
+
+    /// The triples of the well-spread points (the first triple's and the farthest from the chosen ones, in turn)
+    /// other than the first, best last.
+    fn make_others(&self, image: &[Vector2<f64>]) -> Vec<[usize; 3]> {
+        let mut spread: Vec<usize> = Vec::with_capacity(SPREAD_POINTS);
+        // Rebuild the first triple (taken by now) from the same rule.
+        let centroid = image.iter().sum::<Vector2<f64>>() / image.len() as f64;
+        let obs = self.obs;
+        for _ in 0..3 {
+            let next = match spread.len() {
+                0 => farthest(obs, |k| (image[k] - centroid).norm_squared(), &spread),
+                1 => farthest(
+                    obs,
+                    |k| (image[k] - image[spread[0]]).norm_squared(),
+                    &spread,
+                ),
+                _ => farthest(
+                    obs,
+                    |k| signed_area(image, spread[0], spread[1], k).abs(),
+                    &spread,
+                ),
+            };
+            spread.extend(next);
+        }
+        while spread.len() < SPREAD_POINTS {
+            let nearest_chosen = |k: usize| {
+                spread
+                    .iter()
+                    .map(|&s| (image[k] - image[s]).norm_squared())
+                    .fold(f64::INFINITY, f64::min)
+            };
+            match farthest(obs, nearest_chosen, &spread) {
+                Some(k) if nearest_chosen(k) > 0.0 => spread.push(k),
+                _ => break,
+            }
+        }
+        let mut others: Vec<([usize; 3], f64)> = Vec::new();
+        for a in 0..spread.len() {
+            for b in a + 1..spread.len() {
+                for c in b + 1..spread.len() {
+                    let area = signed_area(image, spread[a], spread[b], spread[c]).abs();
+                    if (a, b, c) != (0, 1, 2) && area > 1e-3 * self.largest_area {
+                        others.push(([spread[a], spread[b], spread[c]], area));
+                    }
+                }
+            }
+        }
+        // Largest last: `pop` takes it first.
+        others.sort_by(|x, y| x.1.total_cmp(&y.1));
+        let skip = others.len().saturating_sub(MAX_TRIPLES - 1);
+        others.into_iter().skip(skip).map(|(t, _)| t).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{CameraModel, TargetPoint};
+
+    fn bench() -> MotionState {
+        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
+            * Rotation3::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians());
+        MotionState::at_rest(r, Vector3::new(0.02, -0.01, 0.6))
+    }
+
+    fn observe(
+        model: &SpatioTemporalModel,
+        target: &Target,
+        state: &MotionState,
+    ) -> Vec<Observation> {
+        target
+            .points()
+            .iter()
+            .enumerate()
+            .map(|(i, p)| Observation {
+                t_s: 0.0,
+                point_index: i,
+                ideal_px: model.project(state, &p.point_in_obj_m, 0.0).unwrap(),
+            })
+            .collect()
+    }
+
+    fn assert_recovers(target: &Target, truth: &MotionState) {
+        let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+        let poses =
+            solve_static_pose(&model, target, &observe(&model, target, truth), 0.1).unwrap();
+        assert!(!poses.is_ambiguous(), "{:?}", poses.as_slice());
+        let fit = poses.best();
+        let dt = (fit.state.cam_t_obj_m - truth.cam_t_obj_m).norm();
+        let dr = crate::so3::angle_between(&fit.state.cam_r_obj, &truth.cam_r_obj);
+        assert!(dt < 1e-9 && dr < 1e-9, "dt {dt} m, dr {dr} rad");
+        assert!(fit.residual_rms_px < 1e-8);
+    }
+
+    #[test]
+    fn planar_grid_from_scratch_to_1e9() {
+        let target = Target::grid4x4();
+        assert_recovers(&target, &bench());
+        // Any in-plane rotation, and a strong tilt.
+        for angle_deg in [0.0, 90.0, 180.0, 270.0, 33.0] {
+            let mut s = bench();
+            s.cam_r_obj *=
+                Rotation3::from_axis_angle(&Vector3::z_axis(), f64::to_radians(angle_deg));
+            assert_recovers(&target, &s);
+        }
+        let mut s = bench();
+        s.cam_r_obj = Rotation3::from_euler_angles(0.9, -0.4, 2.0);
+        assert_recovers(&target, &s);
+    }
+
+    #[test]
+    fn non_planar_target_from_scratch() {
+        let points = (0..8)
+            .map(|i| TargetPoint {
+                id: i,
+                point_in_obj_m: Vector3::new(
+                    0.03 * ((i & 1) as f64 - 0.5),
+                    0.03 * (((i >> 1) & 1) as f64 - 0.5),
+                    0.02 * (((i >> 2) & 1) as f64) + 0.001 * i as f64,
+                ),
+                diameter_m: None,
+            })
+            .collect();
+        let target = Target::new(points).unwrap();
+        assert_recovers(&target, &bench());
+    }
+
+    #[test]
+    fn too_few_points() {
+        let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+        let target = Target::grid4x4();
+        let obs = observe(&model, &target, &bench());
+        assert!(matches!(
+            solve_static_pose(&model, &target, &obs[..2], 0.1),
+            Err(InitError::TooFewPoints {
+                required: 3,
+                actual: 2
+            })
+        ));
+    }
+}
