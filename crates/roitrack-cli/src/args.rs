@@ -356,11 +356,21 @@ pub struct TargetArgs {
 impl TargetArgs {
     /// Reads the target through the library's reader, in the unit given (or checked for a likely unit mistake).
     pub fn read(&self) -> Result<roitrack::Target> {
-        Ok(roitrack::formats::read_target_csv_in(
-            &self.target,
-            self.target_units.map(Into::into),
-        )?)
+        read_target(&self.target, self.target_units)
     }
+}
+
+/// Reads a target file (in `units`, or checked for a likely unit mistake) and notes on the standard error what its
+/// pose's ambiguity costs, if it has one (3 points, a symmetric layout).
+pub fn read_target(
+    path: &std::path::Path,
+    units: Option<LengthUnitArg>,
+) -> Result<roitrack::Target> {
+    let target = roitrack::formats::read_target_csv_in(path, units.map(Into::into))?;
+    if let Some(ambiguity) = target.ambiguity() {
+        eprintln!("roitrack: note: {}: {ambiguity}", path.display());
+    }
+    Ok(target)
 }
 
 /// The camera file a command was given, if any (some sources carry their own camera).
@@ -453,10 +463,7 @@ impl RigArgs {
             scenario = scenario.with_camera(roitrack::formats::read_camera_file(path, &options)?);
         }
         if let Some(path) = &self.target {
-            scenario = scenario.with_target(roitrack::formats::read_target_csv_in(
-                path,
-                self.target_units.map(Into::into),
-            )?);
+            scenario = scenario.with_target(read_target(path, self.target_units)?);
         }
         let positive = |name: &str, value: f64| {
             if value.is_finite() && value > 0.0 {

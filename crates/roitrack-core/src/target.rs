@@ -24,6 +24,14 @@ pub enum TargetError {
         "the target points are collinear (spread across the line {spread_m:.3e} m): the pose about that line is unobservable"
     )]
     Collinear { spread_m: f64 },
+    #[error(
+        "points {first_id} and {second_id} are at one place ({distance_m:.1e} m apart): a blob cannot be two points"
+    )]
+    Coincident {
+        first_id: u32,
+        second_id: u32,
+        distance_m: f64,
+    },
     #[error("circle grid: {0}")]
     CircleGrid(CircleGridError),
 }
@@ -119,7 +127,8 @@ pub struct TargetPoint {
     pub diameter_m: Option<f64>,
 }
 
-/// A validated rigid target: at least 4 points, unique ids, finite coordinates, not all on one line.
+/// A validated rigid target: at least 3 points, unique ids, finite coordinates, no two at one place, not all on one
+/// line.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Target {
     points: Vec<TargetPoint>,
@@ -138,11 +147,83 @@ pub struct TargetPlane {
     pub points_in_plane_m: Vec<nalgebra::Vector2<f64>>,
 }
 
-/// Minimum number of points of a target (a pose needs 3 non-collinear points; 4 make it unique for planar targets).
-pub const MIN_TARGET_POINTS: usize = 4;
+/// Minimum number of points of a target: 3 points not on one line fix a pose up to at most four (see
+/// [`Target::ambiguity`]); a fourth makes it unique in almost every view.
+pub const MIN_TARGET_POINTS: usize = 3;
 
-/// Points spread less than this across their best-fit line are collinear (m).
+/// Points spread less than this across their best-fit line are collinear, and two points nearer than this are at one
+/// place (m): a micrometre, far below any printed or machined target's tolerance.
 const COLLINEAR_TOLERANCE_M: f64 = 1e-6;
+
+/// Two points nearer than [`COLLINEAR_TOLERANCE_M`] (their indices and distance), if any: each point is compared
+/// with those in its own and the neighbouring cells of a grid of that pitch, so a million-point grid takes
+/// milliseconds.
+fn coincident_pair(points: &[TargetPoint]) -> Option<(usize, usize, f64)> {
+    let cell = |p: &Vector3<f64>| p.map(|x| (x / COLLINEAR_TOLERANCE_M).floor() as i64);
+    let mut cells: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::with_capacity(points.len());
+    for (i, p) in points.iter().enumerate() {
+        let c = cell(&p.point_in_obj_m);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    let Some(others) = cells.get(&(c.x + dx, c.y + dy, c.z + dz)) else {
+                        continue;
+                    };
+                    for &j in others {
+                        let d = (points[j].point_in_obj_m - p.point_in_obj_m).norm();
+                        if d < COLLINEAR_TOLERANCE_M {
+                            return Some((j, i, d));
+                        }
+                    }
+                }
+            }
+        }
+        cells.entry((c.x, c.y, c.z)).or_default().push(i);
+    }
+    None
+}
+
+/// Why a target's pose can be ambiguous from a view of its points ([`Target::ambiguity`]), and what it costs.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TargetAmbiguity {
+    /// Three points: up to four poses put them on the same three image points, in every view.
+    ThreePoints,
+    /// Rigid motions that take the target onto itself (points onto points of the same diameter), besides the
+    /// identity: from unlabelled blobs the labelling, and so the pose, is known only up to these.
+    Symmetric { motions: Vec<Symmetry> },
+}
+
+impl std::fmt::Display for TargetAmbiguity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::ThreePoints => write!(
+                f,
+                "a target of 3 points: up to four poses project them onto the same image points in every view, so \
+                 no single view decides its pose; a track starts only when the motion over the window singles one \
+                 out, and detection reports every pose that fits (a fourth point makes the pose unique in almost \
+                 every view)"
+            ),
+            Self::Symmetric { motions } => write!(
+                f,
+                "a symmetric target: {} rigid motion{} other than the identity take{} it onto itself, so from \
+                 unlabelled blobs its pose is known only up to {} twins; detection returns one canonical labelling \
+                 flagged ambiguous and a track keeps the labelling it started with (measurements with ids are \
+                 not affected; a point of another size or off the pattern breaks the symmetry)",
+                motions.len(),
+                if motions.len() == 1 { "" } else { "s" },
+                if motions.len() == 1 { "s" } else { "" },
+                motions.len() + 1,
+            ),
+        }
+    }
+}
+
+/// A rigid motion `x -> obj_r * x + obj_t_m` of the object frame that takes the target's points onto its points.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Symmetry {
+    pub obj_r: nalgebra::Rotation3<f64>,
+    pub obj_t_m: Vector3<f64>,
+}
 
 impl Target {
     pub fn new(points: Vec<TargetPoint>) -> Result<Self, TargetError> {
@@ -182,6 +263,13 @@ impl Target {
             if index_of_id.insert(p.id, index).is_some() {
                 return Err(TargetError::DuplicateId { id: p.id });
             }
+        }
+        if let Some((first, second, distance_m)) = coincident_pair(&points) {
+            return Err(TargetError::Coincident {
+                first_id: points[first].id,
+                second_id: points[second].id,
+                distance_m,
+            });
         }
         let mut target = Self {
             points,
@@ -363,6 +451,160 @@ impl Target {
     pub fn is_planar(&self) -> bool {
         self.principal_spreads_m()[2] < COLLINEAR_TOLERANCE_M
     }
+
+    /// Why the pose of this target can be ambiguous, if it can: 3 points, or a symmetric layout ([`Self::symmetries`]).
+    ///
+    /// ```
+    /// use roitrack_core::Target;
+    /// use roitrack_core::target::TargetAmbiguity;
+    ///
+    /// // grid4x4's larger key blob breaks the square's symmetry.
+    /// assert_eq!(Target::grid4x4().ambiguity(), None);
+    /// ```
+    pub fn ambiguity(&self) -> Option<TargetAmbiguity> {
+        if self.points.len() == 3 {
+            return Some(TargetAmbiguity::ThreePoints);
+        }
+        let motions = self.symmetries(SYMMETRY_TOLERANCE);
+        (!motions.is_empty()).then_some(TargetAmbiguity::Symmetric { motions })
+    }
+
+    /// The rigid motions other than the identity that take every point within `relative_tolerance` of the target's
+    /// size onto a point of the same diameter (to a thousandth). A symmetry keeps the centroid and each point's
+    /// distance from it, so the motions are found from two points (the farthest from the centroid and the one least
+    /// in line with it) and every pair of points that could be their images, each motion then checked on all points.
+    pub fn symmetries(&self, relative_tolerance: f64) -> Vec<Symmetry> {
+        let (centre, _) = self.centroid_and_scatter();
+        let size = self.principal_spreads_m()[0];
+        let tolerance = relative_tolerance * size;
+        let offsets: Vec<Vector3<f64>> = self
+            .points
+            .iter()
+            .map(|p| p.point_in_obj_m - centre)
+            .collect();
+        let same_diameter =
+            |i: usize, j: usize| match (self.points[i].diameter_m, self.points[j].diameter_m) {
+                (Some(a), Some(b)) => (a - b).abs() <= 1e-3 * a.max(b),
+                (None, None) => true,
+                _ => false,
+            };
+        let Some(a) =
+            (0..offsets.len()).max_by(|&i, &j| offsets[i].norm().total_cmp(&offsets[j].norm()))
+        else {
+            return Vec::new();
+        };
+        let Some(b) = (0..offsets.len()).max_by(|&i, &j| {
+            offsets[i]
+                .cross(&offsets[a])
+                .norm()
+                .total_cmp(&offsets[j].cross(&offsets[a]).norm())
+        }) else {
+            return Vec::new();
+        };
+        let frame = |u: &Vector3<f64>, v: &Vector3<f64>| -> Option<Matrix3<f64>> {
+            let e1 = u.try_normalize(0.0)?;
+            let e2 = (v - e1 * e1.dot(v)).try_normalize(0.0)?;
+            Some(Matrix3::from_columns(&[e1, e2, e1.cross(&e2)]))
+        };
+        let Some(from) = frame(&offsets[a], &offsets[b]) else {
+            return Vec::new();
+        };
+        let lookup = PointLookup::new(&offsets, tolerance.max(COLLINEAR_TOLERANCE_M));
+        let mut motions: Vec<Symmetry> = Vec::new();
+        for a2 in 0..offsets.len() {
+            if (offsets[a2].norm() - offsets[a].norm()).abs() > tolerance || !same_diameter(a, a2) {
+                continue;
+            }
+            for b2 in 0..offsets.len() {
+                if b2 == a2
+                    || (offsets[b2].norm() - offsets[b].norm()).abs() > tolerance
+                    || ((offsets[b2] - offsets[a2]).norm() - (offsets[b] - offsets[a]).norm()).abs()
+                        > tolerance
+                    || !same_diameter(b, b2)
+                {
+                    continue;
+                }
+                let Some(to) = frame(&offsets[a2], &offsets[b2]) else {
+                    continue;
+                };
+                let r = nalgebra::Rotation3::from_matrix_unchecked(to * from.transpose());
+                // The identity (nalgebra's angle loses half the digits near zero: compare the matrix).
+                if (r.matrix() - Matrix3::identity()).amax() < 1e-9 {
+                    continue;
+                }
+                let maps = (0..offsets.len()).all(|i| {
+                    lookup
+                        .near(&(r * offsets[i]))
+                        .is_some_and(|j| same_diameter(i, j))
+                });
+                if maps
+                    && motions
+                        .iter()
+                        .all(|m| (m.obj_r.matrix() - r.matrix()).amax() > 1e-6)
+                {
+                    motions.push(Symmetry {
+                        obj_r: r,
+                        obj_t_m: centre - r * centre,
+                    });
+                }
+            }
+        }
+        motions
+    }
+}
+
+/// How far (a fraction of the target's size) a moved point may be from a point for [`Target::ambiguity`] to count the
+/// motion as a symmetry: a target drawn to spec and made to a few tenths of a millimetre in 100 mm is as symmetric
+/// for identification as its drawing.
+pub const SYMMETRY_TOLERANCE: f64 = 0.005;
+
+/// The point nearest a position, within a tolerance, by a hash grid of that pitch.
+struct PointLookup<'a> {
+    points: &'a [Vector3<f64>],
+    pitch: f64,
+    cells: HashMap<(i64, i64, i64), Vec<usize>>,
+}
+
+impl<'a> PointLookup<'a> {
+    fn new(points: &'a [Vector3<f64>], pitch: f64) -> Self {
+        let mut cells: HashMap<(i64, i64, i64), Vec<usize>> = HashMap::with_capacity(points.len());
+        for (i, p) in points.iter().enumerate() {
+            cells.entry(Self::cell_of(p, pitch)).or_default().push(i);
+        }
+        Self {
+            points,
+            pitch,
+            cells,
+        }
+    }
+
+    fn cell_of(p: &Vector3<f64>, pitch: f64) -> (i64, i64, i64) {
+        let c = p.map(|x| (x / pitch).floor() as i64);
+        (c.x, c.y, c.z)
+    }
+
+    fn near(&self, p: &Vector3<f64>) -> Option<usize> {
+        let (x, y, z) = Self::cell_of(p, self.pitch);
+        let mut best: Option<(usize, f64)> = None;
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    for &i in self
+                        .cells
+                        .get(&(x + dx, y + dy, z + dz))
+                        .into_iter()
+                        .flatten()
+                    {
+                        let d = (self.points[i] - p).norm();
+                        if d <= self.pitch && best.is_none_or(|(_, b)| d < b) {
+                            best = Some((i, d));
+                        }
+                    }
+                }
+            }
+        }
+        best.map(|(i, _)| i)
+    }
 }
 
 #[cfg(test)]
@@ -524,14 +766,14 @@ mod tests {
             err(grid(u32::MAX, u32::MAX, GridLayout::Hexagonal)),
             TargetError::CircleGrid(CircleGridError::TooManyPoints { .. })
         ));
-        // Fewer than 4 circles, and a single line of them.
+        // Fewer than 3 circles, and a single line of them.
         assert!(matches!(
-            err(grid(1, 3, GridLayout::Square)),
-            TargetError::TooFewPoints { actual: 3, .. }
+            err(grid(1, 2, GridLayout::Square)),
+            TargetError::TooFewPoints { actual: 2, .. }
         ));
         assert!(matches!(
-            err(grid(2, 3, GridLayout::Hexagonal)),
-            TargetError::TooFewPoints { actual: 3, .. }
+            err(grid(2, 2, GridLayout::Hexagonal)),
+            TargetError::TooFewPoints { actual: 2, .. }
         ));
         assert!(matches!(
             err(grid(1, 10, GridLayout::Square)),
@@ -549,10 +791,10 @@ mod tests {
             4
         );
         assert_eq!(
-            Target::circle_grid(&grid(3, 3, GridLayout::Hexagonal))
+            Target::circle_grid(&grid(2, 3, GridLayout::Hexagonal))
                 .unwrap()
                 .len(),
-            5
+            3
         );
     }
 
@@ -564,8 +806,22 @@ mod tests {
             point(2, 0., 1., 0.),
         ];
         assert!(matches!(
-            Target::new(three.clone()),
-            Err(TargetError::TooFewPoints { actual: 3, .. })
+            Target::new(three[..2].to_vec()),
+            Err(TargetError::TooFewPoints { actual: 2, .. })
+        ));
+        assert_eq!(
+            Target::new(three.clone()).unwrap().ambiguity(),
+            Some(TargetAmbiguity::ThreePoints)
+        );
+        let mut twice = three.clone();
+        twice.push(point(7, 1., 0., 4e-7));
+        assert!(matches!(
+            Target::new(twice),
+            Err(TargetError::Coincident {
+                first_id: 1,
+                second_id: 7,
+                ..
+            })
         ));
         let mut dup = three.clone();
         dup.push(point(1, 1., 1., 0.));
@@ -592,5 +848,57 @@ mod tests {
         let t = Target::new(ok).unwrap();
         assert!(!t.is_planar());
         assert!(t.key_point().is_none());
+        assert_eq!(t.ambiguity(), None);
+    }
+
+    #[test]
+    fn symmetries_of_grids_and_bodies() {
+        let count = |t: &Target| t.symmetries(SYMMETRY_TOLERANCE).len();
+        // A square grid: 3 turns in its plane and 4 half turns about in-plane axes (its back).
+        assert_eq!(
+            count(&Target::circle_grid(&grid(4, 4, GridLayout::Square)).unwrap()),
+            7
+        );
+        // A rectangle: a half turn in its plane and two about its axes.
+        assert_eq!(
+            count(&Target::circle_grid(&grid(3, 4, GridLayout::Square)).unwrap()),
+            3
+        );
+        // The key blob of grid4x4 leaves only the flip about its diagonal through the key blob.
+        assert_eq!(count(&Target::grid4x4()), 1);
+        // A cube's corners: the 23 rotations of the cube.
+        let cube: Vec<TargetPoint> = (0..8)
+            .map(|i| {
+                point(
+                    i,
+                    (i & 1) as f64 * 0.05,
+                    ((i >> 1) & 1) as f64 * 0.05,
+                    ((i >> 2) & 1) as f64 * 0.05,
+                )
+            })
+            .collect();
+        assert_eq!(count(&Target::new(cube.clone()).unwrap()), 23);
+        // One corner raised: none (a body with no symmetry).
+        let mut raised = cube;
+        raised[5].point_in_obj_m.z += 0.01;
+        let target = Target::new(raised).unwrap();
+        assert_eq!(count(&target), 0);
+        assert_eq!(target.ambiguity(), None);
+        // Every symmetry found takes every point onto a point.
+        let hex = Target::circle_grid(&grid(5, 6, GridLayout::Hexagonal)).unwrap();
+        for m in hex.symmetries(SYMMETRY_TOLERANCE) {
+            for p in hex.points() {
+                let moved = m.obj_r * p.point_in_obj_m + m.obj_t_m;
+                assert!(
+                    hex.points()
+                        .iter()
+                        .any(|q| (q.point_in_obj_m - moved).norm() < 1e-9)
+                );
+            }
+        }
+        assert!(matches!(
+            hex.ambiguity(),
+            Some(TargetAmbiguity::Symmetric { .. })
+        ));
     }
 }

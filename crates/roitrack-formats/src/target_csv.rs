@@ -84,6 +84,9 @@ fn target_error(error: TargetError, path: &Path, line_of_id: &HashMap<u32, u64>)
         TargetError::DuplicateId { id } => FormatError::new(path, message)
             .with_line(line_of_id.get(&id).copied())
             .with_field("id"),
+        TargetError::Coincident { second_id, .. } => FormatError::new(path, message)
+            .with_line(line_of_id.get(&second_id).copied())
+            .with_field("x"),
         TargetError::TooFewPoints { .. }
         | TargetError::Collinear { .. }
         | TargetError::CircleGrid(_) => FormatError::new(path, message),
@@ -209,9 +212,14 @@ mod tests {
 
     #[test]
     fn whole_file_errors_name_the_file() {
-        let e = parse_err("id,x,y,z\n0,0,0,0\n1,0.02,0,0\n2,0,0.02,0\n");
+        let e = parse_err("id,x,y,z\n0,0,0,0\n1,0.02,0,0\n");
         assert!(e.starts_with("target.csv: "), "{e}");
-        assert!(e.contains("at least 4 points, got 3"), "{e}");
+        assert!(e.contains("at least 3 points, got 2"), "{e}");
+        let e = parse_err("id,x,y,z\n0,0,0,0\n1,0.02,0,0\n2,0,0.02,0\n3,0.02,0,0\n");
+        assert!(
+            e.starts_with("target.csv:5: field 'x': points 1 and 3 are at one place"),
+            "{e}"
+        );
         let e = parse_err(
             "id,x,y,z\n0,0,0,0\n1,0.01,0.01,0.01\n2,0.02,0.02,0.02\n3,-0.01,-0.01,-0.01\n",
         );

@@ -780,9 +780,9 @@ fn track<'py>(
     let report = report.map_err(|e| RoitrackError::new_err(format!("tracking failed: {e}")))?;
     if report.estimates.total() == 0 {
         return Err(RoitrackError::new_err(format!(
-            "no estimate from {} measurements: the tracker could not initialise (it needs two cycles over every \
-             target point with a consistent static pose)",
-            report.measurements
+            "no estimate from {} measurements: {}",
+            report.measurements,
+            report.why_no_start()
         )));
     }
     columns.into_dict(py)

@@ -223,7 +223,7 @@ pub fn run(args: &LiveArgs) -> Result<()> {
                 .context("--camera is required with --device")?,
             &Default::default(),
         )?;
-        let target = roitrack::formats::read_target_csv_in(
+        let target = crate::args::read_target(
             args.target
                 .as_ref()
                 .context("--target is required with --device")?,

@@ -240,9 +240,9 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     } = report;
     if estimates.total() == 0 {
         bail!(
-            "{}: no estimate from {measurements} measurements: the tracker could not initialise (it needs two cycles \
-             over every target point with a consistent static pose)",
-            path.display()
+            "{}: no estimate from {measurements} measurements: {}",
+            path.display(),
+            report.why_no_start()
         );
     }
     writer.finish()?;

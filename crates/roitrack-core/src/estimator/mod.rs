@@ -539,6 +539,16 @@ pub struct EstimatorReport {
 }
 
 impl EstimatorReport {
+    /// Why no track started, for a run that gave no estimate: the reason of the newest failed start, or the wait for
+    /// two cycles over every point when no start was tried.
+    pub fn why_no_start(&self) -> String {
+        match self.start_failure {
+            Some(failure) => format!("the tracker could not initialise: {failure}"),
+            None => "the tracker could not initialise: it needs two cycles over every target point"
+                .to_string(),
+        }
+    }
+
     fn count(&mut self, status: TrackStatus) {
         self.estimates.add(status);
     }
