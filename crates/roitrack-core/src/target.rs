@@ -452,20 +452,34 @@ impl Target {
         self.principal_spreads_m()[2] < COLLINEAR_TOLERANCE_M
     }
 
-    /// Why the pose of this target can be ambiguous, if it can: 3 points, or a symmetric layout ([`Self::symmetries`]).
+    /// Why the pose of this target can be ambiguous, if it can: 3 points, or a symmetric layout ([`Self::symmetries`];
+    /// for a planar target, those that keep its front facing the same way).
     ///
     /// ```
     /// use roitrack_core::Target;
-    /// use roitrack_core::target::TargetAmbiguity;
+    /// use roitrack_core::target::{CircleGrid, GridLayout, TargetAmbiguity};
     ///
     /// // grid4x4's larger key blob breaks the square's symmetry.
     /// assert_eq!(Target::grid4x4().ambiguity(), None);
+    /// // A plain square grid looks the same after each quarter turn.
+    /// let spec = CircleGrid { rows: 4, cols: 4, spacing_m: 0.02, diameter_m: 0.006, layout: GridLayout::Square };
+    /// match Target::circle_grid(&spec)?.ambiguity() {
+    ///     Some(TargetAmbiguity::Symmetric { motions }) => assert_eq!(motions.len(), 3),
+    ///     other => panic!("{other:?}"),
+    /// }
+    /// # Ok::<(), roitrack_core::TargetError>(())
     /// ```
     pub fn ambiguity(&self) -> Option<TargetAmbiguity> {
         if self.points.len() == 3 {
             return Some(TargetAmbiguity::ThreePoints);
         }
-        let motions = self.symmetries(SYMMETRY_TOLERANCE);
+        let mut motions = self.symmetries(SYMMETRY_TOLERANCE);
+        // A planar target's half turns about an axis in its plane show its back, which identification ranks below its
+        // front (a printed side faces the camera): not an ambiguity.
+        if let Some(plane) = &self.plane {
+            let normal: Vector3<f64> = plane.obj_r_plane.column(2).into_owned();
+            motions.retain(|m| (m.obj_r * normal).dot(&normal) > 0.0);
+        }
         (!motions.is_empty()).then_some(TargetAmbiguity::Symmetric { motions })
     }
 
