@@ -910,9 +910,11 @@ mod tests {
                 );
             }
         }
-        assert!(matches!(
-            hex.ambiguity(),
-            Some(TargetAmbiguity::Symmetric { .. })
-        ));
+        // 5 x 6 hexagonal: its half turn in the plane takes even positions to odd ones; only flips remain.
+        assert_eq!(hex.ambiguity(), None);
+        let odd = Target::circle_grid(&grid(5, 5, GridLayout::Hexagonal)).unwrap();
+        assert!(
+            matches!(odd.ambiguity(), Some(TargetAmbiguity::Symmetric { motions }) if motions.len() == 1)
+        );
     }
 }
