@@ -198,10 +198,10 @@ impl std::fmt::Display for TargetAmbiguity {
         match self {
             Self::ThreePoints => write!(
                 f,
-                "a target of 3 points: up to four poses project them onto the same image points in every view, so \
-                 no single view decides its pose; a track starts only when the motion over the window singles one \
-                 out, and detection reports every pose that fits (a fourth point makes the pose unique in almost \
-                 every view)"
+                "a target of 3 points: up to four poses project them onto the same image points in every view, and \
+                 any three blobs are its image in some pose; roitrack gives every pose that fits a view but starts \
+                 no track and identifies no blobs from it (a fourth point makes the pose unique in almost every \
+                 view)"
             ),
             Self::Symmetric { motions } => write!(
                 f,
@@ -426,15 +426,30 @@ impl Target {
 
     /// Centroid and principal axes (columns, largest spread first, the third their cross product).
     fn principal_frame(&self) -> (Vector3<f64>, Matrix3<f64>) {
-        let (centre, scatter) = self.centroid_and_scatter();
-        let eig = scatter.symmetric_eigen();
-        let mut order = [0usize, 1, 2];
-        order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
-        let e1 = eig.eigenvectors.column(order[0]).into_owned();
-        let e2 = eig.eigenvectors.column(order[1]).into_owned();
-        (centre, Matrix3::from_columns(&[e1, e2, e1.cross(&e2)]))
+        let points: Vec<Vector3<f64>> = self.points.iter().map(|p| p.point_in_obj_m).collect();
+        principal_frame_of(&points).expect("a target has points")
     }
+}
 
+/// Centroid and principal axes of points (columns, largest spread first, the third their cross product); `None` for
+/// no points.
+fn principal_frame_of(points: &[Vector3<f64>]) -> Option<(Vector3<f64>, Matrix3<f64>)> {
+    if points.is_empty() {
+        return None;
+    }
+    let centre = points.iter().sum::<Vector3<f64>>() / points.len() as f64;
+    let scatter = points.iter().fold(Matrix3::zeros(), |s, p| {
+        s + (p - centre) * (p - centre).transpose()
+    });
+    let eig = scatter.symmetric_eigen();
+    let mut order = [0usize, 1, 2];
+    order.sort_by(|&a, &b| eig.eigenvalues[b].total_cmp(&eig.eigenvalues[a]));
+    let e1 = eig.eigenvectors.column(order[0]).into_owned();
+    let e2 = eig.eigenvectors.column(order[1]).into_owned();
+    Some((centre, Matrix3::from_columns(&[e1, e2, e1.cross(&e2)])))
+}
+
+impl Target {
     /// Standard deviations of the points along their three principal axes, largest first (m).
     pub fn principal_spreads_m(&self) -> [f64; 3] {
         let (_, scatter) = self.centroid_and_scatter();
@@ -445,6 +460,72 @@ impl Target {
             .collect();
         eig.sort_by(|a, b| b.total_cmp(a));
         [eig[0], eig[1], eig[2]]
+    }
+
+    /// The plane most points lie on, for a target that is planar or nearly so (pins standing off a plate, a drawing's
+    /// flat layout made with some depth): the points' principal plane, fitted again without the points farther from
+    /// it than twice the median distance (a post standing off a plate must not tilt it), with every point projected
+    /// into it. For an exactly planar target it is [`Self::plane`]. Its normal is the third column of
+    /// `obj_r_plane`; how far each point lies off it is `(point - centre) · normal`.
+    ///
+    /// ```
+    /// use nalgebra::Vector3;
+    /// use roitrack_core::{Target, TargetPoint};
+    ///
+    /// // A 3 x 4 grid of 25 mm pitch with one point on a 10 mm post.
+    /// let points: Vec<TargetPoint> = (0..12u32)
+    ///     .map(|id| TargetPoint {
+    ///         id,
+    ///         point_in_obj_m: Vector3::new(0.025 * f64::from(id % 4), 0.025 * f64::from(id / 4), if id == 6 { 0.01 } else { 0.0 }),
+    ///         diameter_m: None,
+    ///     })
+    ///     .collect();
+    /// let target = Target::new(points)?;
+    /// let plane = target.best_plane();
+    /// // The plate's plane, not one tilted towards the post: every in-plane position is the drawing's.
+    /// let normal = plane.obj_r_plane.column(2);
+    /// assert!(normal.z.abs() > 1.0 - 1e-12);
+    /// # Ok::<(), roitrack_core::TargetError>(())
+    /// ```
+    pub fn best_plane(&self) -> TargetPlane {
+        if let Some(plane) = &self.plane {
+            return plane.clone();
+        }
+        let (centre, frame) = self.principal_frame();
+        let normal: Vector3<f64> = frame.column(2).into_owned();
+        let distances: Vec<f64> = self
+            .points
+            .iter()
+            .map(|p| (p.point_in_obj_m - centre).dot(&normal).abs())
+            .collect();
+        let mut sorted = distances.clone();
+        sorted.sort_by(f64::total_cmp);
+        let limit = 2.0 * sorted[sorted.len() / 2];
+        let inliers: Vec<Vector3<f64>> = self
+            .points
+            .iter()
+            .zip(&distances)
+            .filter(|(_, d)| **d <= limit)
+            .map(|(p, _)| p.point_in_obj_m)
+            .collect();
+        let (centre_m, obj_r_plane) = if inliers.len() >= 3 && inliers.len() < self.points.len() {
+            principal_frame_of(&inliers).unwrap_or((centre, frame))
+        } else {
+            (centre, frame)
+        };
+        let points_in_plane_m = self
+            .points
+            .iter()
+            .map(|p| {
+                let q = obj_r_plane.transpose() * (p.point_in_obj_m - centre_m);
+                nalgebra::Vector2::new(q.x, q.y)
+            })
+            .collect();
+        TargetPlane {
+            centre_m,
+            obj_r_plane,
+            points_in_plane_m,
+        }
     }
 
     /// Whether all points lie on one plane (to 1e-6 m).

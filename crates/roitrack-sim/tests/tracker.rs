@@ -156,7 +156,9 @@ fn estimate_equals_truth_on_noiseless_constant_twist_motion() {
             continue; // Neither models the motion exactly: covered by the accuracy evaluation instead.
         }
         let estimates = run(&measurements, config);
-        assert!(estimates.len() > 50);
+        // The start waits until the view tells the grid from its mirror twin beyond what a target drawn within a
+        // quarter millimetre could fake (about ten cycles here), then every estimate must be exact.
+        assert!(estimates.len() >= 40, "{name}: {} estimates", estimates.len());
         for e in &estimates {
             let truth = start.predicted(e.t_ref_s);
             let dp = position_error_m(e, &truth);
@@ -727,7 +729,9 @@ fn a_centroid_file_of_frames_is_tracked_as_closely_as_frame_by_frame_and_more_sm
 #[test]
 fn a_centroid_file_of_frames_gives_an_estimate_per_frame() {
     // Four blobs a frame and the default control period (an estimate every 10 measurements): one estimate per
-    // frame all the same, at the frame's time, from the second frame on (the initial fit takes two cycles).
+    // frame all the same, at the frame's time, from the start on. The start takes two frames at least, and a few
+    // more here: four dots' mirror tilt fits them nearly as well, so the start waits for three frames to measure
+    // the noise and for the frame before to agree.
     let (_, target, measurements) = four_dot_frames(ScenarioKind::Orthoglide, 1);
     let frames: Vec<f64> = measurements.chunks(4).map(|f| f[0].t_s).collect();
     let (estimates, _) = track_all(
@@ -738,7 +742,9 @@ fn a_centroid_file_of_frames_gives_an_estimate_per_frame() {
     )
     .unwrap();
     let times: Vec<f64> = estimates.iter().map(|e| e.t_ref_s).collect();
-    assert_eq!(times, frames[1..]);
+    let first = frames.iter().position(|&t| t == times[0]).unwrap();
+    assert!((1..=6).contains(&first), "started at frame {first}");
+    assert_eq!(times, frames[first..]);
     // Measurements one at a time keep the control period.
     let one_at_a_time: Vec<Measurement> = measurements
         .iter()

@@ -51,6 +51,7 @@
 pub mod batch;
 mod calibration;
 pub mod kalman;
+mod model_error;
 mod options;
 mod point_noise;
 mod problem;
@@ -65,14 +66,15 @@ use thiserror::Error;
 use crate::{CameraModel, Measurement, MotionState, Target};
 pub use batch::BatchEstimator;
 pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12, MotionModel, NoiseSample};
+pub use model_error::{MODEL_UNCERTAINTY, ModelEffect, ModelUncertainty};
 pub use options::{
     Adaptation, EstimatorKind, MotionModelKind, OptionConflict, TrackerOptions, UnknownName,
 };
 pub use problem::{Observation, RobustLoss, WindowProblem};
 pub use static_baseline::StaticEstimator;
 pub use static_pose::{
-    AMBIGUITY_CHI2, InitError, MAX_STATIC_POSES, PoseFit, StaticPoses, refine_static_pose,
-    solve_static_pose,
+    AMBIGUITY_CHI2, InitError, MAX_STATIC_POSES, MODEL_SPREAD_SIGMAS, PixelNoise, PoseFit,
+    StaticPoses, is_rival, refine_static_pose, solve_static_pose,
 };
 pub use vvs::{VvsEstimator, VvsSettings};
 pub use window::WindowMode;
@@ -516,6 +518,12 @@ pub enum StartFailure {
          target far away whose tilt cannot be told from its mirror tilt)"
     )]
     Ambiguous { poses: usize },
+    /// A pose decided with little margin over a rival was not decided the same way by the cycle before: the track
+    /// waits for views that agree.
+    #[error(
+        "a pose that fits only a little better than a second one was not confirmed by the cycle before"
+    )]
+    Unconfirmed,
     /// The 12-dof fit of the first cycles left residuals above the noise (a wrong correspondence, or bad data).
     #[error("the first cycles fit no motion: median residual {median_px:.2} px")]
     Residual { median_px: f64 },

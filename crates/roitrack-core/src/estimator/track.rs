@@ -12,11 +12,12 @@ use nalgebra::{SMatrix, Vector2};
 use super::problem::{Observation, ResidualFigures, WindowProblem, scale_from_median_px};
 use super::window::ObservationWindow;
 use super::{
-    ConfigError, Emit, Estimate, EstimatorConfig, EstimatorReport, Matrix12, RobustLoss,
+    ConfigError, Emit, Estimate, EstimatorConfig, EstimatorReport, InitError, Matrix12, RobustLoss,
     StartFailure, TrackError, TrackStatus, TrackerConfig, WindowMode,
-    static_pose::{AMBIGUITY_CHI2, StaticPoses, solve_static_pose},
+    model_error::{ModelEffect, cost_difference_effect},
+    static_pose::{MODEL_SPREAD_SIGMAS, PixelNoise, PoseFit, solve_static_pose},
 };
-use crate::solver::{NormalEquations, Solution};
+use crate::solver::NormalEquations;
 use crate::{CameraModel, Measurement, MotionState, SpatioTemporalModel, Target};
 
 /// Consecutive good steps needed before a widened window shrinks back; doubled at every degenerate window since the
@@ -65,11 +66,26 @@ pub(crate) const MIN_NOISE_PX: f64 = 0.005;
 /// The median of the norm of a 2-d Gaussian residual of σ = 1 per axis (Rayleigh: √(2 ln 2)).
 const RAYLEIGH_MEDIAN: f64 = 1.177_410_022_515_474_7;
 
-/// Whether two poses agree to `tolerance` (rad, and that fraction of the distance).
-fn same_pose_to(a: &MotionState, b: &MotionState, tolerance: f64) -> bool {
-    crate::so3::angle_between(&a.cam_r_obj, &b.cam_r_obj) < tolerance
-        && (a.cam_t_obj_m - b.cam_t_obj_m).norm() <= tolerance * a.cam_t_obj_m.norm()
+/// How far apart two poses are: their rotation angle (rad) plus their distance over the first's distance from the
+/// camera (what tells a pose from its mirror twin, which turns it by tens of degrees).
+fn pose_distance(a: &MotionState, b: &MotionState) -> f64 {
+    crate::so3::angle_between(&a.cam_r_obj, &b.cam_r_obj)
+        + (a.cam_t_obj_m - b.cam_t_obj_m).norm() / a.cam_t_obj_m.norm().max(1e-9)
 }
+
+/// An estimate whose median residual norm exceeds this many times the noise is disputed (see
+/// [`Track::finish_estimate`]).
+const UNEXPLAINED_MEDIAN_NOISE_RATIO: f64 = 5.0;
+
+/// A rival whose excess cost is within this factor of the ambiguity bound is near: a start past it is confirmed by
+/// the next attempt.
+const NEAR_RIVAL_FACTOR: f64 = 4.0;
+/// Two start fits nearer than this ([`pose_distance`]) reached one minimum.
+const SAME_START_POSE: f64 = 1e-3;
+/// The ambiguity bound of two 12-dof fits (in noise variances): each absorbs the noise along its own 12 directions,
+/// so for twins that fit noise-free data alike the cost difference is that of two χ² of 12 degrees of freedom, which
+/// exceeds 30 with a chance of 1.1e-4, 36 with 1.2e-5 and 40 with 2.5e-6 (simulated, 2e7 draws).
+const AMBIGUITY_CHI2_12DOF: f64 = 36.0;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Phase {
@@ -145,6 +161,12 @@ pub(crate) struct TrackCore {
     pub noise_px: f64,
     last_t_s: Option<f64>,
     since_estimate: usize,
+    /// Measurements since the last attempt to start a track that failed: after a failure the next attempt waits
+    /// for a new cycle (a start is decided on whole cycles, and its static poses cost tens of microseconds).
+    since_start_attempt: usize,
+    /// A start decided with little margin over a rival at the previous attempt (its time and state), which the next
+    /// must confirm.
+    pending_start: Option<(f64, MotionState)>,
     /// Measurements the current control step answers (those since the previous estimate).
     pub step_measurements: usize,
     estimates_since_init: usize,
@@ -174,6 +196,8 @@ impl TrackCore {
             noise_px: config.noise_px,
             last_t_s: None,
             since_estimate: 0,
+            since_start_attempt: 0,
+            pending_start: None,
             step_measurements: 0,
             estimates_since_init: 0,
             widening: 0,
@@ -309,64 +333,130 @@ impl TrackCore {
         residuals.rms_px > MAX_RESIDUAL_NOISE_RATIO * self.noise_px
     }
 
-    /// The 12-dof fit that starts a track, from each static pose that fits the newest centroids (with the static
-    /// pose it came from): fitted over the last `init_len` measurements (two cycles) and, while more than one fit
-    /// explains them as well as the best within the noise ([`AMBIGUITY_CHI2`]), over the whole window. The scratch
-    /// window holds the measurements of the fit returned. Ambiguous when the whole window cannot decide either.
-    fn start_from_poses(
+    /// The pose a track starts from, with the static fit it came from, at `t_ref_s` (the newest measurement's time),
+    /// the scratch window holding the first cycles (the last `init_len` measurements).
+    ///
+    /// The newest cycle's static pose gives the candidates: its best, the rivals that fit as well within the noise
+    /// and the nearest one left out. With one candidate the start is its static pose. With several, each is fitted
+    /// with its twist over the first cycles (12 dof: a target that moves during a cycle, one ROI at a time, leaves a
+    /// static residual that is the motion's, not the noise's), and they are judged on those fits: against the
+    /// larger of the configured noise and the 95 % upper bound the best fit's residual allows, and the spread a
+    /// model's error gives their costs (which repeats at every cycle). A rival within that bound leaves the start
+    /// ambiguous; one within a few times it must lose the same way at the next attempt too, a cycle later (the
+    /// start is tried at every cycle, and one lucky draw among many must not decide).
+    fn decide_start_pose(
         &mut self,
-        poses: &StaticPoses,
         t_ref_s: f64,
         init_len: usize,
-    ) -> Result<(MotionState, Solution<MotionState, 12>), StartFailure> {
-        let mut rivals = poses.as_slice().len();
-        let mut fitted = 0;
-        for len in [init_len, self.window.len()] {
-            if len <= fitted {
-                continue;
-            }
-            fitted = len;
-            self.fill_scratch(WindowMode::Last(len));
-            let problem = self
-                .window_problem(t_ref_s)
-                .with_loss(self.config.robust, 1.0);
-            let fits: Vec<(MotionState, Solution<MotionState, 12>)> = poses
-                .as_slice()
-                .iter()
-                .map(|p| (p.state, problem.fit_robustly(p.state, INIT_MAX_ITERATIONS)))
-                .collect();
-            if fits.len() == 1 {
-                return Ok(fits[0]);
-            }
-            // The fits compared on one truncated cost: residuals beyond 5 sigma (outliers) count alike for all.
-            let median_px = fits
-                .iter()
-                .filter_map(|(_, f)| problem.median_residual_px(&f.params))
-                .fold(f64::INFINITY, f64::min);
-            let sigma_px = self.noise_px.max(median_px / RAYLEIGH_MEDIAN);
-            let costs: Vec<f64> = fits
-                .iter()
-                .map(|(_, f)| problem.truncated_cost_px2(&f.params, 5.0 * sigma_px))
-                .collect();
-            let best = (0..fits.len())
-                .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
-                .unwrap_or(0);
-            let dof = (2 * self.scratch.len()).saturating_sub(12).max(1) as f64;
-            let variance_px2 = (sigma_px * sigma_px).max(costs[best] / dof);
-            let best_state = fits[best].1.params;
-            rivals = 1
-                + (0..fits.len())
-                    .filter(|&k| {
-                        k != best
-                            && costs[k] - costs[best] <= AMBIGUITY_CHI2 * variance_px2
-                            && !same_pose_to(&fits[k].1.params, &best_state, 1e-3)
-                    })
-                    .count();
-            if rivals == 1 {
-                return Ok(fits[best]);
+    ) -> Result<(MotionState, PoseFit), StartFailure> {
+        let prior = PixelNoise::Assumed(self.config.noise_px);
+        let cycle = self
+            .window
+            .cycle(0)
+            .ok_or(StartFailure::NoPose(InitError::TooFewPoints {
+                required: 3,
+                actual: self.window.points_seen(),
+            }))?;
+        let poses = solve_static_pose(&self.model, &self.target, &cycle, prior)
+            .map_err(StartFailure::NoPose)?;
+        let candidates: Vec<PoseFit> = poses
+            .as_slice()
+            .iter()
+            .chain(poses.runner_up())
+            .copied()
+            .collect();
+        if candidates.len() == 1 {
+            self.pending_start = None;
+            return Ok((candidates[0].state, candidates[0]));
+        }
+        self.fill_scratch(WindowMode::Last(init_len));
+        let problem = self
+            .window_problem(t_ref_s)
+            .with_loss(self.config.robust, 1.0);
+        let fits: Vec<MotionState> = candidates
+            .iter()
+            .map(|c| problem.fit_robustly(c.state, INIT_MAX_ITERATIONS).params)
+            .collect();
+        let median_px = fits
+            .iter()
+            .filter_map(|f| problem.median_residual_px(f))
+            .fold(f64::INFINITY, f64::min);
+        let limit_px = 5.0 * self.config.noise_px.max(median_px / RAYLEIGH_MEDIAN);
+        let costs: Vec<f64> = fits
+            .iter()
+            .map(|f| problem.truncated_cost_px2(f, limit_px))
+            .collect();
+        let best = (0..fits.len())
+            .min_by(|&a, &b| costs[a].total_cmp(&costs[b]))
+            .unwrap_or(0);
+        let lower =
+            crate::stats::chi2_lower_5_percent((2 * self.scratch.len()).saturating_sub(12) as f64);
+        let variance_px2 = if lower > 0.0 {
+            (self.config.noise_px * self.config.noise_px).max(costs[best] / lower)
+        } else {
+            f64::INFINITY
+        };
+        // How far a model's error could move each fit's cost excess over the window (where it repeats at every
+        // cycle), given what the best fit's residual shows of it.
+        // The first-order change holds at least-squares minima (where each fit's residual is orthogonal to what
+        // its own parameters absorb): taken from the robust fits, the plain ones.
+        let plain = self.window_problem(t_ref_s);
+        let minima: Vec<MotionState> = fits
+            .iter()
+            .map(|f| plain.fit_robustly(*f, INIT_MAX_ITERATIONS).params)
+            .collect();
+        let effects: Vec<ModelEffect> = (0..fits.len())
+            .map(|k| {
+                if k == best {
+                    ModelEffect::default()
+                } else {
+                    cost_difference_effect(
+                        &plain,
+                        &self.model,
+                        &self.target,
+                        &self.scratch,
+                        |o| o.t_s - t_ref_s,
+                        &minima[best],
+                        &minima[k],
+                        variance_px2,
+                    )
+                    .unwrap_or_default()
+                }
+            })
+            .collect();
+        // Within `factor` times the noise's bound for some model error within MODEL_SPREAD_SIGMAS of its spread.
+        let within = |k: usize, factor: f64| {
+            effects[k].least_excess_px2(costs[k] - costs[best], MODEL_SPREAD_SIGMAS)
+                <= factor * AMBIGUITY_CHI2_12DOF * variance_px2
+        };
+        let excess = |k: usize| costs[k] - costs[best];
+        // Fits that reached the best's own minimum are no rivals.
+        let other = |k: usize| k != best && pose_distance(&fits[k], &fits[best]) > SAME_START_POSE;
+        let rivals = (0..fits.len())
+            .filter(|&k| other(k) && within(k, 1.0))
+            .count();
+        if rivals > 0 {
+            self.pending_start = None;
+            return Err(StartFailure::Ambiguous { poses: rivals + 1 });
+        }
+        let nearest = (0..fits.len())
+            .filter(|&k| other(k))
+            .min_by(|&a, &b| excess(a).total_cmp(&excess(b)));
+        let winner = fits[best];
+        if let Some(k) = nearest.filter(|&k| within(k, NEAR_RIVAL_FACTOR)) {
+            // Decided with little margin: the previous attempt must have decided the same pose (moved on by its
+            // twist), nearer it than the rival.
+            let confirmed = self.pending_start.is_some_and(|(t_s, previous)| {
+                let moved = previous.predicted(t_ref_s - t_s);
+                pose_distance(&moved, &winner) < pose_distance(&moved, &fits[k])
+            });
+            self.pending_start = Some((t_ref_s, winner));
+            if !confirmed {
+                return Err(StartFailure::Unconfirmed);
             }
         }
-        Err(StartFailure::Ambiguous { poses: rivals })
+        self.pending_start = None;
+        Ok((winner, candidates[best]))
     }
 
     /// Fills the scratch window with the measurements `mode` selects.
@@ -430,6 +520,7 @@ impl TrackCore {
         self.last_t_s = Some(obs.t_s);
         self.window.push(obs);
         self.report.measurements += 1;
+        self.since_start_attempt += 1;
     }
 
     /// Widens the window after a degenerate step; shrinks it back after a run of good ones.
@@ -661,22 +752,17 @@ impl<L: Law> Track<L> {
         if core.window.points_seen() < n || core.window.len() < init_len {
             return None;
         }
-        core.fill_scratch(WindowMode::NewestPerPoint);
-        let poses = match solve_static_pose(
-            &core.model,
-            &core.target,
-            &core.scratch,
-            core.config.noise_px,
-        ) {
-            Ok(poses) => poses,
-            Err(e) => {
-                core.report.start_failure = Some(StartFailure::NoPose(e));
-                return None;
-            }
-        };
+        if core.report.start_failure.is_some() && core.since_start_attempt < n {
+            return None;
+        }
+        core.since_start_attempt = 0;
         let t_ref_s = core.window.last(1).next()?.t_s;
-        let (pose, fit) = match core.start_from_poses(&poses, t_ref_s, init_len) {
-            Ok(start) => start,
+        let (pose, static_fit) = match core.decide_start_pose(t_ref_s, init_len) {
+            Ok(start) => {
+                // A start decided by the static pose alone has not filled the scratch window.
+                core.fill_scratch(WindowMode::Last(init_len));
+                start
+            }
             Err(failure) => {
                 core.report.start_failure = Some(failure);
                 return None;
@@ -685,6 +771,7 @@ impl<L: Law> Track<L> {
         let problem = core
             .window_problem(t_ref_s)
             .with_loss(core.config.robust, 1.0);
+        let fit = problem.fit_robustly(pose, INIT_MAX_ITERATIONS);
         let (state, ne) = (fit.params, fit.normal_equations);
         let inverse_condition = ne.fast_inverse_condition();
         let well_posed = !core.is_degenerate(inverse_condition);
@@ -692,8 +779,11 @@ impl<L: Law> Track<L> {
         // median residual, which outliers do not inflate, must be at the noise level: the 12-dof model is exact over
         // two cycles.
         let median_px = problem.median_residual_px(&state).unwrap_or(0.0);
+        // The static pose's own residual is the model's error plus the noise (a camera or target file a little off
+        // leaves pixels of it): a fit of the first cycles that explains them about as well is no wrong minimum.
+        let static_median_px = 3.0 * RAYLEIGH_MEDIAN * static_fit.residual_rms_px;
         let max_median_px = if self.law.adapts_noise() {
-            ADAPTIVE_INIT_MAX_MEDIAN_PX
+            ADAPTIVE_INIT_MAX_MEDIAN_PX.max(static_median_px)
         } else {
             (3.0 * core.config.noise_px).max(0.3)
         };
@@ -712,7 +802,7 @@ impl<L: Law> Track<L> {
         let state = if well_posed {
             state
         } else {
-            MotionState::at_rest(pose.cam_r_obj, pose.cam_t_obj_m)
+            MotionState::at_rest(static_fit.state.cam_r_obj, static_fit.state.cam_t_obj_m)
         };
         let covariance = core.window_covariance(&ne, inverse_condition);
         Some(Initial {
@@ -756,7 +846,11 @@ impl<L: Law> Track<L> {
             problem.simultaneous = self.law.simultaneous_residuals();
             problem.residual_figures(&self.core.state)
         });
-        let disputed = self.law.is_disputed(&self.core, &residuals);
+        // Residuals the noise cannot explain (a median residual norm over five times the noise, where the noise's
+        // own median norm is 1.18 times it) are a filter or fit that has left its measurements, whatever its law
+        // says: not vouched for.
+        let unexplained = residuals.median_px > UNEXPLAINED_MEDIAN_NOISE_RATIO * self.core.noise_px;
+        let disputed = self.law.is_disputed(&self.core, &residuals) || unexplained;
         let core = &mut self.core;
         let mut status = step.status;
         let bad = !residuals.median_px.is_finite()

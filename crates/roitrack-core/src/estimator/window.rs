@@ -87,6 +87,21 @@ impl ObservationWindow {
         (0..n.min(self.len)).map(move |k| &self.ring[(self.head + capacity - 1 - k) % capacity])
     }
 
+    /// The cycle `back` cycles before the newest: the (`back` + 1)-th newest observation of every point seen, newest
+    /// first (`back` = 0: the newest of each); `None` unless every point seen has that many in the ring.
+    pub fn cycle(&self, back: usize) -> Option<Vec<Observation>> {
+        let mut seen = vec![0usize; self.newest_by_point.len()];
+        let mut cycle = Vec::with_capacity(self.points_seen);
+        for o in self.last(self.len) {
+            let count = &mut seen[o.point_index];
+            *count += 1;
+            if *count == back + 1 {
+                cycle.push(*o);
+            }
+        }
+        (cycle.len() == self.points_seen && self.points_seen > 0).then_some(cycle)
+    }
+
     /// The observations selected by `mode`.
     pub fn select(&self, mode: WindowMode) -> impl Iterator<Item = &Observation> {
         let (newest, last) = match mode {
@@ -110,6 +125,19 @@ mod tests {
             point_index: i,
             ideal_px: Vector2::new(t, i as f64),
         }
+    }
+
+    #[test]
+    fn cycles_back_from_the_newest() {
+        let mut w = ObservationWindow::new(3, 10);
+        for k in 0..7 {
+            w.push(obs(k as f64, k % 3));
+        }
+        // Points 0, 1, 2 measured at 0-6 s: point 0 at 0, 3, 6; point 1 at 1, 4; point 2 at 2, 5.
+        let times = |c: Vec<Observation>| c.iter().map(|o| o.t_s).collect::<Vec<_>>();
+        assert_eq!(times(w.cycle(0).unwrap()), [6.0, 5.0, 4.0]);
+        assert_eq!(times(w.cycle(1).unwrap()), [3.0, 2.0, 1.0]);
+        assert_eq!(w.cycle(2), None);
     }
 
     #[test]

@@ -23,6 +23,7 @@ use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, Vector2, Vector3};
 use thiserror::Error;
 
 use super::Observation;
+use super::model_error::{ModelEffect, cost_difference_effect};
 use crate::solver::{
     self, DampingSchedule, LeastSquaresProblem, Method, ResidualSink, SolverOptions,
 };
@@ -50,12 +51,52 @@ pub struct PoseFit {
     pub inverse_condition: f64,
     pub iterations: usize,
     pub converged: bool,
+    /// For a rival of the best pose ([`StaticPoses`]): how its cost's excess over the best's could move if the
+    /// camera and target were off the user's files as users' files are ([`super::MODEL_UNCERTAINTY`]), given what the
+    /// best's residual shows of that; zero for the best.
+    pub model_effect: ModelEffect,
 }
 
 /// Twice the log-likelihood ratio (the cost difference in units of the noise variance) below which a second minimum
-/// is as good as the best: at 16 (4 sigma) a pose that is wrong but fits better than the truth by more than this has
-/// a chance of about Φ(-4) ≈ 3e-5, whatever its distance from the truth.
-pub const AMBIGUITY_CHI2: f64 = 16.0;
+/// is as good as the best. The hardest case is a twin that fits noise-free pixels exactly as well as the truth (a
+/// small planar target's mirror tilt): then the noise alone decides, and the cost difference is that of two χ²
+/// variables of 6 degrees of freedom (each minimum absorbs the noise along its own 6 pose directions), which exceeds
+/// 16 with a chance of 2.3e-3, 24 with 8.5e-5 and 30 with 6.7e-6 (simulated, 2e7 draws). A twin that fits worse
+/// on noise-free pixels by D stands out by D ± 2√D and is rarer still.
+pub const AMBIGUITY_CHI2: f64 = 30.0;
+
+/// What is known of the centroid noise the poses are judged against ([`solve_static_pose`]).
+///
+/// ```
+/// use roitrack_core::estimator::PixelNoise;
+/// assert_eq!(PixelNoise::from(0.2), PixelNoise::Assumed(0.2));
+/// assert_eq!(PixelNoise::Measured(0.3).px(), 0.3);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum PixelNoise {
+    /// A value given, not measured (a configuration's default): the residual may show more, and with few points
+    /// its degrees of freedom cannot tell how much more, so the variance taken is the 95 % upper bound the residual
+    /// allows.
+    Assumed(f64),
+    /// Measured with many degrees of freedom (the scatter of repeated measurements): whatever the residual shows
+    /// beyond it is the model's own error, taken at its estimate.
+    Measured(f64),
+}
+
+impl PixelNoise {
+    /// The noise (px per coordinate).
+    pub fn px(&self) -> f64 {
+        match *self {
+            Self::Assumed(px) | Self::Measured(px) => px,
+        }
+    }
+}
+
+impl From<f64> for PixelNoise {
+    fn from(px: f64) -> Self {
+        Self::Assumed(px)
+    }
+}
 
 /// At most this many poses are returned (the minimal problem's four solutions).
 pub const MAX_STATIC_POSES: usize = 4;
@@ -66,6 +107,7 @@ pub const MAX_STATIC_POSES: usize = 4;
 pub struct StaticPoses {
     fits: [PoseFit; MAX_STATIC_POSES],
     len: usize,
+    runner_up: Option<PoseFit>,
 }
 
 impl StaticPoses {
@@ -82,6 +124,12 @@ impl StaticPoses {
     /// Whether more than one pose fits as well as the best: the observations cannot tell them apart.
     pub fn is_ambiguous(&self) -> bool {
         self.len > 1
+    }
+
+    /// The best of the minima left out (their costs beyond the bound), if one came near enough to be refined: a
+    /// caller who learns more of the noise can judge it again.
+    pub fn runner_up(&self) -> Option<&PoseFit> {
+        self.runner_up.as_ref()
     }
 }
 
@@ -189,21 +237,26 @@ pub fn refine_static_pose(
         state: fit.params,
         cost_px2: ne.cost_px2(),
         residual_rms_px: ne.residual_rms_px(),
+        model_effect: ModelEffect::default(),
         inverse_condition: ne.fast_inverse_condition(),
         iterations: fit.report.iterations,
         converged: fit.report.converged,
     }
 }
 
-/// Triples of points tried at most (each gives up to four hypotheses).
+/// Triples of points tried at most (each gives up to four hypotheses), beyond [`FEW_POINTS`] points.
 const MAX_TRIPLES: usize = 8;
+
+/// Observations of at most this many points are tried with every triple of them.
+const FEW_POINTS: usize = 6;
 
 /// Points the triples are drawn from: the best-spread few in the image.
 const SPREAD_POINTS: usize = 6;
 
 /// The static pose from scratch (see the module's docs): every pose that fits the observations as well as the best
-/// within the noise, best first. `noise_px` is the centroid noise (px per coordinate) the fits are judged against;
-/// a larger residual (the user's model off the truth) widens the judgement to what the residual shows. Observation
+/// within the noise, best first. `noise` is the centroid noise (px per coordinate) the fits are judged against, as
+/// a value ([`PixelNoise::Assumed`]) or measured ([`PixelNoise::Measured`]); a larger residual (the user's model off
+/// the truth) widens the judgement to what the residual shows. Observation
 /// times are ignored (as if simultaneous); each point should appear once.
 ///
 /// Needs 3 distinct points whose images are not on one line; 3 points are posed exactly by up to four poses, all
@@ -234,8 +287,10 @@ pub fn solve_static_pose(
     model: &SpatioTemporalModel,
     target: &Target,
     obs: &[Observation],
-    noise_px: f64,
+    noise: impl Into<PixelNoise>,
 ) -> Result<StaticPoses, InitError> {
+    let noise = noise.into();
+    let noise_px = noise.px();
     let too_few = || InitError::TooFewPoints {
         required: 3,
         actual: distinct_points(obs),
@@ -310,8 +365,14 @@ pub fn solve_static_pose(
             .sum::<f64>()
             / n as f64;
         let noise_cost = noise_normalised.powi(2) * depth2;
-        if best.1 <= noise_cost * (dof + 6.0 * (2.0 * dof).sqrt() + 10.0) {
+        // A few points constrain the pose weakly: a view of them can hold minima that neither one triple nor a
+        // mirror tilt reaches, so all their triples are tried (at most 20, for 6 points).
+        let few = n <= FEW_POINTS;
+        if !few && best.1 <= noise_cost * (dof + 6.0 * (2.0 * dof).sqrt() + 10.0) {
             break;
+        }
+        if few {
+            continue;
         }
         // No hypothesis fits the noise (a gross error in the data, or a user's model off the truth): more triples,
         // until two in a row find nothing better.
@@ -320,6 +381,18 @@ pub fn solve_static_pose(
         if stale >= 2 {
             break;
         }
+    }
+    // Each minimum's mirror twin: a target seen small is fitted about as well by its depths reflected about its
+    // centre, which for a planar target is another pose (the plane tilted the other way). One triple's hypotheses do
+    // not always reach it, and the ambiguity must not go unseen.
+    let normal = thinnest_direction(&centred);
+    for (r, _) in minima.sorted().into_iter().take(2) {
+        let sight = cost.translation(&r).normalize();
+        let mirrored = (Matrix3::identity() - 2.0 * sight * sight.transpose())
+            * r.matrix()
+            * (Matrix3::identity() - 2.0 * normal * normal.transpose());
+        let (twin, e) = cost.minimise(&Rotation3::from_matrix_unchecked(mirrored), 30);
+        minima.add(twin, e);
     }
     let Some(best) = minima.best() else {
         return Err(InitError::Degenerate {
@@ -356,27 +429,76 @@ pub fn solve_static_pose(
             reason: "no pose puts the points in front of the camera",
         });
     };
-    // The rivals: minima whose cost is within the ambiguity bound of the best, against the larger of the noise and the
-    // residual the best leaves (a model off the truth widens both minima alike).
-    let variance_px2 = (noise_px * noise_px).max(if 2 * n > 6 {
-        best_fit.cost_px2 / dof
+    // The rivals: minima whose cost is within the ambiguity bound of the best, against the larger of the given noise
+    // and what the best's residual says of it, model error included. A few points leave few degrees of freedom and a
+    // residual that often shows far less than the noise: the variance is its upper 95 % confidence bound, not its
+    // estimate (for 4 points, 9.7 times the residual per degree of freedom; for 16, 1.5 times).
+    let residual_dof = (2 * n).saturating_sub(6) as f64;
+    let per_dof = match noise {
+        PixelNoise::Assumed(_) => crate::stats::chi2_lower_5_percent(residual_dof),
+        PixelNoise::Measured(_) => residual_dof,
+    };
+    let variance_px2 = if per_dof > 0.0 {
+        (noise_px * noise_px).max(best_fit.cost_px2 / per_dof)
     } else {
-        0.0
-    });
+        // Three points: every pose that puts them on their rays fits exactly.
+        f64::INFINITY
+    };
+    // How far the model's error could move each rival's excess, given what the best's residual shows of it.
+    let problem = StaticPoseProblem { model, target, obs };
+    for fit in &mut fits[1..] {
+        fit.model_effect = cost_difference_effect(
+            &problem,
+            model,
+            target,
+            obs,
+            |_| 0.0,
+            &best_fit.state,
+            &fit.state,
+            variance_px2,
+        )
+        .unwrap_or_default();
+    }
     let mut poses = StaticPoses {
         fits: [best_fit; MAX_STATIC_POSES],
         len: 1,
+        runner_up: None,
     };
     for fit in &fits[1..] {
-        if poses.len < MAX_STATIC_POSES
-            && fit.cost_px2 - best_fit.cost_px2 <= AMBIGUITY_CHI2 * variance_px2
-        {
-            poses.fits[poses.len] = *fit;
-            poses.len += 1;
+        if is_rival(fit, &best_fit, variance_px2) {
+            if poses.len < MAX_STATIC_POSES {
+                poses.fits[poses.len] = *fit;
+                poses.len += 1;
+            }
+        } else if poses.runner_up.is_none() {
+            poses.runner_up = Some(*fit);
         }
     }
     Ok(poses)
 }
+
+/// The unit direction along which points (centred) spread least: a planar target's normal.
+fn thinnest_direction(centred: &[Vector3<f64>]) -> Vector3<f64> {
+    let scatter = centred
+        .iter()
+        .fold(Matrix3::zeros(), |s, x| s + x * x.transpose());
+    let eig = scatter.symmetric_eigen();
+    let k = eig.eigenvalues.imin();
+    eig.eigenvectors.column(k).into_owned()
+}
+
+/// Whether `fit` fits as well as `best` within the noise (cost excess below [`AMBIGUITY_CHI2`] times `variance_px2`)
+/// for some model error within [`MODEL_SPREAD_SIGMAS`] standard deviations ([`PoseFit::model_effect`]).
+pub fn is_rival(fit: &PoseFit, best: &PoseFit, variance_px2: f64) -> bool {
+    let excess_px2 = fit.cost_px2 - best.cost_px2;
+    fit.model_effect
+        .least_excess_px2(excess_px2, MODEL_SPREAD_SIGMAS)
+        <= AMBIGUITY_CHI2 * variance_px2
+}
+
+/// Standard deviations of the model's error ([`PoseFit::model_effect`]) within which a rival's excess cost must stay
+/// above the noise's bound: at 4, a model error that favours the wrong pose by more has a chance of about 3e-5.
+pub const MODEL_SPREAD_SIGMAS: f64 = 4.0;
 
 /// How many distinct points the observations hold.
 fn distinct_points(obs: &[Observation]) -> usize {
@@ -392,6 +514,10 @@ fn same_pose(a: &MotionState, b: &MotionState) -> bool {
         && (a.cam_t_obj_m - b.cam_t_obj_m).norm() <= 1e-6 * a.cam_t_obj_m.norm().max(1e-9)
 }
 
+/// Two minima of the object-space error nearer than this (rad) are one: the minimisation stops at a millionth of the
+/// cost, a few hundred-thousandths of a radian from the minimum, and no view tells poses this close apart.
+const SAME_MINIMUM_RAD: f64 = 1e-4;
+
 /// The distinct minima of the object-space error found so far, with their costs.
 #[derive(Default)]
 struct Minima {
@@ -406,7 +532,7 @@ impl Minima {
         match self
             .found
             .iter_mut()
-            .find(|(q, _)| crate::so3::angle_between(q, &r) < 1e-6)
+            .find(|(q, _)| crate::so3::angle_between(q, &r) < SAME_MINIMUM_RAD)
         {
             Some(same) if cost < same.1 => *same = (r, cost),
             Some(_) => {}
@@ -545,7 +671,11 @@ impl<'a> Triples<'a> {
         }
         // Largest last: `pop` takes it first.
         others.sort_by(|x, y| x.1.total_cmp(&y.1));
-        let skip = others.len().saturating_sub(MAX_TRIPLES - 1);
+        let skip = if self.obs.len() <= FEW_POINTS {
+            0
+        } else {
+            others.len().saturating_sub(MAX_TRIPLES - 1)
+        };
         others.into_iter().skip(skip).map(|(t, _)| t).collect()
     }
 }

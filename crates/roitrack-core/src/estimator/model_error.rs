@@ -1,0 +1,234 @@
+//! How far the error of the user's own model (a camera file a little off, a target drawn to spec) could move the
+//! cost difference of two fits of the same measurements: a pose and a rival (its mirror twin, say). Noise moves that
+//! difference at random; a model's error moves it the same way at every measurement, and a rival that fits a little
+//! worse on the user's model may be the truth on the true one.
+//!
+//! The model parameters are the intrinsics (fx, fy, cx, cy), the first radial distortion coefficient k1 (which moves
+//! each undistorted observation by about `-f m |m|²` per unit, `m` its normalised coordinates) and every target
+//! coordinate. At each fit's minimum the fit's own parameters need not move to first order, so the cost difference
+//! changes by `gᵀ δθ` with `g = 2 (J_θ,rivalᵀ e_rival - J_θ,bestᵀ e_best)`. The parameters' prior ([`MODEL_UNCERTAINTY`],
+//! independent Gaussians) is narrowed by what the best fit's residual already shows of them: a model off by `δθ`
+//! leaves the residual `P J_θ δθ` at the best fit (`P` removes what the fit's own parameters absorb), so with noise
+//! variance `σ²` the posterior precision is `Σ⁻¹ + (P J_θ)ᵀ (P J_θ) / σ²`. The spread is `sqrt(gᵀ Σ_post g)`. Target
+//! coordinates are taken point by point (each point's error shows at its own measurements), the intrinsics together.
+
+use nalgebra::{Matrix3, SMatrix, SVector, Vector2, Vector3};
+
+use super::Observation;
+use crate::solver::{LeastSquaresProblem, ResidualSink};
+use crate::{MotionState, SpatioTemporalModel, Target};
+
+/// How far users' camera and target files are off the truth, as standard deviations: focal lengths and the principal
+/// point's coordinates by 1 % of themselves, k1 by 0.025, each target coordinate by 0.25 mm (half the bounds that
+/// calibrations, nominal lens data and drawings stay within: 2 %, 0.05, 0.5 mm).
+pub const MODEL_UNCERTAINTY: ModelUncertainty = ModelUncertainty {
+    focal_fraction: 0.01,
+    principal_point_fraction: 0.01,
+    k1: 0.025,
+    target_m: 0.25e-3,
+};
+
+/// Standard deviations of the error of a camera and target model ([`MODEL_UNCERTAINTY`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelUncertainty {
+    /// Of fx and fy, as a fraction of them.
+    pub focal_fraction: f64,
+    /// Of cx and cy, as a fraction of them.
+    pub principal_point_fraction: f64,
+    /// Of the first radial distortion coefficient.
+    pub k1: f64,
+    /// Of each target coordinate (m).
+    pub target_m: f64,
+}
+
+/// Each measurement's Jacobian and plain residual, as a problem linearises them.
+struct Rows<const N: usize> {
+    rows: Vec<Option<(SMatrix<f64, 2, N>, Vector2<f64>)>>,
+}
+
+impl<const N: usize> ResidualSink<N> for Rows<N> {
+    fn add(&mut self, jacobian: &SMatrix<f64, 2, N>, residual: &Vector2<f64>, _weight: f64) {
+        self.rows.push(Some((*jacobian, *residual)));
+    }
+
+    fn add_unevaluable(&mut self) {
+        self.rows.push(None);
+    }
+}
+
+fn rows<const N: usize, P: LeastSquaresProblem<N, Params = MotionState>>(
+    problem: &P,
+    state: &MotionState,
+    count: usize,
+) -> Vec<Option<(SMatrix<f64, 2, N>, Vector2<f64>)>> {
+    let mut sink = Rows {
+        rows: Vec::with_capacity(count),
+    };
+    problem.linearize(state, &mut sink);
+    sink.rows
+}
+
+/// The residual's derivatives against the intrinsics and k1 (2 x 5) and against the observation's model point (2 x 3),
+/// for the point seen at `state` `d_s` after its reference time.
+fn model_jacobians(
+    model: &SpatioTemporalModel,
+    state: &MotionState,
+    point_in_obj_m: &Vector3<f64>,
+    d_s: f64,
+    observed_px: &Vector2<f64>,
+) -> Option<(SMatrix<f64, 2, 5>, SMatrix<f64, 2, 3>)> {
+    let k = &model.intrinsics;
+    let (r, _) = state.pose_at(d_s);
+    let p = state.point_in_cam_at(point_in_obj_m, d_s);
+    if p.z <= 0.0 {
+        return None;
+    }
+    let (xz, yz) = (p.x / p.z, p.y / p.z);
+    let m = k.normalized_from_pixel(observed_px);
+    let r2 = m.norm_squared();
+    let intrinsics = SMatrix::<f64, 2, 5>::new(
+        xz,
+        0.0,
+        1.0,
+        0.0,
+        k.fx_px * m.x * r2,
+        0.0,
+        yz,
+        0.0,
+        1.0,
+        k.fy_px * m.y * r2,
+    );
+    Some((intrinsics, k.pixel_jacobian_wrt_cam(&p) * r.matrix()))
+}
+
+/// How the excess cost of a rival over the best fit could change with the model's error ([`cost_difference_effect`]):
+/// along the direction that lowers it fastest, by `-s slope_px2 + s² curvature_px2` for a model `s` standard deviations
+/// off (the posterior ones, given what the best's residual shows).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ModelEffect {
+    /// The first-order change per standard deviation (px²): the spread `sqrt(gᵀ Σ_post g)` of the module's docs.
+    pub slope_px2: f64,
+    /// The second-order change per squared standard deviation along that direction (px²): the rival's own residual
+    /// grows with the model's change (positive) as far as the best's does not.
+    pub curvature_px2: f64,
+}
+
+impl ModelEffect {
+    /// The smallest excess `excess_px2 - s slope + s² curvature` over models at most `sigmas` standard deviations off.
+    pub fn least_excess_px2(&self, excess_px2: f64, sigmas: f64) -> f64 {
+        let at = |s: f64| excess_px2 - s * self.slope_px2 + s * s * self.curvature_px2;
+        let mut least = at(0.0).min(at(sigmas));
+        if self.curvature_px2 > 0.0 {
+            let vertex = self.slope_px2 / (2.0 * self.curvature_px2);
+            if vertex > 0.0 && vertex < sigmas {
+                least = least.min(at(vertex));
+            }
+        }
+        least
+    }
+}
+
+/// What the model's parameters do to one fit's residual: `(P J_θ)ᵀ (P J_θ)` for the intrinsics (`P` removing what
+/// the fit absorbs) and `J_Xᵀ J_X` per target point, and twice the residual times `J`.
+struct Sensitivity {
+    intrinsics_shown: SMatrix<f64, 5, 5>,
+    points_shown: Vec<Matrix3<f64>>,
+    intrinsics_gradient: SVector<f64, 5>,
+    points_gradient: Vec<Vector3<f64>>,
+}
+
+fn sensitivity<const N: usize, P: LeastSquaresProblem<N, Params = MotionState>>(
+    problem: &P,
+    model: &SpatioTemporalModel,
+    target: &Target,
+    obs: &[Observation],
+    offset_s: &impl Fn(&Observation) -> f64,
+    state: &MotionState,
+) -> Option<Sensitivity> {
+    let fit_rows = rows(problem, state, obs.len());
+    if fit_rows.len() != obs.len() {
+        return None;
+    }
+    let mut ata = SMatrix::<f64, N, N>::zeros();
+    let mut at_theta = SMatrix::<f64, N, 5>::zeros();
+    let mut theta_t_theta = SMatrix::<f64, 5, 5>::zeros();
+    let mut intrinsics_gradient = SVector::<f64, 5>::zeros();
+    let mut points_gradient = vec![Vector3::zeros(); target.len()];
+    let mut points_shown = vec![Matrix3::zeros(); target.len()];
+    for (o, row) in obs.iter().zip(&fit_rows) {
+        let (j, e) = (*row)?;
+        let point = &target.points()[o.point_index].point_in_obj_m;
+        let (theta, x) = model_jacobians(model, state, point, offset_s(o), &o.ideal_px)?;
+        ata += j.transpose() * j;
+        at_theta += j.transpose() * theta;
+        theta_t_theta += theta.transpose() * theta;
+        intrinsics_gradient += 2.0 * theta.transpose() * e;
+        points_gradient[o.point_index] += 2.0 * x.transpose() * e;
+        points_shown[o.point_index] += x.transpose() * x;
+    }
+    let ata_inverse = ata.try_inverse()?;
+    Some(Sensitivity {
+        intrinsics_shown: theta_t_theta - at_theta.transpose() * ata_inverse * at_theta,
+        points_shown,
+        intrinsics_gradient,
+        points_gradient,
+    })
+}
+
+/// How a model off as [`MODEL_UNCERTAINTY`] says models are could change `cost(rival) - cost(best)`, given what the
+/// best fit's residual shows of it (see the module's docs and [`ModelEffect`]). `problem` is the fits' least-squares
+/// problem without a robust loss (its observations, in order, are `obs`), both states at its minima, `offset_s` each
+/// observation's time after the states' reference time, `noise_variance_px2` the noise per coordinate. `None` when a
+/// point does not project.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn cost_difference_effect<const N: usize, P: LeastSquaresProblem<N, Params = MotionState>>(
+    problem: &P,
+    model: &SpatioTemporalModel,
+    target: &Target,
+    obs: &[Observation],
+    offset_s: impl Fn(&Observation) -> f64,
+    best: &MotionState,
+    rival: &MotionState,
+    noise_variance_px2: f64,
+) -> Option<ModelEffect> {
+    let u = MODEL_UNCERTAINTY;
+    let k = &model.intrinsics;
+    let prior = SVector::<f64, 5>::new(
+        u.focal_fraction * k.fx_px,
+        u.focal_fraction * k.fy_px,
+        u.principal_point_fraction * k.cx_px.abs(),
+        u.principal_point_fraction * k.cy_px.abs(),
+        u.k1,
+    );
+    let b = sensitivity(problem, model, target, obs, &offset_s, best)?;
+    let r = sensitivity(problem, model, target, obs, &offset_s, rival)?;
+    // The posterior covariances, and the direction (in their metric) that lowers the excess fastest.
+    let precision = SMatrix::<f64, 5, 5>::from_diagonal(&prior.map(|s| 1.0 / (s * s)))
+        + b.intrinsics_shown / noise_variance_px2;
+    let intrinsics_covariance = precision.try_inverse()?;
+    let g = r.intrinsics_gradient - b.intrinsics_gradient;
+    let step = intrinsics_covariance * g;
+    let mut slope2 = g.dot(&step);
+    let mut curvature = step.dot(&((r.intrinsics_shown - b.intrinsics_shown) * step));
+    let point_prior = Matrix3::identity() / (u.target_m * u.target_m);
+    for i in 0..target.len() {
+        let Some(covariance) = (point_prior + b.points_shown[i] / noise_variance_px2).try_inverse() else {
+            continue;
+        };
+        let g = r.points_gradient[i] - b.points_gradient[i];
+        let step = covariance * g;
+        slope2 += g.dot(&step);
+        curvature += step.dot(&((r.points_shown[i] - b.points_shown[i]) * step));
+    }
+    let slope_px2 = slope2.max(0.0).sqrt();
+    // `step` moves one posterior standard deviation times the slope: per unit step, divide by the slope squared.
+    let curvature_px2 = if slope_px2 > 0.0 {
+        curvature / (slope_px2 * slope_px2)
+    } else {
+        0.0
+    };
+    Some(ModelEffect {
+        slope_px2,
+        curvature_px2,
+    })
+}
