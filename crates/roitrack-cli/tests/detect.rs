@@ -375,7 +375,9 @@ fn detect_refuses_a_target_of_three_points() {
         p(&png),
     ]);
     assert!(
-        stderr.contains("three.csv") && stderr.contains("at least 4 points, got 3"),
+        stderr.contains("three.csv: a target of 3 points")
+            && stderr.contains("identifies no blobs")
+            && stderr.contains("not found in 1 of 1 images"),
         "{stderr}"
     );
 }

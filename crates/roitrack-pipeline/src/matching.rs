@@ -31,8 +31,11 @@ pub enum MatchError {
         expected: usize,
         required: usize,
     },
-    #[error("automatic matching needs a planar target or a non-planar one of at least 6 points")]
-    NotPlanar,
+    #[error(
+        "a target of 3 points cannot be identified among blobs: any three blobs are its image in some pose (give a \
+         fourth point, or measurements with the points' ids)"
+    )]
+    ThreePoints,
     #[error(
         "the blobs' convex hull has {image} corners, the target's has {model}: the view is not of the whole target"
     )]

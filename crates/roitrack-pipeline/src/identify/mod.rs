@@ -3,8 +3,9 @@
 //! Hypotheses come from the target's structure. A grid (square or hexagonal: the points on a lattice) is matched by
 //! growing a lattice through the blobs from a seed and laying it on the target's lattice every way the lattice allows
 //! ([`lattice`]); any other planar layout by triples of neighbouring points mapped onto triples of neighbouring blobs
-//! ([`sparse`]); a non-planar one (at least 6 points) by quadruples of neighbouring points and blobs, through an
-//! affine camera ([`spatial`]). None needs every point to be seen nor the blobs to be only the target's.
+//! ([`sparse`]); one spread in depth (at least 4 points) by quadruples of neighbouring points and blobs, through an
+//! affine camera ([`spatial`]). A target nearly flat (pins off a plate, a post on a grid) is searched as a planar
+//! one on its best plane. None needs every point to be seen nor the blobs to be only the target's.
 //!
 //! Every hypothesis is verified the same way: the static pose from its correspondences (intrinsics and distortion
 //! known), then the projection of every target point with that pose. A point projected well inside the image must
@@ -263,9 +264,20 @@ impl Verifier<'_> {
     }
 }
 
-/// Points of a planar target in its plane and its front normal (object frame); `None` if not planar.
+/// A target thinner than this fraction of its width (its spreads across and along its best plane) is identified as a
+/// planar one, on its best plane ([`Target::best_plane`]): the in-plane predictions of the lattice and triple searches
+/// miss a point standing off the plane by at most its height times the view's tilt, and the pose that verifies
+/// every hypothesis is solved in 3-D.
+const NEARLY_PLANAR: f64 = 0.1;
+
+/// Points of a planar or nearly planar target in its best plane and its front normal (object frame); `None` for a
+/// target spread in depth.
 fn plane_and_front(target: &Target) -> Option<(Vec<Vector2<f64>>, Vector3<f64>)> {
-    let plane = target.plane()?;
+    let [widest, _, thinnest] = target.principal_spreads_m();
+    if thinnest > NEARLY_PLANAR * widest {
+        return None;
+    }
+    let plane = target.best_plane();
     let normal: Vector3<f64> = plane.obj_r_plane.column(2).into_owned();
     // The front is the side of negative z in the object frame (a board's printed side faces the camera that sees
     // its x axis to the right and y axis down).
@@ -373,12 +385,12 @@ pub fn identify(
     blobs: &[DetectedBlob],
 ) -> Result<Identification, MatchError> {
     let n = target.len();
-    let planar = plane_and_front(target);
-    // A non-planar pose needs 6 points (the DLT).
-    let min_matched = if planar.is_some() { n.clamp(4, 6) } else { 6 };
-    if n < min_matched {
-        return Err(MatchError::NotPlanar);
+    // Any three blobs are the image of three points in some pose: only a fourth point can be checked.
+    if n < 4 {
+        return Err(MatchError::ThreePoints);
     }
+    let planar = plane_and_front(target);
+    let min_matched = n.clamp(4, 6);
     if blobs.len() < min_matched {
         return Err(MatchError::TooFewBlobs {
             found: blobs.len(),
@@ -771,20 +783,62 @@ mod tests {
                 assert!((px.x - blobs[b].u_px).abs() < 1e-9 && (px.y - blobs[b].v_px).abs() < 1e-9);
             }
         }
-        // Five points in depth cannot be posed from an image: refused, not guessed.
-        let few = Target::new(target.points()[..5].to_vec()).unwrap();
-        assert!(
-            identify(
-                &camera,
-                &few,
-                &blobs_of(
-                    &camera,
-                    &few,
-                    &MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.6)),
-                    0
-                )
-            )
-            .is_err()
+        // Four and five points in depth, alone in the image: identified, every point on its blob.
+        for count in [4, 5] {
+            let few = Target::new(target.points()[..count].to_vec()).unwrap();
+            let truth = MotionState::at_rest(
+                Rotation3::from_euler_angles(0.3, -0.2, 0.4),
+                Vector3::new(0.01, 0.0, 0.5),
+            );
+            let found = identify(&camera, &few, &blobs_of(&camera, &few, &truth, 0)).unwrap();
+            assert_eq!(found.pairs.len(), count);
+            assert!((found.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-6);
+        }
+        // Three points: any three blobs fit, so none is taken.
+        let three = Target::new(target.points()[..3].to_vec()).unwrap();
+        let blobs = blobs_of(
+            &camera,
+            &three,
+            &MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.6)),
+            0,
         );
+        assert_eq!(
+            identify(&camera, &three, &blobs),
+            Err(MatchError::ThreePoints)
+        );
+    }
+
+    /// A 3 x 4 grid with one point on a 10 mm post is identified as the grid it mostly is, the post included.
+    #[test]
+    fn identifies_a_grid_with_a_point_off_its_plane() {
+        let camera = CameraModel::canonical();
+        let points: Vec<TargetPoint> = (0..12u32)
+            .map(|id| TargetPoint {
+                id,
+                point_in_obj_m: Vector3::new(
+                    0.025 * f64::from(id % 4),
+                    0.025 * f64::from(id / 4),
+                    if id == 6 { -0.01 } else { 0.0 },
+                ),
+                // The test's blobs all have one area: no diameter to check it against.
+                diameter_m: None,
+            })
+            .collect();
+        let target = Target::new(points).unwrap();
+        assert!(target.plane().is_none());
+        for angles in [(0.2, -0.3, 0.1), (-0.4, 0.2, 1.6)] {
+            let truth = MotionState::at_rest(
+                Rotation3::from_euler_angles(angles.0, angles.1, angles.2),
+                Vector3::new(-0.03, -0.02, 0.5),
+            );
+            let blobs = blobs_of(&camera, &target, &truth, 8);
+            let found = identify(&camera, &target, &blobs).unwrap();
+            assert_eq!(found.pairs.len(), 12, "{angles:?}");
+            assert!(
+                (found.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-6,
+                "{angles:?}: {:?}",
+                found.state.cam_t_obj_m
+            );
+        }
     }
 }
