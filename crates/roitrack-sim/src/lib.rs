@@ -13,6 +13,7 @@
 pub mod frames;
 pub mod measurements;
 pub mod photo;
+pub mod rigs;
 pub mod rois;
 pub mod scenario;
 
