@@ -1,6 +1,7 @@
 //! The PnP benchmark (`roitrack pnp-bench`): times our static pose solver ([`solve_static_pose`]) on a stored PnP
 //! problem, the same file the OpenCV peer comparison (`bench/opencv_compare.sh`) reads, and reports its accuracy
-//! against the true poses.
+//! against the true poses; or solves a suite of one-instance problems (`bench/pnp_families.py`) and reports, problem by
+//! problem, every pose it returns and its time.
 //!
 //! The problem file is JSON (format `roitrack-pnp-problem/1`, written by `bench/opencv_compare.py`):
 //!
@@ -20,22 +21,36 @@
 //! `pixels[i]` is the noisy ideal (undistorted) pixel of `model_points[i]`; `cam_r_obj`, `cam_t_obj_m` is the true pose
 //! (object to camera, row-major rotation). An optional `"noise_px"` gives the pixels' noise (px per coordinate; the
 //! tracker's default noise when absent), which the solver judges ambiguity against. Other keys are ignored.
+//!
+//! The suite file (format `roitrack-pnp-suite/1`, written by `bench/pnp_families.py`) holds many problems, each of
+//! exactly one instance and with its `noise_px`, each tagged with the family it was drawn from:
+//!
+//! ```json
+//! {"format": "roitrack-pnp-suite/1",
+//!  "problems": [{"family": "4-5 planar", "problem": {"format": "roitrack-pnp-problem/1", "noise_px": 0.2, ...}}, ...]}
+//! ```
+//!
+//! Every refusal names the field, as a path from the file's top (`instances[0].pixels[3]`,
+//! `problems[7].problem.intrinsics.fx_px`), and [`PnpSuite::read`] also names the file.
 
 use std::hint::black_box;
+use std::path::Path;
 use std::time::Instant;
 
 use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
-use roitrack_core::estimator::{Observation, solve_static_pose};
-use roitrack_core::stats::{mean, quantile, rms, sorted};
+use roitrack_core::estimator::{Observation, PoseFit, solve_static_pose};
+use roitrack_core::stats::{mean, median, quantile, rms, sorted};
 use roitrack_core::{
     MotionState, PinholeIntrinsics, SpatioTemporalModel, Target, TargetPoint, so3,
 };
-use serde::Deserialize;
-use serde_json::json;
+use serde_json::{Map, Value, json};
 use thiserror::Error;
 
 /// The format tag a problem file must carry.
 pub const FORMAT: &str = "roitrack-pnp-problem/1";
+
+/// The format tag a suite file must carry.
+pub const SUITE_FORMAT: &str = "roitrack-pnp-suite/1";
 
 /// Why a problem was refused: the message names the instance and field where it applies.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -52,36 +67,186 @@ impl PnpError {
     }
 }
 
-#[derive(Debug, Deserialize)]
+/// `parent.key`, or `key` at the top.
+fn join(parent: &str, key: &str) -> String {
+    if parent.is_empty() {
+        key.to_owned()
+    } else {
+        format!("{parent}.{key}")
+    }
+}
+
+/// What a JSON value is, for "expected X, got Y".
+fn kind(value: &Value) -> String {
+    match value {
+        Value::Null => "null".to_owned(),
+        Value::Bool(b) => b.to_string(),
+        Value::Number(n) => format!("the number {n}"),
+        Value::String(s) if s.chars().count() <= 40 => format!("the string {s:?}"),
+        Value::String(_) => "a string".to_owned(),
+        Value::Array(a) => format!("an array of {}", a.len()),
+        Value::Object(_) => "an object".to_owned(),
+    }
+}
+
+fn expected(path: &str, what: &str, value: &Value) -> PnpError {
+    let at = if path.is_empty() { "the file" } else { path };
+    PnpError::new(format!("{at}: expected {what}, got {}", kind(value)))
+}
+
+fn object<'a>(value: &'a Value, path: &str) -> Result<&'a Map<String, Value>, PnpError> {
+    value
+        .as_object()
+        .ok_or_else(|| expected(path, "an object", value))
+}
+
+/// The field `key` of `object` (at `path`), which must be there (null counts as missing).
+fn field<'a>(object: &'a Map<String, Value>, path: &str, key: &str) -> Result<&'a Value, PnpError> {
+    match object.get(key) {
+        Some(Value::Null) | None => Err(PnpError::new(format!("{} is missing", join(path, key)))),
+        Some(value) => Ok(value),
+    }
+}
+
+fn array<'a>(value: &'a Value, path: &str) -> Result<&'a [Value], PnpError> {
+    value
+        .as_array()
+        .map(Vec::as_slice)
+        .ok_or_else(|| expected(path, "an array", value))
+}
+
+fn number(value: &Value, path: &str) -> Result<f64, PnpError> {
+    value
+        .as_f64()
+        .ok_or_else(|| expected(path, "a number", value))
+}
+
+/// A fixed-length array of numbers (a pixel, a point, a matrix row).
+fn numbers<const N: usize>(value: &Value, path: &str) -> Result<[f64; N], PnpError> {
+    let items = array(value, path)?;
+    if items.len() != N {
+        return Err(expected(path, &format!("an array of {N} numbers"), value));
+    }
+    let mut out = [0.0; N];
+    for (k, (slot, item)) in out.iter_mut().zip(items).enumerate() {
+        *slot = number(item, &format!("{path}[{k}]"))?;
+    }
+    Ok(out)
+}
+
+/// A problem file as written, every field checked for its JSON type (values are checked by [`validate`]).
 struct ProblemFile {
-    format: String,
-    intrinsics: IntrinsicsJson,
-    model_points: Vec<ModelPointJson>,
+    intrinsics: PinholeIntrinsics,
+    model_points: Vec<TargetPoint>,
     instances: Vec<InstanceJson>,
     noise_px: Option<f64>,
 }
 
-#[derive(Debug, Deserialize)]
-struct IntrinsicsJson {
-    fx_px: f64,
-    fy_px: f64,
-    #[serde(default)]
-    skew_px: f64,
-    cx_px: f64,
-    cy_px: f64,
-}
-
-#[derive(Debug, Deserialize)]
-struct ModelPointJson {
-    id: u32,
-    xyz_m: [f64; 3],
-}
-
-#[derive(Debug, Deserialize)]
 struct InstanceJson {
     cam_r_obj: [[f64; 3]; 3],
     cam_t_obj_m: [f64; 3],
     pixels: Vec<[f64; 2]>,
+}
+
+/// Reads a `roitrack-pnp-problem/1` object found at `path` (empty at the file's top).
+fn parse_problem(value: &Value, path: &str) -> Result<ProblemFile, PnpError> {
+    let top = object(value, path)?;
+    let format_path = join(path, "format");
+    let format = field(top, path, "format")?;
+    if format.as_str() != Some(FORMAT) {
+        return Err(PnpError::new(format!(
+            "{format_path} is {format}, expected {FORMAT:?}"
+        )));
+    }
+    let intrinsics_path = join(path, "intrinsics");
+    let intrinsics = object(field(top, path, "intrinsics")?, &intrinsics_path)?;
+    let intrinsic = |key: &str| {
+        number(
+            field(intrinsics, &intrinsics_path, key)?,
+            &join(&intrinsics_path, key),
+        )
+    };
+    // skew_px may be left out (zero), as the earlier reader allowed.
+    let skew_px = match intrinsics.get("skew_px") {
+        None | Some(Value::Null) => 0.0,
+        Some(value) => number(value, &join(&intrinsics_path, "skew_px"))?,
+    };
+    let intrinsics = PinholeIntrinsics {
+        fx_px: intrinsic("fx_px")?,
+        fy_px: intrinsic("fy_px")?,
+        skew_px,
+        cx_px: intrinsic("cx_px")?,
+        cy_px: intrinsic("cy_px")?,
+    };
+    let points_path = join(path, "model_points");
+    let model_points = array(field(top, path, "model_points")?, &points_path)?
+        .iter()
+        .enumerate()
+        .map(|(k, point)| {
+            let point_path = format!("{points_path}[{k}]");
+            let fields = object(point, &point_path)?;
+            let id_path = join(&point_path, "id");
+            let id_value = field(fields, &point_path, "id")?;
+            let id = id_value
+                .as_u64()
+                .and_then(|id| u32::try_from(id).ok())
+                .ok_or_else(|| expected(&id_path, "an integer from 0 to 4294967295", id_value))?;
+            let xyz_path = join(&point_path, "xyz_m");
+            let xyz_m = numbers::<3>(field(fields, &point_path, "xyz_m")?, &xyz_path)?;
+            Ok(TargetPoint {
+                id,
+                point_in_obj_m: Vector3::from(xyz_m),
+                diameter_m: None,
+            })
+        })
+        .collect::<Result<Vec<_>, PnpError>>()?;
+    let instances_path = join(path, "instances");
+    let instances = array(field(top, path, "instances")?, &instances_path)?
+        .iter()
+        .enumerate()
+        .map(|(k, instance)| parse_instance(instance, &format!("{instances_path}[{k}]")))
+        .collect::<Result<Vec<_>, PnpError>>()?;
+    let noise_px = match top.get("noise_px") {
+        None | Some(Value::Null) => None,
+        Some(value) => Some(number(value, &join(path, "noise_px"))?),
+    };
+    Ok(ProblemFile {
+        intrinsics,
+        model_points,
+        instances,
+        noise_px,
+    })
+}
+
+fn parse_instance(value: &Value, path: &str) -> Result<InstanceJson, PnpError> {
+    let fields = object(value, path)?;
+    let r_path = join(path, "cam_r_obj");
+    let rows = array(field(fields, path, "cam_r_obj")?, &r_path)?;
+    if rows.len() != 3 {
+        return Err(PnpError::new(format!(
+            "{r_path}: expected 3 rows of 3 numbers, got {} rows",
+            rows.len()
+        )));
+    }
+    let mut cam_r_obj = [[0.0; 3]; 3];
+    for (i, row) in rows.iter().enumerate() {
+        cam_r_obj[i] = numbers::<3>(row, &format!("{r_path}[{i}]"))?;
+    }
+    let cam_t_obj_m = numbers::<3>(
+        field(fields, path, "cam_t_obj_m")?,
+        &join(path, "cam_t_obj_m"),
+    )?;
+    let pixels_path = join(path, "pixels");
+    let pixels = array(field(fields, path, "pixels")?, &pixels_path)?
+        .iter()
+        .enumerate()
+        .map(|(i, pixel)| numbers::<2>(pixel, &format!("{pixels_path}[{i}]")))
+        .collect::<Result<Vec<_>, PnpError>>()?;
+    Ok(InstanceJson {
+        cam_r_obj,
+        cam_t_obj_m,
+        pixels,
+    })
 }
 
 /// One problem instance, validated: the true pose and the observations.
@@ -110,49 +275,31 @@ impl PnpProblem {
     /// assert!(error.message.contains("not a valid PnP problem"), "{error}");
     /// ```
     pub fn from_json(text: &str) -> Result<Self, PnpError> {
-        let file: ProblemFile = serde_json::from_str(text)
+        let value: Value = serde_json::from_str(text)
             .map_err(|e| PnpError::new(format!("not a valid PnP problem: {e}")))?;
-        validate(file)
+        validate(parse_problem(&value, "")?, "")
     }
 }
 
-fn validate(file: ProblemFile) -> Result<PnpProblem, PnpError> {
-    if file.format != FORMAT {
-        return Err(PnpError::new(format!(
-            "format is {:?}, expected {FORMAT:?}",
-            file.format
-        )));
-    }
-    let intrinsics = PinholeIntrinsics {
-        fx_px: file.intrinsics.fx_px,
-        fy_px: file.intrinsics.fy_px,
-        skew_px: file.intrinsics.skew_px,
-        cx_px: file.intrinsics.cx_px,
-        cy_px: file.intrinsics.cy_px,
-    };
-    intrinsics
+/// Checks the values of a problem found at `path` (empty at the file's top).
+fn validate(file: ProblemFile, path: &str) -> Result<PnpProblem, PnpError> {
+    file.intrinsics
         .validate()
-        .map_err(|e| PnpError::new(format!("intrinsics: {e}")))?;
-    let points = file
-        .model_points
-        .iter()
-        .map(|p| TargetPoint {
-            id: p.id,
-            point_in_obj_m: Vector3::from(p.xyz_m),
-            diameter_m: None,
-        })
-        .collect();
-    let target = Target::new(points).map_err(|e| PnpError::new(format!("model_points: {e}")))?;
+        .map_err(|e| PnpError::new(format!("{}: {e}", join(path, "intrinsics"))))?;
+    let target = Target::new(file.model_points)
+        .map_err(|e| PnpError::new(format!("{}: {e}", join(path, "model_points"))))?;
+    let instances_path = join(path, "instances");
     if file.instances.is_empty() {
-        return Err(PnpError::new("the problem has no instances"));
+        return Err(PnpError::new(format!(
+            "{instances_path}: the problem has no instances"
+        )));
     }
     let instances = file
         .instances
         .iter()
         .enumerate()
         .map(|(k, instance)| {
-            validate_instance(instance, target.len())
-                .map_err(|e| PnpError::new(format!("instance {k}: {}", e.message)))
+            validate_instance(instance, target.len(), &format!("{instances_path}[{k}]"))
         })
         .collect::<Result<Vec<_>, _>>()?;
     let noise_px = file
@@ -160,33 +307,40 @@ fn validate(file: ProblemFile) -> Result<PnpProblem, PnpError> {
         .unwrap_or(roitrack_core::estimator::TrackerConfig::default().noise_px);
     if !(noise_px.is_finite() && noise_px > 0.0) {
         return Err(PnpError::new(format!(
-            "noise_px must be a positive number, got {noise_px}"
+            "{} must be a positive number, got {noise_px}",
+            join(path, "noise_px")
         )));
     }
     Ok(PnpProblem {
-        model: SpatioTemporalModel::new(intrinsics),
+        model: SpatioTemporalModel::new(file.intrinsics),
         target,
         instances,
         noise_px,
     })
 }
 
-fn validate_instance(instance: &InstanceJson, point_count: usize) -> Result<PnpInstance, PnpError> {
+fn validate_instance(
+    instance: &InstanceJson,
+    point_count: usize,
+    path: &str,
+) -> Result<PnpInstance, PnpError> {
     if instance.pixels.len() != point_count {
         return Err(PnpError::new(format!(
-            "{} pixels for {point_count} model points",
+            "{path}.pixels: {} pixels for {point_count} model points",
             instance.pixels.len()
         )));
     }
     let r = Matrix3::from_fn(|i, j| instance.cam_r_obj[i][j]);
     let t = Vector3::from(instance.cam_t_obj_m);
     if !r.iter().chain(t.iter()).all(|v| v.is_finite()) {
-        return Err(PnpError::new("the true pose is not finite"));
+        return Err(PnpError::new(format!(
+            "{path}: the true pose (cam_r_obj, cam_t_obj_m) is not finite"
+        )));
     }
     let orthonormality = (r.transpose() * r - Matrix3::identity()).amax();
     if orthonormality > 1e-6 || r.determinant() < 0.0 {
         return Err(PnpError::new(format!(
-            "cam_r_obj is not a rotation matrix (|RᵀR - I| = {orthonormality:.1e}, det = {:.6})",
+            "{path}.cam_r_obj is not a rotation matrix (|RᵀR - I| = {orthonormality:.1e}, det = {:.6})",
             r.determinant()
         )));
     }
@@ -196,7 +350,9 @@ fn validate_instance(instance: &InstanceJson, point_count: usize) -> Result<PnpI
         .enumerate()
         .map(|(i, &[u, v])| {
             if !(u.is_finite() && v.is_finite()) {
-                return Err(PnpError::new(format!("pixel {i} is not finite ({u}, {v})")));
+                return Err(PnpError::new(format!(
+                    "{path}.pixels[{i}] is not finite ({u}, {v})"
+                )));
             }
             Ok(Observation {
                 t_s: 0.0,
@@ -447,6 +603,270 @@ impl PnpReport {
     }
 }
 
+/// One problem of a suite: the family it was drawn from and the problem (one instance, its noise given).
+#[derive(Debug, Clone)]
+pub struct SuiteProblem {
+    pub family: String,
+    pub problem: PnpProblem,
+}
+
+/// A validated suite of one-instance PnP problems (format `roitrack-pnp-suite/1`, see the
+/// [module documentation](self)).
+#[derive(Debug, Clone)]
+pub struct PnpSuite {
+    pub problems: Vec<SuiteProblem>,
+}
+
+impl PnpSuite {
+    /// Parses and validates a suite file's text; every refusal names the problem (`problems[k]`, with its family
+    /// once known) and the field.
+    ///
+    /// ```
+    /// use roitrack_bench::pnp::PnpSuite;
+    /// let error = PnpSuite::from_json(r#"{"format": "roitrack-pnp-suite/1", "problems": [{"problem": {}}]}"#)
+    ///     .unwrap_err();
+    /// assert_eq!(error.message, "problems[0].family is missing");
+    /// ```
+    pub fn from_json(text: &str) -> Result<Self, PnpError> {
+        let value: Value = serde_json::from_str(text)
+            .map_err(|e| PnpError::new(format!("not a valid PnP suite: {e}")))?;
+        let top = object(&value, "")?;
+        let format = field(top, "", "format")?;
+        if format.as_str() != Some(SUITE_FORMAT) {
+            return Err(PnpError::new(format!(
+                "format is {format}, expected {SUITE_FORMAT:?}"
+            )));
+        }
+        let entries = array(field(top, "", "problems")?, "problems")?;
+        if entries.is_empty() {
+            return Err(PnpError::new("problems: the suite has no problems"));
+        }
+        let problems = entries
+            .iter()
+            .enumerate()
+            .map(|(k, entry)| suite_problem(entry, &format!("problems[{k}]")))
+            .collect::<Result<Vec<_>, _>>()?;
+        Ok(Self { problems })
+    }
+
+    /// Reads and validates a suite file; every refusal names the file, then as [`PnpSuite::from_json`].
+    pub fn read(path: &Path) -> Result<Self, PnpError> {
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            PnpError::new(format!(
+                "cannot read the suite file {}: {e}",
+                path.display()
+            ))
+        })?;
+        Self::from_json(&text)
+            .map_err(|e| PnpError::new(format!("suite file {}: {}", path.display(), e.message)))
+    }
+}
+
+/// One entry of a suite's `problems`, found at `path`.
+fn suite_problem(entry: &Value, path: &str) -> Result<SuiteProblem, PnpError> {
+    let fields = object(entry, path)?;
+    let family_value = field(fields, path, "family")?;
+    let family = family_value
+        .as_str()
+        .ok_or_else(|| expected(&join(path, "family"), "a string", family_value))?
+        .to_owned();
+    // From here on the family is named too: the generator's tables are by family.
+    let named = |e: PnpError| PnpError::new(format!("{} (family {family:?})", e.message));
+    let problem_path = join(path, "problem");
+    let file = parse_problem(field(fields, path, "problem")?, &problem_path).map_err(named)?;
+    // A suite gives each problem's noise and one instance: its report is one pose and one time per problem.
+    if file.noise_px.is_none() {
+        return Err(named(PnpError::new(format!(
+            "{problem_path}.noise_px is missing (a suite problem gives its pixels' noise)"
+        ))));
+    }
+    if file.instances.len() != 1 {
+        return Err(named(PnpError::new(format!(
+            "{problem_path}.instances: a suite problem has exactly one instance, got {}",
+            file.instances.len()
+        ))));
+    }
+    let problem = validate(file, &problem_path).map_err(named)?;
+    Ok(SuiteProblem { family, problem })
+}
+
+/// What the solver gave on one problem of a suite.
+#[derive(Debug, Clone)]
+pub struct SuiteSolve {
+    pub family: String,
+    /// Every pose returned, best first (empty when the solver refused the problem).
+    pub poses: Vec<PoseFit>,
+    /// Whether the solver said the poses cannot be told apart ([`roitrack_core::estimator::StaticPoses::is_ambiguous`]).
+    pub ambiguous: bool,
+    /// The solver's error, if it found no pose.
+    pub error: Option<String>,
+    /// Median over the timed solves (µs).
+    pub median_time_us: f64,
+}
+
+/// The suite's result, problem by problem in the file's order.
+#[derive(Debug, Clone)]
+pub struct SuiteReport {
+    pub solves: Vec<SuiteSolve>,
+    pub repeats: usize,
+}
+
+/// Solves every problem of the suite once (the poses), then times it `repeats` times in a row (as the OpenCV side
+/// times its calls: the same problem repeated, warm in the cache), keeping the median.
+///
+/// ```
+/// use roitrack_bench::pnp::{PnpSuite, run_suite};
+/// let text = r#"{"format": "roitrack-pnp-suite/1", "problems": [{"family": "4-5 planar", "problem": {
+///   "format": "roitrack-pnp-problem/1", "noise_px": 0.1,
+///   "intrinsics": {"fx_px": 1500, "fy_px": 1500, "cx_px": 512, "cy_px": 512},
+///   "model_points": [{"id": 0, "xyz_m": [0, 0, 0]}, {"id": 1, "xyz_m": [0.02, 0, 0]},
+///                    {"id": 2, "xyz_m": [0, 0.02, 0]}, {"id": 3, "xyz_m": [0.02, 0.02, 0]}],
+///   "instances": [{"cam_r_obj": [[1, 0, 0], [0, 1, 0], [0, 0, 1]], "cam_t_obj_m": [0, 0, 0.5],
+///                  "pixels": [[512, 512], [572, 512], [512, 572], [572, 572]]}]}}]}"#;
+/// let report = run_suite(&PnpSuite::from_json(text).unwrap(), 3);
+/// let solve = &report.solves[0];
+/// assert!(solve.error.is_none() && !solve.ambiguous);
+/// assert!((solve.poses[0].state.cam_t_obj_m.z - 0.5).abs() < 1e-9);
+/// ```
+pub fn run_suite(suite: &PnpSuite, repeats: usize) -> SuiteReport {
+    let solves = suite
+        .problems
+        .iter()
+        .map(|SuiteProblem { family, problem }| {
+            let PnpProblem {
+                model,
+                target,
+                instances,
+                noise_px,
+            } = problem;
+            let observations = instances[0].observations.as_slice();
+            let (poses, ambiguous, error) =
+                match solve_static_pose(model, target, observations, *noise_px) {
+                    Ok(poses) => (poses.as_slice().to_vec(), poses.is_ambiguous(), None),
+                    Err(error) => (Vec::new(), false, Some(error.to_string())),
+                };
+            let times_us: Vec<f64> = (0..repeats)
+                .map(|_| {
+                    let start = Instant::now();
+                    let result = solve_static_pose(
+                        black_box(model),
+                        black_box(target),
+                        black_box(observations),
+                        black_box(*noise_px),
+                    );
+                    let elapsed = start.elapsed();
+                    black_box(&result);
+                    elapsed.as_secs_f64() * 1e6
+                })
+                .collect();
+            SuiteSolve {
+                family: family.clone(),
+                poses,
+                ambiguous,
+                error,
+                median_time_us: median(&times_us),
+            }
+        })
+        .collect();
+    SuiteReport { solves, repeats }
+}
+
+fn rotation_rows(state: &MotionState) -> [[f64; 3]; 3] {
+    let r = state.cam_r_obj.matrix();
+    [0, 1, 2].map(|i| [r[(i, 0)], r[(i, 1)], r[(i, 2)]])
+}
+
+impl SuiteReport {
+    /// Per problem: family, ok or the error, the best pose (row-major rotation, translation), every pose returned
+    /// (best first), their number, whether ambiguous, the median solve time.
+    pub fn to_json(&self, suite_name: &str) -> String {
+        let problems: Vec<_> = self
+            .solves
+            .iter()
+            .enumerate()
+            .map(|(index, s)| {
+                let poses: Vec<_> = s
+                    .poses
+                    .iter()
+                    .map(|fit| {
+                        json!({
+                            "cam_r_obj": rotation_rows(&fit.state),
+                            "cam_t_obj_m": fit.state.cam_t_obj_m.as_slice(),
+                            "cost_px2": fit.cost_px2,
+                            "residual_rms_px": fit.residual_rms_px,
+                            "converged": fit.converged,
+                        })
+                    })
+                    .collect();
+                let best = s.poses.first();
+                json!({
+                    "index": index,
+                    "family": s.family,
+                    "ok": s.error.is_none(),
+                    "error": s.error,
+                    "cam_r_obj": best.map(|fit| rotation_rows(&fit.state)),
+                    "cam_t_obj_m": best.map(|fit| fit.state.cam_t_obj_m.as_slice().to_vec()),
+                    "pose_count": s.poses.len(),
+                    "ambiguous": s.ambiguous,
+                    "poses": poses,
+                    "median_time_us": s.median_time_us,
+                })
+            })
+            .collect();
+        let report = json!({
+            "solver": "roitrack_core::estimator::solve_static_pose",
+            "suite": suite_name,
+            "repeats": self.repeats,
+            "problems": problems,
+        });
+        serde_json::to_string_pretty(&report).expect("the report holds only numbers and strings")
+    }
+
+    /// One line per problem.
+    pub fn to_table(&self, suite_name: &str) -> String {
+        let mut out = format!(
+            "solve_static_pose on {suite_name} ({} problems, median of {} timed solves each)\n\
+             {:>5}  {:<24} {:>5} {:>9}  {:>12} {:>12} {:>12}  {:>9}\n",
+            self.solves.len(),
+            self.repeats,
+            "#",
+            "family",
+            "poses",
+            "ambiguous",
+            "tx m",
+            "ty m",
+            "tz m",
+            "median us"
+        );
+        for (index, s) in self.solves.iter().enumerate() {
+            let line = match (&s.error, s.poses.first()) {
+                (None, Some(best)) => {
+                    let t = best.state.cam_t_obj_m;
+                    format!(
+                        "{:>5}  {:<24} {:>5} {:>9}  {:>12.6} {:>12.6} {:>12.6}  {:>9.2}\n",
+                        index,
+                        s.family,
+                        s.poses.len(),
+                        if s.ambiguous { "yes" } else { "no" },
+                        t.x,
+                        t.y,
+                        t.z,
+                        s.median_time_us
+                    )
+                }
+                (error, _) => format!(
+                    "{:>5}  {:<24} error: {}\n",
+                    index,
+                    s.family,
+                    error.as_deref().unwrap_or("no pose")
+                ),
+            };
+            out.push_str(&line);
+        }
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -521,9 +941,199 @@ mod tests {
         let message = PnpProblem::from_json(&problem_json(15))
             .unwrap_err()
             .message;
+        assert_eq!(
+            message,
+            "instances[0].pixels: 15 pixels for 16 model points"
+        );
+    }
+
+    #[test]
+    fn problem_fields_are_named() {
+        let mut value: Value = serde_json::from_str(&problem_json(16)).unwrap();
+        value["intrinsics"].as_object_mut().unwrap().remove("fy_px");
+        let message = PnpProblem::from_json(&value.to_string())
+            .unwrap_err()
+            .message;
+        assert_eq!(message, "intrinsics.fy_px is missing");
+        let mut value: Value = serde_json::from_str(&problem_json(16)).unwrap();
+        value["model_points"][2]["xyz_m"] = json!([0.0, "x", 0.0]);
+        let message = PnpProblem::from_json(&value.to_string())
+            .unwrap_err()
+            .message;
+        assert_eq!(
+            message,
+            "model_points[2].xyz_m[1]: expected a number, got the string \"x\""
+        );
+        let mut value: Value = serde_json::from_str(&problem_json(16)).unwrap();
+        value["format"] = json!("roitrack-pnp-problem/2");
+        let message = PnpProblem::from_json(&value.to_string())
+            .unwrap_err()
+            .message;
         assert!(
-            message.contains("instance 0") && message.contains("15 pixels"),
+            message.starts_with("format is \"roitrack-pnp-problem/2\""),
             "{message}"
         );
+        // No noise given: the tracker's default, as before suites existed.
+        let problem = PnpProblem::from_json(&problem_json(16)).unwrap();
+        assert_eq!(
+            problem.noise_px,
+            roitrack_core::estimator::TrackerConfig::default().noise_px
+        );
+    }
+
+    /// A suite of `problems` copies of the 16-point problem, each with its noise, in families "a", "b", "a", ...
+    fn suite_value(problems: usize) -> Value {
+        let entries: Vec<Value> = (0..problems)
+            .map(|k| {
+                let mut problem: Value = serde_json::from_str(&problem_json(16)).unwrap();
+                problem["noise_px"] = json!(0.1);
+                json!({"family": if k % 2 == 0 { "a" } else { "b" }, "problem": problem})
+            })
+            .collect();
+        json!({"format": SUITE_FORMAT, "problems": entries})
+    }
+
+    fn suite_error(value: &Value) -> String {
+        PnpSuite::from_json(&value.to_string()).unwrap_err().message
+    }
+
+    #[test]
+    fn suite_is_solved_problem_by_problem() {
+        let suite = PnpSuite::from_json(&suite_value(3).to_string()).unwrap();
+        assert_eq!(suite.problems.len(), 3);
+        assert_eq!(suite.problems[1].family, "b");
+        let report = run_suite(&suite, 4);
+        let json: Value = serde_json::from_str(&report.to_json("s.json")).unwrap();
+        assert_eq!(json["repeats"], 4);
+        let first = &json["problems"][0];
+        assert_eq!(
+            (
+                &first["family"],
+                &first["ok"],
+                &first["ambiguous"],
+                &first["pose_count"]
+            ),
+            (&json!("a"), &json!(true), &json!(false), &json!(1))
+        );
+        let t: Vec<f64> = serde_json::from_value(first["cam_t_obj_m"].clone()).unwrap();
+        assert!(
+            (t[0] - 0.02).abs() < 1e-9 && (t[1] + 0.01).abs() < 1e-9 && (t[2] - 0.6).abs() < 1e-9
+        );
+        let r: [[f64; 3]; 3] = serde_json::from_value(first["cam_r_obj"].clone()).unwrap();
+        let truth = &suite.problems[0].problem.instances[0].truth;
+        let found = Rotation3::from_matrix_unchecked(Matrix3::from_fn(|i, j| r[i][j]));
+        assert!(so3::angle_between(&found, &truth.cam_r_obj) < 1e-9);
+        assert!(first["median_time_us"].as_f64().unwrap() > 0.0);
+        assert!(report.to_table("s.json").lines().count() == 5);
+    }
+
+    #[test]
+    fn suite_refusals_name_the_problem_and_field() {
+        let mut value = suite_value(3);
+        value["format"] = json!("roitrack-pnp-problem/1");
+        assert_eq!(
+            suite_error(&value),
+            "format is \"roitrack-pnp-problem/1\", expected \"roitrack-pnp-suite/1\""
+        );
+        assert_eq!(
+            suite_error(&json!({"format": SUITE_FORMAT, "problems": []})),
+            "problems: the suite has no problems"
+        );
+        assert_eq!(
+            suite_error(&json!({"format": SUITE_FORMAT})),
+            "problems is missing"
+        );
+
+        let mut value = suite_value(3);
+        value["problems"][1]["problem"]
+            .as_object_mut()
+            .unwrap()
+            .remove("noise_px");
+        assert_eq!(
+            suite_error(&value),
+            "problems[1].problem.noise_px is missing (a suite problem gives its pixels' noise) (family \"b\")"
+        );
+
+        let mut value = suite_value(3);
+        let instance = value["problems"][0]["problem"]["instances"][0].clone();
+        value["problems"][0]["problem"]["instances"] = json!([instance.clone(), instance]);
+        assert_eq!(
+            suite_error(&value),
+            "problems[0].problem.instances: a suite problem has exactly one instance, got 2 (family \"a\")"
+        );
+
+        let mut value = suite_value(3);
+        value["problems"][2]["problem"]["intrinsics"]["fx_px"] = json!("1500");
+        assert_eq!(
+            suite_error(&value),
+            "problems[2].problem.intrinsics.fx_px: expected a number, got the string \"1500\" (family \"a\")"
+        );
+
+        let mut value = suite_value(3);
+        value["problems"][1]["problem"]["instances"][0]["pixels"][3] = json!([1.0]);
+        assert_eq!(
+            suite_error(&value),
+            "problems[1].problem.instances[0].pixels[3]: expected an array of 2 numbers, got an array of 1 \
+             (family \"b\")"
+        );
+
+        let mut value = suite_value(2);
+        value["problems"][1]["problem"]["instances"][0]["pixels"]
+            .as_array_mut()
+            .unwrap()
+            .pop();
+        assert_eq!(
+            suite_error(&value),
+            "problems[1].problem.instances[0].pixels: 15 pixels for 16 model points (family \"b\")"
+        );
+
+        let mut value = suite_value(2);
+        value["problems"][0]["problem"]["noise_px"] = json!(-0.5);
+        assert_eq!(
+            suite_error(&value),
+            "problems[0].problem.noise_px must be a positive number, got -0.5 (family \"a\")"
+        );
+
+        let mut value = suite_value(2);
+        value["problems"][1]["family"] = json!(3);
+        assert_eq!(
+            suite_error(&value),
+            "problems[1].family: expected a string, got the number 3"
+        );
+        assert!(
+            PnpSuite::from_json("[1, 2")
+                .unwrap_err()
+                .message
+                .starts_with("not a valid PnP suite")
+        );
+    }
+
+    #[test]
+    fn suite_file_is_named() {
+        let dir = tempfile::tempdir().unwrap();
+        let missing = dir.path().join("missing.json");
+        let message = PnpSuite::read(&missing).unwrap_err().message;
+        assert!(
+            message.starts_with(&format!(
+                "cannot read the suite file {}: ",
+                missing.display()
+            )),
+            "{message}"
+        );
+        let bad = dir.path().join("bad.json");
+        let mut value = suite_value(2);
+        value["problems"][1]["problem"]["instances"][0]["cam_r_obj"][0][0] = json!(2.0);
+        std::fs::write(&bad, value.to_string()).unwrap();
+        let message = PnpSuite::read(&bad).unwrap_err().message;
+        assert!(
+            message.starts_with(&format!(
+                "suite file {}: problems[1].problem.instances[0].cam_r_obj is not a rotation matrix",
+                bad.display()
+            )) && message.ends_with("(family \"b\")"),
+            "{message}"
+        );
+        let good = dir.path().join("good.json");
+        std::fs::write(&good, suite_value(1).to_string()).unwrap();
+        assert_eq!(PnpSuite::read(&good).unwrap().problems.len(), 1);
     }
 }
