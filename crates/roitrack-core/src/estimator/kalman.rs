@@ -1130,6 +1130,8 @@ struct KalmanLaw {
     frame_steps: bool,
     /// Per point: the time of its newest measurement if the gate rejected it.
     gated_at: Vec<Option<f64>>,
+    /// Per point: how many of its newest measurements in a row the gate rejected.
+    gated_runs: Vec<u32>,
     /// Natural logarithms of the factors applied to the linear and the angular acceleration density (when
     /// `tuning.adapt_motion`).
     process_log_scale: [f64; 2],
@@ -1174,6 +1176,12 @@ impl Law for KalmanLaw {
                 gated_at.clear();
                 gated_at.resize(core.target.len(), None);
                 gated_at
+            },
+            gated_runs: {
+                let mut gated_runs = std::mem::take(&mut self.gated_runs);
+                gated_runs.clear();
+                gated_runs.resize(core.target.len(), 0);
+                gated_runs
             },
             readout: std::mem::take(&mut self.readout),
             // The points' shares of the noise carry over too (for the same target).
@@ -1303,14 +1311,19 @@ impl Law for KalmanLaw {
     /// estimate rejected (the filter was reset after a run of them and is still re-converging). One measurement
     /// just beyond the gate is not enough: 1.1 % of good measurements land there.
     fn is_disputed(&self, core: &TrackCore, _residuals: &ResidualFigures) -> bool {
-        // A quarter of the points (one of a small target) whose newest measurement the gate refused: the state rests
-        // on the rest, and on a few points a state that has left one point can drift where the others do not hold
-        // it (seen on 4 points: rotated 150 degrees within 50 ms, one point refused at every cycle).
-        let refused_points = self.gated_at.iter().filter(|g| g.is_some()).count();
+        // A point whose last two measurements the gate refused, on a target where the rest are too few to hold the
+        // state: a state that has left one point can drift where the others do not hold it (seen on 4 points:
+        // rotated 150 degrees within 50 ms, one point refused at every cycle). Two in a row of one good point
+        // happen with a chance of 1.2e-4 per cycle; one alone, 1.1e-2, would dispute every twentieth estimate of
+        // 4 points. On larger targets the rest hold the state, and several points refused at once are common while
+        // the filter learns a noise above the one it assumed.
+        let refused_points = self.gated_runs.iter().filter(|&&run| run > 0).count();
+        let holding_points = self.gated_runs.len() - refused_points;
+        let persistent = self.gated_runs.iter().any(|&run| run >= 2);
         self.gated_in_a_row >= DISPUTED_AFTER_GATED_IN_A_ROW
             || (self.gated_in_a_row > 0 && self.newest_nis > DISPUTED_NIS)
             || 2 * self.gated_since_estimate >= core.step_measurements.max(2)
-            || 4 * refused_points >= self.gated_at.len().max(4)
+            || (persistent && holding_points < HOLDING_POINTS)
     }
 
     fn after_estimate(&mut self) {
@@ -1332,6 +1345,11 @@ impl Law for KalmanLaw {
         report.covariance_resets = self.resets_total;
     }
 }
+
+/// Points whose newest measurement was accepted that hold a Kalman state when another's was refused: a pose from
+/// fewer than 6 points can have rival minima (three give up to four poses, four or five a mirror twin in some views),
+/// along which the state can slide while one point disagrees.
+const HOLDING_POINTS: usize = 6;
 
 /// Gated measurements in a row that dispute an estimate (3 in a row happen by chance once in 700,000 good ones).
 const DISPUTED_AFTER_GATED_IN_A_ROW: usize = 3;
@@ -1468,6 +1486,7 @@ impl KalmanLaw {
             process_log_scale: [0.0; 2],
             frame_steps: false,
             gated_at: Vec::new(),
+            gated_runs: Vec::new(),
             calibration: TwistCalibration::new(),
             point_noise: PointNoise::default(),
             readout: Vec::new(),
@@ -1554,8 +1573,12 @@ impl KalmanLaw {
         // Outliers are rare and scattered; a run of gated measurements means the filter itself is off (after a jump
         // of the target, or an outlier that got through): widen its covariance so the measurements pull it back,
         // instead of coasting on a wrong state.
+        let gated = matches!(outcome, UpdateOutcome::Gated { .. });
         if let Some(gated_at) = self.gated_at.get_mut(obs.point_index) {
-            *gated_at = matches!(outcome, UpdateOutcome::Gated { .. }).then_some(obs.t_s);
+            *gated_at = gated.then_some(obs.t_s);
+        }
+        if let Some(run) = self.gated_runs.get_mut(obs.point_index) {
+            *run = if gated { *run + 1 } else { 0 };
         }
         if matches!(outcome, UpdateOutcome::Gated { .. }) {
             self.gated_since_estimate += 1;
@@ -1605,6 +1628,9 @@ impl KalmanLaw {
                 && let Some(gated_at) = self.gated_at.get_mut(m.point_index)
             {
                 *gated_at = None;
+                if let Some(run) = self.gated_runs.get_mut(m.point_index) {
+                    *run = 0;
+                }
             }
             if m.used {
                 self.gated_in_a_row = 0;

@@ -181,7 +181,10 @@ fn sensitivity<const N: usize, P: LeastSquaresProblem<N, Params = MotionState>>(
 /// observation's time after the states' reference time, `noise_variance_px2` the noise per coordinate. `None` when a
 /// point does not project.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn cost_difference_effect<const N: usize, P: LeastSquaresProblem<N, Params = MotionState>>(
+pub(crate) fn cost_difference_effect<
+    const N: usize,
+    P: LeastSquaresProblem<N, Params = MotionState>,
+>(
     problem: &P,
     model: &SpatioTemporalModel,
     target: &Target,
@@ -212,7 +215,8 @@ pub(crate) fn cost_difference_effect<const N: usize, P: LeastSquaresProblem<N, P
     let mut curvature = step.dot(&((r.intrinsics_shown - b.intrinsics_shown) * step));
     let point_prior = Matrix3::identity() / (u.target_m * u.target_m);
     for i in 0..target.len() {
-        let Some(covariance) = (point_prior + b.points_shown[i] / noise_variance_px2).try_inverse() else {
+        let Some(covariance) = (point_prior + b.points_shown[i] / noise_variance_px2).try_inverse()
+        else {
             continue;
         };
         let g = r.points_gradient[i] - b.points_gradient[i];
