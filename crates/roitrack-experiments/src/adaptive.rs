@@ -961,7 +961,10 @@ pub struct HandTuned {
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct Visited {
     pub tuning: HandTuning,
+    /// Position RMSE over the runs that gave estimates.
     pub position_rmse_mm: f64,
+    /// Runs (seeds) in which the filter never started: such a setting is no candidate for the best.
+    pub runs_without_estimates: usize,
 }
 
 /// A case's figures.
@@ -1360,6 +1363,7 @@ fn run_case(case: &Case, options: &SweepOptions) -> Result<CaseResult, Experimen
         visited.push(Visited {
             tuning: grid.tuning(at, case.noise_px),
             position_rmse_mm: summary.position_rmse_mm,
+            runs_without_estimates: summary.runs_without_estimates,
         });
     };
     let truth_at = grid.truth_index();

@@ -92,7 +92,8 @@ fn the_quick_sweep_measures_honestly() {
                     best.summary.position_rmse_mm <= truth.summary.position_rmse_mm,
                     "{name}"
                 );
-                for v in &r.visited {
+                // (A setting that never started on some seed is no candidate: its RMSE is over the other seeds.)
+                for v in r.visited.iter().filter(|v| v.runs_without_estimates == 0) {
                     assert!(
                         best.summary.position_rmse_mm <= v.position_rmse_mm,
                         "{name}"
