@@ -158,7 +158,11 @@ fn estimate_equals_truth_on_noiseless_constant_twist_motion() {
         let estimates = run(&measurements, config);
         // The start waits until the view tells the grid from its mirror twin beyond what a target drawn within a
         // quarter millimetre could fake (about ten cycles here), then every estimate must be exact.
-        assert!(estimates.len() >= 40, "{name}: {} estimates", estimates.len());
+        assert!(
+            estimates.len() >= 40,
+            "{name}: {} estimates",
+            estimates.len()
+        );
         for e in &estimates {
             let truth = start.predicted(e.t_ref_s);
             let dp = position_error_m(e, &truth);
