@@ -39,6 +39,7 @@ use roitrack_core::estimator::{
     MotionModel, MotionModelKind, NoiseSample, Observation, TrackError, TrackStatus, Tracker,
     TrackerConfig, refine_static_pose,
 };
+use roitrack_core::target::{Symmetry, TargetAmbiguity};
 use roitrack_core::{
     Acceleration, CameraModel, Measurement, MotionState, SpatioTemporalModel, Target,
 };
@@ -308,6 +309,9 @@ pub struct FrameTracker {
     /// The newest pose to trust, and its time: a frame found whole (the static pose of its identified blobs) or an
     /// estimate vouched for. A new track takes its twist from it ([`Self::restart_state`]).
     last_pose: Option<(f64, MotionState)>,
+    /// The target's symmetries that identification cannot tell apart, each with the point it takes every point to
+    /// (by index): the labellings of a whole-frame detection that fit as well as the one it gives.
+    twins: Vec<(Symmetry, Vec<usize>)>,
     report: FrameTrackReport,
 }
 
@@ -360,6 +364,7 @@ impl FrameTracker {
         let blob_options = config.detection.blob_options(&camera, &target);
         let points = target.len();
         Ok(Self {
+            twins: symmetric_twins(&target),
             measurements: Vec::with_capacity(target.len()),
             requests: Vec::with_capacity(target.len()),
             window: Vec::with_capacity(max_side * max_side),
@@ -844,14 +849,50 @@ impl FrameTracker {
             self.report.polarity = Some(detection.polarity);
         }
         let time = self.camera.time;
+        let (state, twin) = self.nearest_twin(frame.t_s, detection.state);
+        let target = &self.target;
+        let relabel = |id: u32| match (twin, target.index_of(id)) {
+            (Some(k), Some(i)) => target.points()[self.twins[k].1[i]].id,
+            _ => id,
+        };
         self.measurements
             .extend(detection.points.iter().map(|p| Measurement {
                 t_s: time.blob_time_s(frame.t_s, p.centre_px.y),
-                id: p.id,
+                id: relabel(p.id),
                 u_px: p.centre_px.x,
                 v_px: p.centre_px.y,
             }));
-        Some(detection.state)
+        Some(state)
+    }
+
+    /// Of the poses a symmetric target's detection `found` at `t_s` could be (its labelling and its twins'), the one
+    /// nearest the last trusted pose carried on by its twist to `t_s`, and which twin it is (`None`: the detection's
+    /// own). Identification labels a symmetric grid one fixed way; a track that has turned the grid past half its
+    /// symmetry follows another labelling, and a new track on the detection's would turn the pose by the symmetry's
+    /// angle and write the twist of that turn (a half turn of an 8 x 10 grid: 7 m/s and 78 rad/s).
+    fn nearest_twin(&self, t_s: f64, found: MotionState) -> (MotionState, Option<usize>) {
+        let Some((t_last_s, last)) = self.last_pose else {
+            return (found, None);
+        };
+        let dt_s = t_s - t_last_s;
+        if self.twins.is_empty() || !(dt_s >= 0.0 && dt_s <= RESTART_TWIST_MAX_GAP_S) {
+            return (found, None);
+        }
+        let predicted = last.predicted(dt_s);
+        let distance = |s: &MotionState| {
+            roitrack_core::so3::angle_between(&s.cam_r_obj, &predicted.cam_r_obj)
+                + (s.cam_t_obj_m - predicted.cam_t_obj_m).norm()
+                    / predicted.cam_t_obj_m.norm().max(1e-9)
+        };
+        let mut best = (found, None, distance(&found));
+        for (k, (symmetry, _)) in self.twins.iter().enumerate() {
+            let twin = twin_state(&found, symmetry);
+            let d = distance(&twin);
+            if d < best.2 {
+                best = (twin, Some(k), d);
+            }
+        }
+        (best.0, best.1)
     }
 
     /// A new track from the static pose `found` of the frame whose row 0 is read at `t_s`; the frame's measurements
@@ -1561,4 +1602,41 @@ where
         result
     })?;
     Ok(tracker.report())
+}
+
+/// The symmetries of `target` that identification cannot tell apart ([`Target::ambiguity`]), each with the index of
+/// the point it takes each point to.
+fn symmetric_twins(target: &Target) -> Vec<(Symmetry, Vec<usize>)> {
+    let Some(TargetAmbiguity::Symmetric { motions }) = target.ambiguity() else {
+        return Vec::new();
+    };
+    let points = target.points();
+    motions
+        .into_iter()
+        .filter_map(|symmetry| {
+            let image: Option<Vec<usize>> = points
+                .iter()
+                .map(|p| {
+                    let moved = symmetry.obj_r * p.point_in_obj_m + symmetry.obj_t_m;
+                    (0..points.len()).min_by(|&a, &b| {
+                        (points[a].point_in_obj_m - moved)
+                            .norm()
+                            .total_cmp(&(points[b].point_in_obj_m - moved).norm())
+                    })
+                })
+                .collect();
+            image.map(|image| (symmetry, image))
+        })
+        .collect()
+}
+
+/// The pose under which the target's points, relabelled by `symmetry` (point `p` named as `S p`), project where
+/// they do under `state`: `cam_T_obj S⁻¹`.
+fn twin_state(state: &MotionState, symmetry: &Symmetry) -> MotionState {
+    let cam_r_obj = state.cam_r_obj * symmetry.obj_r.inverse();
+    MotionState {
+        cam_r_obj,
+        cam_t_obj_m: state.cam_t_obj_m - cam_r_obj * symmetry.obj_t_m,
+        ..*state
+    }
 }
