@@ -875,7 +875,7 @@ impl FrameTracker {
             return (found, None);
         };
         let dt_s = t_s - t_last_s;
-        if self.twins.is_empty() || !(dt_s >= 0.0 && dt_s <= RESTART_TWIST_MAX_GAP_S) {
+        if self.twins.is_empty() || !(0.0..=RESTART_TWIST_MAX_GAP_S).contains(&dt_s) {
             return (found, None);
         }
         let predicted = last.predicted(dt_s);
