@@ -6,7 +6,7 @@
 //! | file | reader | writer |
 //! | --- | --- | --- |
 //! | camera: ROS camera_info YAML | [`read_camera_yaml`], [`parse_camera_yaml`] | [`write_camera_yaml`], [`camera_yaml_string`] |
-//! | camera: any calibration file (ROS YAML or topic echo, OpenCV FileStorage YAML or XML, Kalibr camchain), by content | [`read_camera_file`], [`parse_camera_file`] | |
+//! | camera: any calibration file (ROS YAML or topic echo, OpenCV FileStorage YAML or XML, Kalibr camchain, BoofCV YAML), by content | [`read_camera_file`], [`parse_camera_file`] | |
 //! | target: CSV `id,x,y,z[,diameter]` (m, object frame) | [`read_target_csv`], [`parse_target_csv`] | [`write_target_csv`], [`target_csv_string`] |
 //! | measurements: CSV `t,id,u,v` (s, raw px) | [`MeasurementReader`] (streaming), [`read_measurements_csv`] | [`MeasurementWriter`], [`write_measurements_csv`] |
 //! | poses: TUM `t tx ty tz qx qy qz qw` (camera_T_object) | [`read_tum`], [`parse_tum`] | [`PoseWriter`], [`write_tum`] |
