@@ -381,3 +381,164 @@ fn detect_refuses_a_target_of_three_points() {
         "{stderr}"
     );
 }
+
+/// The camera and target files of a test, in `dir`.
+fn write_setup(dir: &Path, camera: &CameraModel, target: &Target) -> (String, String) {
+    let camera_path = dir.join("camera.yaml");
+    let target_path = dir.join("target.csv");
+    roitrack::formats::write_camera_yaml(&camera_path, camera).unwrap();
+    roitrack::formats::write_target_csv(&target_path, target).unwrap();
+    (p(&camera_path).to_owned(), p(&target_path).to_owned())
+}
+
+/// Where the target is not found, the overlay still shows what was seen: a rendered 4 x 4 grid looked for as a
+/// 3 x 8 grid (blobs, none of the target's), and an empty image (no blob at all). Each overlay is a PNG of the image's
+/// size, named in the JSON line and the table; the blobs are drawn (yellow) where there were some.
+#[test]
+fn detect_writes_an_overlay_of_what_was_seen_where_the_target_is_not_found() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let camera = camera();
+    let other = Target::circle_grid(&CircleGrid {
+        rows: 3,
+        cols: 8,
+        spacing_m: 0.02,
+        diameter_m: 0.008,
+        layout: GridLayout::Square,
+    })
+    .unwrap();
+    let (camera_path, target_path) = write_setup(dir, &camera, &other);
+    let scene = PhotoScene::facing(
+        camera.clone(),
+        Target::grid4x4(),
+        0.45,
+        tilt(35.0, 60.0, 20.0),
+    )
+    .harsh()
+    .with_seed(2);
+    let grid_png = dir.join("grid.png");
+    write_png(&grid_png, &render_photo(&scene).unwrap());
+    let blank_png = dir.join("blank.png");
+    image::GrayImage::from_pixel(1024, 768, image::Luma([128]))
+        .save(&blank_png)
+        .unwrap();
+    let overlays = dir.join("overlays");
+    let out = roitrack(&[
+        "detect",
+        "--camera",
+        &camera_path,
+        "--target",
+        &target_path,
+        "--json",
+        "--overlay",
+        p(&overlays),
+        p(&grid_png),
+        p(&blank_png),
+    ]);
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(!out.status.success(), "{stdout}");
+    assert!(stderr.contains("not found in 2 of 2 images"), "{stderr}");
+    let json = lines(&stdout);
+    assert_eq!(json.len(), 2, "{stdout}");
+    for (line, name, with_blobs) in [(&json[0], "grid.png", true), (&json[1], "blank.png", false)] {
+        assert_eq!(line["ok"], false, "{line}");
+        assert_eq!(line["failure"], "not_found", "{line}");
+        assert!(stderr.contains(line["error"].as_str().unwrap()), "{stderr}");
+        let overlay = overlays.join(format!("{name}.overlay.png"));
+        assert_eq!(line["overlay"], p(&overlay), "{line}");
+        let drawn = image::open(&overlay)
+            .unwrap_or_else(|e| panic!("{}: {e}", overlay.display()))
+            .to_rgb8();
+        assert_eq!((drawn.width(), drawn.height()), (1024, 768), "{name}");
+        // Unmatched blobs are yellow circles; the grey image has no colour of its own.
+        let yellow = drawn.pixels().filter(|p| p.0 == [255, 230, 0]).count();
+        assert_eq!(yellow > 0, with_blobs, "{name}: {yellow} yellow pixels");
+    }
+
+    // The table names the overlay too.
+    let out = roitrack(&[
+        "detect",
+        "--camera",
+        &camera_path,
+        "--target",
+        &target_path,
+        "--overlay",
+        p(&overlays),
+        p(&grid_png),
+    ]);
+    assert!(!out.status.success());
+    let table = String::from_utf8(out.stdout).unwrap();
+    let row = table.lines().nth(1).unwrap();
+    assert!(
+        row.contains("FAILED")
+            && row.contains("; overlay ")
+            && row.contains("grid.png.overlay.png"),
+        "{table}"
+    );
+}
+
+/// A PNG or JPEG file cut in half is an image that could not be decoded, said with the decoder's reason in the JSON
+/// line and on standard error, never "not found"; it gets no overlay, and the exit status is non-zero.
+#[test]
+fn detect_says_a_truncated_image_could_not_be_decoded() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let camera = camera();
+    let target = Target::grid4x4();
+    let (camera_path, target_path) = write_setup(dir, &camera, &target);
+    let scene = PhotoScene::facing(camera.clone(), target, 0.45, tilt(35.0, 60.0, 20.0))
+        .harsh()
+        .with_seed(2);
+    let photo = render_photo(&scene).unwrap();
+    let whole = dir.join("whole.png");
+    write_png(&whole, &photo);
+    let jpeg = dir.join("whole.jpg");
+    image::open(&whole).unwrap().save(&jpeg).unwrap();
+    let mut cut = Vec::new();
+    for (from, name) in [(&whole, "cut.png"), (&jpeg, "cut.jpg")] {
+        let bytes = std::fs::read(from).unwrap();
+        let path = dir.join(name);
+        std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+        cut.push(path);
+    }
+    let overlays = dir.join("overlays");
+    let out = roitrack(&[
+        "detect",
+        "--camera",
+        &camera_path,
+        "--target",
+        &target_path,
+        "--json",
+        "--overlay",
+        p(&overlays),
+        p(&cut[0]),
+        p(&cut[1]),
+    ]);
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(!out.status.success(), "{stdout}");
+    assert!(
+        stderr.contains("2 of 2 images failed: 2 could not be decoded")
+            && !stderr.contains("not found"),
+        "{stderr}"
+    );
+    let json = lines(&stdout);
+    assert_eq!(json.len(), 2, "{stdout}");
+    for (line, (path, format)) in json.iter().zip(cut.iter().zip(["PNG", "JPEG"])) {
+        assert_eq!(line["image"], p(path), "{line}");
+        assert_eq!(line["ok"], false, "{line}");
+        assert_eq!(line["failure"], "decode", "{line}");
+        assert!(line["overlay"].is_null(), "{line}");
+        let error = line["error"].as_str().unwrap();
+        assert!(
+            error.starts_with(&format!("{}: could not be decoded: ", p(path)))
+                && error.contains(format)
+                && error.ends_with("; no overlay written")
+                && !error.contains("not found"),
+            "{error}"
+        );
+        assert!(stderr.contains(error), "{stderr}");
+    }
+    assert_eq!(std::fs::read_dir(&overlays).unwrap().count(), 0);
+}

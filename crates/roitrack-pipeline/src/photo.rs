@@ -124,19 +124,40 @@ pub enum PhotoError {
     #[error("{polarity} blobs: {source}")]
     NotFound {
         polarity: &'static str,
-        /// Candidate blobs of that polarity.
-        blobs: usize,
+        /// The candidate blobs of that polarity, among which the target was not identified.
+        blobs: Vec<PhotoBlob>,
         source: MatchError,
     },
     #[error(
-        "neither polarity: dark blobs ({dark_blobs}): {dark}; bright blobs ({bright_blobs}): {bright}"
+        "neither polarity: dark blobs ({}): {dark}; bright blobs ({}): {bright}",
+        .dark_blobs.len(),
+        .bright_blobs.len()
     )]
     NotFoundEither {
-        dark_blobs: usize,
+        /// The candidate blobs of each polarity, among which the target was not identified.
+        dark_blobs: Vec<PhotoBlob>,
         dark: MatchError,
-        bright_blobs: usize,
+        bright_blobs: Vec<PhotoBlob>,
         bright: MatchError,
     },
+}
+
+impl PhotoError {
+    /// The candidate blobs the target was looked for among, of every polarity tried (dark ones first), matched to
+    /// nothing: what was seen in a photograph where the target was not found, e.g. to draw it. Empty for
+    /// [`PhotoError::ImageSize`], where nothing was looked at.
+    pub fn blobs_seen(&self) -> impl Iterator<Item = &PhotoBlob> {
+        let (first, second): (&[PhotoBlob], &[PhotoBlob]) = match self {
+            Self::ImageSize { .. } => (&[], &[]),
+            Self::NotFound { blobs, .. } => (blobs, &[]),
+            Self::NotFoundEither {
+                dark_blobs,
+                bright_blobs,
+                ..
+            } => (dark_blobs, bright_blobs),
+        };
+        first.iter().chain(second)
+    }
 }
 
 /// Finds, identifies and measures the target in a photograph: blob detection ([`detect_photo_blobs`]) in the
@@ -211,7 +232,7 @@ pub fn detect_target(
                 Err(source) => {
                     return Err(PhotoError::NotFound {
                         polarity: polarity.name(),
-                        blobs: blobs.len(),
+                        blobs,
                         source,
                     });
                 }
@@ -232,14 +253,12 @@ pub fn detect_target(
                     (p, b, Ok(found)) => (p, b, found),
                     (_, second_blobs, Err(second_error)) => {
                         let ((dark_blobs, dark), (bright_blobs, bright)) = match first {
-                            Polarity::Dark => (
-                                (first_blobs.len(), first_error),
-                                (second_blobs.len(), second_error),
-                            ),
-                            Polarity::Bright => (
-                                (second_blobs.len(), second_error),
-                                (first_blobs.len(), first_error),
-                            ),
+                            Polarity::Dark => {
+                                ((first_blobs, first_error), (second_blobs, second_error))
+                            }
+                            Polarity::Bright => {
+                                ((second_blobs, second_error), (first_blobs, first_error))
+                            }
                         };
                         return Err(PhotoError::NotFoundEither {
                             dark_blobs,

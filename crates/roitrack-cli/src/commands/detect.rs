@@ -7,7 +7,7 @@ use std::time::Instant;
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
 use roitrack::formats::{MarkKind, OverlayMark};
-use roitrack::pipeline::{PhotoDetection, PhotoOptions, PolarityChoice, detect_target};
+use roitrack::pipeline::{PhotoDetection, PhotoError, PhotoOptions, PolarityChoice, detect_target};
 use roitrack::{CameraModel, Target};
 use serde_json::json;
 
@@ -46,7 +46,8 @@ pub fn distance_range(distance_m: Option<&[f64]>) -> Result<Option<(f64, f64)>> 
 
 /// Find the target in photographs (PNG, JPEG, PGM/PPM, TIFF; 8 or 16 bits; colour made grey): detect the blobs,
 /// identify the target's points among them (clutter, partial views, symmetric and hexagonal grids), solve the pose.
-/// Exits with status 1 if any image failed, each failure's reason printed.
+/// Exits with status 1 if any image failed, each failure's reason printed (with --json, also on standard error): a
+/// file that could not be read or decoded, an image not of the camera's size, the target not found.
 #[derive(Debug, Args)]
 pub struct DetectArgs {
     /// The camera (the images must be its size).
@@ -63,13 +64,16 @@ pub struct DetectArgs {
     pub distance_m: Option<Vec<f64>>,
     /// Write per image a PNG (`<image name>.overlay.png`) with the matched blobs and their ids (green), the model
     /// projected with the pose (red +), unmatched blobs (yellow) and points expected but not found (magenta x), into
-    /// this folder. Default: no overlay.
+    /// this folder. Where the target is not found, the overlay shows what was seen: every candidate blob (yellow, of
+    /// both polarities with `--polarity auto`). An image that could not be read, decoded or is not of the camera's
+    /// size gets none. The report names each overlay written. Default: no overlay.
     #[arg(long)]
     pub overlay: Option<PathBuf>,
-    /// One JSON object per image on its own line of stdout, instead of a table. Fields: image, ok, error (when not
-    /// ok), polarity, ambiguous, points [{id, u_px, v_px}] (raw distorted pixels), cam_t_obj_m [x, y, z],
-    /// cam_q_obj_xyzw [x, y, z, w] (x_cam = R x_obj + t), residual_rms_px (sqrt of the mean squared reprojection
-    /// distance), missing, blobs, time_ms.
+    /// One JSON object per image on its own line of stdout, instead of a table. Fields: image, ok, failure and error
+    /// (when not ok: failure is read, decode, size, not_found or overlay; error says why, naming the file), polarity,
+    /// ambiguous, points [{id, u_px, v_px}] (raw distorted pixels), cam_t_obj_m [x, y, z], cam_q_obj_xyzw
+    /// [x, y, z, w] (x_cam = R x_obj + t), residual_rms_px (sqrt of the mean squared reprojection distance), missing,
+    /// blobs, time_ms; with --overlay, overlay (the file written, or null).
     #[arg(long)]
     pub json: bool,
     /// The photographs.
@@ -99,13 +103,18 @@ pub fn run(args: &DetectArgs) -> Result<()> {
             "image", "points", "blobs", "polarity", "rms px", "time ms"
         )?;
     }
-    let mut failures = 0;
+    let mut failures = Vec::new();
     for path in &args.images {
         let started = Instant::now();
         let outcome = detect_one(path, &camera, &target, &options, args.overlay.as_deref());
         let time_ms = started.elapsed().as_secs_f64() * 1e3;
         let name = path.display().to_string();
-        match outcome {
+        let overlay = outcome.overlay.as_ref().map(|o| o.display().to_string());
+        // Said at the end of the table's result column.
+        let overlay_note = overlay
+            .as_ref()
+            .map_or(String::new(), |o| format!("; overlay {o}"));
+        match outcome.result {
             Ok(found) => {
                 let q = found.cam_q_obj();
                 let t = found.state.cam_t_obj_m;
@@ -115,7 +124,7 @@ pub fn run(args: &DetectArgs) -> Result<()> {
                         .iter()
                         .map(|p| json!({"id": p.id, "u_px": p.centre_px.x, "v_px": p.centre_px.y}))
                         .collect();
-                    let line = json!({
+                    let mut line = json!({
                         "image": name,
                         "ok": true,
                         "polarity": found.polarity.name(),
@@ -128,11 +137,14 @@ pub fn run(args: &DetectArgs) -> Result<()> {
                         "blobs": found.blobs.len(),
                         "time_ms": time_ms,
                     });
+                    if args.overlay.is_some() {
+                        line["overlay"] = json!(overlay);
+                    }
                     writeln!(out, "{line}")?;
                 } else {
                     writeln!(
                         out,
-                        "{:<32} {:>6} {:>7} {:>9} {:>8.3} {:>9.2}  {}",
+                        "{:<32} {:>6} {:>7} {:>9} {:>8.3} {:>9.2}  {}{overlay_note}",
                         name,
                         found.points.len(),
                         found.blobs.len(),
@@ -147,15 +159,26 @@ pub fn run(args: &DetectArgs) -> Result<()> {
                     )?;
                 }
             }
-            Err(error) => {
-                failures += 1;
+            Err((failure, error)) => {
+                failures.push(failure);
                 if args.json {
-                    let line = json!({"image": name, "ok": false, "error": format!("{error:#}"), "time_ms": time_ms});
+                    let mut line = json!({
+                        "image": name,
+                        "ok": false,
+                        "failure": failure.name(),
+                        "error": error,
+                        "time_ms": time_ms,
+                    });
+                    if args.overlay.is_some() {
+                        line["overlay"] = json!(overlay);
+                    }
                     writeln!(out, "{line}")?;
+                    // Standard output may go to a file: each failure is said where the user sees it too.
+                    eprintln!("roitrack: {error}");
                 } else {
                     writeln!(
                         out,
-                        "{name:<32} {:>6} {:>7} {:>9} {:>8} {time_ms:>9.2}  FAILED: {error:#}",
+                        "{name:<32} {:>6} {:>7} {:>9} {:>8} {time_ms:>9.2}  FAILED: {error}{overlay_note}",
                         "-", "-", "-", "-"
                     )?;
                 }
@@ -163,13 +186,73 @@ pub fn run(args: &DetectArgs) -> Result<()> {
         }
     }
     out.flush()?;
-    if failures > 0 {
-        bail!(
-            "the target was not found in {failures} of {} images",
-            args.images.len()
-        );
+    if !failures.is_empty() {
+        bail!("{}", failures_summary(&failures, args.images.len()));
     }
     Ok(())
+}
+
+/// Why an image gave no detection.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Failure {
+    /// The file could not be read.
+    Read,
+    /// The file was read but could not be decoded as an image (truncated, corrupt, not an image).
+    Decode,
+    /// The image is not of the camera's size.
+    Size,
+    /// The image was looked at and the target was not found in it.
+    NotFound,
+    /// The target was found, but its overlay could not be written.
+    Overlay,
+}
+
+impl Failure {
+    /// The `failure` field of the JSON output.
+    fn name(self) -> &'static str {
+        match self {
+            Self::Read => "read",
+            Self::Decode => "decode",
+            Self::Size => "size",
+            Self::NotFound => "not_found",
+            Self::Overlay => "overlay",
+        }
+    }
+}
+
+/// The error of the run: how many images failed, and why (the target not found is not said of an image that could
+/// not be read).
+fn failures_summary(failures: &[Failure], images: usize) -> String {
+    let count = |kind: Failure| failures.iter().filter(|&&f| f == kind).count();
+    let not_found = count(Failure::NotFound);
+    if not_found == failures.len() {
+        return format!("the target was not found in {not_found} of {images} images");
+    }
+    let parts: Vec<String> = [
+        (Failure::Read, "could not be read"),
+        (Failure::Decode, "could not be decoded"),
+        (Failure::Size, "not of the camera's size"),
+    ]
+    .into_iter()
+    .filter(|&(kind, _)| count(kind) > 0)
+    .map(|(kind, what)| format!("{} {what}", count(kind)))
+    .chain((not_found > 0).then(|| format!("the target not found in {not_found}")))
+    .chain(
+        (count(Failure::Overlay) > 0)
+            .then(|| format!("the overlay not written for {}", count(Failure::Overlay))),
+    )
+    .collect();
+    format!(
+        "{} of {images} images failed: {}",
+        failures.len(),
+        parts.join(", ")
+    )
+}
+
+/// What became of one image: the detection or why there is none, and the overlay written, if any.
+struct Outcome {
+    result: std::result::Result<PhotoDetection, (Failure, String)>,
+    overlay: Option<PathBuf>,
 }
 
 fn detect_one(
@@ -177,31 +260,96 @@ fn detect_one(
     camera: &CameraModel,
     target: &Target,
     options: &PhotoOptions,
-    overlay: Option<&Path>,
-) -> Result<PhotoDetection> {
-    let frame = roitrack::formats::read_frame(path)?;
-    roitrack::formats::check_frame_size(&frame, camera, path)?;
-    let found = detect_target(camera, target, &frame, options)
-        .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-    if let Some(dir) = overlay {
-        let name = path
-            .file_name()
-            .map_or("image".into(), |n| n.to_string_lossy().into_owned());
-        roitrack::formats::write_overlay_png(
-            dir.join(format!("{name}.overlay.png")),
-            &frame,
-            &overlay_marks(&found, camera, target),
-        )?;
+    overlay_dir: Option<&Path>,
+) -> Outcome {
+    // Nothing to draw on when the image is not read, decoded and of the camera's size.
+    let no_overlay = if overlay_dir.is_some() {
+        "; no overlay written"
+    } else {
+        ""
+    };
+    let refused = |failure: Failure, error: String| Outcome {
+        result: Err((failure, format!("{error}{no_overlay}"))),
+        overlay: None,
+    };
+    let frame = match roitrack::formats::read_frame(path) {
+        Ok(frame) => frame,
+        Err(e) if e.io_error().is_some() => return refused(Failure::Read, e.to_string()),
+        Err(e) => {
+            return refused(
+                Failure::Decode,
+                format!("{}: could not be decoded: {}", path.display(), e.message()),
+            );
+        }
+    };
+    if let Err(e) = roitrack::formats::check_frame_size(&frame, camera, path) {
+        return refused(Failure::Size, e.to_string());
     }
-    Ok(found)
+    let result = detect_target(camera, target, &frame, options);
+    let Some(dir) = overlay_dir else {
+        return Outcome {
+            result: result.map_err(|e| (Failure::NotFound, format!("{}: {e}", path.display()))),
+            overlay: None,
+        };
+    };
+    let name = path
+        .file_name()
+        .map_or("image".into(), |n| n.to_string_lossy().into_owned());
+    let overlay = dir.join(format!("{name}.overlay.png"));
+    let marks = match &result {
+        Ok(found) => found_marks(found, camera, target),
+        Err(e) => seen_marks(e),
+    };
+    let written = roitrack::formats::write_overlay_png(&overlay, &frame, &marks);
+    match (result, written) {
+        (Ok(found), Ok(())) => Outcome {
+            result: Ok(found),
+            overlay: Some(overlay),
+        },
+        (Ok(_), Err(e)) => Outcome {
+            result: Err((
+                Failure::Overlay,
+                format!(
+                    "{}: found, but the overlay was not written: {e}",
+                    path.display()
+                ),
+            )),
+            overlay: None,
+        },
+        (Err(e), Ok(())) => Outcome {
+            result: Err((Failure::NotFound, format!("{}: {e}", path.display()))),
+            overlay: Some(overlay),
+        },
+        (Err(e), Err(write)) => Outcome {
+            result: Err((
+                Failure::NotFound,
+                format!(
+                    "{}: {e}; the overlay was not written: {write}",
+                    path.display()
+                ),
+            )),
+            overlay: None,
+        },
+    }
 }
 
-/// The overlay's marks: matched blobs with ids, the model projected, unmatched blobs.
-fn overlay_marks(
-    found: &PhotoDetection,
-    camera: &CameraModel,
-    target: &Target,
-) -> Vec<OverlayMark> {
+/// The overlay of an image where the target was not found: every candidate blob looked at, unmatched. (The
+/// identification keeps no rejected hypothesis to draw.)
+fn seen_marks(error: &PhotoError) -> Vec<OverlayMark> {
+    error
+        .blobs_seen()
+        .map(|blob| OverlayMark {
+            u_px: blob.u_px,
+            v_px: blob.v_px,
+            radius_px: blob.semi_major_px,
+            label: None,
+            kind: MarkKind::Unmatched,
+        })
+        .collect()
+}
+
+/// The overlay of an image where the target was found: matched blobs with ids, the model projected, unmatched blobs.
+fn found_marks(found: &PhotoDetection, camera: &CameraModel, target: &Target) -> Vec<OverlayMark> {
     let mut marks = Vec::new();
     let mut matched = vec![false; found.blobs.len()];
     for p in &found.points {

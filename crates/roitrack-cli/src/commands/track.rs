@@ -413,7 +413,8 @@ fn run_frames(
     if report.estimates == 0 {
         bail!(
             "{}: no estimate from {} frames: the target was never found (check --camera, --target, --polarity; \
-             `roitrack detect` on one frame shows what is seen)",
+             `roitrack detect --overlay DIR` on one frame's image writes DIR/<image name>.overlay.png with the blobs \
+             seen in it, found or not)",
             source.display(),
             report.frames
         );
