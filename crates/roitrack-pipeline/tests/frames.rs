@@ -802,6 +802,9 @@ fn a_symmetric_grid_keeps_the_labelling_its_track_follows_through_new_tracks() {
          (truth {truth_rate_radps:.1}); {report:?}"
     );
     assert!(report.restarts >= 5, "{report:?}");
+    // The first estimate of each new track, from one frame whose every circle was found, rests on a well-posed pose
+    // (its twist carried from the previous track): converging, not degenerate.
+    assert_eq!(report.estimator.estimates.degenerate, 0, "{report:?}");
     assert!(estimates >= 70, "{estimates} estimates");
     assert!(worst_turn_deg < 20.0, "{worst_turn_deg} deg");
     assert!(

@@ -1268,7 +1268,16 @@ impl Law for KalmanLaw {
         // The filter is already at t_new; the window only gives the conditioning figure and the noise sample.
         let ne = core.window_problem(t_new_s).normal_equations(&core.state);
         let solved = ne.solve_with_conditioning();
-        let inverse_condition = solved.map_or(0.0, |(_, c)| c);
+        // A window of one instant (the blobs of the one global-shutter frame a new track has seen) shows the pose
+        // and never the twist, which is the filter's prior's (carried over from the previous track, or at rest with
+        // a broad spread the covariance states): such a step is as well posed as its pose. (Judged on all 12
+        // parameters, the first estimate of every new track on frames was flagged degenerate, an 80-point grid
+        // seen whole included.)
+        let inverse_condition = if is_one_instant(&core.scratch) {
+            pose_inverse_condition(&ne)
+        } else {
+            solved.map_or(0.0, |(_, c)| c)
+        };
         self.frame_steps = core.recent_are_frames(core.step_measurements);
         if self.filter.tuning().adapt_noise {
             self.learn_noise(core, t_new_s, &ne, solved.map(|(step, _)| step));
@@ -1350,6 +1359,33 @@ impl Law for KalmanLaw {
 /// fewer than 6 points can have rival minima (three give up to four poses, four or five a mirror twin in some views),
 /// along which the state can slide while one point disagrees.
 const HOLDING_POINTS: usize = 6;
+
+/// Whether every observation of `window` has one time (and there is one).
+fn is_one_instant(window: &[Observation]) -> bool {
+    window
+        .first()
+        .zip(window.last())
+        .is_some_and(|(first, last)| first.t_s == last.t_s)
+}
+
+/// The reciprocal condition number of the column-scaled Jacobian of the pose alone (the first 6 of the 12
+/// parameters, the twist held), as [`crate::solver::NormalEquations::solve_with_conditioning`] gives it for all 12; 0 when singular.
+fn pose_inverse_condition(ne: &crate::solver::NormalEquations<12>) -> f64 {
+    let pose = ne.symmetric_jtj().fixed_view::<6, 6>(0, 0).into_owned();
+    let scale = pose
+        .diagonal()
+        .map(|d| if d > 0.0 { 1.0 / d.sqrt() } else { 0.0 });
+    let scaled = SMatrix::<f64, 6, 6>::from_diagonal(&scale)
+        * pose
+        * SMatrix::<f64, 6, 6>::from_diagonal(&scale);
+    let eigenvalues = scaled.symmetric_eigenvalues();
+    let (low, high) = (eigenvalues.min(), eigenvalues.max());
+    if high > 0.0 && low.is_finite() {
+        (low.max(0.0) / high).sqrt()
+    } else {
+        0.0
+    }
+}
 
 /// Gated measurements in a row that dispute an estimate (3 in a row happen by chance once in 700,000 good ones).
 const DISPUTED_AFTER_GATED_IN_A_ROW: usize = 3;
