@@ -114,6 +114,23 @@ impl MotionState {
         }
     }
 
+    /// How far apart two poses are, as one number: their rotation angle (rad) plus their distance over `self`'s
+    /// distance from the camera. What tells a pose from a twin that fits the same image (a mirror tilt, a symmetric
+    /// target's relabelling), which turns it by tens of degrees.
+    ///
+    /// ```
+    /// use nalgebra::{Rotation3, Vector3};
+    /// use roitrack_core::MotionState;
+    ///
+    /// let a = MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.5));
+    /// let b = MotionState::at_rest(Rotation3::from_euler_angles(0.0, 0.0, 0.1), Vector3::new(0.0, 0.005, 0.5));
+    /// assert!((a.pose_distance(&b) - (0.1 + 0.01)).abs() < 1e-12);
+    /// ```
+    pub fn pose_distance(&self, other: &Self) -> f64 {
+        so3::angle_between(&self.cam_r_obj, &other.cam_r_obj)
+            + (self.cam_t_obj_m - other.cam_t_obj_m).norm() / self.cam_t_obj_m.norm().max(1e-9)
+    }
+
     /// The 12-vector `δ` with `a.corrected(δ) == b` (inverse of [`Self::corrected`]).
     pub fn difference(a: &Self, b: &Self) -> Vector12 {
         let mut delta = Vector12::zeros();

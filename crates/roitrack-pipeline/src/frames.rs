@@ -879,11 +879,7 @@ impl FrameTracker {
             return (found, None);
         }
         let predicted = last.predicted(dt_s);
-        let distance = |s: &MotionState| {
-            roitrack_core::so3::angle_between(&s.cam_r_obj, &predicted.cam_r_obj)
-                + (s.cam_t_obj_m - predicted.cam_t_obj_m).norm()
-                    / predicted.cam_t_obj_m.norm().max(1e-9)
-        };
+        let distance = |s: &MotionState| predicted.pose_distance(s);
         let mut best = (found, None, distance(&found));
         for (k, (symmetry, _)) in self.twins.iter().enumerate() {
             let twin = twin_state(&found, symmetry);

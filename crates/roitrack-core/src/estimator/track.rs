@@ -66,17 +66,10 @@ pub(crate) const MIN_NOISE_PX: f64 = 0.005;
 /// The median of the norm of a 2-d Gaussian residual of σ = 1 per axis (Rayleigh: √(2 ln 2)).
 const RAYLEIGH_MEDIAN: f64 = 1.177_410_022_515_474_7;
 
-/// How far apart two poses are: their rotation angle (rad) plus their distance over the first's distance from the
-/// camera (what tells a pose from its mirror twin, which turns it by tens of degrees).
-fn pose_distance(a: &MotionState, b: &MotionState) -> f64 {
-    crate::so3::angle_between(&a.cam_r_obj, &b.cam_r_obj)
-        + (a.cam_t_obj_m - b.cam_t_obj_m).norm() / a.cam_t_obj_m.norm().max(1e-9)
-}
-
 /// A rival whose excess cost is within this factor of the ambiguity bound is near: a start past it is confirmed by
 /// the next attempt.
 const NEAR_RIVAL_FACTOR: f64 = 4.0;
-/// Two start fits nearer than this ([`pose_distance`]) reached one minimum.
+/// Two start fits nearer than this ([`MotionState::pose_distance`]) reached one minimum.
 const SAME_START_POSE: f64 = 1e-3;
 /// The ambiguity bound of two 12-dof fits (in noise variances): each absorbs the noise along its own 12 directions,
 /// so for twins that fit noise-free data alike the cost difference is that of two χ² of 12 degrees of freedom, which
@@ -399,7 +392,7 @@ impl TrackCore {
             // twist), nearer it than the rival.
             let confirmed = self.pending_start.is_some_and(|(t_s, previous)| {
                 let moved = previous.predicted(t_ref_s - t_s);
-                pose_distance(&moved, &winner) < pose_distance(&moved, &fits[k])
+                moved.pose_distance(&winner) < moved.pose_distance(&fits[k])
             });
             self.pending_start = Some((t_ref_s, winner));
             if !confirmed {
@@ -480,7 +473,7 @@ impl TrackCore {
         };
         let excess = |k: usize| costs[k] - costs[best];
         // Fits that reached the best's own minimum are no rivals.
-        let other = |k: usize| k != best && pose_distance(&fits[k], &fits[best]) > SAME_START_POSE;
+        let other = |k: usize| k != best && fits[k].pose_distance(&fits[best]) > SAME_START_POSE;
         let rivals = (0..fits.len())
             .filter(|&k| other(k) && within(k, 1.0))
             .count();
