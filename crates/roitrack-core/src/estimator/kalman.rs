@@ -1130,8 +1130,11 @@ struct KalmanLaw {
     frame_steps: bool,
     /// Per point: the time of its newest measurement if the gate rejected it.
     gated_at: Vec<Option<f64>>,
-    /// Per point: how many of its newest measurements in a row the gate rejected.
-    gated_runs: Vec<u32>,
+    /// Per point: how many of its newest measurements in a row the gate rejected, and when the newest of them came
+    /// (as a count of the measurements taken).
+    gated_runs: Vec<(u32, u64)>,
+    /// Measurements taken by this track (readouts taken twice count once per take).
+    taken: u64,
     /// Natural logarithms of the factors applied to the linear and the angular acceleration density (when
     /// `tuning.adapt_motion`).
     process_log_scale: [f64; 2],
@@ -1180,7 +1183,7 @@ impl Law for KalmanLaw {
             gated_runs: {
                 let mut gated_runs = std::mem::take(&mut self.gated_runs);
                 gated_runs.clear();
-                gated_runs.resize(core.target.len(), 0);
+                gated_runs.resize(core.target.len(), (0, 0));
                 gated_runs
             },
             readout: std::mem::take(&mut self.readout),
@@ -1268,8 +1271,9 @@ impl Law for KalmanLaw {
         // The filter is already at t_new; the window only gives the conditioning figure and the noise sample.
         let ne = core.window_problem(t_new_s).normal_equations(&core.state);
         let solved = ne.solve_with_conditioning();
-        // A window of one instant (the blobs of the one global-shutter frame a new track has seen) shows the pose
-        // and never the twist, which is the filter's prior's (carried over from the previous track, or at rest with
+        // A window of one instant (the blobs of the one global-shutter frame a new track has seen, or, with the
+        // newest measurement of each point as the window, of every global-shutter frame) shows the pose and never
+        // the twist, which is the filter's prior's (carried over from the previous track, or at rest with
         // a broad spread the covariance states): such a step is as well posed as its pose. (Judged on all 12
         // parameters, the first estimate of every new track on frames was flagged degenerate, an 80-point grid
         // seen whole included.)
@@ -1323,12 +1327,21 @@ impl Law for KalmanLaw {
         // A point whose last two measurements the gate refused, on a target where the rest are too few to hold the
         // state: a state that has left one point can drift where the others do not hold it (seen on 4 points:
         // rotated 150 degrees within 50 ms, one point refused at every cycle). Two in a row of one good point
-        // happen with a chance of 1.2e-4 per cycle; one alone, 1.1e-2, would dispute every twentieth estimate of
-        // 4 points. On larger targets the rest hold the state, and several points refused at once are common while
-        // the filter learns a noise above the one it assumed.
-        let refused_points = self.gated_runs.iter().filter(|&&run| run > 0).count();
+        // happen with a chance of 1.2e-4 per point and cycle; one alone, 1.1e-2, would dispute every twentieth
+        // estimate of 4 points. On larger targets the rest hold the state, and several points refused at once are
+        // common while the filter learns a noise above the one it assumed. Only refusals of the last two cycles
+        // count: a point refused and then no longer measured (hidden, its window lost) says nothing of the state.
+        let recent = |at: u64| self.taken.saturating_sub(at) < 2 * self.gated_runs.len() as u64;
+        let refused_points = self
+            .gated_runs
+            .iter()
+            .filter(|&&(run, at)| run > 0 && recent(at))
+            .count();
         let holding_points = self.gated_runs.len() - refused_points;
-        let persistent = self.gated_runs.iter().any(|&run| run >= 2);
+        let persistent = self
+            .gated_runs
+            .iter()
+            .any(|&(run, at)| run >= 2 && recent(at));
         self.gated_in_a_row >= DISPUTED_AFTER_GATED_IN_A_ROW
             || (self.gated_in_a_row > 0 && self.newest_nis > DISPUTED_NIS)
             || 2 * self.gated_since_estimate >= core.step_measurements.max(2)
@@ -1523,6 +1536,7 @@ impl KalmanLaw {
             frame_steps: false,
             gated_at: Vec::new(),
             gated_runs: Vec::new(),
+            taken: 0,
             calibration: TwistCalibration::new(),
             point_noise: PointNoise::default(),
             readout: Vec::new(),
@@ -1610,11 +1624,20 @@ impl KalmanLaw {
         // of the target, or an outlier that got through): widen its covariance so the measurements pull it back,
         // instead of coasting on a wrong state.
         let gated = matches!(outcome, UpdateOutcome::Gated { .. });
+        self.taken += 1;
+        // The same measurement refused again (a readout taken a second time from a widened prior) is no new
+        // refusal.
+        let again = self.gated_at.get(obs.point_index) == Some(&Some(obs.t_s));
+        if let Some((run, at)) = self.gated_runs.get_mut(obs.point_index) {
+            *run = match (gated, again) {
+                (false, _) => 0,
+                (true, true) => *run,
+                (true, false) => *run + 1,
+            };
+            *at = self.taken;
+        }
         if let Some(gated_at) = self.gated_at.get_mut(obs.point_index) {
             *gated_at = gated.then_some(obs.t_s);
-        }
-        if let Some(run) = self.gated_runs.get_mut(obs.point_index) {
-            *run = if gated { *run + 1 } else { 0 };
         }
         if matches!(outcome, UpdateOutcome::Gated { .. }) {
             self.gated_since_estimate += 1;
@@ -1664,7 +1687,7 @@ impl KalmanLaw {
                 && let Some(gated_at) = self.gated_at.get_mut(m.point_index)
             {
                 *gated_at = None;
-                if let Some(run) = self.gated_runs.get_mut(m.point_index) {
+                if let Some((run, _)) = self.gated_runs.get_mut(m.point_index) {
                     *run = 0;
                 }
             }

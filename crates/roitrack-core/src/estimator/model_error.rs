@@ -199,8 +199,10 @@ pub(crate) fn cost_difference_effect<
     let prior = SVector::<f64, 5>::new(
         u.focal_fraction * k.fx_px,
         u.focal_fraction * k.fy_px,
-        u.principal_point_fraction * k.cx_px.abs(),
-        u.principal_point_fraction * k.cy_px.abs(),
+        // (Of the coordinates taken as at least a tenth of the focal length: a camera file with its principal point
+        // at 0 is no more certain of it, and a prior of zero spread would leave no model term at all.)
+        u.principal_point_fraction * k.cx_px.abs().max(0.1 * k.fx_px),
+        u.principal_point_fraction * k.cy_px.abs().max(0.1 * k.fy_px),
         u.k1,
     );
     let b = sensitivity(problem, model, target, obs, &offset_s, best)?;

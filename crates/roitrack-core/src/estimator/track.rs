@@ -178,6 +178,9 @@ pub(crate) struct TrackCore {
     bad_estimates: usize,
     /// Measurements since the last disputed estimate of this track (`None`: none was).
     since_disputed: Option<usize>,
+    /// Measurements in the window of the newest control step, as filled for it (the law may refill the scratch
+    /// window for its own samples).
+    step_window_len: usize,
     report: EstimatorReport,
 }
 
@@ -208,6 +211,7 @@ impl TrackCore {
             degenerate_windows: 0,
             bad_estimates: 0,
             since_disputed: None,
+            step_window_len: 0,
             report: EstimatorReport::default(),
         }
     }
@@ -721,6 +725,7 @@ impl<L: Law> Track<L> {
         self.core.phase = Phase::Initializing;
         self.core.window.clear();
         self.core.since_estimate = 0;
+        self.core.pending_start = None;
     }
 
     /// Starts tracking from a known state at time `t_s` with its covariance (error-state order v, w, dV, dW). The
@@ -765,6 +770,7 @@ impl<L: Law> Track<L> {
         core.degenerate_windows = 0;
         core.bad_estimates = 0;
         core.since_disputed = None;
+        core.pending_start = None;
         core.report.initialisations += 1;
         self.law.begin_track(&self.core, covariance);
     }
@@ -819,17 +825,22 @@ impl<L: Law> Track<L> {
         } else {
             (3.0 * core.config.noise_px).max(0.3)
         };
+        // The noise from the median residual (which outliers do not move), corrected for the 12 fitted parameters;
+        // never below a hundredth of a pixel, the floor of any centroid.
+        let n = 2.0 * ne.count() as f64;
+        let dof = (n - 12.0).max(1.0);
+        let noise_estimate_px = (median_px / RAYLEIGH_MEDIAN * (n / dof).sqrt()).max(MIN_NOISE_PX);
+        // The residual's cost truncated, as the start's decision truncates it, at five times the larger of that
+        // estimate and the configured noise: an outlier among the first cycles must not make the noise (below).
+        let truncated_cost_px2 =
+            problem.truncated_cost_px2(&state, 5.0 * noise_estimate_px.max(core.config.noise_px));
         if ne.residual_rms_px() > core.config.lost_residual_px || median_px > max_median_px {
             core.report.start_failure = Some(StartFailure::Residual { median_px });
             return None;
         }
         core.report.start_failure = None;
         if self.law.adapts_noise() {
-            // The noise from the median residual (which outliers do not move), corrected for the 12 fitted
-            // parameters; never below a hundredth of a pixel, the floor of any centroid.
-            let n = 2.0 * ne.count() as f64;
-            let dof = (n - 12.0).max(1.0);
-            core.noise_px = (median_px / RAYLEIGH_MEDIAN * (n / dof).sqrt()).max(MIN_NOISE_PX);
+            core.noise_px = noise_estimate_px;
             // With few degrees of freedom (two cycles of 4 points leave 4) the residual often shows far less than
             // the noise, and a filter started from it trusts its first state and its measurements too much (a
             // 4-point body: first residual 0.02 px at 0.1 px of noise, its depth 1.9 mm off at 7 of its stated
@@ -840,7 +851,7 @@ impl<L: Law> Track<L> {
             // blobs, and a start 3-4 times the noise left four dots at 30 Hz behind the random scene's turns.
             let lower = crate::stats::chi2_lower_5_percent(dof);
             if lower > 0.0 && !core.recent_are_frames(init_len) {
-                core.noise_px = core.noise_px.max((ne.cost_px2() / lower).sqrt());
+                core.noise_px = core.noise_px.max((truncated_cost_px2 / lower).sqrt());
             }
         }
         let state = if well_posed {
@@ -876,6 +887,7 @@ impl<L: Law> Track<L> {
         let t_new_s = core.last_t_s.unwrap_or(core.t_ref_s);
         let mode = core.effective_window();
         core.fill_scratch(mode);
+        core.step_window_len = core.scratch.len();
         let step = self.law.control_step(core, t_new_s);
         self.core.track_conditioning(&step);
         self.finish_estimate(step)
@@ -893,10 +905,13 @@ impl<L: Law> Track<L> {
         let core = &mut self.core;
         // A state disputed once is vouched for again only when a whole window of measurements newer than the dispute
         // agrees with it: refitted on a window partly the same, a state that left its measurements can settle in a
-        // wrong minimum with a residual a little above the noise (a fixed-gain loop on the spin scene at 0.3 px:
+        // wrong minimum with a residual a little above the noise (the exact-Jacobian loop on the spin scene at 0.3 px:
         // 24 mm off between two disputed estimates, its residual 2.6 times the noise).
         let disputed_now = self.law.is_disputed(core, &residuals);
-        let disputed = disputed_now || core.since_disputed.is_some_and(|m| m < core.scratch.len());
+        let disputed = disputed_now
+            || core
+                .since_disputed
+                .is_some_and(|m| m < core.step_window_len);
         if disputed_now {
             core.since_disputed = Some(0);
         }
