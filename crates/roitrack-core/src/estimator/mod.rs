@@ -74,7 +74,8 @@ pub use problem::{Observation, RobustLoss, WindowProblem};
 pub use static_baseline::StaticEstimator;
 pub use static_pose::{
     AMBIGUITY_CHI2, InitError, MAX_STATIC_POSES, MODEL_SPREAD_SIGMAS, PixelNoise, PoseFit,
-    StaticPoses, is_rival, refine_static_pose, solve_static_pose,
+    StaticPoses, is_rival, refine_static_pose, relabelling_is_rival, solve_static_pose,
+    static_model_residual_px2,
 };
 pub use vvs::{VvsEstimator, VvsSettings};
 pub use window::WindowMode;

@@ -133,6 +133,8 @@ impl ModelEffect {
 struct Sensitivity {
     intrinsics_shown: SMatrix<f64, 5, 5>,
     points_shown: Vec<Matrix3<f64>>,
+    /// `(P J_X)ᵀ (P J_X)` per target point: what of a point's error the fit's own parameters do not absorb.
+    points_left: Vec<Matrix3<f64>>,
     intrinsics_gradient: SVector<f64, 5>,
     points_gradient: Vec<Vector3<f64>>,
 }
@@ -155,6 +157,7 @@ fn sensitivity<const N: usize, P: LeastSquaresProblem<N, Params = MotionState>>(
     let mut intrinsics_gradient = SVector::<f64, 5>::zeros();
     let mut points_gradient = vec![Vector3::zeros(); target.len()];
     let mut points_shown = vec![Matrix3::zeros(); target.len()];
+    let mut at_points = vec![SMatrix::<f64, N, 3>::zeros(); target.len()];
     for (o, row) in obs.iter().zip(&fit_rows) {
         let (j, e) = (*row)?;
         let point = &target.points()[o.point_index].point_in_obj_m;
@@ -165,14 +168,63 @@ fn sensitivity<const N: usize, P: LeastSquaresProblem<N, Params = MotionState>>(
         intrinsics_gradient += 2.0 * theta.transpose() * e;
         points_gradient[o.point_index] += 2.0 * x.transpose() * e;
         points_shown[o.point_index] += x.transpose() * x;
+        at_points[o.point_index] += j.transpose() * x;
     }
     let ata_inverse = ata.try_inverse()?;
+    let points_left = points_shown
+        .iter()
+        .zip(&at_points)
+        .map(|(shown, at)| shown - at.transpose() * ata_inverse * at)
+        .collect();
     Some(Sensitivity {
         intrinsics_shown: theta_t_theta - at_theta.transpose() * ata_inverse * at_theta,
         points_shown,
+        points_left,
         intrinsics_gradient,
         points_gradient,
     })
+}
+
+/// The standard deviations of the intrinsics and k1 ([`MODEL_UNCERTAINTY`] for this camera).
+fn intrinsics_prior(model: &SpatioTemporalModel) -> SVector<f64, 5> {
+    let u = MODEL_UNCERTAINTY;
+    let k = &model.intrinsics;
+    SVector::<f64, 5>::new(
+        u.focal_fraction * k.fx_px,
+        u.focal_fraction * k.fy_px,
+        // (Of the coordinates taken as at least a tenth of the focal length: a camera file with its principal point
+        // at 0 is no more certain of it, and a prior of zero spread would leave no model term at all.)
+        u.principal_point_fraction * k.cx_px.abs().max(0.1 * k.fx_px),
+        u.principal_point_fraction * k.cy_px.abs().max(0.1 * k.fy_px),
+        u.k1,
+    )
+}
+
+/// The residual cost (px², summed over coordinates) that a model off as [`MODEL_UNCERTAINTY`] says models are leaves,
+/// on average, at a fit: `E|P J_θ δθ|²` over the intrinsics, k1 and every target coordinate, `P` removing what the
+/// fit's own parameters absorb. A fit on the user's model has this on top of the noise's share. `problem` is the
+/// fit's least-squares problem without a robust loss (its observations, in order, are `obs`), `state` at its minimum,
+/// `offset_s` each observation's time after the state's reference time. `None` when a point does not project or
+/// the fit is degenerate.
+pub(crate) fn model_residual_px2<
+    const N: usize,
+    P: LeastSquaresProblem<N, Params = MotionState>,
+>(
+    problem: &P,
+    model: &SpatioTemporalModel,
+    target: &Target,
+    obs: &[Observation],
+    offset_s: impl Fn(&Observation) -> f64,
+    state: &MotionState,
+) -> Option<f64> {
+    let s = sensitivity(problem, model, target, obs, &offset_s, state)?;
+    let prior = intrinsics_prior(model);
+    let intrinsics: f64 = (0..5)
+        .map(|k| prior[k] * prior[k] * s.intrinsics_shown[(k, k)])
+        .sum();
+    let target_m2 = MODEL_UNCERTAINTY.target_m * MODEL_UNCERTAINTY.target_m;
+    let points: f64 = s.points_left.iter().map(|m| target_m2 * m.trace()).sum();
+    Some((intrinsics + points).max(0.0))
 }
 
 /// How a model off as [`MODEL_UNCERTAINTY`] says models are could change `cost(rival) - cost(best)`, given what the
@@ -194,19 +246,38 @@ pub(crate) fn cost_difference_effect<
     rival: &MotionState,
     noise_variance_px2: f64,
 ) -> Option<ModelEffect> {
-    let u = MODEL_UNCERTAINTY;
-    let k = &model.intrinsics;
-    let prior = SVector::<f64, 5>::new(
-        u.focal_fraction * k.fx_px,
-        u.focal_fraction * k.fy_px,
-        // (Of the coordinates taken as at least a tenth of the focal length: a camera file with its principal point
-        // at 0 is no more certain of it, and a prior of zero spread would leave no model term at all.)
-        u.principal_point_fraction * k.cx_px.abs().max(0.1 * k.fx_px),
-        u.principal_point_fraction * k.cy_px.abs().max(0.1 * k.fy_px),
-        u.k1,
-    );
     let b = sensitivity(problem, model, target, obs, &offset_s, best)?;
     let r = sensitivity(problem, model, target, obs, &offset_s, rival)?;
+    effect_of_sensitivities(model, target, &b, &r, noise_variance_px2)
+}
+
+/// [`cost_difference_effect`] for a rival that explains the same measurements with other correspondences: the best's
+/// and the rival's problems and observations (the same pixels in the same order, other target points).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn relabelling_effect<
+    const N: usize,
+    P: LeastSquaresProblem<N, Params = MotionState>,
+>(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    (best_problem, best_obs, best): (&P, &[Observation], &MotionState),
+    (rival_problem, rival_obs, rival): (&P, &[Observation], &MotionState),
+    noise_variance_px2: f64,
+) -> Option<ModelEffect> {
+    let b = sensitivity(best_problem, model, target, best_obs, &|_| 0.0, best)?;
+    let r = sensitivity(rival_problem, model, target, rival_obs, &|_| 0.0, rival)?;
+    effect_of_sensitivities(model, target, &b, &r, noise_variance_px2)
+}
+
+fn effect_of_sensitivities(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    b: &Sensitivity,
+    r: &Sensitivity,
+    noise_variance_px2: f64,
+) -> Option<ModelEffect> {
+    let u = MODEL_UNCERTAINTY;
+    let prior = intrinsics_prior(model);
     // The posterior covariances, and the direction (in their metric) that lowers the excess fastest.
     let precision = SMatrix::<f64, 5, 5>::from_diagonal(&prior.map(|s| 1.0 / (s * s)))
         + b.intrinsics_shown / noise_variance_px2;

@@ -167,7 +167,7 @@ impl Hypotheses {
         index: &PointIndex,
         mut pairs: Vec<(usize, usize)>,
         n: usize,
-        gate: f64,
+        gate: impl Fn(usize) -> f64,
         min_matched: usize,
         predicted: impl Fn(usize) -> Vector2<f64>,
     ) {
@@ -177,7 +177,7 @@ impl Hypotheses {
             if pairs[..seeds].iter().any(|&(q, _)| q == p) {
                 continue;
             }
-            match index.nearest(&predicted(p), gate, |b| {
+            match index.nearest(&predicted(p), gate(p), |b| {
                 pairs.iter().all(|&(_, pb)| pb != b)
             }) {
                 Some((b, _)) => pairs.push((p, b)),

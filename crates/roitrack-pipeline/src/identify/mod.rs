@@ -9,13 +9,17 @@
 //!
 //! Every hypothesis is verified the same way: the static pose from its correspondences (intrinsics and distortion
 //! known), then the projection of every target point with that pose. A point projected well inside the image must
-//! have a blob there (within a quarter of the projected spacing) of the size the pose predicts from its diameter; the
-//! correspondences grow to all such blobs and the pose is solved again. A hypothesis is accepted when its
-//! reprojection residual is at the level of centroid noise, nearly every point it predicts in view is found, and the
-//! sizes agree. The best accepted hypothesis wins; another one as good with a different labelling is either the
-//! target's own symmetry (a rigid motion of the target onto itself, such as a half turn of a grid without a marked
-//! point): then the labelling is ambiguous and a canonical one is returned, flagged; or it is not, and nothing is
-//! returned, since the view cannot tell which part of the target it shows.
+//! have a blob there (within a quarter of the projected spacing); the correspondences grow to all such blobs and the
+//! pose is solved again. The files are nominal: a camera file a few percent off, diameters drawn to spec or missing.
+//! So a hypothesis is accepted when its residual is what the centroid noise and a model at the bounds users' files
+//! stay within explain ([`static_model_residual_px2`]), nearly every point it predicts in view is found, and the
+//! blobs' sizes agree with the diameters up to one common scale (a nominal diameter off by up to 2x). The best
+//! accepted hypothesis wins; another one as good with a different labelling is either the target's own symmetry (a
+//! rigid motion of the target onto itself, such as a half turn of a grid without a marked point): then the labelling
+//! is ambiguous and a canonical one is returned, flagged; or it is not, and nothing is returned, since the view
+//! cannot tell which part of the target it shows. "As good": on the same blobs, as the static pose judges its rivals
+//! (noise and model error, [`relabelling_is_rival`]); on other blobs, a residual cost within what noise makes the
+//! ratio of two fits' costs at one chance in a thousand ([`f_equal_dof_upper_quantile`]).
 //!
 //! Which side: a printed target is seen from its front, the side of -z in its frame when its plane is z = 0 (OpenCV's
 //! convention for calibration boards: x to the right, y down, z into the board). A hypothesis that sees the target
@@ -37,7 +41,10 @@ pub(crate) mod sparse;
 pub(crate) mod spatial;
 
 use nalgebra::{Vector2, Vector3};
-use roitrack_core::estimator::{Observation, solve_static_pose};
+use roitrack_core::estimator::{
+    Observation, relabelling_is_rival, solve_static_pose, static_model_residual_px2,
+};
+use roitrack_core::stats::{chi2_upper_0_1_percent, f_equal_dof_upper_quantile};
 use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
 
 use crate::matching::{DetectedBlob, MatchError};
@@ -46,12 +53,25 @@ use lattice::{TargetLattice, grow, placements};
 use sparse::{PlanarModel, triple_hypotheses};
 use spatial::quadruple_hypotheses;
 
-/// Largest RMS reprojection residual (px, per coordinate) of an accepted identification: a few times the centroid
-/// noise of real photographs (0.1 to 0.35 px), well below what a wrong labelling leaves (a pixel or more).
-pub const MAX_IDENTIFY_RESIDUAL_PX: f64 = 1.0;
-
-/// The centroid noise (px) a hypothesis's static pose is judged against: that of real photographs' centres.
+/// The centroid noise (px per coordinate) a hypothesis is judged against: that of real photographs' centres (0.1 to
+/// 0.35 px).
 const IDENTIFY_NOISE_PX: f64 = 0.3;
+
+/// A grid of at most this many points is also searched as a sparse layout (by triples) when its lattice growth
+/// gives no accepted fit: a few points grow a lattice from few neighbours, and one stray blob among them (a large
+/// disk in the middle of a 2 x 2 plate) misleads the growth. The triple search costs about the square of the
+/// points, so larger grids rely on their growth, which their many neighbours make robust.
+const SMALL_LATTICE_POINTS: usize = 16;
+
+/// The model error a hypothesis's residual is allowed, in standard deviations of [`MODEL_UNCERTAINTY`]: the bounds
+/// users' camera and target files stay within.
+///
+/// [`MODEL_UNCERTAINTY`]: roitrack_core::estimator::MODEL_UNCERTAINTY
+const MODEL_BOUND_SIGMAS: f64 = 2.0;
+
+/// How sure the residuals must make the best labelling against a rival on as many points for the rival to be
+/// dismissed ([`f_equal_dof_upper_quantile`]).
+const RIVAL_CONFIDENCE: f64 = 0.999;
 
 /// Blobs (in the order given: strongest first from the photo detector) that seed the triple and quadruple searches.
 pub const MAX_SEED_BLOBS: usize = 200;
@@ -82,9 +102,13 @@ struct Verified {
     state: MotionState,
     pairs: Vec<(usize, usize)>,
     residual_px: f64,
+    /// The largest residual (RMS px per coordinate) the noise and the model's error explain at this pose.
+    residual_bound_px: f64,
     visible: usize,
     missing: usize,
     size_mismatches: usize,
+    /// The matched blobs' areas over those the target file's diameters predict (their median; 1 without diameters).
+    area_scale: f64,
     /// The pose sees the target from its back (+z of the object frame).
     from_back: bool,
 }
@@ -93,7 +117,7 @@ impl Verified {
     fn accepted(&self, min_matched: usize) -> bool {
         let matched = self.pairs.len();
         matched >= min_matched
-            && self.residual_px <= MAX_IDENTIFY_RESIDUAL_PX
+            && self.residual_px <= self.residual_bound_px
             && self.missing as f64 <= 0.15 * self.visible as f64
             && self.size_mismatches as f64 <= 0.1 * matched as f64
     }
@@ -111,6 +135,17 @@ impl Verified {
     }
 }
 
+/// A hypothesis's static pose and how well it fits.
+struct Fitted {
+    state: MotionState,
+    /// RMS reprojection residual (px per coordinate).
+    residual_px: f64,
+    /// See [`Verified::residual_bound_px`].
+    residual_bound_px: f64,
+    /// The pose sees the target from its back (+z of the object frame).
+    from_back: bool,
+}
+
 /// Everything the verification needs, computed once.
 struct Verifier<'a> {
     camera: &'a CameraModel,
@@ -126,12 +161,22 @@ struct Verifier<'a> {
 }
 
 impl Verifier<'_> {
+    /// The observations of `pairs`, in the order of their blobs.
+    fn observations(&self, pairs: &[(usize, usize)]) -> Vec<Observation> {
+        let mut by_blob = pairs.to_vec();
+        by_blob.sort_unstable_by_key(|&(_, b)| b);
+        by_blob
+            .iter()
+            .map(|&(point_index, b)| Observation {
+                t_s: 0.0,
+                point_index,
+                ideal_px: self.ideal[b],
+            })
+            .collect()
+    }
+
     /// The static pose, its residual, and whether it sees the target from its back.
-    fn pose(
-        &self,
-        pairs: &[(usize, usize)],
-        centres: &[Vector2<f64>],
-    ) -> Option<(MotionState, f64, bool)> {
+    fn pose(&self, pairs: &[(usize, usize)], centres: &[Vector2<f64>]) -> Option<Fitted> {
         let obs: Vec<Observation> = pairs
             .iter()
             .zip(centres)
@@ -152,7 +197,19 @@ impl Verifier<'_> {
             let camera_in_obj = state.cam_r_obj.inverse() * (-state.cam_t_obj_m);
             (camera_in_obj - self.centre_m).dot(&front) <= 0.0
         });
-        Some((state, fit.residual_rms_px, from_back))
+        // The residual the noise explains at one chance in a thousand, plus what a model at the bounds users' files
+        // stay within (two standard deviations) leaves on average.
+        let coordinates = 2 * obs.len();
+        let dof = coordinates.saturating_sub(6) as f64;
+        let model_px2 = static_model_residual_px2(&self.model, self.target, &obs, &state)?;
+        let bound_px2 = IDENTIFY_NOISE_PX * IDENTIFY_NOISE_PX * chi2_upper_0_1_percent(dof)
+            + MODEL_BOUND_SIGMAS * MODEL_BOUND_SIGMAS * model_px2;
+        Some(Fitted {
+            state,
+            residual_px: fit.residual_rms_px,
+            residual_bound_px: (bound_px2 / coordinates as f64).sqrt(),
+            from_back,
+        })
     }
 
     /// Verifies a hypothesis: pose, then every point projected, matched, the pose solved again.
@@ -160,22 +217,23 @@ impl Verifier<'_> {
         let mut current: Vec<(usize, usize)> = pairs.to_vec();
         current.sort_unstable();
         let centres: Vec<Vector2<f64>> = current.iter().map(|&(_, b)| self.ideal[b]).collect();
-        let (mut state, mut residual_px, mut from_back) = self.pose(&current, &centres)?;
+        let mut fitted = self.pose(&current, &centres)?;
         let mut result = None;
         for _ in 0..2 {
-            let verified = self.project_and_match(&state)?;
+            let verified = self.project_and_match(&fitted.state)?;
             // The same correspondences (by point index, as matched): the pose is already theirs, and final.
             let settled = verified.pairs == current;
             if !settled {
                 current.clone_from(&verified.pairs);
                 let centres: Vec<Vector2<f64>> =
                     current.iter().map(|&(_, b)| self.ideal[b]).collect();
-                (state, residual_px, from_back) = self.pose(&current, &centres)?;
+                fitted = self.pose(&current, &centres)?;
             }
             result = Some(Verified {
-                state,
-                residual_px,
-                from_back,
+                state: fitted.state,
+                residual_px: fitted.residual_px,
+                residual_bound_px: fitted.residual_bound_px,
+                from_back: fitted.from_back,
                 ..verified
             });
             if settled {
@@ -205,7 +263,9 @@ impl Verifier<'_> {
             .max(self.camera.intrinsics.fy_px);
         let mut used = vec![false; self.ideal.len()];
         let mut pairs = Vec::new();
-        let (mut visible, mut missing, mut size_mismatches) = (0, 0, 0);
+        // Each matched blob's area over the area its point's diameter predicts at the pose.
+        let mut area_ratios: Vec<f64> = Vec::new();
+        let (mut visible, mut missing) = (0, 0);
         for (i, p) in points.iter().enumerate() {
             let Some((ideal, depth)) = projected[i] else {
                 continue;
@@ -237,10 +297,7 @@ impl Verifier<'_> {
                         });
                         let expected =
                             std::f64::consts::FRAC_PI_4 * (focal * d / depth).powi(2) * normal;
-                        let ratio = self.areas_px[b] / expected;
-                        if !(0.5..=2.0).contains(&ratio) {
-                            size_mismatches += 1;
-                        }
+                        area_ratios.push(self.areas_px[b] / expected);
                     }
                     used[b] = true;
                     pairs.push((i, b));
@@ -252,16 +309,49 @@ impl Verifier<'_> {
                 None => {}
             }
         }
+        let (size_mismatches, area_scale) = size_mismatches(&mut area_ratios);
         (pairs.len() >= 4).then_some(Verified {
             state: *state,
             pairs,
             residual_px: f64::INFINITY,
+            residual_bound_px: 0.0,
             visible,
             missing,
             size_mismatches,
+            area_scale,
             from_back: false,
         })
     }
+}
+
+/// How far a matched blob's area may be from what its point's diameter predicts, as a factor either way, once the
+/// blobs' common scale is taken out: a threshold finds a disk's edge anywhere from its dark to its bright side, which
+/// moves a small disk's area by up to about a factor 2.
+const BLOB_AREA_FACTOR: f64 = 2.0;
+
+/// How far the common scale of the matched blobs' areas may be from the target file's diameters, as a factor either
+/// way: nominal diameters may be off by up to 2x (a factor 4 in area) and the threshold adds its factor 2.
+pub(crate) const NOMINAL_AREA_FACTOR: f64 = 4.0 * BLOB_AREA_FACTOR;
+
+/// Matched blobs whose size disagrees with their points' diameters (`ratios`: each blob's area over the predicted
+/// one; reordered). The diameters of a target file are nominal: a common scale (the median ratio) within
+/// [`NOMINAL_AREA_FACTOR`] is taken out, and each blob must then be within [`BLOB_AREA_FACTOR`] of its prediction;
+/// beyond that common scale every blob disagrees.
+/// Also returns the common scale (1 without diameters).
+fn size_mismatches(ratios: &mut [f64]) -> (usize, f64) {
+    if ratios.is_empty() {
+        return (0, 1.0);
+    }
+    ratios.sort_by(f64::total_cmp);
+    let common = ratios[ratios.len() / 2];
+    if !(1.0 / NOMINAL_AREA_FACTOR..=NOMINAL_AREA_FACTOR).contains(&common) {
+        return (ratios.len(), common);
+    }
+    let mismatches = ratios
+        .iter()
+        .filter(|&&r| !(1.0 / BLOB_AREA_FACTOR..=BLOB_AREA_FACTOR).contains(&(r / common)))
+        .count();
+    (mismatches, common)
 }
 
 /// A target thinner than this fraction of its width (its spreads across and along its best plane) is identified as a
@@ -283,6 +373,16 @@ fn plane_and_front(target: &Target) -> Option<(Vec<Vector2<f64>>, Vector3<f64>)>
     // its x axis to the right and y axis down).
     let front = if normal.z > 0.0 { -normal } else { normal };
     Some((plane.points_in_plane_m.clone(), front))
+}
+
+/// Do two hypotheses match the same blobs (to other points)?
+fn same_blobs(a: &Verified, b: &Verified) -> bool {
+    let blobs = |v: &Verified| {
+        let mut blobs: Vec<usize> = v.pairs.iter().map(|&(_, b)| b).collect();
+        blobs.sort_unstable();
+        blobs
+    };
+    blobs(a) == blobs(b)
 }
 
 /// Is `to` the same labelling as `from` up to a rigid motion of the target onto itself (points onto points of the
@@ -445,8 +545,31 @@ pub fn identify(
     let lattice = planar
         .as_ref()
         .and_then(|(plane, _)| TargetLattice::of(plane));
+    let diameters: Vec<Option<f64>> = points.iter().map(|p| p.diameter_m).collect();
+    let triples = |plane: &[Vector2<f64>]| {
+        let model = PlanarModel {
+            plane_m: plane,
+            diameters_m: &diameters,
+            focal_px: camera.intrinsics.fx_px.max(camera.intrinsics.fy_px),
+        };
+        by_size(triple_hypotheses(
+            &model,
+            &ideal,
+            &areas_px,
+            &index,
+            min_matched,
+        ))
+    };
     let hypothesis_groups: HypothesisGroups = match (&planar, lattice) {
-        (Some(_), Some(lattice)) => lattice_hypotheses(lattice, &ideal, &areas_px, &index),
+        (Some((plane, _)), Some(lattice)) => {
+            let grown = lattice_hypotheses(lattice, &ideal, &areas_px, &index);
+            if n <= SMALL_LATTICE_POINTS {
+                // Made only if the lattice's gave no accepted fit.
+                Box::new(grown.chain(std::iter::once_with(|| triples(plane)).flatten()))
+            } else {
+                grown
+            }
+        }
         (None, _) => {
             let spread: Vec<Vector3<f64>> = points.iter().map(|p| p.point_in_obj_m).collect();
             by_size(quadruple_hypotheses(
@@ -457,20 +580,7 @@ pub fn identify(
                 min_matched,
             ))
         }
-        (Some((plane, _)), None) => {
-            let diameters: Vec<Option<f64>> = points.iter().map(|p| p.diameter_m).collect();
-            let model = PlanarModel {
-                plane_m: plane,
-                diameters_m: &diameters,
-            };
-            by_size(triple_hypotheses(
-                &model,
-                &ideal,
-                &areas_px,
-                &index,
-                min_matched,
-            ))
-        }
+        (Some((plane, _)), None) => triples(plane),
     };
     // Groups in order of promise (the largest grown lattice first): stop at the first that gives an accepted fit.
     let mut verified: Vec<Verified> = Vec::new();
@@ -478,7 +588,9 @@ pub fn identify(
     for group in hypothesis_groups {
         tried += group.len();
         verified.extend(group.iter().filter_map(|pairs| verifier.verify(pairs)));
-        if verified.iter().any(|v| v.accepted(min_matched)) {
+        // A small target's every search is verified (they are cheap): a rival found by another search than the
+        // best's must be seen to be compared.
+        if n > SMALL_LATTICE_POINTS && verified.iter().any(|v| v.accepted(min_matched)) {
             break;
         }
     }
@@ -493,6 +605,11 @@ pub fn identify(
     };
     let mut best_pairs = best.pairs.clone();
     best_pairs.sort_unstable();
+    // A rival on as many points is told apart from the best only if its cost is larger than noise makes the ratio
+    // of two fits' costs on as many degrees of freedom, at one chance in a thousand: with 4 points (2 degrees of
+    // freedom) a rival a little less than 32 times the best's residual might be the truth.
+    let dof = (2 * best.pairs.len()).saturating_sub(6) as f64;
+    let rival_cost_ratio = f_equal_dof_upper_quantile(dof, RIVAL_CONFIDENCE);
     let mut equals: Vec<&Verified> = vec![&best];
     for v in verified.iter().filter(|v| v.accepted(min_matched)) {
         let mut pairs = v.pairs.clone();
@@ -501,7 +618,20 @@ pub fn identify(
             && v.pairs.len() == best.pairs.len()
             && v.missing == best.missing
             && v.size_mismatches == best.size_mismatches
-            && v.residual_px < 1.5 * best.residual_px + 0.05;
+            && if same_blobs(&best, v) {
+                // The same measurements labelled otherwise: judged as the static pose judges its rivals, the
+                // user's model error included.
+                relabelling_is_rival(
+                    &verifier.model,
+                    target,
+                    (&verifier.observations(&best.pairs), &best.state),
+                    (&verifier.observations(&v.pairs), &v.state),
+                    IDENTIFY_NOISE_PX,
+                    MODEL_BOUND_SIGMAS,
+                )
+            } else {
+                v.residual_px.powi(2) <= rival_cost_ratio * best.residual_px.powi(2)
+            };
         if pairs != best_pairs
             && as_good
             && equals.iter().all(|e| {
@@ -539,11 +669,11 @@ pub fn identify(
 
 /// Groups of hypotheses (lists of (target point, blob) pairs) in the order they are verified; a group is made only
 /// if the ones before it gave no accepted fit.
-type HypothesisGroups = Box<dyn Iterator<Item = Vec<Vec<(usize, usize)>>>>;
+type HypothesisGroups<'a> = Box<dyn Iterator<Item = Vec<Vec<(usize, usize)>>> + 'a>;
 
 /// Hypotheses grouped by how many points they match, most first: a group is verified only if the larger ones gave
 /// no accepted fit (rivals as good as the best have as many points, so they are in its group).
-fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> HypothesisGroups {
+fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> HypothesisGroups<'static> {
     hypotheses.sort_by_key(|h| std::cmp::Reverse(h.len()));
     let mut groups: Vec<Vec<Vec<(usize, usize)>>> = Vec::new();
     for h in hypotheses {
@@ -553,6 +683,18 @@ fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> HypothesisGroups {
         }
     }
     Box::new(groups.into_iter())
+}
+
+/// The diameter (m) a point's disk has, from the target file's `diameter_m` and the matched blobs' common area scale
+/// against the file ([`Verified::area_scale`]): the file's, unless the blobs disagree with it by more than a
+/// threshold explains (a nominal diameter off), then the blobs' own. The displacement of a disk's centre grows with
+/// the square of its diameter: a file twice off would move the centres by four times the displacement.
+fn diameter_seen_m(diameter_m: f64, area_scale: f64) -> f64 {
+    if (1.0 / BLOB_AREA_FACTOR..=BLOB_AREA_FACTOR).contains(&area_scale) {
+        diameter_m
+    } else {
+        diameter_m * area_scale.sqrt()
+    }
 }
 
 /// Corrects the matched centres for the perspective displacement of a disk's centre and solves the pose again.
@@ -582,6 +724,7 @@ fn finish(
                 let point = &points[p];
                 point
                     .diameter_m
+                    .map(|d| diameter_seen_m(d, chosen.area_scale))
                     .and_then(|d| {
                         disk_centre_displacement_px(
                             camera,
@@ -598,11 +741,9 @@ fn finish(
             .iter()
             .map(|c| camera.undistort_pixel(c).ok())
             .collect();
-        if let Some((refitted, refitted_residual, _)) =
-            ideal.and_then(|ideal| verifier.pose(&pairs, &ideal))
-        {
-            state = refitted;
-            residual = refitted_residual;
+        if let Some(refitted) = ideal.and_then(|ideal| verifier.pose(&pairs, &ideal)) {
+            state = refitted.state;
+            residual = refitted.residual_px;
             centres = corrected;
         }
     }
@@ -624,7 +765,7 @@ fn lattice_hypotheses(
     ideal: &[Vector2<f64>],
     areas_px: &[f64],
     index: &PointIndex,
-) -> HypothesisGroups {
+) -> HypothesisGroups<'static> {
     const SEEDS: usize = 12;
     let mut grown_sets: Vec<lattice::GrownLattice> = Vec::new();
     let mut covered = vec![false; ideal.len()];

@@ -4,14 +4,19 @@
 
 use nalgebra::{Matrix2, Vector2};
 
-use super::MAX_SEED_BLOBS;
 use super::index::{Hypotheses, PointIndex};
+use super::{MAX_SEED_BLOBS, NOMINAL_AREA_FACTOR};
 
 /// What the search needs of the target: in-plane points and diameters (m, if known).
 pub(crate) struct PlanarModel<'a> {
     pub plane_m: &'a [Vector2<f64>],
     pub diameters_m: &'a [Option<f64>],
+    /// The camera's focal length (px): how much perspective bends an affine prediction.
+    pub focal_px: f64,
 }
+
+/// The sine of the largest tilt of the target's plane to the image plane the predictions allow for (60 degrees).
+const MAX_TILT_SIN: f64 = 0.866;
 
 /// Target points used as the first point of a triple: all of a small target, else a few spread ones.
 fn anchors(model: &PlanarModel) -> Vec<usize> {
@@ -46,6 +51,30 @@ pub(crate) fn nearest_points<const D: usize>(
     });
     others.truncate(k);
     others
+}
+
+/// Do the blobs of a triple have the sizes the points' diameters give them under an affine map of area scale
+/// `scale` (px² per m²)? Up to the nominal diameters' common error, and each within a threshold's error (a factor
+/// 2.5 in area) of the others' scale.
+fn sizes_agree(
+    diameters_m: &[Option<f64>],
+    areas_px: &[f64],
+    triple: [(usize, usize); 3],
+    scale: f64,
+) -> bool {
+    let ratios: Vec<f64> = triple
+        .iter()
+        .filter_map(|&(p, b)| {
+            diameters_m[p].map(|d| areas_px[b] / (scale * std::f64::consts::FRAC_PI_4 * d * d))
+        })
+        .collect();
+    let (lo, hi) = ratios.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &r| {
+        (lo.min(r), hi.max(r))
+    });
+    ratios.is_empty()
+        || (hi <= 2.5 * lo
+            && lo <= 1.25 * NOMINAL_AREA_FACTOR
+            && hi >= 1.0 / (1.25 * NOMINAL_AREA_FACTOR))
 }
 
 /// Candidate correspondences (target point, blob), each the matches of one triple's affine predictions covering at
@@ -122,14 +151,25 @@ pub(crate) fn triple_hypotheses(
                     };
                     let map = Matrix2::from_columns(&[f1, f2]) * inverse;
                     let scale = map.determinant().abs();
-                    // The blobs' sizes must agree with the map's scale.
-                    if let Some(d) = model.diameters_m[p0] {
-                        let expected = scale * std::f64::consts::FRAC_PI_4 * d * d;
-                        if !(expected / 2.5..expected * 2.5).contains(&areas_px[b0]) {
-                            continue;
-                        }
+                    // The blobs' sizes must agree with the map's scale, to the nominal diameters' error, and
+                    // with each other, to a threshold's.
+                    if !sizes_agree(
+                        model.diameters_m,
+                        areas_px,
+                        [(p0, b0), (p1, b1), (p2, b2)],
+                        scale,
+                    ) {
+                        continue;
                     }
-                    let gate = 0.3 * spacing_m * scale.sqrt();
+                    // A third of the smallest spacing, plus what perspective adds to the affine prediction at a
+                    // point `d` from the anchor: the plane's depth changes across `d` by `d sin(tilt)`, of a depth
+                    // `f / sqrt(scale)`, which moves the point by that fraction of its `d sqrt(scale)` px offset
+                    // (a tilt up to 60 degrees).
+                    let gate = |p: usize| {
+                        let d_m = (model.plane_m[p] - model.plane_m[p0]).norm();
+                        0.3 * spacing_m * scale.sqrt()
+                            + MAX_TILT_SIN * d_m * d_m * scale / model.focal_px
+                    };
                     hypotheses.extend_and_keep(
                         index,
                         vec![(p0, b0), (p1, b1), (p2, b2)],

@@ -123,7 +123,7 @@ pub(crate) fn quadruple_hypotheses(
                                 .map(|(&p, b)| (p, b))
                                 .collect(),
                             n,
-                            gate,
+                            |_| gate,
                             min_matched,
                             |p| {
                                 camera

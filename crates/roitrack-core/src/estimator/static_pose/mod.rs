@@ -23,7 +23,9 @@ use nalgebra::{Matrix3, Rotation3, SMatrix, SVector, Vector2, Vector3};
 use thiserror::Error;
 
 use super::Observation;
-use super::model_error::{ModelEffect, cost_difference_effect};
+use super::model_error::{
+    ModelEffect, cost_difference_effect, model_residual_px2, relabelling_effect,
+};
 use crate::solver::{
     self, DampingSchedule, LeastSquaresProblem, Method, ResidualSink, SolverOptions,
 };
@@ -252,6 +254,130 @@ const FEW_POINTS: usize = 6;
 
 /// Points the triples are drawn from: the best-spread few in the image.
 const SPREAD_POINTS: usize = 6;
+
+/// The residual cost (px², summed over both coordinates of every observation) that the error of the user's own
+/// camera and target files ([`super::MODEL_UNCERTAINTY`]: what calibrations, nominal lens data and drawings are off
+/// by, one standard deviation) leaves on average at the static pose `state` fitted to `obs`, beyond the noise's
+/// share: what of the model's error the pose cannot absorb. A residual up to a few times this plus the noise's is a
+/// fit on a model as good as users' files are. `None` if a point does not project or the pose is degenerate.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::estimator::{Observation, static_model_residual_px2};
+/// use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+///
+/// let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+/// let target = Target::grid4x4();
+/// let state = MotionState::at_rest(Rotation3::from_euler_angles(0.4, 0.0, 0.0), Vector3::new(0.0, 0.0, 0.5));
+/// let obs: Vec<Observation> = (0..16)
+///     .map(|i| Observation {
+///         t_s: 0.0,
+///         point_index: i,
+///         ideal_px: model.project(&state, &target.points()[i].point_in_obj_m, 0.0).unwrap(),
+///     })
+///     .collect();
+/// let cost_px2 = static_model_residual_px2(&model, &target, &obs, &state).unwrap();
+/// // Far more than nothing, far less than a pixel at each of the 32 coordinates.
+/// assert!(cost_px2 > 1e-3 && cost_px2 < 32.0);
+/// ```
+pub fn static_model_residual_px2(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    obs: &[Observation],
+    state: &MotionState,
+) -> Option<f64> {
+    let problem = StaticPoseProblem { model, target, obs };
+    model_residual_px2(&problem, model, target, obs, |_| 0.0, state)
+}
+
+/// Whether another labelling of the same measurements fits as well as the best within the noise and the user's model
+/// error, by the rule [`solve_static_pose`] judges its rivals with ([`is_rival`]): `best_obs` and `rival_obs` hold the
+/// same pixels in the same order, each with its labelling's target points, `best` and `rival` their static poses
+/// (minima), `noise_px` the centroid noise assumed (px per coordinate); the variance is the larger of it and the
+/// upper 95 % bound the best's residual sets; `model_sigmas` how many standard deviations of the model's error
+/// ([`super::MODEL_UNCERTAINTY`]) may favour the wrong labelling ([`MODEL_SPREAD_SIGMAS`] for the static pose's own
+/// rivals). A relabelling of a target onto itself (a symmetry) fits as well by
+/// construction; this tells near-symmetries (a rectangle turned a quarter) from the true one.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::estimator::{Observation, relabelling_is_rival, solve_static_pose};
+/// use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target, TargetPoint};
+///
+/// let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+/// // A rectangle 14 x 12 cm: turned a quarter, it is nearly itself.
+/// let corners = [(-0.07, -0.06), (0.07, -0.06), (0.07, 0.06), (-0.07, 0.06)];
+/// let target = Target::new(corners.iter().enumerate().map(|(i, &(x, y))| TargetPoint {
+///     id: i as u32, point_in_obj_m: Vector3::new(x, y, 0.0), diameter_m: None }).collect()).unwrap();
+/// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.3, 0.2, 0.1), Vector3::new(0.0, 0.0, 0.6));
+/// let pixels: Vec<_> = target.points().iter()
+///     .map(|p| model.project(&truth, &p.point_in_obj_m, 0.0).unwrap()).collect();
+/// let labelled = |shift: usize| -> Vec<Observation> {
+///     (0..4).map(|k| Observation { t_s: 0.0, point_index: (k + shift) % 4, ideal_px: pixels[k] }).collect()
+/// };
+/// let (best_obs, rival_obs) = (labelled(0), labelled(1));
+/// let best = solve_static_pose(&model, &target, &best_obs, 0.3).unwrap().best().state;
+/// let rival = solve_static_pose(&model, &target, &rival_obs, 0.3).unwrap().best().state;
+/// assert!(!relabelling_is_rival(&model, &target, (&best_obs, &best), (&rival_obs, &rival), 0.3, 2.0));
+/// ```
+pub fn relabelling_is_rival(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    (best_obs, best): (&[Observation], &MotionState),
+    (rival_obs, rival): (&[Observation], &MotionState),
+    noise_px: f64,
+    model_sigmas: f64,
+) -> bool {
+    let best_problem = StaticPoseProblem {
+        model,
+        target,
+        obs: best_obs,
+    };
+    let rival_problem = StaticPoseProblem {
+        model,
+        target,
+        obs: rival_obs,
+    };
+    let (Some(best_cost), Some(rival_cost)) = (
+        reprojection_cost_px2(&best_problem, best),
+        reprojection_cost_px2(&rival_problem, rival),
+    ) else {
+        // A labelling that does not project is no rival.
+        return false;
+    };
+    let dof = (2 * best_obs.len()).saturating_sub(6) as f64;
+    let per_dof = crate::stats::chi2_lower_5_percent(dof);
+    let variance_px2 = if per_dof > 0.0 {
+        (noise_px * noise_px).max(best_cost / per_dof)
+    } else {
+        return true;
+    };
+    let effect = relabelling_effect(
+        model,
+        target,
+        (&best_problem, best_obs, best),
+        (&rival_problem, rival_obs, rival),
+        variance_px2,
+    )
+    .unwrap_or_default();
+    effect.least_excess_px2(rival_cost - best_cost, model_sigmas) <= AMBIGUITY_CHI2 * variance_px2
+}
+
+/// The plain reprojection cost (px²) of `state` on `problem`'s observations; `None` if a point does not project.
+fn reprojection_cost_px2(problem: &StaticPoseProblem, state: &MotionState) -> Option<f64> {
+    struct Cost(f64);
+    impl crate::solver::ResidualSink<6> for Cost {
+        fn add(&mut self, _: &SMatrix<f64, 2, 6>, residual: &Vector2<f64>, _: f64) {
+            self.0 += residual.norm_squared();
+        }
+        fn add_unevaluable(&mut self) {
+            self.0 = f64::INFINITY;
+        }
+    }
+    let mut cost = Cost(0.0);
+    problem.linearize(state, &mut cost);
+    cost.0.is_finite().then_some(cost.0)
+}
 
 /// The static pose from scratch (see the module's docs): every pose that fits the observations as well as the best
 /// within the noise, best first. `noise` is the centroid noise (px per coordinate) the fits are judged against, as
