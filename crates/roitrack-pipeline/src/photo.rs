@@ -29,8 +29,8 @@ pub struct PhotoOptions {
     pub polarity: PolarityChoice,
     pub blobs: PhotoBlobOptions,
     /// The distances (m) at which the target may be, nearest and farthest, if known: blobs whose area no target
-    /// circle can have at such a distance (from the target's diameters and the focal length, tilts up to 80°, a
-    /// threshold's error of a factor 2) are left out before identification. `None`: any size from
+    /// circle can have at such a distance (from the target's diameters, taken as up to 2x off, and the focal length,
+    /// tilts up to 80°, a threshold's error of a factor 2) are left out before identification. `None`: any size from
     /// [`PhotoBlobOptions::min_area_px`] to a quarter of the image.
     pub distance_range_m: Option<(f64, f64)>,
 }
@@ -41,10 +41,14 @@ impl PhotoOptions {
     /// ```
     /// use roitrack_core::{CameraModel, Target};
     /// use roitrack_pipeline::photo::PhotoOptions;
-    /// let options = PhotoOptions { distance_range_m: Some((0.4, 0.8)), ..PhotoOptions::default() };
-    /// // 6 and 9 mm blobs at 0.4-0.8 m through a 1500 px lens: 11 to 34 px across.
+    /// let options = PhotoOptions { distance_range_m: Some((0.15, 3.0)), ..PhotoOptions::default() };
+    /// // 6 and 9 mm circles at 0.15-3 m through a 1500 px lens: 3 to 90 px across, as drawn.
     /// let blobs = options.blob_options(&CameraModel::canonical(), &Target::grid4x4());
-    /// assert!(blobs.min_area_px > 7.0 && blobs.max_area_fraction < 0.01);
+    /// assert_eq!(blobs.min_area_px, PhotoOptions::default().blobs.min_area_px);
+    /// assert!(blobs.max_area_fraction < 0.06);
+    /// let near = PhotoOptions { distance_range_m: Some((0.3, 0.35)), ..PhotoOptions::default() }
+    ///     .blob_options(&CameraModel::canonical(), &Target::grid4x4());
+    /// assert!(near.min_area_px > 10.0);
     /// ```
     pub fn blob_options(&self, camera: &CameraModel, target: &Target) -> PhotoBlobOptions {
         let mut blobs = self.blobs;
@@ -60,15 +64,19 @@ impl PhotoOptions {
         }
         let focal = camera.intrinsics.fx_px.max(camera.intrinsics.fy_px);
         let area = |d: f64, z: f64| std::f64::consts::FRAC_PI_4 * (focal * d / z).powi(2);
-        // Foreshortening to cos 80° and a threshold that finds half the area below; twice above.
-        let min_area = 0.5 * 80f64.to_radians().cos() * area(small, far);
-        let max_area = 2.0 * area(large, near);
+        // Foreshortening to cos 80°, a threshold that finds half the area below and twice above, and the file's
+        // diameters nominal: up to 2x off either way (a factor 4 in area, as identification allows).
+        let min_area = 0.5 * 80f64.to_radians().cos() * area(small, far) / NOMINAL_DIAMETER_AREA;
+        let max_area = 2.0 * area(large, near) * NOMINAL_DIAMETER_AREA;
         let image_area = f64::from(camera.width_px) * f64::from(camera.height_px);
         blobs.min_area_px = blobs.min_area_px.max(min_area);
         blobs.max_area_fraction = blobs.max_area_fraction.min(max_area / image_area);
         blobs
     }
 }
+
+/// How far a target file's diameters may be off the true ones, as a factor in area either way (2x in diameter).
+pub(crate) const NOMINAL_DIAMETER_AREA: f64 = 4.0;
 
 /// One identified target point in a photograph.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -6,8 +6,8 @@
 //! With diameters in the file (however wrong) the target is found in at least 90 % of the photographs of each family,
 //! and whenever something is returned it is right: every returned point is the image of the point whose id it
 //! carries (or, for a result flagged ambiguous, of a point of the target), and the depth is within what the camera
-//! file's error allows. Without diameters nothing identifies a dot but its place: a cluttered view may then be
-//! refused, never answered wrong.
+//! file's error allows; given the distance range it is found as well. Without diameters nothing identifies a dot
+//! but its place: a cluttered view may then be refused, never answered wrong.
 
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
@@ -263,6 +263,24 @@ fn small_dot_targets_are_found_from_nominal_files_and_never_wrong() {
             }
             if case.with_diameters {
                 given += 1;
+                // The distance range given (0.7 to 1.4 times the true one): the blob size filter allows for the
+                // nominal diameters too.
+                let z_m = case.scene.cam_t_obj_m.z;
+                let options = PhotoOptions {
+                    distance_range_m: Some((0.7 * z_m, 1.4 * z_m)),
+                    ..PhotoOptions::default()
+                };
+                let ranged = detect_target(
+                    &case.camera_file,
+                    &case.target_file,
+                    &case.photo.frame,
+                    &options,
+                );
+                if let (Ok(_), Err(e)) = (&result, &ranged) {
+                    failures.push(format!(
+                        "{family:?} seed {seed}: found, but not with --distance-m: {e}"
+                    ));
+                }
             } else {
                 bare += 1;
             }

@@ -331,7 +331,7 @@ const BLOB_AREA_FACTOR: f64 = 2.0;
 
 /// How far the common scale of the matched blobs' areas may be from the target file's diameters, as a factor either
 /// way: nominal diameters may be off by up to 2x (a factor 4 in area) and the threshold adds its factor 2.
-pub(crate) const NOMINAL_AREA_FACTOR: f64 = 4.0 * BLOB_AREA_FACTOR;
+pub(crate) const NOMINAL_AREA_FACTOR: f64 = crate::photo::NOMINAL_DIAMETER_AREA * BLOB_AREA_FACTOR;
 
 /// Matched blobs whose size disagrees with their points' diameters (`ratios`: each blob's area over the predicted
 /// one; reordered). The diameters of a target file are nominal: a common scale (the median ratio) within
