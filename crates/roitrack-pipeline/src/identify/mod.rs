@@ -336,8 +336,7 @@ pub(crate) const NOMINAL_AREA_FACTOR: f64 = crate::photo::NOMINAL_DIAMETER_AREA 
 /// Matched blobs whose size disagrees with their points' diameters (`ratios`: each blob's area over the predicted
 /// one; reordered). The diameters of a target file are nominal: a common scale (the median ratio) within
 /// [`NOMINAL_AREA_FACTOR`] is taken out, and each blob must then be within [`BLOB_AREA_FACTOR`] of its prediction;
-/// beyond that common scale every blob disagrees.
-/// Also returns the common scale (1 without diameters).
+/// beyond that common scale every blob disagrees. Also returns the common scale (1 without diameters).
 fn size_mismatches(ratios: &mut [f64]) -> (usize, f64) {
     if ratios.is_empty() {
         return (0, 1.0);
@@ -564,7 +563,7 @@ pub fn identify(
         (Some((plane, _)), Some(lattice)) => {
             let grown = lattice_hypotheses(lattice, &ideal, &areas_px, &index);
             if n <= SMALL_LATTICE_POINTS {
-                // Made only if the lattice's gave no accepted fit.
+                // Made when the search reaches them (after the lattice's groups).
                 Box::new(grown.chain(std::iter::once_with(|| triples(plane)).flatten()))
             } else {
                 grown
@@ -582,7 +581,8 @@ pub fn identify(
         }
         (Some((plane, _)), None) => triples(plane),
     };
-    // Groups in order of promise (the largest grown lattice first): stop at the first that gives an accepted fit.
+    // Groups in order of promise (the largest grown lattice first): a large target's search stops at the first that
+    // gives an accepted fit.
     let mut verified: Vec<Verified> = Vec::new();
     let mut tried = 0;
     for group in hypothesis_groups {
@@ -668,7 +668,7 @@ pub fn identify(
 }
 
 /// Groups of hypotheses (lists of (target point, blob) pairs) in the order they are verified; a group is made only
-/// if the ones before it gave no accepted fit.
+/// when the search reaches it (a large target's search stops at the first group that gives an accepted fit).
 type HypothesisGroups<'a> = Box<dyn Iterator<Item = Vec<Vec<(usize, usize)>>> + 'a>;
 
 /// Hypotheses grouped by how many points they match, most first: a group is verified only if the larger ones gave
