@@ -253,7 +253,6 @@ pub(crate) fn cost_difference_effect<
 
 /// [`cost_difference_effect`] for a rival that explains the same measurements with other correspondences: the best's
 /// and the rival's problems and observations (the same pixels in the same order, other target points).
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn relabelling_effect<
     const N: usize,
     P: LeastSquaresProblem<N, Params = MotionState>,

@@ -365,18 +365,8 @@ pub fn relabelling_is_rival(
 
 /// The plain reprojection cost (px²) of `state` on `problem`'s observations; `None` if a point does not project.
 fn reprojection_cost_px2(problem: &StaticPoseProblem, state: &MotionState) -> Option<f64> {
-    struct Cost(f64);
-    impl crate::solver::ResidualSink<6> for Cost {
-        fn add(&mut self, _: &SMatrix<f64, 2, 6>, residual: &Vector2<f64>, _: f64) {
-            self.0 += residual.norm_squared();
-        }
-        fn add_unevaluable(&mut self) {
-            self.0 = f64::INFINITY;
-        }
-    }
-    let mut cost = Cost(0.0);
-    problem.linearize(state, &mut cost);
-    cost.0.is_finite().then_some(cost.0)
+    let cost = solver::normal_equations(problem, state).cost_px2();
+    cost.is_finite().then_some(cost)
 }
 
 /// The static pose from scratch (see the module's docs): every pose that fits the observations as well as the best
