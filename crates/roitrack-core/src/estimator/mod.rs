@@ -66,7 +66,7 @@ use thiserror::Error;
 use crate::{CameraModel, Measurement, MotionState, Target};
 pub use batch::BatchEstimator;
 pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12, MotionModel, NoiseSample};
-pub use model_error::{MODEL_UNCERTAINTY, ModelEffect, ModelUncertainty};
+pub use model_error::{MODEL_UNCERTAINTY, ModelEffect, ModelResidual, ModelUncertainty};
 pub use options::{
     Adaptation, EstimatorKind, MotionModelKind, OptionConflict, TrackerOptions, UnknownName,
 };
@@ -75,7 +75,7 @@ pub use static_baseline::StaticEstimator;
 pub use static_pose::{
     AMBIGUITY_CHI2, InitError, MAX_STATIC_POSES, MODEL_SPREAD_SIGMAS, PixelNoise, PoseFit,
     StaticPoses, is_rival, refine_static_pose, relabelling_is_rival, solve_static_pose,
-    static_model_residual_px2,
+    static_model_residual,
 };
 pub use vvs::{VvsEstimator, VvsSettings};
 pub use window::WindowMode;

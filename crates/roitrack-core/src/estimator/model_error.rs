@@ -16,6 +16,7 @@ use nalgebra::{Matrix3, SMatrix, SVector, Vector2, Vector3};
 
 use super::Observation;
 use crate::solver::{LeastSquaresProblem, ResidualSink};
+use crate::stats::{chi2_upper_0_1_percent, chi2_upper_quantile};
 use crate::{MotionState, SpatioTemporalModel, Target};
 
 /// How far users' camera and target files are off the truth, as standard deviations: focal lengths and the principal
@@ -201,22 +202,19 @@ fn intrinsics_prior(model: &SpatioTemporalModel) -> SVector<f64, 5> {
 }
 
 /// The residual cost (px², summed over coordinates) that a model off as [`MODEL_UNCERTAINTY`] says models are leaves,
-/// on average, at a fit: `E|P J_θ δθ|²` over the intrinsics, k1 and every target coordinate, `P` removing what the
-/// fit's own parameters absorb. A fit on the user's model has this on top of the noise's share. `problem` is the
-/// fit's least-squares problem without a robust loss (its observations, in order, are `obs`), `state` at its minimum,
-/// `offset_s` each observation's time after the state's reference time. `None` when a point does not project or
-/// the fit is degenerate.
-pub(crate) fn model_residual_px2<
-    const N: usize,
-    P: LeastSquaresProblem<N, Params = MotionState>,
->(
+/// on average, at a fit: `E|P J_θ δθ|²` over the intrinsics with k1, and over every target coordinate, `P` removing
+/// what the fit's own parameters absorb. A fit on the user's model has this on top of the noise's share. `problem`
+/// is the fit's least-squares problem without a robust loss (its observations, in order, are `obs`), `state` at its
+/// minimum, `offset_s` each observation's time after the state's reference time. `None` when a point does not
+/// project or the fit is degenerate.
+pub(crate) fn model_residual<const N: usize, P: LeastSquaresProblem<N, Params = MotionState>>(
     problem: &P,
     model: &SpatioTemporalModel,
     target: &Target,
     obs: &[Observation],
     offset_s: impl Fn(&Observation) -> f64,
     state: &MotionState,
-) -> Option<f64> {
+) -> Option<ModelResidual> {
     let s = sensitivity(problem, model, target, obs, &offset_s, state)?;
     let prior = intrinsics_prior(model);
     let intrinsics: f64 = (0..5)
@@ -224,7 +222,51 @@ pub(crate) fn model_residual_px2<
         .sum();
     let target_m2 = MODEL_UNCERTAINTY.target_m * MODEL_UNCERTAINTY.target_m;
     let points: f64 = s.points_left.iter().map(|m| target_m2 * m.trace()).sum();
-    Some((intrinsics + points).max(0.0))
+    Some(ModelResidual {
+        intrinsics_px2: intrinsics.max(0.0),
+        target_px2: points.max(0.0),
+        coordinates: 2 * obs.len(),
+        dof: (2 * obs.len()).saturating_sub(N),
+    })
+}
+
+/// What the error of the user's own camera and target files ([`MODEL_UNCERTAINTY`], one standard deviation) leaves
+/// on average in a fit's residual cost beyond the noise's share (px², summed over coordinates), in its two kinds:
+/// the camera's, a few parameters shared by every measurement (a systematic error), and the target's, independent
+/// from point to point (it acts as more noise).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ModelResidual {
+    /// Of the intrinsics (focal lengths, principal point) and k1.
+    pub intrinsics_px2: f64,
+    /// Of the target points' coordinates.
+    pub target_px2: f64,
+    /// Coordinates measured (twice the observations).
+    pub coordinates: usize,
+    /// Degrees of freedom of the residual: coordinates less the fit's parameters.
+    pub dof: usize,
+}
+
+impl ModelResidual {
+    /// The largest residual cost (px², summed over coordinates) a fit on a model as good as users' files are leaves:
+    /// the noise's (`noise_px` per coordinate) but at one chance in a thousand, plus the model's at `model_sigmas`
+    /// standard deviations. The camera's error, a few parameters shared by every point, is taken that many standard
+    /// deviations off; the target's, independent from point to point, as a sum of `dof` squared errors at the
+    /// chi-square quantile with the tail of `model_sigmas` Gaussian sigmas ([`chi2_upper_quantile`]).
+    ///
+    /// Why not every point that many sigmas off at once: that is far rarer than the quantile says, and so taken, a
+    /// 16-point grid 0.4 m from a 1500 px camera was allowed 1.7 px RMS, enough to fit a 4 x 4 patch of another grid
+    /// seen at a slant (1.1 px now, its noise's share 0.4 px).
+    pub fn bound_px2(&self, noise_px: f64, model_sigmas: f64) -> f64 {
+        let dof = self.dof.max(1) as f64;
+        noise_px * noise_px * chi2_upper_0_1_percent(dof)
+            + self.target_px2 / dof * chi2_upper_quantile(dof, model_sigmas)
+            + model_sigmas * model_sigmas * self.intrinsics_px2
+    }
+
+    /// [`Self::bound_px2`] as an RMS per coordinate (px).
+    pub fn bound_rms_px(&self, noise_px: f64, model_sigmas: f64) -> f64 {
+        (self.bound_px2(noise_px, model_sigmas) / self.coordinates.max(1) as f64).sqrt()
+    }
 }
 
 /// How a model off as [`MODEL_UNCERTAINTY`] says models are could change `cost(rival) - cost(best)`, given what the

@@ -12,7 +12,7 @@
 //! have a blob there (within a quarter of the projected spacing); the correspondences grow to all such blobs and the
 //! pose is solved again. The files are nominal: a camera file a few percent off, diameters drawn to spec or missing.
 //! So a hypothesis is accepted when its residual is what the centroid noise and a model at the bounds users' files
-//! stay within explain ([`static_model_residual_px2`]), nearly every point it predicts in view is found, and the
+//! stay within explain ([`ModelResidual::bound_px2`](roitrack_core::estimator::ModelResidual::bound_px2)), nearly every point it predicts in view is found, and the
 //! blobs' sizes agree with the diameters up to one common scale (a nominal diameter off by up to 2x). The best
 //! accepted hypothesis wins; another one as good with a different labelling is either the target's own symmetry (a
 //! rigid motion of the target onto itself, such as a half turn of a grid without a marked point): then the labelling
@@ -42,9 +42,9 @@ pub(crate) mod spatial;
 
 use nalgebra::{Vector2, Vector3};
 use roitrack_core::estimator::{
-    Observation, relabelling_is_rival, solve_static_pose, static_model_residual_px2,
+    Observation, relabelling_is_rival, solve_static_pose, static_model_residual,
 };
-use roitrack_core::stats::{chi2_upper_0_1_percent, f_equal_dof_upper_quantile};
+use roitrack_core::stats::f_equal_dof_upper_quantile;
 use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
 
 use crate::matching::{DetectedBlob, MatchError};
@@ -63,8 +63,8 @@ const IDENTIFY_NOISE_PX: f64 = 0.3;
 /// points, so larger grids rely on their growth, which their many neighbours make robust.
 const SMALL_LATTICE_POINTS: usize = 16;
 
-/// The model error a hypothesis's residual is allowed, in standard deviations of [`MODEL_UNCERTAINTY`]: the bounds
-/// users' camera and target files stay within.
+/// The model error a hypothesis's residual is allowed (and a rival's advantage over the best), in standard
+/// deviations of [`MODEL_UNCERTAINTY`]: the bounds users' camera and target files stay within.
 ///
 /// [`MODEL_UNCERTAINTY`]: roitrack_core::estimator::MODEL_UNCERTAINTY
 const MODEL_BOUND_SIGMAS: f64 = 2.0;
@@ -198,16 +198,12 @@ impl Verifier<'_> {
             (camera_in_obj - self.centre_m).dot(&front) <= 0.0
         });
         // The residual the noise explains at one chance in a thousand, plus what a model at the bounds users' files
-        // stay within (two standard deviations) leaves on average.
-        let coordinates = 2 * obs.len();
-        let dof = coordinates.saturating_sub(6) as f64;
-        let model_px2 = static_model_residual_px2(&self.model, self.target, &obs, &state)?;
-        let bound_px2 = IDENTIFY_NOISE_PX * IDENTIFY_NOISE_PX * chi2_upper_0_1_percent(dof)
-            + MODEL_BOUND_SIGMAS * MODEL_BOUND_SIGMAS * model_px2;
+        // stay within leaves.
+        let model_residual = static_model_residual(&self.model, self.target, &obs, &state)?;
         Some(Fitted {
             state,
             residual_px: fit.residual_rms_px,
-            residual_bound_px: (bound_px2 / coordinates as f64).sqrt(),
+            residual_bound_px: model_residual.bound_rms_px(IDENTIFY_NOISE_PX, MODEL_BOUND_SIGMAS),
             from_back,
         })
     }

@@ -24,7 +24,7 @@ use thiserror::Error;
 
 use super::Observation;
 use super::model_error::{
-    ModelEffect, cost_difference_effect, model_residual_px2, relabelling_effect,
+    ModelEffect, ModelResidual, cost_difference_effect, model_residual, relabelling_effect,
 };
 use crate::solver::{
     self, DampingSchedule, LeastSquaresProblem, Method, ResidualSink, SolverOptions,
@@ -255,15 +255,15 @@ const FEW_POINTS: usize = 6;
 /// Points the triples are drawn from: the best-spread few in the image.
 const SPREAD_POINTS: usize = 6;
 
-/// The residual cost (px², summed over both coordinates of every observation) that the error of the user's own
-/// camera and target files ([`super::MODEL_UNCERTAINTY`]: what calibrations, nominal lens data and drawings are off
-/// by, one standard deviation) leaves on average at the static pose `state` fitted to `obs`, beyond the noise's
-/// share: what of the model's error the pose cannot absorb. A residual up to a few times this plus the noise's is a
-/// fit on a model as good as users' files are. `None` if a point does not project or the pose is degenerate.
+/// What the error of the user's own camera and target files ([`super::MODEL_UNCERTAINTY`]: what calibrations,
+/// nominal lens data and drawings are off by, one standard deviation) leaves on average in the residual of the static
+/// pose `state` fitted to `obs`, beyond the noise's share: what of the model's error the pose cannot absorb; its
+/// [`ModelResidual::bound_px2`] is the residual a fit on a model as good as users' files are stays within. `None` if
+/// a point does not project or the pose is degenerate.
 ///
 /// ```
 /// use nalgebra::{Rotation3, Vector3};
-/// use roitrack_core::estimator::{Observation, static_model_residual_px2};
+/// use roitrack_core::estimator::{Observation, static_model_residual};
 /// use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
 ///
 /// let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
@@ -276,18 +276,22 @@ const SPREAD_POINTS: usize = 6;
 ///         ideal_px: model.project(&state, &target.points()[i].point_in_obj_m, 0.0).unwrap(),
 ///     })
 ///     .collect();
-/// let cost_px2 = static_model_residual_px2(&model, &target, &obs, &state).unwrap();
+/// let residual = static_model_residual(&model, &target, &obs, &state).unwrap();
 /// // Far more than nothing, far less than a pixel at each of the 32 coordinates.
+/// let cost_px2 = residual.intrinsics_px2 + residual.target_px2;
 /// assert!(cost_px2 > 1e-3 && cost_px2 < 32.0);
+/// // With 0.3 px of noise, the largest residual such a fit leaves, as an RMS per coordinate.
+/// let bound_px = residual.bound_rms_px(0.3, 2.0);
+/// assert!(bound_px > 0.3 && bound_px < 1.5);
 /// ```
-pub fn static_model_residual_px2(
+pub fn static_model_residual(
     model: &SpatioTemporalModel,
     target: &Target,
     obs: &[Observation],
     state: &MotionState,
-) -> Option<f64> {
+) -> Option<ModelResidual> {
     let problem = StaticPoseProblem { model, target, obs };
-    model_residual_px2(&problem, model, target, obs, |_| 0.0, state)
+    model_residual(&problem, model, target, obs, |_| 0.0, state)
 }
 
 /// Whether another labelling of the same measurements fits as well as the best within the noise and the user's model
