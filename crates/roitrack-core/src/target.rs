@@ -56,8 +56,14 @@ pub enum CircleGridError {
 pub enum GridLayout {
     /// A circle at every row and column: `(x, y) = (col S, row S)`.
     Square,
-    /// A circle where `row + col` is even, at `(x, y) = (col S / 2, row S sin 60°)`: each row is shifted by half a
-    /// spacing against the next, and every circle's six neighbours are `S` away (equilateral triangles).
+    /// A circle where `row + col` has the parity of `rows - 1` (the last row holds columns 0, 2, 4, ...), at
+    /// `(x, y) = (col S / 2, row S sin 60°)`: each row is shifted by half a spacing against the next, and every
+    /// circle's six neighbours are `S` away (equilateral triangles).
+    ///
+    /// Why that parity: seen from its front (the object's -z side, x to the right and y down), the bottom row then
+    /// starts at the left edge, as the usual printed boards do (BoofCV's hexagonal grid: its row 0, with y up, at the
+    /// bottom). The layout is not its own mirror image when `rows` is even, so the other parity would describe the
+    /// board's back and every pose would see it from behind.
     Hexagonal,
 }
 
@@ -85,7 +91,7 @@ impl CircleGrid {
         let (rows, cols) = (u64::from(self.rows), u64::from(self.cols));
         match self.layout {
             GridLayout::Square => rows * cols,
-            // Even rows hold the even columns, odd rows the odd ones.
+            // Half the rows hold the even columns, the others the odd ones; the count does not depend on which.
             GridLayout::Hexagonal => rows.div_ceil(2) * cols.div_ceil(2) + (rows / 2) * (cols / 2),
         }
     }
@@ -319,12 +325,14 @@ impl Target {
 
     /// A planar grid of equal circles in the plane z = 0, every point with the grid's diameter (so no key blob).
     ///
-    /// Id 0 is the circle at row 0, column 0, at the origin; the ids then run row by row (row 0 first), and within a
-    /// row by increasing column, over the positions that hold a circle. With `S` the spacing:
+    /// Id 0 is the first circle of row 0 (at the origin, but for a hexagonal grid whose row 0 starts at column 1); the
+    /// ids then run row by row (row 0 first), and within a row by increasing column, over the positions that hold a
+    /// circle. With `S` the spacing:
     ///
     /// - [`GridLayout::Square`]: every position; circle `id = row * cols + col` at `(col S, row S, 0)`.
-    /// - [`GridLayout::Hexagonal`]: the positions where `row + col` is even (row 0 holds columns 0, 2, 4, ..., row 1
-    ///   columns 1, 3, 5, ...), at `(col S / 2, row S sin 60°, 0)`; neighbouring centres are `S` apart.
+    /// - [`GridLayout::Hexagonal`]: the positions where `row + col` has the parity of `rows - 1` (the last row holds
+    ///   columns 0, 2, 4, ..., the one before it columns 1, 3, 5, ...), at `(col S / 2, row S sin 60°, 0)`;
+    ///   neighbouring centres are `S` apart. With an even number of rows, row 0 starts at column 1.
     ///
     /// Refuses (as [`TargetError::CircleGrid`]) no rows or columns, a spacing or diameter that is not a finite
     /// positive length, a diameter not smaller than the spacing and more than [`MAX_GRID_POINTS`] circles; and, as
@@ -339,10 +347,10 @@ impl Target {
     /// let target = Target::circle_grid(&spec)?;
     /// assert_eq!(target.len(), 336);
     /// let p = |id| target.points()[target.index_of(id).unwrap()].point_in_obj_m;
-    /// assert_eq!(p(0).as_slice(), &[0.0, 0.0, 0.0]); // row 0, column 0
-    /// assert!((p(14).x - 0.006).abs() < 1e-12); // row 1 starts at column 1
-    /// // The last circle: row 23, column 27, at (27 S / 2, 23 S sin 60°) = (0.162, 0.2390) m.
-    /// assert!((p(335).x - 0.162).abs() < 1e-12 && (p(335).y - 0.2390).abs() < 1e-4);
+    /// assert_eq!(p(0).as_slice(), &[0.006, 0.0, 0.0]); // row 0 starts at column 1
+    /// assert_eq!(p(14).as_slice(), &[0.0, 0.012 * 60f64.to_radians().sin(), 0.0]); // row 1 at column 0
+    /// // The last circle: row 23, column 26, at (26 S / 2, 23 S sin 60°) = (0.156, 0.2390) m.
+    /// assert!((p(335).x - 0.156).abs() < 1e-12 && (p(335).y - 0.2390).abs() < 1e-4);
     /// # Ok::<(), roitrack_core::TargetError>(())
     /// ```
     pub fn circle_grid(spec: &CircleGrid) -> Result<Self, TargetError> {
@@ -357,7 +365,9 @@ impl Target {
             for col in 0..spec.cols {
                 let x = match spec.layout {
                     GridLayout::Square => f64::from(col) * s,
-                    GridLayout::Hexagonal if (row + col) % 2 == 0 => f64::from(col) * s / 2.0,
+                    GridLayout::Hexagonal if (row + col) % 2 == (spec.rows - 1) % 2 => {
+                        f64::from(col) * s / 2.0
+                    }
                     GridLayout::Hexagonal => continue,
                 };
                 points.push(TargetPoint {
@@ -750,14 +760,14 @@ mod tests {
         let ids: Vec<u32> = t.points().iter().map(|p| p.id).collect();
         assert_eq!(ids, (0..336).collect::<Vec<_>>());
         let h = 0.012 * 3f64.sqrt() / 2.0;
-        // Row 0: columns 0, 2, ..., 26 are ids 0-13.
+        // Row 0: columns 1, 3, ..., 27 are ids 0-13 (the last row, 23, starts at column 0).
         for k in 0..14u32 {
-            let expected = Vector3::new(f64::from(2 * k) * 0.006, 0.0, 0.0);
+            let expected = Vector3::new(f64::from(2 * k + 1) * 0.006, 0.0, 0.0);
             assert!((position(&t, k) - expected).norm() < 1e-15, "id {k}");
         }
-        // Row 1: columns 1, 3, ..., 27 are ids 14-27.
+        // Row 1: columns 0, 2, ..., 26 are ids 14-27.
         for k in 0..14u32 {
-            let expected = Vector3::new(f64::from(2 * k + 1) * 0.006, h, 0.0);
+            let expected = Vector3::new(f64::from(2 * k) * 0.006, h, 0.0);
             assert!(
                 (position(&t, 14 + k) - expected).norm() < 1e-15,
                 "id {}",
@@ -765,13 +775,61 @@ mod tests {
             );
         }
         let last = position(&t, 335);
-        assert!((last - Vector3::new(0.162, 23.0 * h, 0.0)).norm() < 1e-15);
+        assert!((last - Vector3::new(0.156, 23.0 * h, 0.0)).norm() < 1e-15);
         assert!((last.y - 0.2390).abs() < 1e-4);
         assert!(
             t.points()
                 .iter()
                 .all(|p| p.diameter_m == Some(0.006) && p.point_in_obj_m.z == 0.0)
         );
+    }
+
+    /// The printed board's front: BoofCV lays its hexagonal grid out with y up and row 0 at the bottom, row r holding
+    /// the columns of r's parity, centred on the origin, so its front is seen from +z. Seen from the front both are
+    /// the same picture: ours (x right, y down) must be BoofCV's (x right, y up) up to a shift, not its mirror.
+    #[test]
+    fn hexagonal_grid_is_the_printed_board_seen_from_its_front() {
+        for (rows, cols) in [(24, 28), (5, 6), (6, 7), (8, 10)] {
+            let spec = CircleGrid {
+                rows,
+                cols,
+                spacing_m: 0.012,
+                diameter_m: 0.01,
+                layout: GridLayout::Hexagonal,
+            };
+            let ours = Target::circle_grid(&spec).unwrap();
+            assert_eq!(ours.len() as u64, spec.count(), "{rows} x {cols}");
+            let (space_x, space_y) = (0.006, 0.012 * 60f64.to_radians().sin());
+            let (width, height) = (f64::from(cols - 1) * space_x, f64::from(rows - 1) * space_y);
+            let mut boofcv_front_view = Vec::new();
+            for row in 0..rows {
+                for col in (row % 2..cols).step_by(2) {
+                    let y_up = f64::from(row) * space_y - height / 2.0;
+                    boofcv_front_view.push((f64::from(col) * space_x - width / 2.0, y_up));
+                }
+            }
+            // Our front view: x right, y down; centred, with y turned up.
+            let mut ours_front_view: Vec<(f64, f64)> = ours
+                .points()
+                .iter()
+                .map(|p| {
+                    (
+                        p.point_in_obj_m.x - width / 2.0,
+                        height / 2.0 - p.point_in_obj_m.y,
+                    )
+                })
+                .collect();
+            let key = |p: &(f64, f64)| ((p.1 * 1e6).round() as i64, (p.0 * 1e6).round() as i64);
+            ours_front_view.sort_by_key(key);
+            boofcv_front_view.sort_by_key(key);
+            assert_eq!(ours_front_view.len(), boofcv_front_view.len());
+            for (a, b) in ours_front_view.iter().zip(&boofcv_front_view) {
+                assert!(
+                    (a.0 - b.0).abs() < 1e-12 && (a.1 - b.1).abs() < 1e-12,
+                    "{rows} x {cols}: {a:?} {b:?}"
+                );
+            }
+        }
     }
 
     #[test]

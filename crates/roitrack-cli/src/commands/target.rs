@@ -40,15 +40,18 @@ pub enum TargetCommand {
 /// Write a planar grid of equal circles (z = 0) as a target CSV.
 ///
 /// Layouts, with S the spacing: square (the default) puts a circle at every row and column, at (x, y) =
-/// (col S, row S); --hexagonal puts one where row + col is even (row 0 holds columns 0, 2, 4, ..., row 1 columns
-/// 1, 3, 5, ...), at (x, y) = (col S / 2, row S sin 60°), so that every circle's six neighbours are S away.
+/// (col S, row S); --hexagonal puts one where row + col has the parity of rows - 1 (the last row holds columns 0, 2,
+/// 4, ..., the one before it columns 1, 3, 5, ...), at (x, y) = (col S / 2, row S sin 60°), so that every circle's six
+/// neighbours are S away. Seen from its front (x to the right, y down) the bottom row starts at the left edge, as
+/// printed hexagonal boards (BoofCV's) do; with the other parity a pose would see the board from behind.
 ///
-/// Ids: id 0 is the circle at row 0, column 0, at the origin; the ids then run row by row, and within a row by
-/// increasing column (square: id = row * cols + col). Every circle has the same diameter, so the target has no key
+/// Ids: id 0 is the first circle of row 0; the ids then run row by row, and within a row by increasing column
+/// (square: id = row * cols + col, id 0 at the origin). Every circle has the same diameter, so the target has no key
 /// blob.
 ///
 /// Example: `roitrack target grid --rows 24 --cols 28 --spacing-m 0.012 --diameter-m 0.006 --hexagonal --out
-/// board.csv` writes 336 circles, ids 0-13 on row 0, the last, id 335, at (0.162, 0.2390, 0) m.
+/// board.csv` writes 336 circles, ids 0-13 on row 0 (columns 1, 3, ..., 27), the last, id 335, at
+/// (0.156, 0.2390, 0) m.
 #[derive(Debug, Args)]
 pub struct GridArgs {
     /// Number of rows (along y).
@@ -63,7 +66,8 @@ pub struct GridArgs {
     /// Diameter of every circle (m), smaller than the spacing.
     #[arg(long, allow_negative_numbers = true)]
     pub diameter_m: f64,
-    /// Hexagonal layout (circles where row + col is even, rows S sin 60° apart) instead of square.
+    /// Hexagonal layout (every other position, the last row starting at column 0; rows S sin 60° apart) instead of
+    /// square.
     #[arg(long)]
     pub hexagonal: bool,
     /// Output target CSV.
