@@ -7,14 +7,14 @@ use roitrack_image::{
     Frame, PhotoBlob, PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs,
 };
 
-use crate::identify::{Identification, identify};
+use crate::identify::{Identification, identify_if_promising, whole_view_points};
 use crate::matching::{DetectedBlob, MatchError};
 
 /// Which blobs to look for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PolarityChoice {
-    /// Both, per image: the likelier first (dark blobs when most of the image is brighter than halfway up its range),
-    /// the other if the first does not identify the target.
+    /// Both, per image: the likelier first ([`likely_polarity`]) unless its blobs hold less of the target than the
+    /// other's, the other if the first does not identify the target ([`detect_target`]).
     #[default]
     Auto,
     /// Bright blobs on a darker background.
@@ -108,6 +108,11 @@ pub struct PhotoDetection {
     pub missing: usize,
     /// Every candidate blob of the polarity used, matched or not.
     pub blobs: Vec<PhotoBlob>,
+    /// The polarities whose blobs went through identification, in the order they did (the last is
+    /// [`Self::polarity`]): with [`PolarityChoice::Auto`], one when the first tried was the right one.
+    pub polarities_tried: Vec<Polarity>,
+    /// Hypotheses verified by identification, over every polarity tried: the work identification did.
+    pub hypotheses: usize,
 }
 
 impl PhotoDetection {
@@ -168,6 +173,18 @@ impl PhotoError {
     }
 }
 
+/// The blobs as identification takes them.
+fn detected(blobs: &[PhotoBlob]) -> Vec<DetectedBlob> {
+    blobs
+        .iter()
+        .map(|b| DetectedBlob {
+            u_px: b.u_px,
+            v_px: b.v_px,
+            area_px: b.area_px,
+        })
+        .collect()
+}
+
 /// Finds, identifies and measures the target in a photograph: blob detection ([`detect_photo_blobs`]) in the
 /// polarity asked for or, with [`PolarityChoice::Auto`], in both; identification ([`identify`]); the pose.
 ///
@@ -206,8 +223,8 @@ pub fn detect_target(
     }
     let mut scratch = PhotoScratch::default();
     let blob_options = options.blob_options(camera, target);
-    let mut attempt = |polarity: Polarity| {
-        let blobs = detect_photo_blobs(
+    let mut blobs_of = |polarity: Polarity| {
+        detect_photo_blobs(
             &frame.pixels,
             frame.width,
             frame.height,
@@ -215,17 +232,26 @@ pub fn detect_target(
             polarity,
             &blob_options,
             &mut scratch,
-        );
-        let detected: Vec<DetectedBlob> = blobs
-            .iter()
-            .map(|b| DetectedBlob {
-                u_px: b.u_px,
-                v_px: b.v_px,
-                area_px: b.area_px,
-            })
-            .collect();
-        let result = identify(camera, target, &detected);
-        (polarity, blobs, result)
+        )
+    };
+    let mut tally = Tally::default();
+    // Identifies the target among `blobs` if their search's first hypotheses match at least `min_promise` points
+    // (`None` if not), counting the work; also returns that promise.
+    let attempt =
+        |polarity: Polarity, blobs: &[PhotoBlob], min_promise: usize, tally: &mut Tally| {
+            let (outcome, work) =
+                identify_if_promising(camera, target, &detected(blobs), min_promise);
+            tally.hypotheses += work.hypotheses;
+            if outcome.is_some() {
+                tally.polarities.push(polarity);
+            }
+            (outcome, work.promise)
+        };
+    // Identification of every hypothesis.
+    let identify_among = |polarity: Polarity, blobs: &[PhotoBlob], tally: &mut Tally| {
+        attempt(polarity, blobs, 0, tally)
+            .0
+            .expect("a search asking no promise stopped")
     };
     let (polarity, blobs, found) = match options.polarity {
         PolarityChoice::Bright | PolarityChoice::Dark => {
@@ -234,8 +260,8 @@ pub fn detect_target(
             } else {
                 Polarity::Dark
             };
-            let (polarity, blobs, result) = attempt(polarity);
-            match result {
+            let blobs = blobs_of(polarity);
+            match identify_among(polarity, &blobs, &mut tally) {
                 Ok(found) => (polarity, blobs, found),
                 Err(source) => {
                     return Err(PhotoError::NotFound {
@@ -247,50 +273,87 @@ pub fn detect_target(
             }
         }
         PolarityChoice::Auto => {
-            // The likelier polarity first: a photograph mostly brighter than halfway up its range is a printed
-            // target on paper (dark blobs), a mostly dark one a scene of bright markers. The other is tried only
-            // when the first does not identify the target.
-            let first = likely_polarity(frame);
-            let second = match first {
-                Polarity::Dark => Polarity::Bright,
-                Polarity::Bright => Polarity::Dark,
-            };
-            match attempt(first) {
-                (p, b, Ok(found)) => (p, b, found),
-                (_, first_blobs, Err(first_error)) => match attempt(second) {
-                    (p, b, Ok(found)) => (p, b, found),
-                    (_, second_blobs, Err(second_error)) => {
-                        let ((dark_blobs, dark), (bright_blobs, bright)) = match first {
-                            Polarity::Dark => {
-                                ((first_blobs, first_error), (second_blobs, second_error))
-                            }
-                            Polarity::Bright => {
-                                ((second_blobs, second_error), (first_blobs, first_error))
-                            }
-                        };
-                        return Err(PhotoError::NotFoundEither {
-                            dark_blobs,
-                            dark,
-                            bright_blobs,
-                            bright,
-                        });
+            // The likelier polarity's blobs first. If they hold a structure the size of the whole target in view
+            // (the first hypotheses its search would verify match that many points), they are identified at once:
+            // the guess is taken. If not, the wrong polarity's blobs (sky, foliage, glints) may hold thousands of
+            // small placements whose verification fails slowly: the other polarity's blobs are detected too (a
+            // blob detection costs less than a few failing verifications) and the more promising set is
+            // identified first. Both are identified before the target is declared not found, so the order
+            // changes only the time.
+            let guess = likely_polarity(frame);
+            let guess_blobs = blobs_of(guess);
+            let whole_view = whole_view_points(target.len());
+            let (outcome, guess_promise) = attempt(guess, &guess_blobs, whole_view, &mut tally);
+            let other = guess.other();
+            let mut other_blobs = None;
+            let guess_outcome = match outcome {
+                Some(outcome) => outcome,
+                None => {
+                    // Not promising: the other polarity goes first if its blobs promise more.
+                    let blobs = blobs_of(other);
+                    let (outcome, _) = attempt(other, &blobs, guess_promise + 1, &mut tally);
+                    if let Some(Ok(found)) = outcome {
+                        return Ok(tally.into(finish(camera, target, other, blobs, found)));
                     }
-                },
+                    other_blobs = Some(blobs);
+                    identify_among(guess, &guess_blobs, &mut tally)
+                }
+            };
+            match guess_outcome {
+                Ok(found) => (guess, guess_blobs, found),
+                Err(guess_error) => {
+                    let other_blobs = other_blobs.unwrap_or_else(|| blobs_of(other));
+                    match identify_among(other, &other_blobs, &mut tally) {
+                        Ok(found) => (other, other_blobs, found),
+                        Err(other_error) => {
+                            let ((dark_blobs, dark), (bright_blobs, bright)) = match guess {
+                                Polarity::Dark => {
+                                    ((guess_blobs, guess_error), (other_blobs, other_error))
+                                }
+                                Polarity::Bright => {
+                                    ((other_blobs, other_error), (guess_blobs, guess_error))
+                                }
+                            };
+                            return Err(PhotoError::NotFoundEither {
+                                dark_blobs,
+                                dark,
+                                bright_blobs,
+                                bright,
+                            });
+                        }
+                    }
+                }
             }
         }
     };
-    Ok(finish(camera, target, polarity, blobs, found))
+    Ok(tally.into(finish(camera, target, polarity, blobs, found)))
 }
 
+/// The work of identification over the polarities tried ([`PhotoDetection::polarities_tried`],
+/// [`PhotoDetection::hypotheses`]).
+#[derive(Debug, Default)]
+struct Tally {
+    polarities: Vec<Polarity>,
+    hypotheses: usize,
+}
+
+impl Tally {
+    /// `detection` with this work.
+    fn into(self, mut detection: PhotoDetection) -> PhotoDetection {
+        detection.polarities_tried = self.polarities;
+        detection.hypotheses = self.hypotheses;
+        detection
+    }
+}
 /// Side of a square cell (px) of [`likely_polarity`]: a few blobs' worth.
 const POLARITY_CELL_PX: usize = 32;
 
 /// Dark blobs if small dark features dominate the frame's local contrast, else bright. Each 32 x 32 cell (every other
 /// pixel of every other row) votes with its contrast: a few dark blobs on paper pull a cell's minimum far below its
 /// mean while its maximum stays near it, bright markers the other way round; an edge or a smooth gradient pulls both
-/// alike. Global statistics (the median against the range) fail on a print in a shadowed or dark scene; this is only
-/// the order in which the two polarities are tried, so a wrong guess costs time, never the result.
-fn likely_polarity(frame: &Frame) -> Polarity {
+/// alike. Global statistics (the median against the range) fail on a print in a shadowed or dark scene. It is only
+/// a guess (bright glints outdoors outvote a small print): [`detect_target`] checks it against the blobs.
+pub fn likely_polarity(frame: &Frame) -> Polarity {
     let (w, h) = (frame.width as usize, frame.height as usize);
     let (cols, rows) = (w.div_ceil(POLARITY_CELL_PX), h.div_ceil(POLARITY_CELL_PX));
     // Per cell: minimum, maximum, sum and count of the sampled pixels.
@@ -359,5 +422,7 @@ fn finish(
         ambiguous: found.ambiguous,
         missing: found.missing,
         blobs,
+        polarities_tried: vec![polarity],
+        hypotheses: found.hypotheses,
     }
 }

@@ -42,6 +42,14 @@ impl Polarity {
             Self::Dark => "dark",
         }
     }
+
+    /// The opposite polarity.
+    pub fn other(self) -> Self {
+        match self {
+            Self::Bright => Self::Dark,
+            Self::Dark => Self::Bright,
+        }
+    }
 }
 
 /// Settings of [`detect_photo_blobs`]. The defaults suit photographs of printed circles and of bright markers.

@@ -73,6 +73,16 @@ const MODEL_BOUND_SIGMAS: f64 = 2.0;
 /// dismissed ([`f_equal_dof_upper_quantile`]).
 const RIVAL_CONFIDENCE: f64 = 0.999;
 
+/// The fraction of the target points a hypothesis predicts in view that must have a blob for it to be accepted:
+/// a few may be hidden, cut by glare or merged with clutter.
+const MIN_FOUND_FRACTION: f64 = 0.85;
+
+/// The fewest points a hypothesis of a target of `n` points can match when the target is wholly in view and
+/// accepted: all but the [`MIN_FOUND_FRACTION`] acceptance leaves missing.
+pub(crate) fn whole_view_points(n: usize) -> usize {
+    n - (n as f64 * (1.0 - MIN_FOUND_FRACTION)).floor() as usize
+}
+
 /// Blobs (in the order given: strongest first from the photo detector) that seed the triple and quadruple searches.
 pub const MAX_SEED_BLOBS: usize = 200;
 
@@ -118,7 +128,7 @@ impl Verified {
         let matched = self.pairs.len();
         matched >= min_matched
             && self.residual_px <= self.residual_bound_px
-            && self.missing as f64 <= 0.15 * self.visible as f64
+            && self.missing as f64 <= (1.0 - MIN_FOUND_FRACTION) * self.visible as f64
             && self.size_mismatches as f64 <= 0.1 * matched as f64
     }
 
@@ -479,6 +489,56 @@ pub fn identify(
     target: &Target,
     blobs: &[DetectedBlob],
 ) -> Result<Identification, MatchError> {
+    identify_counted(camera, target, blobs).0
+}
+
+/// [`identify`], and the hypotheses it verified: the work its search did.
+pub(crate) fn identify_counted(
+    camera: &CameraModel,
+    target: &Target,
+    blobs: &[DetectedBlob],
+) -> (Result<Identification, MatchError>, usize) {
+    let (found, work) = identify_if_promising(camera, target, blobs, 0);
+    // A search that asks for no promise always ends with a result or an error.
+    (
+        found.expect("a search asking no promise stopped"),
+        work.hypotheses,
+    )
+}
+
+/// [`identify`] if the blobs are promising: the search stops (`None`) before verifying anything when its first
+/// group of hypotheses (the one verified first: the largest grown lattice's placements, or the seeds' extensions
+/// matching the most points) puts fewer than `min_promise` target points on blobs. The work says how many it put
+/// ([`Work::promise`]) and how many hypotheses were verified. A search with no hypothesis at all promises 0 and
+/// fails as [`identify`] does.
+pub(crate) fn identify_if_promising(
+    camera: &CameraModel,
+    target: &Target,
+    blobs: &[DetectedBlob],
+    min_promise: usize,
+) -> (Option<Result<Identification, MatchError>>, Work) {
+    let mut work = Work::default();
+    let found = identify_search(camera, target, blobs, min_promise, &mut work);
+    (found.transpose(), work)
+}
+
+/// What a search did.
+#[derive(Debug, Default, Clone, Copy)]
+pub(crate) struct Work {
+    /// The most target points a hypothesis of the first group put on blobs (0: none).
+    pub promise: usize,
+    /// Hypotheses verified.
+    pub hypotheses: usize,
+}
+
+/// The search of [`identify_if_promising`]: `Ok(None)` when it stopped for too small a promise.
+fn identify_search(
+    camera: &CameraModel,
+    target: &Target,
+    blobs: &[DetectedBlob],
+    min_promise: usize,
+    work: &mut Work,
+) -> Result<Option<Identification>, MatchError> {
     let n = target.len();
     // Any three blobs are the image of three points in some pose: only a fourth point can be checked.
     if n < 4 {
@@ -541,48 +601,50 @@ pub fn identify(
         .as_ref()
         .and_then(|(plane, _)| TargetLattice::of(plane));
     let diameters: Vec<Option<f64>> = points.iter().map(|p| p.diameter_m).collect();
-    let triples = |plane: &[Vector2<f64>]| {
+    let (ideal_ref, areas_ref, index_ref, diameters_ref) = (&ideal, &areas_px, &index, &diameters);
+    let plane_ref: &[Vector2<f64>] = planar.as_ref().map_or(&[], |(plane, _)| plane);
+    // Only called for a planar target (`plane_ref` its points in its plane).
+    let triples = move || {
         let model = PlanarModel {
-            plane_m: plane,
-            diameters_m: &diameters,
+            plane_m: plane_ref,
+            diameters_m: diameters_ref,
             focal_px: camera.intrinsics.fx_px.max(camera.intrinsics.fy_px),
         };
-        by_size(triple_hypotheses(
-            &model,
-            &ideal,
-            &areas_px,
-            &index,
-            min_matched,
-        ))
+        in_tiers(n, min_matched, move |fewest| {
+            triple_hypotheses(&model, ideal_ref, areas_ref, index_ref, fewest)
+        })
     };
     let hypothesis_groups: HypothesisGroups = match (&planar, lattice) {
-        (Some((plane, _)), Some(lattice)) => {
+        (Some(_), Some(lattice)) => {
             let grown = lattice_hypotheses(lattice, &ideal, &areas_px, &index);
             if n <= SMALL_LATTICE_POINTS {
                 // Made when the search reaches them (after the lattice's groups).
-                Box::new(grown.chain(std::iter::once_with(|| triples(plane)).flatten()))
+                Box::new(grown.chain(std::iter::once_with(triples).flatten()))
             } else {
                 grown
             }
         }
         (None, _) => {
             let spread: Vec<Vector3<f64>> = points.iter().map(|p| p.point_in_obj_m).collect();
-            by_size(quadruple_hypotheses(
-                &spread,
-                &ideal,
-                &areas_px,
-                &index,
-                min_matched,
-            ))
+            in_tiers(n, min_matched, move |fewest| {
+                quadruple_hypotheses(&spread, ideal_ref, areas_ref, index_ref, fewest)
+            })
         }
-        (Some((plane, _)), None) => triples(plane),
+        (Some(_), None) => triples(),
     };
     // Groups in order of promise (the largest grown lattice first): a large target's search stops at the first that
     // gives an accepted fit.
     let mut verified: Vec<Verified> = Vec::new();
-    let mut tried = 0;
+    let mut first_group = true;
     for group in hypothesis_groups {
-        tried += group.len();
+        if first_group && !group.is_empty() {
+            first_group = false;
+            work.promise = group.iter().map(Vec::len).max().unwrap_or(0);
+            if work.promise < min_promise {
+                return Ok(None);
+            }
+        }
+        work.hypotheses += group.len();
         verified.extend(group.iter().filter_map(|pairs| verifier.verify(pairs)));
         // A small target's every search is verified (they are cheap): a rival found by another search than the
         // best's must be seen to be compared.
@@ -660,7 +722,7 @@ pub fn identify(
         .copied()
         .unwrap_or(&best)
         .clone();
-    Ok(finish(&verifier, chosen, ambiguous, tried))
+    Ok(Some(finish(&verifier, chosen, ambiguous, work.hypotheses)))
 }
 
 /// Groups of hypotheses (lists of (target point, blob) pairs) in the order they are verified; a group is made only
@@ -679,6 +741,32 @@ fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> HypothesisGroups<'static
         }
     }
     Box::new(groups.into_iter())
+}
+
+/// The hypotheses of a search by seeds (triples, quadruples) that covers at least `fewest` points each
+/// (`make(fewest)`), grouped by size ([`by_size`]), made in two tiers for a target of more than
+/// [`SMALL_LATTICE_POINTS`]: first only those that match a whole view's worth of points (as many as acceptance
+/// allows missing: 85 %), then, if none of these is accepted, the rest. Each seed's extension gives up as soon as
+/// too many points miss for its tier, so a wrong seed among clutter costs a few predictions instead of nearly one
+/// per target point; the hypotheses and their order are those of one search down to `min_matched`, since a larger
+/// target's search stops at the first group that gives an accepted fit, the largest first.
+fn in_tiers<'a>(
+    n: usize,
+    min_matched: usize,
+    make: impl Fn(usize) -> Vec<Vec<(usize, usize)>> + 'a,
+) -> HypothesisGroups<'a> {
+    let whole_view = whole_view_points(n);
+    if n <= SMALL_LATTICE_POINTS || whole_view <= min_matched {
+        return by_size(make(min_matched));
+    }
+    let first = by_size(make(whole_view));
+    let rest = std::iter::once_with(move || {
+        let mut rest = make(min_matched);
+        rest.retain(|h| h.len() < whole_view);
+        by_size(rest)
+    })
+    .flatten();
+    Box::new(first.chain(rest))
 }
 
 /// The diameter (m) a point's disk has, from the target file's `diameter_m` and the matched blobs' common area scale

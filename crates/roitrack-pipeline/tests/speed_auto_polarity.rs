@@ -1,0 +1,111 @@
+//! `--polarity auto` on a frame where the likelier polarity is the wrong one (issue 35, item 5): dark circles on
+//! paper among bright specular glints outdoors. The wrong polarity's blobs (the glints) hold many small chance
+//! lattices, whose placements on a large grid were verified one by one before the right polarity was tried (8,848
+//! hypotheses, 300 times the right polarity's work). The checks count work, not time: which polarities went through
+//! identification and how many hypotheses were verified.
+
+use nalgebra::{Rotation3, Vector3};
+use rand::{Rng, SeedableRng};
+use roitrack_core::target::{CircleGrid, GridLayout};
+use roitrack_core::{CameraModel, Target};
+use roitrack_image::{Frame, Polarity};
+use roitrack_pipeline::detect_target;
+use roitrack_pipeline::photo::{PhotoOptions, PolarityChoice, likely_polarity};
+use roitrack_sim::photo::{PhotoScene, render_photo};
+
+/// `count` small saturated spots (1.5 to 4 px in radius, soft edges) at least 30 px from every circle centre:
+/// sunlight glinting on leaves, water and chrome.
+fn add_glints(frame: &mut Frame, circles_px: &[(f64, f64)], count: usize, seed: u64) {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+    let full = f64::from((1u32 << frame.bit_depth) - 1);
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let mut placed = 0;
+    while placed < count {
+        let (u, v) = (
+            rng.random_range(8.0..w as f64 - 8.0),
+            rng.random_range(8.0..h as f64 - 8.0),
+        );
+        let r = rng.random_range(1.5..4.0);
+        if circles_px
+            .iter()
+            .any(|&(cu, cv)| (cu - u).hypot(cv - v) < 30.0)
+        {
+            continue;
+        }
+        placed += 1;
+        for j in (v - r - 2.0) as usize..=(v + r + 2.0) as usize {
+            for i in (u - r - 2.0) as usize..=(u + r + 2.0) as usize {
+                let weight = (r + 1.0 - (i as f64 - u).hypot(j as f64 - v)).clamp(0.0, 1.0);
+                let p = &mut frame.pixels[j * w + i];
+                *p = (f64::from(*p) + weight * (full - f64::from(*p))).round() as u16;
+            }
+        }
+    }
+}
+
+#[test]
+fn auto_identifies_the_right_polarity_first_among_glints() {
+    let camera = CameraModel::canonical();
+    let target = Target::circle_grid(&CircleGrid {
+        rows: 8,
+        cols: 10,
+        spacing_m: 0.025,
+        diameter_m: 0.015,
+        layout: GridLayout::Square,
+    })
+    .unwrap();
+    let tilt = Rotation3::from_axis_angle(&Vector3::y_axis(), 30f64.to_radians());
+    for seed in [5, 6] {
+        let scene = PhotoScene::facing(camera.clone(), target.clone(), 1.2, tilt)
+            .harsh()
+            .with_seed(seed);
+        let rendered = render_photo(&scene).unwrap();
+        let circles: Vec<(f64, f64)> = rendered
+            .truth
+            .iter()
+            .filter_map(|p| p.centre_px.map(|c| (c.x, c.y)))
+            .collect();
+        let mut frame = rendered.frame;
+        add_glints(&mut frame, &circles, 1000, seed);
+        // The scene is what it is meant to be: the glints outvote the print.
+        assert_eq!(likely_polarity(&frame), Polarity::Bright, "seed {seed}");
+        let dark = detect_target(
+            &camera,
+            &target,
+            &frame,
+            &PhotoOptions {
+                polarity: PolarityChoice::Dark,
+                ..PhotoOptions::default()
+            },
+        )
+        .unwrap();
+        let auto = detect_target(&camera, &target, &frame, &PhotoOptions::default()).unwrap();
+        assert_eq!(auto.points, dark.points, "seed {seed}");
+        assert_eq!(auto.polarity, Polarity::Dark);
+        // The glints' blobs were detected but never identified: the right polarity's work only.
+        assert_eq!(auto.polarities_tried, vec![Polarity::Dark], "seed {seed}");
+        assert_eq!(auto.hypotheses, dark.hypotheses, "seed {seed}");
+    }
+}
+
+#[test]
+fn auto_takes_a_right_guess_without_looking_at_the_other_polarity() {
+    // Dark circles on paper, no glints: the guess is dark, and the dark blobs hold the whole grid.
+    let camera = CameraModel::canonical();
+    let target = Target::circle_grid(&CircleGrid {
+        rows: 6,
+        cols: 7,
+        spacing_m: 0.03,
+        diameter_m: 0.018,
+        layout: GridLayout::Square,
+    })
+    .unwrap();
+    let scene = PhotoScene::facing(camera.clone(), target.clone(), 1.0, Rotation3::identity())
+        .harsh()
+        .with_seed(2);
+    let frame = render_photo(&scene).unwrap().frame;
+    assert_eq!(likely_polarity(&frame), Polarity::Dark);
+    let auto = detect_target(&camera, &target, &frame, &PhotoOptions::default()).unwrap();
+    assert_eq!(auto.polarities_tried, vec![Polarity::Dark]);
+    assert_eq!(auto.points.len(), 42);
+}
