@@ -71,6 +71,10 @@ pub struct FrameTrackerConfig {
     /// Fewest blobs found in their windows for a frame to be tracked from its windows; with fewer, the frame is
     /// searched whole. `None`: half the target's points, and at least 4.
     pub min_window_points: Option<usize>,
+    /// The user chose the Kalman filter's jerk densities (`track --jerk-psd`, `--angular-jerk-psd`): they are kept
+    /// with a rolling shutter too, even where they equal the global-shutter defaults (which a rolling shutter
+    /// otherwise replaces, see `FrameTracker::new`). `false`: the readout's defaults.
+    pub jerk_psd_given: bool,
 }
 
 impl Default for FrameTrackerConfig {
@@ -87,6 +91,7 @@ impl Default for FrameTrackerConfig {
             },
             centroid: CentroidOptions::default(),
             min_window_points: None,
+            jerk_psd_given: false,
         }
     }
 }
@@ -347,7 +352,7 @@ impl FrameTracker {
         let tracker = Tracker::new(
             camera.clone(),
             target.clone(),
-            Self::for_readout(config.tracker, &camera),
+            Self::for_readout(config.tracker, &camera, config.jerk_psd_given),
         )?;
         let scheduler = RoiScheduler::new(
             camera.clone(),
@@ -394,14 +399,20 @@ impl FrameTracker {
 
     /// `config` for the camera's readout: with a rolling shutter, the frame default's jerk densities
     /// ([`MotionModel::constant_acceleration`]) become the rolling-shutter ones
-    /// ([`MotionModel::constant_acceleration_for_rolling_shutter`]); densities a user chose stay. On
+    /// ([`MotionModel::constant_acceleration_for_rolling_shutter`]); densities a user chose (`jerk_psd_given`) stay,
+    /// also when they equal the frame default's. On
     /// `simulate --frames --fps 30 --shutter rolling` (16 points, seed 1) the global-shutter densities left orthoglide's
     /// steps of acceleration (16.7 m/s², switched at once) 4.3 mm off in depth and the random scenario 0.38 mm
     /// (0.30 and 1.8 mm with constant velocity); the rolling-shutter ones leave 0.135 and 0.238 mm, and
     /// `roitrack frame-study`'s rolling-shutter figures move from 0.037-0.050 to 0.038-0.043 mm.
-    fn for_readout(mut config: TrackerConfig, camera: &CameraModel) -> TrackerConfig {
+    fn for_readout(
+        mut config: TrackerConfig,
+        camera: &CameraModel,
+        jerk_psd_given: bool,
+    ) -> TrackerConfig {
         if let EstimatorConfig::Kalman(tuning) = &mut config.estimator
             && camera.time.is_rolling()
+            && !jerk_psd_given
             && tuning.motion_model == MotionModel::constant_acceleration()
         {
             tuning.motion_model = MotionModel::constant_acceleration_for_rolling_shutter();
@@ -1634,5 +1645,51 @@ fn twin_state(state: &MotionState, symmetry: &Symmetry) -> MotionState {
         cam_r_obj,
         cam_t_obj_m: state.cam_t_obj_m - cam_r_obj * symmetry.obj_t_m,
         ..*state
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use roitrack_core::time::Readout;
+
+    use super::*;
+
+    fn tuning(config: &TrackerConfig) -> MotionModel {
+        let EstimatorConfig::Kalman(tuning) = config.estimator else {
+            unreachable!()
+        };
+        tuning.motion_model
+    }
+
+    #[test]
+    fn a_users_jerk_densities_equal_to_the_global_defaults_stay_with_a_rolling_shutter() {
+        let mut rolling = CameraModel::canonical();
+        rolling.time.readout = Readout::RollingShutter {
+            line_delay_s: 30e-6,
+        };
+        // `--jerk-psd 100 --angular-jerk-psd 300`: the global-shutter defaults' values, chosen by the user.
+        let given = FrameTrackerConfig::frame_estimator(
+            TrackerConfig {
+                estimator: EstimatorConfig::Kalman(roitrack_core::estimator::KalmanTuning {
+                    motion_model: MotionModel::constant_acceleration_with(Some(100.0), Some(300.0)),
+                    ..Default::default()
+                }),
+                ..TrackerConfig::default()
+            },
+            None,
+            None,
+        );
+        assert_eq!(tuning(&given), MotionModel::constant_acceleration());
+        let kept = FrameTracker::for_readout(given, &rolling, true);
+        assert_eq!(tuning(&kept), MotionModel::constant_acceleration());
+        // Without a choice, the rolling shutter's own defaults.
+        let defaulted = FrameTracker::for_readout(given, &rolling, false);
+        assert_eq!(
+            tuning(&defaulted),
+            MotionModel::constant_acceleration_for_rolling_shutter()
+        );
+        // A global shutter keeps the global defaults either way.
+        let global = FrameTracker::for_readout(given, &CameraModel::canonical(), false);
+        assert_eq!(tuning(&global), MotionModel::constant_acceleration());
     }
 }

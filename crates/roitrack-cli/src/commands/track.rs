@@ -298,6 +298,9 @@ fn run_frames(
             distance_range_m: distance_range(args.distance_m.as_deref())?,
             ..PhotoOptions::default()
         },
+        // Densities given are the user's, kept whatever the shutter (even equal to the global-shutter defaults).
+        jerk_psd_given: args.estimator.jerk_psd.is_some()
+            || args.estimator.angular_jerk_psd.is_some(),
         ..FrameTrackerConfig::default()
     };
     let timing = roitrack::formats::FrameTiming {
