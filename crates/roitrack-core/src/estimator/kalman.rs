@@ -1738,7 +1738,7 @@ impl KalmanLaw {
             core.fill_scratch(super::WindowMode::Last(min_measurements));
             rebuilt = true;
         }
-        rebuilt |= drop_gated(&self.gated_at, &mut core.scratch);
+        rebuilt |= drop_gated(&self.gated_at, &mut core.scratch, 0);
         let (cost_px2, count) = if rebuilt {
             let window = core.window_problem(t_new_s).normal_equations(&core.state);
             let Some((step, _)) = window.solve_with_conditioning() else {
@@ -1785,8 +1785,8 @@ impl KalmanLaw {
                 break;
             }
             taken += count;
-            drop_gated(&self.gated_at, &mut core.scratch);
-            if core.scratch.len() < 4 {
+            drop_gated(&self.gated_at, &mut core.scratch, FRAME_SAMPLE_MIN_BLOBS);
+            if core.scratch.len() < FRAME_SAMPLE_MIN_BLOBS {
                 continue;
             }
             let frame = core.window_problem(t_new_s).normal_equations(&core.state);
@@ -1837,14 +1837,20 @@ fn distinct_points(batch: &[Observation], needed: usize) -> bool {
     false
 }
 
+/// The fewest blobs of one frame that make a noise sample: a pose fitted to 4 blobs leaves 2 degrees of freedom.
+const FRAME_SAMPLE_MIN_BLOBS: usize = 4;
+
 /// Leaves out of a noise sample's `scratch` the measurements the gate rejected (per point, the time of its newest
 /// rejected one, `gated_at`): an outlier of 5-20 px would count as much noise as a hundred good centroids. Unless they
 /// are more than a quarter of it: then the noise itself has grown beyond the estimate, and they must count for the
-/// estimate to follow. Returns whether any was left out.
-fn drop_gated(gated_at: &[Option<f64>], scratch: &mut Vec<Observation>) -> bool {
+/// estimate to follow; or unless leaving them out would leave fewer than `min_kept`, too few for a sample: then
+/// every sample of a 4-point target with one blob gated would be lost, and a noise started too low (a camera file
+/// 2 % off leaves its 4 dots 0.5-1 px from any pose while the filter assumed 0.1 px) would gate one blob in every
+/// frame and never grow. Returns whether any was left out.
+fn drop_gated(gated_at: &[Option<f64>], scratch: &mut Vec<Observation>, min_kept: usize) -> bool {
     let is_gated = |o: &Observation| gated_at.get(o.point_index) == Some(&Some(o.t_s));
     let gated = scratch.iter().filter(|o| is_gated(o)).count();
-    let drop = gated > 0 && 4 * gated <= scratch.len();
+    let drop = gated > 0 && 4 * gated <= scratch.len() && scratch.len() - gated >= min_kept;
     if drop {
         scratch.retain(|o| !is_gated(o));
     }
