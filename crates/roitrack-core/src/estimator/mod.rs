@@ -55,6 +55,7 @@ mod model_error;
 mod options;
 mod point_noise;
 mod problem;
+pub mod rolling_refit;
 pub mod static_baseline;
 mod static_pose;
 mod track;
@@ -71,6 +72,10 @@ pub use options::{
     Adaptation, EstimatorKind, MotionModelKind, OptionConflict, TrackerOptions, UnknownName,
 };
 pub use problem::{Observation, RobustLoss, WindowProblem};
+pub use rolling_refit::{
+    MAX_STENCIL_POSES, PoseRefit, StencilMotion, TimedPose, pose_residuals, refit_pose,
+    stencil_motion,
+};
 pub use static_baseline::StaticEstimator;
 pub use static_pose::{
     AMBIGUITY_CHI2, InitError, MAX_STATIC_POSES, MODEL_SPREAD_SIGMAS, PixelNoise, PoseFit,
