@@ -24,6 +24,7 @@ use roitrack_core::target::{CircleGrid, GridLayout};
 use roitrack_core::{CameraModel, Target, TargetPoint};
 use roitrack_image::{Frame, PhotoScratch, Polarity, detect_photo_blobs};
 use roitrack_pipeline::photo::{PhotoOptions, PolarityChoice, detect_target};
+use roitrack_sim::glints::add_glints;
 use roitrack_sim::photo::{Clutter, PhotoScene, render_photo};
 
 /// A camera of `width_px` x `height_px` with the field of view of the 640 x 480 development photographs' (a
@@ -74,37 +75,6 @@ fn random_dots() -> Target {
         }
     }
     Target::new(points).unwrap()
-}
-
-/// Bright specular glints added to `frame` away from the target's circles: `count` small saturated spots (1.5 to
-/// 4 px in radius) with soft edges, the sun on leaves, water and chrome outdoors.
-fn add_glints(frame: &mut Frame, circles_px: &[(f64, f64)], count: usize, seed: u64) {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let full = f64::from((1u32 << frame.bit_depth) - 1);
-    let (w, h) = (frame.width as usize, frame.height as usize);
-    let mut placed = 0;
-    while placed < count {
-        let (u, v) = (
-            rng.random_range(8.0..w as f64 - 8.0),
-            rng.random_range(8.0..h as f64 - 8.0),
-        );
-        let r = rng.random_range(1.5..4.0);
-        if circles_px
-            .iter()
-            .any(|&(cu, cv)| (cu - u).hypot(cv - v) < 30.0)
-        {
-            continue;
-        }
-        placed += 1;
-        for j in (v - r - 2.0) as usize..=(v + r + 2.0) as usize {
-            for i in (u - r - 2.0) as usize..=(u + r + 2.0) as usize {
-                let d = (i as f64 - u).hypot(j as f64 - v);
-                let weight = (r + 1.0 - d).clamp(0.0, 1.0);
-                let p = &mut frame.pixels[j * w + i];
-                *p = (f64::from(*p) + weight * (full - f64::from(*p))).round() as u16;
-            }
-        }
-    }
 }
 
 /// One case: the frame, its camera and target, with `detect_target` timed with the polarity given and with `auto`.

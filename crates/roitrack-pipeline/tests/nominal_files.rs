@@ -9,10 +9,12 @@
 //! file's error allows; given the distance range it is found as well. Without diameters nothing identifies a dot
 //! but its place: a cluttered view may then be refused, never answered wrong.
 
+mod common;
+
+use common::{camera, nominal};
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use roitrack_core::camera::{PinholeIntrinsics, PlumbBob};
 use roitrack_core::{CameraModel, Target, TargetPoint};
 use roitrack_pipeline::detect_target;
 use roitrack_pipeline::photo::{PhotoDetection, PhotoOptions};
@@ -20,56 +22,6 @@ use roitrack_sim::photo::{CircleShade, Clutter, PhotoScene, RenderedPhoto, rende
 
 /// Id of the large disk drawn in the middle of a plate (not in the target file).
 const DISK_ID: u32 = 999;
-
-/// A camera of `width` x `height` px.
-fn camera(width: u32, height: u32, f_px: f64, c_px: (f64, f64), k1: f64) -> CameraModel {
-    CameraModel::new(
-        "nominal",
-        width,
-        height,
-        PinholeIntrinsics {
-            fx_px: f_px,
-            fy_px: f_px,
-            skew_px: 0.0,
-            cx_px: c_px.0,
-            cy_px: c_px.1,
-        },
-        PlumbBob {
-            k1,
-            ..PlumbBob::default()
-        },
-    )
-    .unwrap()
-}
-
-/// The camera file a user has for `truth`: each focal length and principal point coordinate off by up to 2 % (of
-/// itself), k1 by up to 0.03.
-fn nominal(truth: &CameraModel, rng: &mut ChaCha8Rng) -> CameraModel {
-    let k = &truth.intrinsics;
-    let mut off = |x: f64| x * (1.0 + rng.random_range(-0.02..0.02));
-    let intrinsics = PinholeIntrinsics {
-        fx_px: off(k.fx_px),
-        fy_px: off(k.fy_px),
-        skew_px: 0.0,
-        cx_px: off(k.cx_px),
-        cy_px: off(k.cy_px),
-    };
-    let roitrack_core::camera::Distortion::PlumbBob(d) = truth.distortion else {
-        unreachable!()
-    };
-    let distortion = PlumbBob {
-        k1: d.k1 + rng.random_range(-0.03..0.03),
-        ..d
-    };
-    CameraModel::new(
-        "nominal",
-        truth.width_px,
-        truth.height_px,
-        intrinsics,
-        distortion,
-    )
-    .unwrap()
-}
 
 /// Points at `corners` (in the plane z = 0), each of `diameter_m`.
 fn target(corners: &[(f64, f64)], diameter_m: Option<f64>) -> Target {

@@ -7,12 +7,14 @@
 //! The tracker must be no worse than detecting each frame alone (`detect_target`) against that reference, smoother,
 //! and must not dispute and restart on footage whose only fault is the model's error.
 
+mod common;
+
+use common::{camera, nominal};
 use nalgebra::{Rotation3, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use roitrack_core::camera::{PinholeIntrinsics, PlumbBob};
 use roitrack_core::estimator::{Observation, solve_static_pose};
-use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target, TargetPoint};
+use roitrack_core::{MotionState, SpatioTemporalModel, Target, TargetPoint};
 use roitrack_image::Frame;
 use roitrack_pipeline::frames::{FrameTracker, FrameTrackerConfig};
 use roitrack_pipeline::photo::{PhotoOptions, detect_target};
@@ -20,26 +22,6 @@ use roitrack_sim::photo::{CircleShade, Clutter, PhotoScene, render_photo};
 
 const FPS_HZ: f64 = 30.0;
 const FRAMES: usize = 150;
-
-fn camera(name: &str, f_px: (f64, f64), c_px: (f64, f64), k1: f64) -> CameraModel {
-    CameraModel::new(
-        name,
-        640,
-        480,
-        PinholeIntrinsics {
-            fx_px: f_px.0,
-            fy_px: f_px.1,
-            skew_px: 0.0,
-            cx_px: c_px.0,
-            cy_px: c_px.1,
-        },
-        PlumbBob {
-            k1,
-            ..PlumbBob::default()
-        },
-    )
-    .unwrap()
-}
 
 fn plate(diameter_m: f64, disk: bool) -> Target {
     let mut points: Vec<TargetPoint> = [(-0.07, -0.06), (0.07, -0.06), (0.07, 0.06), (-0.07, 0.06)]
@@ -99,26 +81,12 @@ fn a_plate_on_nominal_files_is_tracked_as_closely_as_detected_and_more_smoothly(
     for seed in 1..=3u64 {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let f_px = rng.random_range(550.0..750.0);
-        let truth_camera = camera(
-            "truth",
-            (f_px, f_px),
-            (
-                320.0 + rng.random_range(-10.0..10.0),
-                240.0 + rng.random_range(-10.0..10.0),
-            ),
-            rng.random_range(-0.2..0.0),
+        let c_px = (
+            320.0 + rng.random_range(-10.0..10.0),
+            240.0 + rng.random_range(-10.0..10.0),
         );
-        let mut off = |x: f64| x * (1.0 + rng.random_range(-0.02..0.02));
-        let k = truth_camera.intrinsics;
-        let roitrack_core::camera::Distortion::PlumbBob(d) = truth_camera.distortion else {
-            unreachable!()
-        };
-        let nominal_camera = camera(
-            "nominal",
-            (off(k.fx_px), off(k.fy_px)),
-            (off(k.cx_px), off(k.cy_px)),
-            d.k1 + rng.random_range(-0.03..0.03),
-        );
+        let truth_camera = camera(640, 480, f_px, c_px, rng.random_range(-0.2..0.0));
+        let nominal_camera = nominal(&truth_camera, &mut rng);
         let motion = hand_held(&mut rng);
         let drawn = plate(0.013, true);
         let target_file = plate(0.010, false);

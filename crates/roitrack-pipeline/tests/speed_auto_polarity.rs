@@ -5,43 +5,13 @@
 //! identification and how many hypotheses were verified.
 
 use nalgebra::{Rotation3, Vector3};
-use rand::{Rng, SeedableRng};
 use roitrack_core::target::{CircleGrid, GridLayout};
 use roitrack_core::{CameraModel, Target};
-use roitrack_image::{Frame, Polarity};
+use roitrack_image::Polarity;
 use roitrack_pipeline::detect_target;
 use roitrack_pipeline::photo::{PhotoOptions, PolarityChoice, likely_polarity};
+use roitrack_sim::glints::add_glints;
 use roitrack_sim::photo::{PhotoScene, render_photo};
-
-/// `count` small saturated spots (1.5 to 4 px in radius, soft edges) at least 30 px from every circle centre:
-/// sunlight glinting on leaves, water and chrome.
-fn add_glints(frame: &mut Frame, circles_px: &[(f64, f64)], count: usize, seed: u64) {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
-    let full = f64::from((1u32 << frame.bit_depth) - 1);
-    let (w, h) = (frame.width as usize, frame.height as usize);
-    let mut placed = 0;
-    while placed < count {
-        let (u, v) = (
-            rng.random_range(8.0..w as f64 - 8.0),
-            rng.random_range(8.0..h as f64 - 8.0),
-        );
-        let r = rng.random_range(1.5..4.0);
-        if circles_px
-            .iter()
-            .any(|&(cu, cv)| (cu - u).hypot(cv - v) < 30.0)
-        {
-            continue;
-        }
-        placed += 1;
-        for j in (v - r - 2.0) as usize..=(v + r + 2.0) as usize {
-            for i in (u - r - 2.0) as usize..=(u + r + 2.0) as usize {
-                let weight = (r + 1.0 - (i as f64 - u).hypot(j as f64 - v)).clamp(0.0, 1.0);
-                let p = &mut frame.pixels[j * w + i];
-                *p = (f64::from(*p) + weight * (full - f64::from(*p))).round() as u16;
-            }
-        }
-    }
-}
 
 #[test]
 fn auto_identifies_the_right_polarity_first_among_glints() {

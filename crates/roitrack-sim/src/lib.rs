@@ -11,6 +11,7 @@
 //! ([`Scenario::with_camera`], [`Scenario::with_target`]).
 
 pub mod frames;
+pub mod glints;
 pub mod measurements;
 pub mod photo;
 pub mod rigs;
