@@ -13,6 +13,7 @@ pub mod matching;
 pub mod offline;
 pub mod photo;
 pub mod realtime;
+pub mod rs_smoothing;
 pub mod scheduler;
 
 pub use frames::{

@@ -74,6 +74,12 @@ pub struct TrackArgs {
     /// --shutter rolling.
     #[arg(long, value_name = "D")]
     pub line_delay_s: Option<f64>,
+    /// With --shutter rolling: write the causal filter's estimates as they come, instead of holding each until the
+    /// two frames after it are tracked and refitting its pose, at its blobs' row times, with the twist of the poses
+    /// around it (the default offline, docs/frames.md "Rolling shutter: offline smoothing": about 3 times closer on
+    /// fast motion, two frames of latency).
+    #[arg(long, requires = "images")]
+    pub no_rs_smoothing: bool,
     /// With --images: the exposure time (s), used to size the windows for motion blur.
     #[arg(long, default_value_t = 1e-3, requires = "images")]
     pub exposure_s: f64,
@@ -301,6 +307,7 @@ fn run_frames(
         // Densities given are the user's, kept whatever the shutter (even equal to the global-shutter defaults).
         jerk_psd_given: args.estimator.jerk_psd.is_some()
             || args.estimator.angular_jerk_psd.is_some(),
+        rs_smoothing: !args.no_rs_smoothing,
         ..FrameTrackerConfig::default()
     };
     let timing = roitrack::formats::FrameTiming {

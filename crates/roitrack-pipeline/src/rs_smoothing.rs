@@ -1,0 +1,273 @@
+//! Offline rolling-shutter smoothing: each frame's estimate is held until the two frames after it are tracked, and its
+//! pose is fitted again from its own blobs at their row times with the twist of a central difference of the poses of
+//! the frames around it ([`roitrack_core::estimator::rolling_refit`]).
+//!
+//! Why: a rolling-shutter frame's blobs are read milliseconds apart, and the depth of its pose follows the twist
+//! assumed over the readout; the causal filter's twist lags by the angular acceleration and jerk, which left the
+//! position error of rolling-shutter frames about 5 times that of global-shutter frames of the same motion (docs/
+//! frames.md, "Rolling shutter: offline smoothing"). Only for offline sources ([`crate::track_frame_stream`]): the
+//! estimates come two frames late, which a live loop does not take.
+
+use std::collections::VecDeque;
+
+use nalgebra::Matrix6;
+use roitrack_core::estimator::{
+    Estimate, Matrix12, Observation, TimedPose, TrackStatus, refit_pose, stencil_motion,
+};
+use roitrack_core::{CameraModel, Measurement, SpatioTemporalModel, Target};
+
+use crate::frames::FrameOutcome;
+
+/// Frames on either side of the one refitted: a 5-point stencil, whose error (of order the fifth derivative times
+/// T⁴) is far below the centroid noise at 30 Hz, where a ±1 frame difference leaves jerk·T²/6.
+const REACH: usize = 2;
+/// Passes over the held frames per new frame: the neighbours' poses move with their own refits (three passes took the
+/// prototype's refits to within 1e-3 mm of their fixed point).
+const PASSES: usize = 3;
+/// Gauss-Newton steps per refit, from the last refit (or the filter's pose): the pose moves by tenths of a millimetre.
+const REFIT_ITERATIONS: usize = 4;
+/// A refit moving the pose farther than this (m, rad) from the filter's is not taken: the stencil's poses are then
+/// not one smooth motion (a relabelled or restarted track the filter has not flagged), and the filter's estimate is
+/// the safer one. The refits move poses by tenths of a millimetre and milliradians.
+const MAX_SHIFT_M: f64 = 0.005;
+const MAX_SHIFT_RAD: f64 = 0.05;
+
+/// One frame held: what the sink is given once it is refined.
+struct Held<I> {
+    info: I,
+    outcome: FrameOutcome,
+    measurements: Vec<Measurement>,
+    observations: Vec<Observation>,
+    /// The pose in use (the filter's, then the last refit's) with its covariance; `None` if the frame has no estimate
+    /// the filter vouches for (it is then neither refitted nor a neighbour).
+    pose: Option<(TimedPose, Matrix6<f64>)>,
+    refined: Option<Refined>,
+}
+
+/// What the last refit gave.
+struct Refined {
+    estimate: Estimate,
+}
+
+/// A frame's pose and covariance after it left the buffer: the past side of the next frames' stencils.
+type PastPose = Option<(TimedPose, Matrix6<f64>)>;
+
+/// Holds the last frames of an offline rolling-shutter run and gives each back refined two frames later.
+///
+/// ```
+/// use roitrack_core::{CameraModel, Target};
+/// use roitrack_pipeline::frames::{FrameMethod, FrameOutcome};
+/// use roitrack_pipeline::rs_smoothing::RollingSmoother;
+///
+/// let mut smoother = RollingSmoother::new(CameraModel::canonical(), Target::grid4x4());
+/// let nothing = || FrameOutcome { estimate: None, method: FrameMethod::NotFound, measured: 0 };
+/// // Two frames of latency: the first frame comes back with the third.
+/// assert!(smoother.push(0, nothing(), &[]).is_none());
+/// assert!(smoother.push(1, nothing(), &[]).is_none());
+/// assert_eq!(smoother.push(2, nothing(), &[]).map(|(k, _, _)| k), Some(0));
+/// let rest: Vec<usize> = smoother.finish().map(|(k, _, _)| k).collect();
+/// assert_eq!(rest, [1, 2]);
+/// ```
+pub struct RollingSmoother<I> {
+    camera: CameraModel,
+    target: Target,
+    model: SpatioTemporalModel,
+    past: VecDeque<PastPose>,
+    pending: VecDeque<Held<I>>,
+}
+
+impl<I> RollingSmoother<I> {
+    /// A smoother for frames of `camera` (its rolling-shutter time model gave the measurements their times) seeing
+    /// `target`.
+    pub fn new(camera: CameraModel, target: Target) -> Self {
+        Self {
+            model: SpatioTemporalModel::new(camera.intrinsics),
+            camera,
+            target,
+            past: VecDeque::with_capacity(REACH),
+            pending: VecDeque::with_capacity(REACH + 1),
+        }
+    }
+
+    /// Takes the next frame's outcome and its measurements (raw pixels, at their row times), and gives back the frame
+    /// two before it, refined, once there is one.
+    pub fn push(
+        &mut self,
+        info: I,
+        outcome: FrameOutcome,
+        measurements: &[Measurement],
+    ) -> Option<(I, FrameOutcome, Vec<Measurement>)> {
+        let held = self.held(info, outcome, measurements);
+        self.pending.push_back(held);
+        if self.pending.len() <= REACH {
+            return None;
+        }
+        // Every held frame but the newest has a frame after it.
+        self.refine(self.pending.len() - 1);
+        self.pop()
+    }
+
+    /// The frames still held, refined with the neighbours there are (a frame without one on each side keeps the
+    /// filter's estimate), in order.
+    pub fn finish(&mut self) -> impl Iterator<Item = (I, FrameOutcome, Vec<Measurement>)> + '_ {
+        self.refine(self.pending.len().saturating_sub(1));
+        std::iter::from_fn(move || self.pop())
+    }
+
+    fn held(&self, info: I, outcome: FrameOutcome, measurements: &[Measurement]) -> Held<I> {
+        let observations: Vec<Observation> = measurements
+            .iter()
+            .filter_map(|m| {
+                Some(Observation {
+                    t_s: m.t_s,
+                    point_index: self.target.index_of(m.id)?,
+                    ideal_px: self
+                        .camera
+                        .undistort_pixel(&nalgebra::Vector2::new(m.u_px, m.v_px))
+                        .ok()?,
+                })
+            })
+            .collect();
+        // Only estimates the filter vouches for are refitted or lent to a neighbour's stencil.
+        let pose = outcome.estimate.as_ref().and_then(|e| {
+            matches!(e.status, TrackStatus::Tracking | TrackStatus::Converging).then(|| {
+                (
+                    TimedPose {
+                        t_s: e.t_ref_s,
+                        cam_r_obj: e.state.cam_r_obj,
+                        cam_t_obj_m: e.state.cam_t_obj_m,
+                    },
+                    pose_block(e.covariance.as_ref(), e.noise_px),
+                )
+            })
+        });
+        Held {
+            info,
+            outcome,
+            measurements: measurements.to_vec(),
+            observations,
+            pose,
+            refined: None,
+        }
+    }
+
+    /// [`PASSES`] passes of refits over the first `count` held frames.
+    fn refine(&mut self, count: usize) {
+        for _ in 0..PASSES {
+            for p in 0..count {
+                self.refit(p);
+            }
+        }
+    }
+
+    /// Refits held frame `p` from the poses of its neighbours (up to [`REACH`] on each side, contiguous, vouched
+    /// for); leaves it as it is without one on each side.
+    fn refit(&mut self, p: usize) {
+        let position = self.past.len() + p;
+        let pose_at = |i: usize| -> PastPose {
+            if i < self.past.len() {
+                self.past[i]
+            } else {
+                self.pending[i - self.past.len()].pose
+            }
+        };
+        let total = self.past.len() + self.pending.len();
+        if pose_at(position).is_none() {
+            return;
+        }
+        let mut first = position;
+        while first > 0 && position - first < REACH && pose_at(first - 1).is_some() {
+            first -= 1;
+        }
+        let mut last = position;
+        while last + 1 < total && last - position < REACH && pose_at(last + 1).is_some() {
+            last += 1;
+        }
+        let neighbours: Vec<(TimedPose, Matrix6<f64>)> =
+            (first..=last).filter_map(pose_at).collect();
+        let poses: Vec<TimedPose> = neighbours.iter().map(|(pose, _)| *pose).collect();
+        let Some(motion) = stencil_motion(&poses, position - first) else {
+            return;
+        };
+        let held = &self.pending[p];
+        let (Some(filter), Some((current, _))) = (held.outcome.estimate.as_ref(), held.pose) else {
+            return;
+        };
+        let start = roitrack_core::MotionState {
+            cam_r_obj: current.cam_r_obj,
+            cam_t_obj_m: current.cam_t_obj_m,
+            velocity_mps: motion.velocity_mps,
+            angular_velocity_radps: motion.angular_velocity_radps,
+        };
+        let Some(fit) = refit_pose(
+            &self.model,
+            &self.target,
+            &held.observations,
+            current.t_s,
+            &start,
+            Some(&motion.acceleration),
+            filter.noise_px,
+            REFIT_ITERATIONS,
+        ) else {
+            return;
+        };
+        let shift_m = (fit.state.cam_t_obj_m - filter.state.cam_t_obj_m).norm();
+        let shift_rad =
+            roitrack_core::so3::angle_between(&fit.state.cam_r_obj, &filter.state.cam_r_obj);
+        if !fit.state.is_finite() || shift_m > MAX_SHIFT_M || shift_rad > MAX_SHIFT_RAD {
+            return;
+        }
+        let mut estimate = *filter;
+        estimate.state = fit.state;
+        estimate.residual_rms_px = fit.residual_rms_px;
+        if estimate.acceleration.is_some() {
+            estimate.acceleration = Some(motion.acceleration);
+        }
+        estimate.covariance = filter.covariance.map(|_| {
+            // The pose's from the fit; the twist's from the stencil over independent pose errors (Σ w² P); no
+            // correlation between them is claimed.
+            let mut covariance = Matrix12::zeros();
+            covariance
+                .fixed_view_mut::<6, 6>(0, 0)
+                .copy_from(&fit.pose_covariance);
+            let mut twist = Matrix6::zeros();
+            for ((_, pose_covariance), w) in neighbours.iter().zip(motion.velocity_weights_per_s) {
+                twist += pose_covariance * (w * w);
+            }
+            covariance.fixed_view_mut::<6, 6>(6, 6).copy_from(&twist);
+            covariance
+        });
+        let held = &mut self.pending[p];
+        held.pose = Some((
+            TimedPose {
+                t_s: current.t_s,
+                cam_r_obj: fit.state.cam_r_obj,
+                cam_t_obj_m: fit.state.cam_t_obj_m,
+            },
+            fit.pose_covariance,
+        ));
+        held.refined = Some(Refined { estimate });
+    }
+
+    /// Gives back the oldest held frame, its estimate the last refit's if there was one.
+    fn pop(&mut self) -> Option<(I, FrameOutcome, Vec<Measurement>)> {
+        let mut held = self.pending.pop_front()?;
+        if self.past.len() == REACH {
+            self.past.pop_front();
+        }
+        self.past.push_back(held.pose);
+        if let Some(refined) = held.refined {
+            held.outcome.estimate = Some(refined.estimate);
+        }
+        Some((held.info, held.outcome, held.measurements))
+    }
+}
+
+/// The pose block of an estimate's covariance; without one, the centroid noise's order of magnitude (used only to
+/// weigh the neighbours in the twist's covariance, which an estimate without a covariance does not report).
+fn pose_block(covariance: Option<&Matrix12>, noise_px: f64) -> Matrix6<f64> {
+    match covariance {
+        Some(c) => c.fixed_view::<6, 6>(0, 0).into_owned(),
+        None => Matrix6::identity() * (noise_px * 1e-4).powi(2),
+    }
+}
