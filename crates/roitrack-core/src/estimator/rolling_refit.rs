@@ -8,9 +8,13 @@
 //! frame difference leaves jerk T²/6, too much at 30 Hz). Pure math, no I/O: the buffering of frames lives in the
 //! pipeline.
 
-use nalgebra::{Matrix6, Rotation3, Vector3, Vector6};
+use nalgebra::{Matrix6, Rotation3, SMatrix, SVector, Vector2, Vector3};
 
+use super::static_pose::{apply_pose_step, pose_step_is_negligible};
 use super::{Observation, RobustLoss};
+use crate::solver::{
+    self, DampingSchedule, LeastSquaresProblem, Method, ResidualSink, SolverOptions,
+};
 use crate::{Acceleration, MotionState, SpatioTemporalModel, Target, so3};
 
 /// Most poses a stencil takes: the frame and two on either side.
@@ -149,7 +153,7 @@ pub struct PoseRefit {
     /// RMS of the weighted residual at the fitted pose (px, per coordinate).
     pub residual_rms_px: f64,
     pub iterations: usize,
-    /// The last step was below 1e-9 (m and rad).
+    /// The solver converged (its last step negligible).
     pub converged: bool,
 }
 
@@ -185,26 +189,9 @@ pub fn pose_residuals(
     let mut residuals = nalgebra::DVector::zeros(2 * obs.len());
     let mut jacobian = nalgebra::OMatrix::<f64, nalgebra::Dyn, nalgebra::U6>::zeros(2 * obs.len());
     for (i, o) in obs.iter().enumerate() {
-        let d_s = o.t_s - t_ref_s;
-        // Under constant accelerations the pose d later is Exp((W + ½Α d) d) R, t + (V + ½A d) d: the constant-twist
-        // model with the twist averaged over d, whose pose Jacobian is the same.
-        let moved = match acceleration {
-            Some(a) => MotionState {
-                velocity_mps: state.velocity_mps + a.linear_mps2 * (0.5 * d_s),
-                angular_velocity_radps: state.angular_velocity_radps
-                    + a.angular_radps2 * (0.5 * d_s),
-                ..*state
-            },
-            None => *state,
-        };
-        let p = &target.points().get(o.point_index)?.point_in_obj_m;
-        let projected = model.project_with_jacobian(crate::JacobianKind::Exact, &moved, p, d_s)?;
-        residuals
-            .fixed_rows_mut::<2>(2 * i)
-            .copy_from(&(projected.pixel - o.ideal_px));
-        jacobian
-            .fixed_view_mut::<2, 6>(2 * i, 0)
-            .copy_from(&projected.jacobian.fixed_view::<2, 6>(0, 0));
+        let (residual, j) = observation_residual(model, target, o, t_ref_s, state, acceleration)?;
+        residuals.fixed_rows_mut::<2>(2 * i).copy_from(&residual);
+        jacobian.fixed_view_mut::<2, 6>(2 * i, 0).copy_from(&j);
     }
     Some((residuals, jacobian))
 }
@@ -252,45 +239,101 @@ pub fn refit_pose(
     if obs.len() < 4 || noise_px.is_nan() || noise_px <= 0.0 {
         return None;
     }
-    let mut state = *initial;
-    let mut converged = false;
-    let mut iterations = 0;
-    let normal = |state: &MotionState| -> Option<(Matrix6<f64>, Vector6<f64>, f64)> {
-        let (r, j) = pose_residuals(model, target, obs, t_ref_s, state, acceleration)?;
-        let mut jtj = Matrix6::zeros();
-        let mut jtr = Vector6::zeros();
-        let mut cost = 0.0;
-        for i in 0..obs.len() {
-            let ri = r.fixed_rows::<2>(2 * i);
-            let w = RobustLoss::Huber.weight(ri.norm() / noise_px);
-            let ji = j.fixed_view::<2, 6>(2 * i, 0);
-            jtj += ji.transpose() * ji * w;
-            jtr += ji.transpose() * ri * w;
-            cost += w * ri.norm_squared();
-        }
-        Some((jtj, jtr, cost))
+    let mut problem = RollingPoseProblem {
+        model,
+        target,
+        obs,
+        t_ref_s,
+        acceleration,
+        noise_px,
     };
-    while iterations < max_iterations {
-        let (jtj, jtr, _) = normal(&state)?;
-        let step = jtj.cholesky()?.solve(&(-jtr));
-        let mut delta = crate::Vector12::zeros();
-        delta.fixed_rows_mut::<6>(0).copy_from(&step);
-        state = state.corrected(&delta);
-        iterations += 1;
-        if step.norm() < 1e-9 {
-            converged = true;
-            break;
+    let options = SolverOptions {
+        max_iterations,
+        method: Method::LevenbergMarquardt(DampingSchedule::GAUSS_NEWTON_FIRST),
+    };
+    let fit = solver::solve(&mut problem, *initial, &options);
+    let ne = &fit.normal_equations;
+    if !ne.cost_px2().is_finite() {
+        return None;
+    }
+    Some(PoseRefit {
+        state: fit.params,
+        pose_covariance: ne.covariance(noise_px)?,
+        residual_rms_px: (ne.weighted_cost_px2() / (2 * obs.len()) as f64).sqrt(),
+        iterations: fit.report.iterations,
+        converged: fit.report.converged,
+    })
+}
+
+/// The pose of [`refit_pose`] as a least-squares problem: every blob at its own time under the given twist and
+/// accelerations, weighted by Huber's loss at the noise.
+struct RollingPoseProblem<'a> {
+    model: &'a SpatioTemporalModel,
+    target: &'a Target,
+    obs: &'a [Observation],
+    t_ref_s: f64,
+    acceleration: Option<&'a Acceleration>,
+    noise_px: f64,
+}
+
+impl LeastSquaresProblem<6> for RollingPoseProblem<'_> {
+    type Params = MotionState;
+
+    fn linearize<S: ResidualSink<6>>(&self, state: &MotionState, sink: &mut S) {
+        for o in self.obs {
+            match observation_residual(
+                self.model,
+                self.target,
+                o,
+                self.t_ref_s,
+                state,
+                self.acceleration,
+            ) {
+                Some((residual, jacobian)) => {
+                    let weight = RobustLoss::Huber.weight(residual.norm() / self.noise_px);
+                    sink.add(&jacobian, &residual, weight);
+                }
+                None => sink.add_unevaluable(),
+            }
         }
     }
-    let (jtj, _, cost) = normal(&state)?;
-    let pose_covariance = jtj.try_inverse()? * (noise_px * noise_px);
-    Some(PoseRefit {
-        state,
-        pose_covariance,
-        residual_rms_px: (cost / (2 * obs.len()) as f64).sqrt(),
-        iterations,
-        converged,
-    })
+
+    fn apply_step(&self, state: &MotionState, step: &SVector<f64, 6>) -> MotionState {
+        apply_pose_step(state, step)
+    }
+
+    fn step_is_negligible(&self, step: &SVector<f64, 6>) -> bool {
+        pose_step_is_negligible(step)
+    }
+}
+
+/// One observation's residual (predicted minus observed ideal pixel) seen from `state` at `t_ref_s`, moved under its
+/// twist and `acceleration`, and its Jacobian with respect to a pose correction (v, w).
+fn observation_residual(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    o: &Observation,
+    t_ref_s: f64,
+    state: &MotionState,
+    acceleration: Option<&Acceleration>,
+) -> Option<(Vector2<f64>, SMatrix<f64, 2, 6>)> {
+    let d_s = o.t_s - t_ref_s;
+    // Under constant accelerations the pose d later is Exp((W + ½Α d) d) R, t + (V + ½A d) d: the constant-twist
+    // model with the twist averaged over d, whose pose Jacobian is the same.
+    let moved = match acceleration {
+        Some(a) => MotionState {
+            velocity_mps: state.velocity_mps + a.linear_mps2 * (0.5 * d_s),
+            angular_velocity_radps: state.angular_velocity_radps + a.angular_radps2 * (0.5 * d_s),
+            ..*state
+        },
+        None => *state,
+    };
+    let p = &target.points().get(o.point_index)?.point_in_obj_m;
+    let projected = model.project_with_jacobian(crate::JacobianKind::Exact, &moved, p, d_s)?;
+    Some((
+        projected.pixel - o.ideal_px,
+        projected.jacobian.fixed_view::<2, 6>(0, 0).into_owned(),
+    ))
 }
 
 #[cfg(test)]

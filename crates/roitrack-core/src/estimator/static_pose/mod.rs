@@ -180,16 +180,25 @@ impl LeastSquaresProblem<6> for StaticPoseProblem<'_> {
     }
 
     fn apply_step(&self, state: &MotionState, step: &SVector<f64, 6>) -> MotionState {
-        let mut delta = crate::Vector12::zeros();
-        delta.fixed_rows_mut::<6>(0).copy_from(step);
-        state.corrected(&delta)
+        apply_pose_step(state, step)
     }
 
-    /// Gauss-Newton converges about quadratically here: after a step this small (1e-6 m and rad) the next is about
-    /// 1e-9, far below the noise, so it is taken without checking the cost.
     fn step_is_negligible(&self, step: &SVector<f64, 6>) -> bool {
-        step.fixed_rows::<3>(0).norm() < 1e-6 && step.fixed_rows::<3>(3).norm() < 1e-6
+        pose_step_is_negligible(step)
     }
+}
+
+/// A pose correction (v, w) applied to `state`, its twist left as it is: the step of every 6-dof pose problem.
+pub(crate) fn apply_pose_step(state: &MotionState, step: &SVector<f64, 6>) -> MotionState {
+    let mut delta = crate::Vector12::zeros();
+    delta.fixed_rows_mut::<6>(0).copy_from(step);
+    state.corrected(&delta)
+}
+
+/// Gauss-Newton on a pose converges about quadratically: after a step this small (1e-6 m and rad) the next is about
+/// 1e-9, far below the noise, so it is taken without checking the cost.
+pub(crate) fn pose_step_is_negligible(step: &SVector<f64, 6>) -> bool {
+    step.fixed_rows::<3>(0).norm() < 1e-6 && step.fixed_rows::<3>(3).norm() < 1e-6
 }
 
 /// Gauss-Newton on the 6-dof pose, all observations taken as simultaneous, with Levenberg-Marquardt safeguarding
