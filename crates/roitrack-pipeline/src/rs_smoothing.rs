@@ -12,7 +12,7 @@ use std::collections::VecDeque;
 
 use nalgebra::Matrix6;
 use roitrack_core::estimator::{
-    Estimate, Matrix12, Observation, TimedPose, TrackStatus, refit_pose, stencil_motion,
+    Estimate, Matrix12, Observation, TimedPose, refit_pose, stencil_motion,
 };
 use roitrack_core::{CameraModel, Measurement, SpatioTemporalModel, Target};
 
@@ -41,12 +41,7 @@ struct Held<I> {
     /// The pose in use (the filter's, then the last refit's) with its covariance; `None` if the frame has no estimate
     /// the filter vouches for (it is then neither refitted nor a neighbour).
     pose: Option<(TimedPose, Matrix6<f64>)>,
-    refined: Option<Refined>,
-}
-
-/// What the last refit gave.
-struct Refined {
-    estimate: Estimate,
+    refined: Option<Estimate>,
 }
 
 /// A frame's pose and covariance after it left the buffer: the past side of the next frames' stencils.
@@ -130,7 +125,7 @@ impl<I> RollingSmoother<I> {
             .collect();
         // Only estimates the filter vouches for are refitted or lent to a neighbour's stencil.
         let pose = outcome.estimate.as_ref().and_then(|e| {
-            matches!(e.status, TrackStatus::Tracking | TrackStatus::Converging).then(|| {
+            e.status.is_vouched_for().then(|| {
                 (
                     TimedPose {
                         t_s: e.t_ref_s,
@@ -246,7 +241,7 @@ impl<I> RollingSmoother<I> {
             },
             fit.pose_covariance,
         ));
-        held.refined = Some(Refined { estimate });
+        held.refined = Some(estimate);
     }
 
     /// Gives back the oldest held frame, its estimate the last refit's if there was one.
@@ -257,7 +252,7 @@ impl<I> RollingSmoother<I> {
         }
         self.past.push_back(held.pose);
         if let Some(refined) = held.refined {
-            held.outcome.estimate = Some(refined.estimate);
+            held.outcome.estimate = Some(refined);
         }
         Some((held.info, held.outcome, held.measurements))
     }

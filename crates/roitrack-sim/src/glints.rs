@@ -1,27 +1,39 @@
 //! Specular glints painted onto a rendered frame: the sun on leaves, water and chrome outdoors, which give the bright
 //! polarity of a photograph of dark printed circles many small blobs (and its lattices by chance).
 
+use crate::photo::RenderedPhoto;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use roitrack_image::Frame;
 
 /// Least distance (px) of a glint from every circle centre given: glints beside the target, not on it.
 const CLEAR_OF_CIRCLES_PX: f64 = 30.0;
 
-/// Adds `count` small saturated spots (1.5 to 4 px in radius, a 1 px soft edge) to `frame`, each at least 30 px from
-/// every point of `circles_px` and 8 px from the border, placed by `seed`.
+/// Adds `count` small saturated spots (1.5 to 4 px in radius, a 1 px soft edge) to `photo`'s frame, each at least
+/// 30 px from the true centre of every circle seen and 8 px from the border, placed by `seed`.
 ///
 /// ```
-/// use roitrack_image::Frame;
+/// use nalgebra::Rotation3;
+/// use roitrack_core::{CameraModel, Target};
 /// use roitrack_sim::glints::add_glints;
+/// use roitrack_sim::photo::{PhotoScene, render_photo};
 ///
-/// let mut frame = Frame::new(320, 240, 8);
-/// add_glints(&mut frame, &[(160.0, 120.0)], 20, 1);
-/// assert!(frame.pixels.iter().any(|&p| p == 255));
-/// // Nothing near the circle.
-/// assert_eq!(frame.pixels[120 * 320 + 160], 0);
+/// let scene = PhotoScene::facing(CameraModel::canonical(), Target::grid4x4(), 0.6, Rotation3::identity());
+/// let mut photo = render_photo(&scene).unwrap();
+/// let before = photo.frame.pixels.clone();
+/// add_glints(&mut photo, 20, 1);
+/// assert_ne!(photo.frame.pixels, before);
+/// // Nothing on a circle.
+/// let centre = photo.truth[5].centre_px.unwrap();
+/// let at = |pixels: &[u16]| pixels[centre.y.round() as usize * 1024 + centre.x.round() as usize];
+/// assert_eq!(at(&photo.frame.pixels), at(&before));
 /// ```
-pub fn add_glints(frame: &mut Frame, circles_px: &[(f64, f64)], count: usize, seed: u64) {
+pub fn add_glints(photo: &mut RenderedPhoto, count: usize, seed: u64) {
+    let circles_px: Vec<(f64, f64)> = photo
+        .truth
+        .iter()
+        .filter_map(|p| p.centre_px.map(|c| (c.x, c.y)))
+        .collect();
+    let frame = &mut photo.frame;
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let full = f64::from((1u32 << frame.bit_depth) - 1);
     let (w, h) = (frame.width as usize, frame.height as usize);
