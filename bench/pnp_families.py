@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Side by side with OpenCV on random PnP families (issue 34): roitrack's static pose solver against solvePnP.
+"""Side by side with OpenCV on random PnP families: roitrack's static pose solver against solvePnP.
 
 Run through `bash bench/pnp_families.sh`, which makes the virtual environment (opencv-python-headless, numpy) and
 builds `roitrack`. This script, written independently of roitrack's own simulator (numpy and OpenCV only):

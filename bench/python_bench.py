@@ -11,7 +11,7 @@
   measurement: what a push costs on top of the Rust call (the Python call, the loop, building an Estimate when one
   is due), the median over the rounds.
 
-Targets (issue 17): track() at least 300,000 measurements/s and within 1.2x of Rust; push() at most 1 us on top of
+Targets (the Python package's): track() at least 300,000 measurements/s and within 1.2x of Rust; push() at most 1 us on top of
 the Rust call. Run with the package installed (scripts/test installs it in target/py-venv):
 
     target/py-venv/bin/python bench/python_bench.py [--rounds N] [--json] [--check]

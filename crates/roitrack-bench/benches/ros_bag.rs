@@ -34,7 +34,7 @@ use roitrack_pipeline::offline::{RoiEvent, track_rois_with};
 use roitrack_ros::{BackgroundBag, BagOptions, BagWriter};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, render_roi_images, simulate};
 
-/// The writing's share of the tracking time that the issue allows.
+/// The writing's share of the tracking time allowed (10 %).
 const TARGET_RATIO: f64 = 0.10;
 
 struct Scene {

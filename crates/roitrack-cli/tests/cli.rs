@@ -174,7 +174,7 @@ fn eval_of_truth_against_itself_is_zero_and_delayed_truth_lags_3() {
     );
 }
 
-/// The acceptance figures of the estimator issue on orthoglide (seed 1, 0.1 px, 4 kHz, bit-reversed).
+/// The acceptance figures of the default estimator on orthoglide (seed 1, 0.1 px, 4 kHz, bit-reversed).
 #[test]
 fn default_estimator_beats_the_paper_and_the_static_baseline_on_orthoglide() {
     let tmp = tempfile::tempdir().unwrap();

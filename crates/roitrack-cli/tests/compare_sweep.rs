@@ -1,4 +1,4 @@
-//! `roitrack compare --sweep --quick`: the issue-15 table's shape, its JSON, `--check` and the options it refuses. The
+//! `roitrack compare --sweep --quick`: the sweep table's shape, its JSON, `--check` and the options it refuses. The
 //! targets themselves are the estimator's job: these tests pass whether they hold or not.
 
 mod common;

@@ -1,4 +1,4 @@
-//! roitrack's static pose solver side by side with OpenCV's solvePnP on random PnP families (issue 34):
+//! roitrack's static pose solver side by side with OpenCV's solvePnP on random PnP families:
 //! `bench/pnp_families.py --check --per-family 25 --seed 34` draws 25 problems in each of eight families (3 points,
 //! 4-5 and 6-40 points planar, off-plane and 3-D, symmetric grids; random cameras, lenses, poses, noise, and a user's
 //! model off the truth), solves them with `roitrack pnp-bench --suite` (this test's binary) and with OpenCV, and fails,

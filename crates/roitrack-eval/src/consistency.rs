@@ -154,7 +154,7 @@ pub struct Consistency {
     pub velocity_inside_99: f64,
 }
 
-/// The bounds of a calibrated covariance (issue 15): each block's mean NEES per degree of freedom within
+/// The bounds of a calibrated covariance (the sweep's): each block's mean NEES per degree of freedom within
 /// `[MIN_NEES_PER_DOF, MAX_NEES_PER_DOF]`, and at least [`MIN_INSIDE_99`] of the estimates inside the 99 % bound.
 ///
 /// ```
@@ -233,7 +233,7 @@ impl Consistency {
         }
     }
 
-    /// Whether the covariance is calibrated (issue 15): the mean NEES per degree of freedom of the position and of
+    /// Whether the covariance is calibrated (the sweep's): the mean NEES per degree of freedom of the position and of
     /// the velocity from [`MIN_NEES_PER_DOF`] to [`MAX_NEES_PER_DOF`] and at least [`MIN_INSIDE_99`] of the
     /// estimates inside the 99 % bound, for both. False when no estimate counts.
     ///

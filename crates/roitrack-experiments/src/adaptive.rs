@@ -1,4 +1,4 @@
-//! The measurement harness of issue 15 (adaptive estimation): the default Kalman filter, which is not told the noise
+//! The measurement harness of the adaptive-estimation study: the default Kalman filter, which is not told the noise
 //! of the centroids nor the motion, against hand-tuned filters searched over a grid on the same data
 //! (`roitrack compare --sweep`, the table of `docs/results.md`).
 //!
@@ -377,7 +377,7 @@ pub fn grid2x3() -> Target {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Purpose {
-    /// Every target of issue 15; the hand-tuned grid is searched.
+    /// Every target of the study; the hand-tuned grid is searched.
     Accuracy,
     /// The calibration of the covariance only: the default and the told-the-truth filters, no grid.
     Calibration,
@@ -443,7 +443,7 @@ impl Case {
     }
 }
 
-/// Every case of issue 15, accuracy cases first, then the rest of the calibration set.
+/// Every case of the study, accuracy cases first, then the rest of the calibration set.
 ///
 /// - 4 kHz at 0.03, 0.1, 0.3 and 1 px, and 10 kHz at 0.2 px, on orthoglide (the built-in scene);
 /// - the grid at rest 1.6 m away at 0.15 px, 2 s;
@@ -1052,7 +1052,7 @@ impl CaseResult {
     }
 }
 
-/// The targets of issue 15 (see the [module docs](self)).
+/// The targets of the study (see the [module docs](self)).
 ///
 /// ```
 /// use roitrack_experiments::adaptive::Goal;

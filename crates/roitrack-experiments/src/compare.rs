@@ -1,5 +1,5 @@
 //! Every estimator and baseline on one scenario at the measurement level (ideal centroids with Gaussian noise),
-//! scored against the ground truth: the accuracy tables of the README and `docs/results.md`.
+//! scored against the ground truth: the accuracy tables of `docs/results.md`.
 
 use roitrack_core::JacobianKind;
 use roitrack_core::estimator::{

@@ -10,8 +10,8 @@
 //! - [`faults`]: the default estimator under faults (outliers, drops, occlusions, gaps, jumps, blobs leaving the
 //!   image, reflections in the ROIs): accuracy, recovery, flagged and unflagged wrong estimates;
 //! - [`tradeoff`]: velocity noise against velocity lag, for the paper's gain and the Kalman filter's process noise;
-//! - [`adaptive`]: issue 15's harness: the default (adaptive) Kalman filter against hand-tuned filters searched over
-//!   a grid on the same data, on every case of the issue, with the calibration of its covariance (NEES);
+//! - [`adaptive`]: the sweep harness: the default (adaptive) Kalman filter against hand-tuned filters searched over
+//!   a grid on the same data, on every case of the sweep, with the calibration of its covariance (NEES);
 //! - [`frames`]: frame cameras (global and rolling shutters, bright and dark blobs) on simulated image sequences,
 //!   each tracked with the right time model and the wrong one, and the frame-camera targets checked.
 //!

@@ -1,4 +1,4 @@
-//! The issue-15 harness in quick mode: what must hold whatever the default estimator does (the targets themselves are
+//! The sweep harness in quick mode: what must hold whatever the default estimator does (the targets themselves are
 //! the estimator's job, and are not asserted here).
 
 use roitrack_experiments::adaptive::{Goal, Purpose, SweepError, SweepOptions, cases, sweep};

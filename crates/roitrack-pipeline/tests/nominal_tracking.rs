@@ -169,7 +169,7 @@ fn a_plate_on_nominal_files_is_tracked_as_closely_as_detected_and_more_smoothly(
         );
         assert!(report.restarts <= 5, "seed {seed}: {report:?}");
         assert!(report.by_windows >= FRAMES - 10, "seed {seed}: {report:?}");
-        // The bound for a 4-dot plate on nominal files: 1 mm from the per-frame reference. (Within 1.2x of
+        // The bound set for a 4-dot plate on nominal files: 1 mm from the per-frame reference. (Within 1.2x of
         // the poses detected frame by frame on 5 of 8 seeds; see docs/results.md.)
         assert!(
             *tracked_error < 1.0,

@@ -88,7 +88,7 @@ fn smoothed_rolling_shutter_frames_are_tracked_about_as_closely_as_global_shutte
         causal * 1e3,
         smoothed * 1e3
     );
-    // The target: at most 1.5 times the global shutter's error, or 0.2 mm.
+    // The target set for rolling shutters: at most 1.5 times the global shutter's error, or 0.2 mm.
     assert!(
         smoothed <= (1.5 * global).max(0.2e-3),
         "{smoothed} m against {global} m"

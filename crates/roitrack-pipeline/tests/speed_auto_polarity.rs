@@ -1,4 +1,4 @@
-//! `--polarity auto` on a frame where the likelier polarity is the wrong one (issue 35, item 5): dark circles on
+//! `--polarity auto` on a frame where the likelier polarity is the wrong one (auto-polarity speed): dark circles on
 //! paper among bright specular glints outdoors. The wrong polarity's blobs (the glints) hold many small chance
 //! lattices, whose placements on a large grid were verified one by one before the right polarity was tried (8,848
 //! hypotheses, 300 times the right polarity's work). The checks count work, not time: which polarities went through

@@ -1,6 +1,6 @@
 //! `roitrack compare`: every estimator and baseline on one scenario at the measurement level (see
 //! [`roitrack::experiments::compare`]); with `--sweep`, the default Kalman filter against hand-tuned ones on every
-//! case of issue 15 (see [`roitrack::experiments::adaptive`]).
+//! case of the adaptive-estimation study (see [`roitrack::experiments::adaptive`]).
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::time::Duration;
@@ -13,7 +13,7 @@ use roitrack::experiments::compare;
 use crate::args::ScenarioArg;
 
 /// Track one simulated scenario with every estimator and baseline and print their accuracy; or, with `--sweep`,
-/// the default (adaptive) Kalman filter against hand-tuned filters searched over a grid, on every case of issue 15,
+/// the default (adaptive) Kalman filter against hand-tuned filters searched over a grid, on every case of the sweep,
 /// with the calibration of its covariance: the table of docs/results.md in markdown.
 #[derive(Debug, Args)]
 pub struct CompareArgs {
@@ -36,7 +36,7 @@ pub struct CompareArgs {
     /// check and grid point).
     #[arg(long)]
     pub json: bool,
-    /// Run the sweep of issue 15 (adaptive estimation): every case, the hand-tuned grid, the targets checked.
+    /// Run the adaptive-estimation sweep: every case, the hand-tuned grid, the targets checked.
     #[arg(long)]
     pub sweep: bool,
     /// With --sweep: a smoke run (a few cases cut to 0.6 s, a small grid), not the table of record.
