@@ -9,7 +9,7 @@
 //! rejected more than `--max-asymmetric N` blobs (default 0): these are clean blobs as a real camera gives them.
 //!
 //! ```text
-//! cargo run --release -p roitrack-bench --example realdata_rois -- ../shared/realdata [--verbose] [--max-asymmetric N]
+//! cargo run --release -p roitrack-bench --example realdata_rois -- REALDATA_DIR [--verbose] [--max-asymmetric N]
 //! ```
 //!
 //! The folder holds `sets.json` (`{"sets": [names]}` or `{"sets": [{"name": ...}]}`), and per set
