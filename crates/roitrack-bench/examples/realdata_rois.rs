@@ -126,7 +126,7 @@ fn run(data: &Path, verbose: bool) -> Result<usize, String> {
                 outline_centre,
             } in rois(&frame, &found)
             {
-                match measure_flat_window(&pixels, &roi, &flat, &CentroidOptions::default()) {
+                match measure_flat_window(&pixels, &roi, &flat, &CentroidOptions::default(), None) {
                     Ok(c) => counts
                         .offsets_px
                         .push((c.u_px - outline_centre.0).hypot(c.v_px - outline_centre.1)),

@@ -16,8 +16,8 @@ fn the_dense_scene_is_tracked_in_its_windows() {
         }
         let report = tracker.report();
         eprintln!(
-            "{readout:?}: {} frames, {} blobs measured again in a smaller window, window rejections {:?}",
-            report.frames, report.shrunk_windows, report.window_rejections
+            "{readout:?}: {} frames, {} neighbours' blobs left out of windows, window rejections {:?}",
+            report.frames, report.neighbour_blobs, report.window_rejections
         );
         assert_eq!(
             check.by_windows, check.steady_frames,

@@ -44,7 +44,7 @@ pub use accuracy::{
 pub use camera::{GrabError, ReplayCamera, RoiCamera, RoiTrigger, SimulatedCamera};
 pub use centroid::{
     BlobRejection, Centroid, CentroidOptions, MAX_ROI_HEIGHT, MAX_ROI_WIDTH, SymmetryCheck,
-    Threshold, measure_blob,
+    Threshold, measure_blob, measure_blob_near,
 };
 pub use detect::detect_blobs;
 pub use frame::Frame;

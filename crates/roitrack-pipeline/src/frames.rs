@@ -49,7 +49,7 @@ use roitrack_image::centroid::{
 use roitrack_image::photo::{OutlineScratch, outline_centre};
 use roitrack_image::{
     BlobRejection, Centroid, CentroidOptions, Frame, PhotoBlobOptions, PhotoScratch, Polarity,
-    RejectionCounts, Roi, Threshold, detect_photo_blobs, measure_blob,
+    RejectionCounts, Roi, Threshold, detect_photo_blobs, measure_blob, measure_blob_near,
 };
 use thiserror::Error;
 
@@ -224,8 +224,9 @@ pub struct FrameTrackReport {
     pub estimates: usize,
     /// Blobs not found in their windows, by reason.
     pub window_rejections: RejectionCounts,
-    /// Blobs found in a smaller window around their prediction after something reached their window's edge.
-    pub shrunk_windows: usize,
+    /// Blobs left out of their windows because they were nearer another point's prediction than their own: a
+    /// neighbour of a dense target, when the point's own blob was not seen or the prediction missed it.
+    pub neighbour_blobs: usize,
     /// The weight of the blobs' outlines in the centres of the last frame measured in windows (their moments' is 1
     /// minus it; see `CentreBlend` in the source); 0 before any.
     pub outline_weight: f64,
@@ -654,44 +655,27 @@ impl FrameTracker {
                 continue;
             };
             let roi = request.roi;
-            // The window the blob was measured in (the smaller one, if it was measured again).
-            let mut measured_in = roi;
             let flat = flatten_window(frame, &roi, polarity, &mut self.window);
-            let mut measured =
-                measure_flat_window(&self.window, &roi, &flat, &self.config.centroid);
-            if measured == Err(BlobRejection::TouchesBorder)
-                && let Some(smaller) = shrunk_window(
-                    &roi,
-                    &request.predicted_px,
-                    frame,
-                    self.config.windows.min_size_px,
-                )
-            {
-                // Something reaches the window's edge. In a dense target it is most often a neighbour: a window
-                // sized for an uncertain prediction holds the rims of the blobs next to it, and one of them may be
-                // the brightest. Once more in a window 0.6 times as wide around the prediction, which leaves them
-                // out when the prediction is good; the blob found there counts only if it is nearer this point's
-                // prediction than any other point's.
-                let flat = flatten_window(frame, &smaller, polarity, &mut self.window);
-                measured =
-                    match measure_flat_window(&self.window, &smaller, &flat, &self.config.centroid)
-                    {
-                        Ok(c) if nearest_request(&self.requests, c.u_px, c.v_px) == Some(i) => {
-                            self.report.shrunk_windows += 1;
-                            measured_in = smaller;
-                            Ok(c)
-                        }
-                        Ok(_) => Err(BlobRejection::TouchesBorder),
-                        Err(e) => Err(e),
-                    };
-            }
+            // The blob nearest the prediction, not the brightest: a window sized for an uncertain prediction holds
+            // whole neighbours of a dense target, of the same contrast, and the rims of others at its edge (on a
+            // 24 x 28 hexagonal grid, the brightest blob was a neighbour's in up to 60 of 230 windows a frame, and
+            // the frames went to whole-frame searches; 45 of 60 frames in windows, 58 now).
+            let near_px = Some([request.predicted_px.x, request.predicted_px.y]);
+            let measured =
+                measure_flat_window(&self.window, &roi, &flat, &self.config.centroid, near_px);
             match measured {
+                // The blob nearest the prediction is some other point's (the point's own was occluded, or the
+                // prediction missed it by half the distance to a neighbour): never measured twice, never swapped.
+                Ok(c) if nearest_request(&self.requests, c.u_px, c.v_px) != Some(i) => {
+                    self.scheduler.report(i, false);
+                    self.report.neighbour_blobs += 1;
+                    cut += 1;
+                }
                 Ok(c) => {
                     self.scheduler.report(i, true);
                     let t_s = time.blob_time_s(frame.t_s, c.v_px);
                     let moments = Vector2::new(c.u_px, c.v_px);
-                    let outline =
-                        window_outline_centre(&self.window, &measured_in, &c, &mut self.outline);
+                    let outline = window_outline_centre(&self.window, &roi, &c, &mut self.outline);
                     let shift = self.disk_centre_shift_px(predictor, i, t_s);
                     self.window_centres.push(WindowCentres {
                         point_index: i,
@@ -709,11 +693,11 @@ impl FrameTracker {
                 }
             }
         }
-        // Blobs cut by their window's edge even in the smaller window: a neighbour's rim in a dense grid cuts a few
-        // (2 % of an 8 x 10 grid's windows at 30 Hz), and those points are left out of the frame; a prediction that
-        // missed the target cuts most, and then the other windows may hold cut blobs or neighbours too: the frame is
-        // measured whole instead. (Abandoning the windows at the first cut blob sent 51 of 60 frames of an 8 x 10 grid
-        // to whole-frame searches.)
+        // Blobs cut by their window's edge, or nearer another point's prediction: a few are (a blob at the frame's
+        // edge, one merged with a neighbour by blur), and those points are left out of the frame; a prediction that
+        // missed the target makes most of them so, and then the blobs the other windows hold may be neighbours too:
+        // the frame is measured whole instead. (Abandoning the windows at the first cut blob sent 51 of 60 frames of
+        // an 8 x 10 grid to whole-frame searches.)
         let windows = self.requests.iter().filter(|r| r.is_some()).count();
         if 4 * cut >= windows {
             self.window_centres.clear();
@@ -1163,30 +1147,6 @@ fn carried_with_acceleration(
     }
 }
 
-/// A window 0.6 times as wide as `roi` (at least `min_side_px`) centred on `predicted_px`, within `frame`; `None`
-/// when it would not be smaller.
-fn shrunk_window(
-    roi: &Roi,
-    predicted_px: &Vector2<f64>,
-    frame: &Frame,
-    min_side_px: u32,
-) -> Option<Roi> {
-    let side = |s: u32| ((f64::from(s) * 0.6).round() as u32).max(min_side_px) | 1;
-    let (width, height) = (side(roi.width), side(roi.height));
-    if width >= roi.width && height >= roi.height {
-        return None;
-    }
-    let start = |centre: f64, side: u32, limit: u32| {
-        ((centre.round() - f64::from(side / 2)).max(0.0) as u32).min(limit.saturating_sub(side))
-    };
-    Some(Roi::new(
-        start(predicted_px.x, width, frame.width),
-        start(predicted_px.y, height, frame.height),
-        width.min(frame.width),
-        height.min(frame.height),
-    ))
-}
-
 /// The point whose predicted blob centre is nearest to `(u_px, v_px)`.
 fn nearest_request(requests: &[Option<RoiRequest>], u_px: f64, v_px: f64) -> Option<usize> {
     requests
@@ -1383,7 +1343,7 @@ pub struct FlatWindow {
 /// let roi = Roi::new(0, 0, 15, 15);
 /// let mut window = Vec::new();
 /// let flat = flatten_window(&frame, &roi, Polarity::Dark, &mut window);
-/// let c = measure_flat_window(&window, &roi, &flat, &CentroidOptions::default()).unwrap();
+/// let c = measure_flat_window(&window, &roi, &flat, &CentroidOptions::default(), None).unwrap();
 /// // Its contrast varies a little with the light across it: within a hundredth of a pixel of its centre.
 /// assert!((c.u_px - 8.0).abs() < 0.01 && (c.v_px - 7.0).abs() < 0.01);
 /// ```
@@ -1395,9 +1355,14 @@ pub fn measure_flat_window(
     roi: &Roi,
     flat: &FlatWindow,
     options: &CentroidOptions,
+    near_px: Option<[f64; 2]>,
 ) -> Result<Centroid, BlobRejection> {
+    let measure = |options: &CentroidOptions| match near_px {
+        Some(near_px) => measure_blob_near(window, roi, options, near_px),
+        None => measure_blob(window, roi, options),
+    };
     if options.threshold != Threshold::Auto {
-        return measure_blob(window, roi, options);
+        return measure(options);
     }
     let contrast = f64::from(flat.peak_dn) - flat.background_dn;
     if contrast < (AUTO_MIN_CONTRAST_SIGMAS * flat.noise_dn).max(AUTO_MIN_CONTRAST_DN) {
@@ -1410,7 +1375,7 @@ pub fn measure_flat_window(
         background_noise_dn: (flat.noise_dn > 0.0).then_some(flat.noise_dn),
         ..*options
     };
-    measure_blob(window, roi, &options)
+    measure(&options)
 }
 
 /// Most border pixels of a window (64 x 64).

@@ -279,15 +279,71 @@ pub fn measure_blob(
     roi: &Roi,
     opts: &CentroidOptions,
 ) -> Result<Centroid, BlobRejection> {
-    measure_blob_with(Isa::detect(), pixels, roi, opts)
+    measure_blob_with(Isa::detect(), pixels, roi, opts, None)
 }
 
-/// [`measure_blob`] with the given instructions.
+/// [`measure_blob`] for the blob nearest `near_px` (full-sensor pixel coordinates) rather than the brightest one: the
+/// component that contains the above-threshold pixel nearest that point. A window of a dense target holds whole
+/// neighbours of the same contrast as its own blob, and which of them holds the brightest pixel is down to noise; the
+/// blob the prediction points at is the one nearest it. Only that component must stay off the ROI's border: a
+/// neighbour's rim there does not reject it.
+///
+/// ```
+/// use roitrack_image::{CentroidOptions, Roi, measure_blob, measure_blob_near};
+///
+/// // Two 3 x 3 blobs in a 15 x 9 ROI; the right one is a little brighter.
+/// let roi = Roi::new(0, 0, 15, 9);
+/// let mut pixels = vec![10u16; roi.len()];
+/// for j in 3..6 {
+///     for i in 2..5 {
+///         pixels[j * 15 + i] = 200;
+///         pixels[j * 15 + i + 8] = 210;
+///     }
+/// }
+/// let brightest = measure_blob(&pixels, &roi, &CentroidOptions::default()).unwrap();
+/// assert!((brightest.u_px - 11.0).abs() < 1e-9);
+/// let near = measure_blob_near(&pixels, &roi, &CentroidOptions::default(), [4.5, 4.0]).unwrap();
+/// assert!((near.u_px - 3.0).abs() < 1e-9 && (near.v_px - 4.0).abs() < 1e-9);
+/// ```
+///
+/// # Panics
+/// As [`measure_blob`].
+pub fn measure_blob_near(
+    pixels: &[u16],
+    roi: &Roi,
+    opts: &CentroidOptions,
+    near_px: [f64; 2],
+) -> Result<Centroid, BlobRejection> {
+    let local = [
+        near_px[0] - f64::from(roi.x0),
+        near_px[1] - f64::from(roi.y0),
+    ];
+    measure_blob_with(Isa::detect(), pixels, roi, opts, Some(local))
+}
+
+/// The above-threshold pixel of a `w`-wide ROI nearest `near` (ROI coordinates), as an index; `None` if no pixel is
+/// above `threshold`.
+fn nearest_above(pixels: &[u16], w: usize, threshold: u16, near: [f64; 2]) -> Option<usize> {
+    pixels
+        .iter()
+        .enumerate()
+        .filter(|&(_, &p)| p > threshold)
+        .map(|(k, _)| {
+            let (di, dj) = ((k % w) as f64 - near[0], (k / w) as f64 - near[1]);
+            (k, di * di + dj * dj)
+        })
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(k, _)| k)
+}
+
+/// [`measure_blob`] with the given instructions; the component nearest `near` (ROI coordinates) when given, else the
+/// brightest pixel's.
 fn measure_blob_with(
     isa: Isa,
     pixels: &[u16],
     roi: &Roi,
     opts: &CentroidOptions,
+    near: Option<[f64; 2]>,
 ) -> Result<Centroid, BlobRejection> {
     let (w, h) = (roi.width as usize, roi.height as usize);
     assert!(
@@ -304,6 +360,10 @@ fn measure_blob_with(
         weight_origin,
         noise_range,
     } = levels(pixels, w, h, peak, border, opts.threshold)?;
+    let seed = match near {
+        Some(near) => nearest_above(pixels, w, threshold, near).ok_or(BlobRejection::Absent)?,
+        None => seed,
+    };
 
     // Pass 2: the seed's component and its integer moments.
     let seed = (seed % w, seed / w);
@@ -589,7 +649,7 @@ mod tests {
     fn assert_isas_agree(isas: &[Isa], pixels: &[u16], roi: &Roi, opts: &CentroidOptions) -> bool {
         let results: Vec<_> = isas
             .iter()
-            .map(|&isa| measure_blob_with(isa, pixels, roi, opts))
+            .map(|&isa| measure_blob_with(isa, pixels, roi, opts, None))
             .collect();
         for (isa, r) in isas.iter().zip(&results) {
             assert_eq!(*r, results[0], "{roi:?} {opts:?} {isa:?} {pixels:?}");

@@ -1,4 +1,6 @@
 //! What the stand-ins for users' footage share: cameras, and the camera files users have for them.
+// Each test binary that includes this module uses a part of it.
+#![allow(dead_code)]
 
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
