@@ -1,12 +1,11 @@
 //! [`AtomicFile`]: write a file completely or not at all; and what an output path may be.
 
 use std::fs::File;
-use std::io::{self, BufWriter, Write};
+use std::io::{self, BufWriter, Seek, Write};
 use std::path::{Path, PathBuf};
 
-use tempfile::NamedTempFile;
-
 use crate::FormatError;
+use crate::output_set::Temporary;
 
 /// A buffered output that, for a regular file, appears at its path only when [`AtomicFile::finish`] succeeds.
 ///
@@ -16,6 +15,9 @@ use crate::FormatError;
 ///   stays on one file system); `finish` flushes it, syncs it to disk and renames it onto the target, replacing any
 ///   previous file at once. Dropping an `AtomicFile` without `finish` (an error, a panic, an interrupted run) deletes
 ///   the temporary file and leaves whatever was at the target path untouched: readers never see a half-written file.
+///   While an [`OutputSet`](crate::OutputSet) is open, `finish` does not rename: the set's commit moves every output
+///   of the run into place together. The temporary is listed from its creation, so that even a process ending at
+///   once deletes it ([`remove_temporaries_before_exit`](crate::remove_temporaries_before_exit)).
 /// - a symbolic link: the same, at the file the link points to (resolved through every link), so the link stays a
 ///   link and its target gets the new content.
 /// - a FIFO, a character device (a terminal, `/dev/stdout`, `/dev/null`) or a socket: written in place, never
@@ -45,9 +47,11 @@ pub struct AtomicFile {
 #[derive(Debug)]
 enum Sink {
     /// A temporary file renamed onto `real_target` (the path given, or the file its links lead to) by `finish`.
+    // Fields drop in order: the file is closed, then the temporary deleted.
     Atomic {
         real_target: PathBuf,
-        writer: BufWriter<NamedTempFile>,
+        writer: BufWriter<File>,
+        temporary: Temporary,
     },
     /// A FIFO or a device, written where it is.
     InPlace(BufWriter<File>),
@@ -97,6 +101,7 @@ impl AtomicFile {
     pub fn create(path: impl AsRef<Path>) -> Result<Self, FormatError> {
         let target = path.as_ref().to_path_buf();
         if target.as_os_str() == "-" {
+            check_stdout_open()?;
             return Ok(Self {
                 target,
                 sink: Sink::Stdout(BufWriter::new(io::stdout())),
@@ -129,19 +134,7 @@ impl AtomicFile {
                 format!("directory '{}' does not exist", dir.display()),
             ));
         }
-        let mut prefix = std::ffi::OsString::from(".");
-        prefix.push(file_name);
-        prefix.push(".");
-        let mut builder = tempfile::Builder::new();
-        builder.prefix(&prefix).suffix(".tmp");
-        // NamedTempFile is private to its owner (0600) by default; the result is an ordinary output file, so let the
-        // umask decide, as for any file the user creates.
-        #[cfg(unix)]
-        {
-            use std::os::unix::fs::PermissionsExt;
-            builder.permissions(std::fs::Permissions::from_mode(0o666));
-        }
-        let temp = builder.tempfile_in(dir).map_err(|e| {
+        let (file, temporary) = Temporary::file(dir, file_name).map_err(|e| {
             FormatError::io(
                 &target,
                 &format!(
@@ -155,7 +148,8 @@ impl AtomicFile {
             target,
             sink: Sink::Atomic {
                 real_target: real_target.clone(),
-                writer: BufWriter::new(temp),
+                writer: BufWriter::new(file),
+                temporary,
             },
         })
     }
@@ -166,22 +160,23 @@ impl AtomicFile {
     }
 
     /// Flushes, syncs and renames the temporary file onto the target path (or flushes a stream written in place).
+    /// While an [`OutputSet`](crate::OutputSet) is open, the rename waits for its commit.
     pub fn finish(self) -> Result<(), FormatError> {
         let target = self.target;
         match self.sink {
             Sink::Atomic {
                 real_target,
                 writer,
+                temporary,
             } => {
-                let temp = writer
+                let file = writer
                     .into_inner()
                     .map_err(|e| FormatError::io(&target, "cannot write", e.into_error()))?;
-                temp.as_file()
-                    .sync_all()
+                file.sync_all()
                     .map_err(|e| FormatError::io(&target, "cannot sync to disk", e))?;
-                temp.persist(&real_target).map_err(|e| {
-                    FormatError::io(&target, "cannot move the finished file into place", e.error)
-                })?;
+                drop(file);
+                // Renamed now, or with an open output set, at its commit.
+                temporary.finish(&real_target, &target)?;
             }
             Sink::InPlace(mut writer) => writer
                 .flush()
@@ -205,6 +200,47 @@ impl AtomicFile {
             Sink::Stdout(writer) => writer,
         }
     }
+}
+
+/// Seeking works on a regular file's temporary (an MCAP bag writes its index that way), not on a stream.
+impl Seek for AtomicFile {
+    fn seek(&mut self, position: io::SeekFrom) -> io::Result<u64> {
+        match &mut self.sink {
+            Sink::Atomic { writer, .. } => writer.seek(position),
+            Sink::InPlace(_) | Sink::Stdout(_) => Err(io::Error::new(
+                io::ErrorKind::Unsupported,
+                "cannot seek in a stream (a FIFO, a device or the standard output)",
+            )),
+        }
+    }
+}
+
+/// Refuses `-` as an output when the standard output was closed (`>&-`): the Rust runtime then puts `/dev/null` in
+/// its place, opened for reading and writing, and the output would be discarded without a word. A user's own
+/// `>/dev/null` opens it for writing only, and is accepted.
+fn check_stdout_open() -> Result<(), FormatError> {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::unix::fs::{FileTypeExt, MetadataExt};
+        let flags = std::fs::read_to_string("/proc/self/fdinfo/1").unwrap_or_default();
+        let read_write = flags
+            .lines()
+            .find_map(|l| l.strip_prefix("flags:"))
+            .and_then(|f| u32::from_str_radix(f.trim(), 8).ok())
+            .is_some_and(|f| f & 0o3 == 0o2);
+        let null = std::fs::metadata("/dev/null").ok();
+        let stdout = std::fs::metadata("/proc/self/fd/1").ok();
+        if let (true, Some(null), Some(stdout)) = (read_write, null, stdout)
+            && stdout.file_type().is_char_device()
+            && stdout.rdev() == null.rdev()
+        {
+            return Err(FormatError::new(
+                "-",
+                "the standard output is closed: give a file instead of '-', or redirect it (> FILE)",
+            ));
+        }
+    }
+    Ok(())
 }
 
 impl Write for AtomicFile {

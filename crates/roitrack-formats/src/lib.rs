@@ -20,7 +20,8 @@
 //!
 //! Every reader refuses non-finite numbers and times out of order; every writer refuses what the reader would refuse
 //! and writes numbers with full round-trip precision (the shortest decimal that reads back to the same `f64`).
-//! Writers go through [`AtomicFile`]: the file appears at its path, complete, only on `finish()`.
+//! Writers go through [`AtomicFile`]: the file appears at its path, complete, only on `finish()`; with an open
+//! [`OutputSet`], only when the whole run's outputs are committed together.
 //!
 //! No function here panics on any input; all failures are [`FormatError`]s.
 //!
@@ -60,6 +61,7 @@ mod estimates;
 mod frame_source;
 mod image_file;
 mod measurements;
+mod output_set;
 mod overlay;
 mod roi_recording;
 mod row_writer;
@@ -85,6 +87,10 @@ pub use estimates::{DIAGNOSTICS_HEADER, EstimateWriter};
 pub use frame_source::{FRAME_IMAGE_EXTENSIONS, FrameInfo, FrameSource, FrameTiming, SourceKind};
 pub use image_file::{
     FRAME_IMAGE_FORMATS, check_frame_size, decode_frame, read_frame, write_frame_png,
+};
+pub use output_set::{
+    OutputDir, OutputSet, create_output_dir, keep_if_failed, partial_path, remove_at_commit,
+    remove_temporaries_before_exit,
 };
 pub use measurements::{
     CENTROID_EDGE_TOLERANCE_PX, MeasurementChecks, MeasurementField, MeasurementProblem,

@@ -3,21 +3,67 @@
 //! message served live are the same bytes.
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::io::BufWriter;
+use std::path::{Path, PathBuf};
 #[cfg(feature = "live")]
 use std::sync::Arc;
 
 use mcap::McapResult;
 use mcap::records::MessageHeader;
+use roitrack_formats::{AtomicFile, FormatError};
 
 /// An MCAP file, or the channels of a live server; the calls are those of `mcap::Writer` that the bag uses.
 // One per writer, for its whole life: the size of the MCAP variant does not matter.
 #[allow(clippy::large_enum_variant)]
 pub(crate) enum Output {
-    Mcap(mcap::Writer<BufWriter<File>>),
+    Mcap(McapFile),
     #[cfg(feature = "live")]
     Live(LiveChannels),
+}
+
+/// An MCAP file being written: to a temporary beside its path ([`AtomicFile`]), handed over when closed. Dropped
+/// without [`Self::close`] (an error, a panic, an interrupted run), the bag is completed up to its last message and
+/// handed over all the same: moved into place at once without an open output set; with one, deleted if the run fails,
+/// unless marked with [`roitrack_formats::keep_if_failed`] (then kept as `NAME.partial.mcap`).
+pub(crate) struct McapFile {
+    path: PathBuf,
+    writer: Option<mcap::Writer<BufWriter<AtomicFile>>>,
+}
+
+impl McapFile {
+    pub(crate) fn new(path: &Path, writer: mcap::Writer<BufWriter<AtomicFile>>) -> Self {
+        Self {
+            path: path.to_path_buf(),
+            writer: Some(writer),
+        }
+    }
+
+    fn writer(&mut self) -> McapResult<&mut mcap::Writer<BufWriter<AtomicFile>>> {
+        self.writer.as_mut().ok_or_else(|| {
+            mcap::McapError::Io(std::io::Error::other("the bag was already completed"))
+        })
+    }
+
+    /// Completes the bag and hands its file over (renamed into place, or staged for the run's commit).
+    pub(crate) fn close(&mut self) -> Result<(), FormatError> {
+        let Some(mut writer) = self.writer.take() else {
+            return Ok(());
+        };
+        writer
+            .finish()
+            .map_err(|e| FormatError::new(&self.path, format!("cannot complete the bag: {e}")))?;
+        let file = writer
+            .into_inner()
+            .into_inner()
+            .map_err(|e| FormatError::io(&self.path, "cannot write", e.into_error()))?;
+        file.finish()
+    }
+}
+
+impl Drop for McapFile {
+    fn drop(&mut self) {
+        let _ = self.close();
+    }
 }
 
 /// The schemas and channels of a live server, indexed by the ids handed out (as MCAP's are).
@@ -52,7 +98,7 @@ impl Output {
         data: &[u8],
     ) -> McapResult<u16> {
         match self {
-            Self::Mcap(writer) => writer.add_schema(name, encoding, data),
+            Self::Mcap(file) => file.writer()?.add_schema(name, encoding, data),
             #[cfg(feature = "live")]
             Self::Live(live) => {
                 live.schemas
@@ -71,7 +117,10 @@ impl Output {
         metadata: &BTreeMap<String, String>,
     ) -> McapResult<u16> {
         match self {
-            Self::Mcap(writer) => writer.add_channel(schema_id, topic, message_encoding, metadata),
+            Self::Mcap(file) => {
+                file.writer()?
+                    .add_channel(schema_id, topic, message_encoding, metadata)
+            }
             #[cfg(feature = "live")]
             Self::Live(live) => {
                 let schema = live
@@ -100,7 +149,7 @@ impl Output {
         data: &[u8],
     ) -> McapResult<()> {
         match self {
-            Self::Mcap(writer) => writer.write_to_known_channel(header, data),
+            Self::Mcap(file) => file.writer()?.write_to_known_channel(header, data),
             #[cfg(feature = "live")]
             Self::Live(live) => {
                 let channel = live
@@ -122,7 +171,7 @@ impl Output {
 
     pub(crate) fn finish(&mut self) -> McapResult<()> {
         match self {
-            Self::Mcap(writer) => writer.finish().map(|_| ()),
+            Self::Mcap(file) => file.writer()?.finish().map(|_| ()),
             #[cfg(feature = "live")]
             Self::Live(live) => {
                 for channel in &live.channels {

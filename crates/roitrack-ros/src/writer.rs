@@ -1,18 +1,17 @@
 //! [`BagWriter`]: a ROS 2 bag in MCAP storage, written as the estimates come.
 
 use std::collections::BTreeMap;
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use roitrack_core::estimator::{Estimate, TrackStatus};
 use roitrack_core::{CameraModel, Measurement, MotionState, Target};
-use roitrack_formats::FormatError;
+use roitrack_formats::{AtomicFile, FormatError};
 use roitrack_image::{Frame, RoiImage};
 
 use crate::convert;
 use crate::msg::{self, Header};
-use crate::output::Output;
+use crate::output::{McapFile, Output};
 
 /// The topics of a roitrack bag.
 pub mod topics {
@@ -80,9 +79,12 @@ struct Channel {
 /// once, before the first message. With frames, `/roitrack/image` and `/roitrack/annotations`
 /// ([`write_frame`](Self::write_frame)). docs/ros2.md says what each field holds.
 ///
-/// The bag is written at its path as it goes (not to a temporary file): if the run fails, what was written up to
-/// then stays readable, as the MCAP chunks and summary are completed when the writer is dropped, on every exit
-/// path (an error, a panic), as well as by [`finish`](Self::finish).
+/// The bag is written to a temporary file beside its path ([`AtomicFile`]), completed (its chunks, summary and index)
+/// and moved into place by [`finish`](Self::finish), and also when the writer is dropped on any other exit path (an
+/// error, a panic): what was written up to then stays readable. While a run's
+/// [`OutputSet`](roitrack_formats::OutputSet) is open, the move waits for its commit; if the run fails, a bag that
+/// holds at least one estimate is kept as `NAME.partial.mcap` ([`roitrack_formats::partial_path`]) and the bag at its
+/// path stays as it was.
 ///
 /// ```
 /// use roitrack_ros::{BagOptions, BagWriter};
@@ -123,6 +125,8 @@ pub struct BagWriter {
     bytes: Vec<u8>,
     text: String,
     messages: u64,
+    /// Whether an estimate has been written.
+    holds_estimates: bool,
 }
 
 impl std::fmt::Debug for BagWriter {
@@ -135,7 +139,7 @@ impl std::fmt::Debug for BagWriter {
 }
 
 impl BagWriter {
-    /// Creates the bag at `path` (replacing a file there). `camera`, if given, is written once to
+    /// Starts the bag at `path` (replacing a file there when finished). `camera`, if given, is written once to
     /// `/roitrack/camera_info` before the first message.
     pub fn create(
         path: impl AsRef<Path>,
@@ -144,7 +148,7 @@ impl BagWriter {
     ) -> Result<Self, FormatError> {
         let path = path.as_ref().to_path_buf();
         check_frame_ids(&path, options)?;
-        let file = File::create(&path).map_err(|e| FormatError::io(&path, "cannot create", e))?;
+        let file = AtomicFile::create(&path)?;
         let writer = mcap::WriteOptions::new()
             .profile("ros2")
             .library(concat!("roitrack ", env!("CARGO_PKG_VERSION")))
@@ -154,7 +158,8 @@ impl BagWriter {
             .compression_threads(0)
             .create(BufWriter::with_capacity(1 << 18, file))
             .map_err(|e| mcap_error(&path, "cannot start the bag", e))?;
-        Self::with_output(path, Output::Mcap(writer), options, camera)
+        let file = McapFile::new(&path, writer);
+        Self::with_output(path, Output::Mcap(file), options, camera)
     }
 
     /// A writer of the bag's messages to `writer` (the live server's channels, see `LiveServer`), `path` naming it in
@@ -208,6 +213,7 @@ impl BagWriter {
             bytes: Vec::new(),
             text: String::with_capacity(128),
             messages: 0,
+            holds_estimates: false,
         })
     }
 
@@ -292,6 +298,13 @@ impl BagWriter {
     /// Writes one estimate: pose, twist (camera frame), odometry (twist in the target frame), tf and status, all
     /// stamped with the estimate's time.
     pub fn write_estimate(&mut self, estimate: &Estimate) -> Result<(), FormatError> {
+        if !self.holds_estimates {
+            // From its first estimate on, the bag is worth keeping (as NAME.partial.mcap) if the run fails.
+            self.holds_estimates = true;
+            if matches!(self.writer, Output::Mcap(_)) {
+                roitrack_formats::keep_if_failed(&self.path);
+            }
+        }
         let t_s = estimate.t_ref_s;
         self.camera_info_at(t_s)?;
         let state = &estimate.state;
@@ -664,6 +677,9 @@ impl BagWriter {
         self.writer
             .finish()
             .map_err(|e| mcap_error(&self.path, "cannot complete the bag", e))?;
+        if let Output::Mcap(file) = &mut self.writer {
+            file.close()?;
+        }
         Ok(self.messages)
     }
 }
