@@ -24,6 +24,10 @@ use roitrack_core::{
 use serde_yaml_ng::{Mapping, Value};
 
 use crate::FormatError;
+use crate::limits::{MAX_CAMERA_FILE_BYTES, check_yaml_depth, read_text_file};
+
+/// What a camera file should be, for errors.
+pub(crate) const CAMERA_FILE: &str = "a camera calibration (YAML or XML)";
 
 /// What [`read_camera_file`] needs besides the file: what the file may leave out.
 #[derive(Debug, Clone, Default, PartialEq, Eq)]
@@ -91,20 +95,20 @@ pub fn read_camera_file(
     options: &CameraFileOptions,
 ) -> Result<CameraModel, FormatError> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| FormatError::io(path, "cannot read", e))?;
-    let text = String::from_utf8(bytes)
-        .map_err(|e| FormatError::new(path, format!("not UTF-8 text: {e}")))?;
+    let text = read_text_file(path, CAMERA_FILE, MAX_CAMERA_FILE_BYTES)?;
     parse_camera_file(&text, path, options).map(|(camera, _)| camera)
 }
 
 /// Parses camera calibration text of any kind in the table above; `path` names it in errors (and gives an OpenCV
-/// camera its name). Returns the camera and the format found.
+/// camera its name). Returns the camera and the format found. A leading byte-order mark is skipped; YAML nested
+/// deeper than [`MAX_YAML_DEPTH`](crate::MAX_YAML_DEPTH) is refused before it is parsed.
 pub fn parse_camera_file(
     text: &str,
     path: impl AsRef<Path>,
     options: &CameraFileOptions,
 ) -> Result<(CameraModel, CameraFileFormat), FormatError> {
     let path = path.as_ref();
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let format = detect_camera_format(text, path)?;
     if options.camera_name.is_some() && format != CameraFileFormat::Kalibr {
         return Err(FormatError::new(
@@ -142,7 +146,8 @@ pub fn detect_camera_format(
     path: impl AsRef<Path>,
 ) -> Result<CameraFileFormat, FormatError> {
     let path = path.as_ref();
-    let start = text.trim_start_matches('\u{feff}').trim_start();
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
+    let start = text.trim_start();
     if start.is_empty() {
         return Err(FormatError::new(
             path,
@@ -295,9 +300,12 @@ fn first_document(text: &str) -> &str {
     text
 }
 
-/// The first YAML document of `text` as a value; syntax errors name the line.
+/// The first YAML document of `text` as a value; syntax errors name the line. Nesting is checked first: the parser's
+/// time grows with the square of the depth.
 fn yaml_value(text: &str, path: &Path) -> Result<Value, FormatError> {
-    serde_yaml_ng::from_str::<Value>(first_document(text)).map_err(|e| {
+    let text = first_document(text);
+    check_yaml_depth(text, path)?;
+    serde_yaml_ng::from_str::<Value>(text).map_err(|e| {
         let line = e.location().map(|l| l.line() as u64);
         FormatError::new(path, format!("not valid YAML: {e}")).with_line(line)
     })

@@ -47,8 +47,11 @@ use crate::{AtomicFile, FormatError};
 /// ```
 pub fn read_camera_yaml(path: impl AsRef<Path>) -> Result<CameraModel, FormatError> {
     let path = path.as_ref();
-    let text =
-        std::fs::read_to_string(path).map_err(|e| FormatError::io(path, "cannot read", e))?;
+    let text = crate::limits::read_text_file(
+        path,
+        crate::camera_file::CAMERA_FILE,
+        crate::MAX_CAMERA_FILE_BYTES,
+    )?;
     parse_camera_yaml(&text, path)
 }
 
@@ -61,12 +64,14 @@ pub fn read_camera_yaml(path: impl AsRef<Path>) -> Result<CameraModel, FormatErr
 /// key path, e.g. `camera.yaml:7: field 'camera_matrix.data[0] (fx)': fx must be positive, got 0 (column 10)`.
 pub fn parse_camera_yaml(text: &str, path: impl AsRef<Path>) -> Result<CameraModel, FormatError> {
     let path = path.as_ref();
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     if text.trim().is_empty() {
         return Err(FormatError::new(
             path,
             "empty file: expected a ROS camera_info YAML document",
         ));
     }
+    crate::limits::check_yaml_depth(text, path)?;
     let doc: CameraInfoYaml = serde_yaml_ng::from_str(text).map_err(|e| yaml_error(&e, path))?;
     let coefficients = doc.distortion_coefficients.map(|c| c.0).unwrap_or_default();
     let model = match doc.distortion_model {

@@ -98,7 +98,7 @@ pub(crate) fn read_row<R: Read>(
 fn csv_error(error: csv::Error, path: &Path, columns: &[&'static str]) -> FormatError {
     let line = error.position().map(|p| p.line());
     match error.into_kind() {
-        ErrorKind::Io(e) => FormatError::io(path, "cannot read", e).with_line(line),
+        ErrorKind::Io(e) => crate::limits::read_error(path, e, line),
         ErrorKind::UnequalLengths {
             expected_len, len, ..
         } => {

@@ -2,15 +2,15 @@
 //! video, for tracking from full frames (`roitrack track --images SOURCE`).
 
 use std::cmp::Ordering;
-use std::fs::File;
-use std::io::{self, Read};
+use std::io;
 use std::path::{Path, PathBuf};
 
 use roitrack_image::Frame;
 
 use crate::FormatError;
 use crate::csv_util::{Row, check_time_order, csv_reader, read_row};
-use crate::image_file::{decode_frame_into, read_error};
+use crate::image_file::{decode_frame_into, read_image_file};
+use crate::limits::{Limited, MAX_TIMESTAMPS_FILE_BYTES, open_file};
 use crate::video::{Tools, VIDEO_EXTENSIONS, VideoDecoder};
 
 /// File extensions of the images a folder or a pattern is read for (compared without regard to case).
@@ -305,7 +305,7 @@ impl FrameSource {
                 let Some(path) = files.get(index) else {
                     return Ok(None);
                 };
-                read_into(path, bytes).map_err(|e| read_error(path, e))?;
+                read_image_file(path, bytes)?;
                 decode_frame_into(bytes, path, frame)?;
                 (file_name(path), None)
             }
@@ -402,13 +402,6 @@ impl FrameSource {
             }),
         }
     }
-}
-
-/// Reads the whole file at `path` into `bytes` (cleared first; its capacity reused).
-fn read_into(path: &Path, bytes: &mut Vec<u8>) -> io::Result<()> {
-    bytes.clear();
-    File::open(path)?.read_to_end(bytes)?;
-    Ok(())
 }
 
 /// The file name of `path` (without its folder), or the whole path when it has none.
@@ -711,11 +704,21 @@ fn digit_run(s: &[u8], from: usize) -> (&[u8], usize) {
 
 /// Reads a timestamps CSV: header naming `t` and optionally `file`, rows with strictly increasing finite times.
 fn read_times_csv(path: &Path, is_video: bool) -> Result<Vec<TimeRow>, FormatError> {
-    let file = File::open(path).map_err(|e| FormatError::io(path, "cannot open for reading", e))?;
-    let mut reader = csv_reader(io::BufReader::new(file));
+    let what = "a timestamps CSV (t[,file])";
+    let file = open_file(path, what, Some(MAX_TIMESTAMPS_FILE_BYTES))?;
+    let mut reader = csv_reader(Limited::new(
+        io::BufReader::new(file),
+        what,
+        Some(MAX_TIMESTAMPS_FILE_BYTES),
+    ));
     let header = reader
         .headers()
-        .map_err(|e| FormatError::new(path, format!("cannot read the header: {e}")).with_line(1))?
+        .map_err(|e| match e.into_kind() {
+            csv::ErrorKind::Io(e) => crate::limits::read_error(path, e, Some(1)),
+            other => {
+                FormatError::new(path, format!("cannot read the header: {other:?}")).with_line(1)
+            }
+        })?
         .clone();
     let header_line = header.position().map_or(1, |p| p.line());
     if header.is_empty() || (header.len() == 1 && header[0].is_empty()) {

@@ -5,6 +5,7 @@
 //! 0.114 B`, rounded to the nearest integer. An alpha channel is dropped (not composited). 16-bit files keep their
 //! 16 bits (`bit_depth` 16); everything else is 8 bits.
 
+use std::io::Read;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::Path;
 
@@ -14,6 +15,7 @@ use image::{DynamicImage, ImageEncoder, ImageFormat};
 use roitrack_core::CameraModel;
 use roitrack_image::Frame;
 
+use crate::limits::{MAX_IMAGE_FILE_BYTES, check_file};
 use crate::{AtomicFile, FormatError};
 
 /// The image formats [`read_frame`] and [`decode_frame`] read, as said in their errors.
@@ -42,8 +44,51 @@ pub const FRAME_IMAGE_FORMATS: &str = "PNG, JPEG, PGM/PPM or TIFF";
 /// ```
 pub fn read_frame(path: impl AsRef<Path>) -> Result<Frame, FormatError> {
     let path = path.as_ref();
-    let bytes = std::fs::read(path).map_err(|e| read_error(path, e))?;
+    let mut bytes = Vec::new();
+    read_image_file(path, &mut bytes)?;
     decode_frame(&bytes, path)
+}
+
+/// Reads the image file `path` into `bytes` (cleared first, its capacity reused), looking before leaping: a folder or
+/// a file larger than [`MAX_IMAGE_FILE_BYTES`] is refused before it is read, and a file whose first bytes (or, failing
+/// them, whose extension) name no format roitrack reads is refused before the rest is read.
+pub(crate) fn read_image_file(path: &Path, bytes: &mut Vec<u8>) -> Result<(), FormatError> {
+    const WHAT: &str = "an image file";
+    bytes.clear();
+    let file = std::fs::File::open(path).map_err(|e| read_error(path, e))?;
+    check_file(&file, path, WHAT, Some(MAX_IMAGE_FILE_BYTES))?;
+    // Bounded for devices and pipes too, which have no size to check beforehand.
+    let mut reader = file.take(MAX_IMAGE_FILE_BYTES + 1);
+    (&mut reader)
+        .take(64)
+        .read_to_end(bytes)
+        .map_err(|e| read_error(path, e))?;
+    if !bytes.is_empty() {
+        let format = choose_format(bytes, path)?;
+        // Every format read here has magic bytes: content without them is no image, whatever its extension says.
+        if image::guess_format(bytes).is_err() {
+            return Err(FormatError::new(
+                path,
+                format!(
+                    "not a {name} image, as its extension says, nor any other known image format (expected \
+                     {FRAME_IMAGE_FORMATS}): it starts with {start:?}",
+                    name = format_name(format),
+                    start = String::from_utf8_lossy(&bytes[..bytes.len().min(16)])
+                ),
+            ));
+        }
+    }
+    reader.read_to_end(bytes).map_err(|e| read_error(path, e))?;
+    if bytes.len() as u64 > MAX_IMAGE_FILE_BYTES {
+        return Err(FormatError::new(
+            path,
+            format!(
+                "more than {}: {WHAT} is at most that large",
+                crate::limits::format_bytes(MAX_IMAGE_FILE_BYTES)
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// The error of a frame file that cannot be read (the same for [`read_frame`] and the frame sources).

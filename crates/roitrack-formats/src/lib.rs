@@ -60,6 +60,7 @@ mod error;
 mod estimates;
 mod frame_source;
 mod image_file;
+mod limits;
 mod measurements;
 mod output_set;
 mod overlay;
@@ -88,13 +89,17 @@ pub use frame_source::{FRAME_IMAGE_EXTENSIONS, FrameInfo, FrameSource, FrameTimi
 pub use image_file::{
     FRAME_IMAGE_FORMATS, check_frame_size, decode_frame, read_frame, write_frame_png,
 };
-pub use output_set::{
-    OutputDir, OutputSet, create_output_dir, keep_if_failed, partial_path, remove_at_commit,
-    remove_temporaries_before_exit,
+pub use limits::{
+    DEFAULT_MAX_TRAJECTORY_FILE_BYTES, MAX_CAMERA_FILE_BYTES, MAX_IMAGE_FILE_BYTES, MAX_LINE_BYTES,
+    MAX_TARGET_FILE_BYTES, MAX_TIMESTAMPS_FILE_BYTES, MAX_YAML_DEPTH,
 };
 pub use measurements::{
     CENTROID_EDGE_TOLERANCE_PX, MeasurementChecks, MeasurementField, MeasurementProblem,
     MeasurementReader, MeasurementWriter, read_measurements_csv, write_measurements_csv,
+};
+pub use output_set::{
+    OutputDir, OutputSet, create_output_dir, keep_if_failed, partial_path, remove_at_commit,
+    remove_temporaries_before_exit,
 };
 pub use overlay::{MarkKind, OverlayMark, write_overlay_png};
 pub use roi_recording::{
@@ -102,11 +107,16 @@ pub use roi_recording::{
 };
 pub use run_readers::{
     CovarianceRow, DiagnosticsRow, parse_covariance_csv, parse_diagnostics_csv,
-    read_covariance_csv, read_diagnostics_csv,
+    read_covariance_csv, read_covariance_csv_limited, read_diagnostics_csv,
+    read_diagnostics_csv_limited,
 };
 pub use target_csv::{parse_target_csv, read_target_csv, target_csv_string, write_target_csv};
-pub use tum::{PoseWriter, QUATERNION_NORM_TOLERANCE, parse_tum, read_tum, write_tum};
-pub use twists::{TwistWriter, parse_twists_csv, read_twists_csv, write_twists_csv};
+pub use tum::{
+    PoseWriter, QUATERNION_NORM_TOLERANCE, parse_tum, read_tum, read_tum_limited, write_tum,
+};
+pub use twists::{
+    TwistWriter, parse_twists_csv, read_twists_csv, read_twists_csv_limited, write_twists_csv,
+};
 pub use units::{
     LengthUnit, MAX_PLAUSIBLE_BLOB_DIAMETER_M, MAX_PLAUSIBLE_MEDIAN_STEP_S,
     MAX_PLAUSIBLE_TARGET_SPAN_M, MAX_PLAUSIBLE_TIME_S, TimeUnit, TimedMeasurements,

@@ -13,9 +13,12 @@ use roitrack_core::Measurement;
 
 use crate::FormatError;
 use crate::csv_util::{Row, csv_reader, read_header, read_row};
+use crate::limits::{Limited, open_file};
 use crate::row_writer::RowWriter;
 
 const COLUMNS: [&str; 4] = ["t", "id", "u", "v"];
+/// What the file should be, for errors.
+const WHAT: &str = "a measurements CSV (t,id,u,v)";
 
 /// How far (px) a centroid may lie beyond the sensor's edge (at -0.5 and size - 0.5) before
 /// [`MeasurementChecks::with_image_size`] refuses it: centroid noise on a blob cut by the edge.
@@ -217,7 +220,7 @@ impl MeasurementChecks {
 /// field, after which the iterator ends.
 #[derive(Debug)]
 pub struct MeasurementReader<R: Read> {
-    csv: csv::Reader<R>,
+    csv: csv::Reader<Limited<R>>,
     record: StringRecord,
     path: PathBuf,
     checks: MeasurementChecks,
@@ -230,17 +233,19 @@ impl MeasurementReader<File> {
     /// Opens a measurements CSV and checks its header.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, FormatError> {
         let path = path.as_ref();
-        let file =
-            File::open(path).map_err(|e| FormatError::io(path, "cannot open for reading", e))?;
+        // Read in constant memory: no limit on the file's size, only on its lines (in `from_reader`).
+        let file = open_file(path, WHAT, None)?;
         Self::from_reader(file, path)
     }
 }
 
 impl<R: Read> MeasurementReader<R> {
-    /// Reads measurements from any byte source; `path` names it in errors. Checks the header.
+    /// Reads measurements from any byte source; `path` names it in errors. Checks the header. A line longer than
+    /// [`MAX_LINE_BYTES`](crate::MAX_LINE_BYTES) is an error, so that a source without line breaks (`/dev/zero`) is
+    /// refused after that many bytes instead of filling memory.
     pub fn from_reader(reader: R, path: impl AsRef<Path>) -> Result<Self, FormatError> {
         let path = path.as_ref().to_path_buf();
-        let mut csv = csv_reader(reader);
+        let mut csv = csv_reader(Limited::new(reader, WHAT, None));
         read_header(&mut csv, &path, &COLUMNS, None)?;
         Ok(Self {
             csv,

@@ -2,7 +2,6 @@
 //! covariance CSV (the 78 upper-triangle entries of each estimate's 12 x 12 covariance). Formats: see
 //! [`crate::EstimateWriter`] and [`crate::CovarianceWriter`].
 
-use std::fs::File;
 use std::io::Read;
 use std::path::Path;
 
@@ -12,6 +11,7 @@ use roitrack_core::estimator::{Matrix12, TrackStatus};
 use crate::FormatError;
 use crate::covariance::{COVARIANCE_ENTRIES, covariance_from_upper_triangle, covariance_header};
 use crate::csv_util::{Row, check_time_order, csv_reader, read_header, read_row};
+use crate::limits::{DEFAULT_MAX_TRAJECTORY_FILE_BYTES, Limited, open_file};
 
 const DIAGNOSTICS_COLUMNS: [&str; 12] = [
     "t",
@@ -76,7 +76,8 @@ pub fn parse_diagnostics_csv<R: Read>(
     path: impl AsRef<Path>,
 ) -> Result<Vec<DiagnosticsRow>, FormatError> {
     let path = path.as_ref();
-    let mut csv = csv_reader(reader);
+    // Lines bounded whatever the source; the file's size is bounded by the `_limited` readers.
+    let mut csv = csv_reader(Limited::new(reader, "a diagnostics CSV", None));
     read_header(&mut csv, path, &DIAGNOSTICS_COLUMNS, None)?;
     let mut record = StringRecord::new();
     let mut rows = Vec::new();
@@ -121,11 +122,21 @@ pub fn parse_diagnostics_csv<R: Read>(
     Ok(rows)
 }
 
-/// Reads a diagnostics CSV file (see [`parse_diagnostics_csv`]).
+/// Reads a diagnostics CSV file (see [`parse_diagnostics_csv`]) of at most
+/// [`DEFAULT_MAX_TRAJECTORY_FILE_BYTES`](crate::DEFAULT_MAX_TRAJECTORY_FILE_BYTES).
 pub fn read_diagnostics_csv(path: impl AsRef<Path>) -> Result<Vec<DiagnosticsRow>, FormatError> {
+    read_diagnostics_csv_limited(path, DEFAULT_MAX_TRAJECTORY_FILE_BYTES)
+}
+
+/// Reads a diagnostics CSV file of at most `max_file_bytes` (a larger file is refused before it is read).
+pub fn read_diagnostics_csv_limited(
+    path: impl AsRef<Path>,
+    max_file_bytes: u64,
+) -> Result<Vec<DiagnosticsRow>, FormatError> {
     let path = path.as_ref();
-    let file = File::open(path).map_err(|e| FormatError::io(path, "cannot open for reading", e))?;
-    parse_diagnostics_csv(file, path)
+    let what = "a diagnostics CSV";
+    let file = open_file(path, what, Some(max_file_bytes))?;
+    parse_diagnostics_csv(Limited::new(file, what, Some(max_file_bytes)), path)
 }
 
 /// One row of a covariance CSV: the estimate's time and its covariance (`None` where the row is `NaN` throughout).
@@ -161,7 +172,7 @@ pub fn parse_covariance_csv<R: Read>(
 ) -> Result<Vec<CovarianceRow>, FormatError> {
     let path = path.as_ref();
     let columns = covariance_columns();
-    let mut csv = csv_reader(reader);
+    let mut csv = csv_reader(Limited::new(reader, "a covariance CSV", None));
     read_header(&mut csv, path, columns, None)?;
     let mut record = StringRecord::new();
     let mut rows = Vec::new();
@@ -204,9 +215,19 @@ pub fn parse_covariance_csv<R: Read>(
     Ok(rows)
 }
 
-/// Reads a covariance CSV file (see [`parse_covariance_csv`]).
+/// Reads a covariance CSV file (see [`parse_covariance_csv`]) of at most
+/// [`DEFAULT_MAX_TRAJECTORY_FILE_BYTES`](crate::DEFAULT_MAX_TRAJECTORY_FILE_BYTES).
 pub fn read_covariance_csv(path: impl AsRef<Path>) -> Result<Vec<CovarianceRow>, FormatError> {
+    read_covariance_csv_limited(path, DEFAULT_MAX_TRAJECTORY_FILE_BYTES)
+}
+
+/// Reads a covariance CSV file of at most `max_file_bytes` (a larger file is refused before it is read).
+pub fn read_covariance_csv_limited(
+    path: impl AsRef<Path>,
+    max_file_bytes: u64,
+) -> Result<Vec<CovarianceRow>, FormatError> {
     let path = path.as_ref();
-    let file = File::open(path).map_err(|e| FormatError::io(path, "cannot open for reading", e))?;
-    parse_covariance_csv(file, path)
+    let what = "a covariance CSV";
+    let file = open_file(path, what, Some(max_file_bytes))?;
+    parse_covariance_csv(Limited::new(file, what, Some(max_file_bytes)), path)
 }

@@ -5,7 +5,6 @@
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
-use std::fs::File;
 use std::io::{Read, Write};
 use std::path::Path;
 
@@ -14,15 +13,18 @@ use nalgebra::Vector3;
 use roitrack_core::{Target, TargetError, TargetPoint};
 
 use crate::csv_util::{Row, csv_reader, read_header, read_row};
+use crate::limits::{Limited, MAX_TARGET_FILE_BYTES, open_file};
 use crate::{AtomicFile, FormatError};
 
 const COLUMNS: [&str; 4] = ["id", "x", "y", "z"];
 const DIAMETER: &str = "diameter";
+/// What the file should be, for errors.
+const WHAT: &str = "a target CSV (id,x,y,z[,diameter])";
 
 /// Reads a target CSV and validates the target (see [`parse_target_csv`]).
 pub fn read_target_csv(path: impl AsRef<Path>) -> Result<Target, FormatError> {
     let path = path.as_ref();
-    let file = File::open(path).map_err(|e| FormatError::io(path, "cannot open for reading", e))?;
+    let file = open_file(path, WHAT, Some(MAX_TARGET_FILE_BYTES))?;
     parse_target_csv(file, path)
 }
 
@@ -30,10 +32,11 @@ pub fn read_target_csv(path: impl AsRef<Path>) -> Result<Target, FormatError> {
 ///
 /// Refuses, naming line and field: a wrong header, missing or extra fields, non-numbers, non-finite coordinates, a
 /// non-positive diameter, an id seen on an earlier line. Then, naming only the file: an empty file, fewer than 4
-/// points, points all on one line.
+/// points, points all on one line. A line longer than [`MAX_LINE_BYTES`](crate::MAX_LINE_BYTES) or more than
+/// [`MAX_TARGET_FILE_BYTES`](crate::MAX_TARGET_FILE_BYTES) in all is refused as it is met.
 pub fn parse_target_csv<R: Read>(reader: R, path: impl AsRef<Path>) -> Result<Target, FormatError> {
     let path = path.as_ref();
-    let mut csv = csv_reader(reader);
+    let mut csv = csv_reader(Limited::new(reader, WHAT, Some(MAX_TARGET_FILE_BYTES)));
     let columns = read_header(&mut csv, path, &COLUMNS, Some(DIAMETER))?;
     let mut record = StringRecord::new();
     let mut points = Vec::new();

@@ -5,7 +5,6 @@
 //! the camera frame, `qx qy qz qw` the Hamilton unit quaternion of c_R_o (scalar last). Blank lines and lines
 //! starting with `#` are skipped, as evo does.
 
-use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
 use std::path::Path;
 
@@ -14,30 +13,60 @@ use roitrack_core::PoseSample;
 
 use crate::FormatError;
 use crate::csv_util::{check_time_order, parse_finite};
+use crate::limits::{DEFAULT_MAX_TRAJECTORY_FILE_BYTES, Limited, open_file, read_error};
 use crate::row_writer::RowWriter;
 
 const FIELDS: [&str; 8] = ["t", "tx", "ty", "tz", "qx", "qy", "qz", "qw"];
+/// What the file should be, for errors.
+const WHAT: &str = "a TUM trajectory (t tx ty tz qx qy qz qw)";
 
 /// How far from 1 the norm of a quaternion in a file may be (it is then normalised).
 pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
 
-/// Reads a TUM trajectory (see [`parse_tum`]).
+/// Reads a TUM trajectory (see [`parse_tum`]) of at most
+/// [`DEFAULT_MAX_TRAJECTORY_FILE_BYTES`](crate::DEFAULT_MAX_TRAJECTORY_FILE_BYTES).
 pub fn read_tum(path: impl AsRef<Path>) -> Result<Vec<PoseSample>, FormatError> {
+    read_tum_limited(path, DEFAULT_MAX_TRAJECTORY_FILE_BYTES)
+}
+
+/// Reads a TUM trajectory of at most `max_file_bytes` (a larger file is refused before it is read).
+///
+/// ```
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("poses.tum");
+/// std::fs::write(&path, "0 0 0 1 0 0 0 1\n").unwrap();
+/// assert_eq!(roitrack_formats::read_tum_limited(&path, 1000).unwrap().len(), 1);
+/// let e = roitrack_formats::read_tum_limited(&path, 10).unwrap_err().to_string();
+/// assert!(e.contains("at most 10 bytes"), "{e}");
+/// ```
+pub fn read_tum_limited(
+    path: impl AsRef<Path>,
+    max_file_bytes: u64,
+) -> Result<Vec<PoseSample>, FormatError> {
     let path = path.as_ref();
-    let file = File::open(path).map_err(|e| FormatError::io(path, "cannot open for reading", e))?;
-    parse_tum(file, path)
+    let file = open_file(path, WHAT, Some(max_file_bytes))?;
+    parse_tum_limited(file, path, max_file_bytes)
 }
 
 /// Parses a TUM trajectory from any byte source; `path` names it in errors.
 ///
 /// Every pose line has exactly 8 finite numbers; the times increase strictly; the quaternion's norm is within
 /// [`QUATERNION_NORM_TOLERANCE`] of 1 (it is then normalised). A file with no pose line holds an empty trajectory.
+/// A leading byte-order mark is skipped. Lines are at most [`MAX_LINE_BYTES`](crate::MAX_LINE_BYTES), the whole at
+/// most [`DEFAULT_MAX_TRAJECTORY_FILE_BYTES`](crate::DEFAULT_MAX_TRAJECTORY_FILE_BYTES).
 pub fn parse_tum<R: Read>(
     reader: R,
     path: impl AsRef<Path>,
 ) -> Result<Vec<PoseSample>, FormatError> {
-    let path = path.as_ref();
-    let mut reader = BufReader::new(reader);
+    parse_tum_limited(reader, path.as_ref(), DEFAULT_MAX_TRAJECTORY_FILE_BYTES)
+}
+
+fn parse_tum_limited<R: Read>(
+    reader: R,
+    path: &Path,
+    max_file_bytes: u64,
+) -> Result<Vec<PoseSample>, FormatError> {
+    let mut reader = BufReader::new(Limited::new(reader, WHAT, Some(max_file_bytes)));
     let mut buffer = Vec::new();
     let mut poses = Vec::new();
     let mut previous = None;
@@ -46,12 +75,16 @@ pub fn parse_tum<R: Read>(
         buffer.clear();
         let n = reader
             .read_until(b'\n', &mut buffer)
-            .map_err(|e| FormatError::io(path, "cannot read", e).with_line(line + 1))?;
+            .map_err(|e| read_error(path, e, Some(line + 1)))?;
         if n == 0 {
             return Ok(poses);
         }
         line += 1;
-        let text = std::str::from_utf8(&buffer)
+        let mut bytes = &buffer[..];
+        if line == 1 {
+            bytes = bytes.strip_prefix("\u{feff}".as_bytes()).unwrap_or(bytes);
+        }
+        let text = std::str::from_utf8(bytes)
             .map_err(|_| FormatError::new(path, "not valid UTF-8").with_line(line))?
             .trim();
         if text.is_empty() || text.starts_with('#') {

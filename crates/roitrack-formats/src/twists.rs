@@ -3,7 +3,6 @@
 //! `t` in seconds; `vx vy vz` the velocity V of the object origin (m/s) and `wx wy wz` the angular velocity W
 //! (rad/s), both expressed in the camera frame (docs/model.md). The rows have the same times as the poses.
 
-use std::fs::File;
 use std::io::Read;
 use std::path::Path;
 
@@ -13,25 +12,55 @@ use roitrack_core::TwistSample;
 
 use crate::FormatError;
 use crate::csv_util::{Row, check_time_order, csv_reader, read_header, read_row};
+use crate::limits::{DEFAULT_MAX_TRAJECTORY_FILE_BYTES, Limited, open_file};
 use crate::row_writer::RowWriter;
 
 const COLUMNS: [&str; 7] = ["t", "vx", "vy", "vz", "wx", "wy", "wz"];
+/// What the file should be, for errors.
+const WHAT: &str = "a twists CSV";
 
-/// Reads a twists CSV (see [`parse_twists_csv`]).
+/// Reads a twists CSV (see [`parse_twists_csv`]) of at most
+/// [`DEFAULT_MAX_TRAJECTORY_FILE_BYTES`](crate::DEFAULT_MAX_TRAJECTORY_FILE_BYTES).
 pub fn read_twists_csv(path: impl AsRef<Path>) -> Result<Vec<TwistSample>, FormatError> {
+    read_twists_csv_limited(path, DEFAULT_MAX_TRAJECTORY_FILE_BYTES)
+}
+
+/// Reads a twists CSV of at most `max_file_bytes` (a larger file is refused before it is read).
+///
+/// ```
+/// let dir = tempfile::tempdir().unwrap();
+/// let path = dir.path().join("twists.csv");
+/// std::fs::write(&path, "t,vx,vy,vz,wx,wy,wz\n0,0,0,0,0,0,0\n").unwrap();
+/// assert_eq!(roitrack_formats::read_twists_csv_limited(&path, 1000).unwrap().len(), 1);
+/// let e = roitrack_formats::read_twists_csv_limited(&path, 10).unwrap_err().to_string();
+/// assert!(e.contains("at most 10 bytes"), "{e}");
+/// ```
+pub fn read_twists_csv_limited(
+    path: impl AsRef<Path>,
+    max_file_bytes: u64,
+) -> Result<Vec<TwistSample>, FormatError> {
     let path = path.as_ref();
-    let file = File::open(path).map_err(|e| FormatError::io(path, "cannot open for reading", e))?;
-    parse_twists_csv(file, path)
+    let file = open_file(path, WHAT, Some(max_file_bytes))?;
+    parse_twists(file, path, max_file_bytes)
 }
 
 /// Parses a twists CSV from any byte source; `path` names it in errors. Every value must be a finite number and the
-/// times must increase strictly; a header-only file holds no twists, an empty one is an error.
+/// times must increase strictly; a header-only file holds no twists, an empty one is an error. Lines are at most
+/// [`MAX_LINE_BYTES`](crate::MAX_LINE_BYTES), the whole at most
+/// [`DEFAULT_MAX_TRAJECTORY_FILE_BYTES`](crate::DEFAULT_MAX_TRAJECTORY_FILE_BYTES).
 pub fn parse_twists_csv<R: Read>(
     reader: R,
     path: impl AsRef<Path>,
 ) -> Result<Vec<TwistSample>, FormatError> {
-    let path = path.as_ref();
-    let mut csv = csv_reader(reader);
+    parse_twists(reader, path.as_ref(), DEFAULT_MAX_TRAJECTORY_FILE_BYTES)
+}
+
+fn parse_twists<R: Read>(
+    reader: R,
+    path: &Path,
+    max_file_bytes: u64,
+) -> Result<Vec<TwistSample>, FormatError> {
+    let mut csv = csv_reader(Limited::new(reader, WHAT, Some(max_file_bytes)));
     read_header(&mut csv, path, &COLUMNS, None)?;
     let mut record = StringRecord::new();
     let mut twists = Vec::new();
