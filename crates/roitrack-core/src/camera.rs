@@ -40,7 +40,118 @@ pub enum CameraError {
     UndistortionDiverged { u_px: f64, v_px: f64 },
     #[error("{0}")]
     TimeModel(#[from] TimeModelError),
+    #[error(
+        "image of {width_px} x {height_px} px: an image is at most {MAX_IMAGE_SIDE_PX} px a side and \
+         {MAX_IMAGE_PIXELS} px in all (the largest sensors have under 200 million)"
+    )]
+    ImageTooLarge { width_px: u32, height_px: u32 },
+    /// An intrinsic that no camera has for its image (see [`CameraModel::new`] for the ranges). Boxed, as the
+    /// other details below, so that the error stays small to move.
+    #[error("{0}")]
+    Implausible(Box<ImplausibleIntrinsic>),
+    /// A lens model that is not a lens over its image (see [`check_lens`]).
+    #[error("{0}")]
+    Lens(Box<LensError>),
 }
+
+/// An intrinsic that no camera of its image has ([`CameraError::Implausible`]).
+#[derive(Debug, Clone, PartialEq, Error)]
+#[error(
+    "{field} = {} px is not a camera's for a {width_px} x {height_px} px image: {expected}",
+    number(*.value)
+)]
+pub struct ImplausibleIntrinsic {
+    /// `fx`, `fy`, `skew`, `cx` or `cy`.
+    pub field: &'static str,
+    pub value: f64,
+    pub width_px: u32,
+    pub height_px: u32,
+    /// The range it should be in, and why.
+    pub expected: &'static str,
+}
+
+/// Why a lens model is not a lens over its image ([`CameraError::Lens`], found by [`check_lens`]); each names the
+/// coefficient whose removal most relieves the failure.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum LensError {
+    /// The lens model is not invertible over the image: along a ray from the principal point, the distorted radius
+    /// stops growing (or the map's Jacobian turns singular) before the image's farthest corner, so pixels there have
+    /// two undistorted points or none.
+    #[error(
+        "{coefficient} = {}: the {model} lens model folds back {radius_px:.1} px from the principal point, inside \
+         the image (its farthest corner is {corner_px:.1} px away): beyond that its pixels have no single undistorted \
+         point, so the model is not invertible over the image (is {coefficient} right? a calibration's polynomial \
+         may turn back where it had no points)",
+        number(*.value)
+    )]
+    Folds {
+        model: &'static str,
+        coefficient: &'static str,
+        value: f64,
+        radius_px: f64,
+        corner_px: f64,
+    },
+    /// The lens model does not reach the image's farthest corner before 90° off the axis.
+    #[error(
+        "{coefficient} = {}: the {model} lens model reaches no further than {radius_px:.1} px from the principal \
+         point before 90° off the axis, but the image's farthest corner is {corner_px:.1} px away: pixels beyond \
+         have no undistorted point",
+        number(*.value)
+    )]
+    Short {
+        model: &'static str,
+        coefficient: &'static str,
+        value: f64,
+        radius_px: f64,
+        corner_px: f64,
+    },
+    /// The lens model moves a point of the image by more than its distance from the principal point.
+    #[error(
+        "{coefficient} = {}: the {model} lens model scales a point {radius_px:.1} px from the principal point \
+         by {scale:.3} (a distortion moves points by a fraction of their distance from the centre: its scale stays \
+         between 0 and 2 over the image, within 0.5 of 1 for real lenses): not a lens's coefficient",
+        number(*.value)
+    )]
+    TooStrong {
+        model: &'static str,
+        coefficient: &'static str,
+        value: f64,
+        radius_px: f64,
+        scale: f64,
+    },
+}
+
+impl LensError {
+    /// The coefficient named (`k1`, ...).
+    pub fn coefficient(&self) -> &'static str {
+        match self {
+            Self::Folds { coefficient, .. }
+            | Self::Short { coefficient, .. }
+            | Self::TooStrong { coefficient, .. } => coefficient,
+        }
+    }
+}
+
+/// `v` for a message: plain between 1e-4 and 1e9, else in exponent form (`1e-300`, not 300 zeros).
+fn number(v: f64) -> String {
+    if v == 0.0 || (1e-4..1e9).contains(&v.abs()) {
+        format!("{v}")
+    } else {
+        format!("{v:e}")
+    }
+}
+
+/// The largest image side (px) a camera may have: 65,536, four times the widest sensors'.
+pub const MAX_IMAGE_SIDE_PX: u32 = 1 << 16;
+/// The most pixels an image may have: 2^28 (268 million; the largest sensors have about 150 million), so that a
+/// 16-bit frame stays within 512 MiB.
+pub const MAX_IMAGE_PIXELS: u64 = 1 << 28;
+/// The longest focal length (px) a camera may have: 1e8, a 100 m focal length over 1 µm pixels (a large telescope's).
+pub const MAX_FOCAL_PX: f64 = 1e8;
+/// How far off the optical axis (as the tangent of the angle, in normalised units) a pinhole of the given focal
+/// lengths may see the image's corners: 100 is 89.4°. A shorter focal length makes every pixel a sliver of the last
+/// degree before 90°, which no lens does.
+pub const MAX_CORNER_NORMALISED_RADIUS: f64 = 100.0;
 
 /// Pinhole intrinsics (pixels): the camera matrix `[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -516,6 +627,31 @@ impl Distortion {
         }
     }
 
+    /// The same model with other coefficients (in the order of [`Self::coefficients`]; missing ones are 0).
+    fn with_coefficients(&self, c: &[f64]) -> Self {
+        let at = |i: usize| c.get(i).copied().unwrap_or(0.0);
+        match self {
+            Self::None => Self::None,
+            Self::PlumbBob(_) => {
+                PlumbBob::from_coefficients([at(0), at(1), at(2), at(3), at(4)]).into()
+            }
+            Self::RationalPolynomial(_) => RationalPolynomial::from_coefficients([
+                at(0),
+                at(1),
+                at(2),
+                at(3),
+                at(4),
+                at(5),
+                at(6),
+                at(7),
+            ])
+            .into(),
+            Self::Equidistant(_) => {
+                Equidistant::from_coefficients([at(0), at(1), at(2), at(3)]).into()
+            }
+        }
+    }
+
     /// The coefficients' names, in the order of [`Self::coefficients`].
     pub fn coefficient_names(&self) -> &'static [&'static str] {
         match self {
@@ -579,6 +715,225 @@ impl Distortion {
     }
 }
 
+/// The image's corners (pixel edges, at -0.5 and size - 0.5) in normalised (distorted) coordinates.
+fn corners_normalised(k: &PinholeIntrinsics, width_px: u32, height_px: u32) -> [Vector2<f64>; 4] {
+    let (w, h) = (f64::from(width_px) - 0.5, f64::from(height_px) - 0.5);
+    [(-0.5, -0.5), (w, -0.5), (-0.5, h), (w, h)]
+        .map(|(u, v)| k.normalized_from_pixel(&Vector2::new(u, v)))
+}
+
+/// Refuses intrinsics that no camera of a `width_px` x `height_px` image has (see [`CameraModel::new`]).
+fn check_intrinsics(
+    k: &PinholeIntrinsics,
+    width_px: u32,
+    height_px: u32,
+) -> Result<(), CameraError> {
+    let implausible = |field, value, expected| {
+        CameraError::Implausible(Box::new(ImplausibleIntrinsic {
+            field,
+            value,
+            width_px,
+            height_px,
+            expected,
+        }))
+    };
+    let (w, h) = (f64::from(width_px), f64::from(height_px));
+    let half_diagonal_px = 0.5 * w.hypot(h);
+    for (field, f) in [("fx", k.fx_px), ("fy", k.fy_px)] {
+        if f > MAX_FOCAL_PX {
+            return Err(implausible(
+                field,
+                f,
+                "a focal length is at most 1e8 px (a 100 m focal length over 1 µm pixels)",
+            ));
+        }
+        if half_diagonal_px / f > MAX_CORNER_NORMALISED_RADIUS {
+            return Err(implausible(
+                field,
+                f,
+                "a focal length is at least a hundredth of the image's half-diagonal (else a pinhole would see its \
+                 corner more than 89.4° off the axis)",
+            ));
+        }
+    }
+    if !(0.1..=10.0).contains(&(k.fy_px / k.fx_px)) {
+        return Err(implausible(
+            "fy",
+            k.fy_px,
+            "fy is within a factor of 10 of fx (pixels are near square)",
+        ));
+    }
+    if k.skew_px.abs() > 0.1 * k.fx_px {
+        return Err(implausible(
+            "skew",
+            k.skew_px,
+            "the skew is at most a tenth of fx (pixel axes within 6° of square; real sensors have under 0.1 px)",
+        ));
+    }
+    for (field, c, size) in [("cx", k.cx_px, w), ("cy", k.cy_px, h)] {
+        if !(-0.5 * size..=1.5 * size).contains(&c) {
+            return Err(implausible(
+                field,
+                c,
+                "the principal point is at most half the image's size beyond its edge (a calibration of a larger \
+                 image than this one?)",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// How many rays from the principal point [`check_lens`] follows: a lens's tangential terms vary as twice the
+/// azimuth, so 32 rays sample them every 11.25°.
+const LENS_CHECK_RAYS: usize = 32;
+
+/// Checks that `distortion` is a lens over the image of `k`, `width_px` x `height_px`: along rays from the principal
+/// point (undistorted directions, every 360° / 32), the undistorted point `n` walking out from the axis to 90° off it,
+/// until its distorted point is beyond the image's farthest corner, the model must
+///
+/// 1. keep the distorted radius growing and its Jacobian's determinant positive: invertible over the image (each of
+///    its pixels has one undistorted point). Where it folds back, [`LensError::Folds`];
+/// 2. reach the image's farthest corner before 90° off the axis ([`LensError::Short`]), except the
+///    equidistant model, whose normalised plane ends at 90°: a fisheye's image may extend beyond (its dark corners);
+/// 3. move the point by less than its distance from the centre, `|d(n) - n| < |n|`: a scale between 0 and 2, the
+///    symmetric bound of the barrel side's (below 0 a point would cross the centre). Real lenses stay within about
+///    0.5 of 1; beyond 2 the "distortion" is most of the projection ([`LensError::TooStrong`]).
+///
+/// The rays are sampled finely near the axis (where large coefficients act first) and every 0.06° beyond. The
+/// coefficient named is the one whose removal most relieves the failure where it is found.
+///
+/// ```
+/// use roitrack_core::camera::{CameraModel, Distortion, PlumbBob, check_lens};
+///
+/// let k = CameraModel::canonical().intrinsics;
+/// // A barrel lens whose radial map r (1 - 0.5 r²) turns back at r = 0.82, at a distorted radius of 0.54 (816 px
+/// // at fx = 1500): fine for the 1024 px image, whose farthest corner is 724 px from (512, 512), not for 2048 px.
+/// let lens = Distortion::from(PlumbBob::from_coefficients([-0.5, 0.0, 0.0, 0.0, 0.0]));
+/// assert!(check_lens(&k, &lens, 1024, 1024).is_ok());
+/// assert!(check_lens(&k, &lens, 2048, 2048).unwrap_err().to_string().starts_with("k1 = -0.5: the plumb_bob"));
+/// ```
+pub fn check_lens(
+    k: &PinholeIntrinsics,
+    distortion: &Distortion,
+    width_px: u32,
+    height_px: u32,
+) -> Result<(), CameraError> {
+    if distortion.is_identity() {
+        return Ok(());
+    }
+    let corner = corners_normalised(k, width_px, height_px)
+        .iter()
+        .map(|c| c.norm())
+        .fold(0.0, f64::max);
+    let radius_px =
+        |d: &Vector2<f64>| (k.pixel_from_normalized(d) - Vector2::new(k.cx_px, k.cy_px)).norm();
+    let corner_px = corners_normalised(k, width_px, height_px)
+        .iter()
+        .map(&radius_px)
+        .fold(0.0, f64::max);
+    let model = distortion.model_name();
+    // The angles off the axis (rad) sampled: geometric from 1e-6 rad to 1e-3 rad, then every 1e-3 rad (0.06°) to
+    // within 1e-3 rad of 90°.
+    let near_axis = (0..)
+        .map(|i| 1e-6 * 1.1f64.powi(i))
+        .take_while(|&a| a < 1e-3);
+    let beyond = (0..)
+        .map(|i| 1e-3 * f64::from(i + 1))
+        .take_while(|&a| a < std::f64::consts::FRAC_PI_2 - 1e-3);
+    let angles: Vec<f64> = near_axis.chain(beyond).collect();
+    for ray in 0..LENS_CHECK_RAYS {
+        let azimuth = std::f64::consts::TAU * ray as f64 / LENS_CHECK_RAYS as f64;
+        let direction = Vector2::new(azimuth.cos(), azimuth.sin());
+        let mut reached = 0.0f64;
+        let mut covered = false;
+        for &angle in &angles {
+            let n = direction * angle.tan();
+            let (d, j) = distortion.distort_with_jacobian(&n);
+            let d_norm = d.norm();
+            // d|d|/dr along the ray, and the map's local orientation.
+            let radial_slope = if d_norm > 0.0 {
+                d.dot(&(j * direction)) / d_norm
+            } else {
+                0.0
+            };
+            if !(radial_slope > 0.0 && j.determinant() > 0.0 && d_norm > reached) {
+                let (coefficient, value) = blame(distortion, |lens| {
+                    let (d, j) = lens.distort_with_jacobian(&n);
+                    let slope = d.dot(&(j * direction)) / d.norm().max(f64::MIN_POSITIVE);
+                    slope.min(j.determinant())
+                });
+                return Err(lens_error(LensError::Folds {
+                    model,
+                    coefficient,
+                    value,
+                    radius_px: radius_px(&d).min(corner_px),
+                    corner_px,
+                }));
+            }
+            let scale_error = (d - n).norm() / n.norm();
+            if scale_error >= 1.0 {
+                let (coefficient, value) =
+                    blame(distortion, |lens| -(lens.distort(&n) - n).norm() / n.norm());
+                return Err(lens_error(LensError::TooStrong {
+                    model,
+                    coefficient,
+                    value,
+                    radius_px: radius_px(&d),
+                    scale: d_norm / n.norm(),
+                }));
+            }
+            reached = d_norm;
+            if d_norm >= corner {
+                covered = true;
+                break;
+            }
+        }
+        if !covered && !matches!(distortion, Distortion::Equidistant(_)) {
+            let n = direction * angles.last().copied().unwrap_or(1.0).tan();
+            let (coefficient, value) = blame(distortion, |lens| lens.distort(&n).norm());
+            return Err(lens_error(LensError::Short {
+                model,
+                coefficient,
+                value,
+                radius_px: radius_px(&distortion.distort(&n)),
+                corner_px,
+            }));
+        }
+    }
+    Ok(())
+}
+
+fn lens_error(error: LensError) -> CameraError {
+    CameraError::Lens(Box::new(error))
+}
+
+/// The coefficient of `distortion` (name and value) whose removal raises `goodness` the most: the one to blame for
+/// a failure found where `goodness` is evaluated.
+fn blame(distortion: &Distortion, goodness: impl Fn(&Distortion) -> f64) -> (&'static str, f64) {
+    let names = distortion.coefficient_names();
+    let values = distortion.coefficients();
+    let base = goodness(distortion);
+    let mut best = (
+        names.first().copied().unwrap_or("distortion"),
+        values.first().copied().unwrap_or(0.0),
+    );
+    let mut best_gain = f64::NEG_INFINITY;
+    for (i, (&name, &value)) in names.iter().zip(&values).enumerate() {
+        if value == 0.0 {
+            continue;
+        }
+        let mut without = values.clone();
+        without[i] = 0.0;
+        let gain = goodness(&distortion.with_coefficients(&without)) - base;
+        // NaN (a map that overflowed without it) counts as no gain.
+        if gain > best_gain {
+            best_gain = gain;
+            best = (name, value);
+        }
+    }
+    best
+}
+
 /// A calibrated camera: image size, pinhole intrinsics, a lens distortion model, and when its pixels are exposed.
 ///
 /// ```
@@ -607,7 +962,30 @@ pub struct CameraModel {
 }
 
 impl CameraModel {
-    /// Builds a camera, refusing non-finite values, non-positive focal lengths and an empty image.
+    /// Builds a camera, refusing what no camera has:
+    ///
+    /// - a non-finite value, a non-positive focal length, an empty image, an image over [`MAX_IMAGE_SIDE_PX`] a side
+    ///   or [`MAX_IMAGE_PIXELS`] in all;
+    /// - focal lengths over [`MAX_FOCAL_PX`], or so short that the image's corner would be more than
+    ///   [`MAX_CORNER_NORMALISED_RADIUS`] (89.4°) off the axis of a pinhole; `fy` more than 10 times `fx` or less than
+    ///   a tenth of it; a skew over a tenth of `fx` (pixel axes more than 6° from square); a principal point more
+    ///   than half the image's size beyond its edge;
+    /// - a lens model that is not invertible over the image ([`CameraError::Lens`]: [`LensError::Folds`],
+    ///   [`LensError::Short`]) or that scales a point of the image by a factor outside (0, 2)
+    ///   ([`LensError::TooStrong`]), checked along 32 rays from the principal point out to the image's
+    ///   farthest corner (see [`check_lens`]).
+    ///
+    /// ```
+    /// use roitrack_core::camera::{CameraError, CameraModel, LensError, PlumbBob};
+    ///
+    /// let k = CameraModel::canonical().intrinsics;
+    /// assert!(CameraModel::new("ok", 1024, 1024, k, PlumbBob::from_coefficients([-0.2, 0.05, 0.0, 0.0, 0.0])).is_ok());
+    /// // k1 = -1e6 folds back a fraction of a pixel from the centre; k1 = 1e6 scales the image 60 times.
+    /// let folds = CameraModel::new("x", 1024, 1024, k, PlumbBob::from_coefficients([-1e6, 0.0, 0.0, 0.0, 0.0]));
+    /// assert!(matches!(folds, Err(CameraError::Lens(e)) if matches!(*e, LensError::Folds { coefficient: "k1", .. })));
+    /// let strong = CameraModel::new("x", 1024, 1024, k, PlumbBob::from_coefficients([1e6, 0.0, 0.0, 0.0, 0.0]));
+    /// assert!(matches!(strong, Err(CameraError::Lens(e)) if matches!(*e, LensError::TooStrong { coefficient: "k1", .. })));
+    /// ```
     pub fn new(
         name: impl Into<String>,
         width_px: u32,
@@ -622,8 +1000,19 @@ impl CameraModel {
                 height_px,
             });
         }
+        if width_px > MAX_IMAGE_SIDE_PX
+            || height_px > MAX_IMAGE_SIDE_PX
+            || u64::from(width_px) * u64::from(height_px) > MAX_IMAGE_PIXELS
+        {
+            return Err(CameraError::ImageTooLarge {
+                width_px,
+                height_px,
+            });
+        }
         intrinsics.validate()?;
+        check_intrinsics(&intrinsics, width_px, height_px)?;
         distortion.validate()?;
+        check_lens(&intrinsics, &distortion, width_px, height_px)?;
         Ok(Self {
             name: name.into(),
             width_px,

@@ -500,8 +500,22 @@ fn build(
             ));
         }
     };
-    CameraModel::new(name, width_px, height_px, intrinsics, distortion)
-        .map_err(|e| FormatError::new(path, e.to_string()))
+    CameraModel::new(name, width_px, height_px, intrinsics, distortion).map_err(|e| {
+        use roitrack_core::CameraError as E;
+        // The value at fault, by its name (fx, k1, ...): each format keeps it under a key of its own.
+        let field = match &e {
+            E::NotFinite { field, .. } | E::NotPositive { field, .. } => Some(*field),
+            E::Implausible(e) => Some(e.field),
+            E::Lens(e) => Some(e.coefficient()),
+            E::ImageTooLarge { .. } | E::EmptyImage { .. } => Some(size_fields.0),
+            E::UndistortionDiverged { .. } | E::TimeModel(_) => None,
+        };
+        let error = FormatError::new(path, e.to_string());
+        match field {
+            Some(field) => error.with_field(field),
+            None => error,
+        }
+    })
 }
 
 /// A camera read by the ROS YAML reader, with its size checked against the options.
@@ -1129,7 +1143,8 @@ version: 0
                 "  t1: 0.001\n  t2: -0.002\n",
                 [0.0, 0.0, 0.001, -0.002, 0.0],
             ),
-            ("  radial:\n  - -0.25\n", "", [-0.25, 0.0, 0.0, 0.0, 0.0]),
+            // (-0.25 alone would fold back inside this image: see `check_lens`.)
+            ("  radial:\n  - -0.2\n", "", [-0.2, 0.0, 0.0, 0.0, 0.0]),
             (
                 // SnakeYAML writes small doubles as Java does: 1.5E-4.
                 "  radial:\n  - -0.25\n  - 0.125\n  - 1.5E-4\n",

@@ -298,29 +298,49 @@ fn annotate_field(field: &str) -> String {
 
 /// A [`CameraError`] as a [`FormatError`] naming the YAML field of the offending value.
 fn camera_error(error: &CameraError, distortion: &Distortion, path: &Path) -> FormatError {
-    let field = match error {
+    let named = match error {
         CameraError::NotFinite { field, .. } | CameraError::NotPositive { field, .. } => {
-            match *field {
-                "fx" => "camera_matrix.data[0] (fx)".to_string(),
-                "skew" => "camera_matrix.data[1] (skew)".to_string(),
-                "cx" => "camera_matrix.data[2] (cx)".to_string(),
-                "fy" => "camera_matrix.data[4] (fy)".to_string(),
-                "cy" => "camera_matrix.data[5] (cy)".to_string(),
-                name => match distortion
-                    .coefficient_names()
-                    .iter()
-                    .position(|n| n == &name)
-                {
-                    Some(i) => format!("distortion_coefficients.data[{i}] ({name})"),
-                    None => name.to_string(),
-                },
-            }
+            Some(*field)
         }
-        CameraError::EmptyImage { width_px: 0, .. } => "image_width".to_string(),
-        CameraError::EmptyImage { .. } => "image_height".to_string(),
-        CameraError::UndistortionDiverged { .. } => "distortion_coefficients".to_string(),
+        CameraError::Implausible(e) => Some(e.field),
+        CameraError::Lens(e) => Some(e.coefficient()),
+        _ => None,
+    };
+    let field = match (error, named) {
+        (_, Some(name)) => match name {
+            "fx" => "camera_matrix.data[0] (fx)".to_string(),
+            "skew" => "camera_matrix.data[1] (skew)".to_string(),
+            "cx" => "camera_matrix.data[2] (cx)".to_string(),
+            "fy" => "camera_matrix.data[4] (fy)".to_string(),
+            "cy" => "camera_matrix.data[5] (cy)".to_string(),
+            name => match distortion
+                .coefficient_names()
+                .iter()
+                .position(|n| n == &name)
+            {
+                Some(i) => format!("distortion_coefficients.data[{i}] ({name})"),
+                None => name.to_string(),
+            },
+        },
+        (CameraError::EmptyImage { width_px: 0, .. }, _) => "image_width".to_string(),
+        (CameraError::EmptyImage { .. }, _) => "image_height".to_string(),
+        (CameraError::ImageTooLarge { width_px, .. }, _)
+            if *width_px > roitrack_core::camera::MAX_IMAGE_SIDE_PX =>
+        {
+            "image_width".to_string()
+        }
+        (CameraError::ImageTooLarge { .. }, _) => "image_height".to_string(),
+        (CameraError::UndistortionDiverged { .. }, _) => "distortion_coefficients".to_string(),
         // A camera_info file carries no time model: a camera read from one has the default (sequential ROIs).
-        CameraError::TimeModel(_) => "time model".to_string(),
+        (CameraError::TimeModel(_), _) => "time model".to_string(),
+        // Named above.
+        (
+            CameraError::NotFinite { .. }
+            | CameraError::NotPositive { .. }
+            | CameraError::Implausible(_)
+            | CameraError::Lens(_),
+            None,
+        ) => String::new(),
     };
     FormatError::new(path, error.to_string()).with_field(field)
 }
@@ -697,7 +717,8 @@ projection_matrix:
         let mut camera = distorted();
         camera.distortion =
             PlumbBob::from_coefficients([-0.28, 0.12, -2.5e-17, -8e-4, 1e-300]).into();
-        camera.intrinsics.fx_px = 1e300;
+        // Every digit of an f64, within the focal lengths a camera may have.
+        camera.intrinsics.fx_px = 1_234.567_890_123_456_7;
         camera.intrinsics.cy_px = -0.0;
         let back = parse_camera_yaml(&camera_yaml_string(&camera), "c.yaml").unwrap();
         assert_eq!(back, camera);

@@ -2621,12 +2621,19 @@ mod tests {
                 render_photo(&scene)
             );
         }
-        // A distortion that cannot be undistorted over the image is an error, not a panic.
+        // A distortion that cannot be undistorted over the image is refused when the camera is made; one put
+        // together by hand is an error of the renderer, not a panic.
+        let folding = PlumbBob::from_coefficients([-3.0, 0.0, 0.0, 0.0, 0.0]);
+        let k = vga(PlumbBob::default(), 300.0).intrinsics;
+        assert!(matches!(
+            CameraModel::new("vga", 640, 480, k, folding),
+            Err(CameraError::Lens(e)) if e.coefficient() == "k1"
+        ));
         let wild = PhotoScene {
-            camera: vga(
-                PlumbBob::from_coefficients([-3.0, 0.0, 0.0, 0.0, 0.0]),
-                300.0,
-            ),
+            camera: CameraModel {
+                distortion: folding.into(),
+                ..vga(PlumbBob::default(), 300.0)
+            },
             ..good
         };
         // (Newton may also find a ray on the far side of the fold: then the photograph is odd, but rendered.)

@@ -29,30 +29,34 @@ pub fn camera(width: u32, height: u32, f_px: f64, c_px: (f64, f64), k1: f64) -> 
 }
 
 /// The camera file a user has for `truth`: each focal length and principal point coordinate off by up to 2 % (of
-/// itself), k1 by up to 0.03.
+/// itself), k1 by up to 0.03. Drawn again if roitrack would refuse it (a k1 whose polynomial folds back inside the
+/// image is not invertible over it), as it refuses such a file.
 pub fn nominal(truth: &CameraModel, rng: &mut ChaCha8Rng) -> CameraModel {
     let k = &truth.intrinsics;
-    let mut off = |x: f64| x * (1.0 + rng.random_range(-0.02..0.02));
-    let intrinsics = PinholeIntrinsics {
-        fx_px: off(k.fx_px),
-        fy_px: off(k.fy_px),
-        skew_px: 0.0,
-        cx_px: off(k.cx_px),
-        cy_px: off(k.cy_px),
-    };
     let roitrack_core::camera::Distortion::PlumbBob(d) = truth.distortion else {
         unreachable!()
     };
-    let distortion = PlumbBob {
-        k1: d.k1 + rng.random_range(-0.03..0.03),
-        ..d
-    };
-    CameraModel::new(
-        "nominal",
-        truth.width_px,
-        truth.height_px,
-        intrinsics,
-        distortion,
-    )
-    .unwrap()
+    loop {
+        let mut off = |x: f64| x * (1.0 + rng.random_range(-0.02..0.02));
+        let intrinsics = PinholeIntrinsics {
+            fx_px: off(k.fx_px),
+            fy_px: off(k.fy_px),
+            skew_px: 0.0,
+            cx_px: off(k.cx_px),
+            cy_px: off(k.cy_px),
+        };
+        let distortion = PlumbBob {
+            k1: d.k1 + rng.random_range(-0.03..0.03),
+            ..d
+        };
+        if let Ok(camera) = CameraModel::new(
+            "nominal",
+            truth.width_px,
+            truth.height_px,
+            intrinsics,
+            distortion,
+        ) {
+            return camera;
+        }
+    }
 }
