@@ -117,7 +117,7 @@ fn frames_are_written_with_their_times_truth_and_how_to_track_them() {
     // The frame source reads the folder with its timestamps.
     let timing = FrameTiming {
         timestamps: Some(out.join("timestamps.csv")),
-        fps: None,
+        ..FrameTiming::default()
     };
     let mut source = FrameSource::open(out.join("frames"), &timing).unwrap();
     let mut count = 0;

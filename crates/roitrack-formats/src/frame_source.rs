@@ -11,6 +11,7 @@ use crate::FormatError;
 use crate::csv_util::{Row, check_time_order, csv_reader, read_row};
 use crate::image_file::{decode_frame_into, read_image_file};
 use crate::limits::{Limited, MAX_TIMESTAMPS_FILE_BYTES, open_file};
+use crate::units::{TimeUnit, check_time_unit};
 use crate::video::{Tools, VIDEO_EXTENSIONS, VideoDecoder};
 
 /// File extensions of the images a folder or a pattern is read for (compared without regard to case).
@@ -27,19 +28,34 @@ const PATTERN_START_NUMBERS: std::ops::RangeInclusive<u64> = 0..=4;
 /// ```
 /// use roitrack_formats::FrameTiming;
 ///
-/// let from_csv = FrameTiming { timestamps: Some("times.csv".into()), fps: None };
+/// use roitrack_formats::TimeUnit;
+///
+/// let from_csv = FrameTiming { timestamps: Some("times.csv".into()), ..FrameTiming::default() };
+/// let from_csv_in_ms = FrameTiming { time_units: Some(TimeUnit::Ms), ..from_csv.clone() };
 /// let at_100_hz = FrameTiming { fps: Some(100.0), ..FrameTiming::default() };
 /// let video_own = FrameTiming::default(); // videos only: image sequences have no times of their own
-/// # let _ = (from_csv, at_100_hz, video_own);
+/// # let _ = (from_csv, from_csv_in_ms, at_100_hz, video_own);
 /// ```
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct FrameTiming {
     /// A CSV file with a header, a column `t` (s) and one row per frame, in order; optionally a column `file`
     /// holding each frame's file name (without its folder), checked against the frame's (image sequences only).
     pub timestamps: Option<PathBuf>,
-    /// A constant frame rate (frames per second): frame `i` is at `i / fps` s.
+    /// A constant frame rate (frames per second): frame `i` is at `i / fps` s; from [`MIN_FRAME_RATE_HZ`] to
+    /// [`MAX_FRAME_RATE_HZ`].
     pub fps: Option<f64>,
+    /// The unit of the timestamps CSV's times. `None`: seconds, and times that look like milliseconds, microseconds
+    /// or nanoseconds are refused (as a measurements file's are: frames more than 0.2 s apart, the median over the
+    /// first 1,000 rows, or times past the year 5000), naming the likely unit.
+    pub time_units: Option<TimeUnit>,
 }
+
+/// The lowest frame rate (`--fps`, Hz) taken: a frame every 1,000 s.
+pub const MIN_FRAME_RATE_HZ: f64 = 1e-3;
+/// The highest frame rate (`--fps`, Hz) taken: 10 million frames a second, beyond the fastest cameras built.
+pub const MAX_FRAME_RATE_HZ: f64 = 1e7;
+/// How many timestamps the unit check looks at.
+const TIME_CHECK_ROWS: usize = 1000;
 
 /// What was read into the frame by [`FrameSource::next_frame`].
 #[derive(Debug, Clone, PartialEq)]
@@ -87,10 +103,12 @@ pub enum SourceKind {
 ///
 /// - a **timestamps CSV** (`--timestamps FILE.csv`): a header naming `t` and optionally `file` (in either order, no
 ///   other column), then one row per frame in order; `t` finite and strictly increasing; `file`, when present, equal
-///   to the frame's file name (a video's frames have none: a `file` column is refused for a video). For an image
+///   to the frame's file name (a video's frames have none: a `file` column is refused for a video); times that look
+///   like milliseconds, microseconds or nanoseconds refused unless [`FrameTiming::time_units`] says the unit. For an image
 ///   sequence the whole file is checked at `open`, row count included; for a video, rows are matched as frames come
 ///   and the count is checked at the end;
-/// - else a **frame rate** (`--fps F`): frame `i` at `i / F` s (`F` finite and above 0);
+/// - else a **frame rate** (`--fps F`): frame `i` at `i / F` s (`F` from [`MIN_FRAME_RATE_HZ`] to
+///   [`MAX_FRAME_RATE_HZ`]);
 /// - else, for a video, **its own timestamps**: each decoded frame's presentation time, as the container gives it
 ///   (not shifted to start at 0), listed by `ffprobe` alongside the decoding; for an image sequence, an error:
 ///   roitrack never guesses frame times.
@@ -208,19 +226,38 @@ impl FrameSource {
         }
         let is_video = kind == SourceKind::Video;
         let times = if let Some(csv) = &timing.timestamps {
-            let rows = read_times_csv(csv, is_video)?;
+            let mut rows = read_times_csv(csv, is_video)?;
             if let Some(files) = &files {
                 check_rows_against_files(csv, &rows, files)?;
+            }
+            match timing.time_units {
+                Some(unit) => rows.iter_mut().for_each(|row| row.t_s *= unit.seconds()),
+                None => {
+                    let first: Vec<(f64, u64)> = rows
+                        .iter()
+                        .take(TIME_CHECK_ROWS)
+                        .map(|row| (row.t_s, row.line))
+                        .collect();
+                    check_time_unit(&first, csv, "frames")?;
+                }
             }
             Times::Csv {
                 path: csv.clone(),
                 rows,
             }
         } else if let Some(fps) = timing.fps {
-            if !(fps.is_finite() && fps > 0.0) {
+            if !(MIN_FRAME_RATE_HZ..=MAX_FRAME_RATE_HZ).contains(&fps) {
                 return Err(FormatError::new(
                     source,
-                    format!("frame rate {fps} fps: --fps must be a finite number above 0"),
+                    format!(
+                        "frame rate {} fps: --fps must be from {MIN_FRAME_RATE_HZ} (a frame every 1,000 s) to \
+                         {MAX_FRAME_RATE_HZ:e} (beyond the fastest cameras)",
+                        if (1e-4..1e9).contains(&fps.abs()) {
+                            format!("{fps}")
+                        } else {
+                            format!("{fps:e}")
+                        }
+                    ),
                 ));
             }
             Times::Fps(fps)

@@ -85,7 +85,10 @@ pub use covariance::{
 };
 pub use error::FormatError;
 pub use estimates::{DIAGNOSTICS_HEADER, EstimateWriter};
-pub use frame_source::{FRAME_IMAGE_EXTENSIONS, FrameInfo, FrameSource, FrameTiming, SourceKind};
+pub use frame_source::{
+    FRAME_IMAGE_EXTENSIONS, FrameInfo, FrameSource, FrameTiming, MAX_FRAME_RATE_HZ,
+    MIN_FRAME_RATE_HZ, SourceKind,
+};
 pub use image_file::{
     FRAME_IMAGE_FORMATS, check_frame_size, decode_frame, read_frame, write_frame_png,
 };

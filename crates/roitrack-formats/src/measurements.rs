@@ -72,6 +72,14 @@ pub enum MeasurementProblem {
         /// The previous measurement's time (s).
         previous_t_s: f64,
     },
+    /// A point measured a second time at the same time: a row given twice, which would count as two independent
+    /// measurements (twice the estimates, a covariance too small).
+    Duplicate {
+        /// The point id.
+        id: u32,
+        /// The time (s).
+        t_s: f64,
+    },
 }
 
 impl MeasurementProblem {
@@ -79,7 +87,7 @@ impl MeasurementProblem {
     pub fn field(&self) -> MeasurementField {
         match *self {
             Self::NotFinite { field, .. } | Self::OffImage { field, .. } => field,
-            Self::UnknownId { .. } => MeasurementField::Id,
+            Self::UnknownId { .. } | Self::Duplicate { .. } => MeasurementField::Id,
             Self::OutOfOrder { .. } => MeasurementField::Time,
         }
     }
@@ -115,6 +123,11 @@ impl std::fmt::Display for MeasurementProblem {
                 "time {t_s} s is earlier than {previous_t_s} s, the previous measurement's: measurements must be \
                  in time order"
             ),
+            Self::Duplicate { id, t_s } => write!(
+                f,
+                "point {id} is measured twice at t = {t_s} s: a point has one centroid at a time (a row given \
+                 twice?)"
+            ),
         }
     }
 }
@@ -122,7 +135,8 @@ impl std::fmt::Display for MeasurementProblem {
 /// The checks every measurement gets, whichever reader it comes from ([`MeasurementReader`], the ROS 2 bag reader):
 /// time and centroid finite; with [`with_known_ids`](Self::with_known_ids), an id of the target; with
 /// [`with_image_size`](Self::with_image_size), the centroid on the image; the time not before the previous
-/// measurement's. [`check`](Self::check) says what is wrong, so that each reader names the place its own way.
+/// measurement's; no point measured twice at one time. [`check`](Self::check) says what is wrong, so that each reader
+/// names the place its own way.
 ///
 /// ```
 /// use roitrack_core::Measurement;
@@ -136,6 +150,8 @@ impl std::fmt::Display for MeasurementProblem {
 /// assert!(problem.to_string().starts_with("time 0.25 s is earlier than 0.5 s"));
 /// let problem = checks.check(&Measurement { id: 9, ..m }).unwrap_err();
 /// assert_eq!(problem.to_string(), "unknown point id 9: the target has no such point");
+/// let problem = checks.check(&m).unwrap_err();
+/// assert!(problem.to_string().starts_with("point 1 is measured twice at t = 0.5 s"));
 /// ```
 #[derive(Debug, Clone, Default)]
 pub struct MeasurementChecks {
@@ -144,6 +160,8 @@ pub struct MeasurementChecks {
     image_size: Option<(u32, u32)>,
     /// The time (s) of the last measurement that passed.
     previous_t_s: Option<f64>,
+    /// The points measured at that time.
+    ids_at_time: HashSet<u32>,
 }
 
 impl MeasurementChecks {
@@ -207,6 +225,15 @@ impl MeasurementChecks {
                 previous_t_s,
             });
         }
+        if self.previous_t_s != Some(m.t_s) {
+            self.ids_at_time.clear();
+        }
+        if !self.ids_at_time.insert(m.id) {
+            return Err(MeasurementProblem::Duplicate {
+                id: m.id,
+                t_s: m.t_s,
+            });
+        }
         self.previous_t_s = Some(m.t_s);
         Ok(())
     }
@@ -226,6 +253,9 @@ pub struct MeasurementReader<R: Read> {
     checks: MeasurementChecks,
     /// The line of the last row read (0 before the first).
     line: u64,
+    /// The points and lines of the rows at the last row's time, to name the first of a duplicate.
+    lines_at_time: Vec<(u32, u64)>,
+    time_of_lines: Option<f64>,
     done: bool,
 }
 
@@ -253,6 +283,8 @@ impl<R: Read> MeasurementReader<R> {
             path,
             checks: MeasurementChecks::new(),
             line: 0,
+            lines_at_time: Vec::new(),
+            time_of_lines: None,
             done: false,
         })
     }
@@ -314,10 +346,26 @@ impl<R: Read> MeasurementReader<R> {
                     "time {t_s} s is earlier than {previous_t_s} s on line {}: rows must be in time order",
                     self.line
                 ),
+                MeasurementProblem::Duplicate { id, t_s } => {
+                    let first = self
+                        .lines_at_time
+                        .iter()
+                        .find(|(seen, _)| *seen == id)
+                        .map_or(0, |(_, line)| *line);
+                    format!(
+                        "point {id} at t = {t_s} s is already on line {first}: a point has one centroid at a time \
+                         (a row given twice?)"
+                    )
+                }
                 _ => problem.to_string(),
             };
             return Err(row.error(column, message));
         }
+        if self.time_of_lines != Some(m.t_s) {
+            self.lines_at_time.clear();
+            self.time_of_lines = Some(m.t_s);
+        }
+        self.lines_at_time.push((m.id, line));
         self.line = line;
         Ok(Some(m))
     }
@@ -521,6 +569,24 @@ mod tests {
         // No header at all: the first data row is taken as one and refused.
         let e = parse_err("0,1,1,1\n");
         assert!(e.starts_with("measurements.csv:1: field 't': "), "{e}");
+    }
+
+    #[test]
+    fn a_point_measured_twice_at_one_time_names_both_lines() {
+        // Distinct points at one time (a frame) are fine; the same point again is a row given twice.
+        let text = "t,id,u,v\n0,1,1,1\n0.5,1,1,1\n0.5,2,1,1\n0.5,3,1,1\n0.5,2,1,1\n";
+        let e = parse_err(text);
+        assert_eq!(
+            e,
+            "measurements.csv:6: field 'id': point 2 at t = 0.5 s is already on line 4: a point has one centroid \
+             at a time (a row given twice?)"
+        );
+        assert_eq!(
+            parse("t,id,u,v\n0,1,1,1\n0,2,1,1\n0.5,1,1,1\n0.5,2,1,1\n")
+                .unwrap()
+                .len(),
+            4
+        );
     }
 
     #[test]

@@ -240,72 +240,81 @@ impl<R: Read> TimedMeasurements<R> {
                 None => break,
             }
         }
-        let path = self.reader.path().to_path_buf();
-        let error = |line: u64, message: String| {
-            FormatError::new(&path, message)
-                .with_line(line)
-                .with_field("t")
+        let times: Vec<(f64, u64)> = self.ahead.iter().map(|(m, line)| (m.t_s, *line)).collect();
+        check_time_unit(&times, self.reader.path(), "measurements")
+    }
+}
+
+/// Refuses `times` (each with its line; the first rows of a file, in order) that look like milliseconds,
+/// microseconds or nanoseconds read as seconds: a time above [`MAX_PLAUSIBLE_TIME_S`], or a median step between
+/// successive distinct times above [`MAX_PLAUSIBLE_MEDIAN_STEP_S`]. `things` names the rows in the message
+/// (`measurements`, `frames`); the error names the line and the field `t`, the likely unit and the option.
+pub(crate) fn check_time_unit(
+    times: &[(f64, u64)],
+    path: &Path,
+    things: &str,
+) -> Result<(), FormatError> {
+    let error = |line: u64, message: String| {
+        FormatError::new(path, message)
+            .with_line(line)
+            .with_field("t")
+    };
+    if let Some((t_s, line)) = times
+        .iter()
+        .find(|(t_s, _)| t_s.abs() > MAX_PLAUSIBLE_TIME_S)
+    {
+        let unit = if t_s.abs() < 1e14 {
+            TimeUnit::Ms
+        } else if t_s.abs() < 1e17 {
+            TimeUnit::Us
+        } else {
+            TimeUnit::Ns
         };
-        if let Some((m, line)) = self
-            .ahead
-            .iter()
-            .find(|(m, _)| m.t_s.abs() > MAX_PLAUSIBLE_TIME_S)
-        {
-            let unit = if m.t_s.abs() < 1e14 {
-                TimeUnit::Ms
-            } else if m.t_s.abs() < 1e17 {
-                TimeUnit::Us
-            } else {
-                TimeUnit::Ns
-            };
-            return Err(error(
-                *line,
-                format!(
-                    "t = {} read as seconds is past the year 5000: the times look like {}; give --time-units {} \
-                     (or --time-units s if they really are seconds)",
-                    m.t_s,
-                    unit_words(unit),
-                    unit.name()
-                ),
-            ));
-        }
-        let mut steps: Vec<(f64, u64)> = self
-            .ahead
-            .iter()
-            .zip(self.ahead.iter().skip(1))
-            .filter(|(a, b)| b.0.t_s > a.0.t_s)
-            .map(|(a, b)| (b.0.t_s - a.0.t_s, b.1))
-            .collect();
-        if steps.is_empty() {
-            return Ok(());
-        }
-        let line = steps[0].1;
-        let mid = steps.len() / 2;
-        let median = steps
-            .select_nth_unstable_by(mid, |a, b| a.0.total_cmp(&b.0))
-            .1
-            .0;
-        if median <= MAX_PLAUSIBLE_MEDIAN_STEP_S {
-            return Ok(());
-        }
-        let unit = [TimeUnit::Ms, TimeUnit::Us, TimeUnit::Ns]
-            .into_iter()
-            .find(|u| median * u.seconds() <= MAX_PLAUSIBLE_MEDIAN_STEP_S)
-            .unwrap_or(TimeUnit::Ns);
-        Err(error(
-            line,
+        return Err(error(
+            *line,
             format!(
-                "successive measurements are {median} apart (the median over the first {} rows): {:.3} Hz if the \
-                 times are seconds; they look like {} ({}); give --time-units {} to read them so, or \
-                 --time-units s if they really are seconds",
-                self.ahead.len(),
-                1.0 / median,
+                "t = {t_s} read as seconds is past the year 5000: the times look like {}; give --time-units {} \
+                 (or --time-units s if they really are seconds)",
                 unit_words(unit),
-                format_rate(1.0 / (median * unit.seconds())),
                 unit.name()
             ),
-        ))
+        ));
     }
+    let mut steps: Vec<(f64, u64)> = times
+        .iter()
+        .zip(times.iter().skip(1))
+        .filter(|(a, b)| b.0 > a.0)
+        .map(|(a, b)| (b.0 - a.0, b.1))
+        .collect();
+    if steps.is_empty() {
+        return Ok(());
+    }
+    let line = steps[0].1;
+    let mid = steps.len() / 2;
+    let median = steps
+        .select_nth_unstable_by(mid, |a, b| a.0.total_cmp(&b.0))
+        .1
+        .0;
+    if median <= MAX_PLAUSIBLE_MEDIAN_STEP_S {
+        return Ok(());
+    }
+    let unit = [TimeUnit::Ms, TimeUnit::Us, TimeUnit::Ns]
+        .into_iter()
+        .find(|u| median * u.seconds() <= MAX_PLAUSIBLE_MEDIAN_STEP_S)
+        .unwrap_or(TimeUnit::Ns);
+    Err(error(
+        line,
+        format!(
+            "successive {things} are {median} apart (the median over the first {} rows): {:.3} Hz if the \
+             times are seconds; they look like {} ({}); give --time-units {} to read them so, or \
+             --time-units s if they really are seconds",
+            times.len(),
+            1.0 / median,
+            unit_words(unit),
+            format_rate(1.0 / (median * unit.seconds())),
+            unit.name()
+        ),
+    ))
 }
 
 fn unit_words(unit: TimeUnit) -> &'static str {

@@ -200,7 +200,7 @@ fn readers_refuse_unbounded_inputs_without_growing() {
     }
     let timing = FrameTiming {
         timestamps: Some(path("times.csv")),
-        fps: None,
+        ..FrameTiming::default()
     };
     refused("timestamps", &line_2("times.csv"), || {
         FrameSource::open(&frames, &timing)
@@ -225,7 +225,7 @@ fn readers_refuse_unbounded_inputs_without_growing() {
         refused("/dev/zero as an image", "/dev/zero: ", || read_frame(zero));
         let timing = FrameTiming {
             timestamps: Some(zero.into()),
-            fps: None,
+            ..FrameTiming::default()
         };
         refused("/dev/zero as timestamps", "/dev/zero:1: line 1", || {
             FrameSource::open(&frames, &timing)

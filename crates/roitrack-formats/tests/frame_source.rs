@@ -6,7 +6,7 @@ use std::process::Command;
 use std::sync::Mutex;
 
 use roitrack_formats::{
-    FrameInfo, FrameSource, FrameTiming, SourceKind, read_frame, write_frame_png,
+    FrameInfo, FrameSource, FrameTiming, SourceKind, TimeUnit, read_frame, write_frame_png,
 };
 use roitrack_image::Frame;
 
@@ -44,10 +44,13 @@ fn fps(f: f64) -> FrameTiming {
     }
 }
 
+/// A timestamps CSV in seconds, said so: these tests' frames are slow (a second apart), which the unit check would
+/// take for milliseconds (`frame_times_in_milliseconds_are_caught` tests that check).
 fn csv_timing(path: &Path) -> FrameTiming {
     FrameTiming {
         timestamps: Some(path.to_path_buf()),
-        fps: None,
+        time_units: Some(TimeUnit::S),
+        ..FrameTiming::default()
     }
 }
 
@@ -414,10 +417,10 @@ fn frame_rates_must_be_finite_and_positive_and_times_must_be_given() {
     let times: Vec<f64> = frames.iter().map(|(i, _)| i.t_s).collect();
     assert_eq!(times, [0.0, 0.25, 0.5]);
 
-    for bad in [0.0, -10.0, f64::NAN, f64::INFINITY] {
+    for bad in [0.0, -10.0, f64::NAN, f64::INFINITY, 1e300, 1e-4] {
         let e = open_error(dir.path(), &fps(bad));
         assert!(e.starts_with(&dir.path().display().to_string()), "{e}");
-        assert_contains(&e, &["--fps must be a finite number above 0"]);
+        assert_contains(&e, &["--fps must be from 0.001", "to 1e7"]);
     }
 
     let e = open_error(dir.path(), &FrameTiming::default());
@@ -434,6 +437,7 @@ fn frame_rates_must_be_finite_and_positive_and_times_must_be_given() {
     let both = FrameTiming {
         timestamps: Some(csv),
         fps: Some(10.0),
+        ..FrameTiming::default()
     };
     assert_contains(&open_error(dir.path(), &both), &["not both"]);
 }
@@ -939,4 +943,48 @@ fn dropping_a_video_source_leaves_no_process_behind() {
         assert_eq!(frames.len(), 10);
     }
     assert_eq!(ffmpeg_children(), []);
+}
+
+#[test]
+fn frame_times_in_milliseconds_are_caught() {
+    let dir = three_frames();
+    let csv = write_csv(dir.path(), "t\n0\n33.4\n66.7\n");
+    let unchecked = FrameTiming {
+        timestamps: Some(csv.clone()),
+        ..FrameTiming::default()
+    };
+    let e = open_error(dir.path(), &unchecked);
+    assert!(
+        e.starts_with(&format!(
+            "{}:3: field 't': successive frames are 33.",
+            csv.display()
+        )),
+        "{e}"
+    );
+    assert_contains(&e, &["milliseconds (29.", "--time-units ms"]);
+    // Said in milliseconds, they are read so.
+    let in_ms = FrameTiming {
+        time_units: Some(TimeUnit::Ms),
+        ..unchecked.clone()
+    };
+    let (frames, error) = read_all(&mut open(dir.path(), &in_ms));
+    assert!(error.is_none());
+    let times: Vec<f64> = frames.iter().map(|(info, _)| info.t_s).collect();
+    assert_eq!(times, [0.0, 33.4 * 1e-3, 66.7 * 1e-3]);
+    // Nanoseconds since 1970 are past the year 5000 as seconds.
+    let csv = write_csv(
+        dir.path(),
+        "t\n1700000000000000000\n1700000000033000000\n1700000000066000000\n",
+    );
+    let e = open_error(
+        dir.path(),
+        &FrameTiming {
+            timestamps: Some(csv),
+            ..FrameTiming::default()
+        },
+    );
+    assert_contains(
+        &e,
+        &[":2: field 't'", "past the year 5000", "--time-units ns"],
+    );
 }

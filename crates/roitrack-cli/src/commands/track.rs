@@ -40,10 +40,10 @@ pub struct TrackArgs {
     /// Default: none.
     #[arg(long, conflicts_with = "images")]
     pub rois: Option<PathBuf>,
-    /// With --measurements: the unit of the times. Default: seconds, and times more than 0.2 apart (median over the
-    /// first 1,000 rows, slower than 5 Hz) or past the year 5000 are refused as likely ms, us or ns (give s to read
-    /// them as seconds anyway).
-    #[arg(long, value_enum, value_name = "UNIT", requires = "measurements")]
+    /// With --measurements or --timestamps: the unit of the times. Default: seconds, and times more than 0.2 apart
+    /// (median over the first 1,000 rows, slower than 5 Hz) or past the year 5000 are refused as likely ms, us or ns
+    /// (give s to read them as seconds anyway).
+    #[arg(long, value_enum, value_name = "UNIT")]
     pub time_units: Option<TimeUnitArg>,
     /// Instead of centroids: frames. A folder of images (PNG, JPEG, PGM/PPM, TIFF, in natural order: frame2 before
     /// frame10), a numbered pattern (`frames/frame_%05d.png`), a quoted glob (`'frames/*.png'`), or a video (mp4,
@@ -129,6 +129,9 @@ pub struct TrackArgs {
 
 pub fn run(args: &TrackArgs) -> Result<()> {
     check_paths(args)?;
+    if args.time_units.is_some() && args.measurements.is_none() && args.timestamps.is_none() {
+        bail!("--time-units is the unit of the times of --measurements or --timestamps, and neither is given");
+    }
     let camera = crate::ros::camera(args.camera.as_ref(), args.images.as_deref(), &args.mcap_in)?;
     let target = args.target.read()?;
     if let Some(source) = &args.images
@@ -313,6 +316,7 @@ fn run_frames(
     let timing = roitrack::formats::FrameTiming {
         timestamps: args.timestamps.clone(),
         fps: args.fps,
+        time_units: args.time_units.map(Into::into),
     };
     let mut frames = crate::ros::Frames::open(source, &timing, &args.mcap_in, &camera)?;
     let (mut bag, copy_frames) = (
