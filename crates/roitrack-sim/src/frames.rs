@@ -195,7 +195,15 @@ pub enum FrameSequenceError {
     Sensor(#[from] SensorError),
     #[error("the truth rate must be a finite positive number, got {rate_hz} Hz")]
     TruthRate { rate_hz: f64 },
+    #[error(
+        "{frame_count} frames at {fps_hz} Hz: a simulated sequence has at most {MAX_FRAMES} frames (each a PNG file); \
+         lower the frame rate or the duration"
+    )]
+    TooManyFrames { frame_count: usize, fps_hz: f64 },
 }
+
+/// The most frames a sequence may have: 100,000 (55 minutes at 30 Hz), each written as a file of up to a few MB.
+pub const MAX_FRAMES: usize = 100_000;
 
 /// The ground truth of a sequence: poses and twists at the same times, increasing.
 ///
@@ -324,6 +332,12 @@ impl FrameSequence {
                 (room_s * fps_hz + 1e-9).floor() as usize + 1
             }
         });
+        if frame_count > MAX_FRAMES {
+            return Err(FrameSequenceError::TooManyFrames {
+                frame_count,
+                fps_hz,
+            });
+        }
         if frame_count == 0 {
             return Err(FrameSequenceError::NoFrames {
                 frame_count,
@@ -599,31 +613,70 @@ impl FrameSequence {
     /// assert!(truth.poses.windows(2).all(|w| w[1].t_s - w[0].t_s <= 1.0 / DEFAULT_TRUTH_RATE_HZ + 1e-12));
     /// ```
     pub fn truth_samples(&self, rate_hz: f64) -> Result<FrameTruth, FrameSequenceError> {
+        let mut truth = FrameTruth {
+            poses: Vec::new(),
+            twists: Vec::new(),
+        };
+        for (pose, twist) in self.truth_iter(rate_hz)? {
+            truth.poses.push(pose);
+            truth.twists.push(twist);
+        }
+        Ok(truth)
+    }
+
+    /// The samples of [`Self::truth_samples`], one at a time (in constant memory, for long sequences): the regular
+    /// grid and the frames' times merged in order, a time within 1e-9 s of the one before left out.
+    ///
+    /// ```
+    /// use roitrack_sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
+    ///
+    /// let frames = FrameSequence::new(&Scenario::new(ScenarioKind::Sweep, 1), &FrameOptions::default()).unwrap();
+    /// let streamed: Vec<_> = frames.truth_iter(2000.0).unwrap().map(|(pose, _)| pose).collect();
+    /// assert_eq!(streamed, frames.truth_samples(2000.0).unwrap().poses);
+    /// ```
+    pub fn truth_iter(
+        &self,
+        rate_hz: f64,
+    ) -> Result<impl Iterator<Item = (PoseSample, TwistSample)> + '_, FrameSequenceError> {
         if !(rate_hz.is_finite() && rate_hz > 0.0) {
             return Err(FrameSequenceError::TruthRate { rate_hz });
         }
         let (start_s, end_s) = self.span_s();
         let regular = ((end_s - start_s) * rate_hz).floor() as usize;
         // The regular grid stops short of the end so that the end itself is never the duplicate dropped below.
-        let mut times: Vec<f64> = (0..=regular)
-            .map(|i| start_s + i as f64 / rate_hz)
-            .filter(|t| *t < end_s - 1e-9)
-            .chain((0..self.frame_count).map(|k| self.frame_time_s(k)))
+        let mut grid = (0..=regular)
+            .map(move |i| start_s + i as f64 / rate_hz)
+            .filter(move |t| *t < end_s - 1e-9)
+            .peekable();
+        let mut frames = (0..self.frame_count)
+            .map(|k| self.frame_time_s(k))
             .chain(std::iter::once(end_s))
-            .collect();
-        times.sort_by(f64::total_cmp);
-        // A frame time on the regular grid would repeat a sample (up to rounding).
-        times.dedup_by(|later, earlier| *later - *earlier < 1e-9);
-        let mut truth = FrameTruth {
-            poses: Vec::with_capacity(times.len()),
-            twists: Vec::with_capacity(times.len()),
-        };
-        for t_s in times {
+            .peekable();
+        let mut last: Option<f64> = None;
+        let times = std::iter::from_fn(move || {
+            loop {
+                // The smaller of the two heads (both sequences increase), as a sort of their union would give.
+                let t_s = match (grid.peek(), frames.peek()) {
+                    (Some(&g), Some(&f)) if g.total_cmp(&f).is_le() => grid.next(),
+                    (Some(_), Some(_)) | (None, Some(_)) => frames.next(),
+                    (Some(_), None) => grid.next(),
+                    (None, None) => None,
+                }?;
+                // A frame time on the regular grid would repeat a sample (up to rounding).
+                if last.is_some_and(|previous| t_s - previous < 1e-9) {
+                    continue;
+                }
+                last = Some(t_s);
+                return Some(t_s);
+            }
+        });
+        Ok(times.map(|t_s| {
             let state = self.scenario.state_at(t_s);
-            truth.poses.push(PoseSample::from_state(t_s, &state));
-            truth.twists.push(TwistSample::from_state(t_s, &state));
-        }
-        Ok(truth)
+            (
+                PoseSample::from_state(t_s, &state),
+                TwistSample::from_state(t_s, &state),
+            )
+        }))
     }
 }
 

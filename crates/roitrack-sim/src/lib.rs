@@ -20,15 +20,15 @@ pub mod scenario;
 
 pub use frames::{
     DARK_BLOB_CONTRAST, DEFAULT_TRUTH_RATE_HZ, FrameOptions, FrameSequence, FrameSequenceError,
-    FrameTruth,
+    FrameTruth, MAX_FRAMES,
 };
 pub use measurements::{
-    Excursion, Jump, Occlusion, RoiBurst, SimError, SimulatedRun, SimulationOptions, TimeGap,
-    simulate,
+    Excursion, Jump, MAX_ROI_RATE_HZ, MAX_SIMULATED_ROIS, Occlusion, RoiBurst, SimError,
+    SimulatedRoi, SimulatedRun, Simulation, SimulationOptions, TimeGap, simulate,
 };
 pub use photo::{
     Background, CircleShade, Clutter, Glare, Illumination, PhotoError, PhotoPoint, PhotoScene,
     RenderedPhoto, Shadow, render_photo,
 };
-pub use rois::{RenderError, render_roi_images};
+pub use rois::{RenderError, RoiImageRenderer, render_roi_images};
 pub use scenario::{Scenario, ScenarioKind, bench_rotation};

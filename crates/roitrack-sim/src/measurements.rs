@@ -163,6 +163,10 @@ pub enum SimError {
         expected: &'static str,
         value: f64,
     },
+    #[error(
+        "{duration_s} s at {rate_hz} Hz is more than {MAX_SIMULATED_ROIS} ROIs: shorten the run or lower the ROI rate"
+    )]
+    TooManyRois { duration_s: f64, rate_hz: f64 },
     #[error("point id {id} leaves the image at t = {t_s} s (raw pixel {u_px:.1}, {v_px:.1})")]
     BlobOffImage {
         id: u32,
@@ -201,28 +205,207 @@ fn check_option(
     }
 }
 
-/// Samples `scenario` one ROI at a time: every measurement is the projection of the true pose at its own time (the
-/// ROI's exposure middle) plus noise, with the faults of `opts`; the ground truth comes at every ROI time. This is a
-/// camera reading one ROI at a time whatever the camera model's time model says (for frames of a rolling or global
-/// shutter, render them: [`roitrack_image::RoiRenderer::render_frame`]).
+/// The highest ROI rate (Hz) simulated: a million ROIs a second, beyond any ROI camera.
+pub const MAX_ROI_RATE_HZ: f64 = 1e6;
+/// The most ROIs one simulated run may have: a billion (69 hours at 4 kHz, some 45 GB of measurements), so that a
+/// mistaken duration or rate is refused rather than run for days.
+pub const MAX_SIMULATED_ROIS: u64 = 1_000_000_000;
+
+/// One ROI of a simulated run, as [`Simulation`] gives them, in time order.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SimulatedRoi {
+    /// The ROI's index from 0, and its time (s): `index / rate_hz`.
+    pub index: usize,
+    pub t_s: f64,
+    /// The ground truth at the ROI's time (with the options' jump and excursion).
+    pub truth_pose: PoseSample,
+    pub truth_twist: TwistSample,
+    /// What the ROI measured: `None` when it was dropped, hidden by a fault, or its blob was off the image (with
+    /// `skip_off_image`).
+    pub measurement: Option<Measurement>,
+}
+
+/// A simulated acquisition one ROI at a time, in constant memory whatever the duration: the measurements and the
+/// ground truth of [`simulate`] (which collects them), bit for bit, as an iterator. After an error (a blob leaving the
+/// image without `skip_off_image`) it ends.
 ///
 /// ```
-/// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
+/// use roitrack_sim::{Scenario, ScenarioKind, Simulation, SimulationOptions, simulate};
 ///
-/// let options = SimulationOptions { noise_px: 0.2, drop_fraction: 0.1, ..SimulationOptions::default() };
-/// let run = simulate(&Scenario::new(ScenarioKind::Spin, 1), &options).unwrap();
-/// // 3 s at 4 kHz (both ends included), a tenth of the ROIs lost; the truth at every ROI time.
-/// assert_eq!(run.truth_poses.len(), 12_001);
-/// assert!((10_500..11_500).contains(&run.measurements.len()));
+/// let scenario = Scenario::new(ScenarioKind::Spin, 1);
+/// let options = SimulationOptions::default();
+/// let stream = Simulation::new(&scenario, &options).unwrap();
+/// assert_eq!(stream.len(), 12_001);
+/// let measured: Vec<_> = stream.filter_map(|roi| roi.unwrap().measurement).collect();
+/// assert_eq!(measured, simulate(&scenario, &options).unwrap().measurements);
 /// ```
-pub fn simulate(scenario: &Scenario, opts: &SimulationOptions) -> Result<SimulatedRun, SimError> {
+#[derive(Debug, Clone)]
+pub struct Simulation<'a> {
+    scenario: &'a Scenario,
+    opts: &'a SimulationOptions,
+    rng: ChaCha8Rng,
+    noise: Normal<f64>,
+    cycle: Vec<usize>,
+    burst_starts: Vec<usize>,
+    next: usize,
+    sample_count: usize,
+    done: bool,
+}
+
+impl<'a> Simulation<'a> {
+    /// Checks the options (as [`simulate`] does) and starts the run.
+    pub fn new(scenario: &'a Scenario, opts: &'a SimulationOptions) -> Result<Self, SimError> {
+        check_options(opts)?;
+        let samples = (scenario.duration_s * opts.rate_hz + 1e-9).floor() + 1.0;
+        if samples.is_nan() || samples > MAX_SIMULATED_ROIS as f64 {
+            return Err(SimError::TooManyRois {
+                duration_s: scenario.duration_s,
+                rate_hz: opts.rate_hz,
+            });
+        }
+        let sample_count = samples as usize;
+        // The first ROI index of each burst: the first sample at or after its start time.
+        let burst_starts: Vec<usize> = opts
+            .bursts
+            .iter()
+            .map(|b| (b.t0_s.max(0.0) * opts.rate_hz - 1e-9).ceil().max(0.0) as usize)
+            .collect();
+        let n = scenario.target.len();
+        let cycle: Vec<usize> = match opts.order {
+            RoiOrder::BitReversed => bit_reversed_indices(n),
+            RoiOrder::RowMajor | RoiOrder::Random => (0..n).collect(),
+        };
+        Ok(Self {
+            scenario,
+            opts,
+            rng: ChaCha8Rng::seed_from_u64(opts.seed),
+            noise: Normal::new(0.0, opts.noise_px).expect("noise_px checked finite and >= 0"),
+            cycle,
+            burst_starts,
+            next: 0,
+            sample_count,
+            done: false,
+        })
+    }
+
+    /// The number of ROIs of the run (dropped ones included): the scenario's duration at the ROI rate, both ends
+    /// included.
+    pub fn len(&self) -> usize {
+        self.sample_count
+    }
+
+    /// Whether the run has no ROI (never: the first is at t = 0).
+    pub fn is_empty(&self) -> bool {
+        self.sample_count == 0
+    }
+
+    /// The ROI at `self.next`.
+    fn sample(&mut self) -> Result<SimulatedRoi, SimError> {
+        let (scenario, opts) = (self.scenario, self.opts);
+        let camera = &scenario.camera;
+        let k = self.next;
+        let n = scenario.target.len();
+        let slot = k % n;
+        if slot == 0 && opts.order == RoiOrder::Random {
+            self.cycle.shuffle(&mut self.rng);
+        }
+        let t_s = k as f64 / opts.rate_hz;
+        let state = opts.truth_at(scenario, t_s);
+        let point = scenario.target.points()[self.cycle[slot]];
+        let raw = camera
+            .raw_pixel_from_cam(&state.point_in_cam_at(&point.point_in_obj_m, 0.0))
+            .filter(|px| camera.contains_raw_pixel(px));
+        let raw = match raw {
+            Some(px) => Some(px),
+            None if opts.skip_off_image => None,
+            None => {
+                let p = state.point_in_cam_at(&point.point_in_obj_m, 0.0);
+                let px = camera
+                    .intrinsics
+                    .pixel_from_cam(&p)
+                    .unwrap_or(Vector2::new(f64::NAN, f64::NAN));
+                return Err(SimError::BlobOffImage {
+                    id: point.id,
+                    t_s,
+                    u_px: px.x,
+                    v_px: px.y,
+                });
+            }
+        };
+        let rng = &mut self.rng;
+        // Draw every random number whether or not it is used, so options change only what they control.
+        let dropped = rng.random::<f64>() < opts.drop_fraction;
+        let outlier = rng.random::<f64>() < opts.outlier_fraction;
+        let outlier_offset = {
+            let angle = rng.random_range(0.0..std::f64::consts::TAU);
+            Vector2::new(angle.cos(), angle.sin()) * rng.random_range(5.0..20.0)
+        };
+        let noise_px = Vector2::new(self.noise.sample(rng), self.noise.sample(rng));
+        // Faults and blobs off the image remove a measurement after its random numbers are drawn, so the others are
+        // those of the run without the fault.
+        let measurement = raw.and_then(|raw| {
+            let mut measured = raw + noise_px;
+            if outlier {
+                measured += outlier_offset;
+            }
+            (!dropped && !opts.fault_hides(point.id, t_s, k, &self.burst_starts)).then_some(
+                Measurement {
+                    t_s,
+                    id: point.id,
+                    u_px: measured.x,
+                    v_px: measured.y,
+                },
+            )
+        });
+        Ok(SimulatedRoi {
+            index: k,
+            t_s,
+            truth_pose: PoseSample::from_state(t_s, &state),
+            truth_twist: TwistSample::from_state(t_s, &state),
+            measurement,
+        })
+    }
+}
+
+impl Iterator for Simulation<'_> {
+    type Item = Result<SimulatedRoi, SimError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        if self.done || self.next >= self.sample_count {
+            return None;
+        }
+        let sample = self.sample();
+        self.next += 1;
+        if sample.is_err() {
+            self.done = true;
+        }
+        Some(sample)
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let left = if self.done {
+            0
+        } else {
+            self.sample_count - self.next
+        };
+        (0, Some(left))
+    }
+}
+
+/// The checks of [`simulate`]'s options.
+fn check_options(opts: &SimulationOptions) -> Result<(), SimError> {
     check_option(
         "noise_px",
         opts.noise_px,
         "finite and >= 0",
         opts.noise_px >= 0.0,
     )?;
-    check_option("rate_hz", opts.rate_hz, "positive", opts.rate_hz > 0.0)?;
+    check_option(
+        "rate_hz",
+        opts.rate_hz,
+        "positive, at most 1e6 (a million ROIs a second)",
+        opts.rate_hz > 0.0 && opts.rate_hz <= MAX_ROI_RATE_HZ,
+    )?;
     check_option(
         "drop_fraction",
         opts.drop_fraction,
@@ -282,83 +465,39 @@ pub fn simulate(scenario: &Scenario, opts: &SimulationOptions) -> Result<Simulat
             check_option(field, value, "finite", true)?;
         }
     }
-    // The first ROI index of each burst: the first sample at or after its start time.
-    let burst_starts: Vec<usize> = opts
-        .bursts
-        .iter()
-        .map(|b| (b.t0_s.max(0.0) * opts.rate_hz - 1e-9).ceil().max(0.0) as usize)
-        .collect();
-    let camera = scenario.camera.clone();
-    let target = scenario.target.clone();
-    let n = target.len();
-    let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
-    let noise = Normal::new(0.0, opts.noise_px).expect("noise_px checked finite and >= 0");
+    Ok(())
+}
 
-    let sample_count = (scenario.duration_s * opts.rate_hz + 1e-9).floor() as usize + 1;
+/// Samples `scenario` one ROI at a time: every measurement is the projection of the true pose at its own time (the
+/// ROI's exposure middle) plus noise, with the faults of `opts`; the ground truth comes at every ROI time. This is a
+/// camera reading one ROI at a time whatever the camera model's time model says (for frames of a rolling or global
+/// shutter, render them: [`roitrack_image::RoiRenderer::render_frame`]). The run is held in memory; [`Simulation`]
+/// gives the same ROIs one at a time.
+///
+/// ```
+/// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
+///
+/// let options = SimulationOptions { noise_px: 0.2, drop_fraction: 0.1, ..SimulationOptions::default() };
+/// let run = simulate(&Scenario::new(ScenarioKind::Spin, 1), &options).unwrap();
+/// // 3 s at 4 kHz (both ends included), a tenth of the ROIs lost; the truth at every ROI time.
+/// assert_eq!(run.truth_poses.len(), 12_001);
+/// assert!((10_500..11_500).contains(&run.measurements.len()));
+/// ```
+pub fn simulate(scenario: &Scenario, opts: &SimulationOptions) -> Result<SimulatedRun, SimError> {
+    let stream = Simulation::new(scenario, opts)?;
+    let sample_count = stream.len();
     let mut measurements = Vec::with_capacity(sample_count);
     let mut truth_poses = Vec::with_capacity(sample_count);
     let mut truth_twists = Vec::with_capacity(sample_count);
-    let mut cycle: Vec<usize> = match opts.order {
-        RoiOrder::BitReversed => bit_reversed_indices(n),
-        RoiOrder::RowMajor | RoiOrder::Random => (0..n).collect(),
-    };
-    for k in 0..sample_count {
-        let slot = k % n;
-        if slot == 0 && opts.order == RoiOrder::Random {
-            cycle.shuffle(&mut rng);
-        }
-        let t_s = k as f64 / opts.rate_hz;
-        let state = opts.truth_at(scenario, t_s);
-        truth_poses.push(PoseSample::from_state(t_s, &state));
-        truth_twists.push(TwistSample::from_state(t_s, &state));
-        let point = target.points()[cycle[slot]];
-        let raw = camera
-            .raw_pixel_from_cam(&state.point_in_cam_at(&point.point_in_obj_m, 0.0))
-            .filter(|px| camera.contains_raw_pixel(px));
-        let raw = match raw {
-            Some(px) => Some(px),
-            None if opts.skip_off_image => None,
-            None => {
-                let p = state.point_in_cam_at(&point.point_in_obj_m, 0.0);
-                let px = camera
-                    .intrinsics
-                    .pixel_from_cam(&p)
-                    .unwrap_or(Vector2::new(f64::NAN, f64::NAN));
-                return Err(SimError::BlobOffImage {
-                    id: point.id,
-                    t_s,
-                    u_px: px.x,
-                    v_px: px.y,
-                });
-            }
-        };
-        // Draw every random number whether or not it is used, so options change only what they control.
-        let dropped = rng.random::<f64>() < opts.drop_fraction;
-        let outlier = rng.random::<f64>() < opts.outlier_fraction;
-        let outlier_offset = {
-            let angle = rng.random_range(0.0..std::f64::consts::TAU);
-            Vector2::new(angle.cos(), angle.sin()) * rng.random_range(5.0..20.0)
-        };
-        let noise_px = Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
-        // Faults and blobs off the image remove a measurement after its random numbers are drawn, so the others are
-        // those of the run without the fault.
-        let Some(raw) = raw else { continue };
-        let mut measured = raw + noise_px;
-        if outlier {
-            measured += outlier_offset;
-        }
-        if !dropped && !opts.fault_hides(point.id, t_s, k, &burst_starts) {
-            measurements.push(Measurement {
-                t_s,
-                id: point.id,
-                u_px: measured.x,
-                v_px: measured.y,
-            });
-        }
+    for roi in stream {
+        let roi = roi?;
+        truth_poses.push(roi.truth_pose);
+        truth_twists.push(roi.truth_twist);
+        measurements.extend(roi.measurement);
     }
     Ok(SimulatedRun {
-        camera,
-        target,
+        camera: scenario.camera.clone(),
+        target: scenario.target.clone(),
         measurements,
         truth_poses,
         truth_twists,
