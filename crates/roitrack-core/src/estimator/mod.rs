@@ -173,8 +173,30 @@ impl Default for TrackerConfig {
     }
 }
 
+/// The most measurements a window may hold (`window`): 100,000, 25 s at 4 kHz; a window fit is a least-squares
+/// problem of twice that many rows, and a longer one is no longer a constant-velocity stretch of any motion.
+pub const MAX_WINDOW: usize = 100_000;
+/// The most measurements between two estimates (`every`): 100,000, one estimate every 25 s at 4 kHz.
+pub const MAX_EVERY: usize = 100_000;
+/// The most VVS iterations per control step (`iterations`): Gauss-Newton converges in a handful.
+pub const MAX_ITERATIONS: usize = 100;
+/// The largest centroid noise (`noise_px`, px): more than a ROI's half-width is no centroid.
+pub const MAX_NOISE_PX: f64 = 100.0;
+/// The range of the Kalman filter's spectral densities (accelerations' and jerks', in their units per Hz): 1e12
+/// (m/s²)²/Hz is an acceleration of 20,000 m/s² between estimates at 400 Hz, beyond any tracked target; 1e-12 is no
+/// motion at all.
+pub const PSD_RANGE: std::ops::RangeInclusive<f64> = 1e-12..=1e12;
+
 impl TrackerConfig {
-    /// Checks every option, those of the estimator included.
+    /// Checks every option, those of the estimator included, against its range: [`MAX_WINDOW`], [`MAX_EVERY`],
+    /// [`MAX_ITERATIONS`], [`MAX_NOISE_PX`], [`PSD_RANGE`] and the ranges named in the errors.
+    ///
+    /// ```
+    /// use roitrack_core::estimator::{TrackerConfig, WindowMode};
+    ///
+    /// let huge = TrackerConfig { window: WindowMode::Last(4_000_000_000), ..TrackerConfig::default() };
+    /// assert!(huge.validate().unwrap_err().to_string().starts_with("window must be from 4 to 100000"));
+    /// ```
     pub fn validate(&self) -> Result<(), ConfigError> {
         let check = |field, value: f64, expected, ok: bool| {
             if ok && value.is_finite() {
@@ -187,8 +209,18 @@ impl TrackerConfig {
                 })
             }
         };
-        check("every", self.every as f64, "at least 1", self.every >= 1)?;
-        check("noise_px", self.noise_px, "positive", self.noise_px > 0.0)?;
+        check(
+            "every",
+            self.every as f64,
+            "from 1 to 100000 measurements",
+            (1..=MAX_EVERY).contains(&self.every),
+        )?;
+        check(
+            "noise_px",
+            self.noise_px,
+            "positive, at most 100 px",
+            self.noise_px > 0.0 && self.noise_px <= MAX_NOISE_PX,
+        )?;
         check(
             "min_inverse_condition",
             self.min_inverse_condition,
@@ -202,7 +234,12 @@ impl TrackerConfig {
             self.lost_residual_px > 0.0,
         )?;
         if let WindowMode::Last(n) = self.window {
-            check("window", n as f64, "at least 4 measurements", n >= 4)?;
+            check(
+                "window",
+                n as f64,
+                "from 4 to 100000 measurements",
+                (4..=MAX_WINDOW).contains(&n),
+            )?;
         }
         // Infinity is allowed here: it turns the check off.
         if self.max_first_distance_m.is_nan() || self.max_first_distance_m <= 0.0 {
@@ -217,14 +254,14 @@ impl TrackerConfig {
                 check(
                     "kalman.linear_accel_psd",
                     k.linear_accel_psd,
-                    "positive",
-                    k.linear_accel_psd > 0.0,
+                    "from 1e-12 to 1e12",
+                    PSD_RANGE.contains(&k.linear_accel_psd),
                 )?;
                 check(
                     "kalman.angular_accel_psd",
                     k.angular_accel_psd,
-                    "positive",
-                    k.angular_accel_psd > 0.0,
+                    "from 1e-12 to 1e12",
+                    PSD_RANGE.contains(&k.angular_accel_psd),
                 )?;
                 if let MotionModel::ConstantAcceleration {
                     linear_jerk_psd,
@@ -234,14 +271,14 @@ impl TrackerConfig {
                     check(
                         "kalman.linear_jerk_psd",
                         linear_jerk_psd,
-                        "positive",
-                        linear_jerk_psd > 0.0,
+                        "from 1e-12 to 1e12",
+                        PSD_RANGE.contains(&linear_jerk_psd),
                     )?;
                     check(
                         "kalman.angular_jerk_psd",
                         angular_jerk_psd,
-                        "positive",
-                        angular_jerk_psd > 0.0,
+                        "from 1e-12 to 1e12",
+                        PSD_RANGE.contains(&angular_jerk_psd),
                     )?;
                 }
                 check(
@@ -263,8 +300,8 @@ impl TrackerConfig {
                 check(
                     "iterations",
                     v.iterations as f64,
-                    "at least 1",
-                    v.iterations >= 1,
+                    "from 1 to 100",
+                    (1..=MAX_ITERATIONS).contains(&v.iterations),
                 )?;
             }
             EstimatorConfig::Batch | EstimatorConfig::Static => {}
