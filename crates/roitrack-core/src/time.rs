@@ -62,20 +62,37 @@ impl Default for TimeModel {
 /// Why a time model is refused.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum TimeModelError {
-    #[error("the exposure must be finite and non-negative, got {0} s")]
+    #[error("the exposure must be from 0 to {MAX_EXPOSURE_S} s, got {0} s")]
     Exposure(f64),
-    #[error("the rolling shutter's line delay must be finite and non-negative, got {0} s")]
+    #[error(
+        "the rolling shutter's line delay must be from 0 to {MAX_LINE_DELAY_S} s (a 1,000-row frame read in a second), \
+         got {0} s"
+    )]
     LineDelay(f64),
 }
 
+/// The longest exposure (s) a time model may have: over 10 s a moving target is a streak, not a blob.
+pub const MAX_EXPOSURE_S: f64 = 10.0;
+/// The longest line delay (s) of a rolling shutter: 1 ms a row, a 1,000-row frame read in a second (real sensors
+/// take 5 to 50 µs a row).
+pub const MAX_LINE_DELAY_S: f64 = 1e-3;
+
 impl TimeModel {
-    /// Refuses a negative or non-finite exposure or line delay.
+    /// Refuses an exposure outside 0 to [`MAX_EXPOSURE_S`] and a line delay outside 0 to [`MAX_LINE_DELAY_S`]
+    /// (non-finite values included).
+    ///
+    /// ```
+    /// use roitrack_core::time::{Readout, TimeModel};
+    ///
+    /// let slow = TimeModel { readout: Readout::RollingShutter { line_delay_s: 0.5 }, exposure_s: 1e-3 };
+    /// assert!(slow.validate().unwrap_err().to_string().contains("line delay must be from 0 to 0.001 s"));
+    /// ```
     pub fn validate(&self) -> Result<(), TimeModelError> {
-        if !(self.exposure_s.is_finite() && self.exposure_s >= 0.0) {
+        if !(0.0..=MAX_EXPOSURE_S).contains(&self.exposure_s) {
             return Err(TimeModelError::Exposure(self.exposure_s));
         }
         if let Readout::RollingShutter { line_delay_s } = self.readout
-            && !(line_delay_s.is_finite() && line_delay_s >= 0.0)
+            && !(0.0..=MAX_LINE_DELAY_S).contains(&line_delay_s)
         {
             return Err(TimeModelError::LineDelay(line_delay_s));
         }
