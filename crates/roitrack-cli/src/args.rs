@@ -7,8 +7,11 @@ use clap::{Args, ValueEnum};
 use roitrack::TrackerConfig;
 use roitrack::math::estimator::RobustLoss;
 use roitrack::math::estimator::TrackerOptions;
+use roitrack::math::estimator::{self as estimator};
 use roitrack::pipeline::ScheduleOrder;
 use roitrack::sim::{Scenario, ScenarioKind};
+
+use crate::ranges;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
 pub enum ScenarioArg {
@@ -83,22 +86,22 @@ pub struct EstimatorArgs {
     /// Which estimator.
     #[arg(long, value_enum, default_value = "kalman")]
     pub estimator: EstimatorArg,
-    /// Gain λ of the VVS update δ = -λ L⁺ e (exact, paper).
-    #[arg(long, default_value_t = 1.0)]
+    /// Gain λ of the VVS update δ = -λ L⁺ e (exact, paper), in (0, 2].
+    #[arg(long, default_value_t = 1.0, value_parser = ranges::positive_up_to(2.0, "", "beyond 2 the update overshoots"))]
     pub gain: f64,
-    /// VVS iterations per control step (1 = the paper's scheme; more = Gauss-Newton).
-    #[arg(long, default_value_t = 1)]
+    /// VVS iterations per control step (1 = the paper's scheme; more = Gauss-Newton), at most 100.
+    #[arg(long, default_value_t = 1, value_parser = ranges::count(1..=estimator::MAX_ITERATIONS, "Gauss-Newton converges in a handful"))]
     pub iterations: usize,
-    /// Window: 0 = the newest measurement of each point (the paper), N = the last N measurements.
-    #[arg(long, default_value_t = 0)]
+    /// Window: 0 = the newest measurement of each point (the paper), N = the last N measurements (4 to 100,000).
+    #[arg(long, default_value_t = 0, value_parser = parse_window)]
     pub window: usize,
-    /// Control period k: one estimate every K measurements. Measurements that share a time (the blobs of a frame)
-    /// give one estimate per frame instead.
-    #[arg(long, default_value_t = 10)]
+    /// Control period k: one estimate every K measurements (at most 100,000). Measurements that share a time (the
+    /// blobs of a frame) give one estimate per frame instead.
+    #[arg(long, default_value_t = 10, value_parser = ranges::count(1..=100_000, "one estimate every 25 s at 4 kHz"))]
     pub every: usize,
-    /// Centroid noise standard deviation (px): the window fits' covariance scale, and the Kalman filter's starting
-    /// value (it estimates the noise online unless --adapt leaves the noise out).
-    #[arg(long, default_value_t = 0.1)]
+    /// Centroid noise standard deviation (px, at most 100): the window fits' covariance scale, and the Kalman filter's
+    /// starting value (it estimates the noise online unless --adapt leaves the noise out).
+    #[arg(long, default_value_t = 0.1, value_parser = ranges::positive_up_to(estimator::MAX_NOISE_PX, " px", "more than a ROI's half-width is no centroid"))]
     pub noise_px: f64,
     /// Kalman: what the filter learns online: the centroid noise and the process noise (both), one of them, or none
     /// (--noise-px, --accel-psd and --angular-accel-psd taken as the truth: a hand-tuned filter). Default: both for
@@ -111,11 +114,11 @@ pub struct EstimatorArgs {
     /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise. Default: 1
     /// (roitrack_core::estimator::KalmanTuning's), a starting value that the filter adapts unless --adapt leaves the
     /// motion out.
-    #[arg(long)]
+    #[arg(long, value_parser = ranges::within(estimator::PSD_RANGE, "", "from no motion to 20,000 m/s² between estimates"))]
     pub accel_psd: Option<f64>,
     /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz). Default: 10, a starting value as for
     /// --accel-psd.
-    #[arg(long)]
+    #[arg(long, value_parser = ranges::within(estimator::PSD_RANGE, "", "from no motion to 20,000 m/s² between estimates"))]
     pub angular_accel_psd: Option<f64>,
     /// Kalman: the process model. constant-velocity: the twist drifts under white acceleration (--accel-psd,
     /// --angular-accel-psd). constant-acceleration: the state also carries the linear and angular accelerations, which
@@ -128,11 +131,11 @@ pub struct EstimatorArgs {
     /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz). Default: 100 (1000 for
     /// rolling-shutter frames), a starting value that the filter adapts where it adapts the process noise (see
     /// --adapt).
-    #[arg(long)]
+    #[arg(long, value_parser = ranges::within(estimator::PSD_RANGE, "", "from no motion to 20,000 m/s² between estimates"))]
     pub jerk_psd: Option<f64>,
     /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz). Default: 300 (3000 for
     /// rolling-shutter frames), a starting value as for --jerk-psd.
-    #[arg(long)]
+    #[arg(long, value_parser = ranges::within(estimator::PSD_RANGE, "", "from no motion to 20,000 m/s² between estimates"))]
     pub angular_jerk_psd: Option<f64>,
     /// M-estimator against outliers: tukey (default), huber (window fits; the Kalman filter uses Huber either way)
     /// or none (plain least squares, and no Huber weighting in the Kalman filter).
@@ -141,7 +144,7 @@ pub struct EstimatorArgs {
     /// Degeneracy gate: windows whose column-scaled Jacobian has a reciprocal condition number below this are not
     /// used for an update (the estimate is flagged degenerate and the window widened). Default: 3e-3
     /// (TrackerConfig's).
-    #[arg(long)]
+    #[arg(long, value_parser = ranges::within(0.0..=1.0, "", "a reciprocal condition number"))]
     pub min_conditioning: Option<f64>,
 }
 
@@ -209,6 +212,18 @@ impl EstimatorArgs {
             },
             min_conditioning: self.min_conditioning,
         }
+    }
+}
+
+/// `--window`: 0 (the newest measurement of each point) or 4 to [`estimator::MAX_WINDOW`] measurements.
+fn parse_window(text: &str) -> Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(0) => Ok(0),
+        Ok(n) if (4..=estimator::MAX_WINDOW).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "must be 0 (the newest measurement of each point) or from 4 to {} measurements (25 s at 4 kHz), got {text}",
+            estimator::MAX_WINDOW
+        )),
     }
 }
 
@@ -289,14 +304,28 @@ impl CameraArgs {
     }
 }
 
-/// `640x480` -> (640, 480).
+/// `640x480` -> (640, 480), within the image sizes a camera may have ([`roitrack::math::camera::MAX_IMAGE_SIDE_PX`]
+/// a side, [`roitrack::math::camera::MAX_IMAGE_PIXELS`] in all).
 pub fn parse_image_size(text: &str) -> Result<(u32, u32), String> {
+    use roitrack::math::camera::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE_PX};
     let parsed = text
         .split_once(['x', 'X'])
         .and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
     match parsed {
-        Some((w, h)) if w > 0 && h > 0 => Ok((w, h)),
-        _ => Err(format!(
+        Some((w, h))
+            if w > 0
+                && h > 0
+                && w <= MAX_IMAGE_SIDE_PX
+                && h <= MAX_IMAGE_SIDE_PX
+                && u64::from(w) * u64::from(h) <= MAX_IMAGE_PIXELS =>
+        {
+            Ok((w, h))
+        }
+        Some(_) => Err(format!(
+            "{text} is larger than any sensor: an image is at most {MAX_IMAGE_SIDE_PX} px a side and \
+             {MAX_IMAGE_PIXELS} px in all"
+        )),
+        None => Err(format!(
             "expected WIDTHxHEIGHT in pixels, e.g. 1280x1024, got {text:?}"
         )),
     }
@@ -390,11 +419,15 @@ impl CameraPath for Option<CameraArgs> {
     }
 }
 
+/// The longest simulated run (`--duration-s`, s): a day. The ROIs of a run are bounded too
+/// ([`roitrack::sim::MAX_SIMULATED_ROIS`]), and a frame sequence's frames ([`roitrack::sim::MAX_FRAMES`]).
+pub const MAX_DURATION_S: f64 = 86_400.0;
+
 /// Your own rig for a simulated scenario: camera and target files, and the motion moved, sped up or cut.
 #[derive(Debug, Args)]
 pub struct RigArgs {
-    /// Your camera (any calibration file `track --camera` reads) instead of the built-in 1024 x 768 one. Default: the
-    /// built-in camera.
+    /// Your camera (any calibration file `track --camera` reads) instead of the built-in 1024 x 1024 one. Default:
+    /// the built-in camera.
     #[arg(long, value_name = "FILE")]
     pub camera: Option<PathBuf>,
     /// With --camera: the image size for a calibration file that has none. Default: the file's.
@@ -411,15 +444,16 @@ pub struct RigArgs {
     /// millimetres or centimetres is refused).
     #[arg(long, value_enum, value_name = "UNIT", requires = "target")]
     pub target_units: Option<LengthUnitArg>,
-    /// Move the motion along the optical axis so that the target is on average this far from the camera (m).
-    /// Default: the scenario's own (about 0.6 m).
-    #[arg(long, value_name = "M")]
+    /// Move the motion along the optical axis so that the target is on average this far from the camera (m, at most
+    /// 100). Default: the scenario's own (about 0.6 m).
+    #[arg(long, value_name = "M", value_parser = ranges::positive_up_to(100.0, " m", "the farthest a first pose may be"))]
     pub distance_m: Option<f64>,
-    /// Play the motion this many times faster (0.5: half the speeds, twice the duration). Default: 1.
-    #[arg(long, value_name = "FACTOR", default_value_t = 1.0)]
+    /// Play the motion this many times faster (0.5: half the speeds, twice the duration), from 0.001 to 1000.
+    /// Default: 1.
+    #[arg(long, value_name = "FACTOR", default_value_t = 1.0, value_parser = ranges::within(1e-3..=1e3, "", "a thousand times slower to a thousand times faster"))]
     pub speed_scale: f64,
-    /// Length of the simulation (s). Default: the scenario's own (after --speed-scale).
-    #[arg(long, value_name = "S")]
+    /// Length of the simulation (s), at most a day (86,400 s). Default: the scenario's own (after --speed-scale).
+    #[arg(long, value_name = "S", value_parser = ranges::positive_up_to(MAX_DURATION_S, " s", "a day"))]
     pub duration_s: Option<f64>,
 }
 

@@ -6,6 +6,7 @@ use clap::{Parser, Subcommand};
 
 mod args;
 mod commands;
+mod ranges;
 mod ros;
 
 #[derive(Debug, Parser)]

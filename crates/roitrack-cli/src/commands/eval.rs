@@ -7,6 +7,7 @@ use clap::{Args, ValueEnum};
 use roitrack::eval::{Alignment, EvalOptions, TimeOffset, evaluate};
 
 use super::simulate::{TRUTH_POSES_FILE, TRUTH_TWISTS_FILE};
+use crate::ranges;
 
 /// Score an estimated trajectory against ground truth: position, rotation, velocity and angular-velocity RMSE, max
 /// position error, velocity lag; optionally after a clock offset and an alignment of frames, and the relative pose
@@ -40,13 +41,13 @@ pub struct EvalArgs {
     /// motion (speeds correlated within --max-time-offset-s, then refined on the positions).
     #[arg(long, default_value = "0", value_parser = parse_time_offset)]
     pub time_offset: TimeOffset,
-    /// With --time-offset auto, the largest offset searched (s).
-    #[arg(long, default_value_t = 5.0)]
+    /// With --time-offset auto, the largest offset searched (s, at most an hour).
+    #[arg(long, default_value_t = 5.0, value_parser = ranges::within(0.0..=3600.0, " s", "an hour"))]
     pub max_time_offset_s: f64,
     /// Also the relative pose error over this interval (s): the error of the target's estimated motion between
     /// estimates this far apart, independent of the frames and of a constant offset of the pose. Default: not
     /// computed.
-    #[arg(long)]
+    #[arg(long, value_parser = ranges::positive_up_to(86_400.0, " s", "a day"))]
     pub rpe_interval_s: Option<f64>,
     /// Leave out (and count) the estimates outside the truth's time span instead of refusing them.
     #[arg(long)]
@@ -54,6 +55,10 @@ pub struct EvalArgs {
     /// Print one JSON object instead of a table.
     #[arg(long)]
     pub json: bool,
+    /// The largest poses or twists file read (MiB; each is read whole, about half its size in memory). Default:
+    /// 2048 (about 15 million poses, an hour of ground truth at 4 kHz).
+    #[arg(long, value_name = "MIB", default_value_t = 2048, value_parser = ranges::count(1..=1 << 20, "up to a terabyte"))]
+    pub max_file_mib: usize,
 }
 
 /// `--align`.
@@ -94,13 +99,15 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         (None, Some(poses)) => (poses.clone(), args.truth_twists.clone()),
         _ => bail!("give the truth as --truth DIR or as --truth-poses FILE [--truth-twists FILE]"),
     };
-    let truth_poses = roitrack::formats::read_tum(&truth_poses_path)?;
-    let estimated_poses = roitrack::formats::read_tum(&args.poses)?;
+    let max_bytes = (args.max_file_mib as u64) << 20;
+    let read_tum = |path| roitrack::formats::read_tum_limited(path, max_bytes);
+    let read_twists = |path| roitrack::formats::read_twists_csv_limited(path, max_bytes);
+    let truth_poses = read_tum(&truth_poses_path)?;
+    let estimated_poses = read_tum(&args.poses)?;
     let (truth_twists, estimated_twists) = match (&truth_twists_path, &args.twists) {
-        (Some(truth), Some(estimated)) => (
-            Some(roitrack::formats::read_twists_csv(truth)?),
-            Some(roitrack::formats::read_twists_csv(estimated)?),
-        ),
+        (Some(truth), Some(estimated)) => {
+            (Some(read_twists(truth)?), Some(read_twists(estimated)?))
+        }
         (None, Some(_)) => bail!(
             "--twists needs the true twists too: --truth-twists FILE (or --truth DIR with gt_twists.csv)"
         ),

@@ -18,6 +18,7 @@ use roitrack::sim::{
 };
 
 use crate::args::{ScenarioArg, ShutterArg};
+use crate::ranges;
 
 /// File names inside a simulation folder.
 pub const CAMERA_FILE: &str = "camera.yaml";
@@ -94,20 +95,20 @@ pub struct SimulateArgs {
     /// Seed of the noise, drops, outliers, random order and random motion.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Centroid noise standard deviation per axis (px).
-    #[arg(long, default_value_t = 0.1)]
+    /// Centroid noise standard deviation per axis (px), at most 100.
+    #[arg(long, default_value_t = 0.1, value_parser = ranges::within(0.0..=roitrack::math::estimator::MAX_NOISE_PX, " px", "more than a ROI's half-width is no centroid"))]
     pub noise_px: f64,
-    /// ROI rate (Hz).
-    #[arg(long, default_value_t = 4000.0)]
+    /// ROI rate (Hz), at most a million.
+    #[arg(long, default_value_t = 4000.0, value_parser = ranges::positive_up_to(roitrack::sim::MAX_ROI_RATE_HZ, " Hz", "beyond any ROI camera"))]
     pub rate_hz: f64,
     /// Order in which ROIs visit the points.
     #[arg(long, value_enum, default_value = "bitrev")]
     pub order: OrderArg,
     /// Fraction of ROIs lost, in [0, 1).
-    #[arg(long = "drop", default_value_t = 0.0)]
+    #[arg(long = "drop", default_value_t = 0.0, value_parser = parse_drop_fraction)]
     pub drop_fraction: f64,
     /// Fraction of centroids moved 5-20 px, in [0, 1].
-    #[arg(long = "outliers", default_value_t = 0.0)]
+    #[arg(long = "outliers", default_value_t = 0.0, value_parser = parse_fraction)]
     pub outlier_fraction: f64,
     /// Also render the ROI of every measurement (40 x 40 px, placed with a random error of up to 4 px as a real
     /// scheduler would) and write them to rois.bin, a recording `roitrack track --rois` replays.
@@ -145,8 +146,9 @@ pub struct SimulateArgs {
         "gaps", "bursts", "jump", "excursion", "skip_off_image",
     ])]
     pub frames: bool,
-    /// With --frames: frames per second; frame k is at k / F s (the mid-exposure time of its row 0).
-    #[arg(long, value_name = "F", default_value_t = 30.0, requires = "frames")]
+    /// With --frames: frames per second (0.001 to 1e7; at most 100,000 frames in all); frame k is at k / F s (the
+    /// mid-exposure time of its row 0).
+    #[arg(long, value_name = "F", default_value_t = 30.0, requires = "frames", value_parser = ranges::within(roitrack::formats::MIN_FRAME_RATE_HZ..=roitrack::formats::MAX_FRAME_RATE_HZ, " Hz", "a frame every 1,000 s to beyond the fastest cameras"))]
     pub fps: f64,
     /// With --frames: how the camera reads its rows: global (every row at once) or rolling (row v read
     /// v * --line-delay-s after row 0).
@@ -154,17 +156,30 @@ pub struct SimulateArgs {
     pub shutter: ShutterArg,
     /// With --shutter rolling: the time between two rows (s), e.g. 30e-6 (1,024 rows read in 30.7 ms).
     /// Default: none; required with --shutter rolling.
-    #[arg(long, value_name = "D", requires = "frames")]
+    #[arg(long, value_name = "D", requires = "frames", value_parser = ranges::within(0.0..=roitrack::math::time::MAX_LINE_DELAY_S, " s", "a 1,000-row frame read in a second"))]
     pub line_delay_s: Option<f64>,
-    /// With --frames: the exposure of each row (s), centred on the row's time.
-    #[arg(long, value_name = "E", default_value_t = 1e-3, requires = "frames")]
+    /// With --frames: the exposure of each row (s, at most 10), centred on the row's time.
+    #[arg(long, value_name = "E", default_value_t = 1e-3, requires = "frames", value_parser = ranges::within(0.0..=roitrack::math::time::MAX_EXPOSURE_S, " s", "beyond, a moving blob is a streak"))]
     pub exposure_s: f64,
     /// With --frames: bright blobs, or dark printed circles on a light, unevenly lit background.
     #[arg(long, value_enum, default_value = "bright", requires = "frames")]
     pub polarity: FramePolarityArg,
-    /// With --frames: how many frames (default: every frame whose rows are all exposed within the scenario).
-    #[arg(long, value_name = "N", requires = "frames")]
+    /// With --frames: how many frames, at most 100,000 (default: every frame whose rows are all exposed within the
+    /// scenario).
+    #[arg(long, value_name = "N", requires = "frames", value_parser = ranges::count(1..=roitrack::sim::MAX_FRAMES, "each frame is a file"))]
     pub frame_count: Option<usize>,
+}
+
+/// A fraction in [0, 1).
+fn parse_drop_fraction(text: &str) -> Result<f64, String> {
+    let value = parse_number(text, "fraction")?;
+    if (0.0..1.0).contains(&value) {
+        Ok(value)
+    } else {
+        Err(format!(
+            "{value} is not a fraction in [0, 1) (every ROI lost is no run)"
+        ))
+    }
 }
 
 /// A fraction in [0, 1].

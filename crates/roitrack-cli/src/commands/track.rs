@@ -16,6 +16,7 @@ use roitrack::{EstimatorReport, Measurement, TrackStatus, Tracker};
 
 use crate::args::{CameraArgs, CameraPath, EstimatorArgs, ShutterArg, TargetArgs, TimeUnitArg};
 use crate::commands::detect::{PolarityArg, distance_range};
+use crate::ranges;
 
 /// Checked measurements in time order, from a measurements CSV or replayed from a bag: the two differ only in how
 /// they are opened.
@@ -63,7 +64,7 @@ pub struct TrackArgs {
     pub timestamps: Option<PathBuf>,
     /// With --images: frame k is at k / F seconds. Without --timestamps or --fps, only a video's own timestamps are
     /// used; an image sequence without either is refused (roitrack never guesses frame times). Default: none.
-    #[arg(long, value_name = "F", requires = "images")]
+    #[arg(long, value_name = "F", requires = "images", value_parser = ranges::within(roitrack::formats::MIN_FRAME_RATE_HZ..=roitrack::formats::MAX_FRAME_RATE_HZ, " Hz", "a frame every 1,000 s to beyond the fastest cameras"))]
     pub fps: Option<f64>,
     /// With --images: how the camera reads its rows. global: every blob of a frame at the frame's time. rolling:
     /// row v is read v * --line-delay-s after row 0, and a blob centred on row v is at t + v * D.
@@ -72,7 +73,7 @@ pub struct TrackArgs {
     /// With --shutter rolling: the time between two rows (s), the sensor's readout time divided by its number of
     /// rows (datasheet, or a calibration); e.g. 30e-6 for 1,024 rows read in 30.7 ms. Default: none; required with
     /// --shutter rolling.
-    #[arg(long, value_name = "D")]
+    #[arg(long, value_name = "D", value_parser = ranges::within(0.0..=roitrack::math::time::MAX_LINE_DELAY_S, " s", "a 1,000-row frame read in a second"))]
     pub line_delay_s: Option<f64>,
     /// With --shutter rolling: write the causal filter's estimates as they come, instead of holding each until the
     /// two frames after it are tracked and refitting its pose, at its blobs' row times, with the twist of the poses
@@ -80,8 +81,8 @@ pub struct TrackArgs {
     /// fast motion, two frames of latency).
     #[arg(long, requires = "images")]
     pub no_rs_smoothing: bool,
-    /// With --images: the exposure time (s), used to size the windows for motion blur.
-    #[arg(long, default_value_t = 1e-3, requires = "images")]
+    /// With --images: the exposure time (s, at most 10), used to size the windows for motion blur.
+    #[arg(long, default_value_t = 1e-3, requires = "images", value_parser = ranges::within(0.0..=roitrack::math::time::MAX_EXPOSURE_S, " s", "beyond, a moving blob is a streak"))]
     pub exposure_s: f64,
     /// With --images: which blobs to look for (auto decides on the first frame where the target is found).
     #[arg(long, value_enum, default_value = "auto", requires = "images")]
@@ -89,7 +90,7 @@ pub struct TrackArgs {
     /// With --images: the nearest and farthest distances (m) the target may be at, to leave out blobs of impossible
     /// size when searching whole frames (needs diameters in the target file). Default: any size from 7 px to a
     /// quarter of the image.
-    #[arg(long, num_args = 2, value_names = ["NEAR_M", "FAR_M"], requires = "images")]
+    #[arg(long, num_args = 2, value_names = ["NEAR_M", "FAR_M"], requires = "images", value_parser = ranges::positive_up_to(1e3, " m", "a target seen from a kilometre is a pixel"))]
     pub distance_m: Option<Vec<f64>>,
     /// With --rois: keep blobs that are not centrally symmetric (by default they are rejected: a reflection or an
     /// occluder merged with a blob biases its centroid by up to half a pixel). For blobs that are not images of disks.
@@ -130,7 +131,9 @@ pub struct TrackArgs {
 pub fn run(args: &TrackArgs) -> Result<()> {
     check_paths(args)?;
     if args.time_units.is_some() && args.measurements.is_none() && args.timestamps.is_none() {
-        bail!("--time-units is the unit of the times of --measurements or --timestamps, and neither is given");
+        bail!(
+            "--time-units is the unit of the times of --measurements or --timestamps, and neither is given"
+        );
     }
     let camera = crate::ros::camera(args.camera.as_ref(), args.images.as_deref(), &args.mcap_in)?;
     let target = args.target.read()?;
