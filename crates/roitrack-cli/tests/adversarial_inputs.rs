@@ -4,6 +4,8 @@
 //! signals and full disks: tests/output_discipline.rs. That the readers stay bounded in memory is measured by a
 //! counting allocator in crates/roitrack-formats/tests/bounded_readers.rs.)
 
+// The helpers of the other tests' checks are not all needed here.
+#[allow(dead_code)]
 mod common;
 
 use std::path::{Path, PathBuf};
@@ -358,7 +360,7 @@ fn implausible_options_are_refused_naming_the_option_before_anything_runs() {
     ] {
         let mut args = args;
         args.extend(["--out", s(&out)]);
-        let e = refused(&roitrack(&args), 2, &[&format!("invalid value"), option]);
+        let e = refused(&roitrack(&args), 2, &["invalid value", option]);
         assert!(!out.exists(), "{args:?} wrote its folder: {e}");
     }
     for (extra, option) in [
