@@ -254,13 +254,20 @@ fn bad_frame_options_are_refused_by_name_and_nothing_is_written() {
         ],
         "lower the frame rate, the line delay or the exposure",
     );
-    refused(&["--frames", "--fps", "0"], "frame rate");
+    refused(
+        &["--frames", "--fps", "0"],
+        "invalid value '0' for '--fps <F>'",
+    );
     refused(&["--frames", "--exposure-s", "0.05"], "exposure");
     refused(
         &["--frames", "--shutter", "rolling", "--line-delay-s=-1e-6"],
-        "line delay",
+        "for '--line-delay-s <D>'",
     );
-    refused(&["--frames", "--frame-count", "0"], "no frame");
+    refused(
+        &["--frames", "--frame-count", "0"],
+        "for '--frame-count <N>'",
+    );
+    refused(&["--frames", "--fps", "1e300"], "for '--fps <F>'");
     // Frame options without --frames, and measurement options with it.
     refused(&["--fps", "30"], "--frames");
     refused(&["--shutter", "rolling"], "--frames");

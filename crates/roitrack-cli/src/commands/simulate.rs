@@ -14,7 +14,7 @@ use roitrack::math::time::Readout;
 use roitrack::nalgebra::Vector3;
 use roitrack::sim::{
     DEFAULT_TRUTH_RATE_HZ, Excursion, FrameOptions, FrameSequence, Jump, Occlusion, RoiBurst,
-    Scenario, ScenarioKind, SimulatedRun, SimulationOptions, TimeGap, render_roi_images, simulate,
+    RoiImageRenderer, Scenario, ScenarioKind, SimulatedRun, Simulation, SimulationOptions, TimeGap,
 };
 
 use crate::args::{ScenarioArg, ShutterArg};
@@ -315,29 +315,24 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         .scenario(Scenario::new(args.scenario.into(), args.seed))?;
     args.rig.check_outputs(&args.out, &RUN_FILES)?;
     let options = args.options();
-    let run = simulate(&scenario, &options).context("simulation failed")?;
-    write_run(&run, &args.out)?;
-    if args.rois {
-        let reflections = args.reflections.map(|fraction| ReflectionFault {
-            fraction,
-            ..Default::default()
-        });
-        let mut writer = roitrack::formats::RoiRecordingWriter::create(args.out.join(ROIS_FILE))?;
-        for image in render_roi_images(
-            &scenario,
-            &options,
-            &run,
-            SensorModel::default(),
-            reflections,
-        )? {
-            writer.write(&image?)?;
-        }
-        writer.finish()?;
-    }
+    std::fs::create_dir_all(&args.out)
+        .with_context(|| format!("cannot create folder {}", args.out.display()))?;
+    let reflections = args.reflections.map(|fraction| ReflectionFault {
+        fraction,
+        ..Default::default()
+    });
+    // Streamed: the memory does not grow with the duration.
+    let measured = write_run_streamed(
+        &scenario,
+        &options,
+        &args.out,
+        args.rois.then_some(reflections),
+        || Ok(()),
+    )?;
     eprintln!(
         "roitrack: {} scenario: {} measurements over {:.3} s written to {}",
         scenario.kind.name(),
-        run.measurements.len(),
+        measured,
         scenario.duration_s,
         args.out.display()
     );
@@ -354,6 +349,55 @@ pub fn write_run(run: &SimulatedRun, dir: &Path) -> Result<()> {
     roitrack::formats::write_tum(dir.join(TRUTH_POSES_FILE), &run.truth_poses)?;
     roitrack::formats::write_twists_csv(dir.join(TRUTH_TWISTS_FILE), &run.truth_twists)?;
     Ok(())
+}
+
+/// Simulates `scenario` one ROI at a time and writes the run's files into `dir` (which must exist) as it goes:
+/// camera.yaml, target.csv, measurements.csv, gt_poses.tum, gt_twists.csv, and with `rois` (its reflection fault,
+/// if any) the rendered ROI of every measurement in rois.bin. The memory is the same whatever the duration: nothing
+/// of the run is held but the ROI being written. `each_roi` runs before every ROI (to stop on a signal). Returns the
+/// number of measurements. The files are those of [`write_run`] on [`simulate`]'s run, byte for byte.
+fn write_run_streamed(
+    scenario: &Scenario,
+    options: &SimulationOptions,
+    dir: &Path,
+    rois: Option<Option<ReflectionFault>>,
+    mut each_roi: impl FnMut() -> Result<()>,
+) -> Result<usize> {
+    let stream = Simulation::new(scenario, options).context("simulation failed")?;
+    let file = |name: &str| dir.join(name);
+    roitrack::formats::write_camera_yaml(file(CAMERA_FILE), &scenario.camera)?;
+    roitrack::formats::write_target_csv(file(TARGET_FILE), &scenario.target)?;
+    let mut measurements = roitrack::formats::MeasurementWriter::create(file(MEASUREMENTS_FILE))?;
+    let mut poses = roitrack::formats::PoseWriter::create(file(TRUTH_POSES_FILE))?;
+    let mut twists = roitrack::formats::TwistWriter::create(file(TRUTH_TWISTS_FILE))?;
+    let mut recording = match rois {
+        Some(reflections) => Some((
+            roitrack::formats::RoiRecordingWriter::create(file(ROIS_FILE))?,
+            RoiImageRenderer::new(scenario, options, SensorModel::default(), reflections)?,
+        )),
+        None => None,
+    };
+    let mut measured = 0;
+    for roi in stream {
+        each_roi()?;
+        let roi = roi.context("simulation failed")?;
+        poses.write(&roi.truth_pose)?;
+        twists.write(&roi.truth_twist)?;
+        if let Some(m) = roi.measurement {
+            measurements.write(&m)?;
+            measured += 1;
+            if let Some((writer, renderer)) = &mut recording {
+                writer.write(&renderer.render(&m)?)?;
+            }
+        }
+    }
+    measurements.finish()?;
+    poses.finish()?;
+    twists.finish()?;
+    if let Some((writer, _)) = recording {
+        writer.finish()?;
+    }
+    Ok(measured)
 }
 
 impl SimulateArgs {
@@ -436,12 +480,19 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
     roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scenario.target)?;
     render_frames(&sequence, &frames_dir)?;
     write_timestamps(&sequence, &dir.join(TIMESTAMPS_FILE))?;
-    // Dense, so that `roitrack eval` interpolates the truth at each estimate's own time (the mean time of its frame's blobs).
-    let truth = sequence
-        .truth_samples(DEFAULT_TRUTH_RATE_HZ)
-        .context("cannot sample the ground truth")?;
-    roitrack::formats::write_tum(dir.join(TRUTH_POSES_FILE), &truth.poses)?;
-    roitrack::formats::write_twists_csv(dir.join(TRUTH_TWISTS_FILE), &truth.twists)?;
+    // Dense, so that `roitrack eval` interpolates the truth at each estimate's own time (the mean time of its frame's
+    // blobs); written as it is sampled, so that the memory does not grow with the duration.
+    let mut poses = roitrack::formats::PoseWriter::create(dir.join(TRUTH_POSES_FILE))?;
+    let mut twists = roitrack::formats::TwistWriter::create(dir.join(TRUTH_TWISTS_FILE))?;
+    for (pose, twist) in sequence
+        .truth_iter(DEFAULT_TRUTH_RATE_HZ)
+        .context("cannot sample the ground truth")?
+    {
+        poses.write(&pose)?;
+        twists.write(&twist)?;
+    }
+    poses.finish()?;
+    twists.finish()?;
     let track = track_command(args);
     let readme = frames_readme(args, &sequence, &track);
     let readme_path = dir.join(FRAMES_README_FILE);
