@@ -80,20 +80,20 @@ pub struct BenchArgs {
     /// Print one JSON object with stable keys instead of a table.
     #[arg(long)]
     pub json: bool,
-    /// ROIs per loop run.
-    #[arg(long, default_value_t = DEFAULT_ROIS)]
+    /// ROIs per loop run (at most 10 million: 40 minutes at 4 kHz).
+    #[arg(long, default_value_t = DEFAULT_ROIS, value_parser = crate::ranges::count(1..=10_000_000, "40 minutes at 4 kHz"))]
     pub rois: usize,
-    /// Runs of each configuration (the best throughput and the median latencies are reported).
-    #[arg(long, default_value_t = DEFAULT_REPEATS)]
+    /// Runs of each configuration (the best throughput and the median latencies are reported), at most 1,000.
+    #[arg(long, default_value_t = DEFAULT_REPEATS, value_parser = crate::ranges::count(1..=1000, "a median of a thousand is steady"))]
     pub repeats: usize,
     /// Timing budget of each hot-path item (ms). Default: 400 ms, scaled down with the loop's work when `--rois` x
     /// `--repeats` is below the default 16,000 x 3 (at least 10 ms), so a short run stays short.
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=600_000))]
     pub item_ms: Option<u64>,
     /// Also run the loop through Aravis' fake GigE camera on 127.0.0.1 for this many seconds of the orthoglide
     /// scenario (ROIs/s, latency from buffer timestamp to estimate). Default: not run.
     #[cfg(feature = "genicam")]
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", value_parser = crate::ranges::positive_up_to(3600.0, " s", "an hour"))]
     pub fake_camera: Option<f64>,
 }
 

@@ -14,13 +14,13 @@ use roitrack::experiments::frames::{FrameStudyOptions, frame_study};
 #[derive(Debug, Args)]
 pub struct FrameStudyArgs {
     /// Seeds 1 to N: each a motion of the sweep and the noise of its frames.
-    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, default_value_t = 3, value_parser = clap::value_parser!(u64).range(1..=1000))]
     pub seeds: u64,
     /// Frames per sequence. Default: the whole sweep (6 s).
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=roitrack::sim::MAX_FRAMES as u64))]
     pub frame_count: Option<u64>,
     /// Sequences rendered and tracked at once. Default: the machine's cores.
-    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=1024))]
     pub threads: Option<u64>,
     /// Print one JSON object (description, rows, checks, every run) instead of markdown.
     #[arg(long)]

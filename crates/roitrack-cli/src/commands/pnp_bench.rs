@@ -22,7 +22,7 @@ pub struct PnpBenchArgs {
     pub suite: Option<PathBuf>,
     /// Timed solves of each instance (all instances are solved once per repetition, in turn; a suite's problems are
     /// each timed this many times in a row).
-    #[arg(long, default_value_t = 20)]
+    #[arg(long, default_value_t = 20, value_parser = crate::ranges::count(1..=100_000, "a median of a hundred thousand is steady"))]
     pub repeats: usize,
     /// Print one JSON object (summary, the pose found for each instance, every solve's time) instead of a table.
     #[arg(long)]

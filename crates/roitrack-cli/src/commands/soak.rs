@@ -6,8 +6,8 @@ use clap::Args;
 /// Track a long simulated stream at full speed and report, per simulated minute, accuracy, time and memory.
 #[derive(Debug, Args)]
 pub struct SoakArgs {
-    /// Length of the simulated stream (minutes at 4 kHz).
-    #[arg(long, default_value_t = 10.0)]
+    /// Length of the simulated stream (minutes at 4 kHz), at most a day.
+    #[arg(long, default_value_t = 10.0, value_parser = crate::ranges::positive_up_to(1440.0, " min", "a day"))]
     pub minutes: f64,
     /// Print one JSON object instead of a table.
     #[arg(long)]
