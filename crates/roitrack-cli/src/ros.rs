@@ -79,8 +79,8 @@ fn parse_live_address(text: &str) -> Result<SocketAddr, String> {
 
 fn parse_wait_s(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
-        Ok(s) if s.is_finite() && s >= 0.0 => Ok(s),
-        _ => Err("expected seconds, a number from 0".into()),
+        Ok(s) if (0.0..=3600.0).contains(&s) => Ok(s),
+        _ => Err("expected seconds, a number from 0 to 3600 (an hour)".into()),
     }
 }
 
@@ -331,9 +331,9 @@ pub struct PaceArgs {
 
 fn parse_factor(text: &str) -> Result<f64, String> {
     match text.parse::<f64>() {
-        Ok(f) if f.is_finite() && f > 0.0 => Ok(f),
+        Ok(f) if (1e-3..=1e3).contains(&f) => Ok(f),
         _ => Err(
-            "expected a speed factor, a positive number (1: real time, 2: twice as fast)".into(),
+            "expected a speed factor from 0.001 to 1000 (1: real time, 2: twice as fast)".into(),
         ),
     }
 }

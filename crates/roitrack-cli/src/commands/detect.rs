@@ -60,7 +60,7 @@ pub struct DetectArgs {
     pub polarity: PolarityArg,
     /// The nearest and farthest distances (m) the target may be at: blobs no target circle can make at such
     /// distances are left out (needs diameters in the target file). Default: any size.
-    #[arg(long, num_args = 2, value_names = ["NEAR_M", "FAR_M"])]
+    #[arg(long, num_args = 2, value_names = ["NEAR_M", "FAR_M"], value_parser = crate::ranges::positive_up_to(1e3, " m", "a target seen from a kilometre is a pixel"))]
     pub distance_m: Option<Vec<f64>>,
     /// Write per image a PNG (`<image name>.overlay.png`) with the matched blobs and their ids (green), the model
     /// projected with the pose (red +), unmatched blobs (yellow) and points expected but not found (magenta x), into

@@ -67,7 +67,7 @@ pub struct LiveArgs {
     pub target: Option<PathBuf>,
     /// Length of the run (s). Default: the scenario's with --fake (a longer one stops at its end), 10 s with
     /// --device.
-    #[arg(long, value_name = "S")]
+    #[arg(long, value_name = "S", value_parser = crate::ranges::positive_up_to(86_400.0, " s", "a day"))]
     pub duration: Option<f64>,
     /// Side of the square window every ROI is read through (px, at most 64), rounded up to the camera's increments.
     #[arg(long, value_name = "N", default_value_t = 32)]
@@ -75,10 +75,10 @@ pub struct LiveArgs {
     /// ROI slots per second: with --device the loop is paced at this rate on the host's clock (the camera must
     /// sustain it); with --fake the slots are the scenario's times, read as fast as the camera delivers. Default:
     /// 4000 with --fake, 1000 with --device.
-    #[arg(long, value_name = "HZ")]
+    #[arg(long, value_name = "HZ", value_parser = crate::ranges::positive_up_to(roitrack::sim::MAX_ROI_RATE_HZ, " Hz", "beyond any ROI camera"))]
     pub rate_hz: Option<f64>,
     /// ExposureTime (µs). Default: the camera's.
-    #[arg(long, value_name = "US")]
+    #[arg(long, value_name = "US", value_parser = crate::ranges::positive_up_to(roitrack::math::time::MAX_EXPOSURE_S * 1e6, " µs", "beyond, a moving blob is a streak"))]
     pub exposure_us: Option<f64>,
     /// Pixel format (one the camera does not offer is refused with the list of those it does). Default: mono8 if the
     /// camera offers it, else the first of mono12, mono16, mono12-packed, mono12p it offers. The fake camera offers
@@ -90,10 +90,10 @@ pub struct LiveArgs {
     #[arg(long, value_enum, default_value = "software")]
     pub trigger: TriggerArg,
     /// With --trigger free-run: AcquisitionFrameRate (Hz). Default: the camera's.
-    #[arg(long, value_name = "HZ")]
+    #[arg(long, value_name = "HZ", value_parser = crate::ranges::within(roitrack::formats::MIN_FRAME_RATE_HZ..=roitrack::formats::MAX_FRAME_RATE_HZ, " Hz", "a frame every 1,000 s to beyond the fastest cameras"))]
     pub frame_rate_hz: Option<f64>,
     /// How long a ROI may take before it counts as lost (s).
-    #[arg(long, value_name = "S", default_value_t = 0.2)]
+    #[arg(long, value_name = "S", default_value_t = 0.2, value_parser = crate::ranges::positive_up_to(60.0, " s", "a minute"))]
     pub timeout_s: f64,
     /// Output: the poses (TUM). Required.
     #[arg(long, value_name = "P.tum")]

@@ -41,7 +41,7 @@ pub struct PlotArgs {
     #[arg(long, value_enum, default_value_t = AlignArg::None)]
     pub align: AlignArg,
     /// Seconds added to the estimates' times to put them on the truth's clock, as in `roitrack eval`.
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, value_parser = crate::ranges::within(-1e9..=1e9, " s", "over 30 years"), allow_negative_numbers = true)]
     pub time_offset: f64,
     /// Folder for the figures (created if needed).
     #[arg(long)]
