@@ -130,15 +130,44 @@ pub fn parse_target_csv_in<R: Read>(
     }
 }
 
+/// Up to this many points, the span is every pair's distance (8 million pairs at most, milliseconds).
+const EXACT_SPAN_POINTS: usize = 4096;
+
+/// The largest distance between two of `points` (m): exact up to [`EXACT_SPAN_POINTS`] points; beyond (a target
+/// file may hold hundreds of thousands, whose pairs would take minutes), the farthest pair found by sweeps from one
+/// point to the point farthest from it and back, which is at least half the span and is the span for a point set
+/// whose farthest pair is unique from both ends, as the targets of the unit check (a plane or a box of points) are.
+fn span(points: &[TargetPoint]) -> f64 {
+    if points.len() <= EXACT_SPAN_POINTS {
+        let mut span_m: f64 = 0.0;
+        for (i, a) in points.iter().enumerate() {
+            for b in &points[i + 1..] {
+                span_m = span_m.max((a.point_in_obj_m - b.point_in_obj_m).norm());
+            }
+        }
+        return span_m;
+    }
+    let farthest_from = |from: &TargetPoint| {
+        points
+            .iter()
+            .map(|p| (p.point_in_obj_m - from.point_in_obj_m).norm())
+            .enumerate()
+            .fold((0, 0.0f64), |best, (i, d)| if d > best.1 { (i, d) } else { best })
+    };
+    let mut span_m: f64 = 0.0;
+    let mut at = 0;
+    for _ in 0..4 {
+        let (next, d) = farthest_from(&points[at]);
+        span_m = span_m.max(d);
+        at = next;
+    }
+    span_m
+}
+
 /// Refuses a target (read as metres) that looks like millimetres or centimetres.
 fn check_target_units(target: &Target, path: &Path) -> Result<(), FormatError> {
     let points = target.points();
-    let mut span_m: f64 = 0.0;
-    for (i, a) in points.iter().enumerate() {
-        for b in &points[i + 1..] {
-            span_m = span_m.max((a.point_in_obj_m - b.point_in_obj_m).norm());
-        }
-    }
+    let span_m = span(points);
     let widest_m = points
         .iter()
         .filter_map(|p| p.diameter_m)

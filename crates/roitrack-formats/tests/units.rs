@@ -148,3 +148,25 @@ fn centroids_off_the_image_name_line_and_field() {
         "{e}"
     );
 }
+
+#[test]
+fn a_target_of_many_points_is_checked_for_its_unit_in_linear_time() {
+    // 100,000 points of a 60 mm plate written in millimetres: the unit check (which took minutes over every pair of
+    // such a file) sweeps for the farthest pair instead, and still finds the plate 60 m wide.
+    let mut text = String::from("id,x,y,z\n");
+    for i in 0..100_000u32 {
+        let (x, y) = (f64::from(i % 317) * 0.19, f64::from(i / 317) * 0.19);
+        text += &format!("{i},{x},{y},0\n");
+    }
+    let e = roitrack_formats::parse_target_csv_in(text.as_bytes(), "t.csv", None)
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("--target-units mm"), "{e}");
+    let target = roitrack_formats::parse_target_csv_in(
+        text.as_bytes(),
+        "t.csv",
+        Some(roitrack_formats::LengthUnit::Mm),
+    )
+    .unwrap();
+    assert_eq!(target.len(), 100_000);
+}
