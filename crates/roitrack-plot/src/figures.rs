@@ -160,38 +160,31 @@ pub fn write_figures(
     truth: &TruthSeries,
     runs: &[TrackSeries],
 ) -> Result<Vec<PathBuf>, PlotError> {
+    let files = render_figures(scenario, truth, runs)?;
+    crate::write_rendered(dir, &files)
+}
+
+/// [`write_figures`] in memory: the six files (`fig5_trajectory.png`, `fig5_trajectory.svg`, ...), for a caller
+/// that writes them its own way; the same checks and errors.
+pub fn render_figures(
+    scenario: &str,
+    truth: &TruthSeries,
+    runs: &[TrackSeries],
+) -> Result<Vec<crate::RenderedFile>, PlotError> {
     register_font();
     let data = Data::new(scenario, truth, runs)?;
-    std::fs::create_dir_all(dir).map_err(|e| PlotError::Draw {
-        path: dir.to_path_buf(),
-        message: e.to_string(),
-    })?;
     let mut out = Vec::with_capacity(6);
     for (fig, stem, size) in [
         (Fig::Trajectory, "fig5_trajectory", FIG5_SIZE),
         (Fig::Position, "fig6_position", FIG67_SIZE),
         (Fig::Velocity, "fig7_velocity", FIG67_SIZE),
     ] {
-        let png = dir.join(format!("{stem}.png"));
-        let svg = dir.join(format!("{stem}.svg"));
-        draw_figure(
-            BitMapBackend::new(&png, size).into_drawing_area(),
-            fig,
-            &data,
-        )
-        .map_err(|message| PlotError::Draw {
-            path: png.clone(),
-            message,
-        })?;
-        draw_figure(SVGBackend::new(&svg, size).into_drawing_area(), fig, &data).map_err(
-            |message| PlotError::Draw {
-                path: svg.clone(),
-                message,
-            },
-        )?;
-        out.push(png);
-        crate::outline_svg_text(&svg)?;
-        out.push(svg);
+        out.push(crate::render_png(&format!("{stem}.png"), size, |area| {
+            draw_figure(area, fig, &data)
+        })?);
+        out.push(crate::render_svg(&format!("{stem}.svg"), size, |area| {
+            draw_figure(area, fig, &data)
+        })?);
     }
     Ok(out)
 }

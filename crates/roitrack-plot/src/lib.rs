@@ -10,7 +10,7 @@ pub mod figures;
 pub mod run;
 mod svg_text;
 
-pub use figures::{TrackSeries, TruthSeries, write_figures};
+pub use figures::{TrackSeries, TruthSeries, render_figures, write_figures};
 
 use std::path::{Path, PathBuf};
 use std::sync::Once;
@@ -23,12 +23,71 @@ const FONT: &str = "roitrack-sans";
 static FONT_BYTES: &[u8] = include_bytes!("../assets/DejaVuSans.ttf");
 static REGISTER: Once = Once::new();
 
-/// Replaces the text of a written SVG file by the embedded font's outlines (see the `svg_text` module).
-fn outline_svg_text(svg: &Path) -> Result<(), PlotError> {
-    svg_text::outline_text_in_file(svg, FONT_BYTES).map_err(|message| PlotError::Draw {
-        path: svg.to_path_buf(),
+/// A figure file rendered in memory: its file name (`fig5_trajectory.png`) and its content, for a caller that writes
+/// files its own way (the command line writes them with the run's other outputs, all or none).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct RenderedFile {
+    pub name: String,
+    pub bytes: Vec<u8>,
+}
+
+/// Draws with `draw` on an RGB canvas of `size` and encodes it as PNG, named `name` in errors.
+fn render_png(
+    name: &str,
+    size: (u32, u32),
+    draw: impl FnOnce(DrawingArea<BitMapBackend<'_>, Shift>) -> Result<(), String>,
+) -> Result<RenderedFile, PlotError> {
+    use image::ImageEncoder;
+    let failed = |message: String| PlotError::Draw {
+        path: PathBuf::from(name),
         message,
+    };
+    let mut pixels = vec![0u8; size.0 as usize * size.1 as usize * 3];
+    draw(BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area()).map_err(failed)?;
+    let mut bytes = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut bytes)
+        .write_image(&pixels, size.0, size.1, image::ColorType::Rgb8)
+        .map_err(|e| failed(e.to_string()))?;
+    Ok(RenderedFile {
+        name: name.to_string(),
+        bytes,
     })
+}
+
+/// Draws with `draw` as SVG of `size`, its text as the embedded font's outlines (see the `svg_text` module).
+fn render_svg(
+    name: &str,
+    size: (u32, u32),
+    draw: impl FnOnce(DrawingArea<SVGBackend<'_>, Shift>) -> Result<(), String>,
+) -> Result<RenderedFile, PlotError> {
+    let failed = |message: String| PlotError::Draw {
+        path: PathBuf::from(name),
+        message,
+    };
+    let mut svg = String::new();
+    draw(SVGBackend::with_string(&mut svg, size).into_drawing_area()).map_err(failed)?;
+    let outlined = svg_text::outline_text(&svg, FONT_BYTES).map_err(failed)?;
+    Ok(RenderedFile {
+        name: name.to_string(),
+        bytes: outlined.into_bytes(),
+    })
+}
+
+/// Writes rendered files into `dir` (created if needed) and returns their paths.
+fn write_rendered(dir: &Path, files: &[RenderedFile]) -> Result<Vec<PathBuf>, PlotError> {
+    let failed = |path: &Path, e: std::io::Error| PlotError::Draw {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    std::fs::create_dir_all(dir).map_err(|e| failed(dir, e))?;
+    files
+        .iter()
+        .map(|file| {
+            let path = dir.join(&file.name);
+            std::fs::write(&path, &file.bytes).map_err(|e| failed(&path, e))?;
+            Ok(path)
+        })
+        .collect()
 }
 
 fn register_font() {
@@ -230,31 +289,34 @@ where
     area.present().map_err(|e| e.to_string())
 }
 
-/// Writes `stem.png` and `stem.svg` (1000 x 700 px).
-pub fn write_chart(stem: &Path, chart: &Chart) -> Result<(PathBuf, PathBuf), PlotError> {
+/// Renders `chart` as `STEM.png` and `STEM.svg` (1000 x 700 px), in memory.
+pub fn render_chart(stem: &str, chart: &Chart) -> Result<[RenderedFile; 2], PlotError> {
     register_font();
     if finite_points(&chart.series).next().is_none() {
         return Err(PlotError::Empty {
             title: chart.title.clone(),
         });
     }
-    let png = stem.with_extension("png");
-    let svg = stem.with_extension("svg");
     let size = (1000, 700);
-    draw(BitMapBackend::new(&png, size).into_drawing_area(), chart).map_err(|message| {
-        PlotError::Draw {
-            path: png.clone(),
-            message,
-        }
-    })?;
-    draw(SVGBackend::new(&svg, size).into_drawing_area(), chart).map_err(|message| {
-        PlotError::Draw {
-            path: svg.clone(),
-            message,
-        }
-    })?;
-    outline_svg_text(&svg)?;
-    Ok((png, svg))
+    Ok([
+        render_png(&format!("{stem}.png"), size, |area| draw(area, chart))?,
+        render_svg(&format!("{stem}.svg"), size, |area| draw(area, chart))?,
+    ])
+}
+
+/// Writes `stem.png` and `stem.svg` (1000 x 700 px).
+pub fn write_chart(stem: &Path, chart: &Chart) -> Result<(PathBuf, PathBuf), PlotError> {
+    let name = stem
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let dir = match stem.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir,
+        _ => Path::new("."),
+    };
+    let files = render_chart(&name, chart)?;
+    let paths = write_rendered(dir, &files)?;
+    Ok((paths[0].clone(), paths[1].clone()))
 }
 
 #[cfg(test)]

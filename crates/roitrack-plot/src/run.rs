@@ -97,6 +97,13 @@ fn rotation_vector_deg(p: &PoseSample) -> [f64; 3] {
 /// assert_eq!(paths.len(), 6);
 /// ```
 pub fn write_run_figures(dir: &Path, inputs: &RunFigureInputs) -> Result<Vec<PathBuf>, PlotError> {
+    let files = render_run_figures(inputs)?;
+    crate::write_rendered(dir, &files)
+}
+
+/// [`write_run_figures`] in memory: the files (`motion.png`, `motion.svg`, ...), for a caller that writes them its
+/// own way; the same checks and errors.
+pub fn render_run_figures(inputs: &RunFigureInputs) -> Result<Vec<crate::RenderedFile>, PlotError> {
     register_font();
     let n = inputs.poses.len();
     if n == 0 {
@@ -123,10 +130,6 @@ pub fn write_run_figures(dir: &Path, inputs: &RunFigureInputs) -> Result<Vec<Pat
     {
         return Err(invalid("diagnostics", status.len()));
     }
-    std::fs::create_dir_all(dir).map_err(|e| PlotError::Draw {
-        path: dir.to_path_buf(),
-        message: e.to_string(),
-    })?;
     let mut figures: Vec<(&str, Figure)> = vec![("motion", motion_panels(inputs))];
     if let Some(errors) = &inputs.errors {
         figures.push(("errors", error_panels(inputs, errors)));
@@ -134,34 +137,17 @@ pub fn write_run_figures(dir: &Path, inputs: &RunFigureInputs) -> Result<Vec<Pat
     if let Some(status) = &inputs.status {
         figures.push(("status", Figure::Status(status.clone())));
     }
-    let mut paths = Vec::new();
+    let mut files = Vec::new();
     for (stem, figure) in &figures {
-        let png = dir.join(format!("{stem}.png"));
-        let svg = dir.join(format!("{stem}.svg"));
         let title = format!("{}: {stem}", inputs.title);
-        draw(
-            BitMapBackend::new(&png, SIZE).into_drawing_area(),
-            &title,
-            figure,
-        )
-        .map_err(|message| PlotError::Draw {
-            path: png.clone(),
-            message,
-        })?;
-        draw(
-            SVGBackend::new(&svg, SIZE).into_drawing_area(),
-            &title,
-            figure,
-        )
-        .map_err(|message| PlotError::Draw {
-            path: svg.clone(),
-            message,
-        })?;
-        paths.push(png);
-        crate::outline_svg_text(&svg)?;
-        paths.push(svg);
+        files.push(crate::render_png(&format!("{stem}.png"), SIZE, |area| {
+            draw(area, &title, figure)
+        })?);
+        files.push(crate::render_svg(&format!("{stem}.svg"), SIZE, |area| {
+            draw(area, &title, figure)
+        })?);
     }
-    Ok(paths)
+    Ok(files)
 }
 
 enum Figure {

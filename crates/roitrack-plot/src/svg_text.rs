@@ -4,19 +4,10 @@
 //! kerning, so an SVG looks like its PNG in every viewer and needs no font at all; the `<text>` stays, made
 //! transparent, so that the words can still be searched and selected.
 
-use std::path::Path;
-
 use ab_glyph::{Font, FontRef, GlyphId, OutlineCurve, Point};
 
 /// The x-height of the embedded font (DejaVu Sans: 1120 of 2048 units per em), for the SVG backend's `ex` offsets.
 const X_HEIGHT_EM: f32 = 1120.0 / 2048.0;
-
-/// Rewrites the SVG file at `path` with its text as outlines of `font`.
-pub(crate) fn outline_text_in_file(path: &Path, font: &[u8]) -> Result<(), String> {
-    let svg = std::fs::read_to_string(path).map_err(|e| e.to_string())?;
-    let outlined = outline_text(&svg, font)?;
-    std::fs::write(path, outlined).map_err(|e| e.to_string())
-}
 
 /// `svg` with every `<text ...>content</text>` element replaced by a `<path>` of the content's glyph outlines.
 pub(crate) fn outline_text(svg: &str, font: &[u8]) -> Result<String, String> {
