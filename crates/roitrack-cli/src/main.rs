@@ -8,6 +8,7 @@ mod args;
 mod commands;
 mod ranges;
 mod ros;
+mod signals;
 
 #[derive(Debug, Parser)]
 #[command(name = "roitrack", version, about, long_about = None)]
@@ -41,15 +42,40 @@ enum Command {
     Cameras(commands::live::CamerasArgs),
 }
 
-fn main() -> ExitCode {
-    // Like other command-line tools, end quietly when the reader of our output goes away (`roitrack eval | head`)
-    // instead of panicking on a broken pipe.
-    #[cfg(unix)]
-    // SAFETY: called first thing in main, before any other thread exists; restores the default signal action.
-    unsafe {
-        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+/// The error of a run whose outputs stand all the same: they are moved into place, then the error is reported and the
+/// command fails (`detect` with some images failed keeps the others' overlays; `live` ended by its camera keeps the
+/// estimates until then).
+#[derive(Debug)]
+pub struct OutputsStand(pub String);
+
+impl std::fmt::Display for OutputsStand {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
     }
+}
+
+impl std::error::Error for OutputsStand {}
+
+fn main() -> ExitCode {
+    // SIGINT, SIGTERM, SIGHUP and SIGPIPE alike (src/signals.rs). A reader of our output that goes away
+    // (`roitrack eval | head`) still ends the process quietly, by SIGPIPE, as the default action did.
+    signals::install();
     let cli = Cli::parse();
+    // The commands that track or render stop at their next estimate at the first signal, keeping what they promise;
+    // the others end at once.
+    if matches!(
+        cli.command,
+        Command::Demo(_) | Command::Simulate(_) | Command::Track(_) | Command::Detect(_)
+    ) {
+        signals::stop_at_next_estimate();
+    }
+    #[cfg(feature = "genicam")]
+    if matches!(cli.command, Command::Live(_)) {
+        signals::stop_at_next_estimate();
+    }
+    // Every output of the run (files, bags, figures, folders) is written to a temporary and moved into place only
+    // when the whole run has succeeded: a failed or interrupted run leaves every previous output as it was.
+    let outputs = roitrack::formats::OutputSet::begin();
     let result = match cli.command {
         Command::Demo(args) => commands::demo::run(&args),
         Command::Bench(args) => commands::bench::run(&args),
@@ -70,11 +96,48 @@ fn main() -> ExitCode {
         #[cfg(feature = "genicam")]
         Command::Cameras(args) => commands::live::cameras(&args),
     };
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(error) => {
+    let signal = signals::received();
+    // An error after which the outputs stand (`detect` with some images failed, `live` ended by its camera).
+    let stands = matches!(&result, Err(e) if e.downcast_ref::<OutputsStand>().is_some());
+    if signal.is_none() && stands {
+        let committed = outputs.commit();
+        if let Err(error) = result.and(committed.map_err(anyhow::Error::new)) {
             eprintln!("roitrack: error: {error:#}");
-            ExitCode::FAILURE
         }
+        return ExitCode::FAILURE;
+    }
+    if let (Ok(()), None) = (&result, signal) {
+        return match outputs.commit() {
+            Ok(()) => ExitCode::SUCCESS,
+            Err(error) => {
+                eprintln!(
+                    "roitrack: error: the run succeeded, but its outputs could not all be moved into place: {error}"
+                );
+                ExitCode::FAILURE
+            }
+        };
+    }
+    // Failed or interrupted: no output is moved into place; a partial result that was promised is kept under its
+    // own name.
+    let kept = outputs.abandon();
+    // A reader that went away (SIGPIPE) wants no message.
+    if signal != Some(signals::SIGPIPE) {
+        match &result {
+            Err(error) => eprintln!("roitrack: error: {error:#}"),
+            Ok(()) => eprintln!(
+                "roitrack: interrupted ({}) before the outputs were moved into place",
+                signals::name(signal.unwrap_or_default())
+            ),
+        }
+    }
+    for path in &kept {
+        eprintln!(
+            "roitrack: the outputs are as they were; kept {}, the partial result up to the run's last estimate",
+            path.display()
+        );
+    }
+    match signal {
+        Some(signal) => signals::end_by(signal),
+        None => ExitCode::FAILURE,
     }
 }

@@ -22,9 +22,10 @@ use roitrack::{CameraModel, Estimate, Frame, Measurement, MotionState, Target};
 pub struct McapArgs {
     /// Also write the estimates as a ROS 2 bag in MCAP storage (profile ros2, CDR): /roitrack/pose, /roitrack/twist,
     /// /roitrack/odometry, /tf, /roitrack/status per estimate, /roitrack/camera_info once, and with --images the
-    /// frames and the projected target (docs/ros2.md). Completed on every exit path: a failed run leaves a bag
-    /// readable up to its last estimate; the first Ctrl-C stops the run at its next estimate and completes the bag
-    /// (a second one ends the process at once). Default: no bag.
+    /// frames and the projected target (docs/ros2.md). Written to a temporary and moved into place with the other
+    /// outputs when the run succeeds. A run that fails or is interrupted (the first Ctrl-C, SIGTERM, SIGHUP stops it
+    /// at its next estimate; a second one ends it at once) leaves the bag at OUT.mcap as it was and keeps the bag up
+    /// to its last estimate, readable, as OUT.partial.mcap. Default: no bag.
     #[arg(long, value_name = "OUT.mcap")]
     pub mcap: Option<PathBuf>,
     /// Serve the bag's topics live over the Foxglove WebSocket protocol while tracking: in Foxglove, Open
@@ -92,38 +93,10 @@ pub struct Bag {
     rois: bool,
 }
 
-/// Set by the first Ctrl-C (SIGINT) of a run that writes a bag: the run then stops at its next estimate or frame,
-/// through the error path, which completes the bag. A second Ctrl-C ends the process at once.
-static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
-
-#[cfg(unix)]
-extern "C" fn on_interrupt(_signal: libc::c_int) {
-    INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
-    // SAFETY: signal() is async-signal-safe; it restores the default action for a second Ctrl-C.
-    unsafe {
-        libc::signal(libc::SIGINT, libc::SIG_DFL);
-    }
-}
-
-/// Lets the first Ctrl-C stop the run through its error path instead of killing the process (which would leave the
-/// bag without its summary).
-fn stop_on_interrupt() {
-    #[cfg(unix)]
-    // SAFETY: installs a handler that only stores to an atomic and calls signal(), both async-signal-safe.
-    unsafe {
-        let handler: extern "C" fn(libc::c_int) = on_interrupt;
-        libc::signal(libc::SIGINT, handler as libc::sighandler_t);
-    }
-}
-
+/// The run stops at its next estimate or frame once a signal came (`crate::signals`), through the error path, which
+/// completes the bag (kept as NAME.partial.mcap).
 fn check_interrupt(bag: &BackgroundBag) -> Result<(), FormatError> {
-    if INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst) {
-        return Err(FormatError::new(
-            bag.path(),
-            "interrupted (Ctrl-C): the bag is completed up to the last estimate",
-        ));
-    }
-    Ok(())
+    crate::signals::check(bag.path())
 }
 
 impl McapArgs {
@@ -165,9 +138,6 @@ impl McapArgs {
             }
             None => None,
         };
-        if self.mcap.is_some() {
-            stop_on_interrupt();
-        }
         let bag = match &self.mcap {
             Some(path) => Some(BackgroundBag::spawn(
                 BagWriter::create(path, &options, Some(camera.clone()))?,
@@ -229,6 +199,8 @@ impl Bag {
 
     /// The measurements and estimates of a finished run, in the order they came: the measurements up to each
     /// estimate's time, then the estimate (so that each /roitrack/measurements message holds those of one estimate).
+    /// Written whole even after a signal: the run they come from is over, and the bag keeps it (as NAME.partial.mcap
+    /// if the command then stops).
     pub fn run(
         &mut self,
         measured: &[Measurement],
@@ -243,7 +215,12 @@ impl Bag {
                     .count();
             self.measurements(&measured[next..end])?;
             next = end;
-            self.estimate(e)?;
+            if let Some(live) = &mut self.live {
+                live.publish_estimate(e)?;
+            }
+            if let Some(bag) = &mut self.bag {
+                bag.write_estimate(e)?;
+            }
         }
         self.measurements(&measured[next..])
     }

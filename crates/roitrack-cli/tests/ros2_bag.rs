@@ -79,7 +79,7 @@ fn line_count(path: &Path) -> usize {
     std::fs::read_to_string(path).unwrap().lines().count()
 }
 
-/// The bag of a run of `dir`'s simulation that stopped early (`stopped`/run.mcap), checked by check_bag.py against
+/// The bag of a run of `dir`'s simulation that stopped early (`stopped`/run.partial.mcap), checked by check_bag.py against
 /// a whole run of the measurements it got (`lines`, the header first) tracked into `dir`: the number of estimates in
 /// the bag, and in the whole run.
 fn stopped_bag_estimates(
@@ -91,7 +91,9 @@ fn stopped_bag_estimates(
     let measurements = dir.join("measurements_read.csv");
     std::fs::write(&measurements, lines.join("\n") + "\n").unwrap();
     ok(&strs(&track_args(dir, &measurements, dir)));
-    std::fs::rename(stopped.join("run.mcap"), dir.join("run.mcap")).unwrap();
+    // The stopped run changed no output: its bag up to the last estimate is kept under its own name.
+    assert!(!stopped.join("run.mcap").exists());
+    std::fs::rename(stopped.join("run.partial.mcap"), dir.join("run.mcap")).unwrap();
     let report = check_bag(python, dir, ["camera", "target"], &["--prefix"]);
     // The number after the bag's name in the report.
     let estimates = report
@@ -474,7 +476,7 @@ fn bad_bags_are_refused_naming_the_bag_and_the_topic() {
 }
 
 /// Ctrl-C while tracking: the run stops at its next estimate through the error path, so the bag is completed (its
-/// summary written) and reads back with the estimates before the interruption.
+/// summary written), kept as run.partial.mcap, and reads back with the estimates before the interruption.
 #[cfg(unix)]
 #[test]
 fn ctrl_c_completes_the_bag() {

@@ -273,14 +273,37 @@ fn identity(path: &Path) -> Option<FileIdentity> {
         return Some(FileIdentity::Inode(m.dev(), m.ino()));
     }
     let real = follow_links(path).ok()?;
-    let name = real.file_name()?.to_owned();
-    let dir = match real.parent() {
-        Some(dir) if !dir.as_os_str().is_empty() => dir,
-        _ => Path::new("."),
-    };
-    Some(FileIdentity::Path(
-        std::fs::canonicalize(dir).ok()?.join(name),
-    ))
+    Some(FileIdentity::Path(absolute_path(&real)?))
+}
+
+/// The absolute path `path` would have: its nearest existing folder canonicalised (through links), the folders and
+/// file still to be created appended, `.` and `..` among them resolved by name.
+fn absolute_path(path: &Path) -> Option<PathBuf> {
+    let mut missing = Vec::new();
+    let mut existing = path;
+    loop {
+        let here = if existing.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            existing
+        };
+        if let Ok(real) = std::fs::canonicalize(here) {
+            let mut result = real;
+            for part in missing.iter().rev() {
+                match part {
+                    std::path::Component::ParentDir => {
+                        result.pop();
+                    }
+                    std::path::Component::Normal(name) => result.push(name),
+                    _ => {}
+                }
+            }
+            return Some(result);
+        }
+        let mut components = existing.components();
+        missing.push(components.next_back()?);
+        existing = components.as_path();
+    }
 }
 
 /// Refuses output paths that would destroy an input or each other, before anything is written: an output that is an

@@ -45,6 +45,48 @@ pub struct DemoArgs {
     pub ros: crate::ros::McapArgs,
 }
 
+/// The files a demo writes into its folder: the simulated run, each estimator's estimates, the figures.
+fn output_files() -> Vec<String> {
+    let mut files: Vec<String> = super::simulate::RUN_FILES.map(String::from).to_vec();
+    for estimator in demo::lineup() {
+        for suffix in ["poses.tum", "twists.csv", "diagnostics.csv"] {
+            files.push(format!("{}_{suffix}", estimator.stem));
+        }
+    }
+    for stem in ["fig5_trajectory", "fig6_position", "fig7_velocity"] {
+        files.extend(["png", "svg"].map(|ext| format!("{stem}.{ext}")));
+    }
+    files
+}
+
+/// Refuses, before anything is read or written, outputs (the folder's files, the bag and its partial name) that are
+/// the rig's camera or target file (also through links) or each other.
+fn check_paths(args: &DemoArgs) -> Result<()> {
+    let inputs: Vec<(&str, &std::path::Path)> = [
+        ("--camera", &args.rig.camera),
+        ("--target", &args.rig.target),
+    ]
+    .into_iter()
+    .filter_map(|(name, path)| path.as_deref().map(|p| (name, p)))
+    .collect();
+    let mut outputs: Vec<(String, PathBuf)> = output_files()
+        .into_iter()
+        .map(|f| (format!("--out's {f}"), args.out.join(f)))
+        .collect();
+    if let Some(mcap) = &args.ros.mcap {
+        outputs.push(("--mcap".into(), mcap.clone()));
+        outputs.push((
+            "--mcap's partial bag".into(),
+            roitrack::formats::partial_path(mcap),
+        ));
+    }
+    let outputs: Vec<(&str, &std::path::Path)> = outputs
+        .iter()
+        .map(|(n, p)| (n.as_str(), p.as_path()))
+        .collect();
+    Ok(roitrack::formats::check_output_paths(&inputs, &outputs)?)
+}
+
 pub fn run(args: &DemoArgs) -> Result<()> {
     let options = DemoOptions {
         scenario: args.scenario.into(),
@@ -55,8 +97,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let scenario = args
         .rig
         .scenario(roitrack::sim::Scenario::new(options.scenario, options.seed))?;
-    args.rig
-        .check_outputs(&args.out, &super::simulate::RUN_FILES)?;
+    check_paths(args)?;
     let demo = Demo::with_scenario(options, scenario)?;
     write_run(&demo.run, &args.out)?;
     let lineup = demo::lineup();
@@ -88,6 +129,10 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let mut live = bag.as_mut().and_then(|b| b.take_live());
     let mut runs = Vec::new();
     for (k, estimator) in lineup.iter().enumerate() {
+        // A signal stops the demo here, between two estimators' runs (a second or so after it came), through the
+        // error path: no output changes, and the bag of the default estimator's run, if written, is kept as
+        // NAME.partial.mcap (src/signals.rs).
+        crate::signals::check(&args.out)?;
         bar.set_message(estimator.label);
         let done = AtomicUsize::new(0);
         let finished = AtomicBool::new(false);
@@ -162,11 +207,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         .filter(|r| r.source == Source::Images)
         .map(|r| r.track_series())
         .collect();
-    let figures = roitrack::plot::write_figures(
+    let figures = super::plot::write_figure_files(
         &args.out,
-        demo.scenario.kind.name(),
-        &demo.truth_series(),
-        &series,
+        &roitrack::plot::render_figures(demo.scenario.kind.name(), &demo.truth_series(), &series)?,
     )?;
     if args.json {
         for r in &runs {

@@ -85,9 +85,8 @@ pub fn run(args: &DetectArgs) -> Result<()> {
     let camera = args.camera.read()?;
     let target = args.target.read()?;
     if let Some(dir) = &args.overlay {
-        std::fs::create_dir_all(dir).map_err(|e| {
-            anyhow::anyhow!("{}: cannot create the overlay folder: {e}", dir.display())
-        })?;
+        check_overlay_paths(args, dir)?;
+        roitrack::formats::create_output_dir(dir)?;
     }
     let options = PhotoOptions {
         polarity: args.polarity.into(),
@@ -105,6 +104,8 @@ pub fn run(args: &DetectArgs) -> Result<()> {
     }
     let mut failures = Vec::new();
     for path in &args.images {
+        // A signal stops the run here, through the error path: no overlay is written (src/signals.rs).
+        crate::signals::check(path)?;
         let started = Instant::now();
         let outcome = detect_one(path, &camera, &target, &options, args.overlay.as_deref());
         let time_ms = started.elapsed().as_secs_f64() * 1e3;
@@ -187,7 +188,8 @@ pub fn run(args: &DetectArgs) -> Result<()> {
     }
     out.flush()?;
     if !failures.is_empty() {
-        bail!("{}", failures_summary(&failures, args.images.len()));
+        // The other images' overlays stand.
+        return Err(crate::OutputsStand(failures_summary(&failures, args.images.len())).into());
     }
     Ok(())
 }
@@ -222,6 +224,39 @@ impl Failure {
 
 /// The error of the run: how many images failed, and why (the target not found is not said of an image that could
 /// not be read).
+/// The overlay each image gets (`DIR/<image name>.overlay.png`): refused, before anything is read or written, where
+/// one is an input (an image, the camera, the target; also through links) or two images would share one.
+fn check_overlay_paths(args: &DetectArgs, dir: &Path) -> Result<()> {
+    let named: Vec<(String, &Path)> = args
+        .images
+        .iter()
+        .map(|p| (format!("image {}", p.display()), p.as_path()))
+        .collect();
+    let mut inputs: Vec<(&str, &Path)> = vec![
+        ("--camera", args.camera.camera.as_path()),
+        ("--target", args.target.target.as_path()),
+    ];
+    inputs.extend(named.iter().map(|(n, p)| (n.as_str(), *p)));
+    let overlays: Vec<(String, PathBuf)> = args
+        .images
+        .iter()
+        .map(|p| {
+            let name = p
+                .file_name()
+                .map_or("image".into(), |n| n.to_string_lossy().into_owned());
+            (
+                format!("the overlay of {}", p.display()),
+                dir.join(format!("{name}.overlay.png")),
+            )
+        })
+        .collect();
+    let outputs: Vec<(&str, &Path)> = overlays
+        .iter()
+        .map(|(n, p)| (n.as_str(), p.as_path()))
+        .collect();
+    Ok(roitrack::formats::check_output_paths(&inputs, &outputs)?)
+}
+
 fn failures_summary(failures: &[Failure], images: usize) -> String {
     let count = |kind: Failure| failures.iter().filter(|&&f| f == kind).count();
     let not_found = count(Failure::NotFound);

@@ -148,35 +148,52 @@ pub fn cameras(args: &CamerasArgs) -> Result<()> {
     Ok(())
 }
 
-/// Set by Ctrl-C (SIGINT): the run stops at its next ROI and writes every output. A second Ctrl-C ends the process.
-static INTERRUPTED: AtomicBool = AtomicBool::new(false);
-
-#[cfg(unix)]
-extern "C" fn on_interrupt(_signal: libc::c_int) {
-    INTERRUPTED.store(true, Ordering::SeqCst);
-    // SAFETY: signal() is async-signal-safe; it restores the default action for a second Ctrl-C.
-    unsafe {
-        libc::signal(libc::SIGINT, libc::SIG_DFL);
-    }
-}
-
-/// The stop flag the camera reads, raised by Ctrl-C.
+/// The stop flag the camera reads, raised by the first signal (Ctrl-C, SIGTERM, SIGHUP: `crate::signals`): for a live
+/// run the usual way to end, which writes every output. A second signal ends the process at once.
 fn stop_flag() -> Arc<AtomicBool> {
-    #[cfg(unix)]
-    // SAFETY: installs a handler that only stores to an atomic and calls signal(), both async-signal-safe.
-    unsafe {
-        let handler: extern "C" fn(libc::c_int) = on_interrupt;
-        libc::signal(libc::SIGINT, handler as libc::sighandler_t);
-    }
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     std::thread::spawn(move || {
-        while !INTERRUPTED.load(Ordering::SeqCst) {
+        while crate::signals::received().is_none() {
             std::thread::sleep(Duration::from_millis(10));
         }
         flag.store(true, Ordering::SeqCst);
     });
     stop
+}
+
+/// Refuses, before anything is read or written, outputs (poses, twists, the bag and its partial name, the truth's
+/// files) that are the camera or target file (also through links) or each other.
+fn check_paths(args: &LiveArgs) -> Result<()> {
+    let inputs: Vec<(&str, &std::path::Path)> =
+        [("--camera", &args.camera), ("--target", &args.target)]
+            .into_iter()
+            .filter_map(|(name, path)| path.as_deref().map(|p| (name, p)))
+            .collect();
+    let mut outputs: Vec<(&str, PathBuf)> = vec![
+        ("--poses", args.poses.clone()),
+        ("--twists", args.twists.clone()),
+    ];
+    if let Some(mcap) = &args.ros.mcap {
+        outputs.push(("--mcap", mcap.clone()));
+        outputs.push((
+            "--mcap's partial bag",
+            roitrack::formats::partial_path(mcap),
+        ));
+    }
+    if let Some(dir) = &args.truth_out {
+        outputs.push((
+            "--truth-out's gt_poses.tum",
+            dir.join(super::simulate::TRUTH_POSES_FILE),
+        ));
+        outputs.push((
+            "--truth-out's gt_twists.csv",
+            dir.join(super::simulate::TRUTH_TWISTS_FILE),
+        ));
+    }
+    let outputs: Vec<(&str, &std::path::Path)> =
+        outputs.iter().map(|(n, p)| (*n, p.as_path())).collect();
+    Ok(roitrack::formats::check_output_paths(&inputs, &outputs)?)
 }
 
 pub fn run(args: &LiveArgs) -> Result<()> {
@@ -203,13 +220,10 @@ pub fn run(args: &LiveArgs) -> Result<()> {
         timeout_s: args.timeout_s,
         ..GenicamOptions::default()
     };
-    roitrack::formats::check_output_paths(
-        &[],
-        &[("--poses", &args.poses), ("--twists", &args.twists)],
-    )?;
+    check_paths(args)?;
     // The truth's folder first: the estimates may go into it.
     if let Some(dir) = &args.truth_out {
-        std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+        roitrack::formats::create_output_dir(dir)?;
     }
     // Started before the camera, so that a bad output path fails first; finished whatever the run's end.
     let mut writer = EstimateWriter::create(&args.poses, &args.twists, None)?;
@@ -231,8 +245,7 @@ pub fn run(args: &LiveArgs) -> Result<()> {
         )?;
         (camera_model, target)
     };
-    // The bag is opened before our Ctrl-C handler is installed, which then takes the signal: the run stops at its
-    // next ROI and the bag is completed below with every estimate.
+    // The first signal stops the run at its next ROI; the bag is completed below with every estimate.
     let mut bag = args.ros.open(&camera_model, Some(&target))?;
     // The live view follows the run from the loop's estimation thread, as it tracks; the bag takes the estimates
     // at the end.
@@ -288,9 +301,10 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     bag.finish()?;
     // A live view that failed does not cost the outputs: they are written first.
     if let Some(e) = live_failed {
-        return Err(
-            anyhow::Error::from(e).context("the live view failed (the outputs are written)")
-        );
+        return Err(crate::OutputsStand(format!(
+            "the live view failed (the outputs are written): {e}"
+        ))
+        .into());
     }
     if let Some(live) = live {
         crate::ros::finish_live(live)?;
@@ -303,8 +317,16 @@ pub fn run(args: &LiveArgs) -> Result<()> {
         args.twists.display()
     );
     match &report.loop_report.stopped_by {
-        Some(roitrack::image::GrabError::Stopped { .. }) | None => Ok(()),
-        Some(e) => bail!("the camera ended the run: {e} (the estimates until then are written)"),
+        Some(roitrack::image::GrabError::Stopped { .. }) => {
+            // Stopped by a signal: the run's normal end, its outputs committed.
+            crate::signals::acknowledge();
+            Ok(())
+        }
+        None => Ok(()),
+        Some(e) => Err(crate::OutputsStand(format!(
+            "the camera ended the run: {e} (the estimates until then are written)"
+        ))
+        .into()),
     }
 }
 

@@ -5,7 +5,8 @@ use std::path::PathBuf;
 use anyhow::{Context, Result, bail};
 use clap::Args;
 use roitrack::eval::{EvalOptions, TimeOffset, estimate_errors};
-use roitrack::plot::run::{RunFigureInputs, write_run_figures};
+use roitrack::plot::RenderedFile;
+use roitrack::plot::run::{RunFigureInputs, render_run_figures};
 
 use super::eval::AlignArg;
 use super::simulate::{TRUTH_POSES_FILE, TRUTH_TWISTS_FILE};
@@ -219,9 +220,27 @@ pub fn run(args: &PlotArgs) -> Result<()> {
                 .collect()
         }),
     };
-    let paths = write_run_figures(&args.out, &inputs)?;
+    let paths = write_figure_files(&args.out, &render_run_figures(&inputs)?)?;
     for path in paths {
         println!("{}", path.display());
     }
     Ok(())
+}
+
+/// Writes figures rendered in memory into `dir` (created if needed, and removed again if the run fails), each through
+/// a temporary moved into place with the run's other outputs; returns their paths.
+pub fn write_figure_files(dir: &std::path::Path, files: &[RenderedFile]) -> Result<Vec<PathBuf>> {
+    use std::io::Write as _;
+    roitrack::formats::create_output_dir(dir)?;
+    files
+        .iter()
+        .map(|figure| {
+            let path = dir.join(&figure.name);
+            let mut file = roitrack::formats::AtomicFile::create(&path)?;
+            file.write_all(&figure.bytes)
+                .with_context(|| format!("cannot write {}", path.display()))?;
+            file.finish()?;
+            Ok(path)
+        })
+        .collect()
 }

@@ -313,10 +313,17 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let scenario = args
         .rig
         .scenario(Scenario::new(args.scenario.into(), args.seed))?;
-    args.rig.check_outputs(&args.out, &RUN_FILES)?;
+    let mut files = RUN_FILES.to_vec();
+    if args.rois {
+        files.push(ROIS_FILE);
+    }
+    args.rig.check_outputs(&args.out, &files)?;
     let options = args.options();
-    std::fs::create_dir_all(&args.out)
-        .with_context(|| format!("cannot create folder {}", args.out.display()))?;
+    roitrack::formats::create_output_dir(&args.out)?;
+    if !args.rois {
+        // A recording of a previous run would not match these measurements: it goes when they are committed.
+        roitrack::formats::remove_at_commit(&args.out.join(ROIS_FILE))?;
+    }
     let reflections = args.reflections.map(|fraction| ReflectionFault {
         fraction,
         ..Default::default()
@@ -327,7 +334,8 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         &options,
         &args.out,
         args.rois.then_some(reflections),
-        || Ok(()),
+        // A signal stops the run at its next ROI, through the error path (src/signals.rs).
+        || Ok(crate::signals::check(&args.out.join(MEASUREMENTS_FILE))?),
     )?;
     eprintln!(
         "roitrack: {} scenario: {} measurements over {:.3} s written to {}",
@@ -339,10 +347,9 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     Ok(())
 }
 
-/// Writes the five files of a simulated run into `dir` (created if missing).
+/// Writes the five files of a simulated run into `dir` (created if missing; removed again if the run fails).
 pub fn write_run(run: &SimulatedRun, dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create folder {}", dir.display()))?;
+    roitrack::formats::create_output_dir(dir)?;
     roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), &run.camera)?;
     roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &run.target)?;
     roitrack::formats::write_measurements_csv(dir.join(MEASUREMENTS_FILE), &run.measurements)?;
@@ -456,6 +463,8 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
             TIMESTAMPS_FILE,
             TRUTH_POSES_FILE,
             TRUTH_TWISTS_FILE,
+            FRAMES_README_FILE,
+            FRAMES_DIR,
         ],
     )?;
     let options = FrameOptions {
@@ -473,8 +482,7 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
     let count = sequence.len();
     let dir = &args.out;
     let frames_dir = dir.join(FRAMES_DIR);
-    std::fs::create_dir_all(&frames_dir)
-        .with_context(|| format!("cannot create folder {}", frames_dir.display()))?;
+    roitrack::formats::create_output_dir(&frames_dir)?;
     remove_stale_frames(&frames_dir, count)?;
     roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), sequence.camera())?;
     roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scenario.target)?;
@@ -513,8 +521,9 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
     Ok(())
 }
 
-/// Removes the frames a previous, longer simulation left in `frames_dir` (only our own `frame_NNNNN.png` names, from
-/// `count` on): a folder of frames is read whole, and the timestamps would not match.
+/// Removes, when the run's outputs are committed, the frames a previous, longer simulation left in `frames_dir` (only
+/// our own `frame_NNNNN.png` names, from `count` on): a folder of frames is read whole, and the timestamps would not
+/// match. Until then they stay, beside the new frames' temporaries: an interrupted run changes nothing.
 fn remove_stale_frames(frames_dir: &Path, count: usize) -> Result<()> {
     let entries = std::fs::read_dir(frames_dir)
         .with_context(|| format!("cannot list folder {}", frames_dir.display()))?;
@@ -532,9 +541,7 @@ fn remove_stale_frames(frames_dir: &Path, count: usize) -> Result<()> {
             continue;
         };
         if index >= count && frame_file_name(index) == name.to_string_lossy() {
-            std::fs::remove_file(entry.path()).with_context(|| {
-                format!("cannot remove the old frame {}", entry.path().display())
-            })?;
+            roitrack::formats::remove_at_commit(&entry.path())?;
         }
     }
     Ok(())
@@ -566,6 +573,11 @@ fn render_frames(sequence: &FrameSequence, frames_dir: &Path) -> Result<()> {
                         let k = next.fetch_add(1, Ordering::Relaxed);
                         if k >= count {
                             return Ok(());
+                        }
+                        // A signal stops every thread at its next frame (src/signals.rs).
+                        if let Err(e) = crate::signals::check(frames_dir) {
+                            next.store(count, Ordering::Relaxed);
+                            return Err(e.into());
                         }
                         sequence.render(k, &mut frame);
                         if let Err(e) = roitrack::formats::write_frame_png(

@@ -205,6 +205,8 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             let bag = std::cell::RefCell::new(&mut bag);
             let measurements = source.enumerate().map(|(k, m)| {
                 tick(k);
+                // A signal stops the run here, through the error path (src/signals.rs).
+                crate::signals::check(&path)?;
                 let m = m?;
                 bag.borrow_mut().measurements(std::slice::from_ref(&m))?;
                 Ok::<_, FormatError>(m)
@@ -223,6 +225,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             }
             let images = reader.enumerate().map(|(k, image)| {
                 tick(k);
+                crate::signals::check(path)?;
                 image
             });
             // Every ROI and what its centroid gave goes to the bag (its measurement; with --mcap-rois, the image).
@@ -360,6 +363,7 @@ fn run_frames(
         },
         |(info, frame), outcome, measured| {
             progress.inc(1);
+            crate::signals::check(source)?;
             if let Some(pacer) = &mut pacer {
                 pacer.wait_until(info.t_s);
             }
@@ -377,7 +381,17 @@ fn run_frames(
     progress.finish_and_clear();
     let seconds = start.elapsed().as_secs_f64();
     let report = tracker.report();
-    // What was estimated before an error is kept: the files are completed first.
+    // What was estimated before an error or an interruption is kept, under the outputs' partial names
+    // (NAME.partial.EXT; the outputs themselves stay as they were): the files are completed first.
+    if result.is_err() && report.estimates > 0 {
+        for path in [Some(&args.poses), Some(&args.twists)]
+            .into_iter()
+            .chain([args.diagnostics.as_ref(), args.covariance.as_ref()])
+            .flatten()
+        {
+            roitrack::formats::keep_if_failed(path);
+        }
+    }
     let written = if report.estimates > 0 {
         writer.finish().map(|()| true)
     } else {
@@ -407,7 +421,7 @@ fn run_frames(
     if let Err(e) = result {
         let kept = if report.estimates > 0 {
             format!(
-                " (the {} estimates before it are written)",
+                " (the {} estimates before it are kept under the outputs' partial names)",
                 report.estimates
             )
         } else {
@@ -439,8 +453,8 @@ fn run_frames(
     Ok(())
 }
 
-/// Refuses, before anything is read or written, outputs that are inputs (also through links) or each other, and `-`
-/// for more than one output.
+/// Refuses, before anything is read or written, outputs (the files, the bag and its partial name) that are inputs
+/// (also through symbolic and hard links) or each other, and `-` for more than one output.
 fn check_paths(args: &TrackArgs) -> Result<()> {
     let mut inputs = vec![("--target", args.target.target.as_path())];
     if let Some(camera) = args.camera.camera_path() {
@@ -457,17 +471,27 @@ fn check_paths(args: &TrackArgs) -> Result<()> {
         }
     }
     let mut outputs = vec![
-        ("--poses", args.poses.as_path()),
-        ("--twists", args.twists.as_path()),
+        ("--poses", args.poses.clone()),
+        ("--twists", args.twists.clone()),
     ];
     for (name, path) in [
         ("--diagnostics", &args.diagnostics),
         ("--covariance", &args.covariance),
+        ("--mcap", &args.ros.mcap),
     ] {
         if let Some(path) = path {
-            outputs.push((name, path.as_path()));
+            outputs.push((name, path.clone()));
         }
     }
+    // What a failed run keeps: the bag up to its last estimate, and with --images the files (NAME.partial.EXT).
+    if let Some(mcap) = &args.ros.mcap {
+        outputs.push((
+            "--mcap's partial bag",
+            roitrack::formats::partial_path(mcap),
+        ));
+    }
+    let outputs: Vec<(&str, &std::path::Path)> =
+        outputs.iter().map(|(n, p)| (*n, p.as_path())).collect();
     check_output_paths(&inputs, &outputs)?;
     Ok(())
 }

@@ -30,8 +30,10 @@ pub fn run(args: &TradeoffArgs) -> Result<()> {
         args.scenario.into(),
         args.seed,
     ))?;
+    args.rig
+        .check_outputs(&args.out, &["tradeoff.csv", "tradeoff.png", "tradeoff.svg"])?;
     let points = tradeoff::sweep_on(&scenario, args.seed)?;
-    std::fs::create_dir_all(&args.out)?;
+    roitrack::formats::create_output_dir(&args.out)?;
     let mut csv = roitrack::formats::AtomicFile::create(args.out.join("tradeoff.csv"))?;
     writeln!(csv, "{}", tradeoff::CSV_HEADER)?;
     println!("{}", tradeoff::table_header());
@@ -41,7 +43,11 @@ pub fn run(args: &TradeoffArgs) -> Result<()> {
     }
     csv.finish()?;
     let chart = tradeoff::chart(&points, args.scenario.into(), args.seed);
-    let (png, svg) = roitrack::plot::write_chart(&args.out.join("tradeoff"), &chart)?;
+    let paths = super::plot::write_figure_files(
+        &args.out,
+        &roitrack::plot::render_chart("tradeoff", &chart)?,
+    )?;
+    let (png, svg) = (&paths[0], &paths[1]);
     eprintln!(
         "roitrack: wrote {}, {} and tradeoff.csv",
         png.display(),

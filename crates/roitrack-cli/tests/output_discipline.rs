@@ -1,0 +1,562 @@
+//! Fault injection on the outputs: outputs that alias inputs (by another spelling of the path, a symbolic link, a hard
+//! link) refused before anything is read or written, naming both; a run that fails leaves every previous output
+//! byte-identical and no temporary; SIGINT, SIGTERM, SIGHUP sent at seeded random moments of long runs end them by
+//! that signal, with the previous outputs as they were, no temporary, and the bag kept, readable, as
+//! NAME.partial.mcap; a second signal ends a run at once; SIGPIPE and a closed standard output end a run that writes
+//! `-` with a failure, never a silent success.
+
+#![cfg(unix)]
+
+use std::collections::BTreeMap;
+use std::io::Write;
+use std::os::unix::process::{CommandExt, ExitStatusExt};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+fn roitrack() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_roitrack"))
+}
+
+fn p(path: &Path) -> &str {
+    path.to_str().unwrap()
+}
+
+fn run(args: &[&str]) -> Output {
+    roitrack().args(args).output().unwrap()
+}
+
+fn stderr(out: &Output) -> String {
+    String::from_utf8_lossy(&out.stderr).into_owned()
+}
+
+fn succeeded(args: &[&str]) {
+    let out = run(args);
+    assert!(out.status.success(), "{args:?}: {}", stderr(&out));
+}
+
+fn send(child: &Child, signal: i32) {
+    // SAFETY: sends a signal to a child this test spawned.
+    assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, signal) }, 0);
+}
+
+/// Every file under `dir` (recursively) with its bytes: a folder's state, to compare byte for byte.
+fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut files = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                files.insert(path.clone(), std::fs::read(&path).unwrap());
+            }
+        }
+    }
+    files
+}
+
+/// The temporaries left under `dir` (recursively): `.NAME.XXXXXX.tmp` files or folders, a folder moved aside.
+fn temporaries(dir: &Path) -> Vec<PathBuf> {
+    let mut found = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for entry in std::fs::read_dir(&d).unwrap() {
+            let path = entry.unwrap().path();
+            let name = path.file_name().unwrap().to_string_lossy().into_owned();
+            if name.starts_with('.') && (name.ends_with(".tmp") || name.ends_with(".old")) {
+                found.push(path.clone());
+            }
+            if path.is_dir() {
+                stack.push(path);
+            }
+        }
+    }
+    found
+}
+
+/// Whether `path` is a complete MCAP bag (its summary written) holding at least one pose.
+fn bag_is_readable(path: &Path) -> bool {
+    let bytes = std::fs::read(path).unwrap();
+    let summary = mcap::Summary::read(&bytes).ok().flatten();
+    let poses = mcap::MessageStream::new(&bytes)
+        .map(|stream| {
+            stream
+                .map_while(Result::ok)
+                .filter(|m| m.channel.topic == "/roitrack/pose")
+                .count()
+        })
+        .unwrap_or(0);
+    summary.is_some() && poses > 0
+}
+
+/// A small deterministic generator for the moments signals are sent at.
+struct Seeded(u64);
+
+impl Seeded {
+    /// A number in [lo, hi).
+    fn next_in(&mut self, lo: u64, hi: u64) -> u64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        lo + self.0 % (hi - lo)
+    }
+}
+
+/// The camera and target of the bench scene (`roitrack target`), in `dir`.
+fn bench_scene(dir: &Path) -> (PathBuf, PathBuf) {
+    let (target, camera) = (dir.join("target.csv"), dir.join("camera.yaml"));
+    succeeded(&["target", "--out", p(&target), "--camera-out", p(&camera)]);
+    (camera, target)
+}
+
+/// Feeds `child` an endless stream of measurements of the grid at rest (4 kHz) until it stops reading.
+fn feed_forever(child: &mut Child) -> std::thread::JoinHandle<()> {
+    let mut stdin = child.stdin.take().unwrap();
+    std::thread::spawn(move || {
+        let mut text = String::from("t,id,u,v\n");
+        for k in 0u64.. {
+            let id = k % 16;
+            let (c, r) = ((id % 4) as f64, (id / 4) as f64);
+            text += &format!(
+                "{},{},{},{}\n",
+                k as f64 / 4000.0,
+                id,
+                437.0 + 50.0 * c,
+                437.0 + 50.0 * r
+            );
+            if text.len() > 1 << 16 {
+                if stdin.write_all(text.as_bytes()).is_err() {
+                    return;
+                }
+                text.clear();
+            }
+        }
+    })
+}
+
+/// `track` over the standard input into `out` (poses, twists, covariance, bag).
+fn track_stdin(camera: &Path, target: &Path, out: &Path, poses: &str) -> Command {
+    let mut command = roitrack();
+    command
+        .args(["track", "--camera", p(camera), "--target", p(target)])
+        .args(["--measurements", "-", "--poses", poses])
+        .args(["--twists", p(&out.join("twists.csv"))])
+        .args(["--covariance", p(&out.join("covariance.csv"))])
+        .args(["--mcap", p(&out.join("run.mcap"))])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    command
+}
+
+/// Previous outputs in `out`, as a run before would have left them.
+fn previous_outputs(out: &Path) {
+    std::fs::create_dir_all(out).unwrap();
+    for name in ["poses.tum", "twists.csv", "covariance.csv", "run.mcap"] {
+        std::fs::write(out.join(name), format!("previous {name}\n")).unwrap();
+    }
+}
+
+#[test]
+fn outputs_that_alias_inputs_are_refused_naming_both() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (camera, target) = bench_scene(dir);
+    let measurements = dir.join("m.csv");
+    std::fs::write(&measurements, "t,id,u,v\n0,0,437,437\n").unwrap();
+    let sub = dir.join("sub");
+    std::fs::create_dir(&sub).unwrap();
+    let symlink = dir.join("link.mcap");
+    std::os::unix::fs::symlink(&measurements, &symlink).unwrap();
+    let hard = sub.join("hard.mcap");
+    std::fs::hard_link(&camera, &hard).unwrap();
+    let before = snapshot(dir);
+    let spelled = format!("{}/../m.csv", p(&sub));
+    let track = |poses: &str, mcap: &str| {
+        run(&[
+            "track",
+            "--camera",
+            p(&camera),
+            "--target",
+            p(&target),
+            "--measurements",
+            p(&measurements),
+            "--poses",
+            poses,
+            "--twists",
+            p(&dir.join("twists.csv")),
+            "--mcap",
+            mcap,
+        ])
+    };
+    let poses = dir.join("poses.tum");
+    for (mcap, input) in [
+        (p(&camera), "--camera"),
+        (p(&target), "--target"),
+        (spelled.as_str(), "--measurements"),
+        (p(&symlink), "--measurements"),
+        (p(&hard), "--camera"),
+    ] {
+        let out = track(p(&poses), mcap);
+        let error = stderr(&out);
+        assert!(!out.status.success(), "{error}");
+        assert!(
+            error.contains("the output --mcap is the input given as")
+                && error.contains(input)
+                && error.contains(mcap),
+            "{mcap}: {error}"
+        );
+    }
+    // Two outputs to one file, and the bag's partial name onto an output.
+    let error = stderr(&track(p(&poses), p(&poses)));
+    assert!(
+        error.contains("--poses and --mcap would both write"),
+        "{error}"
+    );
+    let error = stderr(&track(
+        p(&dir.join("run.partial.mcap")),
+        p(&dir.join("run.mcap")),
+    ));
+    assert!(
+        error.contains("--poses and --mcap's partial bag would both write"),
+        "{error}"
+    );
+    // simulate and demo: a file of the folder that is the camera given, through a hard link.
+    std::fs::hard_link(&camera, dir.join("camera_link.yaml")).unwrap();
+    let folder = dir.join("folder");
+    std::fs::create_dir(&folder).unwrap();
+    std::fs::hard_link(&camera, folder.join("camera.yaml")).unwrap();
+    let before_folder = snapshot(dir);
+    for command in ["simulate", "demo"] {
+        let out = run(&[
+            command,
+            "--camera",
+            p(&dir.join("camera_link.yaml")),
+            "--out",
+            p(&folder),
+        ]);
+        let error = stderr(&out);
+        assert!(
+            !out.status.success()
+                && error.contains("the output --out's camera.yaml is the input given as --camera"),
+            "{command}: {error}"
+        );
+    }
+    let error = stderr(&run(&[
+        "demo",
+        "--target",
+        p(&target),
+        "--mcap",
+        p(&target),
+        "--out",
+        p(&folder),
+    ]));
+    assert!(
+        error.contains("the output --mcap is the input given as --target"),
+        "{error}"
+    );
+    // detect: two images of one name would share an overlay.
+    let other = sub.join("camera.yaml");
+    std::fs::write(&other, "x").unwrap();
+    let error = stderr(&run(&[
+        "detect",
+        "--camera",
+        p(&camera),
+        "--target",
+        p(&target),
+        "--overlay",
+        p(&dir.join("overlays")),
+        p(&camera),
+        p(&other),
+    ]));
+    assert!(error.contains("would both write"), "{error}");
+    assert!(!dir.join("overlays").exists());
+    // Nothing was read as an output or written: every input and previous file is byte-identical.
+    let mut after = snapshot(dir);
+    after.remove(&other);
+    assert_eq!(after, before_folder);
+    assert!(
+        before
+            .iter()
+            .all(|(path, bytes)| after.get(path) == Some(bytes))
+    );
+    assert!(temporaries(dir).is_empty());
+}
+
+#[test]
+fn a_failed_run_changes_no_output_and_leaves_no_temporary() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let sim = dir.join("sim");
+    succeeded(&["simulate", "--scenario", "spin", "--out", p(&sim)]);
+    let out = dir.join("out");
+    previous_outputs(&out);
+    let text = std::fs::read_to_string(sim.join("measurements.csv")).unwrap();
+    let track = |measurements: &Path| {
+        run(&[
+            "track",
+            "--camera",
+            p(&sim.join("camera.yaml")),
+            "--target",
+            p(&sim.join("target.csv")),
+            "--measurements",
+            p(measurements),
+            "--poses",
+            p(&out.join("poses.tum")),
+            "--twists",
+            p(&out.join("twists.csv")),
+            "--covariance",
+            p(&out.join("covariance.csv")),
+            "--mcap",
+            p(&out.join("run.mcap")),
+        ])
+    };
+    let before = snapshot(&out);
+    // Times in milliseconds, the commonest mistake: refused, nothing changed, no partial bag (no estimate).
+    let in_ms: String = text
+        .lines()
+        .enumerate()
+        .map(|(k, line)| match (k, line.split_once(',')) {
+            (0, _) | (_, None) => format!("{line}\n"),
+            (_, Some((t, rest))) => format!("{},{rest}\n", t.parse::<f64>().unwrap() * 1e3),
+        })
+        .collect();
+    std::fs::write(dir.join("ms.csv"), in_ms).unwrap();
+    let result = track(&dir.join("ms.csv"));
+    assert!(!result.status.success());
+    assert!(stderr(&result).contains("ms.csv"), "{}", stderr(&result));
+    assert_eq!(snapshot(&out), before);
+    // A row broken near the end: the error comes after thousands of estimates. The outputs stay as they were; the
+    // bag up to the last estimate is kept, readable, under its own name.
+    let mut broken: Vec<&str> = text.lines().collect();
+    let last = broken.len() - 10;
+    broken[last] = "not,a,row,here";
+    std::fs::write(dir.join("broken.csv"), broken.join("\n") + "\n").unwrap();
+    let result = track(&dir.join("broken.csv"));
+    let error = stderr(&result);
+    assert!(!result.status.success(), "{error}");
+    assert!(
+        error.contains("broken.csv") && error.contains("run.partial.mcap"),
+        "{error}"
+    );
+    let mut after = snapshot(&out);
+    let partial = out.join("run.partial.mcap");
+    assert!(after.remove(&partial).is_some());
+    assert_eq!(after, before);
+    assert!(bag_is_readable(&partial));
+    assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
+    // The same run on good measurements replaces them all.
+    let result = track(&sim.join("measurements.csv"));
+    assert!(result.status.success(), "{}", stderr(&result));
+    assert!(std::fs::read(out.join("poses.tum")).unwrap().len() > 1000);
+    assert!(temporaries(dir).is_empty());
+}
+
+#[test]
+fn signals_at_random_moments_keep_the_previous_outputs_and_the_partial_bag() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (camera, target) = bench_scene(dir);
+    let out = dir.join("out");
+    let mut moments = Seeded(0x05ee_d0f5_19a1);
+    for signal in [
+        libc::SIGTERM,
+        libc::SIGINT,
+        libc::SIGHUP,
+        libc::SIGTERM,
+        libc::SIGINT,
+        libc::SIGHUP,
+    ] {
+        previous_outputs(&out);
+        let _ = std::fs::remove_file(out.join("run.partial.mcap"));
+        let before = snapshot(&out);
+        let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
+            .spawn()
+            .unwrap();
+        let feeder = feed_forever(&mut child);
+        let delay_ms = moments.next_in(150, 900);
+        std::thread::sleep(Duration::from_millis(delay_ms));
+        assert!(
+            child.try_wait().unwrap().is_none(),
+            "ended before the signal"
+        );
+        send(&child, signal);
+        let start = Instant::now();
+        let result = child.wait_with_output().unwrap();
+        feeder.join().unwrap();
+        let error = stderr(&result);
+        assert!(start.elapsed() < Duration::from_secs(5), "{error}");
+        assert_eq!(result.status.signal(), Some(signal), "{error}");
+        assert!(error.contains("interrupted"), "{error}");
+        let mut after = snapshot(&out);
+        let partial = out.join("run.partial.mcap");
+        assert!(
+            after.remove(&partial).is_some(),
+            "signal {signal} at {delay_ms} ms: {error}"
+        );
+        assert_eq!(after, before, "signal {signal} at {delay_ms} ms");
+        assert!(
+            bag_is_readable(&partial),
+            "signal {signal} at {delay_ms} ms"
+        );
+        assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
+    }
+}
+
+#[test]
+fn a_second_signal_ends_the_run_at_once_without_temporaries() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (camera, target) = bench_scene(dir);
+    let out = dir.join("out");
+    previous_outputs(&out);
+    let before = snapshot(&out);
+    // Waiting for measurements that do not come: the first signal is noted, but the run never reaches its next
+    // estimate.
+    let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
+        .spawn()
+        .unwrap();
+    let _stdin = child.stdin.take().unwrap();
+    let started = Instant::now();
+    while temporaries(&out).len() < 4 && started.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_eq!(
+        temporaries(&out).len(),
+        4,
+        "the outputs' temporaries are there"
+    );
+    send(&child, libc::SIGINT);
+    std::thread::sleep(Duration::from_millis(300));
+    assert!(
+        child.try_wait().unwrap().is_none(),
+        "the first signal waits for the next estimate"
+    );
+    send(&child, libc::SIGTERM);
+    let start = Instant::now();
+    let status = child.wait().unwrap();
+    assert!(start.elapsed() < Duration::from_secs(2));
+    assert_eq!(status.signal(), Some(libc::SIGTERM));
+    assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
+    assert_eq!(snapshot(&out), before);
+}
+
+#[test]
+fn a_reader_gone_or_a_closed_standard_output_fails_the_run() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let (camera, target) = bench_scene(dir);
+    let out = dir.join("out");
+    previous_outputs(&out);
+    let before = snapshot(&out);
+    // The poses to a pipe whose reader goes away: the run ends by SIGPIPE, quietly, changing nothing.
+    let mut child = track_stdin(&camera, &target, &out, "-")
+        .stdout(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let feeder = feed_forever(&mut child);
+    let mut stdout = child.stdout.take().unwrap();
+    let mut first = [0u8; 4096];
+    std::io::Read::read_exact(&mut stdout, &mut first).unwrap();
+    drop(stdout);
+    let result = child.wait_with_output().unwrap();
+    feeder.join().unwrap();
+    assert_eq!(
+        result.status.signal(),
+        Some(libc::SIGPIPE),
+        "{}",
+        stderr(&result)
+    );
+    assert!(!stderr(&result).contains("error"), "{}", stderr(&result));
+    let mut after = snapshot(&out);
+    after.remove(&out.join("run.partial.mcap"));
+    assert_eq!(after, before);
+    assert!(temporaries(dir).is_empty());
+    // The standard output closed (`>&-`): refused, not written to nowhere with success.
+    let mut command = track_stdin(&camera, &target, &out, "-");
+    // SAFETY: only closes a file descriptor in the child before it runs roitrack.
+    unsafe {
+        command.pre_exec(|| {
+            libc::close(1);
+            Ok(())
+        });
+    }
+    let result = command
+        .stdout(Stdio::inherit())
+        .stdin(Stdio::null())
+        .output()
+        .unwrap();
+    assert_eq!(result.status.code(), Some(1));
+    assert!(
+        stderr(&result).contains("the standard output is closed"),
+        "{}",
+        stderr(&result)
+    );
+    assert!(temporaries(dir).is_empty());
+}
+
+#[test]
+fn interrupted_simulate_and_demo_leave_their_previous_folders() {
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    let mut moments = Seeded(0xf01d_e125);
+    // simulate --frames: the previous folder (a shorter run) byte-identical after SIGTERM while rendering.
+    let sim = dir.join("sim");
+    succeeded(&[
+        "simulate",
+        "--frames",
+        "--frame-count",
+        "6",
+        "--out",
+        p(&sim),
+    ]);
+    let before = snapshot(&sim);
+    let child = roitrack()
+        .args(["simulate", "--frames", "--seed", "2", "--out", p(&sim)])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(moments.next_in(300, 1200)));
+    send(&child, libc::SIGTERM);
+    let result = child.wait_with_output().unwrap();
+    assert_eq!(
+        result.status.signal(),
+        Some(libc::SIGTERM),
+        "{}",
+        stderr(&result)
+    );
+    assert_eq!(snapshot(&sim), before);
+    assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
+    // demo --mcap: SIGHUP during its runs stops it after the current one; its folder stays as it was, and the bag
+    // of the default estimator's run is kept, readable.
+    let demo = dir.join("demo");
+    let bag = dir.join("demo.mcap");
+    succeeded(&["demo", "--out", p(&demo), "--mcap", p(&bag)]);
+    let before = snapshot(&demo);
+    let bag_before = std::fs::read(&bag).unwrap();
+    let child = roitrack()
+        .args(["demo", "--seed", "3", "--out", p(&demo), "--mcap", p(&bag)])
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(Duration::from_millis(moments.next_in(1200, 1800)));
+    send(&child, libc::SIGHUP);
+    let result = child.wait_with_output().unwrap();
+    assert_eq!(
+        result.status.signal(),
+        Some(libc::SIGHUP),
+        "{}",
+        stderr(&result)
+    );
+    assert_eq!(snapshot(&demo), before);
+    assert_eq!(std::fs::read(&bag).unwrap(), bag_before);
+    assert!(
+        bag_is_readable(&dir.join("demo.partial.mcap")),
+        "{}",
+        stderr(&result)
+    );
+    assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
+}
