@@ -1135,6 +1135,9 @@ struct KalmanLaw {
     gated_runs: Vec<(u32, u64)>,
     /// Measurements taken by this track (readouts taken twice count once per take).
     taken: u64,
+    /// Whether the measurements being taken are a readout of one instant (a global-shutter frame's blobs), whose
+    /// order is the points' and says nothing of time: see [`KalmanLaw::on_batch`].
+    in_one_instant: bool,
     /// Natural logarithms of the factors applied to the linear and the angular acceleration density (when
     /// `tuning.adapt_motion`).
     process_log_scale: [f64; 2],
@@ -1232,13 +1235,21 @@ impl Law for KalmanLaw {
         let first = &batch[0];
         let dt = self.predict_to(core, first.t_s);
         let before = self.counters(core);
-        let used = self.take_readout(core, batch, dt);
+        // The blobs of one instant come in the points' order, and a camera file's error is worst at the image's
+        // edge, where neighbouring points enter the view together: a run of them beyond the gate is the model's
+        // error, not the filter's, and widening the covariance there restarted a 24 x 28 grid seen through a
+        // nominal camera file whenever a row of circles entered the view. Within one instant, what says the filter
+        // is off is the share of its blobs rejected (below), not their order.
+        let one_instant = batch.iter().all(|obs| obs.t_s == first.t_s);
+        // (On small targets every point matters, and a run there is still the filter's: kept for them.)
+        let ordered_by_points = one_instant && batch.len() >= ORDERED_BY_POINTS_MIN_BLOBS;
+        self.in_one_instant = ordered_by_points;
+        let mut used = self.take_readout(core, batch, dt);
         // Half or more of the blobs of one instant rejected: a filter that no longer predicts the target (a turn
         // faster than its process noise allows between frames), or half the blobs outliers. The readout is taken
         // again from the prior widened at once to the broad one, as the escalating resets would after several frames
         // of rejections, so that its blobs, which pin the pose, set it; and that is kept if it explains more of them
         // (within the gate of their noise) than the first pass did, which it does not when they were outliers.
-        let one_instant = batch.iter().all(|obs| obs.t_s == first.t_s);
         let pose_points = if core.target.is_planar() { 4 } else { 6 };
         if one_instant && 2 * used <= batch.len() && distinct_points(batch, pose_points) {
             let first_pass = (self.counters(core), self.innovations.clone());
@@ -1247,8 +1258,9 @@ impl Law for KalmanLaw {
             self.filter.widen(&core.prior_covariance(), 1.0);
             self.covariance_resets += 1;
             self.resets_total += 1;
-            self.take_readout(core, batch, dt);
+            let used_again = self.take_readout(core, batch, dt);
             if explained(self.filter.tuning(), core, batch) > explained_first {
+                used = used_again;
                 // What judges the track (lost, or following its measurements) is then how well the new state
                 // explains the readout, not the blobs' innovations against the prediction it overruled: those stay
                 // pixels off however right the state is, and three such estimates in a row dropped the track. The
@@ -1265,6 +1277,14 @@ impl Law for KalmanLaw {
                 self.innovations = first_pass.1;
             }
         }
+        if ordered_by_points {
+            self.in_one_instant = false;
+            // Most of the instant's blobs explained: the rejected ones are outliers or the model's error, in no
+            // order; no run of them carries over to dispute the estimate or widen the filter.
+            if 2 * used > batch.len() {
+                self.gated_in_a_row = 0;
+            }
+        }
     }
 
     fn control_step(&mut self, core: &mut TrackCore, t_new_s: f64) -> Step {
@@ -1277,12 +1297,15 @@ impl Law for KalmanLaw {
         // a broad spread the covariance states): such a step is as well posed as its pose. (Judged on all 12
         // parameters, the first estimate of every new track on frames was flagged degenerate, an 80-point grid
         // seen whole included.)
-        let inverse_condition = if is_one_instant(&core.scratch) {
+        // So does a window of global-shutter frames that mixes two instants: a point left out of this frame (its
+        // blob cut by its window) keeps its measurement of the frame before, and the 12 parameters of 322 points of
+        // one frame and 14 of the one before were judged degenerate, their twist shown by those 14 alone.
+        self.frame_steps = core.recent_are_frames(core.step_measurements);
+        let inverse_condition = if is_one_instant(&core.scratch) || self.frame_steps {
             pose_inverse_condition(&ne)
         } else {
             solved.map_or(0.0, |(_, c)| c)
         };
-        self.frame_steps = core.recent_are_frames(core.step_measurements);
         if self.filter.tuning().adapt_noise {
             self.learn_noise(core, t_new_s, &ne, solved.map(|(step, _)| step));
         }
@@ -1372,6 +1395,10 @@ impl Law for KalmanLaw {
 /// fewer than 6 points can have rival minima (three give up to four poses, four or five a mirror twin in some views),
 /// along which the state can slide while one point disagrees.
 const HOLDING_POINTS: usize = 6;
+/// The fewest blobs of one instant whose runs of rejections are taken for the model's error rather than the
+/// filter's (see [`KalmanLaw::on_batch`]): four times [`HOLDING_POINTS`], so that a run leaves enough to hold the
+/// state. (On 4 and 16 points, the runs' rule is what restarts a track the target outran.)
+const ORDERED_BY_POINTS_MIN_BLOBS: usize = 4 * HOLDING_POINTS;
 
 /// Whether every observation of `window` has one time (and there is one).
 fn is_one_instant(window: &[Observation]) -> bool {
@@ -1537,6 +1564,7 @@ impl KalmanLaw {
             gated_at: Vec::new(),
             gated_runs: Vec::new(),
             taken: 0,
+            in_one_instant: false,
             calibration: TwistCalibration::new(),
             point_noise: PointNoise::default(),
             readout: Vec::new(),
@@ -1651,7 +1679,7 @@ impl KalmanLaw {
         if self.accepted_in_a_row >= ACCEPTED_IN_A_ROW_FOR_CALM {
             self.reset_level = 0;
         }
-        if self.gated_in_a_row >= GATED_IN_A_ROW_FOR_RESET {
+        if self.gated_in_a_row >= GATED_IN_A_ROW_FOR_RESET && !self.in_one_instant {
             // Escalate: a run of rejections is more often a bad update than a jump of the target; a little widening
             // lets the measurements correct it without exposing the filter to every outlier, and if the runs go on
             // (a jump), the next resets widen it to the broad prior.
