@@ -231,7 +231,7 @@ fn bad_eval_options_are_refused_with_their_reason() {
         p(&est),
         "--rpe-interval-s=-1",
     ]);
-    assert!(err.contains("rpe_interval_s"), "{err}");
+    assert!(err.contains("--rpe-interval-s"), "{err}");
 }
 
 /// evo_ape's own alignment (`--align`, and `--correct_scale` for a similarity) gives the same translation RMSE as
