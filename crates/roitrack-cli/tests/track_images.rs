@@ -203,7 +203,9 @@ fn bad_frame_inputs_are_refused_naming_the_frame_and_the_estimates_before_are_ke
     args.extend(["--fps".into(), "30".into()]);
     let message = run_fails(&args);
     assert!(message.contains("frame_00005.png"), "{message}");
-    let kept = read_tum(out.path().join("poses.tum")).unwrap();
+    // (Under the partial name: a failed run leaves the outputs' own names as they were.)
+    assert!(!out.path().join("poses.tum").exists());
+    let kept = read_tum(out.path().join("poses.partial.tum")).unwrap();
     assert_eq!(kept.len(), 5, "{message}");
     // A frame of another size.
     let small = Frame::new(64, 48, 8);
