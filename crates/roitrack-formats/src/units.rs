@@ -152,7 +152,10 @@ fn span(points: &[TargetPoint]) -> f64 {
             .iter()
             .map(|p| (p.point_in_obj_m - from.point_in_obj_m).norm())
             .enumerate()
-            .fold((0, 0.0f64), |best, (i, d)| if d > best.1 { (i, d) } else { best })
+            .fold(
+                (0, 0.0f64),
+                |best, (i, d)| if d > best.1 { (i, d) } else { best },
+            )
     };
     let mut span_m: f64 = 0.0;
     let mut at = 0;

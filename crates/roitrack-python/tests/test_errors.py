@@ -22,8 +22,8 @@ def test_missing_files_raise_os_errors(tmp_path: Path) -> None:
         roitrack.Camera.from_yaml(tmp_path / "nope.yaml")
     with pytest.raises(FileNotFoundError, match="nope.csv"):
         roitrack.Target.from_csv(tmp_path / "nope.csv")
-    with pytest.raises(OSError):
-        roitrack.Camera.from_yaml(tmp_path)  # a folder
+    with pytest.raises(roitrack.RoitrackError, match="is a folder"):
+        roitrack.Camera.from_yaml(tmp_path)
 
 
 @pytest.mark.parametrize(
@@ -83,6 +83,14 @@ def test_camera_constructor_refuses_bad_values() -> None:
         roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1, float("inf"), 0, 0])
     with pytest.raises(TypeError):
         roitrack.Camera(640, 480, "fx", 500.0, 320.0, 240.0)  # type: ignore[arg-type]
+    # Values no camera has, refused by the library's checks as the command line's files are.
+    with pytest.raises(roitrack.RoitrackError, match="fx = 1e-300 px is not a camera's"):
+        roitrack.Camera(640, 480, 1e-300, 500.0, 320.0, 240.0)
+    with pytest.raises(roitrack.RoitrackError, match="k1 = 1000000: the plumb_bob lens model scales"):
+        roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[1e6, 0.0, 0.0, 0.0])
+    # Tangential terms of 0.1 fold this rational lens back inside the image.
+    with pytest.raises(roitrack.RoitrackError, match="folds back"):
+        roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1] * 8, model="rational_polynomial")
 
 
 def test_target_constructor_refuses_bad_arrays() -> None:
@@ -122,7 +130,7 @@ def test_tracker_refuses_bad_options(sim: dict) -> None:
         roitrack.Tracker(cam, tgt, robust="cauchy")
     with pytest.raises(ValueError, match="motion-model: unknown value 'jerk' .*constant-velocity, constant-acceleration"):
         roitrack.Tracker(cam, tgt, motion_model="jerk")
-    with pytest.raises(roitrack.RoitrackError, match="linear_jerk_psd must be positive"):
+    with pytest.raises(roitrack.RoitrackError, match="linear_jerk_psd must be from"):
         roitrack.Tracker(cam, tgt, jerk_psd=-1.0)
     with pytest.raises(ValueError, match="jerk-psd does not apply to the constant-velocity motion model"):
         roitrack.Tracker(cam, tgt, motion_model="constant-velocity", jerk_psd=5.0)
@@ -273,7 +281,8 @@ def test_target_in_millimetres_as_the_command_line(orthoglide: Path, tmp_path: P
 def test_camera_models(tmp_path: Path) -> None:
     fisheye = roitrack.Camera(640, 480, 300.0, 300.0, 320.0, 240.0, distortion=[0.05, -0.01, 0.0, 0.0], model="equidistant")
     assert (fisheye.model, fisheye.distortion) == ("equidistant", [0.05, -0.01, 0.0, 0.0])
-    rational = roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1] * 8, model="rational_polynomial")
+    rational = roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1, 0.01, 1e-3, -1e-3, 0.0, 0.1, 0.01, 0.0],
+                               model="rational_polynomial")
     assert rational.model == "rational_polynomial" and len(rational.distortion) == 8
     assert roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0).model == "none"
     four = roitrack.Camera(640, 480, 500.0, 500.0, 320.0, 240.0, distortion=[0.1, 0.01, 0.0, 0.0])
