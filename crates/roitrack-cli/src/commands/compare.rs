@@ -99,9 +99,16 @@ fn run_sweep(args: &CompareArgs) -> Result<()> {
                 std::thread::sleep(Duration::from_millis(200));
             }
         });
-        let result = sweep(&options, Some(&done));
-        finished.store(true, Ordering::Relaxed);
-        result
+        // Set on the way out, a panic of the sweep's included: the progress thread then ends, and the scope with it
+        // (a panic used to leave the process waiting for that thread for ever).
+        struct Finish<'a>(&'a AtomicBool);
+        impl Drop for Finish<'_> {
+            fn drop(&mut self) {
+                self.0.store(true, Ordering::Relaxed);
+            }
+        }
+        let _finish = Finish(&finished);
+        sweep(&options, Some(&done))
     })?;
     bar.finish_and_clear();
     if args.json {
