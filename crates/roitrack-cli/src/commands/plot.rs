@@ -47,6 +47,10 @@ pub struct PlotArgs {
     /// Folder for the figures (created if needed).
     #[arg(long)]
     pub out: PathBuf,
+    /// The largest poses, twists, diagnostics or covariance file read (MiB; each is read whole). Default: 2048
+    /// (about 15 million poses, an hour of ground truth at 4 kHz).
+    #[arg(long, value_name = "MIB", default_value_t = 2048, value_parser = crate::ranges::count(1..=1 << 20, "up to a terabyte"))]
+    pub max_file_mib: usize,
 }
 
 pub fn run(args: &PlotArgs) -> Result<()> {
@@ -72,12 +76,11 @@ pub fn run(args: &PlotArgs) -> Result<()> {
         .map(|(n, p)| (n.as_str(), p.as_path()))
         .collect();
     roitrack::formats::check_output_paths(&inputs, &outputs)?;
-    let poses = roitrack::formats::read_tum(&args.poses)?;
-    let twists = args
-        .twists
-        .as_ref()
-        .map(roitrack::formats::read_twists_csv)
-        .transpose()?;
+    let max_bytes = (args.max_file_mib as u64) << 20;
+    let read_tum = |path: &PathBuf| roitrack::formats::read_tum_limited(path, max_bytes);
+    let read_twists = |path: &PathBuf| roitrack::formats::read_twists_csv_limited(path, max_bytes);
+    let poses = read_tum(&args.poses)?;
+    let twists = args.twists.as_ref().map(read_twists).transpose()?;
     let times: Vec<f64> = poses.iter().map(|p| p.t_s).collect();
     // Side files must be of the same run: one row per estimate, at its time.
     let check_times = |what: &str, path: &PathBuf, side: &[f64]| -> Result<()> {
@@ -113,7 +116,7 @@ pub fn run(args: &PlotArgs) -> Result<()> {
         .diagnostics
         .as_ref()
         .map(|path| -> Result<_> {
-            let rows = roitrack::formats::read_diagnostics_csv(path)?;
+            let rows = roitrack::formats::read_diagnostics_csv_limited(path, max_bytes)?;
             check_times(
                 "diagnostics",
                 path,
@@ -126,7 +129,7 @@ pub fn run(args: &PlotArgs) -> Result<()> {
         .covariance
         .as_ref()
         .map(|path| -> Result<_> {
-            let rows = roitrack::formats::read_covariance_csv(path)?;
+            let rows = roitrack::formats::read_covariance_csv_limited(path, max_bytes)?;
             check_times(
                 "covariance",
                 path,
@@ -166,15 +169,10 @@ pub fn run(args: &PlotArgs) -> Result<()> {
         (None, Some(poses)) => (Some(poses.clone()), args.truth_twists.clone()),
         (None, None) => (None, None),
     };
-    let truth_poses = truth_poses_path
-        .as_ref()
-        .map(roitrack::formats::read_tum)
-        .transpose()?;
+    let truth_poses = truth_poses_path.as_ref().map(read_tum).transpose()?;
     let truth_twists = match (&truth_twists_path, &twists) {
         // With --truth DIR the twists are read only when the estimates have twists to compare.
-        (Some(path), Some(_)) if args.truth.is_none() || path.is_file() => {
-            Some(roitrack::formats::read_twists_csv(path)?)
-        }
+        (Some(path), Some(_)) if args.truth.is_none() || path.is_file() => Some(read_twists(path)?),
         _ => None,
     };
     let errors = match &truth_poses {
