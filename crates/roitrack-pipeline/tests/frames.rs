@@ -849,20 +849,25 @@ fn a_grid_of_close_circles_is_measured_in_its_windows() {
     }
 }
 
-#[test]
-fn a_dense_hexagonal_grid_is_measured_in_its_windows() {
-    // A 24 x 28 hexagonal grid (336 circles of 6 mm, 12 mm apart), dark on light, at 30 Hz: every window holds whole
-    // neighbours and the rims of others. Before the windows took the blob nearest the prediction (they took the
-    // brightest, a neighbour in up to 60 of 230 windows), 45 of 60 frames were measured in windows. Seen by the
-    // built-in camera and by a 640 x 480 camera (blobs 7 px across, 14 px apart).
-    let target = Target::circle_grid(&CircleGrid {
+/// A 24 x 28 hexagonal grid of 336 circles 6 mm across, 12 mm apart (a printed calibration board).
+fn hexagonal_grid() -> Target {
+    Target::circle_grid(&CircleGrid {
         rows: 24,
         cols: 28,
         spacing_m: 0.012,
         diameter_m: 0.006,
         layout: GridLayout::Hexagonal,
     })
-    .unwrap();
+    .unwrap()
+}
+
+#[test]
+fn a_dense_hexagonal_grid_is_measured_in_its_windows() {
+    // A 24 x 28 hexagonal grid (336 circles of 6 mm, 12 mm apart), dark on light, at 30 Hz: every window holds whole
+    // neighbours and the rims of others. Before the windows took the blob nearest the prediction (they took the
+    // brightest, a neighbour in up to 60 of 230 windows), 45 of 60 frames were measured in windows. Seen by the
+    // built-in camera and by a 640 x 480 camera (blobs 7 px across, 14 px apart).
+    let target = hexagonal_grid();
     let vga = common::camera(640, 480, 600.0, (320.0, 240.0), -0.05);
     for (name, camera) in [
         ("built-in camera", CameraModel::canonical()),
@@ -897,14 +902,7 @@ fn a_dense_grid_seen_through_a_nominal_camera_file_is_tracked_as_well_as_detecte
     // the view together: the filter rejected them in a run, widened its covariance and restarted (a pose 70 mm off,
     // then three new tracks). Tracked, the poses are within 1.2 times the error of those found frame by frame, every
     // estimate after the first two vouched for, and all frames but 6 of 60 in windows.
-    let target = Target::circle_grid(&CircleGrid {
-        rows: 24,
-        cols: 28,
-        spacing_m: 0.012,
-        diameter_m: 0.006,
-        layout: GridLayout::Hexagonal,
-    })
-    .unwrap();
+    let target = hexagonal_grid();
     let camera = common::camera(640, 480, 600.0, (320.0, 240.0), -0.05);
     for seed in [7, 8, 9, 10, 11, 12] {
         let file = common::nominal(&camera, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
