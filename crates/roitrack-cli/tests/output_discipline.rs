@@ -57,7 +57,7 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
     files
 }
 
-/// The temporaries left under `dir` (recursively): `.NAME.XXXXXX.tmp` files or folders, a folder moved aside.
+/// The temporaries left under `dir` (recursively): `.NAME.PID.XXXXXX.tmp` files or folders, a version saved aside.
 fn temporaries(dir: &Path) -> Vec<PathBuf> {
     let mut found = Vec::new();
     let mut stack = vec![dir.to_path_buf()];

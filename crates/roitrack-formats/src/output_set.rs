@@ -1,10 +1,11 @@
 //! The outputs of a run as one set ([`OutputSet`]): written to temporaries, moved into place together at the end, and
 //! never left behind as temporaries, whatever the way the run ends.
 //!
-//! Every file [`AtomicFile`](crate::AtomicFile) writes goes to a temporary `.NAME.XXXXXX.tmp` beside its path, and a
-//! folder [`OutputDir`] writes to `.NAME.XXXXXX.tmp/` beside its path. Each temporary is listed here from the moment
-//! it is created until it is moved into place or deleted, so that a process ending at once (a second Ctrl-C) can still
-//! delete every one of them ([`remove_temporaries_before_exit`]).
+//! Every file [`AtomicFile`](crate::AtomicFile) writes goes to a temporary `.NAME.PID.XXXXXX.tmp` beside its path
+//! (`PID`: this process), and a folder [`OutputDir`] writes to `.NAME.PID.XXXXXX.tmp/` beside its path. Each temporary
+//! is listed here from the moment it is created until it is moved into place or deleted, so that a process ending at
+//! once (a second Ctrl-C) can still delete every one of them ([`remove_temporaries_before_exit`]). A process killed
+//! outright (`kill -9`) cannot: the next one to write the same output deletes the temporaries whose process is gone.
 //!
 //! Without an open [`OutputSet`], a finished output is moved into place at once (as a library caller expects). While
 //! one is open, a finished output waits: [`OutputSet::commit`] moves them all into place at the end of a run that
@@ -12,7 +13,7 @@
 //! them, so that every previous output stays exactly as it was. Outputs marked with [`keep_if_failed`] (a bag up to
 //! its last estimate) are then kept under their own name, [`partial_path`], instead.
 
-use std::collections::BTreeSet;
+use std::collections::{BTreeMap, BTreeSet};
 use std::fs::File;
 use std::io;
 use std::path::{Path, PathBuf};
@@ -50,12 +51,16 @@ struct Registry {
     set: Option<Pending>,
     /// Set when the process is ending at once: no temporary may be created any more.
     closed: bool,
+    /// For each folder an output was written in: the temporaries that dead processes left there, not deleted yet,
+    /// with the output each was for.
+    stale: BTreeMap<PathBuf, Vec<(std::ffi::OsString, PathBuf)>>,
 }
 
 static REGISTRY: Mutex<Registry> = Mutex::new(Registry {
     temporaries: BTreeSet::new(),
     set: None,
     closed: false,
+    stale: BTreeMap::new(),
 });
 
 /// The registry; a panic while holding it leaves a list that is still right (every change is one call), so a
@@ -96,8 +101,9 @@ pub fn keep_if_failed(path: &Path) {
     }
 }
 
-/// Removes the file `path` when the open set is committed (a file a previous run wrote that does not belong with the
-/// new outputs); without an open set, at once. A file that is not there is no error.
+/// Removes the file or folder `path` when the open set is committed (what a previous run wrote that does not belong
+/// with the new outputs), as one step of the commit (undone if the commit fails); without an open set, at once.
+/// Nothing there is no error.
 pub fn remove_at_commit(path: &Path) -> Result<(), FormatError> {
     let mut registry = registry();
     match registry.set.as_mut() {
@@ -110,7 +116,11 @@ pub fn remove_at_commit(path: &Path) -> Result<(), FormatError> {
 }
 
 fn remove_if_present(path: &Path) -> Result<(), FormatError> {
-    match std::fs::remove_file(path) {
+    let removed = match std::fs::symlink_metadata(path) {
+        Ok(m) if m.is_dir() => std::fs::remove_dir_all(path),
+        _ => std::fs::remove_file(path),
+    };
+    match removed {
         Err(e) if e.kind() != io::ErrorKind::NotFound => Err(FormatError::io(
             path,
             "cannot remove this file of a previous run",
@@ -184,10 +194,14 @@ impl OutputSet {
         Self { owner }
     }
 
-    /// Moves every finished output into place, in the order they were finished, and removes the files of a previous
-    /// run given to [`remove_at_commit`]. The moves are renames within each output's folder, done while holding the
-    /// list of temporaries, so that a process ending at once waits for them. On the first failure the rest are
-    /// deleted and the error is returned (what was moved stays).
+    /// Moves every finished output into place and removes the files of a previous run given to [`remove_at_commit`],
+    /// all or nothing as far as POSIX allows: every previous output is first saved beside itself (a hard link
+    /// `.NAME.PID.old`, so that it stays in place until the new one replaces it in one rename; moved aside where links
+    /// are not possible, and for folders), then the new ones are renamed in, then the files of a previous run moved
+    /// aside, and only when every step has succeeded are the saved versions deleted. A step that fails undoes every
+    /// step before it, in reverse (each saved version renamed back), deletes the new outputs, and returns the error:
+    /// the outputs are then as they were before the commit. Everything is done while holding the list of
+    /// temporaries, so that a process ending at once (a second signal) waits for the commit or its undoing.
     pub fn commit(mut self) -> Result<(), FormatError> {
         if !std::mem::take(&mut self.owner) {
             return Ok(());
@@ -196,20 +210,9 @@ impl OutputSet {
         let Some(pending) = registry.set.take() else {
             return Ok(());
         };
-        let mut result = Ok(());
-        for staged in pending.staged {
-            if result.is_ok() {
-                result = move_into_place(&staged);
-            }
-            if result.is_err() {
-                discard(&staged.temporary, staged.is_dir);
-            }
+        let result = commit_all(&pending.staged, &pending.remove_on_commit, &mut FileSystem);
+        for staged in &pending.staged {
             registry.temporaries.remove(&staged.temporary);
-        }
-        for path in &pending.remove_on_commit {
-            if result.is_ok() {
-                result = remove_if_present(path);
-            }
         }
         result
     }
@@ -295,55 +298,226 @@ fn discard(path: &Path, is_dir: bool) {
     };
 }
 
-fn move_into_place(staged: &Staged) -> Result<(), FormatError> {
-    let failed = |e| {
-        FormatError::io(
-            &staged.given,
-            "cannot move the finished output into place",
-            e,
-        )
-    };
-    if !staged.is_dir {
-        return std::fs::rename(&staged.temporary, &staged.destination).map_err(failed);
+/// The file-system steps of a commit that can fail halfway, through which a test makes the k-th one fail.
+trait Steps {
+    fn rename(&mut self, from: &Path, to: &Path) -> io::Result<()>;
+    fn hard_link(&mut self, original: &Path, link: &Path) -> io::Result<()>;
+}
+
+/// The real file system.
+struct FileSystem;
+
+impl Steps for FileSystem {
+    fn rename(&mut self, from: &Path, to: &Path) -> io::Result<()> {
+        std::fs::rename(from, to)
     }
-    // A folder: the previous one (if any) is moved aside, the new one in, and the previous one deleted.
-    let previous = match std::fs::symlink_metadata(&staged.destination) {
-        Ok(m) if m.is_dir() => Some(aside_name(&staged.destination)),
-        Ok(_) => {
-            return Err(FormatError::new(
-                &staged.given,
-                "is not a folder: cannot put the new folder in its place",
-            ));
+
+    fn hard_link(&mut self, original: &Path, link: &Path) -> io::Result<()> {
+        std::fs::hard_link(original, link)
+    }
+}
+
+/// A step of a commit, done: what undoing the commit must undo.
+#[derive(Debug)]
+enum Done {
+    /// The previous version of `path` saved at `backup`: as a hard link (`path` still holds it) or moved there.
+    Saved {
+        path: PathBuf,
+        backup: PathBuf,
+        linked: bool,
+        is_dir: bool,
+    },
+    /// A new output moved onto `path`.
+    Placed { path: PathBuf, is_dir: bool },
+}
+
+/// Moves `staged` into place and `removals` aside, all or nothing (see [`OutputSet::commit`]). The temporaries of
+/// `staged` that were not moved into place are deleted either way.
+fn commit_all(
+    staged: &[Staged],
+    removals: &[PathBuf],
+    steps: &mut impl Steps,
+) -> Result<(), FormatError> {
+    let mut done = Vec::new();
+    let result = commit_steps(staged, removals, steps, &mut done);
+    match result {
+        Ok(()) => {
+            for step in &done {
+                if let Done::Saved { backup, is_dir, .. } = step {
+                    // The commit stands; a backup that cannot be deleted is one more file, not a failure.
+                    discard(backup, *is_dir);
+                }
+            }
+            Ok(())
         }
-        Err(_) => None,
-    };
-    if let Some(previous) = &previous {
-        std::fs::rename(&staged.destination, previous).map_err(failed)?;
-    }
-    if let Err(e) = std::fs::rename(&staged.temporary, &staged.destination) {
-        if let Some(previous) = &previous {
-            let _ = std::fs::rename(previous, &staged.destination);
+        Err(error) => {
+            for s in staged {
+                discard(&s.temporary, s.is_dir);
+            }
+            let left = roll_back(&done, steps);
+            if left.is_empty() {
+                return Err(error);
+            }
+            let list: Vec<String> = left
+                .iter()
+                .map(|(path, backup)| format!("{} is at {}", path.display(), backup.display()))
+                .collect();
+            Err(FormatError::new(
+                error.path(),
+                format!(
+                    "{}; undoing the commit, the previous version of some outputs could not be put back: {}",
+                    error.message(),
+                    list.join(", ")
+                ),
+            ))
         }
-        return Err(failed(e));
     }
-    if let Some(previous) = &previous {
-        std::fs::remove_dir_all(previous).map_err(|e| {
-            FormatError::io(
-                previous,
-                "cannot delete the previous folder (moved aside)",
-                e,
-            )
-        })?;
+}
+
+fn commit_steps(
+    staged: &[Staged],
+    removals: &[PathBuf],
+    steps: &mut impl Steps,
+    done: &mut Vec<Done>,
+) -> Result<(), FormatError> {
+    let failed = |s: &Staged| {
+        let given = s.given.clone();
+        move |e| FormatError::io(&given, "cannot move the finished output into place", e)
+    };
+    // Every previous output saved first.
+    for s in staged {
+        let Ok(metadata) = std::fs::symlink_metadata(&s.destination) else {
+            continue;
+        };
+        if metadata.is_dir() != s.is_dir {
+            let message = match s.is_dir {
+                true => "is not a folder: cannot put the new folder in its place",
+                false => "is a folder: cannot put the new file in its place",
+            };
+            return Err(FormatError::new(&s.given, message));
+        }
+        done.push(save(&s.destination, s.is_dir, steps).map_err(failed(s))?);
+    }
+    // The new outputs in.
+    for s in staged {
+        steps
+            .rename(&s.temporary, &s.destination)
+            .map_err(failed(s))?;
+        done.push(Done::Placed {
+            path: s.destination.clone(),
+            is_dir: s.is_dir,
+        });
+    }
+    // The files of a previous run that do not belong with the new ones, aside.
+    for path in removals {
+        let metadata = match std::fs::symlink_metadata(path) {
+            Ok(m) => m,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => continue,
+            Err(e) => {
+                return Err(FormatError::io(
+                    path,
+                    "cannot remove this file of a previous run",
+                    e,
+                ));
+            }
+        };
+        let backup = backup_name(path);
+        discard_any(&backup);
+        steps
+            .rename(path, &backup)
+            .map_err(|e| FormatError::io(path, "cannot remove this file of a previous run", e))?;
+        done.push(Done::Saved {
+            path: path.clone(),
+            backup,
+            linked: false,
+            is_dir: metadata.is_dir(),
+        });
     }
     Ok(())
 }
 
-/// A name beside `path` for its previous version, moved aside while the new one takes its place.
-fn aside_name(path: &Path) -> PathBuf {
+/// Saves the previous version of `path` beside it: a hard link for a file, so that the file stays in place until the
+/// new one replaces it; else (a folder, a file system without hard links) moved aside.
+fn save(path: &Path, is_dir: bool, steps: &mut impl Steps) -> io::Result<Done> {
+    let backup = backup_name(path);
+    // Left by a process of the same number that was killed: nothing of ours.
+    discard_any(&backup);
+    let linked = !is_dir && steps.hard_link(path, &backup).is_ok();
+    if !linked {
+        steps.rename(path, &backup)?;
+    }
+    Ok(Done::Saved {
+        path: path.to_path_buf(),
+        backup,
+        linked,
+        is_dir,
+    })
+}
+
+/// Undoes the steps `done`, last first. Returns the outputs whose previous version could not be put back, with where
+/// it is (those backups are left in place).
+fn roll_back(done: &[Done], steps: &mut impl Steps) -> Vec<(PathBuf, PathBuf)> {
+    let mut restored: Vec<&Path> = Vec::new();
+    let mut left = Vec::new();
+    for step in done.iter().rev() {
+        match step {
+            Done::Placed { path, is_dir } => {
+                let linked_backup = done.iter().find_map(|d| match d {
+                    Done::Saved {
+                        path: p,
+                        backup,
+                        linked: true,
+                        ..
+                    } if p == path => Some(backup),
+                    _ => None,
+                });
+                match linked_backup {
+                    // The previous version back over the new one, in one rename.
+                    Some(backup) => match steps.rename(backup, path) {
+                        Ok(()) => restored.push(path),
+                        Err(_) => {
+                            left.push((path.clone(), backup.clone()));
+                            restored.push(path);
+                        }
+                    },
+                    // Nothing was there, or the previous version was moved aside (put back below).
+                    None => discard(path, *is_dir),
+                }
+            }
+            Done::Saved {
+                path,
+                backup,
+                linked,
+                is_dir,
+            } => {
+                if restored.contains(&path.as_path()) {
+                    continue;
+                }
+                if *linked {
+                    // The new output never replaced it: the previous version is still in place.
+                    discard(backup, *is_dir);
+                } else if steps.rename(backup, path).is_err() {
+                    left.push((path.clone(), backup.clone()));
+                }
+            }
+        }
+    }
+    left
+}
+
+/// The name beside `path` its previous version is saved under during a commit: `.NAME.PID.old`.
+fn backup_name(path: &Path) -> PathBuf {
     let mut name = std::ffi::OsString::from(".");
     name.push(path.file_name().unwrap_or_default());
     name.push(format!(".{}.old", std::process::id()));
     path.with_file_name(name)
+}
+
+/// Deletes whatever is at `path` (a file, a link, a folder with its content), if anything.
+fn discard_any(path: &Path) {
+    if let Ok(metadata) = std::fs::symlink_metadata(path) {
+        discard(path, metadata.is_dir());
+    }
 }
 
 /// A temporary file or folder, deleted (and struck from the list) when dropped unless handed over.
@@ -355,7 +529,7 @@ pub(crate) struct Temporary {
 }
 
 impl Temporary {
-    /// Creates a temporary file `.NAME.XXXXXX.tmp` in `dir` for the output `file_name`, listed before it exists, so
+    /// Creates a temporary file `.NAME.PID.XXXXXX.tmp` in `dir` for the output `file_name`, listed before it exists, so
     /// that no moment passes where it exists unlisted. Its permissions are left to the umask (an ordinary output).
     pub(crate) fn file(dir: &Path, file_name: &std::ffi::OsStr) -> io::Result<(File, Self)> {
         let mut file = None;
@@ -381,7 +555,7 @@ impl Temporary {
         ))
     }
 
-    /// Creates a temporary folder `.NAME.XXXXXX.tmp` in `dir` for the output folder `name`.
+    /// Creates a temporary folder `.NAME.PID.XXXXXX.tmp` in `dir` for the output folder `name`.
     pub(crate) fn dir(dir: &Path, name: &std::ffi::OsStr) -> io::Result<Self> {
         let path = create_listed(dir, name, |path| std::fs::create_dir(path))?;
         Ok(Self {
@@ -410,10 +584,7 @@ impl Temporary {
             set.staged.push(staged);
             return Ok(());
         }
-        let result = move_into_place(&staged);
-        if result.is_err() {
-            discard(&staged.temporary, staged.is_dir);
-        }
+        let result = commit_all(std::slice::from_ref(&staged), &[], &mut FileSystem);
         registry.temporaries.remove(&staged.temporary);
         result
     }
@@ -435,9 +606,11 @@ fn create_listed(
     name: &std::ffi::OsStr,
     mut create: impl FnMut(&Path) -> io::Result<()>,
 ) -> io::Result<PathBuf> {
+    remove_stale_temporaries(dir, name);
+    // `.NAME.PID.XXXXXX.tmp`: the process's number tells a later run whether its writer is still alive.
     let mut prefix = std::ffi::OsString::from(".");
     prefix.push(name);
-    prefix.push(".");
+    prefix.push(format!(".{}.", std::process::id()));
     let named = tempfile::Builder::new()
         .prefix(&prefix)
         .suffix(".tmp")
@@ -457,7 +630,93 @@ fn create_listed(
         .map_err(|e| io::Error::other(e.to_string()))
 }
 
-/// A folder written as a whole: its content goes to a temporary folder `.NAME.XXXXXX.tmp/` beside its path, which
+/// Deletes the temporaries of the output `name` in `dir` that a process no longer alive left behind (killed by
+/// `kill -9`, which no program can catch, or by a power cut): `.NAME.PID.XXXXXX.tmp` files or folders whose process
+/// `PID` does not exist. The folder is listed once per process; the temporaries of a live process (another run
+/// writing the same output now) are left alone, as is anything of another name.
+fn remove_stale_temporaries(dir: &Path, name: &std::ffi::OsStr) {
+    let listed = registry().stale.contains_key(dir);
+    if !listed {
+        let found = find_stale_temporaries(dir);
+        registry().stale.entry(dir.to_path_buf()).or_insert(found);
+    }
+    let mine: Vec<PathBuf> = {
+        let mut registry = registry();
+        let Some(stale) = registry.stale.get_mut(dir) else {
+            return;
+        };
+        let (mine, others) = std::mem::take(stale)
+            .into_iter()
+            .partition(|(output, _)| output.as_os_str() == name);
+        *stale = others;
+        mine.into_iter().map(|(_, path)| path).collect()
+    };
+    for path in mine {
+        discard_any(&path);
+    }
+}
+
+/// The temporaries in `dir` of processes no longer alive, each with the output it was for.
+fn find_stale_temporaries(dir: &Path) -> Vec<(std::ffi::OsString, PathBuf)> {
+    let listing = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    let Ok(entries) = std::fs::read_dir(listing) else {
+        return Vec::new();
+    };
+    let own = std::process::id();
+    entries
+        .filter_map(Result::ok)
+        .filter_map(|entry| {
+            let file_name = entry.file_name();
+            let (output, pid) = parse_temporary_name(file_name.to_str()?)?;
+            (pid != own && !process_alive(pid)).then(|| (output.into(), dir.join(&file_name)))
+        })
+        .collect()
+}
+
+/// The output and the process of a temporary's name `.NAME.PID.XXXXXX.tmp` (`XXXXXX` six letters or digits).
+fn parse_temporary_name(file_name: &str) -> Option<(&str, u32)> {
+    let inner = file_name.strip_prefix('.')?.strip_suffix(".tmp")?;
+    let (rest, random) = inner.rsplit_once('.')?;
+    if random.len() != 6 || !random.bytes().all(|b| b.is_ascii_alphanumeric()) {
+        return None;
+    }
+    let (output, pid) = rest.rsplit_once('.')?;
+    if output.is_empty() || pid.is_empty() || !pid.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    Some((output, pid.parse().ok()?))
+}
+
+/// Whether a process `pid` exists (on this machine). Where that cannot be told, it is taken as alive: nothing is
+/// deleted.
+fn process_alive(pid: u32) -> bool {
+    #[cfg(unix)]
+    {
+        let Ok(pid) = libc::pid_t::try_from(pid) else {
+            return true;
+        };
+        if pid <= 0 {
+            return true;
+        }
+        // SAFETY: signal 0 sends nothing; it only asks whether the process exists.
+        if unsafe { libc::kill(pid, 0) } == 0 {
+            return true;
+        }
+        // EPERM: it exists, as another user's.
+        io::Error::last_os_error().raw_os_error() != Some(libc::ESRCH)
+    }
+    #[cfg(not(unix))]
+    {
+        let _ = pid;
+        true
+    }
+}
+
+/// A folder written as a whole: its content goes to a temporary folder `.NAME.PID.XXXXXX.tmp/` beside its path, which
 /// takes the place of the previous folder (if any) only when finished (and, with an open [`OutputSet`], committed).
 /// Dropped unfinished, the temporary folder is deleted with everything in it.
 ///
@@ -523,5 +782,240 @@ impl OutputDir {
     /// Puts the folder in place of the previous one, or (with an open set) stages it for the commit.
     pub fn finish(self) -> Result<(), FormatError> {
         self.temporary.finish(&self.destination, &self.given)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::collections::BTreeMap;
+
+    use super::*;
+
+    /// The real file system, but its `fail_at`-th step (from 1) fails, and with `for_good` every step after it too.
+    struct Failing {
+        count: usize,
+        fail_at: usize,
+        for_good: bool,
+    }
+
+    impl Failing {
+        fn step(&mut self) -> io::Result<()> {
+            self.count += 1;
+            if self.count == self.fail_at || (self.for_good && self.count > self.fail_at) {
+                return Err(io::Error::other("injected failure"));
+            }
+            Ok(())
+        }
+    }
+
+    impl Steps for Failing {
+        fn rename(&mut self, from: &Path, to: &Path) -> io::Result<()> {
+            self.step()?;
+            std::fs::rename(from, to)
+        }
+
+        fn hard_link(&mut self, original: &Path, link: &Path) -> io::Result<()> {
+            self.step()?;
+            std::fs::hard_link(original, link)
+        }
+    }
+
+    /// Every file under `dir`, by its path below `dir`, with its content.
+    fn snapshot(dir: &Path) -> BTreeMap<String, String> {
+        let mut files = BTreeMap::new();
+        let mut stack = vec![dir.to_path_buf()];
+        while let Some(d) = stack.pop() {
+            for entry in std::fs::read_dir(&d).unwrap() {
+                let path = entry.unwrap().path();
+                if path.is_dir() {
+                    stack.push(path);
+                } else {
+                    let name = path.strip_prefix(dir).unwrap().display().to_string();
+                    files.insert(name, std::fs::read_to_string(&path).unwrap());
+                }
+            }
+        }
+        files
+    }
+
+    fn files(pairs: &[(&str, &str)]) -> BTreeMap<String, String> {
+        pairs
+            .iter()
+            .map(|(k, v)| (k.to_string(), v.to_string()))
+            .collect()
+    }
+
+    /// Previous outputs in `dir` (two files, a folder, a file of a previous run that the commit removes), and the
+    /// finished temporaries of a new run: the two files, a file where there was none, the folder.
+    fn scene(dir: &Path) -> (Vec<Staged>, Vec<PathBuf>) {
+        std::fs::write(dir.join("a.tum"), "old a").unwrap();
+        std::fs::write(dir.join("b.csv"), "old b").unwrap();
+        std::fs::write(dir.join("rois.bin"), "old rois").unwrap();
+        std::fs::create_dir(dir.join("frames")).unwrap();
+        std::fs::write(dir.join("frames/frame_00000.png"), "old frame").unwrap();
+        let mut staged = Vec::new();
+        for (name, content) in [("a.tum", "new a"), ("b.csv", "new b"), ("c.csv", "new c")] {
+            let temporary = dir.join(format!(".{name}.1.abcdef.tmp"));
+            std::fs::write(&temporary, content).unwrap();
+            staged.push(Staged {
+                temporary,
+                destination: dir.join(name),
+                given: dir.join(name),
+                is_dir: false,
+            });
+        }
+        let temporary = dir.join(".frames.1.abcdef.tmp");
+        std::fs::create_dir(&temporary).unwrap();
+        std::fs::write(temporary.join("frame_00000.png"), "new frame").unwrap();
+        staged.push(Staged {
+            temporary,
+            destination: dir.join("frames"),
+            given: dir.join("frames"),
+            is_dir: true,
+        });
+        (staged, vec![dir.join("rois.bin"), dir.join("absent.bin")])
+    }
+
+    fn previous() -> BTreeMap<String, String> {
+        files(&[
+            ("a.tum", "old a"),
+            ("b.csv", "old b"),
+            ("rois.bin", "old rois"),
+            ("frames/frame_00000.png", "old frame"),
+        ])
+    }
+
+    #[test]
+    fn a_commit_failing_at_its_kth_step_leaves_every_previous_output() {
+        let committed = files(&[
+            ("a.tum", "new a"),
+            ("b.csv", "new b"),
+            ("c.csv", "new c"),
+            ("frames/frame_00000.png", "new frame"),
+        ]);
+        let (mut failed, mut fell_back) = (0, 0);
+        for fail_at in 1.. {
+            let tmp = tempfile::tempdir().unwrap();
+            let (staged, removals) = scene(tmp.path());
+            let mut steps = Failing {
+                count: 0,
+                fail_at,
+                for_good: false,
+            };
+            match commit_all(&staged, &removals, &mut steps) {
+                Err(e) => {
+                    failed += 1;
+                    assert!(e.to_string().contains("injected failure"), "{e}");
+                    assert!(!e.to_string().contains("put back"), "{e}");
+                    // Undone: byte for byte as before, no temporary, no backup.
+                    assert_eq!(snapshot(tmp.path()), previous(), "step {fail_at}");
+                    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 4);
+                }
+                Ok(()) if steps.count < fail_at => {
+                    assert_eq!(snapshot(tmp.path()), committed);
+                    assert_eq!(std::fs::read_dir(tmp.path()).unwrap().count(), 4);
+                    break;
+                }
+                // A failed hard link falls back to moving the previous file aside: the commit goes through.
+                Ok(()) => {
+                    fell_back += 1;
+                    assert_eq!(snapshot(tmp.path()), committed, "step {fail_at}");
+                }
+            }
+        }
+        // Three saves (two hard links, the folder moved aside), four renames in, one removal moved aside; the two
+        // links fall back to moving the file aside.
+        assert_eq!((failed, fell_back), (6, 2));
+    }
+
+    #[test]
+    fn an_undo_that_fails_too_says_where_each_previous_output_is() {
+        for fail_at in 1..=8 {
+            let tmp = tempfile::tempdir().unwrap();
+            let dir = tmp.path();
+            let (staged, removals) = scene(dir);
+            let mut steps = Failing {
+                count: 0,
+                fail_at,
+                for_good: true,
+            };
+            let e = commit_all(&staged, &removals, &mut steps)
+                .unwrap_err()
+                .to_string();
+            // Every previous output is at its path or at the backup the error names.
+            let after = snapshot(dir);
+            for (name, content) in previous() {
+                let path = dir.join(&name);
+                let top = dir.join(name.split('/').next().unwrap());
+                if after.get(&name) == Some(&content) {
+                    continue;
+                }
+                let backup = backup_name(&top);
+                assert!(
+                    e.contains(&format!("{} is at {}", top.display(), backup.display())),
+                    "step {fail_at}: {name}: {e}"
+                );
+                let saved = backup.join(path.strip_prefix(&top).unwrap());
+                let saved = if name.contains('/') { saved } else { backup };
+                assert_eq!(std::fs::read_to_string(saved).unwrap(), content, "{e}");
+            }
+            // A new output is left only where its previous version could not be put back (and is named).
+            for (name, content) in &after {
+                if content.starts_with("new") {
+                    let top = dir.join(name.split('/').next().unwrap());
+                    assert!(
+                        e.contains(&format!("{} is at", top.display())),
+                        "step {fail_at}: {name}: {e}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn temporaries_of_dead_processes_go_when_their_output_is_written_again() {
+        assert_eq!(
+            parse_temporary_name(".poses.tum.123.aB3xYz.tmp"),
+            Some(("poses.tum", 123))
+        );
+        for name in [
+            ".poses.tum.aB3xYz.tmp",
+            ".poses.tum.12a.aB3xYz.tmp",
+            ".poses.tum.123.aB3x.tmp",
+            "poses.tum.123.aB3xYz.tmp",
+            "..123.aB3xYz.tmp",
+        ] {
+            assert_eq!(parse_temporary_name(name), None, "{name}");
+        }
+        // A process that has ended (and been waited for), and one alive (this one's parent).
+        let mut child = std::process::Command::new("true").spawn().unwrap();
+        let dead = child.id();
+        child.wait().unwrap();
+        assert!(!process_alive(dead));
+        let alive = std::os::unix::process::parent_id();
+        assert!(process_alive(alive));
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path();
+        let stale_file = dir.join(format!(".poses.tum.{dead}.aB3xYz.tmp"));
+        let stale_dir = dir.join(format!(".poses.tum.{dead}.qQ9wEr.tmp"));
+        let live = dir.join(format!(".poses.tum.{alive}.aB3xYz.tmp"));
+        let other_output = dir.join(format!(".twists.csv.{dead}.aB3xYz.tmp"));
+        let not_ours = dir.join(".poses.tum.tmp");
+        for path in [&stale_file, &live, &other_output, &not_ours] {
+            std::fs::write(path, "x").unwrap();
+        }
+        std::fs::create_dir(&stale_dir).unwrap();
+        std::fs::write(stale_dir.join("frame_00000.png"), "x").unwrap();
+        let mut file = crate::AtomicFile::create(dir.join("poses.tum")).unwrap();
+        io::Write::write_all(&mut file, b"new").unwrap();
+        file.finish().unwrap();
+        let mut names: Vec<PathBuf> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .collect();
+        names.sort();
+        let mut expected = vec![live, other_output, not_ours, dir.join("poses.tum")];
+        expected.sort();
+        assert_eq!(names, expected);
     }
 }
