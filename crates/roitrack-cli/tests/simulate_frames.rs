@@ -315,3 +315,79 @@ fn frame_study_prints_the_table_the_checks_and_json() {
     let stderr = fails(&["frame-study", "--seeds", "0"]);
     assert!(stderr.contains("--seeds"), "{stderr}");
 }
+
+#[test]
+fn a_simulation_of_the_other_kind_leaves_no_file_of_the_previous_one() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("sim");
+    let names = |dir: &Path| {
+        let mut names: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        names.sort();
+        names
+    };
+    let measurements = [
+        "simulate",
+        "--scenario",
+        "sweep",
+        "--duration-s",
+        "0.5",
+        "--rois",
+        "--out",
+        p(&out),
+    ];
+    let frames = [
+        "simulate",
+        "--frames",
+        "--scenario",
+        "sweep",
+        "--frame-count",
+        "3",
+        "--out",
+        p(&out),
+    ];
+    ok(&measurements);
+    let run_files = [
+        "camera.yaml",
+        "gt_poses.tum",
+        "gt_twists.csv",
+        "measurements.csv",
+        "rois.bin",
+        "target.csv",
+    ];
+    assert_eq!(names(&out), run_files);
+    // Frames where measurements were: the measurements and the recording go, and a file of the user's stays.
+    std::fs::write(out.join("notes.txt"), "mine").unwrap();
+    ok(&frames);
+    assert_eq!(
+        names(&out),
+        [
+            "README.txt",
+            "camera.yaml",
+            "frames",
+            "gt_poses.tum",
+            "gt_twists.csv",
+            "notes.txt",
+            "target.csv",
+            "timestamps.csv"
+        ]
+    );
+    // Measurements where frames were: the frames (their folder with them), the times and the README go.
+    ok(&measurements);
+    let mut expected = run_files.to_vec();
+    expected.insert(4, "notes.txt");
+    assert_eq!(names(&out), expected);
+    // A README and a folder of frames that are not ours stay; our frames in that folder go.
+    ok(&frames);
+    std::fs::write(out.join("frames").join("mine.txt"), "mine").unwrap();
+    ok(&measurements);
+    assert_eq!(names(&out.join("frames")), ["mine.txt"]);
+    std::fs::write(out.join("README.txt"), "my own notes").unwrap();
+    ok(&measurements);
+    assert_eq!(
+        std::fs::read_to_string(out.join("README.txt")).unwrap(),
+        "my own notes"
+    );
+}

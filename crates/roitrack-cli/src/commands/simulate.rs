@@ -39,6 +39,8 @@ pub const RUN_FILES: [&str; 5] = [
 pub const FRAMES_DIR: &str = "frames";
 pub const TIMESTAMPS_FILE: &str = "timestamps.csv";
 pub const FRAMES_README_FILE: &str = "README.txt";
+/// How that README begins: a measurement run removes a README.txt only if it is this one.
+const README_START: &str = "Simulated frames of";
 
 /// With `--frames`: the blobs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -313,17 +315,16 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
     let scenario = args
         .rig
         .scenario(Scenario::new(args.scenario.into(), args.seed))?;
-    let mut files = RUN_FILES.to_vec();
-    if args.rois {
-        files.push(ROIS_FILE);
-    }
+    // What this run writes, and what a previous run of the other kind (--frames) left, which it removes.
+    let files = [
+        RUN_FILES.as_slice(),
+        &[ROIS_FILE, TIMESTAMPS_FILE, FRAMES_README_FILE, FRAMES_DIR],
+    ]
+    .concat();
     args.rig.check_outputs(&args.out, &files)?;
     let options = args.options();
     roitrack::formats::create_output_dir(&args.out)?;
-    if !args.rois {
-        // A recording of a previous run would not match these measurements: it goes when they are committed.
-        roitrack::formats::remove_at_commit(&args.out.join(ROIS_FILE))?;
-    }
+    remove_other_runs_files(&args.out, false, args.rois)?;
     let reflections = args.reflections.map(|fraction| ReflectionFault {
         fraction,
         ..Default::default()
@@ -345,6 +346,57 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// Removes, when the run's outputs are committed (as one step of the commit, undone if it fails), the files of a
+/// previous simulation in `dir` that do not belong with this run's: with `frames`, the measurements and the ROI
+/// recording; without, the frames (only our own `frame_NNNNN.png` names, and their folder if nothing else is in it),
+/// their times and their README (only if it is ours), and the ROI recording unless `rois`. Until then they stay: an interrupted or failed run changes nothing, and a committed one never leaves the
+/// files of two runs side by side.
+fn remove_other_runs_files(dir: &Path, frames: bool, rois: bool) -> Result<()> {
+    use roitrack::formats::remove_at_commit;
+    if frames {
+        remove_at_commit(&dir.join(MEASUREMENTS_FILE))?;
+        return Ok(remove_at_commit(&dir.join(ROIS_FILE))?);
+    }
+    if !rois {
+        remove_at_commit(&dir.join(ROIS_FILE))?;
+    }
+    remove_at_commit(&dir.join(TIMESTAMPS_FILE))?;
+    let readme = dir.join(FRAMES_README_FILE);
+    if std::fs::read_to_string(&readme).is_ok_and(|text| text.starts_with(README_START)) {
+        remove_at_commit(&readme)?;
+    }
+    // The folder of frames goes whole if it holds only frames; else only the frames go.
+    let frames_dir = dir.join(FRAMES_DIR);
+    if frames_dir.is_dir() {
+        match foreign_entry(&frames_dir)? {
+            None => remove_at_commit(&frames_dir)?,
+            Some(_) => remove_stale_frames(&frames_dir, 0)?,
+        }
+    }
+    Ok(())
+}
+
+/// The first entry of the folder `frames_dir` that is not a frame `simulate --frames` writes (`frame_NNNNN.png`), if
+/// any.
+fn foreign_entry(frames_dir: &Path) -> Result<Option<String>> {
+    let entries = std::fs::read_dir(frames_dir)
+        .with_context(|| format!("cannot list folder {}", frames_dir.display()))?;
+    for entry in entries {
+        let entry =
+            entry.with_context(|| format!("cannot list folder {}", frames_dir.display()))?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let ours = name
+            .strip_prefix("frame_")
+            .and_then(|n| n.strip_suffix(".png"))
+            .is_some_and(|digits| digits.len() >= 5 && digits.bytes().all(|b| b.is_ascii_digit()))
+            && entry.file_type().is_ok_and(|t| t.is_file());
+        if !ours {
+            return Ok(Some(name));
+        }
+    }
+    Ok(None)
 }
 
 /// Writes the five files of a simulated run into `dir` (created if missing; removed again if the run fails).
@@ -465,8 +517,12 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
             TRUTH_TWISTS_FILE,
             FRAMES_README_FILE,
             FRAMES_DIR,
+            // A previous measurement run's, removed.
+            MEASUREMENTS_FILE,
+            ROIS_FILE,
         ],
     )?;
+
     let options = FrameOptions {
         fps_hz: args.fps,
         readout: args.readout()?,
@@ -483,6 +539,7 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
     let dir = &args.out;
     let frames_dir = dir.join(FRAMES_DIR);
     roitrack::formats::create_output_dir(&frames_dir)?;
+    remove_other_runs_files(dir, true, false)?;
     remove_stale_frames(&frames_dir, count)?;
     roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), sequence.camera())?;
     roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scenario.target)?;
@@ -644,7 +701,7 @@ fn frames_readme(args: &SimulateArgs, sequence: &FrameSequence, track: &str) -> 
     };
     let (start, end) = sequence.span_s();
     format!(
-        "Simulated frames of the {scenario} scenario (seed {seed}), made by\n\n    {command}\n\n\
+        "{README_START} the {scenario} scenario (seed {seed}), made by\n\n    {command}\n\n\
          {count} frames of {w} x {h} px at {fps} Hz, {polarity} blobs, read by {readout}, each row exposed for {e:e} \
          s around its time.\n\n\
          {camera_file:<16} the camera (ROS camera_info). It has no time model: tell `roitrack track` how the rows \
