@@ -3,7 +3,8 @@
 //! The pure mathematics of roitrack, with no I/O and no threads:
 //!
 //! - [`so3`]: the SO(3) exponential, an accurate logarithm and the left Jacobian (what nalgebra lacks);
-//! - [`camera`]: pinhole projection with skew and plumb_bob (OpenCV) distortion and its inverse;
+//! - [`camera`]: pinhole projection with skew, and the lens models of [`camera::lens`] (one file each) with their
+//!   inverses;
 //! - [`target`]: the rigid target (model points, optional blob diameters) and the bundled `grid4x4`;
 //! - [`state`]: the 12-dof [`state::MotionState`] (pose and constant twist at a reference time);
 //! - [`samples`]: timestamped measurements, poses and twists as exchanged with files;

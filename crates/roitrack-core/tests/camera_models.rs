@@ -13,19 +13,6 @@ struct Row {
     opencv_px: Vector2<f64>,
 }
 
-fn distortion(model: &str, c: &[f64]) -> Distortion {
-    match (model, c.len()) {
-        ("none", 0) => Distortion::None,
-        ("plumb_bob", 4) => PlumbBob::from_coefficients([c[0], c[1], c[2], c[3], 0.0]).into(),
-        ("plumb_bob", 5) => PlumbBob::from_coefficients([c[0], c[1], c[2], c[3], c[4]]).into(),
-        ("rational_polynomial", 8) => {
-            RationalPolynomial::from_coefficients(c.try_into().unwrap()).into()
-        }
-        ("equidistant", 4) => Equidistant::from_coefficients(c.try_into().unwrap()).into(),
-        other => panic!("unexpected model {other:?}"),
-    }
-}
-
 fn opencv_rows() -> Vec<Row> {
     let text = include_str!("data/opencv_projections.csv");
     let mut rows = Vec::new();
@@ -44,8 +31,14 @@ fn opencv_rows() -> Vec<Row> {
             cx_px: n(4),
             cy_px: n(5),
         };
-        let camera =
-            CameraModel::new(f[0], 1280, 960, intrinsics, distortion(f[0], &coefficients)).unwrap();
+        let camera = CameraModel::new(
+            f[0],
+            1280,
+            960,
+            intrinsics,
+            Distortion::from_model(f[0], &coefficients).unwrap(),
+        )
+        .unwrap();
         rows.push(Row {
             camera,
             point_in_cam_m: Vector3::new(n(7), n(8), n(9)),

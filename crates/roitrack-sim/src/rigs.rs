@@ -481,23 +481,12 @@ fn user_camera(camera: &CameraModel, rng: &mut ChaCha8Rng) -> Option<CameraModel
         cy_px: k.cy_px + h * rng.random_range(-0.02..0.02),
     };
     let dk1 = rng.random_range(-0.05..0.05);
-    let distortion = match camera.distortion {
-        Distortion::None => Distortion::None,
-        Distortion::PlumbBob(d) => PlumbBob {
-            k1: d.k1 + dk1,
-            ..d
+    let distortion = {
+        let mut c = camera.distortion.coefficients();
+        if let Some(k1) = c.first_mut() {
+            *k1 += dk1;
         }
-        .into(),
-        Distortion::RationalPolynomial(d) => RationalPolynomial {
-            k1: d.k1 + dk1,
-            ..d
-        }
-        .into(),
-        Distortion::Equidistant(d) => Equidistant {
-            k1: d.k1 + dk1,
-            ..d
-        }
-        .into(),
+        camera.distortion.with_coefficients(&c)
     };
     let user = CameraModel::new(
         "user",

@@ -23,7 +23,6 @@ use nalgebra::{Matrix6, Rotation3, SMatrix, Vector2, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use roitrack_core::camera::{Distortion, Equidistant, PlumbBob, RationalPolynomial};
 use roitrack_core::estimator::{
     AMBIGUITY_CHI2, Estimator, MODEL_SPREAD_SIGMAS, MODEL_UNCERTAINTY, Observation, TrackStatus,
     Tracker, TrackerConfig, refine_static_pose, solve_static_pose,
@@ -226,23 +225,12 @@ fn model_cost(
         2 => k.cx_px += step,
         3 => k.cy_px += step,
         4 => {
-            camera.distortion = match camera.distortion {
-                Distortion::None => Distortion::None,
-                Distortion::PlumbBob(d) => PlumbBob {
-                    k1: d.k1 + step,
-                    ..d
+            camera.distortion = {
+                let mut c = camera.distortion.coefficients();
+                if let Some(k1) = c.first_mut() {
+                    *k1 += step;
                 }
-                .into(),
-                Distortion::RationalPolynomial(d) => RationalPolynomial {
-                    k1: d.k1 + step,
-                    ..d
-                }
-                .into(),
-                Distortion::Equidistant(d) => Equidistant {
-                    k1: d.k1 + step,
-                    ..d
-                }
-                .into(),
+                camera.distortion.with_coefficients(&c)
             }
         }
         c => target_points[(c - 5) / 3][(c - 5) % 3] += step,
