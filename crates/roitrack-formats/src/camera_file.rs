@@ -18,9 +18,7 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use roitrack_core::{
-    CameraModel, Distortion, Equidistant, PinholeIntrinsics, PlumbBob, RationalPolynomial,
-};
+use roitrack_core::{CameraModel, Distortion, PinholeIntrinsics};
 use serde_yaml_ng::{Mapping, Value};
 
 use crate::FormatError;
@@ -217,65 +215,10 @@ fn not_a_camera_file(path: &Path) -> FormatError {
     )
 }
 
-/// The distortion model `name` (as ROS and roitrack write it) with `coefficients`, checked.
-///
-/// ```
-/// use roitrack_formats::distortion_from;
-///
-/// assert_eq!(distortion_from("plumb_bob", &[0.1, 0.0, 0.0, 0.0]).unwrap().coefficients().len(), 5);
-/// assert!(distortion_from("equidistant", &[0.1, 0.0, 0.0, 0.0, 0.0]).unwrap_err().contains("4 numbers"));
-/// ```
+/// The distortion model `name` with `coefficients`: [`Distortion::from_model`], the one table of lens models,
+/// under the name the Python package calls.
 pub fn distortion_from(name: &str, coefficients: &[f64]) -> Result<Distortion, String> {
-    check_model_name(name)?;
-    if let Some(i) = coefficients.iter().position(|c| !c.is_finite()) {
-        return Err(format!(
-            "coefficient {i} must be a finite number, got {}",
-            coefficients[i]
-        ));
-    }
-    let c = coefficients;
-    match (name, c.len()) {
-        (_, 0) => Ok(Distortion::None),
-        ("none", n) => Err(format!(
-            "distortion model none takes no coefficients, got {n}"
-        )),
-        ("plumb_bob" | "", 4) => {
-            Ok(PlumbBob::from_coefficients([c[0], c[1], c[2], c[3], 0.0]).into())
-        }
-        ("plumb_bob" | "", 5) => {
-            Ok(PlumbBob::from_coefficients([c[0], c[1], c[2], c[3], c[4]]).into())
-        }
-        ("plumb_bob", n) => Err(format!(
-            "plumb_bob takes 4 or 5 numbers [k1, k2, p1, p2(, k3)], got {n} (8 would be rational_polynomial)"
-        )),
-        ("rational_polynomial", 8) => Ok(RationalPolynomial::from_coefficients([
-            c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7],
-        ])
-        .into()),
-        ("rational_polynomial", n) => Err(format!(
-            "rational_polynomial takes 8 numbers [k1, k2, p1, p2, k3, k4, k5, k6], got {n}"
-        )),
-        ("equidistant", 4) => Ok(Equidistant::from_coefficients([c[0], c[1], c[2], c[3]]).into()),
-        ("equidistant", n) => Err(format!(
-            "equidistant takes 4 numbers [k1, k2, k3, k4], got {n}"
-        )),
-        ("", n) => Err(format!(
-            "{n} coefficients without a distortion model: set distortion_model to plumb_bob (4 or 5), \
-             rational_polynomial (8) or equidistant (4)"
-        )),
-        (other, _) => Err(format!("unsupported distortion model {other:?}")),
-    }
-}
-
-/// Whether roitrack knows the distortion model `name` (an empty name means "not said").
-pub(crate) fn check_model_name(name: &str) -> Result<(), String> {
-    match name {
-        "plumb_bob" | "rational_polynomial" | "equidistant" | "none" | "" => Ok(()),
-        other => Err(format!(
-            "unsupported distortion model {other:?}: roitrack supports plumb_bob (4 or 5 coefficients), \
-             rational_polynomial (8), equidistant (4, the fisheye model of cv::fisheye) and none"
-        )),
-    }
+    Distortion::from_model(name, coefficients)
 }
 
 /// The text up to the end of its first YAML document (a `---` or `...` line after some content), so that a topic
@@ -567,7 +510,7 @@ fn parse_ros_message(
     };
     let d_field = if map.contains_key("D") { "D" } else { "d" };
     let distortion =
-        distortion_from(&model, &coefficients).map_err(|e| field_error(path, d_field, e))?;
+        Distortion::from_model(&model, &coefficients).map_err(|e| field_error(path, d_field, e))?;
     let width = get(map, "width")
         .map(|v| size(v, path, "width"))
         .transpose()?;
@@ -700,13 +643,13 @@ fn parse_opencv(
                     "thin-prism and tilt coefficients (after the 8th) are not supported and must be 0",
                 ));
             }
-            distortion_from("rational_polynomial", &coefficients[..8])
+            Distortion::from_model("rational_polynomial", &coefficients[..8])
         }
-        ("", 8) => distortion_from("rational_polynomial", &coefficients),
+        ("", 8) => Distortion::from_model("rational_polynomial", &coefficients),
         ("", n) if n != 0 && n != 5 => Err(format!(
             "OpenCV's distortion vectors have 4, 5, 8, 12 or 14 coefficients, got {n}"
         )),
-        (m, _) => distortion_from(m, &coefficients),
+        (m, _) => Distortion::from_model(m, &coefficients),
     }
     .map_err(|e| field_error(path, d_field, e))?;
     let mut width = get(map, "image_width")
@@ -824,7 +767,7 @@ fn parse_kalibr(
         ("plumb_bob", n) if n != 4 => {
             Err(format!("radtan takes 4 numbers [k1, k2, r1, r2], got {n}"))
         }
-        _ => distortion_from(model, &coefficients),
+        _ => Distortion::from_model(model, &coefficients),
     }
     .map_err(|e| field_error(path, &f("distortion_coeffs"), e))?;
     let resolution = match get(cam, "resolution") {
@@ -1039,7 +982,7 @@ fn boofcv_brown(rt: &Mapping, path: &Path) -> Result<Distortion, FormatError> {
     };
     let k = |i: usize| radial.get(i).copied().unwrap_or(0.0);
     let (t1, t2) = (tangential("t1")?, tangential("t2")?);
-    distortion_from("plumb_bob", &[k(0), k(1), t1, t2, k(2)])
+    Distortion::from_model("plumb_bob", &[k(0), k(1), t1, t2, k(2)])
         .map_err(|e| field_error(path, "radial_tangential", e))
 }
 

@@ -89,7 +89,7 @@ pub fn parse_camera_yaml(text: &str, path: impl AsRef<Path>) -> Result<CameraMod
             .with_field("distortion_model"));
         }
     };
-    let distortion = crate::camera_file::distortion_from(&model, &coefficients)
+    let distortion = Distortion::from_model(&model, &coefficients)
         .map_err(|e| FormatError::new(path, e).with_field("distortion_coefficients.data"))?;
     // The deserializer has checked that K has 9 numbers in the right layout.
     let &[fx_px, skew_px, cx_px, _, fy_px, cy_px, ..] = doc.camera_matrix.0.as_slice() else {
@@ -400,7 +400,7 @@ impl<'de> Deserialize<'de> for DistortionModel {
             }
             fn visit_str<E: de::Error>(self, v: &str) -> Result<DistortionModel, E> {
                 let name = v.trim();
-                match crate::camera_file::check_model_name(name) {
+                match Distortion::check_model_name(name) {
                     Ok(()) => Ok(DistortionModel(name.to_string())),
                     Err(e) => Err(E::custom(e)),
                 }

@@ -3,7 +3,7 @@
 
 use nalgebra::{Matrix3, SMatrix, UnitQuaternion, Vector3};
 use roitrack_core::MotionState;
-use roitrack_core::camera::{Distortion, Equidistant, PlumbBob, RationalPolynomial};
+use roitrack_core::camera::Distortion;
 use roitrack_core::estimator::Matrix12;
 
 use crate::msg::{Pose, Quaternion, Time, Vector3 as RosVector3};
@@ -32,7 +32,8 @@ pub fn nanoseconds(t_s: f64) -> Option<u64> {
 
 /// A camera's lens distortion as `sensor_msgs/msg/CameraInfo` names it: the model's own name (`plumb_bob`,
 /// `rational_polynomial`, `equidistant`) and its coefficients in ROS's order; a camera without distortion as
-/// `plumb_bob` with five zeros, what ROS's camera drivers write for an undistorted camera (ROS has no `none`).
+/// `plumb_bob` with five zeros, what ROS's camera drivers write for an undistorted camera (ROS has no `none`). The
+/// way back is [`Distortion::from_model`].
 ///
 /// ```
 /// use roitrack_core::camera::{Distortion, Equidistant};
@@ -50,51 +51,6 @@ pub fn camera_info_distortion(distortion: &Distortion) -> (&'static str, Vec<f64
 }
 
 const PLUMB_BOB: &str = "plumb_bob";
-
-/// The distortion of a `sensor_msgs/msg/CameraInfo` (its `distortion_model` and `d`), the inverse of
-/// [`camera_info_distortion`]: `plumb_bob` (5 coefficients), `rational_polynomial` (8; OpenCV's 12 or 14 when the
-/// thin-prism and tilt terms past the eighth are zero), `equidistant` (4); no coefficients (any model, or an empty
-/// name with zeros) is an undistorted camera. Anything else is refused with the reason.
-///
-/// ```
-/// use roitrack_core::camera::Distortion;
-/// use roitrack_ros::convert::distortion_from_camera_info;
-///
-/// let d = distortion_from_camera_info("rational_polynomial", &[0.1, 0.0, 0.0, 0.0, 0.0, 0.2, 0.0, 0.0]).unwrap();
-/// assert_eq!(d.model_name(), "rational_polynomial");
-/// assert!(distortion_from_camera_info("kannala_brandt", &[0.0; 4]).is_err());
-/// ```
-pub fn distortion_from_camera_info(model: &str, d: &[f64]) -> Result<Distortion, String> {
-    let zeros = d.iter().all(|&c| c == 0.0);
-    let refused = || {
-        format!(
-            "distortion model {model:?} with {} coefficients is not read (plumb_bob with 5, rational_polynomial \
-             with 8, equidistant with 4, or none)",
-            d.len()
-        )
-    };
-    Ok(match (model, d) {
-        (_, []) => Distortion::from(PlumbBob::default()),
-        ("", _) if zeros => Distortion::from(PlumbBob::default()),
-        (PLUMB_BOB, [k1, k2, p1, p2, k3]) => {
-            Distortion::from(PlumbBob::from_coefficients([*k1, *k2, *p1, *p2, *k3]))
-        }
-        ("rational_polynomial", _) if d.len() >= 8 => {
-            let (eight, rest) = d.split_at(8);
-            if !(rest.is_empty() || (matches!(rest.len(), 4 | 6) && rest.iter().all(|&c| c == 0.0)))
-            {
-                return Err(refused());
-            }
-            Distortion::from(RationalPolynomial::from_coefficients(
-                eight.try_into().expect("8 coefficients"),
-            ))
-        }
-        ("equidistant", [k1, k2, k3, k4]) => {
-            Distortion::from(Equidistant::from_coefficients([*k1, *k2, *k3, *k4]))
-        }
-        _ => return Err(refused()),
-    })
-}
 
 fn vector(v: &Vector3<f64>) -> RosVector3 {
     RosVector3 {
@@ -203,6 +159,7 @@ pub fn twist_covariance_in_object(covariance: Option<&Matrix12>, state: &MotionS
 mod tests {
     use super::*;
     use nalgebra::Rotation3;
+    use roitrack_core::camera::{Equidistant, PlumbBob, RationalPolynomial};
 
     #[test]
     fn every_distortion_model_is_named_as_ros_names_it_and_reads_back() {
@@ -220,32 +177,11 @@ mod tests {
         {
             let (model, d) = camera_info_distortion(distortion);
             assert_eq!(model, name);
-            assert_eq!(&distortion_from_camera_info(model, &d).unwrap(), distortion);
+            assert_eq!(&Distortion::from_model(model, &d).unwrap(), distortion);
         }
         // No distortion: plumb_bob with zeros, which reads back as an identity.
         let (model, d) = camera_info_distortion(&Distortion::None);
-        assert!(
-            distortion_from_camera_info(model, &d)
-                .unwrap()
-                .is_identity()
-        );
-        // OpenCV's 14 rational coefficients with the extra terms zero.
-        let mut fourteen = models[1].coefficients();
-        fourteen.extend([0.0; 6]);
-        assert_eq!(
-            distortion_from_camera_info("rational_polynomial", &fourteen).unwrap(),
-            models[1]
-        );
-        fourteen[10] = 0.1;
-        for (model, d) in [
-            ("rational_polynomial", &fourteen[..]),
-            ("plumb_bob", &fourteen[..8]),
-            ("equidistant", &fourteen[..5]),
-            ("kannala_brandt", &fourteen[..4]),
-        ] {
-            let e = distortion_from_camera_info(model, d).unwrap_err();
-            assert!(e.contains(model), "{e}");
-        }
+        assert!(Distortion::from_model(model, &d).unwrap().is_identity());
     }
 
     fn state() -> MotionState {

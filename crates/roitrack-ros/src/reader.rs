@@ -573,7 +573,7 @@ fn camera_from_info(message: &[u8]) -> Result<CameraModel, String> {
         .map(|_| cdr.f64())
         .collect::<Result<Vec<_>, _>>()?;
     let k = (0..9).map(|_| cdr.f64()).collect::<Result<Vec<_>, _>>()?;
-    let distortion = crate::convert::distortion_from_camera_info(&model, &d)
+    let distortion = roitrack_core::camera::Distortion::from_model(&model, &d)
         .map_err(|e| format!("{e}: give --camera"))?;
     let intrinsics = PinholeIntrinsics {
         fx_px: k[0],
