@@ -121,7 +121,8 @@ pub use twists::{
     TwistWriter, parse_twists_csv, read_twists_csv, read_twists_csv_limited, write_twists_csv,
 };
 pub use units::{
-    LengthUnit, MAX_PLAUSIBLE_BLOB_DIAMETER_M, MAX_PLAUSIBLE_MEDIAN_STEP_S,
+    LengthUnit, MAX_PLAUSIBLE_ANGULAR_SPEED_RADPS, MAX_PLAUSIBLE_BLOB_DIAMETER_M,
+    MAX_PLAUSIBLE_DISTANCE_M, MAX_PLAUSIBLE_MEDIAN_STEP_S, MAX_PLAUSIBLE_SPEED_MPS,
     MAX_PLAUSIBLE_TARGET_SPAN_M, MAX_PLAUSIBLE_TIME_S, TimeUnit, TimedMeasurements,
     parse_target_csv_in, read_target_csv_in,
 };

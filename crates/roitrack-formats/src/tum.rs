@@ -15,6 +15,7 @@ use crate::FormatError;
 use crate::csv_util::{check_time_order, parse_finite};
 use crate::limits::{DEFAULT_MAX_TRAJECTORY_FILE_BYTES, Limited, open_file, read_error};
 use crate::row_writer::RowWriter;
+use crate::units::{POSITION, check_plausible, check_trajectory_time};
 
 const FIELDS: [&str; 8] = ["t", "tx", "ty", "tz", "qx", "qy", "qz", "qw"];
 /// What the file should be, for errors.
@@ -50,8 +51,10 @@ pub fn read_tum_limited(
 
 /// Parses a TUM trajectory from any byte source; `path` names it in errors.
 ///
-/// Every pose line has exactly 8 finite numbers; the times increase strictly; the quaternion's norm is within
-/// [`QUATERNION_NORM_TOLERANCE`] of 1 (it is then normalised). A file with no pose line holds an empty trajectory.
+/// Every pose line has exactly 8 finite numbers; the times increase strictly and are at most
+/// [`MAX_PLAUSIBLE_TIME_S`](crate::MAX_PLAUSIBLE_TIME_S) (larger ones are refused as milliseconds or nanoseconds);
+/// each coordinate of the position is at most [`MAX_PLAUSIBLE_DISTANCE_M`](crate::MAX_PLAUSIBLE_DISTANCE_M); the
+/// quaternion's norm is within [`QUATERNION_NORM_TOLERANCE`] of 1 (it is then normalised). A file with no pose line holds an empty trajectory.
 /// A leading byte-order mark is skipped. Lines are at most [`MAX_LINE_BYTES`](crate::MAX_LINE_BYTES), the whole at
 /// most [`DEFAULT_MAX_TRAJECTORY_FILE_BYTES`](crate::DEFAULT_MAX_TRAJECTORY_FILE_BYTES).
 pub fn parse_tum<R: Read>(
@@ -125,6 +128,10 @@ fn parse_pose_line(text: &str, path: &Path, line: u64) -> Result<PoseSample, For
         ));
     }
     let [t_s, tx, ty, tz, qx, qy, qz, qw] = values;
+    check_trajectory_time(t_s, path, line)?;
+    for (i, value) in [tx, ty, tz].into_iter().enumerate() {
+        check_plausible(value, &POSITION, path, line, FIELDS[1 + i])?;
+    }
     let q = Quaternion::new(qw, qx, qy, qz);
     let norm = q.norm();
     if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
@@ -294,6 +301,36 @@ mod tests {
         assert!(e.starts_with("poses.tum:2: field 't': "), "{e}");
         let e = parse_tum(&b"0 0 0 0 0 0 0 1\n\xfe\n"[..], "p.tum").unwrap_err();
         assert_eq!(e.line(), Some(2));
+    }
+
+    #[test]
+    fn implausible_times_and_positions_are_refused_by_line_and_field() {
+        // Unix times in seconds are plausible; in nanoseconds or milliseconds they are not.
+        assert_eq!(
+            parse_tum("1700000000.5 0 0 1 0 0 0 1\n".as_bytes(), "p.tum")
+                .unwrap()
+                .len(),
+            1
+        );
+        let e = parse_err("0 0 0 1 0 0 0 1\n1700000000000000000 0 0 1 0 0 0 1\n");
+        assert!(
+            e.starts_with("poses.tum:2: field 't': ") && e.contains("nanoseconds"),
+            "{e}"
+        );
+        let e = parse_err("1700000000000 0 0 1 0 0 0 1\n");
+        assert!(
+            e.contains("milliseconds") && e.contains("divide by 1e3"),
+            "{e}"
+        );
+        // A position a million metres off, any coordinate.
+        assert!(parse_tum("0 -1e6 0 1 0 0 0 1\n".as_bytes(), "p.tum").is_ok());
+        let e = parse_err("0 0 0 1 0 0 0 1\n1 0 2e6 1 0 0 0 1\n");
+        assert!(
+            e.starts_with("poses.tum:2: field 'ty': 2000000 m is not a plausible position"),
+            "{e}"
+        );
+        let e = parse_err("0 0 0 -1e300 0 0 0 1\n");
+        assert!(e.starts_with("poses.tum:1: field 'tz': "), "{e}");
     }
 
     #[test]

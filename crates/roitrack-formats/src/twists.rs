@@ -14,6 +14,7 @@ use crate::FormatError;
 use crate::csv_util::{Row, check_time_order, csv_reader, read_header, read_row};
 use crate::limits::{DEFAULT_MAX_TRAJECTORY_FILE_BYTES, Limited, open_file};
 use crate::row_writer::RowWriter;
+use crate::units::{ANGULAR_SPEED, SPEED, check_plausible, check_trajectory_time};
 
 const COLUMNS: [&str; 7] = ["t", "vx", "vy", "vz", "wx", "wy", "wz"];
 /// What the file should be, for errors.
@@ -44,8 +45,10 @@ pub fn read_twists_csv_limited(
     parse_twists(file, path, max_file_bytes)
 }
 
-/// Parses a twists CSV from any byte source; `path` names it in errors. Every value must be a finite number and the
-/// times must increase strictly; a header-only file holds no twists, an empty one is an error. Lines are at most
+/// Parses a twists CSV from any byte source; `path` names it in errors. Every value must be a finite number, the
+/// times must increase strictly and be at most [`MAX_PLAUSIBLE_TIME_S`](crate::MAX_PLAUSIBLE_TIME_S), the velocities
+/// at most [`MAX_PLAUSIBLE_SPEED_MPS`](crate::MAX_PLAUSIBLE_SPEED_MPS) and
+/// [`MAX_PLAUSIBLE_ANGULAR_SPEED_RADPS`](crate::MAX_PLAUSIBLE_ANGULAR_SPEED_RADPS) in each coordinate; a header-only file holds no twists, an empty one is an error. Lines are at most
 /// [`MAX_LINE_BYTES`](crate::MAX_LINE_BYTES), the whole at most
 /// [`DEFAULT_MAX_TRAJECTORY_FILE_BYTES`](crate::DEFAULT_MAX_TRAJECTORY_FILE_BYTES).
 pub fn parse_twists_csv<R: Read>(
@@ -77,6 +80,11 @@ fn parse_twists<R: Read>(
             *value = row.finite(i)?;
         }
         let [t_s, vx, vy, vz, wx, wy, wz] = values;
+        check_trajectory_time(t_s, path, line)?;
+        for (i, value) in values.iter().enumerate().skip(1) {
+            let kind = if i <= 3 { &SPEED } else { &ANGULAR_SPEED };
+            check_plausible(*value, kind, path, line, COLUMNS[i])?;
+        }
         check_time_order(previous, t_s, true, path, line, "t")?;
         previous = Some((t_s, line));
         twists.push(TwistSample {
@@ -185,6 +193,33 @@ mod tests {
             parse_twists_csv("t,vx,vy,vz,wx,wy,wz\n".as_bytes(), "x")
                 .unwrap()
                 .is_empty()
+        );
+    }
+
+    #[test]
+    fn implausible_twists_are_refused_by_line_and_field() {
+        let header = "t,vx,vy,vz,wx,wy,wz\n";
+        let ok = format!("{header}0,-1e6,0,0,0,0,1e6\n");
+        assert_eq!(
+            parse_twists_csv(ok.as_bytes(), "twists.csv").unwrap().len(),
+            1
+        );
+        let e = parse_err(&format!("{header}0,0,0,0,0,0,0\n1,0,0,1e300,0,0,0\n"));
+        assert!(
+            e.starts_with("twists.csv:3: field 'vz': 1e300 m/s is not a plausible velocity"),
+            "{e}"
+        );
+        let e = parse_err(&format!("{header}0,0,0,0,0,-2e6,0\n"));
+        assert!(
+            e.starts_with(
+                "twists.csv:2: field 'wy': -2000000 rad/s is not a plausible angular velocity"
+            ),
+            "{e}"
+        );
+        let e = parse_err(&format!("{header}1700000000000000,0,0,0,0,0,0\n"));
+        assert!(
+            e.starts_with("twists.csv:2: field 't': ") && e.contains("microseconds"),
+            "{e}"
         );
     }
 

@@ -295,13 +295,7 @@ pub(crate) fn check_time_unit(
         .iter()
         .find(|(t_s, _)| t_s.abs() > MAX_PLAUSIBLE_TIME_S)
     {
-        let unit = if t_s.abs() < 1e14 {
-            TimeUnit::Ms
-        } else if t_s.abs() < 1e17 {
-            TimeUnit::Us
-        } else {
-            TimeUnit::Ns
-        };
+        let unit = likely_time_unit(*t_s);
         return Err(error(
             *line,
             format!(
@@ -347,6 +341,98 @@ pub(crate) fn check_time_unit(
             unit.name()
         ),
     ))
+}
+
+/// The unit a time above [`MAX_PLAUSIBLE_TIME_S`] read as seconds most likely is in.
+fn likely_time_unit(t_s: f64) -> TimeUnit {
+    if t_s.abs() < 1e14 {
+        TimeUnit::Ms
+    } else if t_s.abs() < 1e17 {
+        TimeUnit::Us
+    } else {
+        TimeUnit::Ns
+    }
+}
+
+/// The farthest a pose in a file may put the target from the camera (m, any coordinate): beyond, no camera sees it,
+/// and the file is in another unit or broken.
+pub const MAX_PLAUSIBLE_DISTANCE_M: f64 = 1e6;
+/// The fastest a twist in a file may move the target (m/s, any coordinate): beyond, the file is in another unit or
+/// broken (a diverged estimate is marked lost well before).
+pub const MAX_PLAUSIBLE_SPEED_MPS: f64 = 1e6;
+/// The fastest a twist in a file may turn the target (rad/s, any coordinate): 160,000 turns a second.
+pub const MAX_PLAUSIBLE_ANGULAR_SPEED_RADPS: f64 = 1e6;
+
+/// Refuses a time of a trajectory file (poses, twists) past [`MAX_PLAUSIBLE_TIME_S`], naming the likely unit; such a
+/// file has no unit option, so the way past is to convert it.
+pub(crate) fn check_trajectory_time(t_s: f64, path: &Path, line: u64) -> Result<(), FormatError> {
+    if t_s.abs() <= MAX_PLAUSIBLE_TIME_S {
+        return Ok(());
+    }
+    let unit = likely_time_unit(t_s);
+    Err(FormatError::new(
+        path,
+        format!(
+            "t = {t_s} read as seconds is past the year 5000: the times look like {}; convert them to seconds \
+             (divide by {:e})",
+            unit_words(unit),
+            1.0 / unit.seconds()
+        ),
+    )
+    .with_line(line)
+    .with_field("t"))
+}
+
+/// What a value of a trajectory file is, for [`check_plausible`]: its name, unit and largest magnitude.
+pub(crate) struct Plausible {
+    pub what: &'static str,
+    pub unit: &'static str,
+    pub max: f64,
+}
+
+pub(crate) const POSITION: Plausible = Plausible {
+    what: "position of the target in the camera frame",
+    unit: "m",
+    max: MAX_PLAUSIBLE_DISTANCE_M,
+};
+pub(crate) const SPEED: Plausible = Plausible {
+    what: "velocity",
+    unit: "m/s",
+    max: MAX_PLAUSIBLE_SPEED_MPS,
+};
+pub(crate) const ANGULAR_SPEED: Plausible = Plausible {
+    what: "angular velocity",
+    unit: "rad/s",
+    max: MAX_PLAUSIBLE_ANGULAR_SPEED_RADPS,
+};
+
+/// Refuses a value of a trajectory file beyond its largest plausible magnitude, naming the line, the field, the value
+/// and the bound.
+pub(crate) fn check_plausible(
+    value: f64,
+    kind: &Plausible,
+    path: &Path,
+    line: u64,
+    field: &str,
+) -> Result<(), FormatError> {
+    let Plausible { what, unit, max } = kind;
+    if value.abs() <= *max {
+        return Ok(());
+    }
+    // 1e300, not three hundred digits.
+    let value = if value.abs() < 1e7 {
+        value.to_string()
+    } else {
+        format!("{value:e}")
+    };
+    Err(FormatError::new(
+        path,
+        format!(
+            "{value} {unit} is not a plausible {what}: at most {max:e} {unit} in magnitude (is the file in {unit}?)"
+        ),
+    )
+    .with_line(line)
+    .with_field(field))
 }
 
 fn unit_words(unit: TimeUnit) -> &'static str {
