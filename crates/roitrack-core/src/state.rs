@@ -205,31 +205,41 @@ impl Acceleration {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
+
+    /// A state `spread` from rest at 0.6 m on the axis (1: rotations up to 0.6 rad, 2 m/s, 30 rad/s).
+    pub(crate) fn drawn(rng: &mut rand_chacha::ChaCha8Rng, spread: f64) -> MotionState {
+        use rand::Rng;
+        let mut v3 = |m: f64| {
+            spread
+                * Vector3::new(
+                    rng.random_range(-m..m),
+                    rng.random_range(-m..m),
+                    rng.random_range(-m..m),
+                )
+        };
+        MotionState {
+            cam_r_obj: Rotation3::new(v3(0.6)),
+            cam_t_obj_m: Vector3::new(0.0, 0.0, 0.6) + v3(0.05),
+            velocity_mps: v3(2.0),
+            angular_velocity_radps: v3(30.0),
+        }
+    }
 
     #[test]
     fn the_transition_jacobian_matches_central_differences() {
-        let state = moving();
         for dt_s in [0.015, -0.02] {
-            let f = state.transition_jacobian(dt_s);
-            let nominal = state.predicted(dt_s);
-            let h = 1e-6;
-            for j in 0..12 {
-                let mut delta = Vector12::zeros();
-                delta[j] = h;
-                let plus =
-                    MotionState::difference(&nominal, &state.corrected(&delta).predicted(dt_s));
-                let minus =
-                    MotionState::difference(&nominal, &state.corrected(&-delta).predicted(dt_s));
-                let column = (plus - minus) / (2.0 * h);
-                let error = (column - f.column(j)).amax();
-                assert!(
-                    error < 1e-7,
-                    "dt {dt_s}, column {j}: {error:e}\n{column}\n{}",
-                    f.column(j)
-                );
-            }
+            roitrack_testkit::check_jacobian(
+                &format!("transition_jacobian({dt_s})"),
+                MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.6)),
+                drawn,
+                &Vector12::repeat(1.0),
+                |s, delta| {
+                    MotionState::difference(&s.predicted(dt_s), &s.corrected(delta).predicted(dt_s))
+                },
+                |s| s.transition_jacobian(dt_s),
+            );
         }
     }
 

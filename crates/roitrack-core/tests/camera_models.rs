@@ -100,37 +100,22 @@ fn raw_pixel_jacobians_match_central_differences() {
         let p = row.point_in_cam_m;
         let (px, j) = camera.raw_pixel_with_jacobian_wrt_cam(&p).unwrap();
         assert_eq!(px, camera.raw_pixel_from_cam(&p).unwrap());
-        let h = 1e-6 * p.norm();
-        for c in 0..3 {
-            let mut e = Vector3::zeros();
-            e[c] = h;
-            let numeric = (camera.raw_pixel_from_cam(&(p + e)).unwrap()
-                - camera.raw_pixel_from_cam(&(p - e)).unwrap())
-                / (2.0 * h);
-            assert!(
-                (numeric - j.column(c)).norm() < 1e-6 * j.norm().max(1.0),
-                "{}: {p:?} column {c}: numeric {numeric:?}, analytic {:?}",
-                camera.name,
-                j.column(c)
-            );
-        }
+        roitrack_testkit::jacobian::check_at(
+            &camera.name,
+            &p,
+            &Vector3::repeat(p.norm()),
+            |p, delta| camera.raw_pixel_from_cam(&(p + delta)).unwrap(),
+            &j,
+        );
         // The 2x2 distortion Jacobian on its own, too.
         let n = Vector2::new(p.x / p.z, p.y / p.z);
-        let (_, jd) = camera.distortion.distort_with_jacobian(&n);
-        let h = 1e-7 * n.norm().max(1e-3);
-        for c in 0..2 {
-            let mut e = Vector2::zeros();
-            e[c] = h;
-            let numeric = (camera.distortion.distort(&(n + e))
-                - camera.distortion.distort(&(n - e)))
-                / (2.0 * h);
-            assert!(
-                (numeric - jd.column(c)).norm() < 1e-6,
-                "{}: {n:?}: numeric {numeric:?}, analytic {:?}",
-                camera.name,
-                jd.column(c)
-            );
-        }
+        roitrack_testkit::jacobian::check_at(
+            &camera.name,
+            &n,
+            &Vector2::repeat(1.0),
+            |n, delta| camera.distortion.distort(&(n + delta)),
+            &camera.distortion.distort_with_jacobian(&n).1,
+        );
     }
 }
 

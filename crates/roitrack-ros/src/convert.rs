@@ -194,33 +194,28 @@ mod tests {
     }
 
     #[test]
-    fn the_object_twist_jacobian_matches_finite_differences() {
-        let s = state();
-        let j = object_twist_jacobian(&s);
+    fn the_object_twist_jacobian_matches_central_differences() {
+        use roitrack_testkit::rand::Rng;
         let twist = |s: &MotionState| {
             let (v, w) = twist_in_object(s);
             nalgebra::Vector6::new(v.x, v.y, v.z, w.x, w.y, w.z)
         };
-        let h = 1e-6;
-        for k in 0..12 {
-            let mut d = nalgebra::SVector::<f64, 12>::zeros();
-            d[k] = h;
-            let mut p = s;
-            p.cam_t_obj_m += d.fixed_rows::<3>(0);
-            p.cam_r_obj =
-                Rotation3::from_scaled_axis(d.fixed_rows::<3>(3).into_owned()) * s.cam_r_obj;
-            p.velocity_mps += d.fixed_rows::<3>(6);
-            p.angular_velocity_radps += d.fixed_rows::<3>(9);
-            let numeric = (twist(&p) - twist(&s)) / h;
-            for i in 0..6 {
-                assert!(
-                    (numeric[i] - j[(i, k)]).abs() < 1e-5,
-                    "({i}, {k}): {} vs {}",
-                    numeric[i],
-                    j[(i, k)]
-                );
-            }
-        }
+        roitrack_testkit::check_jacobian(
+            "object_twist_jacobian",
+            MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.6)),
+            |rng, spread| {
+                let mut v3 = |m: f64| spread * Vector3::from_fn(|_, _| rng.random_range(-m..m));
+                MotionState {
+                    cam_r_obj: Rotation3::from_scaled_axis(v3(3.0)),
+                    cam_t_obj_m: Vector3::new(0.0, 0.0, 0.6) + v3(0.2),
+                    velocity_mps: v3(2.0),
+                    angular_velocity_radps: v3(10.0),
+                }
+            },
+            &nalgebra::SVector::<f64, 12>::repeat(1.0),
+            |s, delta| twist(&s.corrected(delta)),
+            object_twist_jacobian,
+        );
     }
 
     #[test]

@@ -789,17 +789,16 @@ mod tests {
         assert_eq!(shift(0.99), Vector3::zeros());
         assert_eq!(shift(1.41), Vector3::zeros());
         assert!((shift(1.2) - excursion.offset_m).norm() < 1e-12);
-        for t in [1.05, 1.2, 1.33] {
-            let h = 1e-6;
-            let numeric = (opts.truth_at(&scenario, t + h).cam_t_obj_m
-                - opts.truth_at(&scenario, t - h).cam_t_obj_m)
-                / (2.0 * h);
-            let analytic = opts.truth_at(&scenario, t).velocity_mps;
-            assert!(
-                (numeric - analytic).norm() < 1e-6,
-                "t = {t}: {numeric} vs {analytic}"
-            );
-        }
+        roitrack_testkit::check_jacobian(
+            "velocity of the excursion's truth",
+            1.2,
+            |rng, spread| {
+                1.2 + spread * roitrack_testkit::rand::Rng::random_range(rng, -0.18..0.18)
+            },
+            &nalgebra::Vector1::new(1.0),
+            |t, dt| opts.truth_at(&scenario, t + dt[0]).cam_t_obj_m,
+            |t| opts.truth_at(&scenario, *t).velocity_mps,
+        );
         // Blobs leave the image during the excursion only, and not all of them.
         let run = simulate(&scenario, &opts).unwrap();
         let clean = simulate(&scenario, &SimulationOptions::default()).unwrap();

@@ -613,27 +613,38 @@ fn random_motion(seed: u64, spec: &RandomMotion) -> Motion {
 mod tests {
     use super::*;
 
-    /// Finite differences of the pose reproduce the scenario's twist (pins the convention: V = dt/dt, dR/dt = [W]× R).
+    /// Central differences of the pose reproduce the scenario's twist (pins the convention: V = dt/dt, dR/dt = [W]× R),
+    /// from mid-run to anywhere within it.
     fn assert_twist_is_pose_derivative(s: &Scenario) {
-        let h = 1e-6;
-        for k in 1..200 {
-            let t = s.duration_s * k as f64 / 200.0;
-            let (a, b, mid) = (s.state_at(t - h), s.state_at(t + h), s.state_at(t));
-            let v = (b.cam_t_obj_m - a.cam_t_obj_m) / (2.0 * h);
-            let w = so3::log(&(b.cam_r_obj * a.cam_r_obj.inverse())) / (2.0 * h);
-            assert!(
-                (v - mid.velocity_mps).norm() < 1e-6,
-                "{:?} t={t}: v {v:?} vs {:?}",
-                s.kind,
-                mid.velocity_mps
-            );
-            assert!(
-                (w - mid.angular_velocity_radps).norm() < 1e-5,
-                "{:?} t={t}: w {w:?} vs {:?}",
-                s.kind,
-                mid.angular_velocity_radps
-            );
-        }
+        let mid_s = 0.5 * s.duration_s;
+        roitrack_testkit::check_jacobian(
+            &format!("{:?}: twist", s.kind),
+            mid_s,
+            |rng, spread| {
+                mid_s
+                    + spread
+                        * roitrack_testkit::rand::Rng::random_range(rng, -0.49..0.49)
+                        * s.duration_s
+            },
+            &nalgebra::Vector1::new(1.0),
+            |&t, dt| {
+                let (at, moved) = (s.state_at(t), s.state_at(t + dt[0]));
+                let rotation = so3::log(&(moved.cam_r_obj * at.cam_r_obj.inverse()));
+                nalgebra::Vector6::new(
+                    moved.cam_t_obj_m.x,
+                    moved.cam_t_obj_m.y,
+                    moved.cam_t_obj_m.z,
+                    rotation.x,
+                    rotation.y,
+                    rotation.z,
+                )
+            },
+            |&t| {
+                let state = s.state_at(t);
+                let (v, w) = (state.velocity_mps, state.angular_velocity_radps);
+                nalgebra::Matrix6x1::new(v.x, v.y, v.z, w.x, w.y, w.z)
+            },
+        );
     }
 
     #[test]

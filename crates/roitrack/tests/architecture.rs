@@ -63,6 +63,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ),
     ("roitrack-cli", &["roitrack", "roitrack-genicam"]),
     ("roitrack-python", &["roitrack"]),
+    ("roitrack-testkit", &[]),
 ];
 
 fn crates_dir() -> PathBuf {

@@ -688,18 +688,23 @@ mod tests {
 
     #[test]
     fn pixel_jacobian_matches_central_differences() {
+        use rand::Rng;
         let k = CameraModel::wide_angle_example().intrinsics;
-        let p = Vector3::new(0.05, -0.03, 0.6);
-        let j = k.pixel_jacobian_wrt_cam(&p);
-        let h = 1e-7;
-        for c in 0..3 {
-            let mut e = Vector3::zeros();
-            e[c] = h;
-            let numeric = (k.pixel_from_cam(&(p + e)).unwrap()
-                - k.pixel_from_cam(&(p - e)).unwrap())
-                / (2.0 * h);
-            assert!((numeric - j.column(c)).norm() < 1e-5 * j.norm());
-        }
+        roitrack_testkit::check_jacobian(
+            "pixel_jacobian_wrt_cam",
+            Vector3::new(0.0, 0.0, 0.6),
+            |rng, spread| {
+                let off_axis = Vector3::new(
+                    rng.random_range(-0.3..0.3),
+                    rng.random_range(-0.3..0.3),
+                    0.0,
+                );
+                Vector3::new(0.0, 0.0, rng.random_range(0.2..2.0)) + spread * off_axis
+            },
+            &Vector3::repeat(1.0),
+            |p, delta| k.pixel_from_cam(&(p + delta)).unwrap(),
+            |p| k.pixel_jacobian_wrt_cam(p),
+        );
     }
 
     #[test]
