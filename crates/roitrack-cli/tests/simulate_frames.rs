@@ -390,4 +390,16 @@ fn a_simulation_of_the_other_kind_leaves_no_file_of_the_previous_one() {
         std::fs::read_to_string(out.join("README.txt")).unwrap(),
         "my own notes"
     );
+    // A demo into a simulation's folder: its ROI recording would not match the demo's measurements; what is not
+    // ours stays.
+    assert!(out.join("rois.bin").is_file());
+    ok(&["demo", "--scenario", "static", "--out", p(&out)]);
+    let after = names(&out);
+    assert!(!after.contains(&"rois.bin".to_string()), "{after:?}");
+    assert_eq!(names(&out.join("frames")), ["mine.txt"]);
+    assert_eq!(
+        std::fs::read_to_string(out.join("README.txt")).unwrap(),
+        "my own notes"
+    );
+    assert!(after.contains(&"kalman_poses.tum".to_string()), "{after:?}");
 }

@@ -100,6 +100,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     check_paths(args)?;
     let demo = Demo::with_scenario(options, scenario)?;
     write_run(&demo.run, &args.out)?;
+    // What a `simulate` run left in the folder (a ROI recording, frames) would not match the demo's measurements: it
+    // goes at the commit, with the rest of the folder's change.
+    super::simulate::remove_other_runs_files(&args.out, false, false)?;
     let lineup = demo::lineup();
     let slots = demo.slots();
     let accuracy = &demo.accuracy;

@@ -353,7 +353,7 @@ pub fn run(args: &SimulateArgs) -> Result<()> {
 /// recording; without, the frames (only our own `frame_NNNNN.png` names, and their folder if nothing else is in it),
 /// their times and their README (only if it is ours), and the ROI recording unless `rois`. Until then they stay: an interrupted or failed run changes nothing, and a committed one never leaves the
 /// files of two runs side by side.
-fn remove_other_runs_files(dir: &Path, frames: bool, rois: bool) -> Result<()> {
+pub fn remove_other_runs_files(dir: &Path, frames: bool, rois: bool) -> Result<()> {
     use roitrack::formats::remove_at_commit;
     if frames {
         remove_at_commit(&dir.join(MEASUREMENTS_FILE))?;
