@@ -363,6 +363,18 @@ fn implausible_options_are_refused_naming_the_option_before_anything_runs() {
         let e = refused(&roitrack(&args), 2, &["invalid value", option]);
         assert!(!out.exists(), "{args:?} wrote its folder: {e}");
     }
+    // The demo holds its run in memory: a day of it, or a run slowed a hundredfold, would not fit.
+    for (extra, option) in [
+        (["--duration-s", "86400"], "--duration-s"),
+        (["--speed-scale", "0.01"], "--speed-scale"),
+    ] {
+        let e = refused(
+            &roitrack(&["demo", extra[0], extra[1], "--out", s(&out)]),
+            1,
+            &[option, "in memory", "at most 120 s"],
+        );
+        assert!(!out.exists(), "{extra:?} wrote its folder: {e}");
+    }
     for (extra, option) in [
         (["--window", "4000000000"], "--window"),
         (["--every", "0"], "--every"),

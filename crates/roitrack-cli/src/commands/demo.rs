@@ -45,6 +45,10 @@ pub struct DemoArgs {
     pub ros: crate::ros::McapArgs,
 }
 
+/// The longest scenario the demo runs (s): it holds the run, its six trackings and their figures in memory, about
+/// 7 MB per simulated second (orthoglide: 166 MB peak for 20 s), so at most about 0.9 GB.
+const MAX_DEMO_DURATION_S: f64 = 120.0;
+
 /// The files a demo writes into its folder: the simulated run, each estimator's estimates, the figures.
 fn output_files() -> Vec<String> {
     let mut files: Vec<String> = super::simulate::RUN_FILES.map(String::from).to_vec();
@@ -97,6 +101,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let scenario = args
         .rig
         .scenario(roitrack::sim::Scenario::new(options.scenario, options.seed))?;
+    if scenario.duration_s > MAX_DEMO_DURATION_S {
+        anyhow::bail!(
+            "the demo's scenario lasts {:.0} s (--duration-s, --speed-scale): the demo holds its whole run in memory \
+             (about 7 MB per simulated second), so it runs at most {MAX_DEMO_DURATION_S} s; `roitrack simulate` \
+             streams longer runs to files for `roitrack track`",
+            scenario.duration_s
+        );
+    }
     check_paths(args)?;
     let demo = Demo::with_scenario(options, scenario)?;
     write_run(&demo.run, &args.out)?;
