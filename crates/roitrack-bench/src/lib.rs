@@ -10,7 +10,7 @@
 //! [`HotPaths`] methods the criterion benches call).
 //!
 //! The scene ([`scene`]): camera [`CameraModel::canonical`], target [`Target::grid4x4`], the bench pose (origin at
-//! (0.02, -0.01, 0.60) m, R = Rz(5°) Ry(-15°) Rx(10°), [`roitrack_sim::bench_rotation`]) at the reference time,
+//! (0.02, -0.01, 0.60) m, R = Rz(5°) Ry(-15°) Rx(10°), [`MotionState::bench`]) at the reference time,
 //! moving with a moderate twist ([`TRUTH_VELOCITY_MPS`], [`TRUTH_ANGULAR_VELOCITY_RADPS`]) so that every path of a
 //! moving target is timed (the time-dependent rotation `Exp(W d)`, a few milliradians over a window, as in tracking).
 //! Measurements are taken [`ROI_PERIOD_S`] (250 µs) apart, visiting the points in the bit-reversed order, each the
@@ -96,14 +96,6 @@ pub struct Scene {
     pub truth: MotionState,
 }
 
-/// The bench pose of the built-in scene (docs/model.md) at rest.
-pub fn bench_pose() -> MotionState {
-    MotionState::at_rest(
-        roitrack_sim::bench_rotation(),
-        Vector3::new(0.02, -0.01, 0.60),
-    )
-}
-
 /// The canonical scene: canonical camera, `grid4x4`, the bench pose moving with the bench twist.
 pub fn scene() -> Scene {
     let camera = CameraModel::canonical();
@@ -111,7 +103,7 @@ pub fn scene() -> Scene {
     let truth = MotionState {
         velocity_mps: Vector3::from(TRUTH_VELOCITY_MPS),
         angular_velocity_radps: Vector3::from(TRUTH_ANGULAR_VELOCITY_RADPS),
-        ..bench_pose()
+        ..MotionState::bench()
     };
     Scene {
         camera,
@@ -199,7 +191,7 @@ impl Scene {
     /// One noisy measurement of each of the 16 points of the bench pose at rest (all at time 0): the static pose
     /// problem.
     pub fn static_observations(&self, seed: u64) -> Vec<Observation> {
-        let at_rest = bench_pose();
+        let at_rest = MotionState::bench();
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let noise = Normal::new(0.0, NOISE_PX).expect("valid noise");
         self.target
@@ -816,7 +808,7 @@ mod tests {
             &hot.scene.model,
             &hot.scene.target,
             &hot.static_observations,
-            &bench_pose(),
+            &MotionState::bench(),
             MAX_ITERATIONS,
         );
         assert!(vvs.converged);

@@ -34,6 +34,20 @@ impl MotionState {
         }
     }
 
+    /// The bench pose of the built-in scene (docs/model.md), at rest: the origin at (0.02, -0.01, 0.60) m, the rotation
+    /// [`Self::bench_rotation`]. With [`crate::CameraModel::canonical`] and [`crate::Target::grid4x4`], the scene of
+    /// the benchmarks, the accuracy studies and the `static` scenario.
+    pub fn bench() -> Self {
+        Self::at_rest(Self::bench_rotation(), Vector3::new(0.02, -0.01, 0.60))
+    }
+
+    /// R = Rz(5°) Ry(-15°) Rx(10°), the rotation of the bench pose ([`Self::bench`]).
+    pub fn bench_rotation() -> Rotation3<f64> {
+        Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
+            * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
+            * Rotation3::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians())
+    }
+
     /// The pose `d_s` seconds after the reference time, under the constant twist.
     #[inline]
     pub fn pose_at(&self, d_s: f64) -> (Rotation3<f64>, Vector3<f64>) {

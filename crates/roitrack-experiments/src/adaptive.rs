@@ -58,11 +58,9 @@ use nalgebra::Vector3;
 use roitrack_core::estimator::{
     EstimatorConfig, KalmanTuning, StatusCounts, TrackerConfig, track_all,
 };
-use roitrack_core::{CameraModel, PinholeIntrinsics, PlumbBob, Target, TargetPoint};
+use roitrack_core::{CameraModel, MotionState, PinholeIntrinsics, PlumbBob, Target, TargetPoint};
 use roitrack_eval::{Consistency, EvalOptions, consistency_of};
-use roitrack_sim::{
-    Scenario, ScenarioKind, SimulatedRun, SimulationOptions, bench_rotation, simulate,
-};
+use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simulate};
 use serde::Serialize;
 
 use crate::ExperimentError;
@@ -142,7 +140,7 @@ impl Scene {
                 distance_m,
                 duration_s,
             } => Scenario::still(
-                bench_rotation(),
+                MotionState::bench_rotation(),
                 Vector3::new(0.02, -0.01, distance_m),
                 duration_s,
             ),

@@ -18,7 +18,7 @@ use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
 use roitrack_image::{
     CentroidOptions, ReflectionFault, RenderScratch, Roi, RoiRenderer, SensorModel, Threshold,
-    bench_state, centroid_accuracy, detect_blobs, measure_blob, reflection_accuracy,
+    centroid_accuracy, detect_blobs, measure_blob, reflection_accuracy,
 };
 
 /// (median, minimum) over `runs` repetitions of the mean time (µs) of `inner` calls of `f`.
@@ -38,7 +38,7 @@ fn time_us(runs: usize, inner: usize, mut f: impl FnMut()) -> (f64, f64) {
 
 /// The static bench ROI (24 x 24, blob 5) as rendered with the default sensor and seed 1.
 fn bench_roi(camera: &CameraModel, target: &Target, renderer: &RoiRenderer) -> (Vec<u16>, Roi) {
-    let bench = bench_state();
+    let bench = MotionState::bench();
     let p = bench.point_in_cam_at(&target.points()[5].point_in_obj_m, 0.0);
     let c = camera.raw_pixel_from_cam(&p).unwrap();
     let roi = Roi::centred(c.x, c.y, 24, 1024, 1024).unwrap();
@@ -186,7 +186,7 @@ fn main() {
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let mut scratch = RenderScratch::new();
 
-    let bench = bench_state();
+    let bench = MotionState::bench();
     let moving = MotionState {
         velocity_mps: Vector3::new(1.0, 0.0, 0.0),
         angular_velocity_radps: Vector3::new(0.0, 2.0, 0.0),

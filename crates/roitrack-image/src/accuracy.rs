@@ -1,6 +1,6 @@
 //! Accuracy of the ROI centroid against the truth, on rendered images.
 
-use nalgebra::{Rotation3, Vector2, Vector3};
+use nalgebra::{Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{MotionState, so3};
@@ -9,18 +9,6 @@ use crate::centroid::{BlobRejection, CentroidOptions, measure_blob};
 use crate::reflection::ReflectionFault;
 use crate::render::{RenderScratch, RoiRenderer};
 use crate::roi::Roi;
-
-/// R = Rz(5 deg) Ry(-15 deg) Rx(10 deg), the bench rotation of the built-in scene (docs/model.md).
-pub fn bench_rotation() -> Rotation3<f64> {
-    Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
-        * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
-        * Rotation3::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians())
-}
-
-/// The bench pose of the built-in scene (docs/model.md), at rest: origin at (0.02, -0.01, 0.60) m, rotation [`bench_rotation`].
-pub fn bench_state() -> MotionState {
-    MotionState::at_rest(bench_rotation(), Vector3::new(0.02, -0.01, 0.60))
-}
 
 /// Largest random shift of the position about the bench pose, per axis (m).
 pub const ACCURACY_POSITION_SPREAD_M: f64 = 0.005;
@@ -209,7 +197,7 @@ fn for_each_random_roi(
     let target = renderer.target();
     let mut scratch = RenderScratch::new();
     let mut pixels = vec![0u16; (roi_size * roi_size) as usize];
-    let bench = bench_state();
+    let bench = MotionState::bench();
     for _ in 0..count {
         let mut symmetric = |half: f64| Vector3::from_fn(|_, _| rng.random_range(-half..=half));
         let position = bench.cam_t_obj_m + symmetric(ACCURACY_POSITION_SPREAD_M);

@@ -37,10 +37,7 @@ pub mod roi;
 pub mod sensor;
 pub mod symmetry;
 
-pub use accuracy::{
-    CentroidAccuracy, ReflectionAccuracy, bench_rotation, bench_state, centroid_accuracy,
-    reflection_accuracy,
-};
+pub use accuracy::{CentroidAccuracy, ReflectionAccuracy, centroid_accuracy, reflection_accuracy};
 pub use camera::{GrabError, ReplayCamera, RoiCamera, RoiTrigger, SimulatedCamera};
 pub use centroid::{
     BlobRejection, Centroid, CentroidOptions, MAX_ROI_HEIGHT, MAX_ROI_WIDTH, SymmetryCheck,

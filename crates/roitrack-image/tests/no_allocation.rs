@@ -8,9 +8,7 @@ use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
-use roitrack_image::{
-    CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel, bench_state, measure_blob,
-};
+use roitrack_image::{CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel, measure_blob};
 
 struct CountingAllocator;
 
@@ -56,7 +54,7 @@ fn steady_state_rendering_and_measuring_do_not_allocate() {
     let state = MotionState {
         velocity_mps: Vector3::new(0.8, -0.4, 0.1),
         angular_velocity_radps: Vector3::new(1.0, -2.0, 0.5),
-        ..bench_state()
+        ..MotionState::bench()
     };
     let state_at = |t: f64| state.predicted(t);
     let mut rng = ChaCha8Rng::seed_from_u64(1);

@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target, TargetPoint};
 use roitrack_image::{
     BlobRejection, CentroidOptions, ReflectionFault, RenderScratch, Roi, RoiRenderer, SensorModel,
-    Threshold, bench_state, centroid_accuracy, detect_blobs, measure_blob, reflection_accuracy,
+    Threshold, centroid_accuracy, detect_blobs, measure_blob, reflection_accuracy,
 };
 
 /// The whole sensor rendered at t = 0 with a seeded generator.
@@ -71,7 +71,7 @@ fn rendering_is_deterministic_per_seed() {
     let moving = MotionState {
         velocity_mps: Vector3::new(0.5, -0.3, 0.2),
         angular_velocity_radps: Vector3::new(1.0, 2.0, -1.5),
-        ..bench_state()
+        ..MotionState::bench()
     };
     let (a, _) = render_blob(&r, &moving, 3, 24, (0.3, -1.2), 42);
     let (b, _) = render_blob(&r, &moving, 3, 24, (0.3, -1.2), 42);
@@ -101,7 +101,7 @@ fn rendering_is_deterministic_per_seed() {
         &mut e,
     );
     assert_eq!(d, e);
-    let static_at = |_t: f64| bench_state();
+    let static_at = |_t: f64| MotionState::bench();
     let f1 = full_frame(&r, &static_at, 5);
     let f2 = full_frame(&r, &static_at, 5);
     assert_eq!(f1.len(), 1024 * 1024);
@@ -112,10 +112,10 @@ fn rendering_is_deterministic_per_seed() {
 fn full_frame_and_roi_agree() {
     // A noiseless ROI is the same crop of a noiseless full frame (the blur margin is rendered in both).
     let r = renderer(SensorModel::noiseless());
-    let static_at = |_t: f64| bench_state();
+    let static_at = |_t: f64| MotionState::bench();
     let frame = full_frame(&r, &static_at, 0);
     for index in [0, 6, 15] {
-        let (roi_pixels, roi) = render_blob(&r, &bench_state(), index, 32, (1.7, -2.2), 0);
+        let (roi_pixels, roi) = render_blob(&r, &MotionState::bench(), index, 32, (1.7, -2.2), 0);
         let mut crop = vec![0; roi.len()];
         roi.crop_from(&frame, 1024, &mut crop);
         assert_eq!(roi_pixels, crop, "blob {index}");
@@ -125,7 +125,7 @@ fn full_frame_and_roi_agree() {
 #[test]
 fn static_noiseless_centroids_hit_the_projected_centres() {
     let r = renderer(SensorModel::noiseless());
-    let bench = bench_state();
+    let bench = MotionState::bench();
     let sensor = r.sensor();
     // Fixed threshold at the same level as Auto: background + 15 % of the contrast.
     let level = sensor.background_dn() + 0.15 * sensor.blob_signal_e * sensor.gain_dn_per_e();
@@ -175,7 +175,7 @@ fn binary_moments_are_pixel_locked() {
     let r = renderer(SensorModel::noiseless());
     let mut worst: f64 = 0.0;
     for k in 0..20 {
-        let mut s = bench_state();
+        let mut s = MotionState::bench();
         s.cam_t_obj_m.x += k as f64 * 2e-5;
         let (pixels, roi) = render_blob(&r, &s, 5, 32, (0.0, 0.0), 0);
         let c = measure_blob(&pixels, &roi, &CentroidOptions::binary()).unwrap();
@@ -187,7 +187,7 @@ fn binary_moments_are_pixel_locked() {
 
 #[test]
 fn key_blob_is_larger_by_the_square_of_the_diameters() {
-    let bench = bench_state();
+    let bench = MotionState::bench();
     let key = renderer(SensorModel::noiseless());
     // The same target with a 6 mm blob in place of the key blob.
     let mut points = Target::grid4x4().points().to_vec();
@@ -237,7 +237,7 @@ fn key_blob_is_larger_by_the_square_of_the_diameters() {
 #[test]
 fn rejections_on_rendered_rois() {
     let r = renderer(SensorModel::default());
-    let bench = bench_state();
+    let bench = MotionState::bench();
     let opts = CentroidOptions::default();
     // Far from every blob.
     let roi = Roi::new(100, 900, 24, 24);
@@ -288,7 +288,7 @@ fn a_second_blob_in_the_roi_does_not_bias_the_first() {
     // Only the component of the brightest pixel counts: a dimmer reflection elsewhere in the ROI, even one joining
     // the border, changes nothing.
     let r = renderer(SensorModel::default());
-    let bench = bench_state();
+    let bench = MotionState::bench();
     let (mut pixels, roi) = render_blob(&r, &bench, 5, 40, (0.0, 0.0), 4);
     let opts = CentroidOptions::default();
     let clean = measure_blob(&pixels, &roi, &opts).unwrap();
@@ -316,7 +316,7 @@ fn a_second_blob_in_the_roi_does_not_bias_the_first() {
 #[test]
 fn detect_blobs_finds_the_sixteen_blobs() {
     let r = renderer(SensorModel::default());
-    let bench = bench_state();
+    let bench = MotionState::bench();
     let frame = full_frame(&r, &|_t| bench, 9);
     let blobs = detect_blobs(&frame, 1024, 1024, &CentroidOptions::default());
     assert_eq!(blobs.len(), 16);
@@ -340,7 +340,7 @@ fn deeper_adcs_stay_in_range() {
     for bits in [10, 12] {
         let r = renderer(SensorModel::with_bit_depth(bits));
         let max = (1u32 << bits) - 1;
-        let (pixels, roi) = render_blob(&r, &bench_state(), 5, 24, (0.0, 0.0), 3);
+        let (pixels, roi) = render_blob(&r, &MotionState::bench(), 5, 24, (0.0, 0.0), 3);
         let peak = u32::from(*pixels.iter().max().unwrap());
         let low = u32::from(*pixels.iter().min().unwrap());
         assert!(peak <= max);
@@ -354,7 +354,7 @@ fn deeper_adcs_stay_in_range() {
             "{bits}: {low}"
         );
         let c = measure_blob(&pixels, &roi, &CentroidOptions::default()).unwrap();
-        assert!((Vector2::new(c.u_px, c.v_px) - truth(&r, &bench_state(), 5)).norm() < 0.05);
+        assert!((Vector2::new(c.u_px, c.v_px) - truth(&r, &MotionState::bench(), 5)).norm() < 0.05);
         // Saturation clamps to the range.
         let bright = RoiRenderer::new(
             CameraModel::canonical(),
@@ -365,7 +365,7 @@ fn deeper_adcs_stay_in_range() {
             },
         )
         .unwrap();
-        let (pixels, _) = render_blob(&bright, &bench_state(), 5, 24, (0.0, 0.0), 3);
+        let (pixels, _) = render_blob(&bright, &MotionState::bench(), 5, 24, (0.0, 0.0), 3);
         assert_eq!(u32::from(*pixels.iter().max().unwrap()), max);
     }
 }
@@ -394,7 +394,7 @@ fn second_moments(pixels: &[u16], w: usize) -> (f64, f64) {
 #[test]
 fn motion_blur_elongates_along_the_motion() {
     let r = renderer(SensorModel::noiseless());
-    let bench = bench_state();
+    let bench = MotionState::bench();
     // 20 m/s along the camera's x for 100 µs: 2 mm, 5 px at 0.6 m.
     let moving = MotionState {
         velocity_mps: Vector3::new(20.0, 0.0, 0.0),
@@ -425,7 +425,7 @@ fn distorted_camera_and_non_planar_target() {
     // A strongly distorting lens: blobs near the image's corners still measure at their distorted projections.
     let camera = CameraModel::wide_angle_example();
     let r = RoiRenderer::new(camera.clone(), Target::grid4x4(), SensorModel::noiseless()).unwrap();
-    let mut state = bench_state();
+    let mut state = MotionState::bench();
     state.cam_t_obj_m = Vector3::new(0.17, 0.16, 0.6);
     let (pixels, roi) = render_blob(&r, &state, 15, 32, (0.0, 0.0), 0);
     let t = truth(&r, &state, 15);
@@ -455,9 +455,9 @@ fn distorted_camera_and_non_planar_target() {
         .collect();
     let target = Target::new(points).unwrap();
     let r = RoiRenderer::new(CameraModel::canonical(), target, SensorModel::noiseless()).unwrap();
-    let (pixels, roi) = render_blob(&r, &bench_state(), 0, 32, (0.0, 0.0), 0);
+    let (pixels, roi) = render_blob(&r, &MotionState::bench(), 0, 32, (0.0, 0.0), 0);
     let c = measure_blob(&pixels, &roi, &CentroidOptions::default()).unwrap();
-    assert!((Vector2::new(c.u_px, c.v_px) - truth(&r, &bench_state(), 0)).norm() < 0.012);
+    assert!((Vector2::new(c.u_px, c.v_px) - truth(&r, &MotionState::bench(), 0)).norm() < 0.012);
     let (su, sv) = second_moments(&pixels, 32);
     assert!((su / sv - 1.0).abs() < 0.02, "{su} {sv}");
 }

@@ -189,11 +189,12 @@ mod tests {
     use roitrack_core::TargetPoint;
 
     fn bench(in_plane_deg: f64) -> MotionState {
-        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
-            * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
-            * Rotation3::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians())
-            * Rotation3::from_axis_angle(&Vector3::z_axis(), in_plane_deg.to_radians());
-        MotionState::at_rest(r, Vector3::new(0.02, -0.01, 0.6))
+        let bench = MotionState::bench();
+        MotionState::at_rest(
+            bench.cam_r_obj
+                * Rotation3::from_axis_angle(&Vector3::z_axis(), in_plane_deg.to_radians()),
+            bench.cam_t_obj_m,
+        )
     }
 
     /// Blobs as a detector would report them: shuffled, areas from the diameters, small noise.

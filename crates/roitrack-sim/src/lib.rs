@@ -31,4 +31,4 @@ pub use photo::{
     RenderedPhoto, Shadow, render_photo,
 };
 pub use rois::{RenderError, RoiImageRenderer, render_roi_images};
-pub use scenario::{Scenario, ScenarioKind, bench_rotation};
+pub use scenario::{Scenario, ScenarioKind};

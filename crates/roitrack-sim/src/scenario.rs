@@ -50,13 +50,6 @@ impl ScenarioKind {
     }
 }
 
-/// R = Rz(5 deg) Ry(-15 deg) Rx(10 deg), the bench rotation of the built-in scene (docs/model.md).
-pub fn bench_rotation() -> Rotation3<f64> {
-    Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
-        * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
-        * Rotation3::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians())
-}
-
 /// The quintic time scaling s(u) = 10u³ - 15u⁴ + 6u⁵ and its derivative ds/du, for u clamped to [0, 1].
 fn quintic(u: f64) -> (f64, f64) {
     let u = u.clamp(0.0, 1.0);
@@ -218,13 +211,7 @@ impl Scenario {
     /// The scenario of this kind. `seed` only matters for [`ScenarioKind::Random`].
     pub fn new(kind: ScenarioKind, seed: u64) -> Self {
         let (duration_s, motion) = match kind {
-            ScenarioKind::Static => (
-                1.0,
-                Motion::Static(MotionState::at_rest(
-                    bench_rotation(),
-                    Vector3::new(0.02, -0.01, 0.60),
-                )),
-            ),
+            ScenarioKind::Static => (1.0, Motion::Static(MotionState::bench())),
             ScenarioKind::Orthoglide => (orthoglide_breaks_s()[7], Motion::Orthoglide),
             ScenarioKind::Spin => (3.0, Motion::Spin),
             ScenarioKind::Random => (RANDOM.duration_s, random_motion(seed, &RANDOM)),
@@ -251,10 +238,11 @@ impl Scenario {
     ///
     /// ```
     /// use nalgebra::Vector3;
-    /// use roitrack_sim::{Scenario, ScenarioKind, bench_rotation};
+    /// use roitrack_core::MotionState;
+    /// use roitrack_sim::{Scenario, ScenarioKind};
     ///
     /// // The grid 1.6 m away, at rest for 2 s.
-    /// let far = Scenario::still(bench_rotation(), Vector3::new(0.02, -0.01, 1.6), 2.0);
+    /// let far = Scenario::still(MotionState::bench_rotation(), Vector3::new(0.02, -0.01, 1.6), 2.0);
     /// assert_eq!((far.kind, far.duration_s), (ScenarioKind::Static, 2.0));
     /// assert_eq!(far.state_at(1.3).cam_t_obj_m.z, 1.6);
     /// assert_eq!(far.state_at(1.3).velocity_mps, Vector3::zeros());
@@ -520,7 +508,7 @@ fn orthoglide_state(t_s: f64) -> MotionState {
         (home, Vector3::zeros())
     };
     MotionState {
-        cam_r_obj: bench_rotation(),
+        cam_r_obj: MotionState::bench_rotation(),
         cam_t_obj_m: position,
         velocity_mps: velocity,
         angular_velocity_radps: Vector3::zeros(),
@@ -537,12 +525,12 @@ fn spin_state(t_s: f64) -> MotionState {
         Vector3::new(0.5, 0.7, 0.3) * (2.0 * PI),
     );
     let position =
-        Vector3::new(0.02, -0.01, 0.60) + a.component_mul(&f.map(|x| x * t_s).map(f64::sin));
+        MotionState::bench().cam_t_obj_m + a.component_mul(&f.map(|x| x * t_s).map(f64::sin));
     let velocity = a
         .component_mul(&f)
         .component_mul(&f.map(|x| x * t_s).map(f64::cos));
     MotionState {
-        cam_r_obj: so3::exp(&(w * t_s)) * bench_rotation(),
+        cam_r_obj: so3::exp(&(w * t_s)) * MotionState::bench_rotation(),
         cam_t_obj_m: position,
         velocity_mps: velocity,
         angular_velocity_radps: w,
@@ -559,7 +547,7 @@ fn random_state(
     let (phi, phi_rate) = rotation.eval(t_s);
     // R(t) = Exp(φ(t)) R0, so dR/dt = [J_l(φ) φ']× R.
     MotionState {
-        cam_r_obj: so3::exp(&phi) * bench_rotation(),
+        cam_r_obj: so3::exp(&phi) * MotionState::bench_rotation(),
         cam_t_obj_m: centre_m + p,
         velocity_mps: v,
         angular_velocity_radps: so3::left_jacobian(&phi) * phi_rate,
@@ -695,7 +683,7 @@ mod tests {
             "two laps: back at the start halfway"
         );
         assert!((s.state_at(s.duration_s).cam_t_obj_m - home).norm() < 1e-15);
-        assert_eq!(s.state_at(1.0).cam_r_obj, bench_rotation());
+        assert_eq!(s.state_at(1.0).cam_r_obj, MotionState::bench_rotation());
     }
 
     #[test]
@@ -775,7 +763,7 @@ mod tests {
 
     #[test]
     fn still_rests_at_its_pose() {
-        let rotation = bench_rotation();
+        let rotation = MotionState::bench_rotation();
         let s = Scenario::still(rotation, Vector3::new(0.02, -0.01, 1.6), 1.5);
         assert_eq!((s.kind, s.duration_s), (ScenarioKind::Static, 1.5));
         for t in [0.0, 0.4, 1.5] {
@@ -789,7 +777,7 @@ mod tests {
         assert!(s.min_image_margin_px() > 100.0);
         // The canonical static scenario is the bench pose 0.6 m away.
         let canonical = Scenario::new(ScenarioKind::Static, 1);
-        let bench = Scenario::still(rotation, Vector3::new(0.02, -0.01, 0.6), 1.0);
+        let bench = Scenario::still(rotation, MotionState::bench().cam_t_obj_m, 1.0);
         assert_eq!(canonical.state_at(0.5), bench.state_at(0.5));
         // Too close: the grid fills more than the image.
         let close = Scenario::still(rotation, Vector3::new(0.0, 0.0, 0.05), 1.0);
@@ -799,6 +787,10 @@ mod tests {
     #[test]
     #[should_panic(expected = "duration_s must be finite and positive")]
     fn still_refuses_a_zero_duration() {
-        let _ = Scenario::still(bench_rotation(), Vector3::new(0.0, 0.0, 1.0), 0.0);
+        let _ = Scenario::still(
+            MotionState::bench_rotation(),
+            Vector3::new(0.0, 0.0, 1.0),
+            0.0,
+        );
     }
 }

@@ -7,7 +7,7 @@ use roitrack_core::estimator::{
     VvsSettings, track_all,
 };
 use roitrack_core::{CameraModel, JacobianKind, Measurement, MotionState, RoiOrder, Target, so3};
-use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, bench_rotation, simulate};
+use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 
 fn configs() -> Vec<(&'static str, TrackerConfig)> {
     let base = TrackerConfig::default();
@@ -128,7 +128,7 @@ fn converges_from_the_static_initialisation_on_noiseless_data_to_1e9_m() {
 fn estimate_equals_truth_on_noiseless_constant_twist_motion() {
     // A fast, constant twist: 0.5 m/s and 8 rad/s (1.3 rev/s) about a tilted axis.
     let start = MotionState {
-        cam_r_obj: bench_rotation(),
+        cam_r_obj: MotionState::bench_rotation(),
         cam_t_obj_m: Vector3::new(-0.03, 0.02, 0.6),
         velocity_mps: Vector3::new(0.4, -0.2, 0.2),
         angular_velocity_radps: Vector3::new(1.5, -2.0, 7.5),
@@ -318,7 +318,7 @@ fn bad_measurements_are_refused_without_changing_the_state() {
 fn a_refused_measurement_of_a_readout_is_named_by_its_place_in_the_stream() {
     // Two frames of four blobs, the second's third blob of an unknown point: `track` pushes each frame whole, and
     // on the refusal again one blob at a time, so the error names measurement 6 and the two before it are taken.
-    let start = MotionState::at_rest(bench_rotation(), Vector3::new(0.0, 0.0, 0.6));
+    let start = MotionState::at_rest(MotionState::bench_rotation(), Vector3::new(0.0, 0.0, 0.6));
     let frames = frames_of(&start, 0.0, 2);
     let mut stream: Vec<Measurement> = frames.iter().flat_map(|f| f[..4].to_vec()).collect();
     stream[6].id = 99;
@@ -421,7 +421,7 @@ fn frames_of(start: &MotionState, line_delay_s: f64, frames: usize) -> Vec<Vec<M
 #[test]
 fn frames_of_simultaneous_measurements_give_one_estimate_each_and_exact_states() {
     let start = MotionState {
-        cam_r_obj: bench_rotation(),
+        cam_r_obj: MotionState::bench_rotation(),
         cam_t_obj_m: Vector3::new(-0.03, 0.02, 0.6),
         velocity_mps: Vector3::new(0.3, -0.1, 0.05),
         angular_velocity_radps: Vector3::new(0.2, -0.3, 1.0),
@@ -478,7 +478,7 @@ fn frames_of_simultaneous_measurements_give_one_estimate_each_and_exact_states()
 
 #[test]
 fn a_refused_batch_changes_nothing() {
-    let start = MotionState::at_rest(bench_rotation(), Vector3::new(0.0, 0.0, 0.6));
+    let start = MotionState::at_rest(MotionState::bench_rotation(), Vector3::new(0.0, 0.0, 0.6));
     let frames = frames_of(&start, 0.0, 4);
     let mut tracker = Tracker::new(
         CameraModel::canonical(),
@@ -780,7 +780,7 @@ fn half_a_frame_of_outliers_does_not_move_the_track() {
     let start = MotionState {
         velocity_mps: Vector3::new(0.05, -0.03, 0.01),
         angular_velocity_radps: Vector3::new(0.1, 0.2, -0.1),
-        ..MotionState::at_rest(bench_rotation(), Vector3::new(0.0, 0.0, 0.6))
+        ..MotionState::at_rest(MotionState::bench_rotation(), Vector3::new(0.0, 0.0, 0.6))
     };
     let mut frames = frames_of(&start, 0.0, 10);
     for m in frames[6].iter_mut().take(8) {

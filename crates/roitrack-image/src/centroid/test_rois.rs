@@ -7,7 +7,6 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
 
-use crate::accuracy::bench_state;
 use crate::render::RoiRenderer;
 use crate::roi::Roi;
 use crate::sensor::SensorModel;
@@ -62,7 +61,7 @@ impl Scene {
         let state = MotionState {
             velocity_mps: Vector3::new(0.8, -0.4, 0.1),
             angular_velocity_radps: Vector3::new(1.0, -2.0, 0.5),
-            ..bench_state()
+            ..MotionState::bench()
         };
         Self { renderer, state }
     }
