@@ -1,43 +1,12 @@
 //! Steady-state ROI rendering (with a kept `RenderScratch`) and blob measurement allocate nothing (counted through a
 //! counting global allocator, per thread: the test harness's own thread may allocate meanwhile).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
 use roitrack_image::{CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel, measure_blob};
-
-struct CountingAllocator;
-
-thread_local! {
-    /// Allocations made by this thread (const-initialised: reading it never allocates).
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-fn count() {
-    ALLOCATIONS.with(|a| a.set(a.get() + 1));
-}
-
-fn allocations() -> usize {
-    ALLOCATIONS.with(Cell::get)
-}
-
-unsafe impl GlobalAlloc for CountingAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use roitrack_testkit::alloc::{CountingAllocator, allocations_on_this_thread as allocations};
 
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;

@@ -2,32 +2,13 @@
 //! loop (replayed, pre-rendered ROIs, both threads) make exactly the same number of heap allocations, all of them
 //! set-up (threads, queues, buffers sized up front, the full-frame initialisation).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use roitrack_core::estimator::{EstimatorConfig, TrackerConfig, VvsSettings};
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_image::ReplayCamera;
 use roitrack_image::{RoiRenderer, SensorModel};
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};
-
-struct CountingAllocator;
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for CountingAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use roitrack_testkit::alloc::{CountingAllocator, allocations_in_all_threads as allocations};
 
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;
@@ -74,7 +55,7 @@ fn steady_state_loop_does_not_allocate() {
                 full_frame_slots: 1,
                 ..Default::default()
             };
-            let before = ALLOCATIONS.load(Ordering::SeqCst);
+            let before = allocations();
             let report = run_loop(
                 &mut camera,
                 &scenario.camera,
@@ -83,7 +64,7 @@ fn steady_state_loop_does_not_allocate() {
                 &config,
             )
             .unwrap();
-            let allocations = ALLOCATIONS.load(Ordering::SeqCst) - before;
+            let allocations = allocations() - before;
             assert!(
                 report.estimates.len() > slots / 10 - 5,
                 "{name}: {} estimates",

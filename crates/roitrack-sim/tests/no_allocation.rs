@@ -1,30 +1,10 @@
 //! The tracker's steady state allocates nothing: every estimator, once initialised, pushes measurements and emits
 //! estimates without touching the heap (counted through a counting global allocator).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use roitrack_core::JacobianKind;
 use roitrack_core::estimator::{Estimator, EstimatorConfig, Tracker, TrackerConfig, VvsSettings};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
-
-struct CountingAllocator;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for CountingAllocator {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
+use roitrack_testkit::alloc::{CountingAllocator, allocations_in_all_threads as allocations};
 
 #[global_allocator]
 static GLOBAL: CountingAllocator = CountingAllocator;
@@ -80,14 +60,14 @@ fn steady_state_tracking_does_not_allocate() {
             tracker.state().is_some(),
             "{name}: initialised during warm-up"
         );
-        let before = ALLOCATIONS.load(Ordering::SeqCst);
+        let before = allocations();
         let mut estimates = 0;
         for m in steady {
             if tracker.push(m).unwrap().is_some() {
                 estimates += 1;
             }
         }
-        let allocations = ALLOCATIONS.load(Ordering::SeqCst) - before;
+        let allocations = allocations() - before;
         assert!(estimates > 1900, "{name}: {estimates} estimates");
         assert_eq!(
             allocations,

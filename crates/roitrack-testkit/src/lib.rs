@@ -3,11 +3,13 @@
 //! What the tests of every roitrack crate share, defined once:
 //!
 //! - [`jacobian`]: the Jacobian checker, central differences at identity, near identity and random states, with one
-//!   step and tolerance rule.
+//!   step and tolerance rule;
+//! - [`alloc`]: the counting allocator of the allocation tests, per thread and in all.
 //!
 //! A dev-dependency only, and it depends on no roitrack crate (only nalgebra and rand), so that every crate's tests,
 //! roitrack-core's included, can use it without a cycle.
 
+pub mod alloc;
 pub mod jacobian;
 
 pub use jacobian::check_jacobian;
