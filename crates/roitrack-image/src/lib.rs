@@ -16,13 +16,15 @@
 //! - [`photo`]: blob detection in photographs ([`detect_photo_blobs`]): dark or bright blobs under uneven light, shape
 //!   filters, grey-level sub-pixel centres;
 //! - [`reflection`]: a simulated reflection, a second bright spot in an ROI ([`ReflectionFault`]);
-//! - [`accuracy`]: the centroid's bias and spread against the truth ([`centroid_accuracy`]).
+//! - [`accuracy`]: the centroid's bias and spread against the truth ([`centroid_accuracy`]);
+//! - [`background`]: the background under a blob as a least-squares plane ([`background::fit_plane`]).
 //!
 //! Pixel convention (everywhere): pixel (i, j) (column i, row j) has its centre at image coordinates (u, v) = (i, j)
 //! and covers [i - 0.5, i + 0.5] x [j - 0.5, j + 0.5], as the raw pixels of [`roitrack_core::CameraModel`]. Images are
 //! row-major `u16` buffers of values 0 to 2^bits - 1.
 
 pub mod accuracy;
+pub mod background;
 pub mod camera;
 pub mod centroid;
 mod components;

@@ -1166,45 +1166,16 @@ fn window_offset(frame: &Frame) -> u16 {
     ((max_value + 1) / 16) as u16
 }
 
-/// The least-squares plane `[a, b, c]` (`a + b x + c y`) through the `border` pixels `(x, y, value)` that `keep`
-/// marks, from their centred moments (one pass over raw sums). Their rank decides what they determine: a plane, a
-/// slope along one line (the pixels of one border row or column: the plane's other slope is unknown and taken as 0,
-/// rather than computed from round-off), or, for one pixel, a level. `None` when none is kept.
+/// The background plane `[a, b, c]` (`a + b x + c y`) through the `border` pixels that `keep` marks
+/// ([`roitrack_image::background::fit_plane`]).
 fn fit_plane(border: &[(f64, f64, f64)], keep: &[bool]) -> Option<[f64; 3]> {
-    let mut sums = [0.0f64; 9];
-    for (p, _) in border.iter().zip(keep).filter(|(_, k)| **k) {
-        let (x, y, v) = *p;
-        for (sum, term) in sums
-            .iter_mut()
-            .zip([1.0, x, y, v, x * x, y * y, x * y, x * v, y * v])
-        {
-            *sum += term;
-        }
-    }
-    let [count, sx, sy, sv, sxx, syy, sxy, sxv, syv] = sums;
-    if count == 0.0 {
-        return None;
-    }
-    let (mx, my, mv) = (sx / count, sy / count, sv / count);
-    let (sxx, syy, sxy) = (sxx - sx * mx, syy - sy * my, sxy - sx * my);
-    let (sxv, syv) = (sxv - sx * mv, syv - sy * mv);
-    let det = sxx * syy - sxy * sxy;
-    // Border pixels sit on whole-pixel coordinates: spreads below a thousandth of a pixel squared are zero.
-    let along = |dx: f64, dy: f64| {
-        let g = (sxv * dx + syv * dy) / (sxx * dx * dx + 2.0 * sxy * dx * dy + syy * dy * dy);
-        (g * dx, g * dy)
-    };
-    let (b, c) = if sxx > 1e-3 && syy > 1e-3 && det > 1e-6 * sxx * syy {
-        ((syy * sxv - sxy * syv) / det, (sxx * syv - sxy * sxv) / det)
-    } else if sxx >= syy && sxx > 1e-3 {
-        // Along a line: the slope along its direction, none across it.
-        along(1.0, sxy / sxx)
-    } else if syy > 1e-3 {
-        along(sxy / syy, 1.0)
-    } else {
-        (0.0, 0.0)
-    };
-    Some([mv - b * mx - c * my, b, c])
+    roitrack_image::background::fit_plane(
+        border
+            .iter()
+            .zip(keep)
+            .filter(|(_, k)| **k)
+            .map(|(p, _)| *p),
+    )
 }
 
 /// Copies the window `roi` of `frame` into `out` with its background taken away, so that the blob stands bright on

@@ -9,6 +9,8 @@
 //! recentred on the estimate and the moments taken again, so that what it cuts of the blur's tails is cut
 //! symmetrically (the photo detector takes one pass: the outline's ellipse refines it).
 
+use crate::background::fit_plane;
+
 /// The blob's shape as thresholding saw it: centre (px) and the semi-axes (px) and orientation of the ellipse with
 /// its second moments.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -135,27 +137,18 @@ fn fit_background(ring: &mut [(f64, f64, f64)]) -> Option<Background> {
     };
     for _ in 0..2 {
         let gate = 2.0 * floor + 2.0;
-        let mut ata = nalgebra::Matrix3::<f64>::zeros();
-        let mut atb = nalgebra::Vector3::<f64>::zeros();
-        let mut used = 0;
-        for &(du, dv, value) in ring.iter() {
-            if value - plane.at(du, dv) <= gate {
-                let a = nalgebra::Vector3::new(1.0, du, dv);
-                ata += a * a.transpose();
-                atb += a * value;
-                used += 1;
-            }
-        }
-        if used < 8 {
+        let below_gate = |&(du, dv, value): &(f64, f64, f64)| value - plane.at(du, dv) <= gate;
+        if ring.iter().filter(|p| below_gate(p)).count() < 8 {
             break;
         }
-        let Some(x) = ata.cholesky().map(|c| c.solve(&atb)) else {
+        let Some([level, slope_u, slope_v]) = fit_plane(ring.iter().copied().filter(below_gate))
+        else {
             break;
         };
         plane = Background {
-            level: x[0],
-            slope_u: x[1],
-            slope_v: x[2],
+            level,
+            slope_u,
+            slope_v,
         };
     }
     Some(plane)
