@@ -51,10 +51,16 @@ struct Registry {
     set: Option<Pending>,
     /// Set when the process is ending at once: no temporary may be created any more.
     closed: bool,
-    /// For each folder an output was written in: the temporaries that dead processes left there, not deleted yet,
-    /// with the output each was for.
-    stale: BTreeMap<PathBuf, Vec<(std::ffi::OsString, PathBuf)>>,
+    /// For each folder an output was written in: when it was listed, and the temporaries that dead processes left
+    /// there, not deleted yet.
+    stale: BTreeMap<PathBuf, (std::time::Instant, StaleList)>,
 }
+
+/// Temporaries of dead processes found in a folder, each with the output it was for.
+type StaleList = Vec<(std::ffi::OsString, PathBuf)>;
+
+/// How long a listing of a folder's stale temporaries is used before the folder is listed again.
+const RELIST_AFTER: std::time::Duration = std::time::Duration::from_secs(10);
 
 static REGISTRY: Mutex<Registry> = Mutex::new(Registry {
     temporaries: BTreeSet::new(),
@@ -632,17 +638,24 @@ fn create_listed(
 
 /// Deletes the temporaries of the output `name` in `dir` that a process no longer alive left behind (killed by
 /// `kill -9`, which no program can catch, or by a power cut): `.NAME.PID.XXXXXX.tmp` files or folders whose process
-/// `PID` does not exist. The folder is listed once per process; the temporaries of a live process (another run
-/// writing the same output now) are left alone, as is anything of another name.
+/// `PID` does not exist. The folder is listed at most once every [`RELIST_AFTER`] (a folder of 100,000 frames is not
+/// listed for each frame; a long-lived process, a Python session, still sees what a process killed since left); the
+/// temporaries of a live process (another run writing the same output now) are left alone, as is anything of another
+/// name.
 fn remove_stale_temporaries(dir: &Path, name: &std::ffi::OsStr) {
-    let listed = registry().stale.contains_key(dir);
-    if !listed {
+    let fresh = registry()
+        .stale
+        .get(dir)
+        .is_some_and(|(listed, _)| listed.elapsed() < RELIST_AFTER);
+    if !fresh {
         let found = find_stale_temporaries(dir);
-        registry().stale.entry(dir.to_path_buf()).or_insert(found);
+        registry()
+            .stale
+            .insert(dir.to_path_buf(), (std::time::Instant::now(), found));
     }
     let mine: Vec<PathBuf> = {
         let mut registry = registry();
-        let Some(stale) = registry.stale.get_mut(dir) else {
+        let Some((_, stale)) = registry.stale.get_mut(dir) else {
             return;
         };
         let (mine, others) = std::mem::take(stale)
@@ -657,7 +670,7 @@ fn remove_stale_temporaries(dir: &Path, name: &std::ffi::OsStr) {
 }
 
 /// The temporaries in `dir` of processes no longer alive, each with the output it was for.
-fn find_stale_temporaries(dir: &Path) -> Vec<(std::ffi::OsString, PathBuf)> {
+fn find_stale_temporaries(dir: &Path) -> StaleList {
     let listing = if dir.as_os_str().is_empty() {
         Path::new(".")
     } else {
