@@ -70,13 +70,10 @@ impl LensModel for Equidistant {
         }
     }
 
-    fn coefficient_list(&self) -> Vec<f64> {
-        self.coefficients().to_vec()
-    }
+    type Coefficients = [f64; 4];
 
-    /// All coefficients zero, as the other models (though `θd = θ` still moves points: the f-θ lens).
-    fn is_identity(&self) -> bool {
-        self.coefficients().iter().all(|&c| c == 0.0)
+    fn coefficient_array(&self) -> [f64; 4] {
+        self.coefficients()
     }
 
     #[inline]

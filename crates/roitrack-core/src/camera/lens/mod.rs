@@ -45,11 +45,23 @@ pub trait LensModel: Copy + PartialEq + Into<Distortion> {
     /// one of this model (its length); the values were checked finite by [`Distortion::from_model`].
     fn from_list(coefficients: &[f64]) -> Result<Self, String>;
 
-    /// The coefficients, in the order of [`Self::COEFFICIENT_NAMES`] (every one of them).
-    fn coefficient_list(&self) -> Vec<f64>;
+    /// The coefficients as the model's struct holds them, an array in the order of [`Self::COEFFICIENT_NAMES`].
+    type Coefficients: AsRef<[f64]>;
 
-    /// Whether all coefficients are zero. Allocation-free: the renderer asks it for every ROI.
-    fn is_identity(&self) -> bool;
+    /// The coefficients, every one of them, in the order of [`Self::COEFFICIENT_NAMES`] (the struct's
+    /// `coefficients()`).
+    fn coefficient_array(&self) -> Self::Coefficients;
+
+    /// The coefficients as a list.
+    fn coefficient_list(&self) -> Vec<f64> {
+        self.coefficient_array().as_ref().to_vec()
+    }
+
+    /// Whether all coefficients are zero (for the equidistant model too, though its `θd = θ` is the f-θ lens, not
+    /// the pinhole). Allocation-free: the renderer asks it for every ROI.
+    fn is_identity(&self) -> bool {
+        self.coefficient_array().as_ref().iter().all(|&c| c == 0.0)
+    }
 
     /// Distorted normalised point of an undistorted one, and the 2x2 Jacobian of that map.
     fn distort_with_jacobian(&self, n: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>);

@@ -49,12 +49,10 @@ impl LensModel for PlumbBob {
         }
     }
 
-    fn coefficient_list(&self) -> Vec<f64> {
-        self.coefficients().to_vec()
-    }
+    type Coefficients = [f64; 5];
 
-    fn is_identity(&self) -> bool {
-        self.coefficients().iter().all(|&c| c == 0.0)
+    fn coefficient_array(&self) -> [f64; 5] {
+        self.coefficients()
     }
 
     #[inline]

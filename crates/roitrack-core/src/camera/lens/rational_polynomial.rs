@@ -74,12 +74,10 @@ impl LensModel for RationalPolynomial {
         }
     }
 
-    fn coefficient_list(&self) -> Vec<f64> {
-        self.coefficients().to_vec()
-    }
+    type Coefficients = [f64; 8];
 
-    fn is_identity(&self) -> bool {
-        self.coefficients().iter().all(|&c| c == 0.0)
+    fn coefficient_array(&self) -> [f64; 8] {
+        self.coefficients()
     }
 
     #[inline]
