@@ -449,4 +449,36 @@ fn temporaries_left_by_kill_9_go_with_the_next_run() {
         p(&sim),
     ]);
     assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
+    // simulate --frames: every finished frame waits as a temporary until the commit, so a killed run leaves many;
+    // the next run, shorter, or of measurements, removes them all.
+    for next in [
+        vec!["--frames", "--frame-count", "2"],
+        vec!["--duration-s", "0.5"],
+    ] {
+        let child = roitrack()
+            .args([
+                "simulate",
+                "--frames",
+                "--frame-count",
+                "5000",
+                "--out",
+                p(&sim),
+            ])
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        let frames = sim.join("frames");
+        until_writing(&frames);
+        std::thread::sleep(Duration::from_millis(moments.next_in(200, 600)));
+        send(&child, libc::SIGKILL);
+        assert_eq!(
+            child.wait_with_output().unwrap().status.signal(),
+            Some(libc::SIGKILL)
+        );
+        assert!(temporaries(&frames).len() > 2, "{:?}", temporaries(&frames));
+        let mut args = vec!["simulate", "--scenario", "spin", "--out", p(&sim)];
+        args.extend(next);
+        succeeded(&args);
+        assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
+    }
 }

@@ -102,7 +102,7 @@ pub use measurements::{
 };
 pub use output_set::{
     OutputDir, OutputSet, create_output_dir, keep_if_failed, partial_path, remove_at_commit,
-    remove_temporaries_before_exit,
+    remove_dead_temporaries, remove_temporaries_before_exit,
 };
 pub use overlay::{MarkKind, OverlayMark, write_overlay_png};
 pub use roi_recording::{

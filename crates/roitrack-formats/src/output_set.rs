@@ -669,6 +669,32 @@ fn remove_stale_temporaries(dir: &Path, name: &std::ffi::OsStr) {
     }
 }
 
+/// Deletes at once, in `dir`, the temporaries that processes no longer alive left for the outputs whose names
+/// `is_ours` accepts: for a writer whose outputs vary in number from run to run (the frames of `simulate --frames`),
+/// where a temporary of a killed run may be for an output the next run does not write. Returns how many went.
+///
+/// ```
+/// let dir = tempfile::tempdir().unwrap();
+/// let mut ended = std::process::Command::new("true").spawn().unwrap();
+/// let pid = ended.id();
+/// ended.wait().unwrap();
+/// std::fs::write(dir.path().join(format!(".frame_00007.png.{pid}.aB3xYz.tmp")), "half").unwrap();
+/// std::fs::write(dir.path().join(format!(".notes.txt.{pid}.aB3xYz.tmp")), "half").unwrap();
+/// let removed = roitrack_formats::remove_dead_temporaries(dir.path(), |name| name.starts_with("frame_"));
+/// assert_eq!(removed, 1);
+/// assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 1);
+/// ```
+pub fn remove_dead_temporaries(dir: &Path, is_ours: impl Fn(&str) -> bool) -> usize {
+    let mut removed = 0;
+    for (output, path) in find_stale_temporaries(dir) {
+        if output.to_str().is_some_and(&is_ours) {
+            discard_any(&path);
+            removed += 1;
+        }
+    }
+    removed
+}
+
 /// The temporaries in `dir` of processes no longer alive, each with the output it was for.
 fn find_stale_temporaries(dir: &Path) -> StaleList {
     let listing = if dir.as_os_str().is_empty() {

@@ -370,12 +370,27 @@ pub fn remove_other_runs_files(dir: &Path, frames: bool, rois: bool) -> Result<(
     // The folder of frames goes whole if it holds only frames; else only the frames go.
     let frames_dir = dir.join(FRAMES_DIR);
     if frames_dir.is_dir() {
+        remove_dead_frame_temporaries(&frames_dir);
         match foreign_entry(&frames_dir)? {
             None => remove_at_commit(&frames_dir)?,
             Some(_) => remove_stale_frames(&frames_dir, 0)?,
         }
     }
     Ok(())
+}
+
+/// Deletes the temporaries of frames that a killed run (`kill -9`) left in `frames_dir`: every finished frame of a run
+/// waits as a temporary until the run's commit, and the next run may write fewer frames, or none.
+fn remove_dead_frame_temporaries(frames_dir: &Path) {
+    roitrack::formats::remove_dead_temporaries(frames_dir, |name| frame_index(name).is_some());
+}
+
+/// The index of a frame file name `frame_NNNNN.png` (at least five digits), if it is one.
+fn frame_index(name: &str) -> Option<usize> {
+    name.strip_prefix("frame_")
+        .and_then(|n| n.strip_suffix(".png"))
+        .filter(|digits| digits.len() >= 5 && digits.bytes().all(|b| b.is_ascii_digit()))
+        .and_then(|digits| digits.parse().ok())
 }
 
 /// The first entry of the folder `frames_dir` that is not a frame `simulate --frames` writes (`frame_NNNNN.png`), if
@@ -387,11 +402,7 @@ fn foreign_entry(frames_dir: &Path) -> Result<Option<String>> {
         let entry =
             entry.with_context(|| format!("cannot list folder {}", frames_dir.display()))?;
         let name = entry.file_name().to_string_lossy().into_owned();
-        let ours = name
-            .strip_prefix("frame_")
-            .and_then(|n| n.strip_suffix(".png"))
-            .is_some_and(|digits| digits.len() >= 5 && digits.bytes().all(|b| b.is_ascii_digit()))
-            && entry.file_type().is_ok_and(|t| t.is_file());
+        let ours = frame_index(&name).is_some() && entry.file_type().is_ok_and(|t| t.is_file());
         if !ours {
             return Ok(Some(name));
         }
@@ -540,6 +551,7 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
     let frames_dir = dir.join(FRAMES_DIR);
     roitrack::formats::create_output_dir(&frames_dir)?;
     remove_other_runs_files(dir, true, false)?;
+    remove_dead_frame_temporaries(&frames_dir);
     remove_stale_frames(&frames_dir, count)?;
     roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), sequence.camera())?;
     roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scenario.target)?;
@@ -588,13 +600,7 @@ fn remove_stale_frames(frames_dir: &Path, count: usize) -> Result<()> {
         let entry =
             entry.with_context(|| format!("cannot list folder {}", frames_dir.display()))?;
         let name = entry.file_name();
-        let Some(index) = name
-            .to_str()
-            .and_then(|n| n.strip_prefix("frame_"))
-            .and_then(|n| n.strip_suffix(".png"))
-            .filter(|digits| digits.len() >= 5 && digits.bytes().all(|b| b.is_ascii_digit()))
-            .and_then(|digits| digits.parse::<usize>().ok())
-        else {
+        let Some(index) = name.to_str().and_then(frame_index) else {
             continue;
         };
         if index >= count && frame_file_name(index) == name.to_string_lossy() {
