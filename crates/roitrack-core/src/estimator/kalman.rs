@@ -398,10 +398,11 @@ impl<const N: usize> ErrorStateKalman<N> {
     /// The trend's weight per update for its translational and its rotational part: the step over the filter's own
     /// time constant for that part, `sqrt(tr P_pose / tr P_twist)` (the `1 / ω` of a constant-velocity filter, whose
     /// pose and twist variances are `√2 r^¾ q^¼` and `√2 r^¼ q^¾` for measurement and process densities `r` and
-    /// `q`), but never more than [`Self::trend_rate`] (two cycles of the target's points). A lagging filter's
-    /// innovations stay correlated over its time constant (for the translation at 1 px, 12 to 35 ms on the built-in
-    /// scenes), and a trend of two cycles (8 ms at 4 kHz with 16 points) missed most of its lag (random motion at
-    /// 1 px: 94.6 % of the positions inside their 99 % bound, 96.3 % with this).
+    /// `q`), but never more than [`Self::trend_rate`] (two cycles of the target's points, and at least
+    /// [`TREND_MIN_UPDATES`] updates). A lagging filter's innovations stay correlated over its time constant (for the
+    /// translation at 1 px, 12 to 35 ms on the built-in scenes), and a trend of two cycles (8 ms at 4 kHz with 16
+    /// points) missed most of its lag (random motion at 1 px: 94.6 % of the positions inside their 99 % bound, 96.3 %
+    /// with this).
     fn trend_rates(&self) -> [f64; 2] {
         let p = &self.covariance;
         [0, 3].map(|first| {
@@ -1050,6 +1051,13 @@ const PROCESS_ADAPTATION_RATE: f64 = 0.05;
 /// The trend of the corrections is averaged over at least this many cycles of the target's points (longer when the
 /// filter's own time constant is: `ErrorStateKalman::trend_rates`).
 const TREND_CYCLES: f64 = 2.0;
+/// The trend is also averaged over at least this many updates, whatever the target: the span at which
+/// [`PROCESS_ADAPTATION_RATE`] was chosen (two cycles of the 16-point built-in target). The trend holds a lag's
+/// consistent part and the noise's part, which shrinks as one over the root of the span, whatever the number of
+/// points; over a shorter span the noise's part hides the lag from the persistence, so the process noise settles
+/// lower and the velocity lags more. Two cycles of a 4- or 5-point target (8-10 updates) lagged a fifth of a sample
+/// more than the 16-point grid on the same motion (docs/results.md).
+const TREND_MIN_UPDATES: f64 = 32.0;
 /// Bounds of the process-noise scale, relative to the tuning's densities.
 const PROCESS_SCALE_RANGE: (f64, f64) = (1e-4, 1e4);
 /// Degrees of freedom of the window residual that the noise estimate remembers (an exponential memory): 2,000 dof
@@ -1155,7 +1163,7 @@ impl Law for KalmanLaw {
             filter: Filter::new(
                 covariance.unwrap_or_else(|| core.prior_covariance()),
                 *self.filter.tuning(),
-                1.0 / (TREND_CYCLES * core.target.len() as f64),
+                1.0 / (TREND_CYCLES * core.target.len() as f64).max(TREND_MIN_UPDATES),
             ),
             gated_total: self.gated_total,
             resets_total: self.resets_total,
