@@ -12,7 +12,8 @@ use std::collections::VecDeque;
 
 use nalgebra::Matrix6;
 use roitrack_core::estimator::{
-    Estimate, Matrix12, Observation, TimedPose, refit_pose, stencil_motion,
+    Estimate, Matrix12, Observation, TimedPose, TrackStatus, refit_pose, stencil_motion,
+    stencil_motion_at_start,
 };
 use roitrack_core::{CameraModel, Measurement, SpatioTemporalModel, Target};
 
@@ -123,9 +124,16 @@ impl<I> RollingSmoother<I> {
                 })
             })
             .collect();
-        // Only estimates the filter vouches for are refitted or lent to a neighbour's stencil.
+        // Only estimates the filter vouches for are refitted or lent to a neighbour's stencil, and a track's first
+        // estimate when it is flagged degenerate: a static pose of a rolling frame (one frame does not show the
+        // twist), which the frames after it can set right.
+        let previous_has_pose = match self.pending.back() {
+            Some(previous) => previous.pose.is_some(),
+            None => self.past.back().is_some_and(Option::is_some),
+        };
         let pose = outcome.estimate.as_ref().and_then(|e| {
-            e.status.is_vouched_for().then(|| {
+            let starts_a_track = e.status == TrackStatus::Degenerate && !previous_has_pose;
+            (e.status.is_vouched_for() || starts_a_track).then(|| {
                 (
                     TimedPose {
                         t_s: e.t_ref_s,
@@ -156,7 +164,7 @@ impl<I> RollingSmoother<I> {
     }
 
     /// Refits held frame `p` from the poses of its neighbours (up to [`REACH`] on each side, contiguous, vouched
-    /// for); leaves it as it is without one on each side.
+    /// for); leaves it as it is without one after it, or without one before it and two after it.
     fn refit(&mut self, p: usize) {
         let position = self.past.len() + p;
         let pose_at = |i: usize| -> PastPose {
@@ -181,7 +189,13 @@ impl<I> RollingSmoother<I> {
         let neighbours: Vec<(TimedPose, Matrix6<f64>)> =
             (first..=last).filter_map(pose_at).collect();
         let poses: Vec<TimedPose> = neighbours.iter().map(|(pose, _)| *pose).collect();
-        let Some(motion) = stencil_motion(&poses, position - first) else {
+        // A frame with no pose before it starts a track: its twist from the poses after it.
+        let motion = if position == first {
+            stencil_motion_at_start(&poses)
+        } else {
+            stencil_motion(&poses, position - first)
+        };
+        let Some(motion) = motion else {
             return;
         };
         let held = &self.pending[p];
@@ -209,7 +223,13 @@ impl<I> RollingSmoother<I> {
         let shift_m = (fit.state.cam_t_obj_m - filter.state.cam_t_obj_m).norm();
         let shift_rad =
             roitrack_core::so3::angle_between(&fit.state.cam_r_obj, &filter.state.cam_r_obj);
-        if !fit.state.is_finite() || shift_m > MAX_SHIFT_M || shift_rad > MAX_SHIFT_RAD {
+        // A track's degenerate first pose was fitted with no twist: it may be off by more than the shifts allowed
+        // (a rolling frame's, by millimetres and degrees), and the refit is taken when it explains the frame's blobs
+        // better.
+        let within_shifts = shift_m <= MAX_SHIFT_M && shift_rad <= MAX_SHIFT_RAD;
+        let explains_a_start_better = filter.status == TrackStatus::Degenerate
+            && fit.residual_rms_px <= filter.residual_rms_px;
+        if !fit.state.is_finite() || !(within_shifts || explains_a_start_better) {
             return;
         }
         let mut estimate = *filter;

@@ -74,7 +74,7 @@ pub use options::{
 pub use problem::{Observation, RobustLoss, WindowProblem};
 pub use rolling_refit::{
     MAX_STENCIL_POSES, PoseRefit, StencilMotion, TimedPose, pose_residuals, refit_pose,
-    stencil_motion,
+    stencil_motion, stencil_motion_at_start,
 };
 pub use static_baseline::StaticEstimator;
 pub use static_pose::{

@@ -104,11 +104,48 @@ fn derivative_weights(offsets_s: &[f64]) -> ([f64; MAX_STENCIL_POSES], [f64; MAX
 /// assert!((motion.angular_velocity_radps - Vector3::new(0.0, 1.0, 0.0)).norm() < 1e-9);
 /// ```
 pub fn stencil_motion(poses: &[TimedPose], centre: usize) -> Option<StencilMotion> {
-    if poses.len() > MAX_STENCIL_POSES
-        || centre == 0
-        || centre + 1 >= poses.len()
-        || poses.windows(2).any(|w| w[1].t_s <= w[0].t_s)
-    {
+    if centre == 0 || centre + 1 >= poses.len() {
+        return None;
+    }
+    motion_of_polynomial(poses, centre)
+}
+
+/// The twist and accelerations at `poses[0]`'s time from it and the poses after it (3 to [`MAX_STENCIL_POSES`], in
+/// time order): the first frames of a track, where no pose precedes. The polynomial's derivatives are extrapolated to
+/// its end, so they are less accurate than a central stencil's (a 3-pose end difference leaves jerk T²/3), but the
+/// filter starting a track knows no twist at all, and a rolling shutter's frame fitted with none is millimetres off in
+/// depth. `None` with fewer than 3 poses, more than [`MAX_STENCIL_POSES`] or times out of order.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::estimator::{TimedPose, stencil_motion_at_start};
+///
+/// // Accelerating along x at 2 m/s² from 0.1 m/s, 30 frames a second: a quadratic, exact for 3 poses.
+/// let poses: Vec<TimedPose> = (0..3)
+///     .map(|k| {
+///         let t_s = k as f64 / 30.0;
+///         TimedPose {
+///             t_s,
+///             cam_r_obj: Rotation3::identity(),
+///             cam_t_obj_m: Vector3::new(0.1 * t_s + t_s * t_s, 0.0, 0.5),
+///         }
+///     })
+///     .collect();
+/// let motion = stencil_motion_at_start(&poses).unwrap();
+/// assert!((motion.velocity_mps - Vector3::new(0.1, 0.0, 0.0)).norm() < 1e-9);
+/// assert!((motion.acceleration.linear_mps2 - Vector3::new(2.0, 0.0, 0.0)).norm() < 1e-6);
+/// ```
+pub fn stencil_motion_at_start(poses: &[TimedPose]) -> Option<StencilMotion> {
+    if poses.len() < 3 {
+        return None;
+    }
+    motion_of_polynomial(poses, 0)
+}
+
+/// The derivatives at `poses[centre]` of the polynomial through `poses`; `None` with more than
+/// [`MAX_STENCIL_POSES`] or times out of order.
+fn motion_of_polynomial(poses: &[TimedPose], centre: usize) -> Option<StencilMotion> {
+    if poses.len() > MAX_STENCIL_POSES || poses.windows(2).any(|w| w[1].t_s <= w[0].t_s) {
         return None;
     }
     let c = &poses[centre];
