@@ -6,7 +6,7 @@ builds `roitrack`. This script:
 
 1. writes the problem (the built-in scene: canonical camera, grid4x4, bench pose perturbed per instance, 0.1 px noise,
    seeded) to a JSON file, then reads it back: both sides solve exactly the numbers in that file;
-2. runs `roitrack pnp-bench --problem FILE --json` (our solver, timed in Rust);
+2. runs `roitrack lab pnp-bench --problem FILE --json` (our solver, timed in Rust);
 3. times cv2.solvePnP with ITERATIVE, SQPNP, EPNP and IPPE on the same instances, per call with
    time.perf_counter_ns, plus the cost of the timer alone and of an empty cv2 call (the Python overhead); steps 2 and
    3 alternate in rounds, so that a change of the machine's load hits both sides alike;
@@ -109,7 +109,7 @@ def make_problem(instances: int, seed: int, shift_mm: float, tilt_deg: float) ->
 
 
 def quantile(sorted_values: list[float], q: float) -> float:
-    """Nearest-rank quantile, as in `roitrack pnp-bench`."""
+    """Nearest-rank quantile, as in `roitrack lab pnp-bench`."""
     return sorted_values[round((len(sorted_values) - 1) * q)]
 
 
@@ -190,7 +190,7 @@ def opencv_timing(problem: dict, flag: int, repeats: int) -> list[float]:
 
 
 def run_ours(binary: str, problem_path: str, repeats: int) -> dict:
-    cmd = [binary, "pnp-bench", "--problem", problem_path, "--repeats", str(repeats), "--json"]
+    cmd = [binary, "lab", "pnp-bench", "--problem", problem_path, "--repeats", str(repeats), "--json"]
     out = subprocess.run(cmd, capture_output=True, text=True)
     if out.returncode != 0:
         sys.exit(f"opencv_compare: {' '.join(cmd)} failed (status {out.returncode}):\n{out.stderr}")

@@ -5,7 +5,7 @@
 #   bash bench/opencv_compare.sh [options of bench/opencv_compare.py, e.g. --repeats 50 --instances 200]
 #
 # Makes a virtual environment under target/ (opencv-python-headless and numpy from PyPI; needs network access to PyPI
-# the first time), builds roitrack in release mode, writes the problem to target/opencv-compare/problem.json, prints
+# the first time), builds roitrack with the lab (feature `lab`) in release mode, writes the problem to target/opencv-compare/problem.json, prints
 # the table and writes target/opencv-compare/summary.json. Exit status 0 when the accuracy checks pass.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -23,8 +23,8 @@ if ! "$venv/bin/python" -c "import cv2, numpy" 2>/dev/null; then
     "$venv/bin/pip" install --quiet --disable-pip-version-check $packages
 fi
 
-echo "opencv_compare: cargo build --release -p roitrack-cli" >&2
-cargo build --release --quiet -p roitrack-cli
+echo "opencv_compare: cargo build --release -p roitrack-cli --features lab" >&2
+cargo build --release --quiet -p roitrack-cli --features lab
 bin="${CARGO_TARGET_DIR:-target}/release/roitrack"
 
 out=target/opencv-compare

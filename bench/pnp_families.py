@@ -13,7 +13,7 @@ builds `roitrack`. This script, written independently of roitrack's own simulato
    covariance of the 6-dof pose at p_model for the noise (numerical Jacobian, central differences); the normalised
    error of a pose is max(|t - t_model| / sqrt(trace S_t), angle(R, R_model) / sqrt(trace S_rot)), and a solve is
    correct when it is at most 10;
-3. writes the problems as a suite (format roitrack-pnp-suite/1) to a temporary file and runs `roitrack pnp-bench
+3. writes the problems as a suite (format roitrack-pnp-suite/1) to a temporary file and runs `roitrack lab pnp-bench
    --suite FILE --json`; solves the same numbers with OpenCV (SQPNP; IPPE on planar targets; EPNP then
    solvePnPRefineLM; AP3P's first solution for 3 points), each timed as the median of 20 calls minus the median of
    an empty call; when roitrack flags a problem ambiguous its answer is the set of poses it returns, correct when
@@ -526,7 +526,7 @@ def suite_entry(problem: dict, ref: dict) -> dict:
 
 
 def run_roitrack(binary: str, suite_path: str, repeats: int) -> dict:
-    cmd = [binary, "pnp-bench", "--suite", suite_path, "--json", "--repeats", str(repeats)]
+    cmd = [binary, "lab", "pnp-bench", "--suite", suite_path, "--json", "--repeats", str(repeats)]
     out = subprocess.run(cmd, capture_output=True, text=True)
     if out.returncode != 0:
         sys.exit(f"pnp_families: {' '.join(cmd)} failed (status {out.returncode}):\n{out.stderr}")

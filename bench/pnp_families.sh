@@ -5,7 +5,7 @@
 #   bash bench/pnp_families.sh [options of bench/pnp_families.py, e.g. --seed 2 --per-family 100 --json OUT]
 #
 # Makes the virtual environment target/opencv-venv (the same as bench/opencv_compare.sh, same pinned packages; needs
-# network access to PyPI the first time), builds roitrack in release mode and runs bench/pnp_families.py with --check:
+# network access to PyPI the first time), builds roitrack with the lab (feature `lab`) in release mode and runs bench/pnp_families.py with --check:
 # exit status 0 when roitrack does as well as the best OpenCV method on every family.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -24,8 +24,8 @@ if ! "$venv/bin/python" -c "import cv2, numpy" 2>/dev/null; then
     "$venv/bin/pip" install --quiet --disable-pip-version-check $packages
 fi
 
-echo "pnp_families: cargo build --release -p roitrack-cli" >&2
-cargo build --release --quiet -p roitrack-cli
+echo "pnp_families: cargo build --release -p roitrack-cli --features lab" >&2
+cargo build --release --quiet -p roitrack-cli --features lab
 bin="${CARGO_TARGET_DIR:-target}/release/roitrack"
 
 exec "$venv/bin/python" bench/pnp_families.py --roitrack "$bin" --check "$@"

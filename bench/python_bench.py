@@ -3,7 +3,7 @@
 (seed 1, 0.1 px, 4 kHz, 19,655 measurements) tracked by the default Kalman filter with an estimate every 10.
 
 - track(): `roitrack.track(camera, target, measurements)` from Python, every estimate returned as arrays, against the
-  same call from Rust in the same process (`roitrack bench --json`'s `track_library_meas_per_s`: the library's
+  same call from Rust in the same process (`roitrack lab bench --json`'s `track_library_meas_per_s`: the library's
   `track` over the measurements in memory, every estimate collected). Each round runs Rust, track() and push()
   back to back; the ratio is Python's time over Rust's, the median over the rounds (the machine's load changes
   between rounds more than within one).
@@ -12,8 +12,10 @@
   is due), the median over the rounds.
 
 Targets (the Python package's): track() at least 300,000 measurements/s and within 1.2x of Rust; push() at most 1 us on top of
-the Rust call. Run with the package installed (scripts/test installs it in target/py-venv):
+the Rust call. The Rust side is in a wheel built with the lab (the feature `lab`); run with it installed:
 
+    target/py-venv/bin/maturin build --release -m crates/roitrack-python/Cargo.toml --features lab --out target/lab-wheels
+    target/py-venv/bin/pip install --force-reinstall --no-deps target/lab-wheels/roitrack-*.whl
     target/py-venv/bin/python bench/python_bench.py [--rounds N] [--json] [--check]
 
 --check exits with status 1 naming the targets that do not hold.
@@ -60,6 +62,9 @@ def main() -> int:
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     parser.add_argument("--check", action="store_true", help="exit with status 1 if a target does not hold")
     args = parser.parse_args()
+    if not hasattr(_roitrack, "_bench_track_library"):
+        print("python_bench: this roitrack wheel has no lab: build it with --features lab (see the docstring)", file=sys.stderr)
+        return 2
 
     sim = roitrack.simulate("orthoglide", seed=1)
     camera, target, measurements = sim["camera"], sim["target"], sim["measurements"]

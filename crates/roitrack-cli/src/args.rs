@@ -5,9 +5,9 @@ use std::path::PathBuf;
 use anyhow::{Result, anyhow, bail};
 use clap::{Args, ValueEnum};
 use roitrack::TrackerConfig;
-use roitrack::math::estimator::RobustLoss;
-use roitrack::math::estimator::TrackerOptions;
-use roitrack::math::estimator::{self as estimator};
+use roitrack::core::estimator::RobustLoss;
+use roitrack::core::estimator::TrackerOptions;
+use roitrack::core::estimator::{self as estimator};
 use roitrack::pipeline::ScheduleOrder;
 use roitrack::sim::{Scenario, ScenarioKind};
 
@@ -150,8 +150,8 @@ pub struct EstimatorArgs {
 
 impl EstimatorArgs {
     /// What `--adapt` asks the Kalman filter to learn; `None` without it (the source's default).
-    pub fn adaptation(&self) -> Option<roitrack::math::estimator::Adaptation> {
-        use roitrack::math::estimator::Adaptation;
+    pub fn adaptation(&self) -> Option<roitrack::core::estimator::Adaptation> {
+        use roitrack::core::estimator::Adaptation;
         self.adapt.map(|a| match a {
             AdaptArg::Both => Adaptation::Both,
             AdaptArg::Noise => Adaptation::Noise,
@@ -161,8 +161,8 @@ impl EstimatorArgs {
     }
 
     /// What `--motion-model` asks for; `None` without it (the source's default).
-    fn motion_model(&self) -> Option<roitrack::math::estimator::MotionModelKind> {
-        use roitrack::math::estimator::MotionModelKind;
+    fn motion_model(&self) -> Option<roitrack::core::estimator::MotionModelKind> {
+        use roitrack::core::estimator::MotionModelKind;
         self.motion_model.map(|m| match m {
             MotionModelArg::ConstantVelocity => MotionModelKind::ConstantVelocity,
             MotionModelArg::ConstantAcceleration => MotionModelKind::ConstantAcceleration,
@@ -179,13 +179,13 @@ impl EstimatorArgs {
 
     /// The process model the options name (`--motion-model`, or implied by the densities given); `None`: the
     /// source's default.
-    pub fn named_motion_model(&self) -> Option<roitrack::math::estimator::MotionModelKind> {
+    pub fn named_motion_model(&self) -> Option<roitrack::core::estimator::MotionModelKind> {
         self.options().named_motion_model()
     }
 
     /// The options by name, as the library takes them.
     fn options(&self) -> TrackerOptions {
-        use roitrack::math::estimator::EstimatorKind;
+        use roitrack::core::estimator::EstimatorKind;
         TrackerOptions {
             estimator: match self.estimator {
                 EstimatorArg::Kalman => EstimatorKind::Kalman,
@@ -256,8 +256,8 @@ impl ShutterArg {
 
     /// The readout of `--shutter` and `--line-delay-s`, refusing a line delay without a rolling shutter and a rolling
     /// shutter without a line delay.
-    pub fn readout(self, line_delay_s: Option<f64>) -> Result<roitrack::math::time::Readout> {
-        use roitrack::math::time::Readout;
+    pub fn readout(self, line_delay_s: Option<f64>) -> Result<roitrack::core::time::Readout> {
+        use roitrack::core::time::Readout;
         match (self, line_delay_s) {
             (Self::Global, None) => Ok(Readout::GlobalShutter),
             (Self::Global, Some(_)) => {
@@ -304,10 +304,10 @@ impl CameraArgs {
     }
 }
 
-/// `640x480` -> (640, 480), within the image sizes a camera may have ([`roitrack::math::camera::MAX_IMAGE_SIDE_PX`]
-/// a side, [`roitrack::math::camera::MAX_IMAGE_PIXELS`] in all).
+/// `640x480` -> (640, 480), within the image sizes a camera may have ([`roitrack::core::camera::MAX_IMAGE_SIDE_PX`]
+/// a side, [`roitrack::core::camera::MAX_IMAGE_PIXELS`] in all).
 pub fn parse_image_size(text: &str) -> Result<(u32, u32), String> {
-    use roitrack::math::camera::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE_PX};
+    use roitrack::core::camera::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE_PX};
     let parsed = text
         .split_once(['x', 'X'])
         .and_then(|(w, h)| Some((w.trim().parse::<u32>().ok()?, h.trim().parse::<u32>().ok()?)));
@@ -476,7 +476,8 @@ impl RigArgs {
         Ok(roitrack::formats::check_output_paths(&inputs, &outputs)?)
     }
 
-    /// Whether any option of the rig was given.
+    /// Whether any option of the rig was given (`lab compare --sweep` refuses them).
+    #[cfg(feature = "lab")]
     pub fn is_given(&self) -> bool {
         self.camera.is_some()
             || self.target.is_some()

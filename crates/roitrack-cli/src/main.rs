@@ -21,9 +21,6 @@ struct Cli {
 #[derive(Debug, Subcommand)]
 enum Command {
     Demo(commands::demo::DemoArgs),
-    Bench(commands::bench::BenchArgs),
-    Compare(commands::compare::CompareArgs),
-    Soak(commands::soak::SoakArgs),
     // Boxed: its many options make it the largest variant by far.
     Simulate(Box<commands::simulate::SimulateArgs>),
     // Boxed: the largest arguments by far (the --mcap and --mcap-in options made the enum trip clippy's size check).
@@ -32,10 +29,8 @@ enum Command {
     Plot(commands::plot::PlotArgs),
     Detect(commands::detect::DetectArgs),
     Target(commands::target::TargetArgs),
-    Tradeoff(commands::tradeoff::TradeoffArgs),
-    PnpBench(commands::pnp_bench::PnpBenchArgs),
-    Faults(commands::faults::FaultsArgs),
-    FrameStudy(commands::frame_study::FrameStudyArgs),
+    #[cfg(feature = "lab")]
+    Lab(commands::lab::LabArgs),
     #[cfg(feature = "genicam")]
     Live(Box<commands::live::LiveArgs>),
     #[cfg(feature = "genicam")]
@@ -56,10 +51,51 @@ impl std::fmt::Display for OutputsStand {
 
 impl std::error::Error for OutputsStand {}
 
+/// The studies and benchmarks, once top-level commands, now under `roitrack lab` (feature `lab`).
+const LAB_COMMANDS: [&str; 7] = [
+    "bench",
+    "compare",
+    "faults",
+    "frame-study",
+    "pnp-bench",
+    "soak",
+    "tradeoff",
+];
+
+/// How to build a binary with the lab.
+const LAB_BUILD: &str = "cargo build --release -p roitrack-cli --features lab";
+
+/// The error for a command that moved to the lab (`roitrack compare`), or for the lab in a binary built without it.
+fn moved_to_the_lab(command: Option<std::ffi::OsString>) -> Option<String> {
+    let command = command?;
+    let command = command.to_str()?;
+    let build = if cfg!(feature = "lab") {
+        String::new()
+    } else {
+        format!(", in a binary built with the cargo feature lab ({LAB_BUILD})")
+    };
+    if LAB_COMMANDS.contains(&command) {
+        return Some(format!(
+            "`{command}` is a study or benchmark: it is `roitrack lab {command}` now{build}"
+        ));
+    }
+    (command == "lab" && !cfg!(feature = "lab")).then(|| {
+        format!(
+            "`roitrack lab` (the studies and benchmarks: {}) is not in this binary: build it with the cargo feature \
+             lab ({LAB_BUILD})",
+            LAB_COMMANDS.join(", ")
+        )
+    })
+}
+
 fn main() -> ExitCode {
     // SIGINT, SIGTERM, SIGHUP and SIGPIPE alike (src/signals.rs). A reader of our output that goes away
     // (`roitrack eval | head`) still ends the process quietly, by SIGPIPE, as the default action did.
     signals::install();
+    if let Some(message) = moved_to_the_lab(std::env::args_os().nth(1)) {
+        eprintln!("roitrack: error: {message}");
+        return ExitCode::from(2);
+    }
     let cli = Cli::parse();
     // The commands that track or render stop at their next estimate at the first signal, keeping what they promise;
     // the others end at once.
@@ -78,19 +114,14 @@ fn main() -> ExitCode {
     let outputs = roitrack::formats::OutputSet::begin();
     let result = match cli.command {
         Command::Demo(args) => commands::demo::run(&args),
-        Command::Bench(args) => commands::bench::run(&args),
-        Command::Compare(args) => commands::compare::run(&args),
-        Command::Soak(args) => commands::soak::run(&args),
         Command::Simulate(args) => commands::simulate::run(&args),
         Command::Track(args) => commands::track::run(&args),
         Command::Eval(args) => commands::eval::run(&args),
         Command::Plot(args) => commands::plot::run(&args),
         Command::Detect(args) => commands::detect::run(&args),
         Command::Target(args) => commands::target::run(&args),
-        Command::Tradeoff(args) => commands::tradeoff::run(&args),
-        Command::PnpBench(args) => commands::pnp_bench::run(&args),
-        Command::Faults(args) => commands::faults::run(&args),
-        Command::FrameStudy(args) => commands::frame_study::run(&args),
+        #[cfg(feature = "lab")]
+        Command::Lab(args) => commands::lab::run(&args),
         #[cfg(feature = "genicam")]
         Command::Live(args) => commands::live::run(&args),
         #[cfg(feature = "genicam")]

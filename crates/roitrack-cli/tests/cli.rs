@@ -98,12 +98,12 @@ fn ground_truth_files_pin_the_twist_convention() {
         let dt = p[1].t_s - p[0].t_s;
         let t = p[0].cam_from_obj.translation.vector
             + (w[0].velocity_mps + w[1].velocity_mps) * (dt / 2.0);
-        let r = roitrack::math::so3::exp(
+        let r = roitrack::core::so3::exp(
             &((w[0].angular_velocity_radps + w[1].angular_velocity_radps) * (dt / 2.0)),
         ) * p[0].cam_from_obj.rotation.to_rotation_matrix();
         worst = worst
             .max((t - p[1].cam_from_obj.translation.vector).norm())
-            .max(roitrack::math::so3::angle_between(
+            .max(roitrack::core::so3::angle_between(
                 &r,
                 &p[1].cam_from_obj.rotation.to_rotation_matrix(),
             ));
@@ -143,7 +143,7 @@ fn eval_of_truth_against_itself_is_zero_and_delayed_truth_lags_3() {
         .iter()
         .step_by(10)
         .zip(est_poses.iter())
-        .map(|(w, p)| roitrack::math::TwistSample { t_s: p.t_s, ..*w })
+        .map(|(w, p)| roitrack::core::TwistSample { t_s: p.t_s, ..*w })
         .collect();
     roitrack::formats::write_tum(dir.join("late.tum"), &est_poses).unwrap();
     roitrack::formats::write_twists_csv(dir.join("late.csv"), &est_twists).unwrap();
@@ -366,10 +366,10 @@ fn target_command_writes_the_bundled_target_and_camera() {
     let camera = tmp.path().join("cam.yaml");
     ok(&["target", "--out", p(&target), "--camera-out", p(&camera)]);
     let t = roitrack::formats::read_target_csv(&target).unwrap();
-    assert_eq!(t, roitrack::math::Target::grid4x4());
+    assert_eq!(t, roitrack::core::Target::grid4x4());
     assert_eq!(
         roitrack::formats::read_camera_yaml(&camera).unwrap(),
-        roitrack::math::CameraModel::canonical()
+        roitrack::core::CameraModel::canonical()
     );
 }
 
@@ -441,23 +441,6 @@ fn roi_recordings_replay_through_track() {
 }
 
 #[test]
-fn bench_prints_the_loop_figures_as_json() {
-    let out = ok(&["bench", "--json", "--rois", "2000", "--repeats", "1"]);
-    let m: serde_json::Value = serde_json::from_str(&out).unwrap();
-    for key in [
-        "loop_k10_rois_per_s",
-        "loop_k1_rois_per_s",
-        "latency_us_p50",
-        "latency_us_p99",
-        "kalman_update_us_median",
-        "kalman_update_us_p99",
-    ] {
-        assert!(f(&m, key) > 0.0, "{key} in {m}");
-    }
-    assert_eq!(m["loop_k10_dropped"].as_u64(), Some(0));
-}
-
-#[test]
 fn densities_of_the_other_motion_model_are_refused() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
@@ -505,4 +488,29 @@ fn densities_of_the_other_motion_model_are_refused() {
     }
     // A jerk density alone names constant acceleration: accepted.
     ok(&[&base[..], &["--jerk-psd", "50"][..]].concat());
+}
+
+/// The studies and benchmarks are under `roitrack lab` (the feature `lab`): their old names say where they went.
+#[test]
+fn a_lab_command_by_its_old_name_points_to_the_lab() {
+    for name in [
+        "bench",
+        "compare",
+        "faults",
+        "frame-study",
+        "pnp-bench",
+        "soak",
+        "tradeoff",
+    ] {
+        let err = fails(&[name, "--json"]);
+        assert!(err.contains(&format!("`roitrack lab {name}`")), "{err}");
+    }
+}
+
+/// A binary built without the lab names the feature that brings it.
+#[cfg(not(feature = "lab"))]
+#[test]
+fn the_lab_names_its_feature_in_a_binary_without_it() {
+    let err = fails(&["lab", "compare"]);
+    assert!(err.contains("--features lab"), "{err}");
 }

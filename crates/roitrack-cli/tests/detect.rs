@@ -5,8 +5,8 @@
 
 use std::path::Path;
 
-use roitrack::math::target::{CircleGrid, GridLayout};
-use roitrack::math::{CameraModel, Target, so3};
+use roitrack::core::target::{CircleGrid, GridLayout};
+use roitrack::core::{CameraModel, Target, so3};
 use roitrack::nalgebra::{Quaternion, Rotation3, UnitQuaternion, Vector3};
 use roitrack::sim::photo::{CircleShade, PhotoScene, RenderedPhoto, render_photo};
 
@@ -48,14 +48,14 @@ fn camera() -> CameraModel {
         "detect_test",
         1024,
         768,
-        roitrack::math::camera::PinholeIntrinsics {
+        roitrack::core::camera::PinholeIntrinsics {
             fx_px: 1200.0,
             fy_px: 1200.0,
             skew_px: 0.0,
             cx_px: 515.0,
             cy_px: 380.0,
         },
-        roitrack::math::camera::PlumbBob::from_coefficients([-0.15, 0.08, 5e-4, -3e-4, 0.0]),
+        roitrack::core::camera::PlumbBob::from_coefficients([-0.15, 0.08, 5e-4, -3e-4, 0.0]),
     )
     .unwrap()
 }

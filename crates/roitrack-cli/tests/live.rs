@@ -179,11 +179,14 @@ fn a_device_address_where_no_camera_answers_fails_fast_with_a_clear_error() {
     assert!(took < Duration::from_secs(15), "{took:?}");
 }
 
+/// `roitrack lab bench --fake-camera`: with the features `genicam` and `lab`.
+#[cfg(feature = "lab")]
 #[test]
 fn bench_measures_the_fake_camera_rate_and_latency_from_buffer_timestamp_to_estimate() {
     let _turn = turn();
     let out = roitrack()
         .args([
+            "lab",
             "bench",
             "--json",
             "--rois",

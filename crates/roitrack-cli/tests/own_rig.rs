@@ -6,18 +6,15 @@ use std::path::Path;
 
 mod common;
 use common::{fails, ok};
+#[path = "common/rig.rs"]
+mod rig;
+use rig::FISHEYE_YAML;
 #[path = "common/run.rs"]
 mod run;
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
 }
-
-/// A 1280 x 1024 fisheye camera (OpenCV's cv::fisheye model), as OpenCV's FileStorage writes it.
-const FISHEYE_YAML: &str = "%YAML:1.0\n---\nimage_width: 1280\nimage_height: 1024\ncamera_matrix: !!opencv-matrix\n   \
-    rows: 3\n   cols: 3\n   dt: d\n   data: [ 900., 0., 639.5, 0., 900., 511.5, 0., 0., 1. ]\n\
-    distortion_model: equidistant\n\
-    distortion_coefficients: !!opencv-matrix\n   rows: 1\n   cols: 4\n   dt: d\n   data: [ 0.05, -0.01, 0.002, 0. ]\n";
 
 fn gt_peak_speed(dir: &Path) -> f64 {
     roitrack::formats::read_twists_csv(dir.join("gt_twists.csv"))
@@ -166,9 +163,10 @@ fn a_rig_that_loses_the_target_is_refused_with_the_fix() {
     assert!(err.contains("missing.csv"), "{err}");
 }
 
-/// `demo`, `compare` and `tradeoff` run on the rig too: the demo's loop renders the target through the user's camera.
+/// `demo` runs on the rig too: its loop renders the target through the user's camera (`lab compare` and `lab tradeoff`
+/// do as well: tests/lab).
 #[test]
-fn demo_compare_and_tradeoff_take_the_rig() {
+fn demo_takes_the_rig() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
     let camera = dir.join("fisheye.yaml");
@@ -188,23 +186,6 @@ fn demo_compare_and_tradeoff_take_the_rig() {
         "--out",
         p(&target),
     ]);
-    let table = ok(&[
-        "compare",
-        "--scenario",
-        "random",
-        "--camera",
-        p(&camera),
-        "--target",
-        p(&target),
-        "--distance-m",
-        "1.0",
-        "--duration-s",
-        "1.5",
-    ]);
-    assert!(
-        table.contains("kalman (default)") && table.contains("batch baseline"),
-        "{table}"
-    );
     // The demo's loop starts from a full frame, which needs a target whose labelling a view decides: the built-in
     // grid with its larger key blob (a plain grid's half turn is ambiguous, and the loop refuses to start on a guess).
     let out = dir.join("demo");
@@ -228,23 +209,6 @@ fn demo_compare_and_tradeoff_take_the_rig() {
     .unwrap();
     assert_eq!(written.distortion.model_name(), "equidistant");
     assert!(out.join("kalman_poses.tum").is_file());
-    let tradeoff = dir.join("tradeoff");
-    ok(&[
-        "tradeoff",
-        "--scenario",
-        "random",
-        "--camera",
-        p(&camera),
-        "--target",
-        p(&target),
-        "--distance-m",
-        "1.0",
-        "--duration-s",
-        "1.0",
-        "--out",
-        p(&tradeoff),
-    ]);
-    assert!(tradeoff.join("tradeoff.csv").is_file() && tradeoff.join("tradeoff.svg").is_file());
     // A plain 4 x 5 grid looks the same turned half way round: the loop cannot start, and says why.
     let err = fails(&[
         "demo",
@@ -261,8 +225,6 @@ fn demo_compare_and_tradeoff_take_the_rig() {
         err.contains("never identified") && err.contains("marked point"),
         "{err}"
     );
-    let err = fails(&["compare", "--sweep", "--quick", "--target", p(&target)]);
-    assert!(err.contains("--sweep"), "{err}");
 }
 
 /// A simulation into the folder that holds its own camera file would overwrite it (with the ROS form of it): refused,

@@ -1,12 +1,12 @@
 //! `roitrack simulate --frames`: every file of a simulated frame sequence written, the frames those of the library's
 //! sequence, tracked and scored by `track --images` and `eval` as the README it writes says; bad options refused by
-//! name before anything is written. And `roitrack frame-study` on a few frames.
+//! name before anything is written (`roitrack lab frame-study`: tests/lab/frame_study.rs).
 
 use std::path::Path;
 
+use roitrack::core::time::Readout;
 use roitrack::formats::{FrameSource, FrameTiming, read_camera_yaml, read_frame, read_target_csv};
 use roitrack::image::{Frame, Polarity};
-use roitrack::math::time::Readout;
 use roitrack::sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
 
 mod common;
@@ -274,46 +274,6 @@ fn bad_frame_options_are_refused_by_name_and_nothing_is_written() {
     refused(&["--frames", "--rois"], "--rois");
     refused(&["--frames", "--noise-px", "0.2"], "--noise-px");
     refused(&["--frames", "--polarity", "grey"], "grey");
-}
-
-#[test]
-fn frame_study_prints_the_table_the_checks_and_json() {
-    let args = [
-        "frame-study",
-        "--seeds",
-        "1",
-        "--frame-count",
-        "8",
-        "--threads",
-        "2",
-    ];
-    let markdown = ok(&args);
-    assert!(markdown.contains("| sequence | model |"), "{markdown}");
-    for row in [
-        "| global shutter, bright | global |",
-        "| rolling shutter, bright | rolling |",
-        "| rolling shutter, bright | global |",
-        "| global shutter, dark | global |",
-        "| rolling shutter, dark | rolling |",
-    ] {
-        assert!(markdown.contains(row), "{row} missing: {markdown}");
-    }
-    assert!(markdown.contains("| target | figure |"));
-    let mut json_args = args.to_vec();
-    json_args.push("--json");
-    let json: serde_json::Value = serde_json::from_str(&ok(&json_args)).unwrap();
-    assert_eq!(json["rows"].as_array().unwrap().len(), 6);
-    assert_eq!(json["checks"].as_array().unwrap().len(), 8);
-    assert_eq!(json["frames_per_sequence"], 8);
-    assert!(
-        json["rows"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .all(|r| r["estimates"] == 8)
-    );
-    let stderr = fails(&["frame-study", "--seeds", "0"]);
-    assert!(stderr.contains("--seeds"), "{stderr}");
 }
 
 #[test]

@@ -2,8 +2,8 @@
 
 use std::path::Path;
 
-use roitrack::math::Target;
-use roitrack::math::target::{CircleGrid, GridLayout};
+use roitrack::core::Target;
+use roitrack::core::target::{CircleGrid, GridLayout};
 
 mod common;
 use common::{fails, ok};

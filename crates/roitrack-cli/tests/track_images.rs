@@ -4,9 +4,9 @@
 
 use std::path::Path;
 
+use roitrack::core::time::Readout;
 use roitrack::formats::{read_tum, write_camera_yaml, write_frame_png, write_target_csv};
 use roitrack::image::{Frame, Polarity};
-use roitrack::math::time::Readout;
 use roitrack::sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
 
 mod common;

@@ -64,7 +64,7 @@ use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simu
 use serde::Serialize;
 
 use crate::ExperimentError;
-use crate::scoring::{Scored, score};
+use roitrack_demo::scoring::{Scored, score};
 
 /// [`Goal::Rmse`]: the default filter's position RMSE may be at most this many times the best hand-tuned one.
 ///
@@ -1349,7 +1349,7 @@ fn run_case(case: &Case, options: &SweepOptions) -> Result<CaseResult, Experimen
                 if estimates.is_empty() {
                     Ok(None)
                 } else {
-                    score(run, estimates, seconds).map(Some)
+                    Ok(Some(score(run, estimates, seconds)?))
                 }
             })
             .collect()

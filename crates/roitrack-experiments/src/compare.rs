@@ -9,7 +9,7 @@ use roitrack_eval::Metrics;
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 
 use crate::ExperimentError;
-use crate::scoring::track_and_score;
+use roitrack_demo::scoring::track_and_score;
 
 /// The estimators compared: label, estimator.
 pub fn lineup() -> [(&'static str, EstimatorConfig); 5] {

@@ -22,8 +22,8 @@ use roitrack_sim::{
 };
 
 use crate::ExperimentError;
-use crate::demo::{image_noise_px, image_side};
-use crate::scoring::{score, track_and_score};
+use roitrack_demo::scoring::{score, track_and_score};
+use roitrack_demo::{image_noise_px, image_side};
 
 /// The position error must stay within this many clean position RMSEs ...
 const RECOVERY_FACTOR: f64 = 3.0;

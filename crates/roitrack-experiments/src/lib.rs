@@ -3,10 +3,7 @@
 //! The experiments behind roitrack's tables and figures, each a library call on typed values (no files, no printing):
 //! the command line (and, to come, the Python package) only shows what they return.
 //!
-//! - [`scoring`]: track a simulated run and score it against its ground truth, the building block of the others;
 //! - [`compare`]: every estimator and baseline on one scenario at the measurement level;
-//! - [`demo`]: the main job end to end from pixels (simulated ROI camera, centroids, two-thread loop), next to ideal
-//!   centroids of the same noise;
 //! - [`faults`]: the default estimator under faults (outliers, drops, occlusions, gaps, jumps, blobs leaving the
 //!   image, reflections in the ROIs): accuracy, recovery, flagged and unflagged wrong estimates;
 //! - [`tradeoff`]: velocity noise against velocity lag, for the paper's gain and the Kalman filter's process noise;
@@ -15,7 +12,8 @@
 //! - [`frames`]: frame cameras (global and rolling shutters, bright and dark blobs) on simulated image sequences,
 //!   each tracked with the right time model and the wrong one, and the frame-camera targets checked.
 //!
-//! Every metric comes from [`roitrack_eval`]; every estimator from [`roitrack_core::estimator`].
+//! Each tracks simulated runs and scores them against their truth with [`roitrack_demo::scoring`]; every metric comes
+//! from [`roitrack_eval`], every estimator from [`roitrack_core::estimator`].
 //!
 //! ```
 //! use roitrack_experiments::compare::{compare, table};
@@ -30,10 +28,8 @@
 
 pub mod adaptive;
 pub mod compare;
-pub mod demo;
 pub mod faults;
 pub mod frames;
-pub mod scoring;
 pub mod tradeoff;
 
 use thiserror::Error;
@@ -53,11 +49,7 @@ pub enum ExperimentError {
     Loop(#[from] roitrack_pipeline::PipelineError),
     #[error("evaluation failed: {0}")]
     Evaluation(#[from] roitrack_eval::EvalError),
-    /// The real-time loop ran but never started a track.
-    #[error(
-        "the real-time loop made no estimate: the target was never identified in a full frame ({attempts} \
-         attempts; a target whose views are ambiguous, such as a plain symmetric grid, needs a marked point, e.g. one \
-         larger blob, for the loop to start)"
-    )]
-    NeverStarted { attempts: usize },
+    /// The demo's image side, or a run's tracking and scoring (`roitrack_demo`).
+    #[error(transparent)]
+    Demo(#[from] roitrack_demo::DemoError),
 }

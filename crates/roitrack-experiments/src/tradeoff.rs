@@ -8,7 +8,7 @@ use roitrack_plot::{Chart, Series, Style};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 
 use crate::ExperimentError;
-use crate::scoring::track_and_score;
+use roitrack_demo::scoring::track_and_score;
 
 /// Paper gains and Kalman linear-acceleration spectral densities ((m/s²)²/Hz) swept.
 pub const GAINS: [f64; 9] = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0];

@@ -10,7 +10,7 @@ use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use roitrack_core::estimator::Estimate;
-use roitrack_experiments::demo::{Demo, DemoOptions, lineup};
+use roitrack_demo::{Demo, DemoOptions, lineup};
 use roitrack_genicam::{
     FAKE_DEVICE_CLOCK_START_S, FakeGigeCamera, GenicamCamera, GenicamError, GenicamOptions,
     LiveOptions, LiveReport, PixelFormatChoice, TriggerChoice, run_fake,

@@ -19,11 +19,11 @@ use pyo3::create_exception;
 use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use roitrack::formats::FormatError;
-use roitrack::math::camera::PinholeIntrinsics;
-use roitrack::math::estimator::{
+use roitrack::core::camera::PinholeIntrinsics;
+use roitrack::core::estimator::{
     Adaptation, EstimatorKind, MotionModelKind, RobustLoss, TrackerOptions, UnknownName,
 };
+use roitrack::formats::FormatError;
 use roitrack::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use roitrack::pipeline::{PhotoError, PhotoOptions, PolarityChoice};
 use roitrack::sim::{Scenario, ScenarioKind, SimulationOptions};
@@ -939,9 +939,9 @@ fn simulate<'py>(
         ))
     })?;
     let order = match order {
-        "bitrev" => roitrack::math::RoiOrder::BitReversed,
-        "rowmajor" => roitrack::math::RoiOrder::RowMajor,
-        "random" => roitrack::math::RoiOrder::Random,
+        "bitrev" => roitrack::core::RoiOrder::BitReversed,
+        "rowmajor" => roitrack::core::RoiOrder::RowMajor,
+        "random" => roitrack::core::RoiOrder::Random,
         other => {
             return Err(PyValueError::new_err(format!(
                 "order: unknown value '{other}' (expected one of bitrev, rowmajor, random)"
@@ -1125,8 +1125,10 @@ fn evaluate<'py>(
         .call_method1("loads", (metrics.to_json(),))
 }
 
-/// The Rust figure of `roitrack bench --json`'s `track_library_meas_per_s`, measured in this process (best of
-/// `runs`): for bench/python_bench.py, which compares it with `track()` from Python in the same run.
+/// The Rust figure of `roitrack lab bench --json`'s `track_library_meas_per_s`, measured in this process (best of
+/// `runs`): for bench/python_bench.py, which compares it with `track()` from Python in the same run. Only in a wheel
+/// built with the feature `lab`.
+#[cfg(feature = "lab")]
 #[pyfunction]
 #[pyo3(signature = (runs = 5))]
 fn _bench_track_library(py: Python<'_>, runs: usize) -> PyResult<f64> {
@@ -1146,6 +1148,7 @@ fn _roitrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(detect, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    #[cfg(feature = "lab")]
     m.add_function(wrap_pyfunction!(_bench_track_library, m)?)?;
     m.add("RoitrackError", m.py().get_type::<RoitrackError>())?;
     Ok(())

@@ -9,7 +9,7 @@
 //! paper, tilted, under uneven light with a shadow, clutter around, noise), so the pose found can be checked against
 //! the truth. With arguments it reads your camera file, target file and photograph.
 
-use roitrack::math::target::{CircleGrid, GridLayout};
+use roitrack::core::target::{CircleGrid, GridLayout};
 use roitrack::nalgebra::{Rotation3, Vector3};
 use roitrack::pipeline::{PhotoOptions, detect_target};
 use roitrack::sim::photo::{PhotoScene, render_photo};

@@ -10,8 +10,8 @@
 
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use roitrack::core::so3;
 use roitrack::image::{CentroidOptions, RenderScratch, RoiRenderer, SensorModel};
-use roitrack::math::so3;
 use roitrack::nalgebra::{Rotation3, Vector3};
 use roitrack::pipeline::find_target;
 use roitrack::{CameraModel, Frame, MotionState, Readout, Target, TimeModel};

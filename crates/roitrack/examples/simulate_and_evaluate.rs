@@ -7,8 +7,8 @@
 //! The camera is a 1280 x 800 sensor behind a distorting 8 mm lens; the target a 3 x 3 grid of 25 mm pitch with one
 //! larger key blob; the motion the paper's orthoglide experiment, seen at 4 kHz with 0.15 px of centroid noise.
 
+use roitrack::core::camera::{PinholeIntrinsics, PlumbBob};
 use roitrack::eval::{EvalOptions, evaluate_estimates};
-use roitrack::math::camera::{PinholeIntrinsics, PlumbBob};
 use roitrack::nalgebra::Vector3;
 use roitrack::sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 use roitrack::{

@@ -75,15 +75,16 @@
 //!
 //! | module | crate | what |
 //! | --- | --- | --- |
-//! | [`math`] | `roitrack-core` | camera models, SO(3), the target, the time model, the spatio-temporal projection and its Jacobians, the solver, the estimators (no I/O, no threads) |
+//! | [`core`] | `roitrack-core` | camera models, SO(3), the target, the time model, the spatio-temporal projection and its Jacobians, the solver, the estimators (no I/O, no threads) |
 //! | [`image`] | `roitrack-image` | ROIs and frames, the camera trait, the simulated and replay cameras, centroids, blob detection, the renderer |
 //! | [`pipeline`] | `roitrack-pipeline` | finding the target in a full frame or a photograph (`detect_target`), the ROI scheduler, the two-thread real-time loop, offline ROI tracking |
 //! | [`sim`] | `roitrack-sim` | scenario motions with ground truth, the measurement simulator, rendered ROI recordings, synthetic photographs |
 //! | [`eval`] | `roitrack-eval` | every accuracy metric, the velocity lag included |
 //! | [`formats`] | `roitrack-formats` | the files: camera YAML, target CSV, measurements CSV, TUM poses, twists, diagnostics, covariance, ROI recordings, images, detection overlays |
 //! | `plot` | `roitrack-plot` | charts and the figures of a run (feature `plot`, on by default) |
-//! | `experiments` | `roitrack-experiments` | the demo, the estimator comparison, the fault table, the lag trade-off (feature `experiments`, on by default) |
-//! | `bench` | `roitrack-bench` | the hot-path, loop, soak and PnP benchmarks (feature `bench`) |
+//! | `demo` | `roitrack-demo` | the demo: a simulated scenario end to end from rendered ROIs, scored against its truth (feature `demo`, on by default) |
+//! | `experiments` | `roitrack-experiments` | the studies: estimator comparison, fault table, lag trade-off, adaptive-estimation sweep, frame cameras (feature `lab`) |
+//! | `bench` | `roitrack-bench` | the hot-path, loop, soak and PnP benchmarks (feature `lab`) |
 //! | `ros` | `roitrack-ros` | ROS 2 bags in MCAP storage: estimates, camera info, status, images out; image frames in (feature `ros`, on by default) |
 //!
 //! The programs in `examples/` show the main uses end to end: `track_recording` (files in, estimates out),
@@ -92,12 +93,10 @@
 //! photograph: yours, or a synthetic one checked against its truth).
 
 pub use nalgebra;
-#[cfg(feature = "bench")]
-pub use roitrack_bench as bench;
-pub use roitrack_core as math;
+pub use roitrack_core as core;
+#[cfg(feature = "demo")]
+pub use roitrack_demo as demo;
 pub use roitrack_eval as eval;
-#[cfg(feature = "experiments")]
-pub use roitrack_experiments as experiments;
 pub use roitrack_formats as formats;
 pub use roitrack_image as image;
 pub use roitrack_pipeline as pipeline;
@@ -106,6 +105,8 @@ pub use roitrack_plot as plot;
 #[cfg(feature = "ros")]
 pub use roitrack_ros as ros;
 pub use roitrack_sim as sim;
+#[cfg(feature = "lab")]
+pub use {roitrack_bench as bench, roitrack_experiments as experiments};
 
 pub use roitrack_core::estimator::{
     ConfigError, Estimate, Estimator, EstimatorConfig, EstimatorReport, KalmanTuning, StreamError,

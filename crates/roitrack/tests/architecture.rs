@@ -14,6 +14,17 @@ const ALLOWED: &[(&str, &[&str])] = &[
     ("roitrack-plot", &["roitrack-core", "roitrack-eval"]),
     ("roitrack-pipeline", &["roitrack-core", "roitrack-image"]),
     (
+        "roitrack-demo",
+        &[
+            "roitrack-core",
+            "roitrack-image",
+            "roitrack-sim",
+            "roitrack-eval",
+            "roitrack-pipeline",
+            "roitrack-plot",
+        ],
+    ),
+    (
         "roitrack-experiments",
         &[
             "roitrack-core",
@@ -22,6 +33,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "roitrack-eval",
             "roitrack-pipeline",
             "roitrack-plot",
+            "roitrack-demo",
         ],
     ),
     (
@@ -47,6 +59,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "roitrack-formats",
             "roitrack-pipeline",
             "roitrack-plot",
+            "roitrack-demo",
             "roitrack-experiments",
             "roitrack-bench",
             "roitrack-ros",

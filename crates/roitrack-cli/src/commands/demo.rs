@@ -1,4 +1,4 @@
-//! `roitrack demo`: the main job, end to end from pixels (see [`roitrack::experiments::demo`]): prints the table of
+//! `roitrack demo`: the main job, end to end from pixels (see [`roitrack::demo`]): prints the table of
 //! accuracy, writes the figures (after the paper's figures 5-7), the simulated inputs and ground truth, and every
 //! estimate.
 
@@ -9,7 +9,7 @@ use std::time::Duration;
 use anyhow::Result;
 use clap::Args;
 use roitrack::Measurement;
-use roitrack::experiments::demo::{self, Demo, DemoOptions, Source};
+use roitrack::demo::{self, Demo, DemoOptions, Source};
 use roitrack::formats::EstimateWriter;
 use roitrack::image::RoiImage;
 

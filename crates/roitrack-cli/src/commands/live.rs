@@ -78,7 +78,7 @@ pub struct LiveArgs {
     #[arg(long, value_name = "HZ", value_parser = crate::ranges::positive_up_to(roitrack::sim::MAX_ROI_RATE_HZ, " Hz", "beyond any ROI camera"))]
     pub rate_hz: Option<f64>,
     /// ExposureTime (µs). Default: the camera's.
-    #[arg(long, value_name = "US", value_parser = crate::ranges::positive_up_to(roitrack::math::time::MAX_EXPOSURE_S * 1e6, " µs", "beyond, a moving blob is a streak"))]
+    #[arg(long, value_name = "US", value_parser = crate::ranges::positive_up_to(roitrack::core::time::MAX_EXPOSURE_S * 1e6, " µs", "beyond, a moving blob is a streak"))]
     pub exposure_us: Option<f64>,
     /// Pixel format (one the camera does not offer is refused with the list of those it does). Default: mono8 if the
     /// camera offers it, else the first of mono12, mono16, mono12-packed, mono12p it offers. The fake camera offers
@@ -330,9 +330,10 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     }
 }
 
-/// `roitrack bench --fake-camera S`: runs the fake camera for `duration_s` of the scenario's time and returns its
+/// `roitrack lab bench --fake-camera S`: runs the fake camera for `duration_s` of the scenario's time and returns its
 /// figures.
-pub fn bench_fake_camera(duration_s: f64) -> Result<super::bench::FakeCameraFigures> {
+#[cfg(feature = "lab")]
+pub fn bench_fake_camera(duration_s: f64) -> Result<super::lab::bench::FakeCameraFigures> {
     if !(duration_s > 0.0 && duration_s.is_finite()) {
         bail!("--fake-camera must be a positive number of seconds, got {duration_s}");
     }
@@ -353,14 +354,14 @@ pub fn bench_fake_camera(duration_s: f64) -> Result<super::bench::FakeCameraFigu
         bail!("the fake camera's run stopped early: {e}");
     }
     let (latency_p50_us, latency_p99_us) = report.timestamp_to_estimate_quantiles_us();
-    let grab = roitrack::math::stats::sorted(&report.camera.grab_us);
-    Ok(super::bench::FakeCameraFigures {
+    let grab = roitrack::core::stats::sorted(&report.camera.grab_us);
+    Ok(super::lab::bench::FakeCameraFigures {
         rois: report.camera.rois,
         rois_per_s: report.loop_report.rois_per_s(),
         latency_p50_us,
         latency_p99_us,
-        grab_p50_us: roitrack::math::stats::quantile(&grab, 0.5),
-        grab_p99_us: roitrack::math::stats::quantile(&grab, 0.99),
+        grab_p50_us: roitrack::core::stats::quantile(&grab, 0.5),
+        grab_p99_us: roitrack::core::stats::quantile(&grab, 0.99),
         moved_fraction: report.camera.moved_fraction(),
     })
 }

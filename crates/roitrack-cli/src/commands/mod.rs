@@ -1,18 +1,13 @@
-//! One module per subcommand.
+//! One module per subcommand; the lab's (feature `lab`) under `lab/`.
 
-pub mod bench;
-pub mod compare;
 pub mod demo;
 pub mod detect;
 pub mod eval;
-pub mod faults;
-pub mod frame_study;
+#[cfg(feature = "lab")]
+pub mod lab;
 #[cfg(feature = "genicam")]
 pub mod live;
 pub mod plot;
-pub mod pnp_bench;
 pub mod simulate;
-pub mod soak;
 pub mod target;
 pub mod track;
-pub mod tradeoff;

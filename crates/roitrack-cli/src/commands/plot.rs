@@ -144,7 +144,7 @@ pub fn run(args: &PlotArgs) -> Result<()> {
                 .map(|r| {
                     r.covariance.as_ref().map_or(
                         [f64::NAN; 12],
-                        roitrack::math::estimator::standard_deviations,
+                        roitrack::core::estimator::standard_deviations,
                     )
                 })
                 .collect(),

@@ -7,10 +7,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::{Context, Result, anyhow};
 use clap::{Args, ValueEnum};
+use roitrack::core::RoiOrder;
+use roitrack::core::time::Readout;
 use roitrack::formats::AtomicFile;
 use roitrack::image::{Frame, Polarity, ReflectionFault, SensorModel};
-use roitrack::math::RoiOrder;
-use roitrack::math::time::Readout;
 use roitrack::nalgebra::Vector3;
 use roitrack::sim::{
     DEFAULT_TRUTH_RATE_HZ, Excursion, FrameOptions, FrameSequence, Jump, Occlusion, RoiBurst,
@@ -98,7 +98,7 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Centroid noise standard deviation per axis (px), at most 100.
-    #[arg(long, default_value_t = 0.1, value_parser = ranges::within(0.0..=roitrack::math::estimator::MAX_NOISE_PX, " px", "more than a ROI's half-width is no centroid"))]
+    #[arg(long, default_value_t = 0.1, value_parser = ranges::within(0.0..=roitrack::core::estimator::MAX_NOISE_PX, " px", "more than a ROI's half-width is no centroid"))]
     pub noise_px: f64,
     /// ROI rate (Hz), at most a million.
     #[arg(long, default_value_t = 4000.0, value_parser = ranges::positive_up_to(roitrack::sim::MAX_ROI_RATE_HZ, " Hz", "beyond any ROI camera"))]
@@ -158,10 +158,10 @@ pub struct SimulateArgs {
     pub shutter: ShutterArg,
     /// With --shutter rolling: the time between two rows (s), e.g. 30e-6 (1,024 rows read in 30.7 ms).
     /// Default: none; required with --shutter rolling.
-    #[arg(long, value_name = "D", requires = "frames", value_parser = ranges::within(0.0..=roitrack::math::time::MAX_LINE_DELAY_S, " s", "a 1,000-row frame read in a second"))]
+    #[arg(long, value_name = "D", requires = "frames", value_parser = ranges::within(0.0..=roitrack::core::time::MAX_LINE_DELAY_S, " s", "a 1,000-row frame read in a second"))]
     pub line_delay_s: Option<f64>,
     /// With --frames: the exposure of each row (s, at most 10), centred on the row's time.
-    #[arg(long, value_name = "E", default_value_t = 1e-3, requires = "frames", value_parser = ranges::within(0.0..=roitrack::math::time::MAX_EXPOSURE_S, " s", "beyond, a moving blob is a streak"))]
+    #[arg(long, value_name = "E", default_value_t = 1e-3, requires = "frames", value_parser = ranges::within(0.0..=roitrack::core::time::MAX_EXPOSURE_S, " s", "beyond, a moving blob is a streak"))]
     pub exposure_s: f64,
     /// With --frames: bright blobs, or dark printed circles on a light, unevenly lit background.
     #[arg(long, value_enum, default_value = "bright", requires = "frames")]

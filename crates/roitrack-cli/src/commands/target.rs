@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use anyhow::{Result, anyhow};
 use clap::{Args, Subcommand, ValueEnum};
-use roitrack::math::target::{CircleGrid, GridLayout};
+use roitrack::core::target::{CircleGrid, GridLayout};
 use roitrack::{CameraModel, Target};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]

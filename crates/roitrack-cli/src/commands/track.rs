@@ -73,7 +73,7 @@ pub struct TrackArgs {
     /// With --shutter rolling: the time between two rows (s), the sensor's readout time divided by its number of
     /// rows (datasheet, or a calibration); e.g. 30e-6 for 1,024 rows read in 30.7 ms. Default: none; required with
     /// --shutter rolling.
-    #[arg(long, value_name = "D", value_parser = ranges::within(0.0..=roitrack::math::time::MAX_LINE_DELAY_S, " s", "a 1,000-row frame read in a second"))]
+    #[arg(long, value_name = "D", value_parser = ranges::within(0.0..=roitrack::core::time::MAX_LINE_DELAY_S, " s", "a 1,000-row frame read in a second"))]
     pub line_delay_s: Option<f64>,
     /// With --shutter rolling: write the causal filter's estimates as they come, instead of holding each until the
     /// two frames after it are tracked and refitting its pose, at its blobs' row times, with the twist of the poses
@@ -82,7 +82,7 @@ pub struct TrackArgs {
     #[arg(long, requires = "images")]
     pub no_rs_smoothing: bool,
     /// With --images: the exposure time (s, at most 10), used to size the windows for motion blur.
-    #[arg(long, default_value_t = 1e-3, requires = "images", value_parser = ranges::within(0.0..=roitrack::math::time::MAX_EXPOSURE_S, " s", "beyond, a moving blob is a streak"))]
+    #[arg(long, default_value_t = 1e-3, requires = "images", value_parser = ranges::within(0.0..=roitrack::core::time::MAX_EXPOSURE_S, " s", "beyond, a moving blob is a streak"))]
     pub exposure_s: f64,
     /// With --images: which blobs to look for (auto decides on the first frame where the target is found).
     #[arg(long, value_enum, default_value = "auto", requires = "images")]
@@ -288,7 +288,7 @@ fn run_frames(
     mut camera: roitrack::CameraModel,
     target: roitrack::Target,
 ) -> Result<()> {
-    use roitrack::math::time::TimeModel;
+    use roitrack::core::time::TimeModel;
     use roitrack::pipeline::{FrameStreamError, FrameTracker, FrameTrackerConfig, PhotoOptions};
 
     let readout = args.shutter.readout(args.line_delay_s)?;

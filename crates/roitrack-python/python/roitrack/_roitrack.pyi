@@ -16,7 +16,6 @@ __all__ = [
     "detect",
     "simulate",
     "evaluate",
-    "_bench_track_library",
     "RoitrackError",
 ]
 
@@ -173,4 +172,6 @@ def simulate(
     outliers: float = 0.0,
 ) -> dict[str, Any]: ...
 def evaluate(sim: dict[str, Any], res: dict[str, Any]) -> dict[str, Any]: ...
+# Only in a wheel built with the feature `lab` (bench/python_bench.py); private, so stubtest does not miss it in the
+# default wheel.
 def _bench_track_library(runs: int = 5) -> float: ...

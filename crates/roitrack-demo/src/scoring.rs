@@ -6,7 +6,7 @@ use roitrack_core::estimator::{Estimate, StatusCounts, TrackStatus, TrackerConfi
 use roitrack_eval::{EstimateErrors, EvalOptions, Metrics, estimate_errors_of};
 use roitrack_sim::SimulatedRun;
 
-use crate::ExperimentError;
+use crate::DemoError;
 
 /// A run tracked and scored.
 #[derive(Debug, Clone)]
@@ -37,7 +37,7 @@ impl Scored {
 ///
 /// ```
 /// use roitrack_core::estimator::TrackerConfig;
-/// use roitrack_experiments::scoring::track_and_score;
+/// use roitrack_demo::scoring::track_and_score;
 /// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 ///
 /// let run = simulate(&Scenario::new(ScenarioKind::Orthoglide, 1), &SimulationOptions::default()).unwrap();
@@ -45,10 +45,7 @@ impl Scored {
 /// assert!(scored.metrics.position_rmse_mm < 0.5);
 /// assert_eq!(scored.metrics.velocity_lag_samples, Some(0));
 /// ```
-pub fn track_and_score(
-    run: &SimulatedRun,
-    config: TrackerConfig,
-) -> Result<Scored, ExperimentError> {
+pub fn track_and_score(run: &SimulatedRun, config: TrackerConfig) -> Result<Scored, DemoError> {
     let start = Instant::now();
     let (estimates, _) = track_all(&run.camera, &run.target, config, &run.measurements)?;
     let seconds = start.elapsed().as_secs_f64();
@@ -60,7 +57,7 @@ pub fn score(
     run: &SimulatedRun,
     estimates: Vec<Estimate>,
     seconds: f64,
-) -> Result<Scored, ExperimentError> {
+) -> Result<Scored, DemoError> {
     let errors = estimate_errors_of(
         &run.truth_poses,
         &run.truth_twists,

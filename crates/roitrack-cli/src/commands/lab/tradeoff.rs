@@ -1,4 +1,4 @@
-//! `roitrack tradeoff`: velocity noise against velocity lag (see [`roitrack::experiments::tradeoff`]); writes a CSV and
+//! `roitrack lab tradeoff`: velocity noise against velocity lag (see [`roitrack::experiments::tradeoff`]); writes a CSV and
 //! a plot (PNG and SVG).
 
 use std::io::Write;
@@ -43,7 +43,7 @@ pub fn run(args: &TradeoffArgs) -> Result<()> {
     }
     csv.finish()?;
     let chart = tradeoff::chart(&points, args.scenario.into(), args.seed);
-    let paths = super::plot::write_figure_files(
+    let paths = crate::commands::plot::write_figure_files(
         &args.out,
         &roitrack::plot::render_chart("tradeoff", &chart)?,
     )?;

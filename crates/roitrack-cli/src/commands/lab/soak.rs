@@ -1,4 +1,4 @@
-//! `roitrack soak`: a long run at full speed, to show that nothing drifts or grows (see [`roitrack::bench::soak`]).
+//! `roitrack lab soak`: a long run at full speed, to show that nothing drifts or grows (see [`roitrack::bench::soak`]).
 
 use anyhow::Result;
 use clap::Args;

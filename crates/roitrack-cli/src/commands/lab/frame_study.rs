@@ -1,4 +1,4 @@
-//! `roitrack frame-study`: the frame tracker on simulated global- and rolling-shutter sequences of bright and dark
+//! `roitrack lab frame-study`: the frame tracker on simulated global- and rolling-shutter sequences of bright and dark
 //! blobs, and the frame-camera targets checked (see [`roitrack::experiments::frames`]).
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};

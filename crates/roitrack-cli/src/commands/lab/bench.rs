@@ -1,4 +1,4 @@
-//! `roitrack bench`: a quick measurement (about 10 s) of the hot paths and of the real-time loop.
+//! `roitrack lab bench`: a quick measurement (about 10 s) of the hot paths and of the real-time loop.
 //!
 //! **Hot paths**, on the built-in scene of docs/model.md (inputs and timer shared with the criterion benches of
 //! `cargo bench -p roitrack-bench`, see [`roitrack_bench`]): each item is timed for `--item-ms` in batches of calls
@@ -142,7 +142,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     #[cfg(feature = "genicam")]
     let fake_camera = args
         .fake_camera
-        .map(super::live::bench_fake_camera)
+        .map(crate::commands::live::bench_fake_camera)
         .transpose()?;
     #[cfg(not(feature = "genicam"))]
     let fake_camera: Option<FakeCameraFigures> = None;

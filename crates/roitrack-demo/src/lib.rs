@@ -1,10 +1,13 @@
-//! The main job end to end from pixels: a simulated ROI camera renders each ROI the scheduler asks for, the
-//! acquisition thread centroids it and the estimation thread tracks it, joined by lock-free queues; the target is
-//! found in a first full frame with no prior. The same scenario is also tracked from ideal centroids with the image
-//! side's measured noise, to show what the image side costs.
+//! # roitrack-demo
+//!
+//! The main job end to end from pixels, on a simulated scenario (`roitrack demo`): a simulated ROI camera renders each
+//! ROI the scheduler asks for, the acquisition thread centroids it and the estimation thread tracks it, joined by
+//! lock-free queues; the target is found in a first full frame with no prior. The same scenario is also tracked from
+//! ideal centroids with the image side's measured noise, to show what the image side costs.
 //!
 //! [`Demo::new`] simulates the scenario and measures the centroid noise; [`Demo::from_images`] and
-//! [`Demo::from_centroids`] run one estimator each way. The caller writes the files and shows the progress.
+//! [`Demo::from_centroids`] run one estimator each way. The caller writes the files and shows the progress. Every
+//! run is tracked and scored against its truth by [`scoring`], which the studies of `roitrack-experiments` share.
 
 use std::sync::atomic::AtomicUsize;
 
@@ -21,13 +24,14 @@ use roitrack_image::{
 use roitrack_pipeline::{LoopConfig, LoopReport, ScheduleOrder, run_loop_with_sink};
 use roitrack_plot::{TrackSeries, TruthSeries};
 use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simulate};
-
-use crate::ExperimentError;
+use thiserror::Error;
 
 /// What [`Demo::from_images_observed`] hands each ROI the camera grabs: the image, and the centroid the loop measures
 /// in it (`None`: its blob was rejected).
 pub type RoiObserver<'a> = dyn FnMut(&RoiImage, Option<&Measurement>) + Send + 'a;
-use crate::scoring::{Scored, score, track_and_score};
+pub mod scoring;
+
+use scoring::{Scored, score, track_and_score};
 
 /// ROIs rendered to measure the image side's centroid noise, and their side (px).
 const ACCURACY_ROIS: usize = 2000;
@@ -148,7 +152,7 @@ impl Default for DemoOptions {
 /// A prepared demo: the scenario simulated with the image side's measured centroid noise.
 ///
 /// ```
-/// use roitrack_experiments::demo::{Demo, DemoOptions, lineup, table};
+/// use roitrack_demo::{Demo, DemoOptions, lineup, table};
 /// use roitrack_sim::ScenarioKind;
 ///
 /// let demo = Demo::new(DemoOptions { scenario: ScenarioKind::Static, ..DemoOptions::default() }).unwrap();
@@ -172,16 +176,13 @@ pub struct Demo {
 impl Demo {
     /// Simulates the scenario; the ideal centroids get the image side's noise, measured on rendered ROIs, so that the
     /// two runs of an estimator compare the image side with a perfect one of equal precision.
-    pub fn new(options: DemoOptions) -> Result<Self, ExperimentError> {
+    pub fn new(options: DemoOptions) -> Result<Self, DemoError> {
         Self::with_scenario(options, Scenario::new(options.scenario, options.seed))
     }
 
     /// [`Self::new`] on a scenario of one's own (another camera, target, distance or speed: see
     /// [`Scenario::with_camera`] and the others); `options.scenario` is then only its name.
-    pub fn with_scenario(
-        options: DemoOptions,
-        scenario: Scenario,
-    ) -> Result<Self, ExperimentError> {
+    pub fn with_scenario(options: DemoOptions, scenario: Scenario) -> Result<Self, DemoError> {
         let (renderer, accuracy) = image_side(&scenario, ACCURACY_ROIS, options.seed)?;
         let simulation = SimulationOptions {
             seed: options.seed,
@@ -218,7 +219,7 @@ impl Demo {
         &self,
         estimator: &DemoEstimator,
         progress: Option<&AtomicUsize>,
-    ) -> Result<DemoRun, ExperimentError> {
+    ) -> Result<DemoRun, DemoError> {
         self.from_images_with(estimator, progress, &mut |_| {})
     }
 
@@ -229,7 +230,7 @@ impl Demo {
         estimator: &DemoEstimator,
         progress: Option<&AtomicUsize>,
         on_estimate: &mut (dyn FnMut(&Estimate) + Send),
-    ) -> Result<DemoRun, ExperimentError> {
+    ) -> Result<DemoRun, DemoError> {
         self.from_images_observed(estimator, progress, on_estimate, None)
     }
 
@@ -242,7 +243,7 @@ impl Demo {
         progress: Option<&AtomicUsize>,
         on_estimate: &mut (dyn FnMut(&Estimate) + Send),
         on_roi: Option<&mut RoiObserver<'_>>,
-    ) -> Result<DemoRun, ExperimentError> {
+    ) -> Result<DemoRun, DemoError> {
         let config = self.config(estimator);
         let camera = SimulatedCamera::new(
             self.renderer.clone(),
@@ -289,7 +290,7 @@ impl Demo {
             }
         };
         if report.estimates.is_empty() {
-            return Err(ExperimentError::NeverStarted {
+            return Err(DemoError::NeverStarted {
                 attempts: report.failed_initialisations,
             });
         }
@@ -303,7 +304,7 @@ impl Demo {
     }
 
     /// Runs `estimator` on the ideal centroids.
-    pub fn from_centroids(&self, estimator: &DemoEstimator) -> Result<DemoRun, ExperimentError> {
+    pub fn from_centroids(&self, estimator: &DemoEstimator) -> Result<DemoRun, DemoError> {
         Ok(DemoRun {
             estimator: *estimator,
             source: Source::Centroids,
@@ -334,11 +335,11 @@ impl Demo {
 
 /// The simulated camera of a scenario (default sensor) and the accuracy of the default centroid on `rois` of its
 /// rendered 32 x 32 ROIs.
-pub(crate) fn image_side(
+pub fn image_side(
     scenario: &Scenario,
     rois: usize,
     seed: u64,
-) -> Result<(RoiRenderer, CentroidAccuracy), ExperimentError> {
+) -> Result<(RoiRenderer, CentroidAccuracy), DemoError> {
     let renderer = RoiRenderer::new(
         scenario.camera.clone(),
         scenario.target.clone(),
@@ -408,4 +409,28 @@ pub fn json(run: &DemoRun) -> String {
         run.scored.us_per_estimate(),
         run.scored.metrics.to_json()
     )
+}
+
+/// Why the demo (or a run scored against its truth) could not run.
+#[derive(Debug, Error)]
+pub enum DemoError {
+    #[error("simulation failed: {0}")]
+    Simulation(#[from] roitrack_sim::SimError),
+    #[error("rendering failed: {0}")]
+    Rendering(#[from] roitrack_sim::RenderError),
+    #[error("invalid sensor model: {0}")]
+    Sensor(#[from] roitrack_image::SensorError),
+    #[error("tracking failed: {0}")]
+    Tracking(#[from] roitrack_core::estimator::TrackAllError),
+    #[error("the real-time loop failed: {0}")]
+    Loop(#[from] roitrack_pipeline::PipelineError),
+    #[error("evaluation failed: {0}")]
+    Evaluation(#[from] roitrack_eval::EvalError),
+    /// The real-time loop ran but never started a track.
+    #[error(
+        "the real-time loop made no estimate: the target was never identified in a full frame ({attempts} \
+         attempts; a target whose views are ambiguous, such as a plain symmetric grid, needs a marked point, e.g. one \
+         larger blob, for the loop to start)"
+    )]
+    NeverStarted { attempts: usize },
 }

@@ -1,4 +1,4 @@
-//! `roitrack faults`: the default estimator under faults (see [`roitrack::experiments::faults`]).
+//! `roitrack lab faults`: the default estimator under faults (see [`roitrack::experiments::faults`]).
 
 use anyhow::Result;
 use clap::Args;

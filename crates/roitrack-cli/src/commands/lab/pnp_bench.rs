@@ -1,4 +1,4 @@
-//! `roitrack pnp-bench`: times the static pose solver on a stored PnP problem, or solves a suite of one-instance
+//! `roitrack lab pnp-bench`: times the static pose solver on a stored PnP problem, or solves a suite of one-instance
 //! problems (see [`roitrack::bench::pnp`]).
 
 use std::path::PathBuf;

@@ -1,12 +1,11 @@
-//! `roitrack compare --sweep --quick`: the sweep table's shape, its JSON, `--check` and the options it refuses. The
+//! `roitrack lab compare --sweep --quick`: the sweep table's shape, its JSON, `--check` and the options it refuses. The
 //! targets themselves are the estimator's job: these tests pass whether they hold or not.
 
-mod common;
-use common::{fails, ok, roitrack};
+use crate::common::{fails, ok, roitrack};
 
 #[test]
 fn the_quick_sweep_prints_its_tables_and_json_and_check_names_the_failures() {
-    let markdown = ok(&["compare", "--sweep", "--quick"]);
+    let markdown = ok(&["lab", "compare", "--sweep", "--quick"]);
     assert!(markdown.starts_with("Quick mode"), "{markdown}");
     // The accuracy table: a header, a rule and one row per accuracy case, each with 13 cells.
     let table: Vec<&str> = markdown
@@ -29,7 +28,8 @@ fn the_quick_sweep_prints_its_tables_and_json_and_check_names_the_failures() {
     assert!(markdown.contains("checks hold") || markdown.contains("checks do not hold"));
 
     let json: serde_json::Value =
-        serde_json::from_str(ok(&["compare", "--sweep", "--quick", "--json"]).trim()).unwrap();
+        serde_json::from_str(ok(&["lab", "compare", "--sweep", "--quick", "--json"]).trim())
+            .unwrap();
     let cases = json["cases"].as_array().unwrap();
     assert_eq!(
         cases.len(),
@@ -54,7 +54,7 @@ fn the_quick_sweep_prints_its_tables_and_json_and_check_names_the_failures() {
     assert_eq!(json["holds"].as_bool().unwrap(), failures.is_empty());
 
     // --check fails exactly when a target does not hold, naming each failure.
-    let checked = roitrack(&["compare", "--sweep", "--quick", "--check"]);
+    let checked = roitrack(&["lab", "compare", "--sweep", "--quick", "--check"]);
     let stderr = String::from_utf8_lossy(&checked.stderr);
     assert_eq!(checked.status.success(), failures.is_empty(), "{stderr}");
     for failure in &failures {
@@ -65,11 +65,11 @@ fn the_quick_sweep_prints_its_tables_and_json_and_check_names_the_failures() {
 #[test]
 fn options_that_do_not_apply_are_refused() {
     for args in [
-        &["compare", "--sweep", "--scenario", "spin"][..],
-        &["compare", "--sweep", "--noise-px", "0.3"],
-        &["compare", "--sweep", "--seed", "2"],
-        &["compare", "--quick"],
-        &["compare", "--check"],
+        &["lab", "compare", "--sweep", "--scenario", "spin"][..],
+        &["lab", "compare", "--sweep", "--noise-px", "0.3"],
+        &["lab", "compare", "--sweep", "--seed", "2"],
+        &["lab", "compare", "--quick"],
+        &["lab", "compare", "--check"],
     ] {
         let stderr = fails(args);
         assert!(

@@ -1,7 +1,7 @@
 //! roitrack's static pose solver side by side with OpenCV's solvePnP on random PnP families:
 //! `bench/pnp_families.py --check --per-family 25 --seed 34` draws 25 problems in each of eight families (3 points,
 //! 4-5 and 6-40 points planar, off-plane and 3-D, symmetric grids; random cameras, lenses, poses, noise, and a user's
-//! model off the truth), solves them with `roitrack pnp-bench --suite` (this test's binary) and with OpenCV, and fails,
+//! model off the truth), solves them with `roitrack lab pnp-bench --suite` (this test's binary) and with OpenCV, and fails,
 //! naming the family and the figure, where roitrack's correct rate, median normalised error or wrong answers given
 //! without a flag are worse than the best OpenCV method's. Times are printed, never checked.
 //!
