@@ -423,40 +423,25 @@ mod tests {
             cam_t_obj_m: state.cam_t_obj_m + Vector3::new(0.003, 0.001, -0.004),
             ..state
         };
+        // The grid's 16 points: 32 residuals.
+        let residuals = |at: &MotionState, accel: Option<&Acceleration>| {
+            let (r, j) = pose_residuals(&model, &target, &obs, 2.0, at, accel).unwrap();
+            (
+                nalgebra::SVector::<f64, 32>::from_column_slice(r.as_slice()),
+                nalgebra::SMatrix::<f64, 32, 6>::from_column_slice(j.as_slice()),
+            )
+        };
         for accel in [None, Some(&acceleration)] {
-            let (_, j) = pose_residuals(&model, &target, &obs, 2.0, &shifted, accel).unwrap();
-            let h = 1e-6;
-            for c in 0..6 {
-                let mut delta = Vector12::zeros();
-                delta[c] = h;
-                let plus = pose_residuals(
-                    &model,
-                    &target,
-                    &obs,
-                    2.0,
-                    &shifted.corrected(&delta),
-                    accel,
-                )
-                .unwrap()
-                .0;
-                let minus = pose_residuals(
-                    &model,
-                    &target,
-                    &obs,
-                    2.0,
-                    &shifted.corrected(&(-delta)),
-                    accel,
-                )
-                .unwrap()
-                .0;
-                let numeric = (plus - minus) / (2.0 * h);
-                assert!(
-                    (&numeric - j.column(c)).norm() < 1e-5 * j.norm(),
-                    "column {c}: {} vs {}",
-                    numeric,
-                    j.column(c)
-                );
-            }
+            roitrack_testkit::jacobian::check_at(
+                "pose residuals",
+                &shifted,
+                &nalgebra::Vector6::repeat(1.0),
+                |at, d| {
+                    let delta = Vector12::from_iterator(d.iter().copied().chain([0.0; 6]));
+                    residuals(&at.corrected(&delta), accel).0
+                },
+                &residuals(&shifted, accel).1,
+            );
         }
     }
 

@@ -832,13 +832,6 @@ mod tests {
     use super::*;
     use crate::{CameraModel, TargetPoint};
 
-    fn bench() -> MotionState {
-        let r = Rotation3::from_axis_angle(&Vector3::z_axis(), 5f64.to_radians())
-            * Rotation3::from_axis_angle(&Vector3::y_axis(), (-15f64).to_radians())
-            * Rotation3::from_axis_angle(&Vector3::x_axis(), 10f64.to_radians());
-        MotionState::at_rest(r, Vector3::new(0.02, -0.01, 0.6))
-    }
-
     fn observe(
         model: &SpatioTemporalModel,
         target: &Target,
@@ -871,15 +864,15 @@ mod tests {
     #[test]
     fn planar_grid_from_scratch_to_1e9() {
         let target = Target::grid4x4();
-        assert_recovers(&target, &bench());
+        assert_recovers(&target, &MotionState::bench());
         // Any in-plane rotation, and a strong tilt.
         for angle_deg in [0.0, 90.0, 180.0, 270.0, 33.0] {
-            let mut s = bench();
+            let mut s = MotionState::bench();
             s.cam_r_obj *=
                 Rotation3::from_axis_angle(&Vector3::z_axis(), f64::to_radians(angle_deg));
             assert_recovers(&target, &s);
         }
-        let mut s = bench();
+        let mut s = MotionState::bench();
         s.cam_r_obj = Rotation3::from_euler_angles(0.9, -0.4, 2.0);
         assert_recovers(&target, &s);
     }
@@ -898,14 +891,14 @@ mod tests {
             })
             .collect();
         let target = Target::new(points).unwrap();
-        assert_recovers(&target, &bench());
+        assert_recovers(&target, &MotionState::bench());
     }
 
     #[test]
     fn too_few_points() {
         let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
         let target = Target::grid4x4();
-        let obs = observe(&model, &target, &bench());
+        let obs = observe(&model, &target, &MotionState::bench());
         assert!(matches!(
             solve_static_pose(&model, &target, &obs[..2], 0.1),
             Err(InitError::TooFewPoints {

@@ -240,15 +240,17 @@ mod tests {
     /// The Jacobian of the rotation's entries against central differences.
     #[test]
     fn perturbation_jacobian_matches_central_differences() {
-        let r = Rotation3::from_euler_angles(0.3, 0.8, -2.0);
-        let j = perturbation_jacobian(&r);
-        let h = 1e-6;
-        for k in 0..3 {
-            let d = Vector3::ith(k, h);
-            let numeric = (entries(&(r * crate::so3::exp(&d)))
-                - entries(&(r * crate::so3::exp(&-d))))
-                / (2.0 * h);
-            assert!((numeric - j.column(k)).norm() < 1e-9);
-        }
+        roitrack_testkit::check_jacobian(
+            "rotation entries under a right perturbation",
+            Rotation3::identity(),
+            |rng, spread| {
+                use rand::Rng;
+                let axis = Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0));
+                crate::so3::exp(&(axis * std::f64::consts::PI * spread))
+            },
+            &Vector3::repeat(1.0),
+            |r, d| entries(&(r * crate::so3::exp(d))),
+            perturbation_jacobian,
+        );
     }
 }
