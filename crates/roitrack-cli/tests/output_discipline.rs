@@ -7,133 +7,17 @@
 
 #![cfg(unix)]
 
-use std::collections::BTreeMap;
-use std::io::Write;
+#[path = "common/outputs.rs"]
+mod outputs;
+
+use outputs::*;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
-use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::path::Path;
+use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
-
-fn roitrack() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_roitrack"))
-}
-
-fn p(path: &Path) -> &str {
-    path.to_str().unwrap()
-}
 
 fn run(args: &[&str]) -> Output {
     roitrack().args(args).output().unwrap()
-}
-
-fn stderr(out: &Output) -> String {
-    String::from_utf8_lossy(&out.stderr).into_owned()
-}
-
-fn succeeded(args: &[&str]) {
-    let out = run(args);
-    assert!(out.status.success(), "{args:?}: {}", stderr(&out));
-}
-
-fn send(child: &Child, signal: i32) {
-    // SAFETY: sends a signal to a child this test spawned.
-    assert_eq!(unsafe { libc::kill(child.id() as libc::pid_t, signal) }, 0);
-}
-
-/// Every file under `dir` (recursively) with its bytes: a folder's state, to compare byte for byte.
-fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut files = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for entry in std::fs::read_dir(&d).unwrap() {
-            let path = entry.unwrap().path();
-            if path.is_dir() {
-                stack.push(path);
-            } else {
-                files.insert(path.clone(), std::fs::read(&path).unwrap());
-            }
-        }
-    }
-    files
-}
-
-/// The temporaries left under `dir` (recursively): `.NAME.PID.XXXXXX.tmp` files or folders, a version saved aside.
-fn temporaries(dir: &Path) -> Vec<PathBuf> {
-    let mut found = Vec::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        for entry in std::fs::read_dir(&d).unwrap() {
-            let path = entry.unwrap().path();
-            let name = path.file_name().unwrap().to_string_lossy().into_owned();
-            if name.starts_with('.') && (name.ends_with(".tmp") || name.ends_with(".old")) {
-                found.push(path.clone());
-            }
-            if path.is_dir() {
-                stack.push(path);
-            }
-        }
-    }
-    found
-}
-
-/// Whether `path` is a complete MCAP bag (its summary written) holding at least one pose.
-fn bag_is_readable(path: &Path) -> bool {
-    let bytes = std::fs::read(path).unwrap();
-    let summary = mcap::Summary::read(&bytes).ok().flatten();
-    let poses = mcap::MessageStream::new(&bytes)
-        .map(|stream| {
-            stream
-                .map_while(Result::ok)
-                .filter(|m| m.channel.topic == "/roitrack/pose")
-                .count()
-        })
-        .unwrap_or(0);
-    summary.is_some() && poses > 0
-}
-
-/// A small deterministic generator for the moments signals are sent at.
-struct Seeded(u64);
-
-impl Seeded {
-    /// A number in [lo, hi).
-    fn next_in(&mut self, lo: u64, hi: u64) -> u64 {
-        self.0 ^= self.0 << 13;
-        self.0 ^= self.0 >> 7;
-        self.0 ^= self.0 << 17;
-        lo + self.0 % (hi - lo)
-    }
-}
-
-/// The camera and target of the bench scene (`roitrack target`), in `dir`.
-fn bench_scene(dir: &Path) -> (PathBuf, PathBuf) {
-    let (target, camera) = (dir.join("target.csv"), dir.join("camera.yaml"));
-    succeeded(&["target", "--out", p(&target), "--camera-out", p(&camera)]);
-    (camera, target)
-}
-
-/// Feeds `child` an endless stream of measurements of the grid at rest (4 kHz) until it stops reading.
-fn feed_forever(child: &mut Child) -> std::thread::JoinHandle<()> {
-    let mut stdin = child.stdin.take().unwrap();
-    std::thread::spawn(move || {
-        let mut text = String::from("t,id,u,v\n");
-        for k in 0u64.. {
-            let id = k % 16;
-            let (c, r) = ((id % 4) as f64, (id / 4) as f64);
-            text += &format!(
-                "{},{},{},{}\n",
-                k as f64 / 4000.0,
-                id,
-                437.0 + 50.0 * c,
-                437.0 + 50.0 * r
-            );
-            if text.len() > 1 << 16 {
-                if stdin.write_all(text.as_bytes()).is_err() {
-                    return;
-                }
-                text.clear();
-            }
-        }
-    })
 }
 
 /// `track` over the standard input into `out` (poses, twists, covariance, bag).
