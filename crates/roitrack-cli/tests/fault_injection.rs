@@ -25,28 +25,9 @@ use std::path::Path;
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-/// `track` over the standard input into `out`: poses, twists, covariance and a bag.
-fn track_stdin(camera: &Path, target: &Path, out: &Path) -> Command {
-    let mut command = roitrack();
-    command
-        .args(["track", "--camera", p(camera), "--target", p(target)])
-        .args(["--measurements", "-"])
-        .args(["--poses", p(&out.join("poses.tum"))])
-        .args(["--twists", p(&out.join("twists.csv"))])
-        .args(["--covariance", p(&out.join("covariance.csv"))])
-        .args(["--mcap", p(&out.join("run.mcap"))])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped());
-    command
-}
-
-/// Previous outputs of `track` in `out`, as a run before would have left them.
+/// Previous outputs of `track` in `out`, as a run before would have left them, and no partial bag.
 fn previous_track_outputs(out: &Path) {
-    std::fs::create_dir_all(out).unwrap();
-    for name in ["poses.tum", "twists.csv", "covariance.csv", "run.mcap"] {
-        std::fs::write(out.join(name), format!("previous {name}\n")).unwrap();
-    }
+    previous_outputs(out);
     let _ = std::fs::remove_file(out.join("run.partial.mcap"));
 }
 
@@ -117,7 +98,9 @@ fn each_signal_at_a_random_moment_of_track_keeps_the_outputs_and_the_partial_bag
     for signal in SIGNALS {
         previous_track_outputs(&out);
         let before = snapshot(&out);
-        let mut child = track_stdin(&camera, &target, &out).spawn().unwrap();
+        let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
+            .spawn()
+            .unwrap();
         let feeder = feed_forever(&mut child);
         let delay_ms = moments.next_in(200, 1000);
         std::thread::sleep(Duration::from_millis(delay_ms));
@@ -200,7 +183,9 @@ fn a_second_signal_ends_a_run_at_once_without_temporaries() {
     ] {
         previous_track_outputs(&out);
         let before = snapshot(&out);
-        let mut child = track_stdin(&camera, &target, &out).spawn().unwrap();
+        let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
+            .spawn()
+            .unwrap();
         let _stdin = child.stdin.take().unwrap();
         let started = Instant::now();
         while temporaries(&out).len() < 4 && started.elapsed() < Duration::from_secs(10) {
@@ -279,7 +264,9 @@ fn temporaries_left_by_kill_9_go_with_the_next_run() {
     previous_track_outputs(&out);
     let mut moments = Seeded(0x0c11_9e55);
     // track: killed outright while writing, its four temporaries stay, named with its process.
-    let mut child = track_stdin(&camera, &target, &out).spawn().unwrap();
+    let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
+        .spawn()
+        .unwrap();
     let pid = child.id();
     let feeder = feed_forever(&mut child);
     std::thread::sleep(Duration::from_millis(moments.next_in(200, 800)));
@@ -295,7 +282,9 @@ fn temporaries_left_by_kill_9_go_with_the_next_run() {
         "{left:?}"
     );
     // The next run over the same outputs (half a second of measurements) succeeds and removes them.
-    let mut child = track_stdin(&camera, &target, &out).spawn().unwrap();
+    let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
+        .spawn()
+        .unwrap();
     let mut stdin = child.stdin.take().unwrap();
     let mut text = String::from("t,id,u,v\n");
     for k in 0..2000u32 {

@@ -13,34 +13,11 @@ mod outputs;
 use outputs::*;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::Path;
-use std::process::{Command, Output, Stdio};
+use std::process::{Output, Stdio};
 use std::time::{Duration, Instant};
 
 fn run(args: &[&str]) -> Output {
     roitrack().args(args).output().unwrap()
-}
-
-/// `track` over the standard input into `out` (poses, twists, covariance, bag).
-fn track_stdin(camera: &Path, target: &Path, out: &Path, poses: &str) -> Command {
-    let mut command = roitrack();
-    command
-        .args(["track", "--camera", p(camera), "--target", p(target)])
-        .args(["--measurements", "-", "--poses", poses])
-        .args(["--twists", p(&out.join("twists.csv"))])
-        .args(["--covariance", p(&out.join("covariance.csv"))])
-        .args(["--mcap", p(&out.join("run.mcap"))])
-        .stdin(Stdio::piped())
-        .stdout(Stdio::null())
-        .stderr(Stdio::piped());
-    command
-}
-
-/// Previous outputs in `out`, as a run before would have left them.
-fn previous_outputs(out: &Path) {
-    std::fs::create_dir_all(out).unwrap();
-    for name in ["poses.tum", "twists.csv", "covariance.csv", "run.mcap"] {
-        std::fs::write(out.join(name), format!("previous {name}\n")).unwrap();
-    }
 }
 
 #[test]

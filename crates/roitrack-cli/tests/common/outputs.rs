@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output};
+use std::process::{Child, Command, Output, Stdio};
 
 pub fn roitrack() -> Command {
     Command::new(env!("CARGO_BIN_EXE_roitrack"))
@@ -125,5 +125,28 @@ impl Seeded {
         self.0 ^= self.0 >> 7;
         self.0 ^= self.0 << 17;
         lo + self.0 % (hi - lo)
+    }
+}
+
+/// `track` over the standard input into `out` (poses, twists, covariance, bag).
+pub fn track_stdin(camera: &Path, target: &Path, out: &Path, poses: &str) -> Command {
+    let mut command = roitrack();
+    command
+        .args(["track", "--camera", p(camera), "--target", p(target)])
+        .args(["--measurements", "-", "--poses", poses])
+        .args(["--twists", p(&out.join("twists.csv"))])
+        .args(["--covariance", p(&out.join("covariance.csv"))])
+        .args(["--mcap", p(&out.join("run.mcap"))])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped());
+    command
+}
+
+/// Previous outputs in `out`, as a run before would have left them.
+pub fn previous_outputs(out: &Path) {
+    std::fs::create_dir_all(out).unwrap();
+    for name in ["poses.tum", "twists.csv", "covariance.csv", "run.mcap"] {
+        std::fs::write(out.join(name), format!("previous {name}\n")).unwrap();
     }
 }
