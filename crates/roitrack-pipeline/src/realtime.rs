@@ -294,260 +294,399 @@ pub fn run_loop_with_sink<C: RoiCamera>(
     config.validate()?;
     camera_model.time.validate()?;
     let mut tracker = Tracker::new(camera_model.clone(), target.clone(), tracker_config)?;
-    let (mut measurement_tx, mut measurement_rx) =
+    let (measurement_tx, mut measurement_rx) =
         rtrb::RingBuffer::<Event>::new(config.queue_capacity.max(2));
-    let (mut predictor_tx, mut predictor_rx) = rtrb::RingBuffer::<Predictor>::new(8);
+    let (mut predictor_tx, predictor_rx) = rtrb::RingBuffer::<Predictor>::new(8);
     let expected_estimates = config.roi_slots / tracker_config.every.max(1) + 64;
     let camera_done = AtomicBool::new(false);
     let start = Instant::now();
 
     let (camera_side, estimation_side) = std::thread::scope(|scope| {
         let estimation = scope.spawn(|| {
-            let mut estimates = Vec::with_capacity(expected_estimates);
-            let mut latencies_us = Vec::with_capacity(expected_estimates);
-            let mut refused = 0usize;
-            let mut measured = Vec::with_capacity(if config.keep_measurements {
-                config.roi_slots
-            } else {
-                0
-            });
-            let mut spins = 0u32;
-            loop {
-                match measurement_rx.pop() {
-                    Ok(Event::Measurement { m, grabbed }) => {
-                        spins = 0;
-                        if config.keep_measurements && measured.len() < measured.capacity() {
-                            measured.push(m);
+            let queues = EstimationQueues {
+                measurements: &mut measurement_rx,
+                predictors: &mut predictor_tx,
+                camera_done: &camera_done,
+            };
+            run_estimation(
+                &mut tracker,
+                queues,
+                config,
+                expected_estimates,
+                on_estimate,
+            )
+        });
+        // The acquisition side runs on this thread.
+        let mut acquisition = Acquisition::new(
+            camera,
+            camera_model,
+            target,
+            config,
+            tracker_config.noise_px,
+            (measurement_tx, predictor_rx),
+        );
+        acquisition.run(start, progress);
+        camera_done.store(true, Ordering::Release);
+        (acquisition.counters, estimation.join())
+    });
+    let estimation_side = estimation_side.map_err(|_| PipelineError::EstimatorPanicked)?;
+    Ok(LoopReport::from_sides(
+        camera_side,
+        estimation_side,
+        start.elapsed().as_secs_f64(),
+    ))
+}
+
+impl LoopReport {
+    /// The report of a run from what each thread counted and kept, and the run's wall time.
+    fn from_sides(camera_side: Counters, estimation_side: EstimationSide, wall_s: f64) -> Self {
+        Self {
+            estimates: estimation_side.estimates,
+            latencies_us: estimation_side.latencies_us,
+            rois: camera_side.rois,
+            measurements: camera_side.measurements,
+            rejections: camera_side.rejections,
+            dropped: camera_side.dropped,
+            late: camera_side.late,
+            initialisations: camera_side.initialisations,
+            failed_initialisations: camera_side.failed_initialisations,
+            refused: estimation_side.refused,
+            camera_errors: camera_side.camera_errors,
+            stopped_by: camera_side.stopped_by,
+            wall_s,
+            measured: estimation_side.measured,
+        }
+    }
+}
+
+/// The estimation thread's ends of the two queues, and the camera side's signal that it is done.
+struct EstimationQueues<'a> {
+    measurements: &'a mut rtrb::Consumer<Event>,
+    predictors: &'a mut rtrb::Producer<Predictor>,
+    camera_done: &'a AtomicBool,
+}
+
+/// What the estimation thread hands back when the camera side is done and the queue is empty.
+struct EstimationSide {
+    estimates: Vec<Estimate>,
+    latencies_us: Vec<f64>,
+    refused: usize,
+    measured: Vec<Measurement>,
+}
+
+/// The estimation thread: feeds each queued measurement to the tracker and sends each estimate back as a
+/// [`Predictor`], until the camera side is done and the queue is empty. Its vectors are sized before the run (the
+/// steady state does not allocate); estimates beyond `expected_estimates` reach `on_estimate` but are not kept.
+fn run_estimation(
+    tracker: &mut Tracker,
+    queues: EstimationQueues<'_>,
+    config: &LoopConfig,
+    expected_estimates: usize,
+    on_estimate: &mut (dyn FnMut(&Estimate) + Send),
+) -> EstimationSide {
+    let mut estimates = Vec::with_capacity(expected_estimates);
+    let mut latencies_us = Vec::with_capacity(expected_estimates);
+    let mut refused = 0usize;
+    let mut measured = Vec::with_capacity(if config.keep_measurements {
+        config.roi_slots
+    } else {
+        0
+    });
+    let mut spins = 0u32;
+    loop {
+        match queues.measurements.pop() {
+            Ok(Event::Measurement { m, grabbed }) => {
+                spins = 0;
+                if config.keep_measurements && measured.len() < measured.capacity() {
+                    measured.push(m);
+                }
+                match tracker.push(&m) {
+                    Ok(Some(e)) => {
+                        on_estimate(&e);
+                        if estimates.len() < estimates.capacity() {
+                            latencies_us.push(grabbed.elapsed().as_secs_f64() * 1e6);
+                            estimates.push(e);
                         }
-                        match tracker.push(&m) {
-                            Ok(Some(e)) => {
-                                on_estimate(&e);
-                                if estimates.len() < estimates.capacity() {
-                                    latencies_us.push(grabbed.elapsed().as_secs_f64() * 1e6);
-                                    estimates.push(e);
-                                }
-                                // If the camera side has not taken the previous ones, this one is skipped: it will
-                                // get the next.
-                                let _ = predictor_tx.push(Predictor {
-                                    t_ref_s: e.t_ref_s,
-                                    state: e.state,
-                                    covariance: e.covariance,
-                                });
-                            }
-                            Ok(None) => {}
-                            Err(_) => refused += 1,
-                        }
+                        // If the camera side has not taken the previous ones, this one is skipped: it will get the
+                        // next.
+                        let _ = queues.predictors.push(Predictor {
+                            t_ref_s: e.t_ref_s,
+                            state: e.state,
+                            covariance: e.covariance,
+                        });
                     }
-                    Ok(Event::Restart { t_s, state }) => {
-                        tracker.start_from(t_s, state, Some(full_frame_covariance()));
-                    }
-                    Err(_) => {
-                        if camera_done.load(Ordering::Acquire) && measurement_rx.is_empty() {
-                            break;
-                        }
-                        backoff(&mut spins);
-                    }
+                    Ok(None) => {}
+                    Err(_) => refused += 1,
                 }
             }
-            (estimates, latencies_us, refused, measured)
-        });
+            Ok(Event::Restart { t_s, state }) => {
+                tracker.start_from(t_s, state, Some(full_frame_covariance()));
+            }
+            Err(_) => {
+                if queues.camera_done.load(Ordering::Acquire) && queues.measurements.is_empty() {
+                    break;
+                }
+                backoff(&mut spins);
+            }
+        }
+    }
+    EstimationSide {
+        estimates,
+        latencies_us,
+        refused,
+        measured,
+    }
+}
 
-        // The acquisition side runs on this thread.
-        let mut scheduler = RoiScheduler::new(
-            camera_model.clone(),
-            target.clone(),
-            config.scheduler,
-            tracker_config.noise_px,
-        );
+/// What one step of the camera side did with the ROI slots: go on after this many, or end the run.
+enum Slots {
+    Advance(usize),
+    Stop,
+}
+
+/// The acquisition thread's state: the camera, the scheduler placing each ROI from the latest [`Predictor`], the
+/// buffers a grab fills (sized before the run), the counters, and its ends of the two queues.
+struct Acquisition<'a, C> {
+    camera: &'a mut C,
+    camera_model: &'a CameraModel,
+    target: &'a Target,
+    config: &'a LoopConfig,
+    scheduler: RoiScheduler,
+    image: RoiImage,
+    frame: Frame,
+    /// The latest estimate to place ROIs from; none before the first full frame or after a failed one.
+    predictor: Option<Predictor>,
+    /// The time of the last full-frame restart: older estimates describe the old track.
+    restart_t_s: f64,
+    counters: Counters,
+    measurement_tx: rtrb::Producer<Event>,
+    predictor_rx: rtrb::Consumer<Predictor>,
+}
+
+impl<'a, C: RoiCamera> Acquisition<'a, C> {
+    /// The camera side before its first slot: no track yet, the ROI buffer sized for the largest ROI, and the
+    /// acquisition ends of the measurement and predictor queues.
+    fn new(
+        camera: &'a mut C,
+        camera_model: &'a CameraModel,
+        target: &'a Target,
+        config: &'a LoopConfig,
+        noise_px: f64,
+        (measurement_tx, predictor_rx): (rtrb::Producer<Event>, rtrb::Consumer<Predictor>),
+    ) -> Self {
         let max_side = config.scheduler.max_size_px as usize;
-        let mut image = RoiImage::with_capacity(max_side * max_side);
-        let mut frame = Frame::default();
-        let mut predictor: Option<Predictor> = None;
-        let mut restart_t_s = f64::NEG_INFINITY;
-        let mut report = Counters::default();
-        let period = Duration::from_secs_f64(1.0 / config.rate_hz);
+        Self {
+            scheduler: RoiScheduler::new(
+                camera_model.clone(),
+                target.clone(),
+                config.scheduler,
+                noise_px,
+            ),
+            image: RoiImage::with_capacity(max_side * max_side),
+            frame: Frame::default(),
+            predictor: None,
+            restart_t_s: f64::NEG_INFINITY,
+            counters: Counters::default(),
+            measurement_tx,
+            predictor_rx,
+            camera,
+            camera_model,
+            target,
+            config,
+        }
+    }
+
+    /// The camera side: `config.roi_slots` slots from `start`, each a full frame (when there is no track to follow)
+    /// or one ROI, until the slots are done or the camera ends.
+    fn run(&mut self, start: Instant, progress: Option<&std::sync::atomic::AtomicUsize>) {
+        let period = Duration::from_secs_f64(1.0 / self.config.rate_hz);
         let mut slot = 0usize;
-        while slot < config.roi_slots {
-            let t_s = config.t_start_s + slot as f64 / config.rate_hz;
+        while slot < self.config.roi_slots {
+            let t_s = self.config.t_start_s + slot as f64 / self.config.rate_hz;
             if let Some(progress) = progress
                 && slot.is_multiple_of(256)
             {
                 progress.store(slot, Ordering::Relaxed);
             }
-            if config.paced {
-                let due = start + period * slot as u32;
-                let mut spins = 0;
-                while Instant::now() < due {
-                    backoff(&mut spins);
-                }
-                if Instant::now() > due + period {
-                    report.late += 1;
-                }
-            } else {
-                let mut spins = 0;
-                while measurement_tx.buffer().capacity() - measurement_tx.slots()
-                    > config.max_queued
-                {
-                    backoff(&mut spins);
-                }
-            }
-            while let Ok(p) = predictor_rx.pop() {
+            self.wait_for_slot(start, slot, period);
+            while let Ok(p) = self.predictor_rx.pop() {
                 // Estimates from before the last re-initialisation describe the old track.
-                if p.t_ref_s >= restart_t_s {
-                    predictor = Some(p);
+                if p.t_ref_s >= self.restart_t_s {
+                    self.predictor = Some(p);
                 }
             }
-            if predictor.is_none() || scheduler.needs_reinitialisation() {
-                if let Err(e) = camera.grab_full_frame(t_s, &mut frame) {
-                    if !e.is_transient() {
-                        report.stopped_by = Some(e);
-                        break;
-                    }
-                    report.camera_errors += 1;
-                    slot += config.full_frame_slots.max(1);
-                    continue;
-                }
-                match find_target(camera_model, target, &frame, &config.centroid) {
-                    Ok(found) => {
-                        // The frame's own time, not the pose's (a rolling shutter's middle row, later): the next
-                        // ROI slots must not come before the restart.
-                        let restart_s = frame.t_s;
-                        predictor = Some(Predictor {
-                            t_ref_s: restart_s,
-                            state: found.state,
-                            covariance: Some(full_frame_covariance()),
-                        });
-                        restart_t_s = restart_s;
-                        scheduler.reset();
-                        let mut spins = 0;
-                        let mut event = Event::Restart {
-                            t_s: restart_s,
-                            state: found.state,
-                        };
-                        loop {
-                            match measurement_tx.push(event) {
-                                Ok(()) => break,
-                                Err(rtrb::PushError::Full(back)) => {
-                                    event = back;
-                                    backoff(&mut spins);
-                                }
-                            }
-                        }
-                        report.initialisations += 1;
-                    }
-                    // Frames of another size than the camera model's will never match it: stop, saying so.
-                    Err(MatchError::FrameSize {
-                        frame_width,
-                        frame_height,
-                        camera_width,
-                        camera_height,
-                    }) => {
-                        report.stopped_by = Some(GrabError::FrameSize {
-                            width: frame_width,
-                            height: frame_height,
-                            expected_width: camera_width,
-                            expected_height: camera_height,
-                        });
-                        break;
-                    }
-                    Err(_) => {
-                        predictor = None;
-                        report.failed_initialisations += 1;
-                    }
-                }
-                slot += config.full_frame_slots.max(1);
-                continue;
-            }
-            let Some(p) = predictor else {
-                slot += 1;
-                continue;
-            };
-            let Some(request) = scheduler.next(&p, t_s) else {
-                report.rejections.absent += 1;
-                slot += 1;
-                continue;
-            };
-            let trigger = RoiTrigger {
-                point_id: target.points()[request.point_index].id,
-                roi: request.roi,
-                t_s,
-            };
-            let grab = camera.grab_roi(&trigger, &mut image).and_then(|()| {
-                if image.is_consistent() {
-                    Ok(())
-                } else {
-                    Err(GrabError::Dropped {
-                        reason: format!(
-                            "{} pixel values for a {} x {} ROI",
-                            image.pixels.len(),
-                            image.roi.width,
-                            image.roi.height
-                        ),
-                    })
-                }
-            });
-            if let Err(e) = grab {
-                if !e.is_transient() {
-                    report.stopped_by = Some(e);
-                    break;
-                }
-                // A point whose ROIs keep failing counts as lost, so the camera side re-initialises.
-                scheduler.report(request.point_index, false);
-                report.camera_errors += 1;
-                slot += 1;
-                continue;
-            }
-            let grabbed = Instant::now();
-            report.rois += 1;
-            // The point the camera says it read (a replay may not follow the schedule).
-            let point_index = if image.point_id == trigger.point_id {
-                request.point_index
+            let step = if self.predictor.is_none() || self.scheduler.needs_reinitialisation() {
+                self.initialise(t_s)
             } else {
-                target
-                    .index_of(image.point_id)
-                    .unwrap_or(request.point_index)
+                self.read_roi(t_s)
             };
-            match measure_roi(&image, &config.centroid, &camera_model.time) {
-                Ok(m) => {
-                    scheduler.report(point_index, true);
-                    if measurement_tx
-                        .push(Event::Measurement { m, grabbed })
-                        .is_err()
-                    {
-                        report.dropped += 1;
-                    } else {
-                        report.measurements += 1;
+            match step {
+                Slots::Advance(n) => slot += n,
+                Slots::Stop => break,
+            }
+        }
+    }
+
+    /// Paced: waits for the trigger time of `slot` (counting a trigger reached more than a `period` late).
+    /// Free-running: waits while more than `max_queued` measurements are unprocessed.
+    fn wait_for_slot(&mut self, start: Instant, slot: usize, period: Duration) {
+        let mut spins = 0;
+        if self.config.paced {
+            let due = start + period * slot as u32;
+            while Instant::now() < due {
+                backoff(&mut spins);
+            }
+            if Instant::now() > due + period {
+                self.counters.late += 1;
+            }
+        } else {
+            while self.measurement_tx.buffer().capacity() - self.measurement_tx.slots()
+                > self.config.max_queued
+            {
+                backoff(&mut spins);
+            }
+        }
+    }
+
+    /// Reads a full frame at `t_s` and finds the target in it with no prior; on success restarts the track (the
+    /// scheduler here, the tracker through the queue). A full frame costs `full_frame_slots` slots.
+    fn initialise(&mut self, t_s: f64) -> Slots {
+        let config = self.config;
+        let frame_slots = Slots::Advance(config.full_frame_slots.max(1));
+        if let Err(e) = self.camera.grab_full_frame(t_s, &mut self.frame) {
+            if !e.is_transient() {
+                self.counters.stopped_by = Some(e);
+                return Slots::Stop;
+            }
+            self.counters.camera_errors += 1;
+            return frame_slots;
+        }
+        match find_target(
+            self.camera_model,
+            self.target,
+            &self.frame,
+            &config.centroid,
+        ) {
+            Ok(found) => {
+                // The frame's own time, not the pose's (a rolling shutter's middle row, later): the next ROI slots
+                // must not come before the restart.
+                let restart_s = self.frame.t_s;
+                self.predictor = Some(Predictor {
+                    t_ref_s: restart_s,
+                    state: found.state,
+                    covariance: Some(full_frame_covariance()),
+                });
+                self.restart_t_s = restart_s;
+                self.scheduler.reset();
+                let mut spins = 0;
+                let mut event = Event::Restart {
+                    t_s: restart_s,
+                    state: found.state,
+                };
+                loop {
+                    match self.measurement_tx.push(event) {
+                        Ok(()) => break,
+                        Err(rtrb::PushError::Full(back)) => {
+                            event = back;
+                            backoff(&mut spins);
+                        }
                     }
                 }
-                Err(r) => {
-                    scheduler.report(point_index, false);
-                    report.rejections.count(&r);
+                self.counters.initialisations += 1;
+            }
+            // Frames of another size than the camera model's will never match it: stop, saying so.
+            Err(MatchError::FrameSize {
+                frame_width,
+                frame_height,
+                camera_width,
+                camera_height,
+            }) => {
+                self.counters.stopped_by = Some(GrabError::FrameSize {
+                    width: frame_width,
+                    height: frame_height,
+                    expected_width: camera_width,
+                    expected_height: camera_height,
+                });
+                return Slots::Stop;
+            }
+            Err(_) => {
+                self.predictor = None;
+                self.counters.failed_initialisations += 1;
+            }
+        }
+        frame_slots
+    }
+
+    /// Places the next ROI from the latest predictor, reads it at `t_s`, measures its blob and queues the
+    /// measurement for the estimator. One slot.
+    fn read_roi(&mut self, t_s: f64) -> Slots {
+        let Some(p) = self.predictor else {
+            return Slots::Advance(1);
+        };
+        let Some(request) = self.scheduler.next(&p, t_s) else {
+            self.counters.rejections.absent += 1;
+            return Slots::Advance(1);
+        };
+        let trigger = RoiTrigger {
+            point_id: self.target.points()[request.point_index].id,
+            roi: request.roi,
+            t_s,
+        };
+        let image = &mut self.image;
+        let grab = self.camera.grab_roi(&trigger, image).and_then(|()| {
+            if image.is_consistent() {
+                Ok(())
+            } else {
+                Err(GrabError::Dropped {
+                    reason: format!(
+                        "{} pixel values for a {} x {} ROI",
+                        image.pixels.len(),
+                        image.roi.width,
+                        image.roi.height
+                    ),
+                })
+            }
+        });
+        if let Err(e) = grab {
+            if !e.is_transient() {
+                self.counters.stopped_by = Some(e);
+                return Slots::Stop;
+            }
+            // A point whose ROIs keep failing counts as lost, so the camera side re-initialises.
+            self.scheduler.report(request.point_index, false);
+            self.counters.camera_errors += 1;
+            return Slots::Advance(1);
+        }
+        let grabbed = Instant::now();
+        self.counters.rois += 1;
+        // The point the camera says it read (a replay may not follow the schedule).
+        let point_index = if self.image.point_id == trigger.point_id {
+            request.point_index
+        } else {
+            self.target
+                .index_of(self.image.point_id)
+                .unwrap_or(request.point_index)
+        };
+        match measure_roi(&self.image, &self.config.centroid, &self.camera_model.time) {
+            Ok(m) => {
+                self.scheduler.report(point_index, true);
+                if self
+                    .measurement_tx
+                    .push(Event::Measurement { m, grabbed })
+                    .is_err()
+                {
+                    self.counters.dropped += 1;
+                } else {
+                    self.counters.measurements += 1;
                 }
             }
-            slot += 1;
+            Err(r) => {
+                self.scheduler.report(point_index, false);
+                self.counters.rejections.count(&r);
+            }
         }
-        camera_done.store(true, Ordering::Release);
-        let estimation = estimation.join();
-        (report, estimation)
-    });
-    let (estimates, latencies_us, refused, measured) =
-        estimation_side.map_err(|_| PipelineError::EstimatorPanicked)?;
-    Ok(LoopReport {
-        estimates,
-        latencies_us,
-        rois: camera_side.rois,
-        measurements: camera_side.measurements,
-        rejections: camera_side.rejections,
-        dropped: camera_side.dropped,
-        late: camera_side.late,
-        initialisations: camera_side.initialisations,
-        failed_initialisations: camera_side.failed_initialisations,
-        refused,
-        camera_errors: camera_side.camera_errors,
-        stopped_by: camera_side.stopped_by,
-        wall_s: start.elapsed().as_secs_f64(),
-        measured,
-    })
+        Slots::Advance(1)
+    }
 }
 
 #[derive(Debug, Default)]
