@@ -5,5 +5,18 @@
 //!
 //! - [`robot`]: an Orthoglide-like 3-dof translational parallel robot, its kinematics and joint-space dynamics
 //!   (configuration-dependent inertia, viscous and Coulomb friction, force limits). Pure math.
+//! - [`reference`]: the paths to follow (the simulator's orthoglide path at any speed, seeded random paths).
+//! - [`control`]: the controllers behind one trait: computed torque with the tracker's pose and velocity, the same
+//!   with pose only, the kinematic visual servo, and the true-state floor. Pure math.
+//! - [`closed_loop`]: the loop in simulated time through the simulated ROI or frame camera and roitrack's trackers
+//!   ([`run_servo`]), deterministic for a seed, with divergence detected and reported.
 
+pub mod closed_loop;
+pub mod control;
+pub mod reference;
 pub mod robot;
+
+pub use closed_loop::{
+    CameraKind, CameraTiming, ControllerKind, ServoConfig, ServoError, ServoReport, ServoSample,
+    run_servo,
+};

@@ -1,0 +1,806 @@
+//! The closed loop in simulated time: the robot moves, the simulated camera sees the target where the robot has it,
+//! the tracker estimates, the controller acts ([`run_servo`]). Deterministic for a seed.
+//!
+//! The clock ticks at the control rate (4 kHz, one ROI per tick). At each tick `t`:
+//! 1. the estimates whose processing ended by `t` become available to the controller;
+//! 2. the controller computes the forces that act at `t + actuation delay` (the `true-state` floor: the true state now,
+//!    acting now);
+//! 3. the robot is integrated to the next tick (RK4, 4 steps per tick) under the forces acting, each clipped to the
+//!    actuator's limit;
+//! 4. the camera exposes: the ROI camera one ROI centred where roitrack's scheduler predicts the blob
+//!    ([`roitrack_pipeline::RoiScheduler`]), rendered from the robot's motion over its exposure
+//!    ([`roitrack_image::RoiRenderer`]), centroided ([`roitrack_image::measure_roi`]) and pushed to the tracker
+//!    ([`roitrack_core::estimator::Tracker`]); a frame camera a whole global-shutter frame when one is due, tracked by
+//!    [`roitrack_pipeline::FrameTracker`]. An estimate is available `exposure / 2 + readout + processing + extra
+//!    latency` after the time it refers to.
+//!
+//! A run whose error from the path passes [`ServoConfig::divergence_error_m`], whose platform leaves the workspace, or
+//! whose controller gives a force that is not finite is stopped and reported unstable.
+
+use std::collections::VecDeque;
+
+use nalgebra::Vector3;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+use roitrack_core::estimator::{Estimate, Estimator, TrackError, Tracker, TrackerConfig};
+use roitrack_core::time::{Readout, TimeModel};
+use roitrack_core::{CameraModel, MotionState, Target};
+use roitrack_image::{
+    CentroidOptions, Frame, RenderScratch, RoiImage, RoiRenderer, SensorError, SensorModel,
+    measure_roi,
+};
+use roitrack_pipeline::{
+    FrameError, FrameTracker, FrameTrackerConfig, Predictor, RoiScheduler, SchedulerConfig,
+};
+use thiserror::Error;
+
+use crate::control::{
+    ComputedTorque, ControlInput, Controller, Gains, KinematicGains, KinematicServo, Observation,
+    VelocitySource,
+};
+use crate::reference::{ReferencePath, ReferencePoint};
+use crate::robot::{Geometry, RobotParams, RobotState, step_rk4};
+
+/// Which controller a run uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ControllerKind {
+    /// Computed torque, the tracker's position and velocity predicted to the actuation instant.
+    Ctc,
+    /// Computed torque, position only (velocity by differences of the estimated positions).
+    CtcPose,
+    /// Kinematic visual servo into the drives' joint-velocity loop.
+    Kvs,
+    /// Computed torque on the true state, with no delay: the floor.
+    TrueState,
+}
+
+impl ControllerKind {
+    pub const ALL: [Self; 4] = [Self::Ctc, Self::CtcPose, Self::Kvs, Self::TrueState];
+
+    /// `ctc`, `ctc-pose`, `kvs`, `true-state`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Ctc => "ctc",
+            Self::CtcPose => "ctc-pose",
+            Self::Kvs => "kvs",
+            Self::TrueState => "true-state",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| k.name() == name)
+    }
+}
+
+/// What the controller sees the robot through.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CameraKind {
+    /// The ROI camera: one ROI every 250 µs, an estimate every 10 (roitrack).
+    Roi,
+    /// A 120 Hz global-shutter frame camera through the frame tracker.
+    Frames120,
+    /// A 30 Hz global-shutter frame camera through the frame tracker.
+    Frames30,
+    /// No camera: the true state (the `true-state` controller's).
+    Truth,
+}
+
+impl CameraKind {
+    /// `roi`, `frames-120`, `frames-30`, `truth`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Roi => "roi",
+            Self::Frames120 => "frames-120",
+            Self::Frames30 => "frames-30",
+            Self::Truth => "truth",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Self> {
+        [Self::Roi, Self::Frames120, Self::Frames30, Self::Truth]
+            .into_iter()
+            .find(|k| k.name() == name)
+    }
+
+    /// The camera's timing: exposure, readout and processing (docs/servo.md, "Latency").
+    pub fn timing(&self) -> CameraTiming {
+        match self {
+            // 100 µs exposure (the paper's), a small ROI read in 50 µs, 100 µs to centroid and update the filter.
+            Self::Roi | Self::Truth => CameraTiming {
+                rate_hz: 4000.0,
+                exposure_s: 100e-6,
+                readout_s: 50e-6,
+                processing_s: 100e-6,
+            },
+            // 1 ms exposure, a 1 Mpx frame read in half a frame period (at most 4 ms), 3 ms to find and fit the blobs.
+            Self::Frames120 => CameraTiming {
+                rate_hz: 120.0,
+                exposure_s: 1e-3,
+                readout_s: 4e-3,
+                processing_s: 3e-3,
+            },
+            Self::Frames30 => CameraTiming {
+                rate_hz: 30.0,
+                exposure_s: 1e-3,
+                readout_s: 4e-3,
+                processing_s: 3e-3,
+            },
+        }
+    }
+}
+
+/// When a camera's images are taken and when their estimates are ready.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CameraTiming {
+    /// ROIs or frames per second.
+    pub rate_hz: f64,
+    pub exposure_s: f64,
+    /// From the end of the exposure to the image in memory.
+    pub readout_s: f64,
+    /// From the image in memory to the estimate.
+    pub processing_s: f64,
+}
+
+impl CameraTiming {
+    /// From the time an estimate refers to (its newest image's mid-exposure) to the estimate ready.
+    pub fn latency_s(&self) -> f64 {
+        self.exposure_s / 2.0 + self.readout_s + self.processing_s
+    }
+}
+
+/// One closed-loop run.
+#[derive(Debug, Clone)]
+pub struct ServoConfig {
+    pub controller: ControllerKind,
+    pub camera: CameraKind,
+    pub path: ReferencePath,
+    /// The simulated robot.
+    pub robot: RobotParams,
+    /// The controller's model: the robot's masses times this (0.8: a payload 25 % of the model's masses unknown to
+    /// it, the model 20 % off) and its friction times `model_friction_factor`.
+    pub model_mass_factor: f64,
+    pub model_friction_factor: f64,
+    /// The gains; `None`: from the loop's latency ([`Gains::for_latency`], [`KinematicGains::for_latency`]), with
+    /// [`Self::depth_factor`] along the optical axis for a camera.
+    pub gains: Option<Gains>,
+    /// [`Gains::depth_factor`] of the gains made from the latency, for the camera-fed controllers (the floor's is 1).
+    pub depth_factor: f64,
+    /// The natural frequency (or λ) times this: for the study of the largest stable gain.
+    pub gain_scale: f64,
+    /// From the command to the force (s): the drive's delay. The `true-state` floor has none.
+    pub actuation_delay_s: f64,
+    /// Latency added between the camera and the controller (s).
+    pub extra_latency_s: f64,
+    /// The camera's timing; `None`: [`CameraKind::timing`].
+    pub timing: Option<CameraTiming>,
+    /// The tracker's configuration (ROI camera; the frame tracker's is made from it).
+    pub tracker: TrackerConfig,
+    /// Seed of the camera's noise.
+    pub seed: u64,
+    /// Distance from the path (m) beyond which the run is stopped as unstable: 50 mm, ten times the largest error
+    /// of any run that ends (under 5 mm even at 30 Hz) and still inside the image (the path keeps the blobs about
+    /// 90 mm from its border at 0.6 m).
+    pub divergence_error_m: f64,
+    /// Control (and ROI) ticks per second.
+    pub control_rate_hz: f64,
+    /// RK4 steps per control tick.
+    pub substeps: usize,
+}
+
+impl ServoConfig {
+    /// The run of `controller` through `camera` on the orthoglide path at `speed_scale` times 1 m/s peak, with the
+    /// defaults: the Orthoglide-like robot, the model's masses and friction 20 % low, 250 µs actuation delay, gains
+    /// from the latency, seed 1.
+    ///
+    /// ```
+    /// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig};
+    /// let config = ServoConfig::new(ControllerKind::Ctc, CameraKind::Roi, 1.0);
+    /// assert_eq!(config.path.name(), "orthoglide");
+    /// ```
+    pub fn new(controller: ControllerKind, camera: CameraKind, speed_scale: f64) -> Self {
+        let camera = if controller == ControllerKind::TrueState {
+            CameraKind::Truth
+        } else {
+            camera
+        };
+        Self {
+            controller,
+            camera,
+            path: ReferencePath::orthoglide(speed_scale),
+            robot: RobotParams::orthoglide(),
+            model_mass_factor: 0.8,
+            model_friction_factor: 0.8,
+            gains: None,
+            depth_factor: 0.5,
+            gain_scale: 1.0,
+            actuation_delay_s: 250e-6,
+            extra_latency_s: 0.0,
+            timing: None,
+            tracker: servo_tracker_config(),
+            seed: 1,
+            divergence_error_m: 0.05,
+            control_rate_hz: 4000.0,
+            substeps: 4,
+        }
+    }
+
+    /// The camera's timing in use.
+    pub fn camera_timing(&self) -> CameraTiming {
+        self.timing.unwrap_or_else(|| self.camera.timing())
+    }
+
+    /// How old, on average, the feedback is when the command it made acts (s), as the gains are tuned for it: the
+    /// camera's latency, the actuation delay and half the interval between estimates (an estimate every 10 ROIs, or
+    /// one per frame); zero for the `true-state` floor. The extra latency is not in it: it is what the loop is
+    /// tested against, not tuned for.
+    pub fn feedback_age_s(&self) -> f64 {
+        if self.camera == CameraKind::Truth {
+            return 0.0;
+        }
+        let timing = self.camera_timing();
+        let estimate_interval_s = match self.camera {
+            CameraKind::Roi => self.tracker.every as f64 / timing.rate_hz,
+            _ => 1.0 / timing.rate_hz,
+        };
+        timing.latency_s()
+            + self.extra_latency_s
+            + self.actuation_delay_s
+            + estimate_interval_s / 2.0
+    }
+
+    fn check(&self) -> Result<(), ServoError> {
+        let positive = |field: &'static str, value: f64| {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(ServoError::Invalid { field, value })
+            }
+        };
+        let non_negative = |field: &'static str, value: f64| {
+            if value.is_finite() && value >= 0.0 {
+                Ok(())
+            } else {
+                Err(ServoError::Invalid { field, value })
+            }
+        };
+        positive("model_mass_factor", self.model_mass_factor)?;
+        non_negative("model_friction_factor", self.model_friction_factor)?;
+        positive("gain_scale", self.gain_scale)?;
+        positive("depth_factor", self.depth_factor)?;
+        non_negative("actuation_delay_s", self.actuation_delay_s)?;
+        non_negative("extra_latency_s", self.extra_latency_s)?;
+        positive("divergence_error_m", self.divergence_error_m)?;
+        positive("control_rate_hz", self.control_rate_hz)?;
+        positive("substeps", self.substeps as f64)?;
+        if let Some(gains) = self.gains {
+            positive(
+                "gains.natural_frequency_radps",
+                gains.natural_frequency_radps,
+            )?;
+            positive("gains.damping", gains.damping)?;
+        }
+        let timing = self.camera_timing();
+        positive("timing.rate_hz", timing.rate_hz)?;
+        non_negative("timing.exposure_s", timing.exposure_s)?;
+        non_negative("timing.readout_s", timing.readout_s)?;
+        non_negative("timing.processing_s", timing.processing_s)?;
+        if self.camera == CameraKind::Roi && (timing.rate_hz - self.control_rate_hz).abs() > 1e-9 {
+            return Err(ServoError::Invalid {
+                field: "timing.rate_hz (the ROI camera reads one ROI per control tick)",
+                value: timing.rate_hz,
+            });
+        }
+        if (self.controller == ControllerKind::TrueState) != (self.camera == CameraKind::Truth) {
+            return Err(ServoError::Invalid {
+                field: "camera (the true-state controller and only it sees the truth)",
+                value: f64::NAN,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// The tracker's configuration in the loop: roitrack's default Kalman filter with its process noise fixed at its
+/// starting density (1 (m/s²)²/Hz) instead of adapted to the motion. Adapted, it averages the still start down to a
+/// density so low that the robot's first accelerations under feedback (force steps at each new estimate) fall
+/// outside its gate: the estimates are disputed and the loop diverges (docs/servo.md, "The tracker in the loop").
+///
+/// ```
+/// use roitrack_core::estimator::EstimatorConfig;
+/// let EstimatorConfig::Kalman(tuning) = roitrack_servo::closed_loop::servo_tracker_config().estimator else {
+///     unreachable!()
+/// };
+/// assert!(!tuning.adapt_motion);
+/// ```
+pub fn servo_tracker_config() -> TrackerConfig {
+    let mut config = TrackerConfig::default();
+    if let roitrack_core::estimator::EstimatorConfig::Kalman(tuning) = &mut config.estimator {
+        tuning.adapt_motion = false;
+    }
+    config
+}
+
+/// Why a run could not be made (an unstable run is not an error: see [`ServoReport::stable`]).
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ServoError {
+    #[error("servo option {field} is out of range: {value}")]
+    Invalid { field: &'static str, value: f64 },
+    #[error("the simulated camera: {0}")]
+    Sensor(#[from] SensorError),
+    #[error("the tracker refused its configuration: {0}")]
+    Tracker(String),
+    #[error("the frame tracker failed on a frame: {0}")]
+    Frame(#[from] FrameError),
+    #[error("the tracker refused a measurement: {0}")]
+    Measurement(#[from] TrackError),
+}
+
+/// One control tick of a run (robot frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ServoSample {
+    pub t_s: f64,
+    pub reference: ReferencePoint,
+    pub achieved_m: Vector3<f64>,
+    pub achieved_velocity_mps: Vector3<f64>,
+    /// The forces acting at `t_s` (N), after clipping.
+    pub force_n: Vector3<f64>,
+}
+
+impl ServoSample {
+    pub fn error_m(&self) -> f64 {
+        (self.achieved_m - self.reference.position_m).norm()
+    }
+}
+
+/// What a run did.
+#[derive(Debug, Clone)]
+pub struct ServoReport {
+    pub controller: ControllerKind,
+    pub camera: CameraKind,
+    pub path: ReferencePath,
+    /// RMS and largest distance between the platform and the path over the run (mm).
+    pub rms_error_mm: f64,
+    pub max_error_mm: f64,
+    /// Whether the run went to its end; else why it was stopped.
+    pub stable: bool,
+    pub stop_reason: Option<String>,
+    /// The gains used (for `kvs`: λ as the natural frequency).
+    pub gains: Gains,
+    /// Median age of the feedback when the commands it made acted (s): from the mid-exposure of the newest image
+    /// in the estimate to the actuation.
+    pub median_feedback_age_s: f64,
+    /// Fraction of control ticks at which some actuator was at its force limit.
+    pub saturated_fraction: f64,
+    pub samples: Vec<ServoSample>,
+    /// Every estimate of the tracker (camera frame), in order.
+    pub estimates: Vec<Estimate>,
+}
+
+/// The robot's motion so far, at every integration step, to render the camera's exposures from.
+struct History {
+    dt_s: f64,
+    states: Vec<RobotState>,
+}
+
+impl History {
+    /// The state at `t_s`, interpolated (cubic Hermite: position and velocity are both known at each step).
+    fn at(&self, t_s: f64) -> RobotState {
+        let last = self.states.len() - 1;
+        let x = (t_s / self.dt_s).clamp(0.0, last as f64);
+        let k = (x.floor() as usize).min(last.saturating_sub(1));
+        if last == 0 {
+            return self.states[0];
+        }
+        let (a, b) = (&self.states[k], &self.states[k + 1]);
+        let u = x - k as f64;
+        let h = self.dt_s;
+        let (u2, u3) = (u * u, u * u * u);
+        let position = a.position_m * (2.0 * u3 - 3.0 * u2 + 1.0)
+            + a.velocity_mps * (h * (u3 - 2.0 * u2 + u))
+            + b.position_m * (-2.0 * u3 + 3.0 * u2)
+            + b.velocity_mps * (h * (u3 - u2));
+        let velocity = (a.position_m * (6.0 * u2 - 6.0 * u) + b.position_m * (-6.0 * u2 + 6.0 * u))
+            / h
+            + a.velocity_mps * (3.0 * u2 - 4.0 * u + 1.0)
+            + b.velocity_mps * (3.0 * u2 - 2.0 * u);
+        RobotState {
+            position_m: position,
+            velocity_mps: velocity,
+        }
+    }
+}
+
+/// The camera side of a run.
+enum CameraSide {
+    Truth,
+    Roi(Box<RoiSide>),
+    Frames(Box<FrameSide>),
+}
+
+struct RoiSide {
+    renderer: RoiRenderer,
+    scheduler: RoiScheduler,
+    tracker: Tracker,
+    predictor: Predictor,
+    centroid: CentroidOptions,
+    time: TimeModel,
+    image: RoiImage,
+    scratch: RenderScratch,
+    rng: ChaCha8Rng,
+}
+
+struct FrameSide {
+    renderer: RoiRenderer,
+    tracker: FrameTracker,
+    frame: Frame,
+    scratch: RenderScratch,
+    rng: ChaCha8Rng,
+    rate_hz: f64,
+    exposure_s: f64,
+    next_frame: usize,
+}
+
+impl CameraSide {
+    fn new(config: &ServoConfig) -> Result<Self, ServoError> {
+        let target = Target::grid4x4();
+        let timing = config.camera_timing();
+        let (rotation, home) = config.path.home_in_camera();
+        let rng = ChaCha8Rng::seed_from_u64(config.seed);
+        match config.camera {
+            CameraKind::Truth => Ok(Self::Truth),
+            CameraKind::Roi => {
+                let mut camera = CameraModel::canonical();
+                camera.time = TimeModel {
+                    readout: Readout::SequentialRois,
+                    exposure_s: timing.exposure_s,
+                };
+                let renderer =
+                    RoiRenderer::new(camera.clone(), target.clone(), SensorModel::default())?;
+                let scheduler = RoiScheduler::new(
+                    camera.clone(),
+                    target.clone(),
+                    SchedulerConfig::default(),
+                    config.tracker.noise_px,
+                );
+                let tracker = Tracker::new(camera.clone(), target, config.tracker)
+                    .map_err(|e| ServoError::Tracker(e.to_string()))?;
+                Ok(Self::Roi(Box::new(RoiSide {
+                    renderer,
+                    scheduler,
+                    tracker,
+                    // The robot starts at rest at home, where the first ROIs are placed.
+                    predictor: Predictor {
+                        t_ref_s: 0.0,
+                        state: MotionState::at_rest(rotation, home),
+                        covariance: None,
+                    },
+                    centroid: CentroidOptions::default(),
+                    time: camera.time,
+                    image: RoiImage::default(),
+                    scratch: RenderScratch::new(),
+                    rng,
+                })))
+            }
+            CameraKind::Frames120 | CameraKind::Frames30 => {
+                let mut camera = CameraModel::canonical();
+                camera.time = TimeModel {
+                    readout: Readout::GlobalShutter,
+                    exposure_s: timing.exposure_s,
+                };
+                let renderer =
+                    RoiRenderer::new(camera.clone(), target.clone(), SensorModel::default())?;
+                let frame_config = FrameTrackerConfig {
+                    tracker: FrameTrackerConfig::frame_estimator(config.tracker, None, None),
+                    ..FrameTrackerConfig::default()
+                };
+                let tracker = FrameTracker::new(camera, target, frame_config)
+                    .map_err(|e| ServoError::Tracker(e.to_string()))?;
+                Ok(Self::Frames(Box::new(FrameSide {
+                    renderer,
+                    tracker,
+                    frame: Frame::default(),
+                    scratch: RenderScratch::new(),
+                    rng,
+                    rate_hz: timing.rate_hz,
+                    exposure_s: timing.exposure_s,
+                    next_frame: 0,
+                })))
+            }
+        }
+    }
+
+    /// Exposes what is due by `t_now_s` (the robot's motion is known up to it): the ROI of the tick `t_tick_s`, or the
+    /// frames whose exposure has ended. Returns the estimates made.
+    fn expose(
+        &mut self,
+        t_tick_s: f64,
+        t_now_s: f64,
+        state_at: &impl Fn(f64) -> MotionState,
+        out: &mut Vec<Estimate>,
+    ) -> Result<(), ServoError> {
+        match self {
+            Self::Truth => Ok(()),
+            Self::Roi(side) => {
+                let Some(request) = side.scheduler.next(&side.predictor, t_tick_s) else {
+                    return Ok(());
+                };
+                let point_id = side.tracker.target().points()[request.point_index].id;
+                let bit_depth = side.renderer.sensor().bit_depth as u8;
+                side.image.set(t_tick_s, point_id, request.roi, bit_depth);
+                side.renderer.render_readout(
+                    state_at,
+                    &request.roi,
+                    t_tick_s,
+                    &mut side.rng,
+                    &mut side.scratch,
+                    &mut side.image.pixels,
+                );
+                let measured = measure_roi(&side.image, &side.centroid, &side.time);
+                side.scheduler.report(request.point_index, measured.is_ok());
+                if let Ok(measurement) = measured
+                    && let Some(estimate) = side.tracker.push(&measurement)?
+                {
+                    if estimate.status.is_vouched_for() {
+                        side.predictor = Predictor {
+                            t_ref_s: estimate.t_ref_s,
+                            state: estimate.state,
+                            covariance: estimate.covariance,
+                        };
+                    }
+                    out.push(estimate);
+                }
+                Ok(())
+            }
+            Self::Frames(side) => loop {
+                let t_frame = side.next_frame as f64 / side.rate_hz;
+                if t_frame + side.exposure_s / 2.0 > t_now_s {
+                    return Ok(());
+                }
+                side.next_frame += 1;
+                side.renderer.render_frame(
+                    state_at,
+                    t_frame,
+                    &mut side.rng,
+                    &mut side.scratch,
+                    &mut side.frame,
+                );
+                let outcome = side.tracker.process(&side.frame)?;
+                if let Some(estimate) = outcome.estimate {
+                    out.push(estimate);
+                }
+            },
+        }
+    }
+}
+
+/// Runs one closed loop (see the [module docs](self)).
+///
+/// ```
+/// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig, run_servo};
+/// // The floor: computed torque on the true state, the orthoglide path at 1 m/s.
+/// let report = run_servo(&ServoConfig::new(ControllerKind::TrueState, CameraKind::Truth, 1.0)).unwrap();
+/// assert!(report.stable);
+/// assert!(report.rms_error_mm < 0.5, "{}", report.rms_error_mm);
+/// ```
+pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
+    config.check()?;
+    let path = &config.path;
+    let robot = config.robot;
+    let model = robot
+        .with_mass_factor(config.model_mass_factor)
+        .with_friction_factor(config.model_friction_factor);
+    let age = config.feedback_age_s();
+    let (gains, mut controller): (Gains, Box<dyn Controller>) = match config.controller {
+        ControllerKind::Kvs => {
+            let mut kinematic = KinematicGains::for_latency(age);
+            if let Some(g) = config.gains {
+                kinematic.lambda_per_s = g.natural_frequency_radps;
+            }
+            kinematic.lambda_per_s *= config.gain_scale;
+            (
+                Gains::critically_damped(kinematic.lambda_per_s),
+                Box::new(KinematicServo::new(model, kinematic)),
+            )
+        }
+        kind => {
+            let depth_factor = if kind == ControllerKind::TrueState {
+                1.0
+            } else {
+                config.depth_factor
+            };
+            let gains = config
+                .gains
+                .unwrap_or_else(|| Gains::for_latency(age).with_depth_factor(depth_factor))
+                .scaled(config.gain_scale);
+            let velocity = if kind == ControllerKind::CtcPose {
+                VelocitySource::PoseDifferences
+            } else {
+                VelocitySource::Estimate
+            };
+            (
+                gains,
+                Box::new(ComputedTorque::new(kind.name(), model, gains, velocity)),
+            )
+        }
+    };
+    let truth_fed = config.controller == ControllerKind::TrueState;
+    let actuation_delay_s = if truth_fed {
+        0.0
+    } else {
+        config.actuation_delay_s
+    };
+    let timing = config.camera_timing();
+    let availability_s = timing.latency_s() + config.extra_latency_s;
+
+    let tick_s = 1.0 / config.control_rate_hz;
+    let step_s = tick_s / config.substeps as f64;
+    let ticks = (path.duration_s() / tick_s).round() as usize;
+    let mut camera = CameraSide::new(config)?;
+    let mut state = RobotState::default();
+    let mut history = History {
+        dt_s: step_s,
+        states: Vec::with_capacity(ticks * config.substeps + 1),
+    };
+    history.states.push(state);
+    // The forces acting, and the commands waiting for their actuation instant.
+    let hold = Geometry::at(&model, &Vector3::zeros())
+        .expect("home is in the workspace")
+        .gravity_forces(&model);
+    let mut force = hold;
+    let mut commands: VecDeque<(f64, Vector3<f64>)> = VecDeque::new();
+    let mut pending: VecDeque<(f64, Observation)> = VecDeque::new();
+    let mut observation: Option<Observation> = None;
+    let mut estimates = Vec::new();
+    let mut new_estimates = Vec::new();
+    let mut samples = Vec::with_capacity(ticks + 1);
+    let mut ages = Vec::with_capacity(ticks);
+    let mut saturated_ticks = 0usize;
+    let mut stop_reason = None;
+    let (_, home_cam) = path.home_in_camera();
+    let limit = robot.force_limit_n;
+    let clip = |f: Vector3<f64>| f.map(|x| x.clamp(-limit, limit));
+    samples.push(ServoSample {
+        t_s: 0.0,
+        reference: path.at(0.0),
+        achieved_m: state.position_m,
+        achieved_velocity_mps: state.velocity_mps,
+        force_n: force,
+    });
+
+    'ticks: for n in 0..ticks {
+        let t_s = n as f64 * tick_s;
+        // 1. The estimates ready by now.
+        while pending
+            .front()
+            .is_some_and(|(ready_s, _)| *ready_s <= t_s + 1e-12)
+        {
+            observation = pending.pop_front().map(|(_, o)| o);
+        }
+        // 2. The command.
+        let t_act_s = t_s + actuation_delay_s;
+        let geometry = Geometry::at(&robot, &state.position_m).expect("checked at each step");
+        let fed = if truth_fed {
+            Some(Observation {
+                t_s,
+                position_m: state.position_m,
+                velocity_mps: state.velocity_mps,
+                acceleration_mps2: None,
+            })
+        } else {
+            observation
+        };
+        if let Some(o) = &fed {
+            ages.push(t_act_s - o.t_s);
+        }
+        let input = ControlInput {
+            t_act_s,
+            dt_s: tick_s,
+            reference: path.at(t_act_s),
+            observation: fed,
+            drive_joint_velocity_mps: geometry.joint_velocity(&state.velocity_mps),
+        };
+        let command = controller.command(&input);
+        if !command.iter().all(|f| f.is_finite()) {
+            stop_reason = Some(format!(
+                "the controller gave a force that is not finite at t = {t_s:.4} s"
+            ));
+            break 'ticks;
+        }
+        commands.push_back((t_act_s, clip(command)));
+        // 3. The robot to the next tick.
+        let mut saturated = false;
+        for j in 0..config.substeps {
+            let t_step = t_s + j as f64 * step_s;
+            while commands
+                .front()
+                .is_some_and(|(at_s, _)| *at_s <= t_step + 1e-12)
+            {
+                force = commands.pop_front().map(|(_, f)| f).expect("checked");
+            }
+            saturated |= force.amax() >= limit;
+            match step_rk4(&robot, &state, &force, step_s) {
+                Ok(next)
+                    if next
+                        .position_m
+                        .iter()
+                        .chain(&next.velocity_mps)
+                        .all(|x| x.is_finite()) =>
+                {
+                    state = next
+                }
+                Ok(_) => {
+                    stop_reason = Some(format!(
+                        "the robot's state is not finite at t = {t_step:.4} s"
+                    ));
+                    break 'ticks;
+                }
+                Err(e) => {
+                    stop_reason = Some(format!("at t = {t_step:.4} s {e}"));
+                    break 'ticks;
+                }
+            }
+            history.states.push(state);
+        }
+        saturated_ticks += usize::from(saturated);
+        let t_next = (n + 1) as f64 * tick_s;
+        let sample = ServoSample {
+            t_s: t_next,
+            reference: path.at(t_next),
+            achieved_m: state.position_m,
+            achieved_velocity_mps: state.velocity_mps,
+            force_n: force,
+        };
+        samples.push(sample);
+        if sample.error_m() > config.divergence_error_m {
+            stop_reason = Some(format!(
+                "diverged: {:.1} mm from the path at t = {t_next:.4} s (limit {:.1} mm)",
+                sample.error_m() * 1e3,
+                config.divergence_error_m * 1e3
+            ));
+            break 'ticks;
+        }
+        // 4. The camera: the ROI exposed around this tick (its exposure has ended), or the frames due.
+        let state_at = |t: f64| {
+            let s = history.at(t);
+            path.camera_state(&s.position_m, &s.velocity_mps)
+        };
+        new_estimates.clear();
+        camera.expose(t_s, t_next, &state_at, &mut new_estimates)?;
+        for estimate in &new_estimates {
+            if estimate.status.is_vouched_for() && estimate.state.is_finite() {
+                pending.push_back((
+                    estimate.t_ref_s + availability_s,
+                    Observation {
+                        t_s: estimate.t_ref_s,
+                        position_m: estimate.state.cam_t_obj_m - home_cam,
+                        velocity_mps: estimate.state.velocity_mps,
+                        acceleration_mps2: estimate.acceleration.map(|a| a.linear_mps2),
+                    },
+                ));
+            }
+        }
+        estimates.extend_from_slice(&new_estimates);
+    }
+    let errors: Vec<f64> = samples.iter().map(ServoSample::error_m).collect();
+    let rms_error_mm =
+        (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt() * 1e3;
+    let max_error_mm = errors.iter().copied().fold(0.0, f64::max) * 1e3;
+    Ok(ServoReport {
+        controller: config.controller,
+        camera: config.camera,
+        path: config.path.clone(),
+        rms_error_mm,
+        max_error_mm,
+        stable: stop_reason.is_none(),
+        stop_reason,
+        gains,
+        median_feedback_age_s: if ages.is_empty() {
+            f64::NAN
+        } else {
+            roitrack_core::stats::median(&ages)
+        },
+        saturated_fraction: saturated_ticks as f64 / ticks.max(1) as f64,
+        samples,
+        estimates,
+    })
+}
