@@ -29,6 +29,7 @@ enum Command {
     Plot(commands::plot::PlotArgs),
     Detect(commands::detect::DetectArgs),
     Target(commands::target::TargetArgs),
+    Servo(commands::servo::ServoArgs),
     #[cfg(feature = "lab")]
     Lab(commands::lab::LabArgs),
     #[cfg(feature = "genicam")]
@@ -120,6 +121,7 @@ fn main() -> ExitCode {
         Command::Plot(args) => commands::plot::run(&args),
         Command::Detect(args) => commands::detect::run(&args),
         Command::Target(args) => commands::target::run(&args),
+        Command::Servo(args) => commands::servo::run(&args),
         #[cfg(feature = "lab")]
         Command::Lab(args) => commands::lab::run(&args),
         #[cfg(feature = "genicam")]

@@ -242,10 +242,7 @@ impl ServoConfig {
             CameraKind::Roi => self.tracker.every as f64 / timing.rate_hz,
             _ => 1.0 / timing.rate_hz,
         };
-        timing.latency_s()
-            + self.extra_latency_s
-            + self.actuation_delay_s
-            + estimate_interval_s / 2.0
+        timing.latency_s() + self.actuation_delay_s + estimate_interval_s / 2.0
     }
 
     fn check(&self) -> Result<(), ServoError> {

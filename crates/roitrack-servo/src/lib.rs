@@ -10,6 +10,7 @@
 //!   with pose only, the kinematic visual servo, and the true-state floor. Pure math.
 //! - [`closed_loop`]: the loop in simulated time through the simulated ROI or frame camera and roitrack's trackers
 //!   ([`run_servo`]), deterministic for a seed, with divergence detected and reported.
+//! - [`output`]: a run's files (reference and achieved poses in TUM, the estimates, the per-tick log).
 
 pub mod closed_loop;
 pub mod control;
@@ -20,3 +21,4 @@ pub use closed_loop::{
     CameraKind, CameraTiming, ControllerKind, ServoConfig, ServoError, ServoReport, ServoSample,
     run_servo,
 };
+pub mod output;

@@ -216,11 +216,16 @@ fn an_unstable_loop_is_detected_and_stopped() {
     }
 }
 
-/// The ROI camera with the tracker's pose and velocity, 1 ms of extra latency: still stable.
+/// The ROI camera with the tracker's pose and velocity and 1 ms of extra latency, the gains tuned for the whole
+/// latency by the rule of `Gains::for_latency`: stable. (With the gains left at the nominal latency's, the run
+/// diverges near 3 s: docs/servo.md, "What latency costs".)
 #[test]
-fn one_millisecond_of_extra_latency_keeps_the_roi_loop_stable() {
+fn one_millisecond_of_extra_latency_keeps_the_retuned_roi_loop_stable() {
     let mut config = ServoConfig::new(ControllerKind::Ctc, CameraKind::Roi, 1.0);
     config.extra_latency_s = 1e-3;
+    config.gains = Some(
+        Gains::for_latency(config.feedback_age_s() + 1e-3).with_depth_factor(config.depth_factor),
+    );
     let report = run_servo(&config).unwrap();
     assert!(report.stable, "{:?}", report.stop_reason);
 }

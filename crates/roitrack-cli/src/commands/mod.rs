@@ -8,6 +8,7 @@ pub mod lab;
 #[cfg(feature = "genicam")]
 pub mod live;
 pub mod plot;
+pub mod servo;
 pub mod simulate;
 pub mod target;
 pub mod track;

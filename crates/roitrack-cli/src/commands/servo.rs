@@ -1,0 +1,148 @@
+//! `roitrack servo`: close the loop on a simulated fast robot with roitrack's estimates (see docs/servo.md and the
+//! library call `roitrack_servo::run_servo`); this file only translates the options and prints.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Args, ValueEnum};
+use roitrack_servo::{CameraKind, ControllerKind, ServoConfig, run_servo};
+
+use crate::ranges;
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum ControllerArg {
+    /// Computed torque with the tracker's pose and velocity, each predicted to the actuation instant.
+    Ctc,
+    /// The same with pose only (velocity by differences of the estimated positions).
+    CtcPose,
+    /// Kinematic visual servo: velocity commands into the drives' joint-velocity loop.
+    Kvs,
+    /// Computed torque on the true state with no delay: the floor.
+    TrueState,
+}
+
+impl From<ControllerArg> for ControllerKind {
+    fn from(c: ControllerArg) -> Self {
+        match c {
+            ControllerArg::Ctc => Self::Ctc,
+            ControllerArg::CtcPose => Self::CtcPose,
+            ControllerArg::Kvs => Self::Kvs,
+            ControllerArg::TrueState => Self::TrueState,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+pub enum CameraArg {
+    /// The ROI camera at 4 kHz, an estimate every 10 ROIs.
+    Roi,
+    /// A 120 Hz global-shutter frame camera through the frame tracker.
+    #[value(name = "frames-120")]
+    Frames120,
+    /// A 30 Hz global-shutter frame camera through the frame tracker.
+    #[value(name = "frames-30")]
+    Frames30,
+}
+
+impl From<CameraArg> for CameraKind {
+    fn from(c: CameraArg) -> Self {
+        match c {
+            CameraArg::Roi => Self::Roi,
+            CameraArg::Frames120 => Self::Frames120,
+            CameraArg::Frames30 => Self::Frames30,
+        }
+    }
+}
+
+/// Servo a simulated Orthoglide-like robot along the orthoglide path (1 m/s peak times --speed-scale) with the
+/// controllers fed by the simulated camera and roitrack's tracker, the controller's model 20 % off the robot's
+/// masses; print a table of tracking errors and write, per run, a folder <out>/<controller>-<camera> with
+/// reference.tum, achieved.tum (commanded and true platform poses), the tracker's estimates and servo.csv (per tick:
+/// path, platform, error, actuator forces). A run that diverges is stopped and reported unstable.
+#[derive(Debug, Args)]
+pub struct ServoArgs {
+    /// One controller; default: ctc, ctc-pose and kvs through the camera, and the true-state floor.
+    #[arg(long, value_enum)]
+    pub controller: Option<ControllerArg>,
+    /// The camera the controllers see the robot through (true-state sees the truth whatever this says).
+    #[arg(long, value_enum, default_value = "roi")]
+    pub camera: CameraArg,
+    /// The path played this many times faster (2: 2 m/s peak), from 0.1 to 4.
+    #[arg(long, default_value_t = 1.0, value_parser = ranges::within(0.1..=4.0, "", "a path played at up to 4 m/s"))]
+    pub speed_scale: f64,
+    /// Latency added between the camera and the controller (s), at most 0.1; the gains stay tuned for the camera's
+    /// own latency.
+    #[arg(long, default_value_t = 0.0, value_parser = ranges::within(0.0..=0.1, " s", "a tenth of a second"))]
+    pub extra_latency_s: f64,
+    /// Seed of the camera's noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// One JSON object per run on a line (controller, camera, rms_error_mm, max_error_mm, stable, dir, ...)
+    /// instead of the table.
+    #[arg(long)]
+    pub json: bool,
+    /// Output folder (created if missing); one folder per run inside.
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+pub fn run(args: &ServoArgs) -> Result<()> {
+    let controllers: Vec<ControllerKind> = match args.controller {
+        Some(c) => vec![c.into()],
+        None => ControllerKind::ALL.to_vec(),
+    };
+    roitrack::formats::create_output_dir(&args.out)?;
+    if !args.json {
+        println!(
+            "{:<11} {:<10} {:>8} {:>8} {:>6} {:>9} {:>8}  dir",
+            "controller", "camera", "rms_mm", "max_mm", "stable", "omega_rad", "age_ms"
+        );
+    }
+    for controller in controllers {
+        let mut config = ServoConfig::new(controller, args.camera.into(), args.speed_scale);
+        config.extra_latency_s = args.extra_latency_s;
+        config.seed = args.seed;
+        let report =
+            run_servo(&config).with_context(|| format!("servo run {}", controller.name()))?;
+        let dir = args.out.join(format!(
+            "{}-{}",
+            report.controller.name(),
+            report.camera.name()
+        ));
+        roitrack_servo::output::write_run(&report, &dir)?;
+        let age_ms = report.median_feedback_age_s * 1e3;
+        if args.json {
+            let line = serde_json::json!({
+                "controller": report.controller.name(),
+                "camera": report.camera.name(),
+                "speed_scale": args.speed_scale,
+                "extra_latency_s": args.extra_latency_s,
+                "rms_error_mm": report.rms_error_mm,
+                "max_error_mm": report.max_error_mm,
+                "stable": report.stable,
+                "stop_reason": report.stop_reason,
+                "natural_frequency_radps": report.gains.natural_frequency_radps,
+                "median_feedback_age_ms": age_ms.is_finite().then_some(age_ms),
+                "saturated_fraction": report.saturated_fraction,
+                "dir": dir.display().to_string(),
+            });
+            println!("{line}");
+        } else {
+            println!(
+                "{:<11} {:<10} {:>8.4} {:>8.4} {:>6} {:>9.0} {:>8.3}  {}",
+                report.controller.name(),
+                report.camera.name(),
+                report.rms_error_mm,
+                report.max_error_mm,
+                report.stable,
+                report.gains.natural_frequency_radps,
+                age_ms,
+                dir.display()
+            );
+            if let Some(reason) = &report.stop_reason {
+                println!("    stopped: {reason}");
+            }
+        }
+    }
+    Ok(())
+}
