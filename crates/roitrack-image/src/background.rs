@@ -1,7 +1,6 @@
 //! The background under a blob as a plane: the least-squares plane through the pixels around it that belong to the
 //! background. Photographs' outline centres (`photo/centre.rs`, through a ring around the blob) and the frame
-//! tracker's windows (roitrack-pipeline's `frames.rs`, through a window's border) fit it here, each choosing its
-//! pixels its own way.
+//! tracker's windows (`window.rs`, through a window's border) fit it here, each choosing its pixels its own way.
 
 /// The least-squares plane `[a, b, c]` (`a + b x + c y`) through the `pixels` `(x, y, value)`, from their centred
 /// moments (one pass over raw sums). Their rank decides what they determine: a plane, a slope along one line (the

@@ -17,7 +17,9 @@
 //!   filters, grey-level sub-pixel centres;
 //! - [`reflection`]: a simulated reflection, a second bright spot in an ROI ([`ReflectionFault`]);
 //! - [`accuracy`]: the centroid's bias and spread against the truth ([`centroid_accuracy`]);
-//! - [`background`]: the background under a blob as a least-squares plane ([`background::fit_plane`]).
+//! - [`background`]: the background under a blob as a least-squares plane ([`background::fit_plane`]);
+//! - [`window`]: one blob measured in a window of a frame around its predicted position, its background plane taken
+//!   away ([`window::flatten_window`], [`window::measure_flat_window`]).
 //!
 //! Pixel convention (everywhere): pixel (i, j) (column i, row j) has its centre at image coordinates (u, v) = (i, j)
 //! and covers [i - 0.5, i + 0.5] x [j - 0.5, j + 0.5], as the raw pixels of [`roitrack_core::CameraModel`]. Images are
@@ -38,6 +40,7 @@ pub mod render;
 pub mod roi;
 pub mod sensor;
 pub mod symmetry;
+pub mod window;
 
 pub use accuracy::{CentroidAccuracy, ReflectionAccuracy, centroid_accuracy, reflection_accuracy};
 pub use camera::{GrabError, ReplayCamera, RoiCamera, RoiTrigger, SimulatedCamera};
