@@ -156,6 +156,18 @@ fn a_plate_on_nominal_files_is_tracked_as_closely_as_detected_and_more_smoothly(
             report,
         ));
     }
+    // Within 1.2x of the per-frame poses on most seeds. Before the filter weighed the frames by their white noise
+    // alone (told the model's error as white noise, it trusted its motion model over the frames), only seed 3 was:
+    // 0.098, 0.225 and 0.034 mm against 0.035, 0.029 and 0.039 frame by frame.
+    let close = pooled
+        .iter()
+        .filter(|(_, tracked, _, alone, _, _)| *tracked <= 1.2 * alone)
+        .count();
+    assert!(
+        2 * close > pooled.len(),
+        "within 1.2x of the per-frame poses on {close} of {} seeds",
+        pooled.len()
+    );
     // Before the frames' noise samples kept a gated blob when leaving it out left too few for a sample, the noise
     // stayed at its 0.1 px start while the model's error left the dots 0.5-1 px from any pose: every frame was
     // disputed and found whole again (134, 17 and 20 new tracks in 150 frames), 3.1, 0.67 and 0.63 mm off.
@@ -169,8 +181,8 @@ fn a_plate_on_nominal_files_is_tracked_as_closely_as_detected_and_more_smoothly(
         );
         assert!(report.restarts <= 5, "seed {seed}: {report:?}");
         assert!(report.by_windows >= FRAMES - 10, "seed {seed}: {report:?}");
-        // The bound set for a 4-dot plate on nominal files: 1 mm from the per-frame reference. (Within 1.2x of
-        // the poses detected frame by frame on 5 of 8 seeds; see docs/results.md.)
+        // The bound set for a 4-dot plate on nominal files: 1 mm from the per-frame reference (see
+        // docs/results.md for seeds 1-8).
         assert!(
             *tracked_error < 1.0,
             "seed {seed}: {tracked_error} mm ({alone_error} mm frame by frame)"

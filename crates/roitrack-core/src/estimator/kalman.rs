@@ -34,7 +34,7 @@
 //! With [`KalmanTuning::adapt_noise`] and [`KalmanTuning::adapt_motion`] off, the filter takes
 //! [`TrackerConfig::noise_px`] and the densities as the truth: a hand-tuned filter.
 
-use nalgebra::{Matrix2, Rotation3, SMatrix, SVector, Vector2, Vector3};
+use nalgebra::{Matrix2, Rotation3, SMatrix, SVector, Vector2, Vector3, Vector6};
 
 use super::calibration::TwistCalibration;
 use super::point_noise::PointNoise;
@@ -259,6 +259,38 @@ enum UpdateOutcome {
     Invalid,
 }
 
+/// A centroid's noise as one update weighs and judges it.
+///
+/// Seen through the user's own camera and target files (nominal intrinsics, a target drawn to spec), a blob of a
+/// frame sits off the best pose mostly by the model's error, a bias that changes slowly with the pose, and a little by
+/// white noise, new at every frame. The bias is no error of the pose the frames show: a pose fitted to each frame on
+/// the same files (the reference users compare with) carries it too, and averaging over frames cannot remove it. So
+/// the gain weighs the white part only, while the gate, the Huber weight and every test of the innovations judge a
+/// blob by both: how far it may lie from the prediction. Told the total as white noise, a filter trusted its motion
+/// model over the frames and lagged them by a few tenths of a millimetre on a 4-dot plate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct CentroidNoise {
+    /// Standard deviation per axis of the white part (px): the update's measurement noise.
+    white_px: f64,
+    /// Standard deviation per axis of the model's error (px); 0 where none is told apart.
+    bias_px: f64,
+}
+
+impl CentroidNoise {
+    /// Noise that is white through and through.
+    fn white(noise_px: f64) -> Self {
+        Self {
+            white_px: noise_px,
+            bias_px: 0.0,
+        }
+    }
+
+    /// The variance per axis of the white part and the bias together (px²).
+    fn total_px2(&self) -> f64 {
+        self.white_px * self.white_px + self.bias_px * self.bias_px
+    }
+}
+
 /// The standard deviations of the accelerations at the start of a track (linear in m/s², angular in rad/s²), and
 /// the widening of a covariance reset (scaled as the pose's and twist's). Wider is not safer: a start knows the twist
 /// only to 1 m/s and 10 rad/s, and with 10 m/s² and 30 rad/s² the first rolling-shutter frames could trade twist
@@ -418,14 +450,38 @@ impl<const N: usize> ErrorStateKalman<N> {
         })
     }
 
-    /// Updates with one centroid (ideal pixel) of `point_in_obj_m`, observed at the state's reference time.
+    /// The squared Mahalanobis distance of a centroid (ideal pixel) of `point_in_obj_m` from this filter's
+    /// prediction, against the whole of `noise`; `None` if the point does not project.
+    fn prediction_nis(
+        &self,
+        model: &SpatioTemporalModel,
+        state: &MotionState,
+        point_in_obj_m: &Vector3<f64>,
+        ideal_px: &Vector2<f64>,
+        noise: CentroidNoise,
+    ) -> Option<f64> {
+        let projected =
+            model.project_with_jacobian(JacobianKind::Exact, state, point_in_obj_m, 0.0)?;
+        let h = projected.jacobian;
+        let s = h * self.covariance.fixed_view::<12, 12>(0, 0) * h.transpose()
+            + Matrix2::identity() * noise.total_px2();
+        let innovation = ideal_px - projected.pixel;
+        let nis = (innovation.transpose() * s.try_inverse()? * innovation)[0];
+        nis.is_finite().then_some(nis)
+    }
+
+    /// Updates with one centroid (ideal pixel) of `point_in_obj_m`, observed at the state's reference time, weighed
+    /// by the white part of `noise` and judged (gate, Huber weight, persistence) by the whole of it: by its squared
+    /// Mahalanobis distance from this filter's prediction, or by `judged_nis` when it was judged before (against the
+    /// prediction before the other blobs of its frame: see [`KalmanLaw::take_readout`]).
     fn update(
         &mut self,
         model: &SpatioTemporalModel,
         state: &mut MotionState,
         point_in_obj_m: &Vector3<f64>,
         ideal_px: &Vector2<f64>,
-        sigma_px: f64,
+        noise: CentroidNoise,
+        judged_nis: Option<f64>,
     ) -> UpdateOutcome {
         let Some(projected) =
             model.project_with_jacobian(JacobianKind::Exact, state, point_in_obj_m, 0.0)
@@ -453,11 +509,11 @@ impl<const N: usize> ErrorStateKalman<N> {
         }
         let hph_t = h * ph_t.fixed_rows::<12>(0);
         self.predicted_variance_px2 = 0.5 * (hph_t[(0, 0)] + hph_t[(1, 1)]);
-        let s = hph_t + Matrix2::identity() * (sigma_px * sigma_px);
+        let s = hph_t + Matrix2::identity() * noise.total_px2();
         let Some(s_inv) = s.try_inverse() else {
             return UpdateOutcome::Invalid;
         };
-        let mahalanobis2 = (innovation.transpose() * s_inv * innovation)[0];
+        let mahalanobis2 = judged_nis.unwrap_or((innovation.transpose() * s_inv * innovation)[0]);
         if !mahalanobis2.is_finite() {
             return UpdateOutcome::Invalid;
         }
@@ -484,14 +540,20 @@ impl<const N: usize> ErrorStateKalman<N> {
             };
         }
         let distance = mahalanobis2.sqrt();
+        let white2 = noise.white_px * noise.white_px;
         let (sigma2, s_inv) = if distance > self.tuning.huber_sigma {
-            let inflated = sigma_px * sigma_px * distance / self.tuning.huber_sigma;
+            let inflated = white2 * distance / self.tuning.huber_sigma;
             match (hph_t + Matrix2::identity() * inflated).try_inverse() {
                 Some(inv) => (inflated, inv),
                 None => return UpdateOutcome::Invalid,
             }
+        } else if noise.bias_px == 0.0 {
+            (white2, s_inv)
         } else {
-            (sigma_px * sigma_px, s_inv)
+            match (hph_t + Matrix2::identity() * white2).try_inverse() {
+                Some(inv) => (white2, inv),
+                None => return UpdateOutcome::Invalid,
+            }
         };
         let gain = ph_t * s_inv;
         let correction = gain * innovation;
@@ -608,14 +670,14 @@ impl<const N: usize> ErrorStateKalman<N> {
         span_s: f64,
         model: &SpatioTemporalModel,
         readout: &mut [ReadoutMeasurement],
-        noise_px: f64,
+        noise: CentroidNoise,
         process_scale: [f64; 2],
     ) -> bool {
         let start = (
             self.acceleration.predicted(state, -span_s),
             self.acceleration,
         );
-        if Self::linear_enough(prior_state, &start.0, model, readout, noise_px) {
+        if Self::linear_enough(prior_state, &start.0, model, readout, noise.white_px) {
             return false;
         }
         let Some(mut fit) = Self::refined(prior, prior_state, start, model, readout) else {
@@ -625,13 +687,14 @@ impl<const N: usize> ErrorStateKalman<N> {
         let mut recovered = false;
         for m in readout.iter_mut().filter(|m| m.gated) {
             let judged = ReadoutMeasurement {
-                variance_px2: noise_px * noise_px,
+                variance_px2: noise.total_px2(),
                 ..*m
             };
             if Self::normalised_innovation2(&fit, model, &judged).is_some_and(|nis| nis <= gate2) {
                 *m = ReadoutMeasurement {
                     used: true,
-                    ..judged
+                    variance_px2: noise.white_px * noise.white_px,
+                    ..*m
                 };
                 recovered = true;
             }
@@ -1001,9 +1064,21 @@ impl Filter {
         state: &mut MotionState,
         point_in_obj_m: &Vector3<f64>,
         ideal_px: &Vector2<f64>,
-        sigma_px: f64,
+        noise: CentroidNoise,
+        judged_nis: Option<f64>,
     ) -> UpdateOutcome {
-        with_filter!(self, f => f.update(model, state, point_in_obj_m, ideal_px, sigma_px))
+        with_filter!(self, f => f.update(model, state, point_in_obj_m, ideal_px, noise, judged_nis))
+    }
+
+    fn prediction_nis(
+        &self,
+        model: &SpatioTemporalModel,
+        state: &MotionState,
+        point_in_obj_m: &Vector3<f64>,
+        ideal_px: &Vector2<f64>,
+        noise: CentroidNoise,
+    ) -> Option<f64> {
+        with_filter!(self, f => f.prediction_nis(model, state, point_in_obj_m, ideal_px, noise))
     }
 
     /// [`ErrorStateKalman::refine`] from `prior`, a copy of this filter before the readout (`false` if it is of
@@ -1017,7 +1092,7 @@ impl Filter {
         span_s: f64,
         model: &SpatioTemporalModel,
         readout: &mut [ReadoutMeasurement],
-        noise_px: f64,
+        noise: CentroidNoise,
         process_scale: [f64; 2],
     ) -> bool {
         macro_rules! refine_from {
@@ -1029,7 +1104,7 @@ impl Filter {
                     span_s,
                     model,
                     readout,
-                    noise_px,
+                    noise,
                     process_scale,
                 )
             };
@@ -1132,6 +1207,11 @@ struct KalmanLaw {
     newest_nis: f64,
     /// The learnt centroid noise (when `tuning.adapt_noise`).
     noise: NoiseEstimate,
+    /// On frames, the white part of the learnt noise, from the change of the blobs' residuals from one frame to the
+    /// next ([`FrameResiduals`]); see [`CentroidNoise`].
+    white_noise: NoiseEstimate,
+    /// The residuals of the newest frame sampled, which the next frame's are compared with.
+    frame_residuals: FrameResiduals,
     /// Whether the measurements come a frame at a time (the blobs of global-shutter frames, several at each time),
     /// from the initial window and then from each control step: each frame samples the noise from its own blobs
     /// ([`NoiseSample`]), and the process noise is not adapted.
@@ -1155,6 +1235,12 @@ struct KalmanLaw {
     point_noise: PointNoise,
     /// The blobs of the readout being taken, but those that do not project (kept to reuse its allocation).
     readout: Vec<ReadoutMeasurement>,
+    /// Per blob of the readout being taken, its squared Mahalanobis distance from the prediction before it, when
+    /// judged so (see [`KalmanLaw::take_readout`]; kept to reuse its allocation).
+    judged_nis: Vec<Option<f64>>,
+    /// Whether the frame being taken is weighed by the white part of the noise alone (see
+    /// [`KalmanLaw::take_readout`]).
+    bias_apart: bool,
 }
 
 impl Law for KalmanLaw {
@@ -1170,6 +1256,14 @@ impl Law for KalmanLaw {
             // The initial fit's noise (set in `core.noise_px`) counts as one window's worth; the process scale
             // carries over from the previous track.
             noise: NoiseEstimate::new(core.noise_px, 2.0 * core.target.len() as f64),
+            // The white part carries over (the same camera and footage); the frame the next is compared with does
+            // not (a new track's pose may be another fit of the frames).
+            white_noise: self.white_noise,
+            frame_residuals: {
+                let mut frame_residuals = std::mem::take(&mut self.frame_residuals);
+                frame_residuals.clear();
+                frame_residuals
+            },
             process_log_scale: self.process_log_scale,
             // From the measurements the track starts from, if there are enough (a track started from a whole frame
             // has none in its window yet).
@@ -1198,6 +1292,7 @@ impl Law for KalmanLaw {
                 gated_runs
             },
             readout: std::mem::take(&mut self.readout),
+            judged_nis: std::mem::take(&mut self.judged_nis),
             // The points' shares of the noise carry over too (for the same target).
             point_noise: {
                 let mut point_noise = std::mem::take(&mut self.point_noise);
@@ -1226,7 +1321,7 @@ impl Law for KalmanLaw {
 
     fn on_measurement(&mut self, core: &mut TrackCore, obs: &Observation) {
         let dt = self.predict_to(core, obs.t_s);
-        self.take(core, obs, dt, true);
+        self.take(core, obs, dt, true, None);
     }
 
     /// Each blob of the readout in turn, then, if at least [`MIN_READOUT_TO_REFINE`] were accepted, their iterated
@@ -1494,6 +1589,14 @@ impl KalmanLaw {
     /// Takes a readout (the filter already at its first time, `dt` after the measurement before): its blobs one by
     /// one, then, for three or more, fitted together with the prior ([`Filter::refine`]). Returns how many blobs the
     /// result uses.
+    ///
+    /// When the noise holds the model's error apart ([`CentroidNoise`]), the blobs of one instant are judged against
+    /// the prediction before any of them: weighed by their white part alone, the first blobs pin the pose, bias and
+    /// all, and a later blob judged against that pose sat as far off as the model's error through a fit of three
+    /// points amplifies it (4 dots on nominal files: one in a few frames refused, the track disputed and restarted).
+    /// And they are weighed so only if every one of them is inside the gate: the pose of the rest would carry their
+    /// model's error differently from a pose of all of them (the user's reference), and with 3 dots of 4 it moved
+    /// by up to half a millimetre; such a frame is weighed by the whole noise, as the bias were white.
     fn take_readout(&mut self, core: &mut TrackCore, batch: &[Observation], dt: f64) -> usize {
         let first = &batch[0];
         let prior = (self.filter, core.state);
@@ -1504,6 +1607,18 @@ impl KalmanLaw {
         );
         let mut readout = std::mem::take(&mut self.readout);
         readout.clear();
+        let mut judged = std::mem::take(&mut self.judged_nis);
+        judged.clear();
+        if self.split_noise(core.noise_px).bias_px > 0.0 && is_one_instant(batch) {
+            judged.extend(batch.iter().map(|obs| {
+                let p = &core.target.points()[obs.point_index].point_in_obj_m;
+                let noise = self.split_noise(self.point_noise_px(core, obs.point_index));
+                self.filter
+                    .prediction_nis(&core.model, &core.state, p, &obs.ideal_px, noise)
+            }));
+            let gate2 = self.filter.tuning().gate_sigma.powi(2);
+            self.bias_apart = judged.iter().all(|nis| nis.is_some_and(|nis| nis <= gate2));
+        }
         for (i, obs) in batch.iter().enumerate() {
             let dt = if i == 0 {
                 dt
@@ -1512,7 +1627,7 @@ impl KalmanLaw {
             };
             // A readout's blobs (a frame's, or a rolling-shutter frame's rows) do not teach the points' shares: each
             // point comes once a frame, and a readout may be taken twice (see `on_batch`).
-            let outcome = self.take(core, obs, dt, false);
+            let outcome = self.take(core, obs, dt, false, judged.get(i).copied().flatten());
             let huber = self.filter.tuning().huber_sigma;
             let nis = match outcome {
                 UpdateOutcome::Accepted { nis, .. } | UpdateOutcome::Gated { nis, .. } => nis,
@@ -1524,7 +1639,7 @@ impl KalmanLaw {
                 point_in_obj_m: core.target.points()[obs.point_index].point_in_obj_m,
                 ideal_px: obs.ideal_px,
                 dt_s: obs.t_s - first.t_s,
-                variance_px2: self.point_noise_px(core, obs.point_index).powi(2)
+                variance_px2: self.centroid_noise(core, obs.point_index).white_px.powi(2)
                     * (nis.sqrt() / huber).max(1.0),
                 gated,
                 used: !gated,
@@ -1535,6 +1650,7 @@ impl KalmanLaw {
         if accepted >= MIN_READOUT_TO_REFINE && self.resets_total == resets {
             let span_s = core.t_ref_s - first.t_s;
             let process_scale = self.process_log_scale.map(f64::exp);
+            let noise = self.weighed_noise(core.noise_px);
             let refined = self.filter.refine(
                 &prior.0,
                 &prior.1,
@@ -1542,7 +1658,7 @@ impl KalmanLaw {
                 span_s,
                 &core.model,
                 &mut readout,
-                core.noise_px,
+                noise,
                 process_scale,
             );
             if refined {
@@ -1551,6 +1667,8 @@ impl KalmanLaw {
         }
         let used = readout.iter().filter(|m| m.used).count();
         self.readout = readout;
+        self.judged_nis = judged;
+        self.bias_apart = false;
         used
     }
 
@@ -1567,6 +1685,8 @@ impl KalmanLaw {
             resets_total: 0,
             newest_nis: 0.0,
             noise: NoiseEstimate::new(1.0, 0.0),
+            white_noise: NoiseEstimate::new(1.0, 0.0),
+            frame_residuals: FrameResiduals::default(),
             process_log_scale: [0.0; 2],
             frame_steps: false,
             gated_at: Vec::new(),
@@ -1576,6 +1696,8 @@ impl KalmanLaw {
             calibration: TwistCalibration::new(),
             point_noise: PointNoise::default(),
             readout: Vec::new(),
+            judged_nis: Vec::new(),
+            bias_apart: false,
         }
     }
 
@@ -1603,20 +1725,62 @@ impl KalmanLaw {
         }
     }
 
+    /// The noise of `point`'s centroid as an update weighs and judges it: the point's noise
+    /// ([`Self::point_noise_px`]), split ([`Self::split_noise`]) while the frame being taken holds the model's error
+    /// apart ([`KalmanLaw::take_readout`]).
+    fn centroid_noise(&self, core: &TrackCore, point: usize) -> CentroidNoise {
+        self.weighed_noise(self.point_noise_px(core, point))
+    }
+
+    /// A centroid noise of `total_px` as the frame being taken weighs it: split while it holds the model's error
+    /// apart, else white.
+    fn weighed_noise(&self, total_px: f64) -> CentroidNoise {
+        if self.bias_apart {
+            self.split_noise(total_px)
+        } else {
+            CentroidNoise::white(total_px)
+        }
+    }
+
+    /// A centroid noise of `total_px` as white noise; but on global-shutter frames, once their white part is known
+    /// ([`MIN_WHITE_NOISE_DOF`]), that part, and the rest as the model's error.
+    fn split_noise(&self, total_px: f64) -> CentroidNoise {
+        if !(self.frame_steps
+            && self.filter.tuning().adapt_noise
+            && self.white_noise.dof >= MIN_WHITE_NOISE_DOF)
+        {
+            return CentroidNoise::white(total_px);
+        }
+        // The white part is at most the whole (its samples also hold the bias's change between frames).
+        let white_px = self.white_noise.noise_px().min(total_px);
+        CentroidNoise {
+            white_px,
+            bias_px: (total_px * total_px - white_px * white_px).max(0.0).sqrt(),
+        }
+    }
+
     /// Updates the filter, already at its time, with `obs`, `dt` after the measurement before, and keeps the
-    /// counters and what the filter learns from it (the points' shares of the noise only if `learn_points`).
+    /// counters and what the filter learns from it (the points' shares of the noise only if `learn_points`), judged
+    /// by `judged_nis` if it was judged before ([`ErrorStateKalman::update`]).
     fn take(
         &mut self,
         core: &mut TrackCore,
         obs: &Observation,
         dt: f64,
         learn_points: bool,
+        judged_nis: Option<f64>,
     ) -> UpdateOutcome {
         let p = core.target.points()[obs.point_index].point_in_obj_m;
-        let sigma_px = self.point_noise_px(core, obs.point_index);
-        let outcome = self
-            .filter
-            .update(&core.model, &mut core.state, &p, &obs.ideal_px, sigma_px);
+        let noise = self.centroid_noise(core, obs.point_index);
+        let sigma_px = noise.total_px2().sqrt();
+        let outcome = self.filter.update(
+            &core.model,
+            &mut core.state,
+            &p,
+            &obs.ideal_px,
+            noise,
+            judged_nis,
+        );
         if let UpdateOutcome::Accepted { norm_px, nis } | UpdateOutcome::Gated { norm_px, nis } =
             outcome
         {
@@ -1812,6 +1976,9 @@ impl KalmanLaw {
     /// widened by the prediction's spread, but the frame's later ones, once those have pinned the pose, one not much
     /// wider than the noise (without the correction, four dots at 0.3 px learnt 0.297 px and tracked 7 % worse than
     /// the filter told the noise; with it, 0.307 px and as well).
+    ///
+    /// The newest frame's residuals at that fit are also compared with those of the frame sampled before it
+    /// ([`FrameResiduals`]), which samples the white part of the noise.
     fn learn_noise_from_frames(&mut self, core: &mut TrackCore, t_new_s: f64) {
         let step = core.step_measurements;
         let (mut cost_px2, mut dof, mut taken) = (0.0, 0.0, 0);
@@ -1820,15 +1987,24 @@ impl KalmanLaw {
             if count == 0 {
                 break;
             }
+            let newest = taken == 0;
             taken += count;
             drop_gated(&self.gated_at, &mut core.scratch, FRAME_SAMPLE_MIN_BLOBS);
             if core.scratch.len() < FRAME_SAMPLE_MIN_BLOBS {
                 continue;
             }
-            let frame = core.window_problem(t_new_s).normal_equations(&core.state);
-            if let Some(frame_cost_px2) = pose_only_optimum_cost_px2(&frame) {
+            let problem = core.window_problem(t_new_s);
+            let frame = problem.normal_equations(&core.state);
+            if let Some((pose_step, frame_cost_px2)) = pose_only_optimum(&frame) {
                 cost_px2 += frame_cost_px2;
                 dof += (2 * frame.count() - 6) as f64;
+                if newest
+                    && let Some((change_px2, change_dof)) =
+                        self.frame_residuals
+                            .sample(&problem, &core.state, &pose_step)
+                {
+                    self.white_noise.add(change_px2 / change_dof, change_dof);
+                }
             }
         }
         if dof > 0.0 {
@@ -1893,9 +2069,10 @@ fn drop_gated(gated_at: &[Option<f64>], scratch: &mut Vec<Observation>, min_kept
     drop
 }
 
-/// The least-squares residual `eᵀe - gᵀ H⁻¹ g` of `window` at its optimum over the pose alone (the first six
-/// parameters; `H` and `g` their block of `JᵀJ` and `Jᵀe`), the twist held; `None` when that block is singular.
-fn pose_only_optimum_cost_px2(window: &crate::solver::NormalEquations<12>) -> Option<f64> {
+/// The fit of `window` over the pose alone (the first six parameters; `H` and `g` their block of `JᵀJ` and `Jᵀe`),
+/// the twist held: the solution `x = H⁻¹ g` (the pose moves by `-x`) and the least-squares residual `eᵀe - gᵀ x` at
+/// it; `None` when that block is singular.
+fn pose_only_optimum(window: &crate::solver::NormalEquations<12>) -> Option<(Vector6<f64>, f64)> {
     let jtj = window.symmetric_jtj();
     let h = jtj.fixed_view::<6, 6>(0, 0).into_owned();
     let g = window.jte().fixed_rows::<6>(0).into_owned();
@@ -1908,9 +2085,93 @@ fn pose_only_optimum_cost_px2(window: &crate::solver::NormalEquations<12>) -> Op
     }
     let scaled = SMatrix::<f64, 6, 6>::from_fn(|i, j| h[(i, j)] * scale[i] * scale[j]);
     let scaled_g = g.component_mul(&scale);
-    let reduction = scaled.cholesky()?.solve(&scaled_g).dot(&scaled_g);
-    let cost = window.cost_px2() - reduction;
-    cost.is_finite().then_some(cost.max(0.0))
+    let scaled_x = scaled.cholesky()?.solve(&scaled_g);
+    let cost = window.cost_px2() - scaled_x.dot(&scaled_g);
+    cost.is_finite()
+        .then_some((scaled_x.component_mul(&scale), cost.max(0.0)))
+}
+
+/// The fewest degrees of freedom behind the white part of the noise before the updates weigh it apart from the
+/// model's error ([`CentroidNoise`]): a variance from 16 has a relative standard error of 35 %, from 8 of 50 %.
+/// Eight frames of 4 blobs, one of 11 or more.
+const MIN_WHITE_NOISE_DOF: f64 = 16.0;
+
+/// The blobs' residuals of the newest global-shutter frame at the fit of its pose alone, kept to sample the white
+/// part of the centroid noise from the next frame's.
+///
+/// A blob's residual at the fit is `r = P (b + w)`: `b` the model's error at that pose, `w` white noise, `P` the
+/// projection that removes what the pose absorbs (of rank `2 m - 6` for `m` blobs). From one frame to the next the
+/// pose, hence `b` and `P`, hardly change, so `r₂ - r₁ = P (w₂ - w₁)`, whose squared norm is `2 σ²` times a
+/// chi-square of `2 m - 6` degrees of freedom: the bias cancels. What it does not cancel (the bias's change with the
+/// pose between frames) can only raise the sample: the white part it gives is at most too large, never too small.
+#[derive(Debug, Clone, Default)]
+struct FrameResiduals {
+    /// Per blob of the frame before: its point and residual (px); empty if there is none to compare with.
+    before: Vec<(usize, Vector2<f64>)>,
+    /// The frame being sampled (kept to reuse its allocation).
+    newest: Vec<(usize, Vector2<f64>)>,
+}
+
+impl FrameResiduals {
+    fn clear(&mut self) {
+        self.before.clear();
+    }
+
+    /// Takes the residuals of the frame `problem` holds, at `state` moved by the pose-only fit's solution `x`
+    /// ([`pose_only_optimum`]), and, when the frame before measured the same points, returns the sample of the
+    /// white variance it gives: `|r₂ - r₁|² / 2` summed over the blobs (px²) and its degrees of freedom, `2 m - 6`.
+    fn sample(
+        &mut self,
+        problem: &super::problem::WindowProblem<'_>,
+        state: &MotionState,
+        x: &Vector6<f64>,
+    ) -> Option<(f64, f64)> {
+        struct AtOptimum<'a> {
+            x: &'a Vector6<f64>,
+            residuals_px: &'a mut Vec<(usize, Vector2<f64>)>,
+            points: std::slice::Iter<'a, Observation>,
+        }
+        impl crate::solver::ResidualSink<12> for AtOptimum<'_> {
+            fn add(
+                &mut self,
+                jacobian: &SMatrix<f64, 2, 12>,
+                residual: &Vector2<f64>,
+                _weight: f64,
+            ) {
+                if let Some(obs) = self.points.next() {
+                    let at_optimum = residual - jacobian.fixed_columns::<6>(0) * self.x;
+                    self.residuals_px.push((obs.point_index, at_optimum));
+                }
+            }
+            fn add_unevaluable(&mut self) {
+                self.points.next();
+            }
+        }
+        self.newest.clear();
+        let mut sink = AtOptimum {
+            x,
+            residuals_px: &mut self.newest,
+            points: problem.window.iter(),
+        };
+        crate::solver::LeastSquaresProblem::linearize(problem, state, &mut sink);
+        let same_points = self.newest.len() == self.before.len()
+            && self
+                .newest
+                .iter()
+                .zip(&self.before)
+                .all(|(a, b)| a.0 == b.0);
+        let sample = (same_points && self.newest.len() >= FRAME_SAMPLE_MIN_BLOBS).then(|| {
+            let change_px2: f64 = self
+                .newest
+                .iter()
+                .zip(&self.before)
+                .map(|(a, b)| (a.1 - b.1).norm_squared())
+                .sum();
+            (change_px2 / 2.0, (2 * self.newest.len() - 6) as f64)
+        });
+        std::mem::swap(&mut self.newest, &mut self.before);
+        sample
+    }
 }
 
 /// The default estimator: an error-state Kalman filter, every centroid one update at its own time (see the
@@ -2185,8 +2446,14 @@ mod tests {
         let mut sequential = prior;
         let mut state = prior_state;
         for m in &mut readout {
-            let outcome =
-                sequential.update(&model, &mut state, &m.point_in_obj_m, &m.ideal_px, 0.1);
+            let outcome = sequential.update(
+                &model,
+                &mut state,
+                &m.point_in_obj_m,
+                &m.ideal_px,
+                CentroidNoise::white(0.1),
+                None,
+            );
             m.gated = matches!(outcome, UpdateOutcome::Gated { .. });
             m.used = !m.gated;
         }
@@ -2204,7 +2471,7 @@ mod tests {
             0.0,
             &model,
             &mut readout,
-            0.1,
+            CentroidNoise::white(0.1),
             [1.0, 1.0],
         ));
         let error = MotionState::difference(&truth, &state)
@@ -2302,8 +2569,14 @@ mod tests {
         for m in &mut readout {
             sequential.predict(&mut state, m.dt_s - t_s, [1.0, 1.0]);
             t_s = m.dt_s;
-            let outcome =
-                sequential.update(&model, &mut state, &m.point_in_obj_m, &m.ideal_px, 0.1);
+            let outcome = sequential.update(
+                &model,
+                &mut state,
+                &m.point_in_obj_m,
+                &m.ideal_px,
+                CentroidNoise::white(0.1),
+                None,
+            );
             m.gated = matches!(outcome, UpdateOutcome::Gated { .. });
             m.used = !m.gated;
         }
@@ -2317,7 +2590,7 @@ mod tests {
             span_s,
             &model,
             &mut readout,
-            0.1,
+            CentroidNoise::white(0.1),
             [1.0, 1.0],
         ));
         let refined_px = residual_px(&readout, &state, &refined.acceleration, span_s);
