@@ -1,0 +1,202 @@
+//! What lies outside the board: a flat level or a random value-noise texture ([`Background`]), with the clutter
+//! drawn on it.
+
+use nalgebra::Vector2;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use super::CLUTTER_STREAM;
+use super::clutter::{draw_stamp, random_item};
+use super::rays::Area;
+use super::scene::PhotoScene;
+
+/// Mixed into the seed of the background texture's hash.
+const TEXTURE_SALT: u64 = 0x7e57_u64 << 40;
+
+/// What lies behind the board, seen wherever the board is not (levels: fractions of full scale under unit light).
+///
+/// ```
+/// use roitrack_sim::photo::Background;
+/// let busy = Background::Texture { mean_level: 0.4, contrast: 0.3, scale_px: 30.0 };
+/// assert_ne!(busy, Background::default());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Background {
+    /// One flat level.
+    Uniform { level: f64 },
+    /// A smooth random pattern (fractal value noise, four octaves from `scale_px` down): `mean_level` ± at most
+    /// `contrast`, clipped to 0..1.
+    Texture {
+        mean_level: f64,
+        contrast: f64,
+        scale_px: f64,
+    },
+}
+
+impl Default for Background {
+    /// A flat mid-dark grey, 0.32.
+    fn default() -> Self {
+        Self::Uniform { level: 0.32 }
+    }
+}
+
+/// The background's level at every pixel of the area: the texture or flat level, with the clutter drawn on it.
+pub(super) fn background_layer(
+    scene: &PhotoScene,
+    area: &Area,
+    background_fraction: &[f64],
+) -> Vec<f64> {
+    let n = area.width * area.height;
+    let mut layer = match scene.background {
+        Background::Uniform { level } => vec![level; n],
+        Background::Texture {
+            mean_level,
+            contrast,
+            scale_px,
+        } => {
+            let mut layer = vec![mean_level; n];
+            let octaves: Vec<NoiseOctave> = (0..4)
+                .map(|o| NoiseOctave::new(scene.seed ^ TEXTURE_SALT, o, scale_px, area))
+                .collect();
+            let norm: f64 = octaves.iter().map(|o| o.amplitude).sum();
+            for j in 0..area.height {
+                for i in 0..area.width {
+                    let k = j * area.width + i;
+                    if background_fraction[k] > 0.0 {
+                        let sum: f64 = octaves.iter().map(|o| o.at(i, j)).sum();
+                        // Value noise rarely reaches its extremes: stretch it, then clip.
+                        let noise = (2.0 * sum / norm).clamp(-1.0, 1.0);
+                        layer[k] = (mean_level + contrast * noise).clamp(0.0, 1.0);
+                    }
+                }
+            }
+            layer
+        }
+    };
+    let clutter = &scene.clutter;
+    if clutter.count == 0 {
+        return layer;
+    }
+    // Where the board is, for the clearance: a summed-area table of the pixels it touches.
+    let (aw, ah) = (area.width, area.height);
+    let mut board_sat = vec![0u32; (aw + 1) * (ah + 1)];
+    for j in 0..ah {
+        let mut row = 0;
+        for i in 0..aw {
+            row += u32::from(background_fraction[j * aw + i] < 1.0);
+            board_sat[(j + 1) * (aw + 1) + i + 1] = board_sat[j * (aw + 1) + i + 1] + row;
+        }
+    }
+    let to_area =
+        |x: f64, n: usize| (x + area.margin as f64).round().clamp(0.0, n as f64 - 1.0) as usize;
+    let board_in = |lo: Vector2<f64>, hi: Vector2<f64>| {
+        let (i0, i1) = (to_area(lo.x.floor(), aw), to_area(hi.x.ceil(), aw) + 1);
+        let (j0, j1) = (to_area(lo.y.floor(), ah), to_area(hi.y.ceil(), ah) + 1);
+        let at = |i: usize, j: usize| board_sat[j * (aw + 1) + i];
+        at(i1, j1) + at(i0, j0) > at(i0, j1) + at(i1, j0)
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(scene.seed);
+    rng.set_stream(CLUTTER_STREAM);
+    let (w, h) = (
+        f64::from(scene.camera.width_px),
+        f64::from(scene.camera.height_px),
+    );
+    let scale = w.min(h) / 480.0;
+    for _ in 0..clutter.count {
+        for _ in 0..20 {
+            let stamps = random_item(&mut rng, w, h, scale);
+            if let Some(clearance) = clutter.clearance_px {
+                let (lo, hi) = stamps.iter().fold(
+                    (Vector2::repeat(f64::MAX), Vector2::repeat(f64::MIN)),
+                    |(lo, hi), s| {
+                        let (a, b) = s.bounds();
+                        (lo.inf(&a), hi.sup(&b))
+                    },
+                );
+                let c = Vector2::repeat(clearance + 1.0);
+                if board_in(lo - c, hi + c) {
+                    continue;
+                }
+            }
+            for stamp in &stamps {
+                draw_stamp(stamp, area, &mut layer);
+            }
+            break;
+        }
+    }
+    layer
+}
+
+/// One octave of the background's fractal value noise over the area: random values (-1..1) on a lattice of
+/// `scale_px / 2^octave` pixels (amplitude `2^-octave`), smoothly interpolated; the lattice cell and weights of every
+/// column and row are computed once.
+struct NoiseOctave {
+    amplitude: f64,
+    /// Lattice column (from the first) and smoothed weight of each area column; the same for rows.
+    cols: Vec<(usize, f64)>,
+    rows: Vec<(usize, f64)>,
+    pub(super) nx: usize,
+    values: Vec<f64>,
+}
+
+impl NoiseOctave {
+    pub(super) fn new(seed: u64, octave: u32, scale_px: f64, area: &Area) -> Self {
+        let frequency = f64::from(1u32 << octave) / scale_px;
+        let cells = |n: usize| -> (i64, Vec<(usize, f64)>) {
+            let raw: Vec<(i64, f64)> = (0..n)
+                .map(|i| {
+                    let x = area.raw(i) * frequency;
+                    let f = x.floor();
+                    let t = x - f;
+                    (f as i64, t * t * (3.0 - 2.0 * t))
+                })
+                .collect();
+            let first = raw[0].0;
+            (
+                first,
+                raw.into_iter()
+                    .map(|(c, s)| ((c - first) as usize, s))
+                    .collect(),
+            )
+        };
+        let (ix0, cols) = cells(area.width);
+        let (iy0, rows) = cells(area.height);
+        let nx = cols.last().map_or(0, |c| c.0) + 2;
+        let ny = rows.last().map_or(0, |r| r.0) + 2;
+        let octave_seed = seed.wrapping_add(u64::from(octave));
+        let values = (0..ny as i64)
+            .flat_map(|y| (0..nx as i64).map(move |x| (x, y)))
+            .map(|(x, y)| lattice_value(octave_seed, ix0 + x, iy0 + y))
+            .collect();
+        Self {
+            amplitude: 0.5f64.powi(octave as i32),
+            cols,
+            rows,
+            nx,
+            values,
+        }
+    }
+
+    /// The octave's contribution (amplitude included) at area pixel (i, j).
+    #[inline]
+    fn at(&self, i: usize, j: usize) -> f64 {
+        let (x, sx) = self.cols[i];
+        let (y, sy) = self.rows[j];
+        let k = y * self.nx + x;
+        let v = &self.values;
+        let top = v[k] + (v[k + 1] - v[k]) * sx;
+        let bottom = v[k + self.nx] + (v[k + self.nx + 1] - v[k + self.nx]) * sx;
+        self.amplitude * (top + (bottom - top) * sy)
+    }
+}
+
+fn lattice_value(seed: u64, i: i64, j: i64) -> f64 {
+    let mut z = seed
+        ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)
+        ^ (j as u64).wrapping_mul(0xC2B2_AE3D_27D4_EB4F);
+    // splitmix64's finaliser.
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+}
