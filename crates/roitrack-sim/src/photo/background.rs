@@ -6,9 +6,10 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::CLUTTER_STREAM;
+use super::PhotoError;
 use super::clutter::{draw_stamp, random_item};
 use super::rays::Area;
-use super::scene::PhotoScene;
+use super::scene::{PhotoScene, check, unit};
 
 /// Mixed into the seed of the background texture's hash.
 const TEXTURE_SALT: u64 = 0x7e57_u64 << 40;
@@ -37,6 +38,30 @@ impl Default for Background {
     /// A flat mid-dark grey, 0.32.
     fn default() -> Self {
         Self::Uniform { level: 0.32 }
+    }
+}
+
+impl Background {
+    /// Levels within 0..1, a positive texture scale.
+    pub(super) fn check(&self) -> Result<(), PhotoError> {
+        match *self {
+            Background::Uniform { level } => unit("background level", level)?,
+            Background::Texture {
+                mean_level,
+                contrast,
+                scale_px,
+            } => {
+                unit("background mean_level", mean_level)?;
+                unit("background contrast", contrast)?;
+                check(
+                    "background scale_px",
+                    scale_px,
+                    scale_px > 0.0 && scale_px.is_finite(),
+                    "positive",
+                )?;
+            }
+        }
+        Ok(())
     }
 }
 

@@ -6,10 +6,14 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::MARKS_STREAM;
+use super::PhotoError;
 use super::board::PlaneShape;
 use super::light::segment_distance2;
 use super::rays::Area;
-use super::scene::PhotoScene;
+use super::scene::{PhotoScene, check};
+
+/// Largest number of clutter items and board marks.
+const MAX_CLUTTER: usize = 100_000;
 
 /// Distractors: random shapes on the background, and optionally printed marks on the board's margin.
 ///
@@ -52,6 +56,34 @@ impl Clutter {
             count,
             ..Self::default()
         }
+    }
+}
+
+impl Clutter {
+    /// At most 100,000 items and marks, clearances and gaps of 0 or more.
+    pub(super) fn check(&self) -> Result<(), PhotoError> {
+        for (field, n) in [
+            ("clutter count", self.count),
+            ("clutter board_marks", self.board_marks),
+        ] {
+            check(field, n as f64, n <= MAX_CLUTTER, "at most 100000")?;
+        }
+        if let Some(c) = self.clearance_px {
+            check(
+                "clutter clearance_px",
+                c,
+                (0.0..1e9).contains(&c),
+                "0 or more",
+            )?;
+        }
+        let gap = self.board_mark_gap_m;
+        check(
+            "clutter board_mark_gap_m",
+            gap,
+            (0.0..1e6).contains(&gap),
+            "0 or more",
+        )?;
+        Ok(())
     }
 }
 

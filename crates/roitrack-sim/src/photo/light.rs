@@ -3,6 +3,9 @@
 
 use nalgebra::Vector2;
 
+use super::PhotoError;
+use super::scene::{check, unit};
+
 /// A shadow: light multiplied by `light_factor` inside a polygon of the image, with a soft edge.
 ///
 /// ```
@@ -100,6 +103,50 @@ impl Default for Illumination {
             shadow: None,
             glare: None,
         }
+    }
+}
+
+impl Illumination {
+    /// The gradient and vignetting within 0..1, a shadow polygon of finite vertices, a glare spot of positive size.
+    pub(super) fn check(&self) -> Result<(), PhotoError> {
+        unit("illumination.gradient_min", self.gradient_min)?;
+        unit("illumination.vignetting", self.vignetting)?;
+        if let Some(shadow) = &self.shadow {
+            unit("shadow light_factor", shadow.light_factor)?;
+            let s = shadow.softness_px;
+            check(
+                "shadow softness_px",
+                s,
+                (0.0..1e9).contains(&s),
+                "0 or more",
+            )?;
+            let n = shadow.polygon_px.len() as f64;
+            check("shadow polygon vertices", n, n >= 3.0, "3 or more")?;
+            for p in &shadow.polygon_px {
+                for value in [p.x, p.y] {
+                    check("shadow polygon vertex", value, value.is_finite(), "finite")?;
+                }
+            }
+        }
+        if let Some(glare) = &self.glare {
+            let g = glare;
+            check(
+                "glare radius_px",
+                g.radius_px,
+                g.radius_px > 0.0 && g.radius_px.is_finite(),
+                "positive",
+            )?;
+            check(
+                "glare level",
+                g.level,
+                (0.0..1e3).contains(&g.level),
+                "0 or more",
+            )?;
+            for value in [g.centre_px.x, g.centre_px.y] {
+                check("glare centre_px", value, value.is_finite(), "finite")?;
+            }
+        }
+        Ok(())
     }
 }
 

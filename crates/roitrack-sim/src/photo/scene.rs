@@ -19,9 +19,6 @@ pub const DEFAULT_CIRCLE_DIAMETER_M: f64 = 0.01;
 /// Largest supersampling factor (per axis).
 const MAX_SUPERSAMPLING: u32 = 32;
 
-/// Largest number of clutter items and board marks.
-const MAX_CLUTTER: usize = 100_000;
-
 /// Which of paper and circles is the bright one, with typical levels ([`PhotoScene::with_shade`]).
 ///
 /// ```
@@ -283,6 +280,16 @@ impl PhotoScene {
 
     /// Checks every parameter (ranges, finiteness, bit depth, image size); [`render_photo`] calls it.
     pub fn validate(&self) -> Result<(), PhotoError> {
+        self.check_image()?;
+        self.check_pose_and_paper()?;
+        self.background.check()?;
+        self.illumination.check()?;
+        self.clutter.check()?;
+        self.check_sensor()
+    }
+
+    /// The camera's image: not empty, not too large, a valid lens, a bit depth of 8 to 16.
+    fn check_image(&self) -> Result<(), PhotoError> {
         let camera = &self.camera;
         if camera.width_px == 0 || camera.height_px == 0 {
             return Err(CameraError::EmptyImage {
@@ -302,6 +309,11 @@ impl PhotoScene {
         if !(8..=16).contains(&self.bit_depth) {
             return Err(PhotoError::BitDepth(self.bit_depth));
         }
+        Ok(())
+    }
+
+    /// The pose (a rotation, finite), the time, the circles' default size, the paper's margin and the levels.
+    fn check_pose_and_paper(&self) -> Result<(), PhotoError> {
         let r = self.cam_r_obj.matrix();
         let orthonormality = (r.transpose() * r - Matrix3::identity()).norm();
         check(
@@ -333,83 +345,11 @@ impl PhotoScene {
         check("paper_margin_m", m, (0.0..1e6).contains(&m), "0 or more")?;
         unit("paper_level", self.paper_level)?;
         unit("circle_level", self.circle_level)?;
-        match self.background {
-            Background::Uniform { level } => unit("background level", level)?,
-            Background::Texture {
-                mean_level,
-                contrast,
-                scale_px,
-            } => {
-                unit("background mean_level", mean_level)?;
-                unit("background contrast", contrast)?;
-                check(
-                    "background scale_px",
-                    scale_px,
-                    scale_px > 0.0 && scale_px.is_finite(),
-                    "positive",
-                )?;
-            }
-        }
-        let light = &self.illumination;
-        unit("illumination.gradient_min", light.gradient_min)?;
-        unit("illumination.vignetting", light.vignetting)?;
-        if let Some(shadow) = &light.shadow {
-            unit("shadow light_factor", shadow.light_factor)?;
-            let s = shadow.softness_px;
-            check(
-                "shadow softness_px",
-                s,
-                (0.0..1e9).contains(&s),
-                "0 or more",
-            )?;
-            let n = shadow.polygon_px.len() as f64;
-            check("shadow polygon vertices", n, n >= 3.0, "3 or more")?;
-            for p in &shadow.polygon_px {
-                for value in [p.x, p.y] {
-                    check("shadow polygon vertex", value, value.is_finite(), "finite")?;
-                }
-            }
-        }
-        if let Some(glare) = &light.glare {
-            let g = glare;
-            check(
-                "glare radius_px",
-                g.radius_px,
-                g.radius_px > 0.0 && g.radius_px.is_finite(),
-                "positive",
-            )?;
-            check(
-                "glare level",
-                g.level,
-                (0.0..1e3).contains(&g.level),
-                "0 or more",
-            )?;
-            for value in [g.centre_px.x, g.centre_px.y] {
-                check("glare centre_px", value, value.is_finite(), "finite")?;
-            }
-        }
-        let clutter = &self.clutter;
-        for (field, n) in [
-            ("clutter count", clutter.count),
-            ("clutter board_marks", clutter.board_marks),
-        ] {
-            check(field, n as f64, n <= MAX_CLUTTER, "at most 100000")?;
-        }
-        if let Some(c) = clutter.clearance_px {
-            check(
-                "clutter clearance_px",
-                c,
-                (0.0..1e9).contains(&c),
-                "0 or more",
-            )?;
-        }
-        let gap = clutter.board_mark_gap_m;
-        check(
-            "clutter board_mark_gap_m",
-            gap,
-            (0.0..1e6).contains(&gap),
-            "0 or more",
-        )?;
+        Ok(())
+    }
+
+    /// Blur, noise, compression and supersampling.
+    fn check_sensor(&self) -> Result<(), PhotoError> {
         let b = self.blur_sigma_px;
         check("blur_sigma_px", b, (0.0..=50.0).contains(&b), "0 to 50")?;
         unit("noise_sigma", self.noise_sigma)?;
@@ -440,7 +380,7 @@ impl PhotoScene {
     }
 }
 
-fn check(
+pub(super) fn check(
     field: &'static str,
     value: f64,
     ok: bool,
@@ -457,6 +397,6 @@ fn check(
     }
 }
 
-fn unit(field: &'static str, value: f64) -> Result<(), PhotoError> {
+pub(super) fn unit(field: &'static str, value: f64) -> Result<(), PhotoError> {
     check(field, value, (0.0..=1.0).contains(&value), "within 0..1")
 }
