@@ -97,65 +97,14 @@ impl<'a> Data<'a> {
         truth: &TruthSeries,
         runs: &'a [TrackSeries],
     ) -> Result<Self, PlotError> {
-        let n = truth.t_s.len();
-        if truth.position_m.len() != n || truth.velocity_mps.len() != n {
-            return Err(invalid(
-                "truth",
-                format!(
-                    "{} times, {} positions, {} velocities",
-                    n,
-                    truth.position_m.len(),
-                    truth.velocity_mps.len()
-                ),
-            ));
-        }
-        if truth.t_s.iter().any(|t| !t.is_finite()) || truth.t_s.windows(2).any(|w| w[1] < w[0]) {
-            return Err(invalid(
-                "truth",
-                "times must be finite and ascending".to_string(),
-            ));
-        }
-        let finite3 = |p: &[f64; 3]| p.iter().all(|v| v.is_finite());
-        if !truth.position_m.iter().any(finite3) {
-            return Err(PlotError::Empty {
-                title: format!("{scenario}: truth"),
-            });
-        }
+        check_truth(scenario, truth)?;
         if runs.is_empty() {
             return Err(PlotError::Empty {
                 title: format!("{scenario}: runs"),
             });
         }
         for r in runs {
-            let m = r.t_s.len();
-            let empty_or_m = |len: usize| len == 0 || len == m;
-            if r.position_m.len() != m
-                || r.velocity_mps.len() != m
-                || !empty_or_m(r.residual_rms_px.len())
-                || r.position_error_m.len() != m
-                || !empty_or_m(r.velocity_error_mps.len())
-            {
-                return Err(invalid(
-                    &format!("run '{}'", r.label),
-                    format!(
-                        "{} times, {} positions, {} velocities, {} residuals, {} position errors, {} velocity \
-                         errors",
-                        m,
-                        r.position_m.len(),
-                        r.velocity_mps.len(),
-                        r.residual_rms_px.len(),
-                        r.position_error_m.len(),
-                        r.velocity_error_mps.len()
-                    ),
-                ));
-            }
-            // Metrics of other estimates than those drawn would label the curves with foreign numbers.
-            if let Some(metrics) = r.metrics.as_ref().filter(|metrics| metrics.count != m) {
-                return Err(invalid(
-                    &format!("run '{}'", r.label),
-                    format!("{} times but metrics of {} estimates", m, metrics.count),
-                ));
-            }
+            check_run(r)?;
         }
         if !runs.iter().any(|r| {
             r.t_s
@@ -196,6 +145,74 @@ impl<'a> Data<'a> {
             t_range,
         })
     }
+}
+
+/// Whether the three coordinates are finite.
+fn finite3(p: &[f64; 3]) -> bool {
+    p.iter().all(|v| v.is_finite())
+}
+
+/// Refuses a truth whose columns differ in length, whose times are not finite and ascending, or with no finite
+/// position.
+fn check_truth(scenario: &str, truth: &TruthSeries) -> Result<(), PlotError> {
+    let n = truth.t_s.len();
+    if truth.position_m.len() != n || truth.velocity_mps.len() != n {
+        return Err(invalid(
+            "truth",
+            format!(
+                "{} times, {} positions, {} velocities",
+                n,
+                truth.position_m.len(),
+                truth.velocity_mps.len()
+            ),
+        ));
+    }
+    if truth.t_s.iter().any(|t| !t.is_finite()) || truth.t_s.windows(2).any(|w| w[1] < w[0]) {
+        return Err(invalid(
+            "truth",
+            "times must be finite and ascending".to_string(),
+        ));
+    }
+    if !truth.position_m.iter().any(finite3) {
+        return Err(PlotError::Empty {
+            title: format!("{scenario}: truth"),
+        });
+    }
+    Ok(())
+}
+
+/// Refuses a run whose columns differ in length, or whose metrics are of another number of estimates.
+fn check_run(r: &TrackSeries) -> Result<(), PlotError> {
+    let m = r.t_s.len();
+    let empty_or_m = |len: usize| len == 0 || len == m;
+    if r.position_m.len() != m
+        || r.velocity_mps.len() != m
+        || !empty_or_m(r.residual_rms_px.len())
+        || r.position_error_m.len() != m
+        || !empty_or_m(r.velocity_error_mps.len())
+    {
+        return Err(invalid(
+            &format!("run '{}'", r.label),
+            format!(
+                "{} times, {} positions, {} velocities, {} residuals, {} position errors, {} velocity \
+                 errors",
+                m,
+                r.position_m.len(),
+                r.velocity_mps.len(),
+                r.residual_rms_px.len(),
+                r.position_error_m.len(),
+                r.velocity_error_mps.len()
+            ),
+        ));
+    }
+    // Metrics of other estimates than those drawn would label the curves with foreign numbers.
+    if let Some(metrics) = r.metrics.as_ref().filter(|metrics| metrics.count != m) {
+        return Err(invalid(
+            &format!("run '{}'", r.label),
+            format!("{} times but metrics of {} estimates", m, metrics.count),
+        ));
+    }
+    Ok(())
 }
 
 fn prepare_run(r: &TrackSeries, color: RGBColor) -> Run<'_> {

@@ -8,7 +8,7 @@ use roitrack_eval::Metrics;
 
 use crate::FONT;
 
-use super::data::{Data, FRAME, NOTE, num};
+use super::data::{Data, FRAME, NOTE, Run, num};
 use super::draw::{MR, Res, YLA, de, panel_header};
 use super::time_series::Quantity;
 
@@ -30,11 +30,6 @@ where
             FRAME.stroke_width(1),
         ))
         .map_err(de)?;
-    let font = |size: u32, color: &'static RGBColor| {
-        TextStyle::from((FONT, size).into_font())
-            .color(color)
-            .pos(Pos::new(HPos::Left, VPos::Top))
-    };
     let x0 = YLA / 2 + 14;
     let cols = [x0 + 8, x0 + 120, x0 + 228, x0 + 336, x0 + 444, x0 + 570];
     let line_h = 24;
@@ -47,75 +42,100 @@ where
                 .draw(&Text::new(
                     format!("… {left} more run{}", if left > 1 { "s" } else { "" }),
                     (x0, y),
-                    font(14, &NOTE),
+                    text_style(14, &NOTE),
                 ))
                 .map_err(de)?;
             break;
         }
-        inner
-            .draw(&PathElement::new(
-                vec![(x0, y + 10), (x0 + 24, y + 10)],
-                r.style(i),
-            ))
-            .map_err(de)?;
-        let title = r.metrics.map_or_else(
-            || r.label.to_string(),
-            |m| {
-                format!(
-                    "{}  ({} estimate{})",
-                    r.label,
-                    m.count,
-                    if m.count == 1 { "" } else { "s" }
-                )
-            },
-        );
-        inner
-            .draw(&Text::new(title, (x0 + 32, y), font(16, &BLACK)))
-            .map_err(de)?;
-        y += line_h + 2;
-        for q in [Quantity::Position, Quantity::Velocity] {
-            let cells = match q.rms(r) {
-                Some((xyz, norm)) => vec![
-                    q.name().to_string(),
-                    format!("x {}", num(xyz[0])),
-                    format!("y {}", num(xyz[1])),
-                    format!("z {}", num(xyz[2])),
-                    format!("3-D {}", num(norm)),
-                    q.unit().to_string(),
-                ],
-                None => vec![q.name().to_string(), "n/a".to_string()],
-            };
-            for (text, &x) in cells.iter().zip(&cols) {
-                inner
-                    .draw(&Text::new(text.clone(), (x, y), font(15, &BLACK)))
-                    .map_err(de)?;
-            }
-            y += line_h;
-        }
-        let residual = r
-            .mean_residual_px
-            .map_or("no image residual".to_string(), |m| {
-                format!("mean image residual {} px", num(m))
-            });
-        inner
-            .draw(&Text::new(
-                format!("{} · {residual}", lag_text(r.metrics)),
-                (cols[0], y),
-                font(14, &NOTE),
-            ))
-            .map_err(de)?;
-        y += line_h + 10;
+        y = run_block(&inner, i, r, x0, &cols, y, line_h)?;
     }
     for (k, text) in FOOTNOTES.iter().enumerate() {
         inner
             .draw(&Text::new(
                 text.to_string(),
                 (x0, bottom + 4 + k as i32 * line_h),
-                font(13, &NOTE),
+                text_style(13, &NOTE),
             ))
             .map_err(de)?;
     }
     Ok(())
+}
+
+/// Text of the embedded font at `size` px in `color`, anchored at its top left.
+fn text_style(size: u32, color: &'static RGBColor) -> TextStyle<'static> {
+    TextStyle::from((FONT, size).into_font())
+        .color(color)
+        .pos(Pos::new(HPos::Left, VPos::Top))
+}
+
+/// Run `i`'s block of the statistics panel, from height `y`: its key and title, a row per quantity (RMS errors
+/// along x, y, z and 3-D), then its velocity lag and mean residual. Returns the height below the block.
+fn run_block<DB: DrawingBackend>(
+    inner: &DrawingArea<DB, Shift>,
+    i: usize,
+    r: &Run,
+    x0: i32,
+    cols: &[i32; 6],
+    mut y: i32,
+    line_h: i32,
+) -> Res<i32>
+where
+    DB::ErrorType: 'static,
+{
+    inner
+        .draw(&PathElement::new(
+            vec![(x0, y + 10), (x0 + 24, y + 10)],
+            r.style(i),
+        ))
+        .map_err(de)?;
+    let title = r.metrics.map_or_else(
+        || r.label.to_string(),
+        |m| {
+            format!(
+                "{}  ({} estimate{})",
+                r.label,
+                m.count,
+                if m.count == 1 { "" } else { "s" }
+            )
+        },
+    );
+    inner
+        .draw(&Text::new(title, (x0 + 32, y), text_style(16, &BLACK)))
+        .map_err(de)?;
+    y += line_h + 2;
+    for q in [Quantity::Position, Quantity::Velocity] {
+        let cells = match q.rms(r) {
+            Some((xyz, norm)) => vec![
+                q.name().to_string(),
+                format!("x {}", num(xyz[0])),
+                format!("y {}", num(xyz[1])),
+                format!("z {}", num(xyz[2])),
+                format!("3-D {}", num(norm)),
+                q.unit().to_string(),
+            ],
+            None => vec![q.name().to_string(), "n/a".to_string()],
+        };
+        for (text, &x) in cells.iter().zip(cols) {
+            inner
+                .draw(&Text::new(text.clone(), (x, y), text_style(15, &BLACK)))
+                .map_err(de)?;
+        }
+        y += line_h;
+    }
+    let residual = r
+        .mean_residual_px
+        .map_or("no image residual".to_string(), |m| {
+            format!("mean image residual {} px", num(m))
+        });
+    inner
+        .draw(&Text::new(
+            format!("{} · {residual}", lag_text(r.metrics)),
+            (cols[0], y),
+            text_style(14, &NOTE),
+        ))
+        .map_err(de)?;
+    y += line_h + 10;
+    Ok(y)
 }
 
 /// The footnote of figure 7 (d): how roitrack-eval defines what the table shows. Three lines leave room for three

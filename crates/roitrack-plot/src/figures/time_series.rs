@@ -69,19 +69,31 @@ fn truth_estimate_error<DB: DrawingBackend>(
 where
     DB::ErrorType: 'static,
 {
-    let unit = q.unit();
     let truth = q.truth(d);
     let first = &d.runs[0];
     // (a) and (b) share their ranges, so that truth and estimate can be compared row by row.
     let ranges: [(f64, f64); 3] =
         std::array::from_fn(|c| robust_range(&[&truth[c]], &[&q.est(first)[c]], 1.0));
-    let off_b: usize = (0..3)
-        .map(|c| off_scale(&[&q.est(first)[c]], ranges[c]))
-        .sum();
+    truth_panel(&cells[0], d, q, &ranges)?;
+    estimate_panel(&cells[1], d, q, &ranges)?;
+    error_panel(&cells[2], d, q)
+}
 
+/// Panel (a): the true quantity along x, y and z against time, on `ranges`.
+fn truth_panel<DB: DrawingBackend>(
+    cell: &DrawingArea<DB, Shift>,
+    d: &Data,
+    q: Quantity,
+    ranges: &[(f64, f64); 3],
+) -> Res<()>
+where
+    DB::ErrorType: 'static,
+{
+    let unit = q.unit();
+    let truth = q.truth(d);
     // (a) truth
     let inner = panel_header(
-        &cells[0],
+        cell,
         &format!("(a) True {} (camera frame)", q.name()),
         None,
         true,
@@ -99,11 +111,30 @@ where
         })
         .collect();
     time_rows(&inner, d.t_range, &stack)?;
+    Ok(())
+}
+
+/// Panel (b): the first run's estimate over the truth in grey, on the truth's `ranges`.
+fn estimate_panel<DB: DrawingBackend>(
+    cell: &DrawingArea<DB, Shift>,
+    d: &Data,
+    q: Quantity,
+    ranges: &[(f64, f64); 3],
+) -> Res<()>
+where
+    DB::ErrorType: 'static,
+{
+    let unit = q.unit();
+    let truth = q.truth(d);
+    let first = &d.runs[0];
+    let off_b: usize = (0..3)
+        .map(|c| off_scale(&[&q.est(first)[c]], ranges[c]))
+        .sum();
 
     // (b) first run's estimate over the truth in grey
     let note_b = join_notes(&[Some("grey: truth".to_string()), off_scale_note(off_b)]);
     let inner = panel_header(
-        &cells[1],
+        cell,
         &format!("(b) Estimated {}: {}", q.name(), first.label),
         note_b.as_deref(),
         true,
@@ -128,7 +159,15 @@ where
         })
         .collect();
     time_rows(&inner, d.t_range, &stack)?;
+    Ok(())
+}
 
+/// Panel (c): every run's error against time on a robust symmetric range, its RMS errors in the legend.
+fn error_panel<DB: DrawingBackend>(cell: &DrawingArea<DB, Shift>, d: &Data, q: Quantity) -> Res<()>
+where
+    DB::ErrorType: 'static,
+{
+    let unit = q.unit();
     // (c) errors of every run, on a robust symmetric range
     let limits: [f64; 3] = std::array::from_fn(|c| {
         let errs: Vec<&[f64]> = d.runs.iter().map(|r| q.err(r)[c].as_slice()).collect();
@@ -144,7 +183,7 @@ where
         format!("range of each row: ±1.2 × 99th percentile of |error| over all runs; {off}")
     });
     let inner = panel_header(
-        &cells[2],
+        cell,
         &format!("(c) {} error: estimate − truth", capitalised(q.name())),
         note_c.as_deref(),
         true,

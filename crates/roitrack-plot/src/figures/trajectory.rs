@@ -65,21 +65,7 @@ where
         ),
     )?;
     let truth_style = BLACK.mix(0.3).stroke_width(6);
-    let mut keys = vec![truth_key(truth_style)];
-    keys.extend(d.runs.iter().enumerate().map(|(i, r)| Key {
-        label: r.metrics.map_or_else(
-            || r.label.to_string(),
-            |m| {
-                format!(
-                    "{} (3-D position RMS error {} mm)",
-                    r.label,
-                    num(m.position_rmse_mm)
-                )
-            },
-        ),
-        style: r.style(i),
-    }));
-    let body = legend_strip(&body, &keys)?;
+    let body = legend_strip(&body, &trajectory_keys(d, truth_style))?;
     let panels: Vec<_> = body
         .split_evenly((1, 3))
         .into_iter()
@@ -97,17 +83,46 @@ where
     let (xr, yr) = equal_aspect(xr, yr, plot);
     let y_down = (-yr.1, -yr.0);
 
-    struct Panel<'s> {
-        title: &'s str,
-        h: usize,
-        v: usize,
-        hr: (f64, f64),
-        vr: (f64, f64),
-        h_desc: &'s str,
-        v_desc: &'s str,
+    for (p, area) in projections(xr, zr, y_down).iter().zip(&panels) {
+        projection_panel(area, d, p, plot, truth_style)?;
     }
-    let specs = [
-        Panel {
+    Ok(())
+}
+
+/// The legend of figure 5: the truth, and each run with its 3-D position RMS error.
+fn trajectory_keys(d: &Data, truth_style: ShapeStyle) -> Vec<Key> {
+    let mut keys = vec![truth_key(truth_style)];
+    keys.extend(d.runs.iter().enumerate().map(|(i, r)| Key {
+        label: r.metrics.map_or_else(
+            || r.label.to_string(),
+            |m| {
+                format!(
+                    "{} (3-D position RMS error {} mm)",
+                    r.label,
+                    num(m.position_rmse_mm)
+                )
+            },
+        ),
+        style: r.style(i),
+    }));
+    keys
+}
+
+/// One panel of figure 5: the plane of axes `h` (across) and `v` (up), their ranges and descriptions.
+struct Projection<'s> {
+    title: &'s str,
+    h: usize,
+    v: usize,
+    hr: (f64, f64),
+    vr: (f64, f64),
+    h_desc: &'s str,
+    v_desc: &'s str,
+}
+
+/// The three panels of figure 5 from the ranges of x, z and y (pointing down, `y_down`).
+fn projections(xr: (f64, f64), zr: (f64, f64), y_down: (f64, f64)) -> [Projection<'static>; 3] {
+    [
+        Projection {
             title: "(a) x–y: image plane, as seen by the camera",
             h: 0,
             v: 1,
@@ -116,7 +131,7 @@ where
             h_desc: "x (mm)",
             v_desc: "y (mm, pointing down)",
         },
-        Panel {
+        Projection {
             title: "(b) x–z: top view",
             h: 0,
             v: 2,
@@ -125,7 +140,7 @@ where
             h_desc: "x (mm)",
             v_desc: "z, depth (mm)",
         },
-        Panel {
+        Projection {
             title: "(c) y–z: side view",
             h: 2,
             v: 1,
@@ -134,66 +149,77 @@ where
             h_desc: "z, depth (mm)",
             v_desc: "y (mm, pointing down)",
         },
-    ];
-    for (p, area) in specs.iter().zip(&panels) {
-        let sign = |c: usize| if c == 1 { -1.0 } else { 1.0 };
-        let v_of =
-            |vals: &[f64], c: usize| -> Vec<f64> { vals.iter().map(|v| sign(c) * v).collect() };
-        let truth_h = v_of(&d.truth.pos[p.h], p.h);
-        let truth_v = v_of(&d.truth.pos[p.v], p.v);
-        let run_hv: Vec<(Vec<f64>, Vec<f64>)> = d
-            .runs
-            .iter()
-            .map(|r| (v_of(&r.pos[p.h], p.h), v_of(&r.pos[p.v], p.v)))
-            .collect();
-        let off: usize = run_hv
-            .iter()
-            .map(|(h, v)| {
-                h.iter()
-                    .zip(v)
-                    .filter(|(h, v)| {
-                        h.is_finite()
-                            && v.is_finite()
-                            && (**h < p.hr.0 || **h > p.hr.1 || **v < p.vr.0 || **v > p.vr.1)
-                    })
-                    .count()
-            })
-            .sum();
-        let h_name = p
-            .h_desc
-            .split(' ')
-            .next()
-            .unwrap_or("")
-            .trim_end_matches(',');
-        let v_name = p
-            .v_desc
-            .split(' ')
-            .next()
-            .unwrap_or("")
-            .trim_end_matches(',');
-        let note = join_notes(&[
-            scale_note(p.hr, p.vr, plot, h_name, v_name),
-            off_scale_note(off),
-        ]);
-        let inner = panel_header(area, p.title, note.as_deref(), true)?;
-        let axes = Axes {
-            xr: p.hr,
-            yr: p.vr,
-            x_desc: p.h_desc,
-            y_desc: p.v_desc,
-            x_ticks: true,
-            y_down: p.v == 1,
-            n_x: 6,
-            n_y: 10,
-        };
-        let mut ctx = chart(&inner, &axes)?;
-        line(&mut ctx, &axes, &truth_h, &truth_v, truth_style, false)?;
-        for (i, r) in runs_back_to_front(d) {
-            let (h, v) = &run_hv[i];
-            line(&mut ctx, &axes, h, v, r.style(i), false)?;
-        }
-        start_and_direction(&mut ctx, &axes, &truth_h, &truth_v)?;
+    ]
+}
+
+/// Draws panel `p` of figure 5 in `area`: the truth and every run projected on its plane, with a note on its scale
+/// and on the points off it.
+fn projection_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    d: &Data,
+    p: &Projection,
+    plot: (f64, f64),
+    truth_style: ShapeStyle,
+) -> Res<()>
+where
+    DB::ErrorType: 'static,
+{
+    let sign = |c: usize| if c == 1 { -1.0 } else { 1.0 };
+    let v_of = |vals: &[f64], c: usize| -> Vec<f64> { vals.iter().map(|v| sign(c) * v).collect() };
+    let truth_h = v_of(&d.truth.pos[p.h], p.h);
+    let truth_v = v_of(&d.truth.pos[p.v], p.v);
+    let run_hv: Vec<(Vec<f64>, Vec<f64>)> = d
+        .runs
+        .iter()
+        .map(|r| (v_of(&r.pos[p.h], p.h), v_of(&r.pos[p.v], p.v)))
+        .collect();
+    let off: usize = run_hv
+        .iter()
+        .map(|(h, v)| {
+            h.iter()
+                .zip(v)
+                .filter(|(h, v)| {
+                    h.is_finite()
+                        && v.is_finite()
+                        && (**h < p.hr.0 || **h > p.hr.1 || **v < p.vr.0 || **v > p.vr.1)
+                })
+                .count()
+        })
+        .sum();
+    let h_name = p
+        .h_desc
+        .split(' ')
+        .next()
+        .unwrap_or("")
+        .trim_end_matches(',');
+    let v_name = p
+        .v_desc
+        .split(' ')
+        .next()
+        .unwrap_or("")
+        .trim_end_matches(',');
+    let note = join_notes(&[
+        scale_note(p.hr, p.vr, plot, h_name, v_name),
+        off_scale_note(off),
+    ]);
+    let inner = panel_header(area, p.title, note.as_deref(), true)?;
+    let axes = Axes {
+        xr: p.hr,
+        yr: p.vr,
+        x_desc: p.h_desc,
+        y_desc: p.v_desc,
+        x_ticks: true,
+        y_down: p.v == 1,
+        n_x: 6,
+        n_y: 10,
+    };
+    let mut ctx = chart(&inner, &axes)?;
+    line(&mut ctx, &axes, &truth_h, &truth_v, truth_style, false)?;
+    for (i, r) in runs_back_to_front(d) {
+        let (h, v) = &run_hv[i];
+        line(&mut ctx, &axes, h, v, r.style(i), false)?;
     }
+    start_and_direction(&mut ctx, &axes, &truth_h, &truth_v)?;
     Ok(())
 }
 
