@@ -131,6 +131,81 @@ pub fn estimate_errors(
     est_twists: Option<&[TwistSample]>,
     opts: &EvalOptions,
 ) -> Result<EstimateErrors, EvalError> {
+    let (truth_times, est_times) =
+        check_inputs(truth_poses, truth_twists, est_poses, est_twists, opts)?;
+    let gap = opts.max_time_gap_s;
+    let time_offset_s = clock_offset_s(opts, (truth_poses, &truth_times), (est_poses, &est_times))?;
+    if let Some(interval) = opts.rpe_interval_s
+        && !(interval.is_finite() && interval > 0.0)
+    {
+        return Err(EvalError::InvalidOption {
+            name: "rpe_interval_s",
+            value: interval,
+            reason: "must be finite and positive",
+        });
+    }
+    let kept = pair_with_truth(
+        &truth_times,
+        &est_times,
+        time_offset_s,
+        gap,
+        opts.skip_outside_truth,
+    )?;
+    let skipped_outside_truth = est_times.len() - kept.len();
+    let truth_at: Vec<PoseSample> = kept
+        .iter()
+        .map(|&(i, at)| {
+            let (rotation, translation) = at.pose(truth_poses);
+            PoseSample {
+                t_s: est_times[i] + time_offset_s,
+                cam_from_obj: nalgebra::Isometry3::from_parts(translation.into(), rotation),
+            }
+        })
+        .collect();
+    let transform = alignment(opts.alignment, est_poses, &kept, &truth_at)?;
+    let aligned: Vec<PoseSample> = kept
+        .iter()
+        .zip(&truth_at)
+        .map(|(&(i, _), truth)| {
+            let mut pose = transform.pose(&est_poses[i]);
+            pose.t_s = truth.t_s;
+            pose
+        })
+        .collect();
+    let (position_m, rotation_rad, rotation_vector_rad) = pose_errors(&aligned, &truth_at);
+    let relative = opts
+        .rpe_interval_s
+        .map(|interval| trajectory::relative_errors(&truth_at, &aligned, interval));
+    let mut errors = EstimateErrors {
+        t_s: truth_at.iter().map(|p| p.t_s).collect(),
+        time_offset_s,
+        alignment: opts.alignment,
+        transform,
+        skipped_outside_truth,
+        relative,
+        position_m,
+        rotation_rad,
+        rotation_vector_rad,
+        velocity_mps: None,
+        angular_velocity_radps: None,
+        true_velocity_mps: None,
+        estimated_velocity_mps: None,
+    };
+    if let (Some(truth_twists), Some(est_twists)) = (truth_twists, est_twists) {
+        add_twist_errors(&mut errors, &kept, truth_twists, est_twists);
+    }
+    Ok(errors)
+}
+
+/// Refuses a negative or non-finite time gap, empty poses, times that do not increase and twists at other times
+/// than their poses; returns the times of the truth's poses and of the estimates.
+fn check_inputs(
+    truth_poses: &[PoseSample],
+    truth_twists: Option<&[TwistSample]>,
+    est_poses: &[PoseSample],
+    est_twists: Option<&[TwistSample]>,
+    opts: &EvalOptions,
+) -> Result<(Vec<f64>, Vec<f64>), EvalError> {
     if !opts.max_time_gap_s.is_finite() || opts.max_time_gap_s < 0.0 {
         return Err(EvalError::InvalidOption {
             name: "max_time_gap_s",
@@ -159,8 +234,17 @@ pub fn estimate_errors(
     if let Some(twists) = est_twists {
         check_twist_times("estimated twists", &est_times, twists, gap)?;
     }
+    Ok((truth_times, est_times))
+}
 
-    let time_offset_s = match opts.time_offset {
+/// The estimates' clock offset to the truth's: the given one, or the one found by matching the trajectories and
+/// refined.
+fn clock_offset_s(
+    opts: &EvalOptions,
+    (truth_poses, truth_times): (&[PoseSample], &[f64]),
+    (est_poses, est_times): (&[PoseSample], &[f64]),
+) -> Result<f64, EvalError> {
+    Ok(match opts.time_offset {
         TimeOffset::Fixed(offset) if offset.is_finite() => offset,
         TimeOffset::Fixed(offset) => {
             return Err(EvalError::InvalidOption {
@@ -173,28 +257,29 @@ pub fn estimate_errors(
             let coarse =
                 trajectory::find_time_offset(truth_poses, est_poses, opts.max_time_offset_s)?;
             refine_time_offset(
-                (truth_poses, &truth_times),
-                (est_poses, &est_times),
+                (truth_poses, truth_times),
+                (est_poses, est_times),
                 coarse,
                 opts.alignment,
             )
         }
-    };
-    if let Some(interval) = opts.rpe_interval_s
-        && !(interval.is_finite() && interval > 0.0)
-    {
-        return Err(EvalError::InvalidOption {
-            name: "rpe_interval_s",
-            value: interval,
-            reason: "must be finite and positive",
-        });
-    }
-    // Each estimate on the truth's clock, with the truth there; those outside the truth left out when asked.
+    })
+}
+
+/// Each estimate on the truth's clock (shifted by `time_offset_s`) with where the truth is there; estimates outside
+/// the truth's span are left out with `skip_outside_truth`, refused otherwise.
+fn pair_with_truth(
+    truth_times: &[f64],
+    est_times: &[f64],
+    time_offset_s: f64,
+    gap: f64,
+    skip_outside_truth: bool,
+) -> Result<Vec<(usize, TruthIndex)>, EvalError> {
     let mut kept: Vec<(usize, TruthIndex)> = Vec::with_capacity(est_times.len());
     for (i, &t) in est_times.iter().enumerate() {
-        match align::locate(&truth_times, i, t + time_offset_s, gap) {
+        match align::locate(truth_times, i, t + time_offset_s, gap) {
             Ok(at) => kept.push((i, at)),
-            Err(EvalError::OutsideTruthSpan { .. }) if opts.skip_outside_truth => {}
+            Err(EvalError::OutsideTruthSpan { .. }) if skip_outside_truth => {}
             Err(error) => return Err(error),
         }
     }
@@ -203,18 +288,17 @@ pub fn estimate_errors(
             what: "estimates inside the truth's time span",
         });
     }
-    let skipped_outside_truth = est_times.len() - kept.len();
-    let truth_at: Vec<PoseSample> = kept
-        .iter()
-        .map(|&(i, at)| {
-            let (rotation, translation) = at.pose(truth_poses);
-            PoseSample {
-                t_s: est_times[i] + time_offset_s,
-                cam_from_obj: nalgebra::Isometry3::from_parts(translation.into(), rotation),
-            }
-        })
-        .collect();
-    let transform = match opts.alignment {
+    Ok(kept)
+}
+
+/// The transform that aligns the kept estimates' positions onto the truth's (`Alignment::None`: the identity).
+fn alignment(
+    alignment: Alignment,
+    est_poses: &[PoseSample],
+    kept: &[(usize, TruthIndex)],
+    truth_at: &[PoseSample],
+) -> Result<SimilarityTransform, EvalError> {
+    Ok(match alignment {
         Alignment::None => SimilarityTransform::identity(),
         kind => {
             let from: Vec<Vector3<f64>> = kept
@@ -227,19 +311,17 @@ pub fn estimate_errors(
                 .collect();
             trajectory::umeyama(&from, &to, kind == Alignment::Sim3)?
         }
-    };
-    let aligned: Vec<PoseSample> = kept
-        .iter()
-        .zip(&truth_at)
-        .map(|(&(i, _), truth)| {
-            let mut pose = transform.pose(&est_poses[i]);
-            pose.t_s = truth.t_s;
-            pose
-        })
-        .collect();
+    })
+}
+
+/// The position error (m), rotation angle (rad) and rotation vector (rad) of each aligned estimate against the truth.
+fn pose_errors(
+    aligned: &[PoseSample],
+    truth_at: &[PoseSample],
+) -> (Vec<Vector3<f64>>, Vec<f64>, Vec<Vector3<f64>>) {
     let (position_m, (rotation_rad, rotation_vector_rad)): (Vec<_>, (Vec<_>, Vec<_>)) = aligned
         .iter()
-        .zip(&truth_at)
+        .zip(truth_at)
         .map(|(est, truth)| {
             let angle = so3::angle_between(
                 &est.cam_from_obj.rotation.to_rotation_matrix(),
@@ -254,46 +336,37 @@ pub fn estimate_errors(
             )
         })
         .unzip();
-    let relative = opts
-        .rpe_interval_s
-        .map(|interval| trajectory::relative_errors(&truth_at, &aligned, interval));
-    let mut errors = EstimateErrors {
-        t_s: truth_at.iter().map(|p| p.t_s).collect(),
-        time_offset_s,
-        alignment: opts.alignment,
-        transform,
-        skipped_outside_truth,
-        relative,
-        position_m,
-        rotation_rad,
-        rotation_vector_rad,
-        velocity_mps: None,
-        angular_velocity_radps: None,
-        true_velocity_mps: None,
-        estimated_velocity_mps: None,
-    };
-    if let (Some(truth_twists), Some(est_twists)) = (truth_twists, est_twists) {
-        let count = kept.len();
-        let (mut velocity, mut angular, mut truth_v, mut est_v) = (
-            Vec::with_capacity(count),
-            Vec::with_capacity(count),
-            Vec::with_capacity(count),
-            Vec::with_capacity(count),
-        );
-        for &(i, truth_at) in &kept {
-            let (true_v, true_w) = truth_at.twist(truth_twists);
-            let est = transform.twist(&est_twists[i]);
-            velocity.push(est.velocity_mps - true_v);
-            angular.push(est.angular_velocity_radps - true_w);
-            truth_v.push(true_v);
-            est_v.push(est.velocity_mps);
-        }
-        errors.velocity_mps = Some(velocity);
-        errors.angular_velocity_radps = Some(angular);
-        errors.true_velocity_mps = Some(truth_v);
-        errors.estimated_velocity_mps = Some(est_v);
+    (position_m, rotation_rad, rotation_vector_rad)
+}
+
+/// The velocity and angular velocity errors of the kept estimates (their twists through the alignment), and the
+/// true and estimated velocities the velocity lag is measured on.
+fn add_twist_errors(
+    errors: &mut EstimateErrors,
+    kept: &[(usize, TruthIndex)],
+    truth_twists: &[TwistSample],
+    est_twists: &[TwistSample],
+) {
+    let transform = errors.transform;
+    let count = kept.len();
+    let (mut velocity, mut angular, mut truth_v, mut est_v) = (
+        Vec::with_capacity(count),
+        Vec::with_capacity(count),
+        Vec::with_capacity(count),
+        Vec::with_capacity(count),
+    );
+    for &(i, truth_at) in kept {
+        let (true_v, true_w) = truth_at.twist(truth_twists);
+        let est = transform.twist(&est_twists[i]);
+        velocity.push(est.velocity_mps - true_v);
+        angular.push(est.angular_velocity_radps - true_w);
+        truth_v.push(true_v);
+        est_v.push(est.velocity_mps);
     }
-    Ok(errors)
+    errors.velocity_mps = Some(velocity);
+    errors.angular_velocity_radps = Some(angular);
+    errors.true_velocity_mps = Some(truth_v);
+    errors.estimated_velocity_mps = Some(est_v);
 }
 
 impl EstimateErrors {
