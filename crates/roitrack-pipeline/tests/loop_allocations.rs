@@ -1,6 +1,6 @@
 //! The real-time loop allocates nothing per ROI or per control step: two runs of N and 2N ROIs through the same
-//! loop (replayed, pre-rendered ROIs, both threads) make exactly the same number of heap allocations, all of them
-//! set-up (threads, queues, buffers sized up front, the full-frame initialisation).
+//! loop (replayed, pre-rendered ROIs, both threads), after a first run, make exactly the same number of heap
+//! allocations, all of them set-up (threads, queues, buffers sized up front, the full-frame initialisation).
 
 use roitrack_core::estimator::{EstimatorConfig, TrackerConfig, VvsSettings};
 use roitrack_core::roi_order::bit_reversed_indices;
@@ -45,7 +45,9 @@ fn steady_state_loop_does_not_allocate() {
             ..Default::default()
         };
         let mut counts = Vec::new();
-        for slots in [n, 2 * n] {
+        // A first run, not counted: the identification keeps what it derives from the target for the next
+        // whole-frame search on the same thread, which the first run of the process computes and later ones reuse.
+        for slots in [n, n, 2 * n] {
             let mut camera = replay.clone();
             camera.rewind();
             let config = LoopConfig {
@@ -74,7 +76,7 @@ fn steady_state_loop_does_not_allocate() {
             counts.push((allocations, report.rois));
         }
         assert_eq!(
-            counts[0].0, counts[1].0,
+            counts[1].0, counts[2].0,
             "{name}: allocations grow with the number of ROIs: {counts:?} (allocations, ROIs)"
         );
     }
