@@ -84,12 +84,9 @@ impl FrameTracker {
         request
     }
 
-    /// Measures every predicted blob in its window; returns how many were found (in `self.measurements`).
-    pub(super) fn measure_windows(&mut self, frame: &Frame, predictor: &Predictor) -> usize {
-        self.measurements.clear();
-        self.windows.centres.clear();
-        let polarity = self.search.polarity.unwrap_or(Polarity::Bright);
-        let time = self.camera.time;
+    /// Places each point's window (`self.windows.requests`) in the frame whose row 0 is read at `frame.t_s`; `false`
+    /// if a prediction is too uncertain for the largest window.
+    fn place_windows(&mut self, frame: &Frame, predictor: &Predictor) -> bool {
         self.windows.requests.clear();
         for i in 0..self.target.len() {
             let request = self.request_at_row_time(predictor, i, frame.t_s);
@@ -100,9 +97,21 @@ impl FrameTracker {
                 r.sigma_px
                     .is_some_and(|sigma| 2.0 * self.config.windows.sigma_margin * sigma > largest)
             }) {
-                return 0;
+                return false;
             }
             self.windows.requests.push(request);
+        }
+        true
+    }
+
+    /// Measures every predicted blob in its window; returns how many were found (in `self.measurements`).
+    pub(super) fn measure_windows(&mut self, frame: &Frame, predictor: &Predictor) -> usize {
+        self.measurements.clear();
+        self.windows.centres.clear();
+        let polarity = self.search.polarity.unwrap_or(Polarity::Bright);
+        let time = self.camera.time;
+        if !self.place_windows(frame, predictor) {
+            return 0;
         }
         let mut cut = 0;
         for i in 0..self.windows.requests.len() {
