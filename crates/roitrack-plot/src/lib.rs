@@ -8,6 +8,7 @@
 
 pub mod figures;
 pub mod run;
+pub mod servo;
 mod svg_text;
 
 pub use figures::{TrackSeries, TruthSeries, render_figures, write_figures};

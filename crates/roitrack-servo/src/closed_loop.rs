@@ -14,8 +14,9 @@
 //!    [`roitrack_pipeline::FrameTracker`]. An estimate is available `exposure / 2 + readout + processing + extra
 //!    latency` after the time it refers to.
 //!
-//! A run whose error from the path passes [`ServoConfig::divergence_error_m`], whose platform leaves the workspace, or
-//! whose controller gives a force that is not finite is stopped and reported unstable.
+//! A run whose error from the path passes [`ServoConfig::divergence_error_m`], whose platform leaves the workspace,
+//! whose actuators stay at their force limit (a limit cycle, [`ServoConfig::saturation_window_s`]) or whose
+//! controller gives a force that is not finite is stopped and reported unstable.
 
 use std::collections::VecDeque;
 
@@ -169,8 +170,13 @@ pub struct ServoConfig {
     pub gain_scale: f64,
     /// From the command to the force (s): the drive's delay. The `true-state` floor has none.
     pub actuation_delay_s: f64,
-    /// Latency added between the camera and the controller (s).
+    /// Latency added between the camera and the controller (s); for the `true-state` floor, the true state this much
+    /// old.
     pub extra_latency_s: f64,
+    /// Whether the gains made from the latency (`gains: None`) count [`Self::extra_latency_s`]: the loop knows the
+    /// age of its feedback (each estimate carries the time it refers to) and tunes for it. `false`: tuned for the
+    /// camera's own latency only, to see what an unforeseen delay does.
+    pub gains_follow_latency: bool,
     /// The camera's timing; `None`: [`CameraKind::timing`].
     pub timing: Option<CameraTiming>,
     /// The tracker's configuration (ROI camera; the frame tracker's is made from it).
@@ -181,6 +187,11 @@ pub struct ServoConfig {
     /// of any run that ends (under 5 mm even at 30 Hz) and still inside the image (the path keeps the blobs about
     /// 90 mm from its border at 0.6 m).
     pub divergence_error_m: f64,
+    /// A run whose actuators are at their force limit more than half of any window this long (s) is stopped as
+    /// unstable: 0.1 s. An unstable loop does not always run away: the force limit can hold it in a limit cycle a
+    /// few millimetres wide (saturated most of the time), which the distance alone would not catch; a stable loop
+    /// on the path saturates only in transients (none in the nominal runs).
+    pub saturation_window_s: f64,
     /// Control (and ROI) ticks per second.
     pub control_rate_hz: f64,
     /// RK4 steps per control tick.
@@ -215,10 +226,12 @@ impl ServoConfig {
             gain_scale: 1.0,
             actuation_delay_s: 250e-6,
             extra_latency_s: 0.0,
+            gains_follow_latency: true,
             timing: None,
             tracker: servo_tracker_config(),
             seed: 1,
             divergence_error_m: 0.05,
+            saturation_window_s: 0.1,
             control_rate_hz: 4000.0,
             substeps: 4,
         }
@@ -231,18 +244,44 @@ impl ServoConfig {
 
     /// How old, on average, the feedback is when the command it made acts (s), as the gains are tuned for it: the
     /// camera's latency, the actuation delay and half the interval between estimates (an estimate every 10 ROIs, or
-    /// one per frame); zero for the `true-state` floor. The extra latency is not in it: it is what the loop is
-    /// tested against, not tuned for.
+    /// one per frame), plus the extra latency when [`Self::gains_follow_latency`]; for the `true-state` floor only
+    /// that extra latency.
+    ///
+    /// ```
+    /// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig};
+    /// let mut config = ServoConfig::new(ControllerKind::Ctc, CameraKind::Roi, 1.0);
+    /// assert!((config.feedback_age_s() - 1.7e-3).abs() < 1e-9);
+    /// config.extra_latency_s = 1e-3;
+    /// assert!((config.feedback_age_s() - 2.7e-3).abs() < 1e-9);
+    /// config.gains_follow_latency = false;
+    /// assert!((config.feedback_age_s() - 1.7e-3).abs() < 1e-9);
+    /// ```
     pub fn feedback_age_s(&self) -> f64 {
+        let extra_s = if self.gains_follow_latency {
+            self.extra_latency_s
+        } else {
+            0.0
+        };
         if self.camera == CameraKind::Truth {
-            return 0.0;
+            return extra_s;
         }
         let timing = self.camera_timing();
         let estimate_interval_s = match self.camera {
             CameraKind::Roi => self.tracker.every as f64 / timing.rate_hz,
             _ => 1.0 / timing.rate_hz,
         };
-        timing.latency_s() + self.actuation_delay_s + estimate_interval_s / 2.0
+        timing.latency_s() + self.actuation_delay_s + estimate_interval_s / 2.0 + extra_s
+    }
+
+    /// The natural frequency (rad/s; λ for the kinematic servo) that the gain rule gives for
+    /// [`Self::feedback_age_s`] ([`Gains::for_latency`], [`KinematicGains::for_latency`]), before
+    /// [`Self::gain_scale`] and the depth factor.
+    pub fn rule_gain_radps(&self) -> f64 {
+        let age = self.feedback_age_s();
+        match self.controller {
+            ControllerKind::Kvs => KinematicGains::for_latency(age).lambda_per_s,
+            _ => Gains::for_latency(age).natural_frequency_radps,
+        }
     }
 
     fn check(&self) -> Result<(), ServoError> {
@@ -267,6 +306,7 @@ impl ServoConfig {
         non_negative("actuation_delay_s", self.actuation_delay_s)?;
         non_negative("extra_latency_s", self.extra_latency_s)?;
         positive("divergence_error_m", self.divergence_error_m)?;
+        positive("saturation_window_s", self.saturation_window_s)?;
         positive("control_rate_hz", self.control_rate_hz)?;
         positive("substeps", self.substeps as f64)?;
         if let Some(gains) = self.gains {
@@ -652,6 +692,11 @@ pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
     let mut samples = Vec::with_capacity(ticks + 1);
     let mut ages = Vec::with_capacity(ticks);
     let mut saturated_ticks = 0usize;
+    // The ticks of the last `saturation_window_s` at which an actuator was at its limit.
+    let window_ticks =
+        ((config.saturation_window_s * config.control_rate_hz).round() as usize).max(1);
+    let mut recent_saturation: VecDeque<bool> = VecDeque::with_capacity(window_ticks + 1);
+    let mut recent_saturated = 0usize;
     let mut stop_reason = None;
     let (_, home_cam) = path.home_in_camera();
     let limit = robot.force_limit_n;
@@ -677,10 +722,17 @@ pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
         let t_act_s = t_s + actuation_delay_s;
         let geometry = Geometry::at(&robot, &state.position_m).expect("checked at each step");
         let fed = if truth_fed {
+            // The true state, `extra_latency_s` old.
+            let t_seen_s = (t_s - config.extra_latency_s).max(0.0);
+            let seen = if config.extra_latency_s > 0.0 {
+                history.at(t_seen_s)
+            } else {
+                state
+            };
             Some(Observation {
-                t_s,
-                position_m: state.position_m,
-                velocity_mps: state.velocity_mps,
+                t_s: t_seen_s,
+                position_m: seen.position_m,
+                velocity_mps: seen.velocity_mps,
                 acceleration_mps2: None,
             })
         } else {
@@ -739,6 +791,21 @@ pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
             history.states.push(state);
         }
         saturated_ticks += usize::from(saturated);
+        recent_saturation.push_back(saturated);
+        recent_saturated += usize::from(saturated);
+        if recent_saturation.len() > window_ticks {
+            recent_saturated -= usize::from(recent_saturation.pop_front().unwrap_or(false));
+        }
+        if recent_saturation.len() == window_ticks && 2 * recent_saturated > window_ticks {
+            stop_reason = Some(format!(
+                "unstable: an actuator at its force limit {:.0} % of the {:.0} ms before t = {:.4} s (a limit cycle \
+                 the force limit bounds)",
+                100.0 * recent_saturated as f64 / window_ticks as f64,
+                config.saturation_window_s * 1e3,
+                t_s + tick_s
+            ));
+            break 'ticks;
+        }
         let t_next = (n + 1) as f64 * tick_s;
         let sample = ServoSample {
             t_s: t_next,

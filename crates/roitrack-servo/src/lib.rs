@@ -10,12 +10,14 @@
 //!   with pose only, the kinematic visual servo, and the true-state floor. Pure math.
 //! - [`closed_loop`]: the loop in simulated time through the simulated ROI or frame camera and roitrack's trackers
 //!   ([`run_servo`]), deterministic for a seed, with divergence detected and reported.
-//! - [`output`]: a run's files (reference and achieved poses in TUM, the estimates, the per-tick log).
+//! - [`output`]: a run's files (reference and achieved poses in TUM, the estimates, the per-tick log) and figures.
+//! - [`sweep`]: the largest stable gain against latency, per scheme.
 
 pub mod closed_loop;
 pub mod control;
 pub mod reference;
 pub mod robot;
+pub mod sweep;
 
 pub use closed_loop::{
     CameraKind, CameraTiming, ControllerKind, ServoConfig, ServoError, ServoReport, ServoSample,

@@ -88,3 +88,42 @@ pub fn write_run(report: &ServoReport, dir: &Path) -> Result<(), FormatError> {
     }
     file.finish()
 }
+
+/// A run as the series its figures draw (robot frame), labelled `controller / camera`.
+pub fn figure_series(report: &ServoReport) -> roitrack_plot::servo::ServoRunSeries {
+    let array = |v: &nalgebra::Vector3<f64>| [v.x, v.y, v.z];
+    roitrack_plot::servo::ServoRunSeries {
+        label: format!("{} / {}", report.controller.name(), report.camera.name()),
+        t_s: report.samples.iter().map(|s| s.t_s).collect(),
+        reference_m: report
+            .samples
+            .iter()
+            .map(|s| array(&s.reference.position_m))
+            .collect(),
+        achieved_m: report
+            .samples
+            .iter()
+            .map(|s| array(&s.achieved_m))
+            .collect(),
+        force_n: report.samples.iter().map(|s| array(&s.force_n)).collect(),
+    }
+}
+
+/// The figures of `reports` (the path, the error over time, the actuator forces: `servo_path`, `servo_error`,
+/// `servo_forces`, PNG and SVG), rendered in memory for the caller to write with its other outputs.
+///
+/// ```
+/// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig, run_servo};
+/// use roitrack_servo::reference::ReferencePath;
+/// let mut config = ServoConfig::new(ControllerKind::TrueState, CameraKind::Truth, 1.0);
+/// config.path = ReferencePath::random(1, 0.5, 1.0);
+/// let report = run_servo(&config).unwrap();
+/// let files = roitrack_servo::output::render_figures(&[report]).unwrap();
+/// assert_eq!(files.len(), 6);
+/// ```
+pub fn render_figures(
+    reports: &[ServoReport],
+) -> Result<Vec<roitrack_plot::RenderedFile>, roitrack_plot::PlotError> {
+    let series: Vec<_> = reports.iter().map(figure_series).collect();
+    roitrack_plot::servo::render_servo_figures(&series)
+}

@@ -70,10 +70,22 @@ pub struct ServoArgs {
     /// The path played this many times faster (2: 2 m/s peak), from 0.1 to 4.
     #[arg(long, default_value_t = 1.0, value_parser = ranges::within(0.1..=4.0, "", "a path played at up to 4 m/s"))]
     pub speed_scale: f64,
-    /// Latency added between the camera and the controller (s), at most 0.1; the gains stay tuned for the camera's
-    /// own latency.
+    /// Latency added between the camera and the controller (s), at most 0.1; the gains follow the whole latency
+    /// unless --fixed-gains.
     #[arg(long, default_value_t = 0.0, value_parser = ranges::within(0.0..=0.1, " s", "a tenth of a second"))]
     pub extra_latency_s: f64,
+    /// Keep the gains tuned for the camera's own latency, whatever --extra-latency-s adds (to see what an
+    /// unforeseen delay does).
+    #[arg(long)]
+    pub fixed_gains: bool,
+    /// The gains' natural frequency (rad/s; λ for kvs) times this, from 0.01 to 100 (to find the stability limit by
+    /// hand).
+    #[arg(long, default_value_t = 1.0, value_parser = ranges::within(0.01..=100.0, "", "a hundred times the rule's gain"))]
+    pub gain_scale: f64,
+    /// Also find, for each controller, the largest stable gain against extra latency (0 to 4 ms) and write
+    /// stable_gain.csv and servo_stable_gain.png/svg (a few hundred runs: minutes).
+    #[arg(long)]
+    pub sweep_gains: bool,
     /// Seed of the camera's noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -92,15 +104,18 @@ pub fn run(args: &ServoArgs) -> Result<()> {
         None => ControllerKind::ALL.to_vec(),
     };
     roitrack::formats::create_output_dir(&args.out)?;
+    let mut reports = Vec::new();
     if !args.json {
         println!(
             "{:<11} {:<10} {:>8} {:>8} {:>6} {:>9} {:>8}  dir",
             "controller", "camera", "rms_mm", "max_mm", "stable", "omega_rad", "age_ms"
         );
     }
-    for controller in controllers {
+    for &controller in &controllers {
         let mut config = ServoConfig::new(controller, args.camera.into(), args.speed_scale);
         config.extra_latency_s = args.extra_latency_s;
+        config.gains_follow_latency = !args.fixed_gains;
+        config.gain_scale = args.gain_scale;
         config.seed = args.seed;
         let report =
             run_servo(&config).with_context(|| format!("servo run {}", controller.name()))?;
@@ -143,6 +158,65 @@ pub fn run(args: &ServoArgs) -> Result<()> {
                 println!("    stopped: {reason}");
             }
         }
+        reports.push(report);
     }
+    let figures = roitrack_servo::output::render_figures(&reports)?;
+    crate::commands::plot::write_figure_files(&args.out, &figures)?;
+    if args.sweep_gains {
+        sweep(args, &controllers)?;
+    }
+    Ok(())
+}
+
+/// The largest stable gain against extra latency of each controller: a table, `stable_gain.csv` and the figure.
+fn sweep(args: &ServoArgs, controllers: &[ControllerKind]) -> Result<()> {
+    use roitrack_servo::sweep;
+    let search = sweep::GainSearch::default();
+    let mut curves = Vec::new();
+    let mut rows = Vec::new();
+    if !args.json {
+        println!("\n{}", sweep::TABLE_HEADER);
+    }
+    for &controller in controllers {
+        let mut config = ServoConfig::new(controller, args.camera.into(), args.speed_scale);
+        config.seed = args.seed;
+        let points = sweep::stable_gain_sweep(&config, &sweep::EXTRA_LATENCIES_S, &search)
+            .with_context(|| format!("gain sweep of {}", controller.name()))?;
+        for point in &points {
+            let row = sweep::Row {
+                controller,
+                camera: config.camera,
+                point: *point,
+            };
+            if args.json {
+                println!(
+                    "{}",
+                    serde_json::json!({
+                        "sweep": "stable_gain",
+                        "controller": controller.name(),
+                        "camera": config.camera.name(),
+                        "extra_latency_s": point.extra_latency_s,
+                        "largest_stable_radps": point.largest_stable_radps,
+                        "rule_radps": point.rule_radps,
+                    })
+                );
+            } else {
+                println!("{}", row.table_row());
+            }
+            rows.push(row);
+        }
+        curves.push(sweep::curve(controller, config.camera, &points));
+    }
+    let mut csv = roitrack::formats::AtomicFile::create(args.out.join(sweep::CSV_FILE))?;
+    use std::io::Write as _;
+    writeln!(csv, "{}", sweep::CSV_HEADER)?;
+    for row in &rows {
+        writeln!(csv, "{}", row.csv_row())?;
+    }
+    csv.finish()?;
+    crate::commands::plot::write_figure_files(
+        &args.out,
+        &roitrack::plot::servo::render_stable_gain(&curves)?,
+    )?;
     Ok(())
 }
