@@ -76,6 +76,11 @@ impl LensModel for Equidistant {
         self.coefficients()
     }
 
+    /// Never: with zero coefficients it is still the f-θ lens, `θd = θ`, which no pinhole is.
+    fn is_identity(&self) -> bool {
+        false
+    }
+
     #[inline]
     fn distort_with_jacobian(&self, n: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
         let r2 = n.norm_squared();

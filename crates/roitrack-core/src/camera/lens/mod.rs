@@ -57,8 +57,9 @@ pub trait LensModel: Copy + PartialEq + Into<Distortion> {
         self.coefficient_array().as_ref().to_vec()
     }
 
-    /// Whether all coefficients are zero (for the equidistant model too, though its `θd = θ` is the f-θ lens, not
-    /// the pinhole). Allocation-free: the renderer asks it for every ROI.
+    /// Whether the map is the identity, every point its own distorted point: by default, whether all coefficients
+    /// are zero (a model whose zero coefficients still map, as the equidistant lens's `θd = θ`, says otherwise).
+    /// Allocation-free: the renderer asks it for every ROI, and skips the map when it is the identity.
     fn is_identity(&self) -> bool {
         self.coefficient_array().as_ref().iter().all(|&c| c == 0.0)
     }
@@ -409,6 +410,27 @@ mod tests {
                 assert!(!d.is_identity() && d.validate().is_ok());
             }
         }
+    }
+
+    /// `is_identity` says the map is the identity, whatever the coefficients say: the renderer and the lens check
+    /// skip the map when it does. An equidistant lens with zero coefficients is the f-θ lens, `θd = θ`: it maps
+    /// a point at 45° (normalised radius 1) to π/4, not to 1.
+    #[test]
+    fn only_a_lens_that_maps_every_point_to_itself_is_the_identity() {
+        let probe = Vector2::new(0.6, -0.8);
+        for name in &Distortion::MODEL_NAMES[1..] {
+            let count = Distortion::examples()
+                .into_iter()
+                .find(|e| e.lens.model_name() == *name)
+                .unwrap()
+                .lens
+                .coefficients()
+                .len();
+            let zeros = Distortion::named(name, &vec![0.0; count]).unwrap().unwrap();
+            let moves = (zeros.distort(&probe) - probe).norm() > 1e-12;
+            assert_eq!(zeros.is_identity(), !moves, "{name} with zero coefficients");
+        }
+        assert!(Distortion::None.is_identity());
     }
 
     #[test]
