@@ -1,13 +1,8 @@
 //! What lies outside the board: a flat level or a random value-noise texture ([`Background`]), with the clutter
 //! drawn on it.
 
-use nalgebra::Vector2;
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-
-use super::CLUTTER_STREAM;
 use super::PhotoError;
-use super::clutter::{draw_stamp, random_item};
+use super::clutter::draw_clutter;
 use super::rays::Area;
 use super::scene::{PhotoScene, check, unit};
 
@@ -78,75 +73,42 @@ pub(super) fn background_layer(
             mean_level,
             contrast,
             scale_px,
-        } => {
-            let mut layer = vec![mean_level; n];
-            let octaves: Vec<NoiseOctave> = (0..4)
-                .map(|o| NoiseOctave::new(scene.seed ^ TEXTURE_SALT, o, scale_px, area))
-                .collect();
-            let norm: f64 = octaves.iter().map(|o| o.amplitude).sum();
-            for j in 0..area.height {
-                for i in 0..area.width {
-                    let k = j * area.width + i;
-                    if background_fraction[k] > 0.0 {
-                        let sum: f64 = octaves.iter().map(|o| o.at(i, j)).sum();
-                        // Value noise rarely reaches its extremes: stretch it, then clip.
-                        let noise = (2.0 * sum / norm).clamp(-1.0, 1.0);
-                        layer[k] = (mean_level + contrast * noise).clamp(0.0, 1.0);
-                    }
-                }
-            }
-            layer
-        }
+        } => texture_layer(
+            scene.seed,
+            area,
+            background_fraction,
+            (mean_level, contrast, scale_px),
+        ),
     };
-    let clutter = &scene.clutter;
-    if clutter.count == 0 {
-        return layer;
+    if scene.clutter.count > 0 {
+        draw_clutter(scene, area, background_fraction, &mut layer);
     }
-    // Where the board is, for the clearance: a summed-area table of the pixels it touches.
-    let (aw, ah) = (area.width, area.height);
-    let mut board_sat = vec![0u32; (aw + 1) * (ah + 1)];
-    for j in 0..ah {
-        let mut row = 0;
-        for i in 0..aw {
-            row += u32::from(background_fraction[j * aw + i] < 1.0);
-            board_sat[(j + 1) * (aw + 1) + i + 1] = board_sat[j * (aw + 1) + i + 1] + row;
-        }
-    }
-    let to_area =
-        |x: f64, n: usize| (x + area.margin as f64).round().clamp(0.0, n as f64 - 1.0) as usize;
-    let board_in = |lo: Vector2<f64>, hi: Vector2<f64>| {
-        let (i0, i1) = (to_area(lo.x.floor(), aw), to_area(hi.x.ceil(), aw) + 1);
-        let (j0, j1) = (to_area(lo.y.floor(), ah), to_area(hi.y.ceil(), ah) + 1);
-        let at = |i: usize, j: usize| board_sat[j * (aw + 1) + i];
-        at(i1, j1) + at(i0, j0) > at(i0, j1) + at(i1, j0)
-    };
-    let mut rng = ChaCha8Rng::seed_from_u64(scene.seed);
-    rng.set_stream(CLUTTER_STREAM);
-    let (w, h) = (
-        f64::from(scene.camera.width_px),
-        f64::from(scene.camera.height_px),
-    );
-    let scale = w.min(h) / 480.0;
-    for _ in 0..clutter.count {
-        for _ in 0..20 {
-            let stamps = random_item(&mut rng, w, h, scale);
-            if let Some(clearance) = clutter.clearance_px {
-                let (lo, hi) = stamps.iter().fold(
-                    (Vector2::repeat(f64::MAX), Vector2::repeat(f64::MIN)),
-                    |(lo, hi), s| {
-                        let (a, b) = s.bounds();
-                        (lo.inf(&a), hi.sup(&b))
-                    },
-                );
-                let c = Vector2::repeat(clearance + 1.0);
-                if board_in(lo - c, hi + c) {
-                    continue;
-                }
+    layer
+}
+
+/// The value-noise texture of mean `mean_level`, `contrast` and feature size `scale_px` at the pixels of the area
+/// where the background shows (`background_fraction` above 0), `mean_level` elsewhere.
+fn texture_layer(
+    seed: u64,
+    area: &Area,
+    background_fraction: &[f64],
+    (mean_level, contrast, scale_px): (f64, f64, f64),
+) -> Vec<f64> {
+    let n = area.width * area.height;
+    let mut layer = vec![mean_level; n];
+    let octaves: Vec<NoiseOctave> = (0..4)
+        .map(|o| NoiseOctave::new(seed ^ TEXTURE_SALT, o, scale_px, area))
+        .collect();
+    let norm: f64 = octaves.iter().map(|o| o.amplitude).sum();
+    for j in 0..area.height {
+        for i in 0..area.width {
+            let k = j * area.width + i;
+            if background_fraction[k] > 0.0 {
+                let sum: f64 = octaves.iter().map(|o| o.at(i, j)).sum();
+                // Value noise rarely reaches its extremes: stretch it, then clip.
+                let noise = (2.0 * sum / norm).clamp(-1.0, 1.0);
+                layer[k] = (mean_level + contrast * noise).clamp(0.0, 1.0);
             }
-            for stamp in &stamps {
-                draw_stamp(stamp, area, &mut layer);
-            }
-            break;
         }
     }
     layer

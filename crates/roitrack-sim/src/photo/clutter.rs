@@ -5,12 +5,12 @@ use nalgebra::Vector2;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::MARKS_STREAM;
 use super::PhotoError;
 use super::board::PlaneShape;
 use super::light::segment_distance2;
 use super::rays::Area;
 use super::scene::{PhotoScene, check};
+use super::{CLUTTER_STREAM, MARKS_STREAM};
 
 /// Largest number of clutter items and board marks.
 const MAX_CLUTTER: usize = 100_000;
@@ -170,7 +170,7 @@ pub(super) fn board_marks(
 
 /// An item of background clutter, in raw pixels.
 #[derive(Debug, Clone, Copy)]
-pub(super) enum Stamp {
+enum Stamp {
     Ellipse {
         centre: Vector2<f64>,
         semi_axes: Vector2<f64>,
@@ -270,7 +270,7 @@ impl Stamp {
 }
 
 /// One random clutter item (a text line is several stamps), `scale` the image's size relative to 480 px.
-pub(super) fn random_item(rng: &mut ChaCha8Rng, w: f64, h: f64, scale: f64) -> Vec<Stamp> {
+fn random_item(rng: &mut ChaCha8Rng, w: f64, h: f64, scale: f64) -> Vec<Stamp> {
     let centre = Vector2::new(
         rng.random_range(-0.05..1.05) * w,
         rng.random_range(-0.05..1.05) * h,
@@ -325,47 +325,108 @@ pub(super) fn random_item(rng: &mut ChaCha8Rng, w: f64, h: f64, scale: f64) -> V
                 level,
             }]
         }
-        _ => {
-            // A line of text-like glyphs: each a few strokes in a cell.
-            let glyph = rng.random_range(5.0..14.0) * scale;
-            let stroke = (0.12 * glyph).max(0.7);
-            let chars = rng.random_range(3..9usize);
-            let tilt: f64 = rng.random_range(-0.3..0.3);
-            let (along, across) = (
-                Vector2::new(tilt.cos(), tilt.sin()),
-                Vector2::new(-tilt.sin(), tilt.cos()),
-            );
-            let mut stamps = Vec::new();
-            for c in 0..chars {
-                let origin = centre + along * (c as f64 * 0.8 * glyph);
-                let strokes = rng.random_range(1..4);
-                for _ in 0..strokes {
-                    let (a, b) = match rng.random_range(0..3) {
-                        0 => {
-                            let x = rng.random_range(0.0..0.6) * glyph;
-                            (Vector2::new(x, 0.0), Vector2::new(x, glyph))
-                        }
-                        1 => {
-                            let y = rng.random_range(0.0..1.0) * glyph;
-                            (Vector2::new(0.0, y), Vector2::new(0.6 * glyph, y))
-                        }
-                        _ => (Vector2::new(0.0, glyph), Vector2::new(0.6 * glyph, 0.0)),
-                    };
-                    stamps.push(Stamp::Segment {
-                        a: origin + along * a.x + across * a.y,
-                        b: origin + along * b.x + across * b.y,
-                        half_width: 0.5 * stroke,
-                        level,
-                    });
+        // A line of text-like glyphs: each a few strokes in a cell.
+        _ => text_line(rng, centre, level, scale),
+    }
+}
+
+/// Draws `scene.clutter.count` random items on the background `layer`, each kept off the board by the clutter's
+/// clearance when it has one (an item that comes too near is drawn again, up to 20 times).
+pub(super) fn draw_clutter(
+    scene: &PhotoScene,
+    area: &Area,
+    background_fraction: &[f64],
+    layer: &mut [f64],
+) {
+    let clutter = &scene.clutter;
+    // Where the board is, for the clearance: a summed-area table of the pixels it touches.
+    let (aw, ah) = (area.width, area.height);
+    let mut board_sat = vec![0u32; (aw + 1) * (ah + 1)];
+    for j in 0..ah {
+        let mut row = 0;
+        for i in 0..aw {
+            row += u32::from(background_fraction[j * aw + i] < 1.0);
+            board_sat[(j + 1) * (aw + 1) + i + 1] = board_sat[j * (aw + 1) + i + 1] + row;
+        }
+    }
+    let to_area =
+        |x: f64, n: usize| (x + area.margin as f64).round().clamp(0.0, n as f64 - 1.0) as usize;
+    let board_in = |lo: Vector2<f64>, hi: Vector2<f64>| {
+        let (i0, i1) = (to_area(lo.x.floor(), aw), to_area(hi.x.ceil(), aw) + 1);
+        let (j0, j1) = (to_area(lo.y.floor(), ah), to_area(hi.y.ceil(), ah) + 1);
+        let at = |i: usize, j: usize| board_sat[j * (aw + 1) + i];
+        at(i1, j1) + at(i0, j0) > at(i0, j1) + at(i1, j0)
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(scene.seed);
+    rng.set_stream(CLUTTER_STREAM);
+    let (w, h) = (
+        f64::from(scene.camera.width_px),
+        f64::from(scene.camera.height_px),
+    );
+    let scale = w.min(h) / 480.0;
+    for _ in 0..clutter.count {
+        for _ in 0..20 {
+            let stamps = random_item(&mut rng, w, h, scale);
+            if let Some(clearance) = clutter.clearance_px {
+                let (lo, hi) = stamps.iter().fold(
+                    (Vector2::repeat(f64::MAX), Vector2::repeat(f64::MIN)),
+                    |(lo, hi), s| {
+                        let (a, b) = s.bounds();
+                        (lo.inf(&a), hi.sup(&b))
+                    },
+                );
+                let c = Vector2::repeat(clearance + 1.0);
+                if board_in(lo - c, hi + c) {
+                    continue;
                 }
             }
-            stamps
+            for stamp in &stamps {
+                draw_stamp(stamp, area, layer);
+            }
+            break;
         }
     }
 }
 
+/// A line of text-like glyphs from `centre` (px), each a few strokes in a cell `scale` times 5 to 14 px high.
+fn text_line(rng: &mut ChaCha8Rng, centre: Vector2<f64>, level: f64, scale: f64) -> Vec<Stamp> {
+    let glyph = rng.random_range(5.0..14.0) * scale;
+    let stroke = (0.12 * glyph).max(0.7);
+    let chars = rng.random_range(3..9usize);
+    let tilt: f64 = rng.random_range(-0.3..0.3);
+    let (along, across) = (
+        Vector2::new(tilt.cos(), tilt.sin()),
+        Vector2::new(-tilt.sin(), tilt.cos()),
+    );
+    let mut stamps = Vec::new();
+    for c in 0..chars {
+        let origin = centre + along * (c as f64 * 0.8 * glyph);
+        let strokes = rng.random_range(1..4);
+        for _ in 0..strokes {
+            let (a, b) = match rng.random_range(0..3) {
+                0 => {
+                    let x = rng.random_range(0.0..0.6) * glyph;
+                    (Vector2::new(x, 0.0), Vector2::new(x, glyph))
+                }
+                1 => {
+                    let y = rng.random_range(0.0..1.0) * glyph;
+                    (Vector2::new(0.0, y), Vector2::new(0.6 * glyph, y))
+                }
+                _ => (Vector2::new(0.0, glyph), Vector2::new(0.6 * glyph, 0.0)),
+            };
+            stamps.push(Stamp::Segment {
+                a: origin + along * a.x + across * a.y,
+                b: origin + along * b.x + across * b.y,
+                half_width: 0.5 * stroke,
+                level,
+            });
+        }
+    }
+    stamps
+}
+
 /// Blends `stamp` into `layer` with its edge antialiased over a pixel.
-pub(super) fn draw_stamp(stamp: &Stamp, area: &Area, layer: &mut [f64]) {
+fn draw_stamp(stamp: &Stamp, area: &Area, layer: &mut [f64]) {
     let (lo, hi) = stamp.bounds();
     let m = area.margin as f64;
     let range = |a: f64, b: f64, n: usize| {
