@@ -15,6 +15,7 @@
 use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use roitrack_core::estimator::TrackStatus;
 use roitrack_core::{PoseSample, TwistSample, so3};
@@ -339,6 +340,54 @@ where
 {
     // The truth is drawn over the estimates' span only.
     let x_range = range_of(panel.t.iter());
+    let y_range = panel_y_range(panel, x_range);
+    let mut chart = ChartBuilder::on(area)
+        .caption(&panel.title, (FONT, 17))
+        .margin(8)
+        .x_label_area_size(34)
+        .y_label_area_size(78)
+        .build_cartesian_2d(x_range.0..x_range.1, y_range.0..y_range.1)
+        .map_err(de)?;
+    chart
+        .configure_mesh()
+        .x_desc("time (s)")
+        .y_desc(panel.unit)
+        .label_style((FONT, 13))
+        .axis_desc_style((FONT, 14))
+        .light_line_style(RGBColor(238, 238, 238))
+        .draw()
+        .map_err(de)?;
+    draw_bands(&mut chart, panel)?;
+    draw_truth(&mut chart, panel, x_range)?;
+    for (c, column) in panel.values.iter().enumerate() {
+        let color = AXIS_COLORS[c];
+        chart
+            .draw_series(LineSeries::new(
+                finite_points(&panel.t, column),
+                color.stroke_width(1),
+            ))
+            .map_err(de)?
+            .label(["x", "y", "z"][c])
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+            });
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(RGBColor(180, 180, 180))
+        .label_font((FONT, 13))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()
+        .map_err(de)
+}
+
+/// The chart of one panel: time (s) across, the panel's values up.
+type PanelChart<'a, DB> = ChartContext<'a, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// The vertical range of a panel: its values, its truth within the estimates' span `x_range`, and its bands on both
+/// sides of zero.
+fn panel_y_range(panel: &Panel, x_range: (f64, f64)) -> (f64, f64) {
     let in_span = |t: &f64| *t >= x_range.0 && *t <= x_range.1;
     let mut y_values: Vec<f64> = panel.values.iter().flatten().copied().collect();
     if let Some(truth) = &panel.truth {
@@ -358,23 +407,14 @@ where
             y_values.extend(column.iter().flat_map(|b| [*b, -*b]));
         }
     }
-    let y_range = range_of(y_values.iter());
-    let mut chart = ChartBuilder::on(area)
-        .caption(&panel.title, (FONT, 17))
-        .margin(8)
-        .x_label_area_size(34)
-        .y_label_area_size(78)
-        .build_cartesian_2d(x_range.0..x_range.1, y_range.0..y_range.1)
-        .map_err(de)?;
-    chart
-        .configure_mesh()
-        .x_desc("time (s)")
-        .y_desc(panel.unit)
-        .label_style((FONT, 13))
-        .axis_desc_style((FONT, 14))
-        .light_line_style(RGBColor(238, 238, 238))
-        .draw()
-        .map_err(de)?;
+    range_of(y_values.iter())
+}
+
+/// The ±bands of a panel around zero, filled in its axes' colours.
+fn draw_bands<DB: DrawingBackend>(chart: &mut PanelChart<DB>, panel: &Panel) -> Res
+where
+    DB::ErrorType: 'static,
+{
     if let Some(band) = &panel.band {
         for (c, column) in band.iter().enumerate() {
             let upper = finite_points(&panel.t, column);
@@ -391,6 +431,19 @@ where
                 .map_err(de)?;
         }
     }
+    Ok(())
+}
+
+/// The panel's truth, dashed, within the estimates' span `x_range`, with one legend entry.
+fn draw_truth<DB: DrawingBackend>(
+    chart: &mut PanelChart<DB>,
+    panel: &Panel,
+    x_range: (f64, f64),
+) -> Res
+where
+    DB::ErrorType: 'static,
+{
+    let in_span = |t: &f64| *t >= x_range.0 && *t <= x_range.1;
     if let Some(truth) = &panel.truth {
         for (c, column) in truth.iter().enumerate() {
             let points: Vec<(f64, f64)> = finite_points(&panel.truth_t, column)
@@ -417,27 +470,7 @@ where
             }
         }
     }
-    for (c, column) in panel.values.iter().enumerate() {
-        let color = AXIS_COLORS[c];
-        chart
-            .draw_series(LineSeries::new(
-                finite_points(&panel.t, column),
-                color.stroke_width(1),
-            ))
-            .map_err(de)?
-            .label(["x", "y", "z"][c])
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
-            });
-    }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(RGBColor(180, 180, 180))
-        .label_font((FONT, 13))
-        .position(SeriesLabelPosition::UpperRight)
-        .draw()
-        .map_err(de)
+    Ok(())
 }
 
 fn draw_status<DB: DrawingBackend>(
