@@ -233,6 +233,38 @@ impl Consistency {
         }
     }
 
+    /// Summaries of several runs pooled: the means and fractions of all their counted estimates together (each
+    /// weighted by its count).
+    ///
+    /// ```
+    /// use roitrack_eval::{BlockNees, Consistency};
+    /// let at = |position| BlockNees { t_s: 0.0, position, velocity: 3.0 };
+    /// let one = Consistency::of_samples(&[at(3.0)], 1);
+    /// let three = Consistency::of_samples(&[at(6.0), at(6.0), at(6.0)], 0);
+    /// let pooled = Consistency::pooled(&[one, three]);
+    /// assert_eq!((pooled.count, pooled.skipped), (4, 1));
+    /// assert!((pooled.position_nees_per_dof - (3.0 + 18.0) / 4.0 / 3.0).abs() < 1e-12);
+    /// ```
+    pub fn pooled(parts: &[Consistency]) -> Self {
+        let count: usize = parts.iter().map(|c| c.count).sum();
+        let weighted = |f: fn(&Consistency) -> f64| {
+            parts
+                .iter()
+                .filter(|c| c.count > 0)
+                .map(|c| f(c) * c.count as f64)
+                .sum::<f64>()
+                / count as f64
+        };
+        Self {
+            count,
+            skipped: parts.iter().map(|c| c.skipped).sum(),
+            position_nees_per_dof: weighted(|c| c.position_nees_per_dof),
+            velocity_nees_per_dof: weighted(|c| c.velocity_nees_per_dof),
+            position_inside_99: weighted(|c| c.position_inside_99),
+            velocity_inside_99: weighted(|c| c.velocity_inside_99),
+        }
+    }
+
     /// Whether the covariance is calibrated (the sweep's): the mean NEES per degree of freedom of the position and of
     /// the velocity from [`MIN_NEES_PER_DOF`] to [`MAX_NEES_PER_DOF`] and at least [`MIN_INSIDE_99`] of the
     /// estimates inside the 99 % bound, for both. False when no estimate counts.
@@ -315,6 +347,32 @@ pub fn consistency_of(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn pooled_consistency_weighs_by_count() {
+        let a = Consistency {
+            count: 1,
+            skipped: 0,
+            position_nees_per_dof: 1.0,
+            velocity_nees_per_dof: 2.0,
+            position_inside_99: 1.0,
+            velocity_inside_99: 0.0,
+        };
+        let b = Consistency {
+            count: 3,
+            skipped: 2,
+            position_nees_per_dof: 3.0,
+            velocity_nees_per_dof: 2.0,
+            position_inside_99: 0.0,
+            velocity_inside_99: 1.0,
+        };
+        let p = Consistency::pooled(&[a, b]);
+        assert_eq!((p.count, p.skipped), (4, 2));
+        assert_eq!(p.position_nees_per_dof, 2.5);
+        assert_eq!(p.velocity_nees_per_dof, 2.0);
+        assert_eq!((p.position_inside_99, p.velocity_inside_99), (0.25, 0.75));
+    }
+
     use nalgebra::SMatrix;
     use rand::SeedableRng;
     use rand_chacha::ChaCha8Rng;

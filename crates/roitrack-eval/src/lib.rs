@@ -30,7 +30,7 @@ use roitrack_core::{PoseSample, TwistSample, so3};
 
 pub use consistency::{BlockNees, CHI2_3DOF_99, Consistency, consistency_of, nees};
 pub use error::EvalError;
-pub use metrics::Metrics;
+pub use metrics::{Metrics, PooledErrors};
 pub use trajectory::{Alignment, SimilarityTransform, TimeOffset};
 
 use align::TruthIndex;

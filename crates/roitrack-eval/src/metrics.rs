@@ -65,6 +65,80 @@ fn one() -> f64 {
     1.0
 }
 
+/// The errors of several evaluations pooled (several seeds of one case, say): each RMSE that of all their estimates
+/// together (every evaluation's RMSE squared times its count is its sum of squares), the largest error the largest
+/// of them all.
+///
+/// ```
+/// use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+/// use roitrack_core::PoseSample;
+/// use roitrack_eval::{EvalOptions, PooledErrors, evaluate};
+///
+/// let at = |t_s: f64, x_m: f64| PoseSample {
+///     t_s,
+///     cam_from_obj: Isometry3::from_parts(Translation3::new(x_m, 0.0, 0.6), UnitQuaternion::identity()),
+/// };
+/// let truth: Vec<_> = (0..4).map(|k| at(k as f64, 0.0)).collect();
+/// // One run of 2 estimates 3 mm off, one of 4 estimates 1 mm off: sqrt((2 * 9 + 4 * 1) / 6) mm.
+/// let run = |count: usize, off_m: f64| {
+///     let estimates: Vec<_> = (0..count).map(|k| at(k as f64, off_m)).collect();
+///     evaluate(&truth, None, &estimates, None, &EvalOptions::default()).unwrap()
+/// };
+/// let pooled = PooledErrors::of([&run(2, 0.003), &run(4, 0.001)]);
+/// assert_eq!(pooled.count, 6);
+/// assert!((pooled.position_rmse_mm - (22.0f64 / 6.0).sqrt()).abs() < 1e-9);
+/// assert!((pooled.max_position_error_mm - 3.0).abs() < 1e-9);
+/// assert!(pooled.velocity_rmse_mm_s.is_nan()); // no twists
+/// assert!(PooledErrors::of([]).position_rmse_mm.is_nan());
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PooledErrors {
+    /// Estimates over all the evaluations.
+    pub count: usize,
+    /// RMS of the position error's norm over all of them (mm).
+    pub position_rmse_mm: f64,
+    /// RMS of the rotation error over all of them (deg).
+    pub rotation_rmse_deg: f64,
+    /// RMS of the linear velocity error's norm over all of them (mm/s); NaN if an evaluation had no velocity.
+    pub velocity_rmse_mm_s: f64,
+    /// Largest position error of any of them (mm).
+    pub max_position_error_mm: f64,
+}
+
+impl PooledErrors {
+    /// Pools `parts`; with no estimate in them, every figure is NaN.
+    pub fn of<'a>(parts: impl IntoIterator<Item = &'a Metrics>) -> Self {
+        let (mut count, mut position_sq, mut rotation_sq, mut velocity_sq) = (0, 0.0, 0.0, 0.0);
+        let mut max_position_error_mm = f64::NAN;
+        for m in parts {
+            let n = m.count as f64;
+            count += m.count;
+            position_sq += n * m.position_rmse_mm.powi(2);
+            rotation_sq += n * m.rotation_rmse_deg.powi(2);
+            velocity_sq += n * m.velocity_rmse_mm_s.unwrap_or(f64::NAN).powi(2);
+            max_position_error_mm = max_position_error_mm.max(m.max_position_error_mm);
+        }
+        let rms = |sum_sq: f64| {
+            if count == 0 {
+                f64::NAN
+            } else {
+                (sum_sq / count as f64).sqrt()
+            }
+        };
+        Self {
+            count,
+            position_rmse_mm: rms(position_sq),
+            rotation_rmse_deg: rms(rotation_sq),
+            velocity_rmse_mm_s: rms(velocity_sq),
+            max_position_error_mm: if count == 0 {
+                f64::NAN
+            } else {
+                max_position_error_mm
+            },
+        }
+    }
+}
+
 impl Metrics {
     /// The metrics as one compact JSON object (the field names above, `null` for absent velocity figures).
     pub fn to_json(&self) -> String {

@@ -59,7 +59,7 @@ use roitrack_core::estimator::{
     EstimatorConfig, KalmanTuning, StatusCounts, TrackerConfig, track_all,
 };
 use roitrack_core::{CameraModel, MotionState, PinholeIntrinsics, PlumbBob, Target, TargetPoint};
-use roitrack_eval::{Consistency, EvalOptions, consistency_of};
+use roitrack_eval::{Consistency, EvalOptions, PooledErrors, consistency_of};
 use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simulate};
 use serde::Serialize;
 
@@ -862,8 +862,7 @@ pub struct RunSummary {
 impl RunSummary {
     /// The figures of a filter's runs, one per seed (`None`: the run gave no estimate at all).
     fn of(runs: &[SimulatedRun], scored: &[Option<Scored>]) -> Result<Self, ExperimentError> {
-        let mut count = 0usize;
-        let (mut position_sq, mut velocity_sq) = (0.0, 0.0);
+        let mut metrics = Vec::with_capacity(scored.len());
         let mut max_vouched_error_mm: f64 = 0.0;
         let mut lag: Option<i64> = None;
         let mut statuses = StatusCounts::default();
@@ -876,10 +875,7 @@ impl RunSummary {
                 continue;
             };
             let m = &s.metrics;
-            let n = m.count as f64;
-            count += m.count;
-            position_sq += n * m.position_rmse_mm.powi(2);
-            velocity_sq += n * m.velocity_rmse_mm_s.unwrap_or(f64::NAN).powi(2);
+            metrics.push(m);
             if let Some(l) = m.velocity_lag_samples
                 && lag.is_none_or(|worst| l.abs() > worst.abs())
             {
@@ -904,12 +900,12 @@ impl RunSummary {
                 &EvalOptions::default(),
             )?);
         }
-        let n = count as f64;
+        let pooled = PooledErrors::of(metrics);
         Ok(Self {
-            estimates: count,
+            estimates: pooled.count,
             runs_without_estimates,
-            position_rmse_mm: (position_sq / n).sqrt(),
-            velocity_rmse_mm_s: (velocity_sq / n).sqrt(),
+            position_rmse_mm: pooled.position_rmse_mm,
+            velocity_rmse_mm_s: pooled.velocity_rmse_mm_s,
             max_vouched_error_mm: if vouched == 0 {
                 f64::NAN
             } else {
@@ -921,30 +917,9 @@ impl RunSummary {
             degenerate: statuses.degenerate,
             disputed: statuses.disputed,
             lost: statuses.lost,
-            consistency: pool(&consistencies),
+            consistency: Consistency::pooled(&consistencies),
             mean_noise_px: noise_sum / vouched as f64,
         })
-    }
-}
-
-/// Consistency summaries of several runs pooled: means and fractions weighted by their counts.
-fn pool(parts: &[Consistency]) -> Consistency {
-    let count: usize = parts.iter().map(|c| c.count).sum();
-    let weighted = |f: fn(&Consistency) -> f64| {
-        parts
-            .iter()
-            .filter(|c| c.count > 0)
-            .map(|c| f(c) * c.count as f64)
-            .sum::<f64>()
-            / count as f64
-    };
-    Consistency {
-        count,
-        skipped: parts.iter().map(|c| c.skipped).sum(),
-        position_nees_per_dof: weighted(|c| c.position_nees_per_dof),
-        velocity_nees_per_dof: weighted(|c| c.velocity_nees_per_dof),
-        position_inside_99: weighted(|c| c.position_inside_99),
-        velocity_inside_99: weighted(|c| c.velocity_inside_99),
     }
 }
 
@@ -1802,31 +1777,6 @@ mod tests {
         );
         assert!(grid.on_edge([4, 3, 3]) && grid.on_edge([2, 0, 3]) && !grid.on_edge([2, 3, 3]));
         assert_eq!(Grid::quick().coarse().len(), 5);
-    }
-
-    #[test]
-    fn pooled_consistency_weighs_by_count() {
-        let a = Consistency {
-            count: 1,
-            skipped: 0,
-            position_nees_per_dof: 1.0,
-            velocity_nees_per_dof: 2.0,
-            position_inside_99: 1.0,
-            velocity_inside_99: 0.0,
-        };
-        let b = Consistency {
-            count: 3,
-            skipped: 2,
-            position_nees_per_dof: 3.0,
-            velocity_nees_per_dof: 2.0,
-            position_inside_99: 0.0,
-            velocity_inside_99: 1.0,
-        };
-        let p = pool(&[a, b]);
-        assert_eq!((p.count, p.skipped), (4, 2));
-        assert_eq!(p.position_nees_per_dof, 2.5);
-        assert_eq!(p.velocity_nees_per_dof, 2.0);
-        assert_eq!((p.position_inside_99, p.velocity_inside_99), (0.25, 0.75));
     }
 
     #[test]

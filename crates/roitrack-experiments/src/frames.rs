@@ -34,7 +34,7 @@ use std::time::Instant;
 use roitrack_core::estimator::{ConfigError, Estimate, TrackStatus};
 use roitrack_core::time::Readout;
 use roitrack_core::{PoseSample, TwistSample};
-use roitrack_eval::{EvalError, EvalOptions, Metrics, evaluate};
+use roitrack_eval::{EvalError, EvalOptions, Metrics, PooledErrors, evaluate};
 use roitrack_image::{Frame, Polarity};
 use roitrack_pipeline::frames::{FrameError, FrameTracker, FrameTrackerConfig};
 use roitrack_sim::{FrameOptions, FrameSequence, FrameSequenceError, Scenario, ScenarioKind};
@@ -350,16 +350,12 @@ pub struct FrameRun {
     pub tracking_s: f64,
 }
 
-/// Sums of one or more runs' figures, from which pooled RMSEs are taken.
-#[derive(Debug, Clone, Copy, Default)]
+/// Sums of one or more runs' figures, and their errors pooled.
+#[derive(Debug, Clone, Copy)]
 struct Pool {
     frames: usize,
     estimates: usize,
-    scored: usize,
-    position_sq_mm2: f64,
-    velocity_sq_mm2_s2: f64,
-    rotation_sq_deg2: f64,
-    worst_position_mm: f64,
+    errors: PooledErrors,
     by_windows: usize,
     by_full_frame: usize,
     restarts: usize,
@@ -368,34 +364,17 @@ struct Pool {
 }
 
 impl Pool {
-    fn of<'a>(runs: impl IntoIterator<Item = &'a FrameRun>) -> Self {
-        let mut pool = Self::default();
-        for run in runs {
-            pool.frames += run.frames;
-            pool.estimates += run.estimates;
-            pool.by_windows += run.by_windows;
-            pool.by_full_frame += run.by_full_frame;
-            pool.restarts += run.restarts;
-            pool.not_found += run.not_found;
-            pool.tracking_s += run.tracking_s;
-            if let Some(m) = &run.metrics {
-                let n = m.count as f64;
-                pool.scored += m.count;
-                // Each run's RMSE squared times its count is its sum of squares: pooled, the RMSE of all estimates.
-                pool.position_sq_mm2 += n * m.position_rmse_mm.powi(2);
-                pool.velocity_sq_mm2_s2 += n * m.velocity_rmse_mm_s.unwrap_or(f64::NAN).powi(2);
-                pool.rotation_sq_deg2 += n * m.rotation_rmse_deg.powi(2);
-                pool.worst_position_mm = pool.worst_position_mm.max(m.max_position_error_mm);
-            }
-        }
-        pool
-    }
-
-    fn rms(&self, sum_sq: f64) -> f64 {
-        if self.scored == 0 {
-            f64::NAN
-        } else {
-            (sum_sq / self.scored as f64).sqrt()
+    fn of<'a>(runs: impl IntoIterator<Item = &'a FrameRun> + Clone) -> Self {
+        let sum = |f: fn(&FrameRun) -> usize| runs.clone().into_iter().map(f).sum();
+        Self {
+            frames: sum(|r| r.frames),
+            estimates: sum(|r| r.estimates),
+            errors: PooledErrors::of(runs.clone().into_iter().filter_map(|r| r.metrics.as_ref())),
+            by_windows: sum(|r| r.by_windows),
+            by_full_frame: sum(|r| r.by_full_frame),
+            restarts: sum(|r| r.restarts),
+            not_found: sum(|r| r.not_found),
+            tracking_s: runs.into_iter().map(|r| r.tracking_s).sum(),
         }
     }
 
@@ -404,15 +383,11 @@ impl Pool {
             case,
             frames: self.frames,
             estimates: self.estimates,
-            scored: self.scored,
-            position_rmse_mm: self.rms(self.position_sq_mm2),
-            velocity_rmse_mm_s: self.rms(self.velocity_sq_mm2_s2),
-            rotation_rmse_deg: self.rms(self.rotation_sq_deg2),
-            worst_position_mm: if self.scored == 0 {
-                f64::NAN
-            } else {
-                self.worst_position_mm
-            },
+            scored: self.errors.count,
+            position_rmse_mm: self.errors.position_rmse_mm,
+            velocity_rmse_mm_s: self.errors.velocity_rmse_mm_s,
+            rotation_rmse_deg: self.errors.rotation_rmse_deg,
+            worst_position_mm: self.errors.max_position_error_mm,
             by_windows: self.by_windows,
             by_full_frame: self.by_full_frame,
             restarts: self.restarts,
