@@ -273,14 +273,43 @@ impl FrameSequence {
     /// );
     /// ```
     pub fn new(scenario: &Scenario, options: &FrameOptions) -> Result<Self, FrameSequenceError> {
+        let (time, readout_s) = Self::check_timing(options, scenario.camera.height_px)?;
+        let frame_count = Self::frame_count(scenario, options, &time, readout_s)?;
+        let &FrameOptions {
+            polarity, sensor, ..
+        } = options;
+        let camera = CameraModel {
+            time,
+            ..scenario.camera.clone()
+        };
+        sensor.validate()?;
+        let (render_sensor, light) = match polarity {
+            Polarity::Bright => (sensor, Vec::new()),
+            Polarity::Dark => (coverage_sensor(&sensor), light_field(&camera)),
+        };
+        let renderer = RoiRenderer::new(camera, scenario.target.clone(), render_sensor)?;
+        Ok(Self {
+            scenario: scenario.clone(),
+            options: *options,
+            frame_count,
+            renderer,
+            light,
+            scratch: RenderScratch::new(),
+            coverage: Frame::default(),
+        })
+    }
+
+    /// The time model of `options` for a camera of `rows` rows, and its readout time (s), if every frame's exposure
+    /// and readout fit in its period.
+    fn check_timing(
+        options: &FrameOptions,
+        rows: u32,
+    ) -> Result<(TimeModel, f64), FrameSequenceError> {
         let &FrameOptions {
             fps_hz,
             readout,
             exposure_s,
-            polarity,
-            sensor,
             start_s,
-            frame_count,
             ..
         } = options;
         if !(fps_hz.is_finite() && fps_hz > 0.0) {
@@ -295,7 +324,6 @@ impl FrameSequence {
         };
         time.validate()?;
         let period_s = 1.0 / fps_hz;
-        let rows = scenario.camera.height_px;
         let readout_s = match readout {
             Readout::SequentialRois => return Err(FrameSequenceError::SequentialRois),
             Readout::GlobalShutter => 0.0,
@@ -321,6 +349,24 @@ impl FrameSequence {
                 fps_hz,
             });
         }
+        Ok((time, readout_s))
+    }
+
+    /// The number of frames: the given one, or every frame whose rows are all exposed by the scenario's end; at
+    /// least 1 and at most `MAX_FRAMES`.
+    fn frame_count(
+        scenario: &Scenario,
+        options: &FrameOptions,
+        time: &TimeModel,
+        readout_s: f64,
+    ) -> Result<usize, FrameSequenceError> {
+        let &FrameOptions {
+            fps_hz,
+            start_s,
+            frame_count,
+            ..
+        } = options;
+        let rows = scenario.camera.height_px;
         // The last row of a frame is at t_k + (rows - 1) * line_delay.
         let last_row_s = time.blob_time_s(0.0, f64::from(rows.saturating_sub(1)));
         let frame_count = frame_count.unwrap_or_else(|| {
@@ -346,25 +392,7 @@ impl FrameSequence {
                 readout_s,
             });
         }
-        let camera = CameraModel {
-            time,
-            ..scenario.camera.clone()
-        };
-        sensor.validate()?;
-        let (render_sensor, light) = match polarity {
-            Polarity::Bright => (sensor, Vec::new()),
-            Polarity::Dark => (coverage_sensor(&sensor), light_field(&camera)),
-        };
-        let renderer = RoiRenderer::new(camera, scenario.target.clone(), render_sensor)?;
-        Ok(Self {
-            scenario: scenario.clone(),
-            options: *options,
-            frame_count,
-            renderer,
-            light,
-            scratch: RenderScratch::new(),
-            coverage: Frame::default(),
-        })
+        Ok(frame_count)
     }
 
     /// Number of frames.
