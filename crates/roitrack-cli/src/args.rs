@@ -3,11 +3,12 @@
 use std::path::PathBuf;
 
 use anyhow::{Result, anyhow, bail};
-use clap::{Args, ValueEnum};
+use std::sync::OnceLock;
+
+use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser, ValueParser};
+use clap::{Arg, ArgAction, ArgMatches, Args, Command, ValueEnum};
 use roitrack::TrackerConfig;
-use roitrack::core::estimator::RobustLoss;
-use roitrack::core::estimator::TrackerOptions;
-use roitrack::core::estimator::{self as estimator};
+use roitrack::core::estimator::{self as estimator, TrackerOptions};
 use roitrack::pipeline::ScheduleOrder;
 use roitrack::sim::{Scenario, ScenarioKind};
 
@@ -51,189 +52,209 @@ impl From<ScheduleOrderArg> for ScheduleOrder {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum EstimatorArg {
-    /// Error-state Kalman filter, one update per centroid at its own time (default)
-    Kalman,
-    /// The paper's virtual visual servoing loop with the exact Jacobian
-    Exact,
-    /// The paper's virtual visual servoing loop with the paper's Jacobian (eqs. 17-24)
-    Paper,
-    /// Baseline: static PnP as if simultaneous, velocity by finite differences
-    Static,
-    /// Baseline: Levenberg-Marquardt of the 12 parameters on the window
-    Batch,
-}
+/// The tracker's options (`--estimator`, `--every`, ...), shared by `track` and the commands that run the tracker:
+/// one argument per entry of the library's table [`roitrack::core::tracker_options!`], whose docs are the help, whose
+/// defaults are [`TrackerOptions::DEFAULT`] and whose checks name the value parsers of [`checks`]. Reads as the
+/// [`TrackerOptions`] it holds.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EstimatorArgs(TrackerOptions);
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum AdaptArg {
-    Both,
-    Noise,
-    Motion,
-    None,
-}
+impl std::ops::Deref for EstimatorArgs {
+    type Target = TrackerOptions;
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum RobustArg {
-    None,
-    Huber,
-    Tukey,
-}
-
-/// Estimator options shared by `track` and the commands that run the tracker.
-#[derive(Debug, Clone, Args)]
-pub struct EstimatorArgs {
-    /// Which estimator.
-    #[arg(long, value_enum, default_value = "kalman")]
-    pub estimator: EstimatorArg,
-    /// Gain λ of the VVS update δ = -λ L⁺ e (exact, paper), in (0, 2].
-    #[arg(long, default_value_t = 1.0, value_parser = ranges::positive_up_to(2.0, "", "beyond 2 the update overshoots"))]
-    pub gain: f64,
-    /// VVS iterations per control step (1 = the paper's scheme; more = Gauss-Newton), at most 100.
-    #[arg(long, default_value_t = 1, value_parser = ranges::count(1..=estimator::MAX_ITERATIONS, "Gauss-Newton converges in a handful"))]
-    pub iterations: usize,
-    /// Window: 0 = the newest measurement of each point (the paper), N = the last N measurements (4 to 100,000).
-    #[arg(long, default_value_t = 0, value_parser = parse_window)]
-    pub window: usize,
-    /// Control period k: one estimate every K measurements (at most 100,000). Measurements that share a time (the
-    /// blobs of a frame) give one estimate per frame instead.
-    #[arg(long, default_value_t = 10, value_parser = ranges::count(1..=100_000, "one estimate every 25 s at 4 kHz"))]
-    pub every: usize,
-    /// Centroid noise standard deviation (px, at most 100): the window fits' covariance scale, and the Kalman filter's
-    /// starting value (it estimates the noise online unless --adapt leaves the noise out).
-    #[arg(long, default_value_t = 0.1, value_parser = ranges::positive_up_to(estimator::MAX_NOISE_PX, " px", "more than a ROI's half-width is no centroid"))]
-    pub noise_px: f64,
-    /// Kalman: what the filter learns online: the centroid noise and the process noise (both), one of them, or none
-    /// (--noise-px, --accel-psd and --angular-accel-psd taken as the truth: a hand-tuned filter). Default: both for
-    /// measurements and ROI recordings; for --images, the noise, learnt from global-shutter frames and held for
-    /// rolling-shutter ones (a process noise that follows the motion chases the jitter between frames at frame rates).
-    /// Frames whose blobs share one instant never adapt the process noise, and with --images the twist covariance is
-    /// never calibrated against the poses around each estimate, whatever --adapt says.
-    #[arg(long, value_enum)]
-    pub adapt: Option<AdaptArg>,
-    /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise. Default: 1
-    /// (roitrack_core::estimator::KalmanTuning's), a starting value that the filter adapts unless --adapt leaves the
-    /// motion out.
-    #[arg(long, value_parser = ranges::within(estimator::PSD_RANGE, "", "from no motion to 20,000 m/s² between estimates"))]
-    pub accel_psd: Option<f64>,
-    /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz). Default: 10, a starting value as for
-    /// --accel-psd.
-    #[arg(long, value_parser = ranges::within(estimator::PSD_RANGE, "", "from no motion to 20,000 m/s² between estimates"))]
-    pub angular_accel_psd: Option<f64>,
-    /// Kalman: the process model. constant-velocity: the twist drifts under white acceleration (--accel-psd,
-    /// --angular-accel-psd). constant-acceleration: the state also carries the linear and angular accelerations, which
-    /// drift under white jerk (--jerk-psd, --angular-jerk-psd); about 1.45 times the work per update. Default: constant
-    /// velocity for measurements and ROI recordings, constant acceleration for --images (frames tens of
-    /// milliseconds apart, where the twist changes from one frame to the next). A jerk density given alone means
-    /// constant acceleration, an acceleration density constant velocity; the other model's densities are refused.
-    #[arg(long, value_enum)]
-    pub motion_model: Option<MotionModelArg>,
-    /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz). Default: 100 (1000 for
-    /// rolling-shutter frames), a starting value that the filter adapts where it adapts the process noise (see
-    /// --adapt).
-    #[arg(long, value_parser = ranges::within(estimator::PSD_RANGE, "", "from no motion to 20,000 m/s² between estimates"))]
-    pub jerk_psd: Option<f64>,
-    /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz). Default: 300 (3000 for
-    /// rolling-shutter frames), a starting value as for --jerk-psd.
-    #[arg(long, value_parser = ranges::within(estimator::PSD_RANGE, "", "from no motion to 20,000 m/s² between estimates"))]
-    pub angular_jerk_psd: Option<f64>,
-    /// M-estimator against outliers: tukey (default), huber (window fits; the Kalman filter uses Huber either way)
-    /// or none (plain least squares, and no Huber weighting in the Kalman filter).
-    #[arg(long, value_enum, default_value = "tukey")]
-    pub robust: RobustArg,
-    /// Degeneracy gate: windows whose column-scaled Jacobian has a reciprocal condition number below this are not
-    /// used for an update (the estimate is flagged degenerate and the window widened). Default: 3e-3
-    /// (TrackerConfig's).
-    #[arg(long, value_parser = ranges::within(0.0..=1.0, "", "a reciprocal condition number"))]
-    pub min_conditioning: Option<f64>,
+    fn deref(&self) -> &TrackerOptions {
+        &self.0
+    }
 }
 
 impl EstimatorArgs {
     /// What `--adapt` asks the Kalman filter to learn; `None` without it (the source's default).
-    pub fn adaptation(&self) -> Option<roitrack::core::estimator::Adaptation> {
-        use roitrack::core::estimator::Adaptation;
-        self.adapt.map(|a| match a {
-            AdaptArg::Both => Adaptation::Both,
-            AdaptArg::Noise => Adaptation::Noise,
-            AdaptArg::Motion => Adaptation::Motion,
-            AdaptArg::None => Adaptation::None,
-        })
-    }
-
-    /// What `--motion-model` asks for; `None` without it (the source's default).
-    fn motion_model(&self) -> Option<roitrack::core::estimator::MotionModelKind> {
-        use roitrack::core::estimator::MotionModelKind;
-        self.motion_model.map(|m| match m {
-            MotionModelArg::ConstantVelocity => MotionModelKind::ConstantVelocity,
-            MotionModelArg::ConstantAcceleration => MotionModelKind::ConstantAcceleration,
-        })
+    pub fn adaptation(&self) -> Option<estimator::Adaptation> {
+        self.0.adapt
     }
 
     /// The options by name, checked and translated into a configuration by the library (as the Python package
     /// does).
     pub fn config(&self) -> anyhow::Result<TrackerConfig> {
-        let options = self.options();
-        options.check()?;
-        Ok(options.config())
+        self.0.check()?;
+        Ok(self.0.config())
     }
+}
 
-    /// The process model the options name (`--motion-model`, or implied by the densities given); `None`: the
-    /// source's default.
-    pub fn named_motion_model(&self) -> Option<roitrack::core::estimator::MotionModelKind> {
-        self.options().named_motion_model()
-    }
+/// The value parsers the table's checks name: each refuses, as the command line is read, a value outside its range.
+mod checks {
+    pub use crate::ranges::{count, positive_up_to, within};
+    use roitrack::core::estimator;
 
-    /// The options by name, as the library takes them.
-    fn options(&self) -> TrackerOptions {
-        use roitrack::core::estimator::EstimatorKind;
-        TrackerOptions {
-            estimator: match self.estimator {
-                EstimatorArg::Kalman => EstimatorKind::Kalman,
-                EstimatorArg::Exact => EstimatorKind::Exact,
-                EstimatorArg::Paper => EstimatorKind::Paper,
-                EstimatorArg::Static => EstimatorKind::Static,
-                EstimatorArg::Batch => EstimatorKind::Batch,
-            },
-            gain: self.gain,
-            iterations: self.iterations,
-            window: self.window,
-            every: self.every,
-            noise_px: self.noise_px,
-            adapt: self.adaptation(),
-            accel_psd: self.accel_psd,
-            angular_accel_psd: self.angular_accel_psd,
-            motion_model: self.motion_model(),
-            jerk_psd: self.jerk_psd,
-            angular_jerk_psd: self.angular_jerk_psd,
-            robust: match self.robust {
-                RobustArg::None => RobustLoss::None,
-                RobustArg::Huber => RobustLoss::Huber,
-                RobustArg::Tukey => RobustLoss::Tukey,
-            },
-            min_conditioning: self.min_conditioning,
+    /// `--window`: 0 (the newest measurement of each point) or 4 to [`estimator::MAX_WINDOW`] measurements.
+    pub fn window() -> fn(&str) -> Result<usize, String> {
+        |text| match text.trim().parse::<usize>() {
+            Ok(0) => Ok(0),
+            Ok(n) if (4..=estimator::MAX_WINDOW).contains(&n) => Ok(n),
+            _ => Err(format!(
+                "must be 0 (the newest measurement of each point) or from 4 to {} measurements (25 s at 4 kHz), got \
+                 {text}",
+                estimator::MAX_WINDOW
+            )),
         }
     }
 }
 
-/// `--window`: 0 (the newest measurement of each point) or 4 to [`estimator::MAX_WINDOW`] measurements.
-fn parse_window(text: &str) -> Result<usize, String> {
-    match text.trim().parse::<usize>() {
-        Ok(0) => Ok(0),
-        Ok(n) if (4..=estimator::MAX_WINDOW).contains(&n) => Ok(n),
-        _ => Err(format!(
-            "must be 0 (the newest measurement of each point) or from 4 to {} measurements (25 s at 4 kHz), got {text}",
-            estimator::MAX_WINDOW
-        )),
+/// A value named by a string: its names (with their help) as the possible values, parsed by the library.
+fn named_parser<T, E>(
+    values: impl Iterator<Item = (&'static str, Option<&'static str>)>,
+    parse: fn(&str) -> Result<T, E>,
+) -> ValueParser
+where
+    T: Clone + Send + Sync + 'static,
+    E: Into<Box<dyn std::error::Error + Send + Sync + 'static>> + 'static,
+{
+    let values = values.map(|(name, help)| match help {
+        Some(help) => PossibleValue::new(name).help(help),
+        None => PossibleValue::new(name),
+    });
+    ValueParser::new(PossibleValuesParser::new(values).try_map(move |name| parse(&name)))
+}
+
+/// The value parser of a table entry.
+macro_rules! parser_of {
+    (named $ty:ty) => {
+        named_parser(<$ty>::ALL.iter().map(|v| (v.name(), v.help())), <$ty>::from_name)
+    };
+    (optional_named $ty:ty) => {
+        parser_of!(named $ty)
+    };
+    (number $ty:ty, $check:ident($($arg:expr),*)) => {
+        ValueParser::new(checks::$check($($arg),*))
+    };
+    (optional_number $ty:ty, $check:ident($($arg:expr),*)) => {
+        parser_of!(number $ty, $check($($arg),*))
+    };
+}
+
+/// The default `--help` shows for a table entry: none for the optional shapes (their help says the default).
+macro_rules! default_text_of {
+    (number, $value:expr) => {
+        Some($value.to_string())
+    };
+    (named, $value:expr) => {
+        Some($value.to_string())
+    };
+    (optional_number, $value:expr) => {
+        None
+    };
+    (optional_named, $value:expr) => {
+        None
+    };
+}
+
+/// A table entry's value read back: the default of [`TrackerOptions::DEFAULT`] for the non-optional shapes.
+macro_rules! value_of {
+    (number $ty:ty, $matches:ident, $name:ident) => {
+        $matches.get_one::<$ty>(stringify!($name)).copied().unwrap_or(TrackerOptions::DEFAULT.$name)
+    };
+    (named $ty:ty, $matches:ident, $name:ident) => {
+        value_of!(number $ty, $matches, $name)
+    };
+    (optional_number $ty:ty, $matches:ident, $name:ident) => {
+        $matches.get_one::<$ty>(stringify!($name)).copied()
+    };
+    (optional_named $ty:ty, $matches:ident, $name:ident) => {
+        value_of!(optional_number $ty, $matches, $name)
+    };
+}
+
+/// The arguments and their reading from the table.
+macro_rules! estimator_arguments {
+    ($($(#[doc = $doc:literal])* $name:ident : $shape:ident $ty:ty = $default:tt $(, $check:ident ($($arg:expr),*))?;)*) => {
+        /// One argument per option, in the table's order.
+        fn estimator_arguments() -> Vec<Arg> {
+            static LABELS: OnceLock<Vec<Labels>> = OnceLock::new();
+            let labels = LABELS.get_or_init(|| {
+                vec![$(Labels::new(
+                    stringify!($name),
+                    &[$($doc),*],
+                    default_text_of!($shape, TrackerOptions::DEFAULT.$name),
+                )),*]
+            });
+            let parsers = [$(parser_of!($shape $ty $(, $check($($arg),*))?)),*];
+            labels.iter().zip(parsers).map(|(labels, parser)| labels.arg(parser)).collect()
+        }
+
+        /// The options the arguments give.
+        fn options_from(matches: &ArgMatches) -> TrackerOptions {
+            TrackerOptions {
+                $($name: value_of!($shape $ty, matches, $name),)*
+            }
+        }
+    };
+}
+
+roitrack::core::tracker_options!(estimator_arguments);
+
+/// The texts of an argument, made once.
+struct Labels {
+    id: &'static str,
+    long: String,
+    value_name: String,
+    help: String,
+    default: Option<String>,
+}
+
+impl Labels {
+    /// The option `name` (`noise_px`: `--noise-px <NOISE_PX>`) with the help of its doc lines (joined, without the
+    /// final period, as clap's derive makes it of a doc comment) and its default.
+    fn new(name: &'static str, doc: &[&str], default: Option<String>) -> Self {
+        let mut help = doc
+            .iter()
+            .map(|line| line.trim())
+            .collect::<Vec<_>>()
+            .join(" ");
+        if help.ends_with('.') && !help.ends_with("..") {
+            help.pop();
+        }
+        Self {
+            id: name,
+            long: name.replace('_', "-"),
+            value_name: name.to_uppercase(),
+            help,
+            default,
+        }
+    }
+
+    fn arg(&'static self, parser: ValueParser) -> Arg {
+        let arg = Arg::new(self.id)
+            .long(self.long.as_str())
+            .value_name(self.value_name.as_str())
+            .help(self.help.as_str())
+            .action(ArgAction::Set)
+            .value_parser(parser);
+        match &self.default {
+            Some(default) => arg.default_value(default.as_str()),
+            None => arg,
+        }
     }
 }
 
-/// The Kalman filter's process model (`--motion-model`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
-pub enum MotionModelArg {
-    /// The twist drifts under white acceleration.
-    ConstantVelocity,
-    /// The accelerations are states too, drifting under white jerk.
-    ConstantAcceleration,
+impl clap::Args for EstimatorArgs {
+    fn augment_args(command: Command) -> Command {
+        command.args(estimator_arguments())
+    }
+
+    fn augment_args_for_update(command: Command) -> Command {
+        Self::augment_args(command)
+    }
+}
+
+impl clap::FromArgMatches for EstimatorArgs {
+    fn from_arg_matches(matches: &ArgMatches) -> Result<Self, clap::Error> {
+        Ok(Self(options_from(matches)))
+    }
+
+    fn update_from_arg_matches(&mut self, matches: &ArgMatches) -> Result<(), clap::Error> {
+        *self = Self::from_arg_matches(matches)?;
+        Ok(())
+    }
 }
 
 /// How a frame camera reads its rows (`--shutter`).

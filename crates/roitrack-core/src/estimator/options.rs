@@ -92,112 +92,278 @@ pub struct UnknownName {
     pub expected: String,
 }
 
-/// Implements `name` and `from_name` for an enum of named values.
+/// A value's help, if the list gives one.
+macro_rules! value_help {
+    () => {
+        None
+    };
+    ($help:literal) => {
+        Some($help)
+    };
+}
+
+/// Implements `name`, `from_name`, `help` and `Display` for an enum of named values; a value's help (after `:`) is
+/// what `--help` prints beside its name.
 macro_rules! named_values {
-    ($ty:ty, $option:literal, [$($variant:ident => $name:literal),+ $(,)?]) => {
+    ($ty:ty, $option:literal, [$($variant:ident => $name:literal $(: $help:literal)?),+ $(,)?]) => {
         impl $ty {
             /// Every value, in the order of the documentation.
             pub const ALL: &'static [Self] = &[$(Self::$variant),+];
 
             /// The value's name, as the command line and the Python package spell it.
-            pub fn name(self) -> &'static str {
+            pub const fn name(self) -> &'static str {
                 match self {
                     $(Self::$variant => $name),+
                 }
             }
 
+            /// What the value does, in a line (`None` where the name says it).
+            pub const fn help(self) -> Option<&'static str> {
+                match self {
+                    $(Self::$variant => value_help!($($help)?)),+
+                }
+            }
+
             /// The value of a name; an error listing the names otherwise.
             pub fn from_name(name: &str) -> Result<Self, UnknownName> {
-                Self::ALL.iter().copied().find(|v| v.name() == name).ok_or_else(|| UnknownName {
+                Self::named(name).ok_or_else(|| UnknownName {
                     option: $option,
                     value: name.to_string(),
                     expected: Self::ALL.iter().map(|v| v.name()).collect::<Vec<_>>().join(", "),
                 })
             }
+
+            /// [`Self::from_name`] at compile time: the table's default names are checked as the crate builds.
+            const fn named(name: &str) -> Option<Self> {
+                let mut k = 0;
+                while k < Self::ALL.len() {
+                    if same_text(Self::ALL[k].name(), name) {
+                        return Some(Self::ALL[k]);
+                    }
+                    k += 1;
+                }
+                None
+            }
+        }
+
+        impl std::fmt::Display for $ty {
+            fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+                f.write_str(self.name())
+            }
         }
     };
 }
 
+/// `a == b` for strings, in a `const fn`.
+const fn same_text(a: &str, b: &str) -> bool {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    if a.len() != b.len() {
+        return false;
+    }
+    let mut k = 0;
+    while k < a.len() {
+        if a[k] != b[k] {
+            return false;
+        }
+        k += 1;
+    }
+    true
+}
+
 named_values!(EstimatorKind, "estimator", [
-    Kalman => "kalman", Exact => "exact", Paper => "paper", Static => "static", Batch => "batch",
+    Kalman => "kalman": "Error-state Kalman filter, one update per centroid at its own time (default)",
+    Exact => "exact": "The paper's virtual visual servoing loop with the exact Jacobian",
+    Paper => "paper": "The paper's virtual visual servoing loop with the paper's Jacobian (eqs. 17-24)",
+    Static => "static": "Baseline: static PnP as if simultaneous, velocity by finite differences",
+    Batch => "batch": "Baseline: Levenberg-Marquardt of the 12 parameters on the window",
 ]);
 named_values!(Adaptation, "adapt", [
     Both => "both", Noise => "noise", Motion => "motion", None => "none",
 ]);
 named_values!(MotionModelKind, "motion-model", [
-    ConstantVelocity => "constant-velocity", ConstantAcceleration => "constant-acceleration",
+    ConstantVelocity => "constant-velocity": "The twist drifts under white acceleration",
+    ConstantAcceleration => "constant-acceleration": "The accelerations are states too, drifting under white jerk",
 ]);
 named_values!(RobustLoss, "robust", [None => "none", Huber => "huber", Tukey => "tukey"]);
 
-/// The tracker's options by name, with the command line's defaults (`roitrack track --help`); [`Self::config`]
-/// turns them into a [`TrackerConfig`].
+/// The tracker's options, the one table from which follow [`TrackerOptions`] (its fields, docs and defaults), the
+/// command line's arguments (`roitrack track --help`: the docs are the help, the checks its value parsers) and the
+/// Python package's keyword arguments (`Tracker(...)`, `track(...)`: names and defaults).
+///
+/// `tracker_options!(callback)` calls `callback! { ENTRY* }` (with `tracker_options!(callback [TOKENS])`,
+/// `callback! { [TOKENS] ENTRY* }`), each entry
+///
+/// ```text
+/// /// help text, as `--help` prints it
+/// name: SHAPE Type = DEFAULT, check(arguments);
+/// ```
+///
+/// - `name`: the field, the Python keyword, and with `-` for `_` the command-line option;
+/// - `SHAPE`: `number` (a value, `DEFAULT` a number), `named` (a value named by a string, `DEFAULT` its name),
+///   `optional_number` or `optional_named` (`Option<Type>`, `DEFAULT` `None`: the source's default, which the help
+///   says);
+/// - `check(arguments)` (numbers only): the range the command line refuses outside as it reads the value, one of the
+///   CLI's value parsers `within(range, unit, why)`, `positive_up_to(max, unit, why)`, `count(range, why)` or
+///   `window()`, on the bounds of this crate (`MAX_ITERATIONS`, ...) that [`TrackerConfig::validate`] enforces from
+///   every front end.
+///
+/// Named values name their type's values (`named_values!` above: names, help).
 ///
 /// ```
-/// use roitrack_core::estimator::{Adaptation, EstimatorConfig, EstimatorKind, TrackerConfig, TrackerOptions};
-///
-/// // The default options are the default configuration.
-/// assert_eq!(TrackerOptions::default().config(), TrackerConfig::default());
-/// // A hand-tuned Kalman filter: nothing learnt online.
-/// let options = TrackerOptions { adapt: Some(Adaptation::None), accel_psd: Some(5.0), ..TrackerOptions::default() };
-/// let EstimatorConfig::Kalman(tuning) = options.config().estimator else { unreachable!() };
-/// assert!(!tuning.adapt_noise && !tuning.adapt_motion && tuning.linear_accel_psd == 5.0);
-/// let paper = TrackerOptions { estimator: EstimatorKind::Paper, gain: 0.5, ..TrackerOptions::default() };
-/// assert_eq!(paper.config().estimator.name(), "vvs");
+/// macro_rules! names {
+///     ($($(#[doc = $doc:literal])* $name:ident : $shape:ident $ty:ty = $default:tt $(, $check:ident ($($arg:expr),*))?;)*) => {
+///         [$(stringify!($name)),*]
+///     };
+/// }
+/// let names = roitrack_core::tracker_options!(names);
+/// assert_eq!(names[..3], ["estimator", "every", "gain"]);
 /// ```
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TrackerOptions {
-    /// Which estimator.
-    pub estimator: EstimatorKind,
-    /// Gain λ of the VVS update δ = -λ L⁺ e (exact, paper).
-    pub gain: f64,
-    /// VVS iterations per control step (1 = the paper's scheme; more = Gauss-Newton).
-    pub iterations: usize,
-    /// Window: 0 = the newest measurement of each point (the paper), N = the last N measurements.
-    pub window: usize,
-    /// Control period: one estimate every `every` measurements.
-    pub every: usize,
-    /// Centroid noise standard deviation (px): the window fits' covariance scale, and the Kalman filter's starting
-    /// value.
-    pub noise_px: f64,
-    /// Kalman: what the filter learns online; `None` means the default of the caller's source (both for
-    /// measurements, see `FrameTrackerConfig::frame_estimator` for frames).
-    pub adapt: Option<Adaptation>,
-    /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); `None` for the default.
-    pub accel_psd: Option<f64>,
-    /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz); `None` for the default.
-    pub angular_accel_psd: Option<f64>,
-    /// Kalman: the process model; `None` means the default of the caller's source (constant velocity for
-    /// measurements, constant acceleration for frames, see `FrameTrackerConfig::frame_estimator`), unless densities
-    /// name one ([`Self::named_motion_model`]).
-    pub motion_model: Option<MotionModelKind>,
-    /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz); `None` for the default.
-    pub jerk_psd: Option<f64>,
-    /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz); `None` for the default.
-    pub angular_jerk_psd: Option<f64>,
-    /// M-estimator of the window fits; `None` also turns off the Kalman filter's Huber weighting.
-    pub robust: RobustLoss,
-    /// Degeneracy gate on the window's reciprocal condition number; `None` for the default.
-    pub min_conditioning: Option<f64>,
+#[macro_export]
+macro_rules! tracker_options {
+    ($callback:ident $([$($extra:tt)*])?) => {
+        $callback! {
+            $([$($extra)*])?
+            /// Which estimator.
+            estimator: named $crate::estimator::EstimatorKind = "kalman";
+            /// Control period k: one estimate every K measurements (at most 100,000). Measurements that share a time (the
+            /// blobs of a frame) give one estimate per frame instead.
+            every: number usize = 10, count(1..=100_000, "one estimate every 25 s at 4 kHz");
+            /// Gain λ of the VVS update δ = -λ L⁺ e (exact, paper), in (0, 2].
+            gain: number f64 = 1.0, positive_up_to(2.0, "", "beyond 2 the update overshoots");
+            /// VVS iterations per control step (1 = the paper's scheme; more = Gauss-Newton), at most 100.
+            iterations: number usize = 1,
+                count(1..=$crate::estimator::MAX_ITERATIONS, "Gauss-Newton converges in a handful");
+            /// Window: 0 = the newest measurement of each point (the paper), N = the last N measurements (4 to 100,000).
+            window: number usize = 0, window();
+            /// Centroid noise standard deviation (px, at most 100): the window fits' covariance scale, and the Kalman filter's
+            /// starting value (it estimates the noise online unless --adapt leaves the noise out).
+            noise_px: number f64 = 0.1, positive_up_to(
+                $crate::estimator::MAX_NOISE_PX,
+                " px",
+                "more than a ROI's half-width is no centroid"
+            );
+            /// Kalman: what the filter learns online: the centroid noise and the process noise (both), one of them, or none
+            /// (--noise-px, --accel-psd and --angular-accel-psd taken as the truth: a hand-tuned filter). Default: both for
+            /// measurements and ROI recordings; for --images, the noise, learnt from global-shutter frames and held for
+            /// rolling-shutter ones (a process noise that follows the motion chases the jitter between frames at frame rates).
+            /// Frames whose blobs share one instant never adapt the process noise, and with --images the twist covariance is
+            /// never calibrated against the poses around each estimate, whatever --adapt says.
+            adapt: optional_named $crate::estimator::Adaptation = None;
+            /// Kalman: white linear acceleration spectral density ((m/s²)²/Hz); larger = less lag, more noise. Default: 1
+            /// (roitrack_core::estimator::KalmanTuning's), a starting value that the filter adapts unless --adapt leaves the
+            /// motion out.
+            accel_psd: optional_number f64 = None, within(
+                $crate::estimator::PSD_RANGE,
+                "",
+                "from no motion to 20,000 m/s² between estimates"
+            );
+            /// Kalman: white angular acceleration spectral density ((rad/s²)²/Hz). Default: 10, a starting value as for
+            /// --accel-psd.
+            angular_accel_psd: optional_number f64 = None, within(
+                $crate::estimator::PSD_RANGE,
+                "",
+                "from no motion to 20,000 m/s² between estimates"
+            );
+            /// Kalman: the process model. constant-velocity: the twist drifts under white acceleration (--accel-psd,
+            /// --angular-accel-psd). constant-acceleration: the state also carries the linear and angular accelerations, which
+            /// drift under white jerk (--jerk-psd, --angular-jerk-psd); about 1.45 times the work per update. Default: constant
+            /// velocity for measurements and ROI recordings, constant acceleration for --images (frames tens of
+            /// milliseconds apart, where the twist changes from one frame to the next). A jerk density given alone means
+            /// constant acceleration, an acceleration density constant velocity; the other model's densities are refused.
+            motion_model: optional_named $crate::estimator::MotionModelKind = None;
+            /// Kalman, constant acceleration: white linear jerk spectral density ((m/s³)²/Hz). Default: 100 (1000 for
+            /// rolling-shutter frames), a starting value that the filter adapts where it adapts the process noise (see
+            /// --adapt).
+            jerk_psd: optional_number f64 = None, within(
+                $crate::estimator::PSD_RANGE,
+                "",
+                "from no motion to 20,000 m/s² between estimates"
+            );
+            /// Kalman, constant acceleration: white angular jerk spectral density ((rad/s³)²/Hz). Default: 300 (3000 for
+            /// rolling-shutter frames), a starting value as for --jerk-psd.
+            angular_jerk_psd: optional_number f64 = None, within(
+                $crate::estimator::PSD_RANGE,
+                "",
+                "from no motion to 20,000 m/s² between estimates"
+            );
+            /// M-estimator against outliers: tukey (default), huber (window fits; the Kalman filter uses Huber either way)
+            /// or none (plain least squares, and no Huber weighting in the Kalman filter).
+            robust: named $crate::estimator::RobustLoss = "tukey";
+            /// Degeneracy gate: windows whose column-scaled Jacobian has a reciprocal condition number below this are not
+            /// used for an update (the estimate is flagged degenerate and the window widened). Default: 3e-3
+            /// (TrackerConfig's).
+            min_conditioning: optional_number f64 = None, within(0.0..=1.0, "", "a reciprocal condition number");
+        }
+    };
 }
+
+/// The type of a field of the table: `Option<Type>` for the optional shapes.
+macro_rules! option_type {
+    (number $ty:ty) => { $ty };
+    (named $ty:ty) => { $ty };
+    (optional_number $ty:ty) => { Option<$ty> };
+    (optional_named $ty:ty) => { Option<$ty> };
+}
+
+/// The default of a field of the table, a named value looked up as the crate builds (an unknown name stops the
+/// build).
+macro_rules! option_default {
+    (number $ty:ty, $default:tt) => {
+        $default
+    };
+    (named $ty:ty, $default:tt) => {
+        match <$ty>::named($default) {
+            Some(value) => value,
+            None => panic!(concat!("tracker_options!: no value named ", $default)),
+        }
+    };
+    (optional_number $ty:ty, None) => {
+        None
+    };
+    (optional_named $ty:ty, None) => {
+        None
+    };
+}
+
+/// [`TrackerOptions`] from the table.
+macro_rules! define_tracker_options {
+    ($($(#[doc = $doc:literal])* $name:ident : $shape:ident $ty:ty = $default:tt $(, $check:ident ($($arg:expr),*))?;)*) => {
+        /// The tracker's options by name, with the command line's defaults (`roitrack track --help`, whose help is
+        /// the fields' docs); [`Self::config`] turns them into a [`TrackerConfig`]. The fields, their defaults, the
+        /// command-line arguments and the Python keywords all follow from one table, [`tracker_options!`].
+        ///
+        /// ```
+        /// use roitrack_core::estimator::{Adaptation, EstimatorConfig, EstimatorKind, TrackerConfig, TrackerOptions};
+        ///
+        /// // The default options are the default configuration.
+        /// assert_eq!(TrackerOptions::default().config(), TrackerConfig::default());
+        /// // A hand-tuned Kalman filter: nothing learnt online.
+        /// let options = TrackerOptions { adapt: Some(Adaptation::None), accel_psd: Some(5.0), ..TrackerOptions::default() };
+        /// let EstimatorConfig::Kalman(tuning) = options.config().estimator else { unreachable!() };
+        /// assert!(!tuning.adapt_noise && !tuning.adapt_motion && tuning.linear_accel_psd == 5.0);
+        /// let paper = TrackerOptions { estimator: EstimatorKind::Paper, gain: 0.5, ..TrackerOptions::default() };
+        /// assert_eq!(paper.config().estimator.name(), "vvs");
+        /// ```
+        #[derive(Debug, Clone, Copy, PartialEq)]
+        pub struct TrackerOptions {
+            $($(#[doc = $doc])* pub $name: option_type!($shape $ty),)*
+        }
+
+        impl TrackerOptions {
+            /// The defaults of the table (an `Option` field's `None`: the default of the caller's source, which its
+            /// doc says).
+            pub const DEFAULT: Self = Self {
+                $($name: option_default!($shape $ty, $default),)*
+            };
+        }
+    };
+}
+
+tracker_options!(define_tracker_options);
 
 impl Default for TrackerOptions {
     fn default() -> Self {
-        Self {
-            estimator: EstimatorKind::Kalman,
-            gain: 1.0,
-            iterations: 1,
-            window: 0,
-            every: 10,
-            noise_px: 0.1,
-            adapt: None,
-            accel_psd: None,
-            angular_accel_psd: None,
-            motion_model: None,
-            jerk_psd: None,
-            angular_jerk_psd: None,
-            robust: RobustLoss::Tukey,
-            min_conditioning: None,
-        }
+        Self::DEFAULT
     }
 }
 
