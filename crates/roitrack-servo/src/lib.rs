@@ -11,10 +11,12 @@
 //! - [`closed_loop`]: the loop in simulated time through the simulated ROI or frame camera and roitrack's trackers
 //!   ([`run_servo`]), deterministic for a seed, with divergence detected and reported.
 //! - [`output`]: a run's files (reference and achieved poses in TUM, the estimates, the per-tick log) and figures.
+//! - [`handle`]: the newest estimate for a user's control thread, read without locks or allocation.
 //! - [`sweep`]: the largest stable gain against latency, per scheme.
 
 pub mod closed_loop;
 pub mod control;
+pub mod handle;
 pub mod reference;
 pub mod robot;
 pub mod sweep;
