@@ -292,6 +292,19 @@ fn border_plane(
         let mean = border.iter().map(|p| p.2).sum::<f64>() / n.max(1) as f64;
         return (mean, 0.0, 0.0, 0.0);
     };
+    let (plane, noise) = refit_background(border, &mut background[..n], towards_blob, first);
+    (plane[0], plane[1], plane[2], noise)
+}
+
+/// Refits the background plane `first` through the `border` pixels up to three times, each time without those that
+/// stand towards the blob (`towards_blob`: +1 for bright blobs, -1 for dark ones) by more than twice the
+/// background's noise (`background` marks the pixels kept); returns the plane and the noise.
+fn refit_background(
+    border: &[(f64, f64, f64)],
+    background: &mut [bool],
+    towards_blob: f64,
+    first: [f64; 3],
+) -> ([f64; 3], f64) {
     let plane_at =
         |plane: &[f64; 3], p: &(f64, f64, f64)| plane[0] + plane[1] * p.0 + plane[2] * p.1;
     // Refits without the pixels that stand towards the blob by more than twice the background's noise, the noise
@@ -322,11 +335,11 @@ fn border_plane(
         if !changed {
             break;
         }
-        let Some(refit) = fit_plane(border, &background[..n]) else {
+        let Some(refit) = fit_plane(border, background) else {
             break;
         };
         plane = refit;
         noise = background_noise(&plane);
     }
-    (plane[0], plane[1], plane[2], noise)
+    (plane, noise)
 }
