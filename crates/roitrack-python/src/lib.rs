@@ -20,9 +20,7 @@ use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyTypeError, PyValueError
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use roitrack::core::camera::PinholeIntrinsics;
-use roitrack::core::estimator::{
-    Adaptation, EstimatorKind, MotionModelKind, RobustLoss, TrackerOptions, UnknownName,
-};
+use roitrack::core::estimator::{TrackerOptions, UnknownName};
 use roitrack::formats::FormatError;
 use roitrack::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use roitrack::pipeline::{PhotoError, PhotoOptions, PolarityChoice};
@@ -465,50 +463,36 @@ impl Estimate {
     }
 }
 
-/// The tracker options of `roitrack track`, by keyword.
-#[allow(clippy::too_many_arguments)]
-fn tracker_options(
-    estimator: &str,
-    every: usize,
-    gain: f64,
-    iterations: usize,
-    window: usize,
-    noise_px: f64,
-    adapt: Option<&str>,
-    accel_psd: Option<f64>,
-    angular_accel_psd: Option<f64>,
-    motion_model: Option<&str>,
-    jerk_psd: Option<f64>,
-    angular_jerk_psd: Option<f64>,
-    robust: &str,
-    min_conditioning: Option<f64>,
-) -> PyResult<TrackerOptions> {
-    let options = TrackerOptions {
-        estimator: EstimatorKind::from_name(estimator).map_err(name_error)?,
-        gain,
-        iterations,
-        window,
-        every,
-        noise_px,
-        adapt: adapt
-            .map(Adaptation::from_name)
-            .transpose()
-            .map_err(name_error)?,
-        accel_psd,
-        angular_accel_psd,
-        motion_model: motion_model
-            .map(MotionModelKind::from_name)
-            .transpose()
-            .map_err(name_error)?,
-        jerk_psd,
-        angular_jerk_psd,
-        robust: RobustLoss::from_name(robust).map_err(name_error)?,
-        min_conditioning,
-    };
+/// Checks options as the command line does (densities of the other motion model refused).
+fn checked(options: TrackerOptions) -> PyResult<TrackerOptions> {
     options
         .check()
         .map_err(|e| PyValueError::new_err(e.to_string()))?;
     Ok(options)
+}
+
+/// A table entry's Python type: a named value by its name (`str`).
+macro_rules! py_type {
+    (number $ty:ty) => { $ty };
+    (named $ty:ty) => { &str };
+    (optional_number $ty:ty) => { Option<$ty> };
+    (optional_named $ty:ty) => { Option<&str> };
+}
+
+/// A table entry's value from its Python argument `$arg`: a name looked up (ValueError listing the names).
+macro_rules! py_value {
+    (number $ty:ty, $arg:ident) => {
+        $arg
+    };
+    (named $ty:ty, $arg:ident) => {
+        <$ty>::from_name($arg).map_err(name_error)?
+    };
+    (optional_number $ty:ty, $arg:ident) => {
+        $arg
+    };
+    (optional_named $ty:ty, $arg:ident) => {
+        $arg.map(<$ty>::from_name).transpose().map_err(name_error)?
+    };
 }
 
 fn new_tracker(
@@ -521,9 +505,8 @@ fn new_tracker(
 }
 
 /// A streaming tracker: push centroids one at a time, get an Estimate every `every` measurements once initialised.
-/// The keywords are those of `roitrack track` (see its --help): estimator kalman|exact|paper|static|batch, every,
-/// gain, iterations, window, noise_px, adapt both|noise|motion|none, accel_psd, angular_accel_psd, motion_model
-/// constant-velocity|constant-acceleration, jerk_psd, angular_jerk_psd, robust none|huber|tukey, min_conditioning.
+/// The keywords are the tracker options of `roitrack track`, `_` for `-` (see `roitrack track --help` for what each
+/// does and the names it takes: estimator kalman, exact, paper, static or batch, ...).
 ///
 /// >>> tr = roitrack.Tracker(cam, tgt, estimator="kalman", every=10)
 /// >>> est = tr.push(0.0, 3, 512.2, 498.7)   # None until an estimate is due
@@ -532,51 +515,26 @@ struct Tracker {
     inner: Mutex<roitrack::Tracker>,
 }
 
-#[pymethods]
-impl Tracker {
-    #[new]
-    #[pyo3(signature = (camera, target, estimator = "kalman", every = 10, gain = 1.0, iterations = 1, window = 0,
-        noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, motion_model = None,
-        jerk_psd = None, angular_jerk_psd = None, robust = "tukey", min_conditioning = None))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        camera: PyRef<'_, Camera>,
-        target: PyRef<'_, Target_>,
-        estimator: &str,
-        every: usize,
-        gain: f64,
-        iterations: usize,
-        window: usize,
-        noise_px: f64,
-        adapt: Option<&str>,
-        accel_psd: Option<f64>,
-        angular_accel_psd: Option<f64>,
-        motion_model: Option<&str>,
-        jerk_psd: Option<f64>,
-        angular_jerk_psd: Option<f64>,
-        robust: &str,
-        min_conditioning: Option<f64>,
-    ) -> PyResult<Self> {
-        let options = tracker_options(
-            estimator,
-            every,
-            gain,
-            iterations,
-            window,
-            noise_px,
-            adapt,
-            accel_psd,
-            angular_accel_psd,
-            motion_model,
-            jerk_psd,
-            angular_jerk_psd,
-            robust,
-            min_conditioning,
-        )?;
-        Ok(Self {
-            inner: Mutex::new(new_tracker(&camera, &target, &options)?),
-        })
-    }
+/// `Tracker(camera, target, ...)` and `track(camera, target, measurements, ...)` with one keyword argument per entry of
+/// the library's table of tracker options ([`roitrack::core::tracker_options!`]), its default the table's, and
+/// `_tracker_options()`, the table as the tests compare it with the signatures and the stubs.
+macro_rules! tracker_api {
+    ($($(#[doc = $doc:literal])* $name:ident : $shape:ident $ty:ty = $default:tt $(, $check:ident ($($arg:expr),*))?;)*) => {
+        #[pymethods]
+        impl Tracker {
+            #[new]
+            #[pyo3(signature = (camera, target, $($name = $default),*))]
+            #[allow(clippy::too_many_arguments)]
+            fn new(
+                camera: PyRef<'_, Camera>,
+                target: PyRef<'_, Target_>,
+                $($name: py_type!($shape $ty),)*
+            ) -> PyResult<Self> {
+                let options = checked(TrackerOptions { $($name: py_value!($shape $ty, $name),)* })?;
+                Ok(Self {
+                    inner: Mutex::new(new_tracker(&camera, &target, &options)?),
+                })
+            }
 
     /// Takes one centroid: time (s, not decreasing), point id, raw pixel (u, v). Returns None, or an Estimate when
     /// one is due. A refused measurement raises RoitrackError and leaves the tracker as it was.
@@ -609,7 +567,37 @@ impl Tracker {
     fn measurements(&self) -> usize {
         self.inner.lock().map_or(0, |t| t.report().measurements)
     }
+        }
+
+        /// Tracks a whole recording: `measurements` is an (N, 4) float64 array of rows t (s), id, u, v (raw px), in
+        /// time order, as `roitrack track --measurements` reads them (rows sharing a time form one readout). The
+        /// keywords are Tracker's. Returns a dict of arrays, one row per estimate: t_s (M,), position_m (M, 3),
+        /// quaternion_xyzw (M, 4), velocity_mps (M, 3), angular_velocity_radps (M, 3), covariance (M, 12, 12),
+        /// status (M,) str, residual_px (M,), conditioning (M,). Releases the GIL while tracking.
+        #[pyfunction]
+        #[pyo3(signature = (camera, target, measurements, $($name = $default),*))]
+        #[allow(clippy::too_many_arguments)]
+        fn track<'py>(
+            py: Python<'py>,
+            camera: PyRef<'py, Camera>,
+            target: PyRef<'py, Target_>,
+            measurements: &Bound<'py, PyAny>,
+            $($name: py_type!($shape $ty),)*
+        ) -> PyResult<Bound<'py, PyDict>> {
+            let options = checked(TrackerOptions { $($name: py_value!($shape $ty, $name),)* })?;
+            track_with(py, &camera, &target, measurements, &options)
+        }
+
+        /// The table of tracker options as (name, shape, default as Python writes it, Rust type), for the tests that
+        /// compare it with the signatures of `Tracker` and `track` and with the stubs.
+        #[pyfunction]
+        fn _tracker_options() -> Vec<(&'static str, &'static str, &'static str, &'static str)> {
+            vec![$((stringify!($name), stringify!($shape), stringify!($default), stringify!($ty))),*]
+        }
+    };
 }
+
+roitrack::core::tracker_options!(tracker_api);
 
 /// Estimates as arrays, filled as they come (no per-estimate Python object).
 struct EstimateColumns {
@@ -713,54 +701,17 @@ fn measurements_of(argument: &Bound<'_, PyAny>) -> PyResult<Vec<Measurement>> {
         .collect()
 }
 
-/// Tracks a whole recording: `measurements` is an (N, 4) float64 array of rows t (s), id, u, v (raw px), in time
-/// order, as `roitrack track --measurements` reads them (rows sharing a time form one readout). The keywords are
-/// Tracker's. Returns a dict of arrays, one row per estimate: t_s (M,), position_m (M, 3), quaternion_xyzw (M, 4),
-/// velocity_mps (M, 3), angular_velocity_radps (M, 3), covariance (M, 12, 12), status (M,) str, residual_px (M,),
-/// conditioning (M,). Releases the GIL while tracking.
-#[pyfunction]
-#[pyo3(signature = (camera, target, measurements, estimator = "kalman", every = 10, gain = 1.0, iterations = 1,
-    window = 0, noise_px = 0.1, adapt = None, accel_psd = None, angular_accel_psd = None, motion_model = None,
-    jerk_psd = None, angular_jerk_psd = None, robust = "tukey", min_conditioning = None))]
-#[allow(clippy::too_many_arguments)]
-fn track<'py>(
+/// `track()` once its options are read: the measurements tracked with the GIL released, as columns.
+fn track_with<'py>(
     py: Python<'py>,
-    camera: PyRef<'py, Camera>,
-    target: PyRef<'py, Target_>,
+    camera: &Camera,
+    target: &Target_,
     measurements: &Bound<'py, PyAny>,
-    estimator: &str,
-    every: usize,
-    gain: f64,
-    iterations: usize,
-    window: usize,
-    noise_px: f64,
-    adapt: Option<&str>,
-    accel_psd: Option<f64>,
-    angular_accel_psd: Option<f64>,
-    motion_model: Option<&str>,
-    jerk_psd: Option<f64>,
-    angular_jerk_psd: Option<f64>,
-    robust: &str,
-    min_conditioning: Option<f64>,
+    options: &TrackerOptions,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let options = tracker_options(
-        estimator,
-        every,
-        gain,
-        iterations,
-        window,
-        noise_px,
-        adapt,
-        accel_psd,
-        angular_accel_psd,
-        motion_model,
-        jerk_psd,
-        angular_jerk_psd,
-        robust,
-        min_conditioning,
-    )?;
+    let every = options.every;
     let measurements = measurements_of(measurements)?;
-    let mut tracker = new_tracker(&camera, &target, &options)?;
+    let mut tracker = new_tracker(camera, target, options)?;
     // An estimate every `every` measurements, and one per readout at most: room for them all.
     let expected = measurements.len() / every.max(1) + 1;
     let (columns, report) = py.detach(move || {
@@ -1148,6 +1099,7 @@ fn _roitrack(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(detect, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(_tracker_options, m)?)?;
     #[cfg(feature = "lab")]
     m.add_function(wrap_pyfunction!(_bench_track_library, m)?)?;
     m.add("RoitrackError", m.py().get_type::<RoitrackError>())?;

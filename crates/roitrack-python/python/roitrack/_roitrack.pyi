@@ -17,6 +17,7 @@ __all__ = [
     "simulate",
     "evaluate",
     "RoitrackError",
+    "_tracker_options",
 ]
 
 _Path = Union[str, "os.PathLike[str]"]
@@ -175,3 +176,5 @@ def evaluate(sim: dict[str, Any], res: dict[str, Any]) -> dict[str, Any]: ...
 # Only in a wheel built with the feature `lab` (bench/python_bench.py); private, so stubtest does not miss it in the
 # default wheel.
 def _bench_track_library(runs: int = 5) -> float: ...
+# The table of tracker options (name, shape, default as Python writes it, Rust type): for tests/test_options.py.
+def _tracker_options() -> list[tuple[str, str, str, str]]: ...
