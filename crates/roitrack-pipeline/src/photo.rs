@@ -3,11 +3,14 @@
 
 use nalgebra::{UnitQuaternion, Vector2};
 use roitrack_core::{CameraModel, MotionState, Target};
-use roitrack_image::{
-    Frame, PhotoBlob, PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs,
+use roitrack_image::photo::{
+    PhotoBlobCandidates, find_photo_blob_candidates, find_rough_photo_blob_candidates,
 };
+use roitrack_image::{Frame, PhotoBlob, PhotoBlobOptions, PhotoScratch, Polarity};
 
-use crate::identify::{Identification, identify_if_promising, whole_view_points};
+use crate::identify::{
+    Identification, identify_if_promising, lattice_promise, on_lattice, whole_view_points,
+};
 use crate::matching::{DetectedBlob, MatchError};
 
 /// Which blobs to look for.
@@ -111,6 +114,10 @@ pub struct PhotoDetection {
     /// The polarities whose blobs went through identification, in the order they did (the last is
     /// [`Self::polarity`]): with [`PolarityChoice::Auto`], one when the first tried was the right one.
     pub polarities_tried: Vec<Polarity>,
+    /// The polarities whose blobs' centres were measured (their outlines), in the order they were: with
+    /// [`PolarityChoice::Auto`], one when the polarities' thresholded blobs ranked the right one first. The other is
+    /// at most thresholded.
+    pub polarities_measured: Vec<Polarity>,
     /// Hypotheses verified by identification, over every polarity tried: the work identification did.
     pub hypotheses: usize,
 }
@@ -185,7 +192,7 @@ fn detected(blobs: &[PhotoBlob]) -> Vec<DetectedBlob> {
         .collect()
 }
 
-/// Finds, identifies and measures the target in a photograph: blob detection ([`detect_photo_blobs`]) in the
+/// Finds, identifies and measures the target in a photograph: blob detection ([`detect_photo_blobs`](roitrack_image::detect_photo_blobs)) in the
 /// polarity asked for or, with [`PolarityChoice::Auto`], in both; identification ([`identify`]); the pose.
 ///
 /// ```
@@ -223,17 +230,34 @@ pub fn detect_target(
     }
     let mut scratch = PhotoScratch::default();
     let blob_options = options.blob_options(camera, target);
-    let mut blobs_of = |polarity: Polarity| {
-        detect_photo_blobs(
+    let find_rough = |polarity: Polarity, scratch: &mut PhotoScratch| {
+        find_rough_photo_blob_candidates(
             &frame.pixels,
             frame.width,
             frame.height,
             frame.bit_depth,
             polarity,
             &blob_options,
-            &mut scratch,
+            scratch,
         )
     };
+    let find = |polarity: Polarity, scratch: &mut PhotoScratch| {
+        find_photo_blob_candidates(
+            &frame.pixels,
+            frame.width,
+            frame.height,
+            frame.bit_depth,
+            polarity,
+            &blob_options,
+            scratch,
+        )
+    };
+    // The candidates' centres measured, the work counted.
+    let measure =
+        |candidates: PhotoBlobCandidates<'_>, scratch: &mut PhotoScratch, tally: &mut Tally| {
+            tally.measured.push(candidates.polarity());
+            candidates.measure(scratch)
+        };
     let mut tally = Tally::default();
     // Identifies the target among `blobs` if their search's first hypotheses match at least `min_promise` points
     // (`None` if not), counting the work; also returns that promise.
@@ -260,7 +284,7 @@ pub fn detect_target(
             } else {
                 Polarity::Dark
             };
-            let blobs = blobs_of(polarity);
+            let blobs = measure(find(polarity, &mut scratch), &mut scratch, &mut tally);
             match identify_among(polarity, &blobs, &mut tally) {
                 Ok(found) => (polarity, blobs, found),
                 Err(source) => {
@@ -273,53 +297,93 @@ pub fn detect_target(
             }
         }
         PolarityChoice::Auto => {
-            // The likelier polarity's blobs first. If they hold a structure the size of the whole target in view
-            // (the first hypotheses its search would verify match that many points), they are identified at once:
-            // the guess is taken. If not, the wrong polarity's blobs (sky, foliage, glints) may hold thousands of
-            // small placements whose verification fails slowly: the other polarity's blobs are detected too (a
-            // blob detection costs less than a few failing verifications) and the more promising set is
-            // identified first. Both are identified before the target is declared not found, so the order
-            // changes only the time.
+            // The likelier polarity first. If its blobs hold a structure the size of the whole target in view (the
+            // first hypotheses its search would verify match that many points), they are identified at once: the
+            // guess is taken. If not, the wrong polarity's blobs (sky, foliage, glints) may hold thousands of small
+            // placements whose verification fails slowly: the other polarity's blobs are found too and the more
+            // promising set is identified first. Both are identified before the target is declared not found, so
+            // the order changes only the time.
             let guess = likely_polarity(frame);
-            let guess_blobs = blobs_of(guess);
-            let whole_view = whole_view_points(target.len());
-            let (outcome, guess_promise) = attempt(guess, &guess_blobs, whole_view, &mut tally);
             let other = guess.other();
-            let mut other_blobs = None;
-            let guess_outcome = match outcome {
-                Some(outcome) => outcome,
-                None => {
-                    // Not promising: the other polarity goes first if its blobs promise more.
-                    let blobs = blobs_of(other);
-                    let (outcome, _) = attempt(other, &blobs, guess_promise + 1, &mut tally);
-                    if let Some(Ok(found)) = outcome {
-                        return Ok(tally.into(finish(camera, target, other, blobs, found)));
+            let whole_view = whole_view_points(target.len());
+            if on_lattice(target) {
+                // A target on a lattice: each polarity judged by its lattices' growth on the blobs of two
+                // thresholds, before the other levels are labelled and any centre is measured (a wrong polarity's
+                // few hundred glints cost as much to label and measure as identifying the target), and only the
+                // first in that order labelled in full and measured unless it fails.
+                let guess_candidates = find_rough(guess, &mut scratch);
+                let guess_promise =
+                    lattice_promise(camera, target, &rough(&guess_candidates)).unwrap_or(0);
+                let (first, second) = if guess_promise >= whole_view {
+                    (guess_candidates, None)
+                } else if guess_promise == 0 {
+                    // Nothing grew: the other polarity cannot promise less.
+                    (find_rough(other, &mut scratch), Some(guess_candidates))
+                } else {
+                    let other_candidates = find_rough(other, &mut scratch);
+                    let other_promise =
+                        lattice_promise(camera, target, &rough(&other_candidates)).unwrap_or(0);
+                    if other_promise > guess_promise {
+                        (other_candidates, Some(guess_candidates))
+                    } else {
+                        (guess_candidates, Some(other_candidates))
                     }
-                    other_blobs = Some(blobs);
-                    identify_among(guess, &guess_blobs, &mut tally)
+                };
+                let first_polarity = first.polarity();
+                let first_blobs = measure(first, &mut scratch, &mut tally);
+                match identify_among(first_polarity, &first_blobs, &mut tally) {
+                    Ok(found) => (first_polarity, first_blobs, found),
+                    Err(first_error) => {
+                        let second =
+                            second.unwrap_or_else(|| find(first_polarity.other(), &mut scratch));
+                        let second_polarity = second.polarity();
+                        let second_blobs = measure(second, &mut scratch, &mut tally);
+                        let outcome = identify_among(second_polarity, &second_blobs, &mut tally);
+                        fall_back(
+                            (first_polarity, first_blobs, first_error),
+                            (second_polarity, second_blobs, outcome),
+                        )?
+                    }
                 }
-            };
-            match guess_outcome {
-                Ok(found) => (guess, guess_blobs, found),
-                Err(guess_error) => {
-                    let other_blobs = other_blobs.unwrap_or_else(|| blobs_of(other));
-                    match identify_among(other, &other_blobs, &mut tally) {
-                        Ok(found) => (other, other_blobs, found),
-                        Err(other_error) => {
-                            let ((dark_blobs, dark), (bright_blobs, bright)) = match guess {
-                                Polarity::Dark => {
-                                    ((guess_blobs, guess_error), (other_blobs, other_error))
-                                }
-                                Polarity::Bright => {
-                                    ((other_blobs, other_error), (guess_blobs, guess_error))
-                                }
-                            };
-                            return Err(PhotoError::NotFoundEither {
-                                dark_blobs,
-                                dark,
-                                bright_blobs,
-                                bright,
-                            });
+            } else {
+                // A target on no lattice: judging a polarity costs about as much as identifying it, so the guess
+                // is measured and its promise known from its search's first hypotheses. If it does not hold the
+                // whole target, the other polarity's is asked for more.
+                {
+                    let guess_blobs = measure(find(guess, &mut scratch), &mut scratch, &mut tally);
+                    let (outcome, guess_promise) =
+                        attempt(guess, &guess_blobs, whole_view, &mut tally);
+                    match outcome {
+                        Some(Ok(found)) => (guess, guess_blobs, found),
+                        Some(Err(guess_error)) => {
+                            let other_blobs =
+                                measure(find(other, &mut scratch), &mut scratch, &mut tally);
+                            let outcome = identify_among(other, &other_blobs, &mut tally);
+                            fall_back(
+                                (guess, guess_blobs, guess_error),
+                                (other, other_blobs, outcome),
+                            )?
+                        }
+                        None => {
+                            let other_blobs =
+                                measure(find(other, &mut scratch), &mut scratch, &mut tally);
+                            let (other_outcome, _) =
+                                attempt(other, &other_blobs, guess_promise + 1, &mut tally);
+                            match other_outcome {
+                                Some(Ok(found)) => (other, other_blobs, found),
+                                _ => match identify_among(guess, &guess_blobs, &mut tally) {
+                                    Ok(found) => (guess, guess_blobs, found),
+                                    Err(guess_error) => {
+                                        let outcome = other_outcome.unwrap_or_else(|| {
+                                            identify_among(other, &other_blobs, &mut tally)
+                                        });
+                                        fall_back(
+                                            (guess, guess_blobs, guess_error),
+                                            (other, other_blobs, outcome),
+                                        )?
+                                    }
+                                },
+                            }
                         }
                     }
                 }
@@ -329,11 +393,48 @@ pub fn detect_target(
     Ok(tally.into(finish(camera, target, polarity, blobs, found)))
 }
 
+/// The blobs as the thresholds see them, for ranking the polarities ([`lattice_promise`]).
+fn rough(candidates: &PhotoBlobCandidates<'_>) -> Vec<DetectedBlob> {
+    candidates
+        .rough_blobs()
+        .iter()
+        .map(|b| DetectedBlob {
+            u_px: b.u_px,
+            v_px: b.v_px,
+            area_px: b.area_px,
+        })
+        .collect()
+}
+
+/// The polarity identified after another failed: its identification, or the failure of both.
+fn fall_back(
+    (first, first_blobs, first_error): (Polarity, Vec<PhotoBlob>, MatchError),
+    (second, second_blobs, outcome): (Polarity, Vec<PhotoBlob>, Result<Identification, MatchError>),
+) -> Result<(Polarity, Vec<PhotoBlob>, Identification), PhotoError> {
+    match outcome {
+        Ok(found) => Ok((second, second_blobs, found)),
+        Err(second_error) => {
+            let ((dark_blobs, dark), (bright_blobs, bright)) = match first {
+                Polarity::Dark => ((first_blobs, first_error), (second_blobs, second_error)),
+                Polarity::Bright => ((second_blobs, second_error), (first_blobs, first_error)),
+            };
+            debug_assert_ne!(first, second);
+            Err(PhotoError::NotFoundEither {
+                dark_blobs,
+                dark,
+                bright_blobs,
+                bright,
+            })
+        }
+    }
+}
+
 /// The work of identification over the polarities tried ([`PhotoDetection::polarities_tried`],
 /// [`PhotoDetection::hypotheses`]).
 #[derive(Debug, Default)]
 struct Tally {
     polarities: Vec<Polarity>,
+    measured: Vec<Polarity>,
     hypotheses: usize,
 }
 
@@ -341,6 +442,7 @@ impl Tally {
     /// `detection` with this work.
     fn into(self, mut detection: PhotoDetection) -> PhotoDetection {
         detection.polarities_tried = self.polarities;
+        detection.polarities_measured = self.measured;
         detection.hypotheses = self.hypotheses;
         detection
     }
@@ -423,6 +525,7 @@ fn finish(
         missing: found.missing,
         blobs,
         polarities_tried: vec![polarity],
+        polarities_measured: vec![polarity],
         hypotheses: found.hypotheses,
     }
 }

@@ -2,7 +2,7 @@
 //! paper among bright specular glints outdoors. The wrong polarity's blobs (the glints) hold many small chance
 //! lattices, whose placements on a large grid were verified one by one before the right polarity was tried (8,848
 //! hypotheses, 300 times the right polarity's work). The checks count work, not time: which polarities went through
-//! identification and how many hypotheses were verified.
+//! identification, whose blobs' centres were measured, and how many hypotheses were verified.
 
 use nalgebra::{Rotation3, Vector3};
 use roitrack_core::target::{CircleGrid, GridLayout};
@@ -50,6 +50,13 @@ fn auto_identifies_the_right_polarity_first_among_glints() {
         // The glints' blobs were detected but never identified: the right polarity's work only.
         assert_eq!(auto.polarities_tried, vec![Polarity::Dark], "seed {seed}");
         assert_eq!(auto.hypotheses, dark.hypotheses, "seed {seed}");
+        // The glints were thresholded, ranked below the print by their lattices' growth, and their centres never
+        // measured.
+        assert_eq!(
+            auto.polarities_measured,
+            vec![Polarity::Dark],
+            "seed {seed}"
+        );
     }
 }
 
@@ -72,5 +79,6 @@ fn auto_takes_a_right_guess_without_looking_at_the_other_polarity() {
     assert_eq!(likely_polarity(&frame), Polarity::Dark);
     let auto = detect_target(&camera, &target, &frame, &PhotoOptions::default()).unwrap();
     assert_eq!(auto.polarities_tried, vec![Polarity::Dark]);
+    assert_eq!(auto.polarities_measured, vec![Polarity::Dark]);
     assert_eq!(auto.points.len(), 42);
 }

@@ -143,8 +143,6 @@ pub struct PhotoScratch {
 #[derive(Debug, Default)]
 struct WorkerScratch {
     labeller: Labeller<Component>,
-    /// Per level, the components that passed the shape filters.
-    found: Vec<Vec<Component>>,
     ring: Vec<(f64, f64, f64)>,
     edges: Vec<nalgebra::Vector2<f64>>,
     contrasts: Vec<f64>,
@@ -212,91 +210,344 @@ pub fn detect_photo_blobs(
     options: &PhotoBlobOptions,
     scratch: &mut PhotoScratch,
 ) -> Vec<PhotoBlob> {
+    find_photo_blob_candidates(pixels, width, height, bit_depth, polarity, options, scratch)
+        .measure(scratch)
+}
+
+/// The blobs of one polarity found by thresholding, their centres not yet measured: the first of the two steps of
+/// [`detect_photo_blobs`] ([`find_photo_blob_candidates`], then [`Self::measure`]). The second step (the outline of
+/// every blob, then its contrast) costs about as much as the first; a caller that must choose between polarities
+/// can judge each by its [`Self::rough_blobs`] and measure only the one it chooses. Found with
+/// [`find_rough_photo_blob_candidates`], only a few of the levels are labelled until [`Self::measure`] asks for
+/// the others: a quarter of the labelling, for a polarity that may be judged and left.
+#[derive(Debug)]
+pub struct PhotoBlobCandidates<'a> {
+    polarity: Polarity,
+    /// The image with the blobs bright: the photograph, or its inversion for dark blobs.
+    image: std::borrow::Cow<'a, [u16]>,
+    width: usize,
+    height: usize,
+    full_scale: u16,
+    options: PhotoBlobOptions,
+    /// The threshold of each level (none for an image without range).
+    thresholds: Vec<u16>,
+    /// Per level, the components that passed the shape filters; `None` for a level not labelled yet.
+    found: Vec<Option<Vec<Component>>>,
+    /// Smallest contrast a blob's outline must show (DN).
+    min_contrast: f64,
+    two_threads: bool,
+}
+
+/// A blob as thresholding sees it, before its centre is measured ([`PhotoBlobCandidates::rough_blobs`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RoughBlob {
+    /// Centre of its pixels at the middle level that found it (px): within a few tenths of a pixel of the measured
+    /// centre under even light, farther under a gradient.
+    pub u_px: f64,
+    pub v_px: f64,
+    /// Area of its ellipse (px²): with every level labelled, the same as [`PhotoBlob::area_px`].
+    pub area_px: f64,
+    /// Threshold levels at which it was found.
+    pub levels: u32,
+}
+
+impl PhotoBlobCandidates<'_> {
+    /// The polarity of the blobs.
+    pub fn polarity(&self) -> Polarity {
+        self.polarity
+    }
+
+    /// Whether every level has been labelled (not yet for [`find_rough_photo_blob_candidates`]'s).
+    pub fn is_complete(&self) -> bool {
+        self.found.iter().all(Option::is_some)
+    }
+
+    /// The blobs found by the levels labelled so far, in the order they were found: with every level, those found at
+    /// [`PhotoBlobOptions::min_levels`] levels or more; with a few, those found at any.
+    fn groups(&self) -> Vec<Group> {
+        let mut groups: Vec<Group> = Vec::new();
+        let mut grid = CellGrid::new(self.width, self.height);
+        // In the order of the levels, as if one thread had found them all.
+        for found in self.found.iter().flatten() {
+            for c in found {
+                add_to_group(&mut groups, &mut grid, c);
+            }
+        }
+        let min_levels = if self.is_complete() {
+            self.options.min_levels
+        } else {
+            1
+        };
+        groups.retain(|g| g.members.len() >= min_levels);
+        groups
+    }
+
+    /// Every candidate as the levels labelled so far see it, those found at the most levels (the strongest) first.
+    pub fn rough_blobs(&self) -> Vec<RoughBlob> {
+        let mut rough: Vec<RoughBlob> = self
+            .groups()
+            .iter()
+            .map(|g| {
+                let c = middle_member(g);
+                let (u_px, v_px) = c.centre();
+                let shape = Ellipse::from_moments(u_px, v_px, c.covariance());
+                RoughBlob {
+                    u_px,
+                    v_px,
+                    area_px: std::f64::consts::PI * shape.semi_major_px * shape.semi_minor_px,
+                    levels: g.members.len() as u32,
+                }
+            })
+            .collect();
+        // Stable: equally strong ones stay in the order they were found.
+        rough.sort_by_key(|b| std::cmp::Reverse(b.levels));
+        rough
+    }
+
+    /// Labels the levels `todo` (increasing), half of them on a second thread when the image is large.
+    fn label(&mut self, todo: &[usize], scratch: &mut PhotoScratch) {
+        let (w, h) = (self.width, self.height);
+        let image: &[u16] = &self.image;
+        let (options, thresholds) = (&self.options, &self.thresholds);
+        let max_area = options.max_area_fraction * (w * h) as f64;
+        // Each thread's thresholds climb, so each of its levels reads only the words of the image that held pixels
+        // at the one before.
+        let label = |levels: &[usize], worker: &mut WorkerScratch| -> Vec<Vec<Component>> {
+            worker.labeller.forget_levels();
+            levels
+                .iter()
+                .map(|&k| {
+                    let mut found = Vec::new();
+                    worker
+                        .labeller
+                        .components_above_previous(image, w, h, thresholds[k], |c| {
+                            if passes_shape(c, options, max_area) {
+                                found.push(*c);
+                            }
+                        });
+                    found
+                })
+                .collect()
+        };
+        let split = if self.two_threads && todo.len() >= 2 {
+            todo.len() / 2
+        } else {
+            todo.len()
+        };
+        let (low, high) = todo.split_at(split);
+        let (mut first, second) = split_work(
+            &mut scratch.workers,
+            self.two_threads && !high.is_empty(),
+            |worker| label(low, worker),
+            |worker| label(high, worker),
+        );
+        first.extend(second);
+        for (&k, found) in todo.iter().zip(first) {
+            self.found[k] = Some(found);
+        }
+    }
+
+    /// Measures every candidate's centre and contrast (see the module's documentation), the levels not labelled yet
+    /// labelled first, and keeps those with enough contrast: the blobs [`detect_photo_blobs`] returns, sorted by
+    /// decreasing contrast.
+    pub fn measure(mut self, scratch: &mut PhotoScratch) -> Vec<PhotoBlob> {
+        let todo: Vec<usize> = (0..self.found.len())
+            .filter(|&k| self.found[k].is_none())
+            .collect();
+        self.label(&todo, scratch);
+        let groups = self.groups();
+        let Self {
+            polarity,
+            image,
+            width: w,
+            height: h,
+            full_scale,
+            min_contrast,
+            two_threads,
+            ..
+        } = self;
+        // The centres, half of the blobs on each thread, kept in the order of the groups.
+        let half = if two_threads {
+            groups.len() / 2
+        } else {
+            groups.len()
+        };
+        let measure_all = |part: &[Group], worker: &mut WorkerScratch| -> Vec<PhotoBlob> {
+            part.iter()
+                .filter_map(|g| {
+                    measure(
+                        g,
+                        &image,
+                        (w, h),
+                        polarity,
+                        full_scale,
+                        min_contrast,
+                        worker,
+                    )
+                })
+                .collect()
+        };
+        let (mut blobs, rest) = split_work(
+            &mut scratch.workers,
+            two_threads,
+            |worker| measure_all(&groups[..half], worker),
+            |worker| measure_all(&groups[half..], worker),
+        );
+        blobs.extend(rest);
+        blobs.sort_by(|a, b| b.contrast.total_cmp(&a.contrast));
+        // The inverted image's buffer goes back to the scratch, for the next image.
+        if let std::borrow::Cow::Owned(inverted) = image {
+            scratch.inverted = inverted;
+        }
+        blobs
+    }
+}
+
+/// The first step of [`detect_photo_blobs`]: the image thresholded at every level, the components that pass the
+/// shape filters grouped into blobs, no centre measured ([`PhotoBlobCandidates`]).
+///
+/// ```
+/// use roitrack_image::photo::{PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs, find_photo_blob_candidates};
+/// // Two bright squares of 5 x 5 px on a dark background.
+/// let (w, h) = (40usize, 20usize);
+/// let mut image = vec![10u16; w * h];
+/// for (i0, j0) in [(8, 8), (25, 6)] {
+///     for j in j0..j0 + 5 {
+///         for i in i0..i0 + 5 {
+///             image[j * w + i] = 200;
+///         }
+///     }
+/// }
+/// let options = PhotoBlobOptions { ellipse_fill_range: (0.7, 1.3), ..PhotoBlobOptions::default() };
+/// let mut scratch = PhotoScratch::default();
+/// let candidates = find_photo_blob_candidates(&image, w as u32, h as u32, 8, Polarity::Bright, &options, &mut scratch);
+/// let rough = candidates.rough_blobs();
+/// assert_eq!(rough.len(), 2);
+/// assert!(rough.iter().any(|b| (b.u_px - 10.0).abs() < 1e-9 && (b.v_px - 10.0).abs() < 1e-9));
+/// // Measuring them gives what the one-step detection gives.
+/// let blobs = candidates.measure(&mut scratch);
+/// let direct = detect_photo_blobs(&image, w as u32, h as u32, 8, Polarity::Bright, &options, &mut scratch);
+/// assert_eq!(blobs, direct);
+/// ```
+///
+/// # Panics
+/// If `pixels.len() != width * height`.
+pub fn find_photo_blob_candidates<'a>(
+    pixels: &'a [u16],
+    width: u32,
+    height: u32,
+    bit_depth: u8,
+    polarity: Polarity,
+    options: &PhotoBlobOptions,
+    scratch: &mut PhotoScratch,
+) -> PhotoBlobCandidates<'a> {
+    let mut candidates = unlabelled(pixels, width, height, bit_depth, polarity, options, scratch);
+    let every: Vec<usize> = (0..candidates.found.len()).collect();
+    candidates.label(&every, scratch);
+    candidates
+}
+
+/// [`find_photo_blob_candidates`] with only the levels a third and two thirds of the way up labelled (a quarter of
+/// the work with the default 8 levels), the others when the candidates are measured: enough to judge a polarity by
+/// its [`PhotoBlobCandidates::rough_blobs`] (any blob found at either level) before paying for the rest. Measured,
+/// the candidates give exactly what [`detect_photo_blobs`] gives.
+///
+/// ```
+/// use roitrack_image::photo::{PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs, find_rough_photo_blob_candidates};
+/// // A bright square of 6 x 6 px on a dark background.
+/// let (w, h) = (30usize, 20usize);
+/// let mut image = vec![10u16; w * h];
+/// for j in 7..13 {
+///     for i in 12..18 {
+///         image[j * w + i] = 200;
+///     }
+/// }
+/// let options = PhotoBlobOptions { ellipse_fill_range: (0.7, 1.3), ..PhotoBlobOptions::default() };
+/// let mut scratch = PhotoScratch::default();
+/// let rough = find_rough_photo_blob_candidates(&image, w as u32, h as u32, 8, Polarity::Bright, &options, &mut scratch);
+/// assert!(!rough.is_complete());
+/// assert_eq!(rough.rough_blobs().len(), 1);
+/// let blobs = rough.measure(&mut scratch);
+/// assert_eq!(blobs, detect_photo_blobs(&image, w as u32, h as u32, 8, Polarity::Bright, &options, &mut scratch));
+/// ```
+///
+/// # Panics
+/// If `pixels.len() != width * height`.
+pub fn find_rough_photo_blob_candidates<'a>(
+    pixels: &'a [u16],
+    width: u32,
+    height: u32,
+    bit_depth: u8,
+    polarity: Polarity,
+    options: &PhotoBlobOptions,
+    scratch: &mut PhotoScratch,
+) -> PhotoBlobCandidates<'a> {
+    let mut candidates = unlabelled(pixels, width, height, bit_depth, polarity, options, scratch);
+    let levels = candidates.found.len();
+    let mut some = vec![levels / 3, 2 * levels / 3];
+    some.dedup();
+    some.retain(|&k| k < levels);
+    candidates.label(&some, scratch);
+    candidates
+}
+
+/// The candidates of an image before any level is labelled: the image of the polarity, the levels' thresholds.
+fn unlabelled<'a>(
+    pixels: &'a [u16],
+    width: u32,
+    height: u32,
+    bit_depth: u8,
+    polarity: Polarity,
+    options: &PhotoBlobOptions,
+    scratch: &mut PhotoScratch,
+) -> PhotoBlobCandidates<'a> {
     let (w, h) = (width as usize, height as usize);
     assert_eq!(pixels.len(), w * h, "pixel buffer length");
-    if w < 3 || h < 3 {
-        return Vec::new();
-    }
     let full_scale = ((1u32 << bit_depth.clamp(1, 16)) - 1) as u16;
-    let image: &[u16] = match polarity {
-        Polarity::Bright => pixels,
+    let levels = options.levels.max(1);
+    let image = match polarity {
+        Polarity::Bright => std::borrow::Cow::Borrowed(pixels),
         Polarity::Dark => {
-            scratch.inverted.clear();
-            scratch
-                .inverted
-                .extend(pixels.iter().map(|&p| full_scale.saturating_sub(p)));
-            &scratch.inverted
+            let mut inverted = std::mem::take(&mut scratch.inverted);
+            inverted.clear();
+            inverted.extend(pixels.iter().map(|&p| full_scale.saturating_sub(p)));
+            std::borrow::Cow::Owned(inverted)
         }
     };
+    let mut candidates = PhotoBlobCandidates {
+        polarity,
+        image,
+        width: w,
+        height: h,
+        full_scale,
+        options: *options,
+        thresholds: Vec::new(),
+        found: Vec::new(),
+        min_contrast: 0.0,
+        two_threads: options.threads >= 2 && w * h >= MIN_PIXELS_FOR_TWO_THREADS && levels >= 2,
+    };
+    if w < 3 || h < 3 {
+        return candidates;
+    }
     // The top of the range is the brightest pixel: small blobs can be far fewer than 1 % of the pixels.
-    let histogram = crate::histogram::Histogram::of(image, full_scale);
+    let histogram = crate::histogram::Histogram::of(&candidates.image, full_scale);
     let (low, high) = (histogram.percentile(0.01), histogram.percentile(1.0));
     let range = f64::from(high.saturating_sub(low));
     if range < 4.0 {
-        return Vec::new();
+        return candidates;
     }
-    let max_area = options.max_area_fraction * (w * h) as f64;
-    let levels = options.levels.max(1);
-    let two = options.threads >= 2 && w * h >= MIN_PIXELS_FOR_TWO_THREADS && levels >= 2;
-    // The levels, shared between the threads: the lower half here, the upper half beside it. Each thread's
-    // thresholds climb, so each of its levels reads only the words of the image that held pixels at the one before.
-    let split = if two { levels / 2 } else { levels };
-    let label = |range_k: std::ops::Range<usize>, worker: &mut WorkerScratch| {
-        worker.found.resize_with(levels, Vec::new);
-        worker.labeller.forget_levels();
-        for k in range_k {
-            let threshold = f64::from(low) + range * (k as f64 + 1.0) / (levels as f64 + 1.0);
-            let found = &mut worker.found[k];
-            found.clear();
-            worker
-                .labeller
-                .components_above_previous(image, w, h, threshold as u16, |c| {
-                    if passes_shape(c, options, max_area) {
-                        found.push(*c);
-                    }
-                });
-        }
-    };
-    split_work(
-        &mut scratch.workers,
-        two,
-        |worker| label(0..split, worker),
-        |worker| label(split..levels, worker),
-    );
-    // Grouped in the order of the levels, as if one thread had found them all.
-    let mut groups: Vec<Group> = Vec::new();
-    let mut grid = CellGrid::new(w, h);
-    for k in 0..levels {
-        let worker = &scratch.workers[usize::from(k >= split)];
-        for c in &worker.found[k] {
-            add_to_group(&mut groups, &mut grid, c);
-        }
-    }
-    let min_contrast = options.min_contrast_fraction * range;
-    let candidates: Vec<&Group> = groups
-        .iter()
-        .filter(|g| g.members.len() >= options.min_levels)
+    candidates.thresholds = (0..levels)
+        .map(|k| (f64::from(low) + range * (k as f64 + 1.0) / (levels as f64 + 1.0)) as u16)
         .collect();
-    // The centres, half of the blobs on each thread, kept in the order of the groups.
-    let half = if two {
-        candidates.len() / 2
-    } else {
-        candidates.len()
-    };
-    let measure_all = |part: &[&Group], worker: &mut WorkerScratch| -> Vec<PhotoBlob> {
-        part.iter()
-            .filter_map(|g| measure(g, image, (w, h), polarity, full_scale, min_contrast, worker))
-            .collect()
-    };
-    let (mut blobs, rest) = split_work(
-        &mut scratch.workers,
-        two,
-        |worker| measure_all(&candidates[..half], worker),
-        |worker| measure_all(&candidates[half..], worker),
-    );
-    blobs.extend(rest);
-    blobs.sort_by(|a, b| b.contrast.total_cmp(&a.contrast));
-    blobs
+    candidates.found = vec![None; levels];
+    candidates.min_contrast = options.min_contrast_fraction * range;
+    candidates
+}
+
+/// The component of a group at its middle level: its threshold sits halfway up the blob's edge, so its area is the
+/// blob's.
+fn middle_member(g: &Group) -> &Component {
+    &g.members[g.members.len() / 2]
 }
 
 /// The blob of a group: its centre and contrast from the outline, its shape from the middle level.
@@ -309,8 +560,7 @@ fn measure(
     min_contrast: f64,
     worker: &mut WorkerScratch,
 ) -> Option<PhotoBlob> {
-    // The middle level: its threshold sits halfway up the blob's edge, so its area is the blob's.
-    let c = &g.members[g.members.len() / 2];
+    let c = middle_member(g);
     let (cu, cv) = c.centre();
     let shape = Ellipse::from_moments(cu, cv, c.covariance());
     // The outline's ellipse, from rays cast from the threshold's centre: the better centre under uneven light and on

@@ -630,6 +630,61 @@ pub(crate) struct Work {
     pub bounds: usize,
 }
 
+/// The blobs as the searches take them: their undistorted centres (NaN where undistortion fails), their areas and
+/// an index of the centres by cells of twice the median blob's size. `blobs` must not be empty.
+fn blob_geometry(
+    camera: &CameraModel,
+    blobs: &[DetectedBlob],
+) -> (Vec<Vector2<f64>>, Vec<f64>, PointIndex) {
+    let ideal: Vec<Vector2<f64>> = blobs
+        .iter()
+        .map(|b| {
+            camera
+                .undistort_pixel(&Vector2::new(b.u_px, b.v_px))
+                .unwrap_or(Vector2::repeat(f64::NAN))
+        })
+        .collect();
+    let areas_px: Vec<f64> = blobs.iter().map(|b| b.area_px).collect();
+    let typical_px = {
+        let mut d: Vec<f64> = areas_px.iter().map(|a| a.sqrt()).collect();
+        d.sort_by(f64::total_cmp);
+        d[d.len() / 2].max(4.0)
+    };
+    let index = PointIndex::new(&ideal, 2.0 * typical_px);
+    (ideal, areas_px, index)
+}
+
+/// Whether the target's points lie on a lattice in a plane, so that [`lattice_promise`] judges blobs for it.
+pub(crate) fn on_lattice(target: &Target) -> bool {
+    let facts = TargetFacts::of(target);
+    facts.planar.is_some() && facts.lattice.is_some()
+}
+
+/// The promise of `blobs` for a target on a lattice, at the cost of the lattice's growth alone: the blobs in their
+/// largest grown lattice, at most the target's points (0 when no lattice grows): at least the most target points a
+/// placement of that lattice puts on blobs, which [`Work::promise`] counts for the search of [`identify`]. `None` for a target on no lattice: its first hypotheses (triples or
+/// quadruples) cost about as much as its whole search. A caller choosing between sets of blobs (the polarities of
+/// a photograph) ranks them by it before it measures their centres precisely: rough centres, a few tenths of a pixel
+/// off, grow the same lattices.
+pub(crate) fn lattice_promise(
+    camera: &CameraModel,
+    target: &Target,
+    blobs: &[DetectedBlob],
+) -> Option<usize> {
+    if !on_lattice(target) {
+        return None;
+    }
+    if target.len() < 4 || blobs.len() < target.len().clamp(4, 6) {
+        return Some(0);
+    }
+    let (ideal, areas_px, index) = blob_geometry(camera, blobs);
+    // The largest grown lattice's nodes, as many as the target has at most: an upper bound of the points its
+    // placements put on blobs (computing those costs as much again as the growth, for a ranking that the growth
+    // alone decides: a polarity's chance lattices are small).
+    let grown = grown_lattices(&ideal, &areas_px, &index);
+    Some(grown.first().map_or(0, |g| g.nodes.len().min(target.len())))
+}
+
 /// The search of [`identify_if_promising`]: `Ok(None)` when it stopped for too small a promise.
 fn identify_search(
     camera: &CameraModel,
@@ -653,21 +708,7 @@ fn identify_search(
             required: min_matched,
         });
     }
-    let ideal: Vec<Vector2<f64>> = blobs
-        .iter()
-        .map(|b| {
-            camera
-                .undistort_pixel(&Vector2::new(b.u_px, b.v_px))
-                .unwrap_or(Vector2::repeat(f64::NAN))
-        })
-        .collect();
-    let areas_px: Vec<f64> = blobs.iter().map(|b| b.area_px).collect();
-    let typical_px = {
-        let mut d: Vec<f64> = areas_px.iter().map(|a| a.sqrt()).collect();
-        d.sort_by(f64::total_cmp);
-        d[d.len() / 2].max(4.0)
-    };
-    let index = PointIndex::new(&ideal, 2.0 * typical_px);
+    let (ideal, areas_px, index) = blob_geometry(camera, blobs);
     let points = target.points();
     let verifier = Verifier {
         camera,
@@ -941,6 +982,25 @@ fn lattice_hypotheses(
     areas_px: &[f64],
     index: &PointIndex,
 ) -> HypothesisGroups<'static> {
+    let grown_sets = grown_lattices(ideal, areas_px, index);
+    // First the placements that put nearly every grown blob on the target; then, if none verifies, those that leave
+    // up to half of them off it: stray blobs where the lattice goes on beyond the target (printed marks, clutter)
+    // join the growth and stick out of the target.
+    // Made as the search asks for them: the lenient ones are many, and seldom needed.
+    let count = grown_sets.len();
+    Box::new((0..2 * count).map(move |k| {
+        let (min_fraction, slack) = if k < count { (0.9, 1) } else { (0.5, 3) };
+        placements(&lattice, &grown_sets[k % count], min_fraction, slack)
+    }))
+}
+
+/// The lattices grown among the blobs (at most 3, of 4 nodes or more), the largest first: growth from a few seeds,
+/// each blob in one grown lattice at most.
+fn grown_lattices(
+    ideal: &[Vector2<f64>],
+    areas_px: &[f64],
+    index: &PointIndex,
+) -> Vec<lattice::GrownLattice> {
     const SEEDS: usize = 12;
     let mut grown_sets: Vec<lattice::GrownLattice> = Vec::new();
     let mut covered = vec![false; ideal.len()];
@@ -993,20 +1053,11 @@ fn lattice_hypotheses(
         grown_sets.push(grown);
     }
     grown_sets.sort_by_key(|g| std::cmp::Reverse(g.nodes.len()));
-    let grown_sets: Vec<lattice::GrownLattice> = grown_sets
+    grown_sets
         .into_iter()
         .take(3)
         .filter(|g| g.nodes.len() >= 4)
-        .collect();
-    // First the placements that put nearly every grown blob on the target; then, if none verifies, those that leave
-    // up to half of them off it: stray blobs where the lattice goes on beyond the target (printed marks, clutter)
-    // join the growth and stick out of the target.
-    // Made as the search asks for them: the lenient ones are many, and seldom needed.
-    let count = grown_sets.len();
-    Box::new((0..2 * count).map(move |k| {
-        let (min_fraction, slack) = if k < count { (0.9, 1) } else { (0.5, 3) };
-        placements(&lattice, &grown_sets[k % count], min_fraction, slack)
-    }))
+        .collect()
 }
 
 #[cfg(test)]
