@@ -751,3 +751,108 @@ fn add_to_group(groups: &mut Vec<Group>, grid: &mut CellGrid, c: &Component) {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A `w` x `h` 8-bit scene: a background brightening to the right and down, dark and bright disks of 2 to 9 px
+    /// radius, and noise of about ±6 DN, all from `seed` (a linear congruential generator: the scene is all that
+    /// matters here, not the quality of its randomness).
+    fn scene(w: usize, h: usize, seed: u64) -> Vec<u16> {
+        let mut state = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1);
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let disks: Vec<(f64, f64, f64, f64)> = (0..40)
+            .map(|_| {
+                let r = 2.0 + 7.0 * uniform();
+                let (u, v) = (
+                    r + 2.0 + (w as f64 - 2.0 * r - 4.0) * uniform(),
+                    r + 2.0 + (h as f64 - 2.0 * r - 4.0) * uniform(),
+                );
+                let ink = if uniform() < 0.5 { -90.0 } else { 90.0 };
+                (u, v, r, ink)
+            })
+            .collect();
+        let mut pixels = vec![0u16; w * h];
+        for j in 0..h {
+            for i in 0..w {
+                let mut value = 80.0 + 60.0 * i as f64 / w as f64 + 30.0 * j as f64 / h as f64;
+                for &(u, v, r, ink) in &disks {
+                    let d = (i as f64 - u).hypot(j as f64 - v);
+                    // A half-pixel ramp at the edge, as a lens blurs it.
+                    value += ink * (r + 0.5 - d).clamp(0.0, 1.0);
+                }
+                value += 12.0 * (uniform() - 0.5);
+                pixels[j * w + i] = value.clamp(0.0, 255.0) as u16;
+            }
+        }
+        pixels
+    }
+
+    #[test]
+    fn candidates_measured_are_the_one_step_blobs_and_rough_ones_label_two_levels() {
+        // 400 x 300: two threads; 200 x 150: one.
+        for (w, h) in [(400usize, 300usize), (200, 150)] {
+            for seed in 0..4 {
+                let pixels = scene(w, h, seed);
+                for polarity in [Polarity::Dark, Polarity::Bright] {
+                    let options = PhotoBlobOptions::default();
+                    let mut scratch = PhotoScratch::default();
+                    let direct = detect_photo_blobs(
+                        &pixels,
+                        w as u32,
+                        h as u32,
+                        8,
+                        polarity,
+                        &options,
+                        &mut scratch,
+                    );
+                    assert!(
+                        direct.len() >= 5,
+                        "{w} x {h}, seed {seed}: {}",
+                        direct.len()
+                    );
+                    let rough = find_rough_photo_blob_candidates(
+                        &pixels,
+                        w as u32,
+                        h as u32,
+                        8,
+                        polarity,
+                        &options,
+                        &mut scratch,
+                    );
+                    // The counted work of a rough pass: 2 of the 8 levels.
+                    let labelled = rough.found.iter().filter(|f| f.is_some()).count();
+                    assert_eq!(labelled, 2);
+                    assert!(!rough.is_complete());
+                    assert!(!rough.rough_blobs().is_empty());
+                    assert_eq!(
+                        rough.measure(&mut scratch),
+                        direct,
+                        "seed {seed} {polarity:?}"
+                    );
+                    let full = find_photo_blob_candidates(
+                        &pixels,
+                        w as u32,
+                        h as u32,
+                        8,
+                        polarity,
+                        &options,
+                        &mut scratch,
+                    );
+                    assert!(full.is_complete());
+                    assert_eq!(
+                        full.measure(&mut scratch),
+                        direct,
+                        "seed {seed} {polarity:?}"
+                    );
+                }
+            }
+        }
+    }
+}
