@@ -299,11 +299,10 @@ impl Law for KalmanLaw {
     /// estimate rejected (the filter was reset after a run of them and is still re-converging). One measurement
     /// just beyond the gate is not enough: 1.1 % of good measurements land there.
     fn is_disputed(&self, core: &TrackCore, _residuals: &ResidualFigures) -> bool {
-        // A point whose last two measurements the gate refused, on a target where the rest are too few to hold the
-        // state: a state that has left one point can drift where the others do not hold it (seen on 4 points:
-        // rotated 150 degrees within 50 ms, one point refused at every cycle). Two in a row of one good point
-        // happen with a chance of 1.2e-4 per point and cycle; one alone, 1.1e-2, would dispute every twentieth
-        // estimate of 4 points. On larger targets the rest hold the state, and several points refused at once are
+        // A point whose last measurements the gate refused, [`DISPUTED_AFTER_POINT_REFUSED_IN_A_ROW`] of them, on a
+        // target where the rest are too few to hold the state: a state that has left one point can drift where the
+        // others do not hold it (seen on 4 points: rotated 150 degrees within 50 ms, one point refused at every
+        // cycle). On larger targets the rest hold the state, and several points refused at once are
         // common while the filter learns a noise above the one it assumed. Only refusals of the last two cycles
         // count: a point refused and then no longer measured (hidden, its window lost) says nothing of the state.
         let recent = |at: u64| self.taken.saturating_sub(at) < 2 * self.gated_runs.len() as u64;
@@ -316,7 +315,7 @@ impl Law for KalmanLaw {
         let persistent = self
             .gated_runs
             .iter()
-            .any(|&(run, at)| run >= 2 && recent(at));
+            .any(|&(run, at)| run >= DISPUTED_AFTER_POINT_REFUSED_IN_A_ROW && recent(at));
         self.gated_in_a_row >= DISPUTED_AFTER_GATED_IN_A_ROW
             || (self.gated_in_a_row > 0 && self.newest_nis > DISPUTED_NIS)
             || 2 * self.gated_since_estimate >= core.step_measurements.max(2)
@@ -382,6 +381,14 @@ pub(super) fn pose_inverse_condition(ne: &crate::solver::NormalEquations<12>) ->
 
 /// Gated measurements in a row that dispute an estimate (3 in a row happen by chance once in 700,000 good ones).
 pub(super) const DISPUTED_AFTER_GATED_IN_A_ROW: usize = 3;
+
+/// Measurements of one point refused in a row that dispute an estimate of a target too small for the rest to hold
+/// its state ([`HOLDING_POINTS`]): a good point's are refused three times in a row with a chance of 1.3e-6 per
+/// point and cycle, as rarely as the other rules fire on good measurements. Two in a row, 1.2e-4, disputed a 2 x 3
+/// grid at random about every two seconds at 4 kHz (0.5 a second over its points), a third of them at the start of
+/// a move (the orthoglide, seeds 1-6: 0-2 disputes a run); one alone, 1.1e-2, would dispute every twentieth estimate
+/// of 4 points.
+pub(super) const DISPUTED_AFTER_POINT_REFUSED_IN_A_ROW: u32 = 3;
 
 /// A newest measurement gated with a normalised innovation squared above this (5 σ: once in 270,000 good
 /// measurements) disputes the estimate on its own.
