@@ -104,6 +104,8 @@ pub use roitrack_pipeline as pipeline;
 pub use roitrack_plot as plot;
 #[cfg(feature = "ros")]
 pub use roitrack_ros as ros;
+#[cfg(feature = "servo")]
+pub use roitrack_servo as servo;
 pub use roitrack_sim as sim;
 #[cfg(feature = "lab")]
 pub use {roitrack_bench as bench, roitrack_experiments as experiments};

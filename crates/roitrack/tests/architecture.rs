@@ -50,6 +50,17 @@ const ALLOWED: &[(&str, &[&str])] = &[
         &["roitrack-core", "roitrack-image", "roitrack-formats"],
     ),
     (
+        "roitrack-servo",
+        &[
+            "roitrack-core",
+            "roitrack-image",
+            "roitrack-sim",
+            "roitrack-formats",
+            "roitrack-pipeline",
+            "roitrack-plot",
+        ],
+    ),
+    (
         "roitrack",
         &[
             "roitrack-core",
@@ -63,6 +74,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "roitrack-experiments",
             "roitrack-bench",
             "roitrack-ros",
+            "roitrack-servo",
         ],
     ),
     (

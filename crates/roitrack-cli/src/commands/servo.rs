@@ -1,11 +1,11 @@
 //! `roitrack servo`: close the loop on a simulated fast robot with roitrack's estimates (see docs/servo.md and the
-//! library call `roitrack_servo::run_servo`); this file only translates the options and prints.
+//! library call `roitrack::servo::run_servo`); this file only translates the options and prints.
 
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use clap::{Args, ValueEnum};
-use roitrack_servo::{CameraKind, ControllerKind, ServoConfig, run_servo};
+use roitrack::servo::{CameraKind, ControllerKind, ServoConfig, run_servo};
 
 use crate::ranges;
 
@@ -129,7 +129,7 @@ pub fn run(args: &ServoArgs) -> Result<()> {
             report.controller.name(),
             report.camera.name()
         ));
-        roitrack_servo::output::write_run(&report, &dir)?;
+        roitrack::servo::output::write_run(&report, &dir)?;
         let age_ms = report.median_feedback_age_s * 1e3;
         if args.json {
             let line = serde_json::json!({
@@ -165,7 +165,7 @@ pub fn run(args: &ServoArgs) -> Result<()> {
         }
         reports.push(report);
     }
-    let figures = roitrack_servo::output::render_figures(&reports)?;
+    let figures = roitrack::servo::output::render_figures(&reports)?;
     crate::commands::plot::write_figure_files(&args.out, &figures)?;
     if args.sweep_gains {
         sweep(args, &controllers)?;
@@ -175,7 +175,7 @@ pub fn run(args: &ServoArgs) -> Result<()> {
 
 /// The largest stable gain against extra latency of each controller: a table, `stable_gain.csv` and the figure.
 fn sweep(args: &ServoArgs, controllers: &[ControllerKind]) -> Result<()> {
-    use roitrack_servo::sweep;
+    use roitrack::servo::sweep;
     let search = sweep::GainSearch::default();
     let mut curves = Vec::new();
     let mut rows = Vec::new();
