@@ -635,7 +635,6 @@ impl KalmanLaw {
     ) -> UpdateOutcome {
         let p = core.target.points()[obs.point_index].point_in_obj_m;
         let noise = self.centroid_noise(core, obs.point_index);
-        let sigma_px = noise.total_px2().sqrt();
         let outcome = self.filter.update(
             &core.model,
             &mut core.state,
@@ -680,7 +679,7 @@ impl KalmanLaw {
                 obs.t_s,
                 innovation_px,
                 predicted_variance_px2,
-                sigma_px,
+                noise.total_px2().sqrt(),
             );
         }
         // Outliers are rare and scattered; a run of gated measurements means the filter itself is off (after a jump
