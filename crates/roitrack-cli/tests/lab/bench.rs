@@ -17,6 +17,8 @@ fn bench_prints_the_loop_figures_as_json() {
         "latency_us_p99",
         "kalman_update_us_median",
         "kalman_update_us_p99",
+        "estimate_handle_read_ns_median",
+        "estimate_handle_read_ns_p99",
     ] {
         assert!(f(&m, key) > 0.0, "{key} in {m}");
     }

@@ -31,6 +31,9 @@
 //!   prediction, update and window bookkeeping, the per-measurement cost of tracking (target 1 µs);
 //!   `kalman_update_constant_acceleration_us_median`, `kalman_update_constant_acceleration_us_p99`: the same with the
 //!   constant-acceleration model (18 states, the frame tracker's default);
+//! - `estimate_handle_read_ns_median`, `estimate_handle_read_ns_p99`: one read of the newest estimate with its
+//!   covariance through the lock-free handle a control thread holds (`roitrack::servo::handle`), nothing publishing,
+//!   in ns;
 //! - `item_ms`: the timing budget of each of those items (ms);
 //! - `loop_k10_rois_per_s`, `loop_k1_rois_per_s`: free-running loop throughput with an estimate every 10 ROIs and at
 //!   every ROI (best of `--repeats`); `loop_k10_dropped`, `loop_k1_dropped`: ROIs dropped in those runs;
@@ -56,7 +59,7 @@ use anyhow::Result;
 use clap::Args;
 use roitrack::bench::loop_bench::{LoopBench, LoopFigures, PACED_HZ};
 use roitrack::bench::track_bench::TrackLibraryBench;
-use roitrack::bench::{HotPaths, Item, Timing, time_all};
+use roitrack::bench::{HotPaths, Item, Timing, time_all, time_item};
 
 /// `--fake-camera S`: the loop through Aravis' fake GigE camera on 127.0.0.1 (orthoglide, seed 1, 4 kHz ROI slots, a
 /// 32 px window, Mono8, software trigger, free-running); see `live::bench_fake_camera`.
@@ -132,6 +135,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let timings = time_all(&mut hot, item_budget);
     let gauss_newton_iterations = hot.gauss_newton_solve(32).report.iterations;
     let static_pose_iterations = hot.static_pose().map_or(0, |poses| poses.best().iterations);
+    let handle_read = estimate_handle_read(item_budget);
 
     let bench = LoopBench::new(args.rois)?;
     let k10 = bench.measure(10, None, args.repeats)?;
@@ -156,6 +160,14 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             fields.push((format!("{}_us_p99", item.key()), json_number(t.p99_us, 4)));
         }
         let mut field = |key: &str, value: String| fields.push((key.to_string(), value));
+        field(
+            "estimate_handle_read_ns_median",
+            json_number(handle_read.median_us * 1e3, 1),
+        );
+        field(
+            "estimate_handle_read_ns_p99",
+            json_number(handle_read.p99_us * 1e3, 1),
+        );
         field(
             "gauss_newton_iterations",
             gauss_newton_iterations.to_string(),
@@ -202,6 +214,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             item_budget,
             gauss_newton_iterations,
             static_pose_iterations,
+            &handle_read,
         );
         println!();
         print_loop(
@@ -234,6 +247,27 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+/// One read of the estimate handle (`roitrack::servo::handle`) with a covariance-carrying estimate published once:
+/// what a user's control thread pays per read.
+fn estimate_handle_read(budget: Duration) -> Timing {
+    use roitrack::core::MotionState;
+    use roitrack::core::estimator::{Estimate, Matrix12, TrackStatus};
+    let (mut publisher, reader) = roitrack::servo::handle::estimate_channel();
+    publisher.publish(&Estimate {
+        t_ref_s: 1.0,
+        state: MotionState::bench(),
+        residual_rms_px: 0.1,
+        inverse_condition: 1.0,
+        measurements_used: 16,
+        iterations: 1,
+        status: TrackStatus::Tracking,
+        covariance: Some(Matrix12::identity() * 1e-6),
+        noise_px: 0.1,
+        acceleration: None,
+    });
+    time_item(|| reader.read(), budget)
+}
+
 /// The loop table.
 fn print_loop(bench: &LoopBench, free: &[(&str, &LoopFigures)], paced: &LoopFigures) {
     println!(
@@ -262,6 +296,7 @@ fn print_items(
     budget: Duration,
     gauss_newton_iterations: usize,
     static_pose_iterations: usize,
+    handle_read: &Timing,
 ) {
     println!(
         "hot paths, built-in scene (docs/model.md), one thread, {:.0} ms each:",
@@ -286,6 +321,14 @@ fn print_items(
             t.batches
         );
     }
+    println!(
+        "{:<46} {:>11.4} {:>11.4} {:>7} {:>8}",
+        "estimate handle, one read with covariance",
+        handle_read.median_us,
+        handle_read.p99_us,
+        handle_read.batch_size,
+        handle_read.batches
+    );
     println!(
         "Items under 5 us are timed in batches: their p99 is that of a batch's mean. \
          Criterion: cargo bench -p roitrack-bench."
