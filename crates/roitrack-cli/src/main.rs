@@ -8,6 +8,7 @@ mod args;
 mod commands;
 mod ranges;
 mod ros;
+mod ros2_args;
 mod signals;
 
 #[derive(Debug, Parser)]

@@ -1,6 +1,7 @@
-//! Where a [`BagWriter`](crate::BagWriter)'s serialised messages go: an MCAP file, or the channels of a Foxglove live
-//! server. One writer builds and serialises every message for both, so that a message of the bag and the same
-//! message served live are the same bytes.
+//! Where a [`BagWriter`](crate::BagWriter)'s serialised messages go: an MCAP file, the channels of a Foxglove live
+//! server, or the writers of a ROS 2 node on the DDS bus (feature `ros2`). One writer builds and serialises every
+//! message for all three, so that a message of the bag and the same message served live or published are the same
+//! bytes.
 
 use std::collections::BTreeMap;
 use std::io::BufWriter;
@@ -12,13 +13,16 @@ use mcap::McapResult;
 use mcap::records::MessageHeader;
 use roitrack_formats::{AtomicFile, FormatError};
 
-/// An MCAP file, or the channels of a live server; the calls are those of `mcap::Writer` that the bag uses.
+/// An MCAP file, the channels of a live server or the writers of a ROS 2 node; the calls are those of `mcap::Writer`
+/// that the bag uses.
 // One per writer, for its whole life: the size of the MCAP variant does not matter.
 #[allow(clippy::large_enum_variant)]
 pub(crate) enum Output {
     Mcap(McapFile),
     #[cfg(feature = "live")]
     Live(LiveChannels),
+    #[cfg(feature = "ros2")]
+    Dds(crate::ros2::DdsChannels),
 }
 
 /// An MCAP file being written: to a temporary beside its path ([`AtomicFile`]), handed over when closed. Dropped
@@ -106,6 +110,9 @@ impl Output {
                 u16::try_from(live.schemas.len() - 1)
                     .map_err(|_| live_error("too many schemas".into()))
             }
+            // A ROS 2 topic is typed by its name only: the schema's text is not sent.
+            #[cfg(feature = "ros2")]
+            Self::Dds(dds) => dds.add_type(name),
         }
     }
 
@@ -140,6 +147,8 @@ impl Output {
                 u16::try_from(live.channels.len() - 1)
                     .map_err(|_| live_error("too many channels".into()))
             }
+            #[cfg(feature = "ros2")]
+            Self::Dds(dds) => dds.add_topic(schema_id, topic),
         }
     }
 
@@ -166,6 +175,8 @@ impl Output {
                 );
                 Ok(())
             }
+            #[cfg(feature = "ros2")]
+            Self::Dds(dds) => dds.write(header.channel_id, data),
         }
     }
 
@@ -179,6 +190,8 @@ impl Output {
                 }
                 Ok(())
             }
+            #[cfg(feature = "ros2")]
+            Self::Dds(_) => Ok(()),
         }
     }
 }

@@ -86,7 +86,11 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "roitrack-pipeline",
         ],
     ),
-    ("roitrack-cli", &["roitrack", "roitrack-genicam"]),
+    // roitrack-genicam with the feature genicam only, roitrack-ros (for its feature ros2) with the feature ros2 only.
+    (
+        "roitrack-cli",
+        &["roitrack", "roitrack-genicam", "roitrack-ros"],
+    ),
     ("roitrack-python", &["roitrack"]),
     ("roitrack-testkit", &[]),
 ];

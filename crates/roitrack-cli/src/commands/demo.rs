@@ -43,6 +43,8 @@ pub struct DemoArgs {
     pub rig: crate::args::RigArgs,
     #[command(flatten)]
     pub ros: crate::ros::McapArgs,
+    #[command(flatten)]
+    pub ros2: crate::ros2_args::Ros2Args,
 }
 
 /// The longest scenario the demo runs (s): it holds the run, its six trackings and their figures in memory, about
@@ -142,6 +144,13 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     let mut bag = Some(args.ros.open_for_rois(&demo.run.camera, None)?);
     // The live view follows the default estimator's run from the loop's estimation thread, as it tracks.
     let mut live = bag.as_mut().and_then(|b| b.take_live());
+    // --ros2 publishes the same run's estimates on the DDS bus, from the estimation thread too.
+    let ros2_options = roitrack::ros::BagOptions {
+        frame_id: args.ros.frame_id.clone(),
+        child_frame_id: args.ros.child_frame_id.clone(),
+        ..roitrack::ros::BagOptions::default()
+    };
+    let mut ros2 = Some(args.ros2.start(&demo.run.camera, &ros2_options)?);
     let mut runs = Vec::new();
     for (k, estimator) in lineup.iter().enumerate() {
         // A signal stops the demo here, between two estimators' runs (a second or so after it came), through the
@@ -164,7 +173,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             } else {
                 // The default estimator's run: each estimate to the live view as the loop makes it, and with
                 // --mcap-rois each ROI to the bag as the camera grabs it (on two threads: an error slot each).
-                let (mut live_error, mut roi_error) = (None, None);
+                let (mut live_error, mut roi_error, mut ros2_error) = (None, None, None);
                 let wants_rois = bag.as_ref().is_some_and(|b| b.wants_rois());
                 let mut on_roi = |image: &RoiImage, measured: Option<&Measurement>| {
                     if let (None, Some(bag)) = (&roi_error, bag.as_mut()) {
@@ -178,15 +187,18 @@ pub fn run(args: &DemoArgs) -> Result<()> {
                         if let (None, Some(live)) = (&live_error, live.as_mut()) {
                             live_error = live.publish_estimate(e).err();
                         }
+                        if let (None, Some(ros2)) = (&ros2_error, ros2.as_mut()) {
+                            ros2_error = ros2.estimate(e).err();
+                        }
                     },
                     match wants_rois {
                         true => Some(&mut on_roi),
                         false => None,
                     },
                 );
-                match (live_error, roi_error) {
-                    (Some(e), _) | (None, Some(e)) => Err(e.into()),
-                    (None, None) => run.map_err(anyhow::Error::from),
+                match live_error.or(roi_error).or(ros2_error) {
+                    Some(e) => Err(e.into()),
+                    None => run.map_err(anyhow::Error::from),
                 }
             };
             finished.store(true, Ordering::Relaxed);
@@ -212,6 +224,9 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         }
         if let Some(live) = live.take() {
             crate::ros::finish_live(live)?;
+        }
+        if let Some(ros2) = ros2.take() {
+            ros2.finish()?;
         }
         runs.push(from_images);
         runs.push(demo.from_centroids(estimator)?);

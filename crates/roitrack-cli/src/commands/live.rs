@@ -103,6 +103,8 @@ pub struct LiveArgs {
     pub twists: PathBuf,
     #[command(flatten)]
     pub ros: crate::ros::McapArgs,
+    #[command(flatten)]
+    pub ros2: crate::ros2_args::Ros2Args,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -251,11 +253,23 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     // at the end.
     let mut live = bag.take_live();
     let mut live_failed = None;
+    // --ros2: the estimates on the DDS bus as the loop makes them, too (a node that cannot start fails here, before
+    // the camera is opened).
+    let ros2_options = roitrack::ros::BagOptions {
+        frame_id: args.ros.frame_id.clone(),
+        child_frame_id: args.ros.child_frame_id.clone(),
+        ..roitrack::ros::BagOptions::default()
+    };
+    let mut ros2 = args.ros2.start(&camera_model, &ros2_options)?;
+    let mut ros2_failed = None;
     let mut on_estimate = |e: &roitrack::Estimate| {
         if let Some(live) = live.as_mut()
             && live_failed.is_none()
         {
             live_failed = live.publish_estimate(e).err();
+        }
+        if ros2_failed.is_none() {
+            ros2_failed = ros2.estimate(e).err();
         }
     };
     let stop = stop_flag();
@@ -299,16 +313,23 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     bag.run(&report.loop_report.measured, &report.loop_report.estimates)?;
     writer.finish()?;
     bag.finish()?;
-    // A live view that failed does not cost the outputs: they are written first.
+    // A live view or a ROS 2 publisher that failed does not cost the outputs: they are written first.
     if let Some(e) = live_failed {
         return Err(crate::OutputsStand(format!(
             "the live view failed (the outputs are written): {e}"
         ))
         .into());
     }
+    if let Some(e) = ros2_failed {
+        return Err(crate::OutputsStand(format!(
+            "the ROS 2 publisher failed (the outputs are written): {e}"
+        ))
+        .into());
+    }
     if let Some(live) = live {
         crate::ros::finish_live(live)?;
     }
+    ros2.finish()?;
     println!("{}", report.summary());
     println!(
         "wrote {} estimates to {} and {}",
