@@ -1,4 +1,4 @@
-//! `--ros2` (with `--ros2-domain`, `--ros2-namespace`, `--ros2-wait-s`): the estimates published live on the ROS 2 DDS
+//! `--ros2` (with `--ros2-domain`, `--ros2-namespace`, `--ros2-interface`, `--ros2-wait-s`): the estimates published live on the ROS 2 DDS
 //! bus while tracking, as the node `roitrack` (the cargo feature `ros2`; see `roitrack_ros::ros2`, docs/ros2.md). A
 //! command takes them by flattening [`Ros2Args`] into its arguments, then [`Ros2Args::start`] before tracking,
 //! [`Ros2::estimate`] per estimate and [`Ros2::finish`] at the end.
@@ -33,6 +33,12 @@ pub struct Ros2Args {
     /// Default: none.
     #[arg(long, value_name = "NS", requires = "ros2")]
     pub ros2_namespace: Option<String>,
+    /// With --ros2: use only the network interface with this IPv4 address (repeat for several) for DDS's multicast
+    /// discovery and the locators it announces, e.g. the robot's network rather than the office's (--ros2-interface
+    /// 127.0.0.1: this machine only, with multicast on lo). The interface must be up. Default: every interface that
+    /// is up.
+    #[arg(long, value_name = "ADDR", requires = "ros2")]
+    pub ros2_interface: Vec<std::net::IpAddr>,
     /// With --ros2: before tracking, wait up to S seconds for a subscriber on every estimate topic (then start
     /// anyway), so that it receives the run from its start. Default: no wait.
     #[arg(long, value_name = "S", requires = "ros2", value_parser = parse_wait_s)]
@@ -98,6 +104,7 @@ impl Ros2Args {
                 domain_id: domain(self.ros2_domain)?,
                 namespace: self.ros2_namespace.clone().unwrap_or_default(),
                 wait_for_subscribers_s: self.ros2_wait_s,
+                interfaces: self.ros2_interface.clone(),
             };
             if let Some(wait_s) = self.ros2_wait_s {
                 eprintln!(

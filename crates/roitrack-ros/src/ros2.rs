@@ -2,6 +2,7 @@
 //! node named `roitrack` (through `ros2-client` on RustDDS, pure Rust: no ROS install), so that a robot's
 //! controller, `ros2 topic echo` and RViz subscribe to them while roitrack tracks.
 
+use std::net::IpAddr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc;
@@ -11,9 +12,9 @@ use std::time::{Duration, Instant};
 use roitrack_core::CameraModel;
 use roitrack_core::estimator::Estimate;
 use roitrack_formats::FormatError;
+use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::{
-    Context, ContextOptions, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher,
-    QosProfile, WriteError,
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile, WriteError,
     qos::{Durability, History, Reliability, WhenFull},
 };
 
@@ -54,6 +55,9 @@ pub struct Ros2Options {
     /// Before the first estimate, wait up to this long (s) for a subscriber on every estimate topic (pose, twist,
     /// odometry, tf, status), so that it receives the run from its start; `None`: no wait.
     pub wait_for_subscribers_s: Option<f64>,
+    /// The addresses of the local network interfaces DDS uses (multicast discovery and the locators it announces),
+    /// each on an interface that is up; empty: every interface that is up.
+    pub interfaces: Vec<IpAddr>,
 }
 
 /// Why the publisher could not start (before any estimate was handed over).
@@ -62,6 +66,9 @@ pub enum Ros2Error {
     /// A domain id beyond [`MAX_DOMAIN_ID`].
     #[error("domain id {0}: DDS domains are 0 to {MAX_DOMAIN_ID}")]
     Domain(u16),
+    /// No network interface that is up (with an address, or with one of [`Ros2Options::interfaces`]).
+    #[error("{0}")]
+    Interface(String),
     /// A namespace ROS 2 does not accept.
     #[error("namespace {namespace:?}: {message}")]
     Namespace { namespace: String, message: String },
@@ -286,6 +293,7 @@ impl Ros2Publisher {
         if options.domain_id > MAX_DOMAIN_ID {
             return Err(Ros2Error::Domain(options.domain_id));
         }
+        check_interfaces(&options.interfaces)?;
         let namespace = normalised_namespace(&options.namespace);
         let node_name = NodeName::new(
             if namespace.is_empty() {
@@ -422,6 +430,44 @@ impl Drop for Ros2Publisher {
     }
 }
 
+/// The IPv4 addresses of the network interfaces that are up (DDS, RustDDS's transport, speaks IPv4).
+fn addresses_up() -> Vec<IpAddr> {
+    netdev::get_interfaces()
+        .iter()
+        .filter(|interface| interface.is_up())
+        .flat_map(|interface| interface.ipv4.iter().map(|net| IpAddr::V4(net.addr())))
+        .collect()
+}
+
+/// Refuses a start with no network interface up (DDS would then publish to nobody, silently), or with an address
+/// asked for that no interface that is up has.
+fn check_interfaces(wanted: &[IpAddr]) -> Result<(), Ros2Error> {
+    let up = addresses_up();
+    let list = |addresses: &[IpAddr]| {
+        addresses
+            .iter()
+            .map(IpAddr::to_string)
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    if up.is_empty() {
+        return Err(Ros2Error::Interface(
+            "no network interface is up with an IPv4 address: DDS would reach no one (in a network namespace, \
+             `ip link set lo up` first)"
+                .into(),
+        ));
+    }
+    let missing: Vec<IpAddr> = wanted.iter().filter(|a| !up.contains(a)).copied().collect();
+    if !missing.is_empty() {
+        return Err(Ros2Error::Interface(format!(
+            "no network interface that is up has the address {} (those up: {})",
+            list(&missing),
+            list(&up)
+        )));
+    }
+    Ok(())
+}
+
 /// The node, its writers and the bag writer that feeds them (on the publishing thread).
 fn open(
     options: &Ros2Options,
@@ -436,8 +482,15 @@ fn open(
         domain_id: options.domain_id,
         message,
     };
-    let context = Context::with_options(ContextOptions::new().domain_id(options.domain_id))
-        .map_err(|e| start_error(format!("{e} (is a network interface up?)")))?;
+    let mut participant = DomainParticipantBuilder::new(options.domain_id);
+    if !options.interfaces.is_empty() {
+        participant = participant.with_only_networks(options.interfaces.iter().copied());
+    }
+    let participant = participant
+        .build()
+        .map_err(|e| start_error(e.to_string()))?;
+    let context =
+        Context::from_domain_participant(participant).map_err(|e| start_error(e.to_string()))?;
     let node = context
         .new_node(node_name, NodeOptions::new().enable_rosout(false))
         .map_err(|e| start_error(e.to_string()))?;
@@ -554,6 +607,17 @@ mod tests {
         let tf = qos_of(topics::TF);
         assert!(matches!(tf.reliability, Reliability::Reliable { .. }));
         assert_eq!(tf.durability, Durability::Volatile);
+    }
+
+    #[test]
+    fn an_address_no_interface_has_is_refused_before_starting() {
+        // 192.0.2.0/24 is TEST-NET-1, reserved for documentation: no machine has it.
+        let options = Ros2Options {
+            interfaces: vec!["192.0.2.1".parse().unwrap()],
+            ..Ros2Options::default()
+        };
+        let error = Ros2Publisher::start(&options, &BagOptions::default(), None).unwrap_err();
+        assert!(error.to_string().contains("192.0.2.1"), "{error}");
     }
 
     #[test]

@@ -1,0 +1,413 @@
+//! `roitrack demo --ros2` (feature `ros2`) against an independent DDS: Eclipse Cyclone DDS (PyPI `cyclonedds`, one of
+//! ROS 2's middlewares) subscribes with the ROS 2 topic and type names through `crates/roitrack-ros/tests/
+//! ros2_subscriber.py`, and every estimate of a paced demo (400 Hz estimates from 4 kHz ROIs, in real time) must
+//! arrive, in order, equal to what the demo wrote to its TUM and CSV files (1e-9): pose, twist, odometry (its twist
+//! in the target frame), tf, status; the camera info once, the camera's.
+//!
+//! DDS discovers by multicast: the publisher and the subscriber run in a network namespace of their own with only
+//! the loopback interface (`unshare -n`, then `ip link set lo up`; we are root), so nothing leaves the machine. Where
+//! `unshare` is not permitted, or the subscriber's virtual environment (`target/dds-venv`, made by
+//! scripts/setup-test-deps, or `ROITRACK_DDS_VENV`) is missing, the tests say they were skipped, unless
+//! `ROITRACK_REQUIRE_DDS` is set (as `.ci/run` does), when that is a failure.
+//!
+//! The publish-to-receive latency (the DDS source timestamp of each message to the time the Python subscriber took
+//! it, one clock) is printed, not tested: docs/ros2.md gives it with this command.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const REQUIRE: &str = "ROITRACK_REQUIRE_DDS";
+
+fn skip(why: &str) {
+    assert!(
+        std::env::var_os(REQUIRE).is_none(),
+        "{why}, but {REQUIRE} is set: the DDS tests must run"
+    );
+    eprintln!("skipped: {why}");
+}
+
+/// The Python with `cyclonedds`, or `None` (skipped).
+fn python() -> Option<PathBuf> {
+    let venv = std::env::var_os("ROITRACK_DDS_VENV").map_or_else(
+        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/dds-venv"),
+        PathBuf::from,
+    );
+    let python = venv.join("bin/python");
+    let ready = python.is_file()
+        && Command::new(&python)
+            .args(["-c", "import cyclonedds.domain"])
+            .status()
+            .is_ok_and(|s| s.success());
+    if ready {
+        return Some(python);
+    }
+    skip(&format!(
+        "cyclonedds is not installed in {} (run scripts/setup-test-deps)",
+        venv.display()
+    ));
+    None
+}
+
+/// Whether this process may make a network namespace (root, or a user namespace allowed).
+fn namespaces_allowed() -> bool {
+    let allowed = Command::new("unshare")
+        .args(["-n", "true"])
+        .status()
+        .is_ok_and(|s| s.success());
+    if !allowed {
+        skip(
+            "`unshare -n` is not permitted here (DDS is only spoken in a network namespace of its own)",
+        );
+    }
+    allowed
+}
+
+/// Runs `script` (bash) in a network namespace of its own whose loopback is up, with `env`; its combined output.
+fn in_namespace(script: &str, env: &[(&str, &Path)]) -> (bool, String) {
+    let mut command = Command::new("unshare");
+    command.args([
+        "-n",
+        "bash",
+        "-c",
+        &format!("ip link set lo up || exit 90\n{script}"),
+    ]);
+    for (name, value) in env {
+        command.env(name, value);
+    }
+    let out = command.output().unwrap();
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    (out.status.success(), text)
+}
+
+fn subscriber_script() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/ros2_subscriber.py")
+}
+
+/// One message as the subscriber printed it.
+struct Received {
+    topic: String,
+    taken_ns: i64,
+    source_ns: i64,
+    msg: serde_json::Value,
+}
+
+fn read_received(path: &Path) -> Vec<Received> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .map(|line| {
+            let v: serde_json::Value = serde_json::from_str(line).unwrap();
+            Received {
+                topic: v["topic"].as_str().unwrap().to_string(),
+                taken_ns: v["taken_ns"].as_i64().unwrap(),
+                source_ns: v["source_ns"].as_i64().unwrap(),
+                msg: v["msg"].clone(),
+            }
+        })
+        .collect()
+}
+
+fn f(v: &serde_json::Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+fn xyz(v: &serde_json::Value) -> [f64; 3] {
+    [f(&v["x"]), f(&v["y"]), f(&v["z"])]
+}
+
+fn stamp_s(header: &serde_json::Value) -> f64 {
+    f(&header["stamp"]["sec"]) + 1e-9 * f(&header["stamp"]["nanosec"])
+}
+
+/// Equal to 1e-9 (the files hold every digit; a stamp is rounded to the nanosecond).
+fn close(what: &str, got: &[f64], want: &[f64]) {
+    for (g, w) in got.iter().zip(want) {
+        assert!(
+            (g - w).abs() <= 1e-9,
+            "{what}: {got:?} received, {want:?} in the files"
+        );
+    }
+}
+
+#[test]
+fn every_estimate_of_a_paced_demo_reaches_cyclone_dds_equal_to_the_files() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let (received, out) = (dir.path().join("received.jsonl"), dir.path().join("demo"));
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
+subscriber=$!
+"$ROITRACK" demo --ros2 --ros2-wait-s 30 --paced --duration-s 1 --out "$OUT" >/dev/null || exit 91
+wait $subscriber || exit 92
+"#,
+        &[
+            ("PYTHON", &python),
+            ("SUBSCRIBER", &subscriber_script()),
+            ("RECEIVED", &received),
+            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
+            ("OUT", &out),
+        ],
+    );
+    assert!(ok, "{log}");
+    assert!(log.contains("0 dropped"), "{log}");
+    let messages = read_received(&received);
+    let poses = roitrack::formats::read_tum(out.join("kalman_poses.tum")).unwrap();
+    let twists = roitrack::formats::read_twists_csv(out.join("kalman_twists.csv")).unwrap();
+    let diagnostics =
+        roitrack::formats::read_diagnostics_csv(out.join("kalman_diagnostics.csv")).unwrap();
+    assert!(
+        poses.len() >= 390,
+        "{} estimates in 1 s at 400 Hz",
+        poses.len()
+    );
+    let on =
+        |topic: &str| -> Vec<&Received> { messages.iter().filter(|m| m.topic == topic).collect() };
+
+    // None lost at 400 Hz, in order, each equal to its row.
+    for topic in [
+        "/roitrack/pose",
+        "/roitrack/twist",
+        "/roitrack/odometry",
+        "/tf",
+        "/roitrack/status",
+    ] {
+        assert_eq!(
+            on(topic).len(),
+            poses.len(),
+            "{topic}: received, and estimates in the files"
+        );
+    }
+    let quaternion = |q: &serde_json::Value| [f(&q["x"]), f(&q["y"]), f(&q["z"]), f(&q["w"])];
+    let check_pose = |what: &str, k: usize, position: [f64; 3], q: [f64; 4]| {
+        let pose = &poses[k].cam_from_obj;
+        let t = pose.translation.vector;
+        close(&format!("{what} {k} position"), &position, &[t.x, t.y, t.z]);
+        let r = pose.rotation;
+        // q and -q are one rotation.
+        let sign = if q[3] * r.w + q[0] * r.i + q[1] * r.j + q[2] * r.k < 0.0 {
+            -1.0
+        } else {
+            1.0
+        };
+        close(
+            &format!("{what} {k} orientation"),
+            &q.map(|x| sign * x),
+            &[r.i, r.j, r.k, r.w],
+        );
+    };
+    for (k, m) in on("/roitrack/pose").iter().enumerate() {
+        close("pose stamp", &[stamp_s(&m.msg["header"])], &[poses[k].t_s]);
+        assert_eq!(m.msg["header"]["frame_id"], "camera");
+        let pose = &m.msg["pose"]["pose"];
+        check_pose(
+            "pose",
+            k,
+            xyz(&pose["position"]),
+            quaternion(&pose["orientation"]),
+        );
+        let covariance: Vec<f64> = m.msg["pose"]["covariance"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(f)
+            .collect();
+        assert_eq!(covariance.len(), 36);
+        for i in 0..6 {
+            assert!(covariance[7 * i] >= 0.0, "pose {k}: a negative variance");
+            for j in 0..6 {
+                assert_eq!(
+                    covariance[6 * i + j],
+                    covariance[6 * j + i],
+                    "pose {k}: not symmetric"
+                );
+            }
+        }
+    }
+    for (k, m) in on("/roitrack/twist").iter().enumerate() {
+        close(
+            "twist stamp",
+            &[stamp_s(&m.msg["header"])],
+            &[twists[k].t_s],
+        );
+        let twist = &m.msg["twist"]["twist"];
+        let (v, w) = (twists[k].velocity_mps, twists[k].angular_velocity_radps);
+        close(
+            &format!("twist {k} linear"),
+            &xyz(&twist["linear"]),
+            &[v.x, v.y, v.z],
+        );
+        close(
+            &format!("twist {k} angular"),
+            &xyz(&twist["angular"]),
+            &[w.x, w.y, w.z],
+        );
+    }
+    for (k, m) in on("/roitrack/odometry").iter().enumerate() {
+        close(
+            "odometry stamp",
+            &[stamp_s(&m.msg["header"])],
+            &[poses[k].t_s],
+        );
+        assert_eq!(m.msg["child_frame_id"], "target");
+        let pose = &m.msg["pose"]["pose"];
+        check_pose(
+            "odometry",
+            k,
+            xyz(&pose["position"]),
+            quaternion(&pose["orientation"]),
+        );
+        // nav_msgs' convention: the twist in the child (target) frame, Rᵀ V and Rᵀ W.
+        let r_t = poses[k]
+            .cam_from_obj
+            .rotation
+            .to_rotation_matrix()
+            .transpose();
+        let (v, w) = (
+            r_t * twists[k].velocity_mps,
+            r_t * twists[k].angular_velocity_radps,
+        );
+        let twist = &m.msg["twist"]["twist"];
+        close(
+            &format!("odometry {k} linear"),
+            &xyz(&twist["linear"]),
+            &[v.x, v.y, v.z],
+        );
+        close(
+            &format!("odometry {k} angular"),
+            &xyz(&twist["angular"]),
+            &[w.x, w.y, w.z],
+        );
+    }
+    for (k, m) in on("/tf").iter().enumerate() {
+        let transforms = m.msg["transforms"].as_array().unwrap();
+        assert_eq!(transforms.len(), 1);
+        let t = &transforms[0];
+        close("tf stamp", &[stamp_s(&t["header"])], &[poses[k].t_s]);
+        assert_eq!(
+            (&t["header"]["frame_id"], &t["child_frame_id"]),
+            (&"camera".into(), &"target".into())
+        );
+        let transform = &t["transform"];
+        check_pose(
+            "tf",
+            k,
+            xyz(&transform["translation"]),
+            quaternion(&transform["rotation"]),
+        );
+    }
+    for (k, m) in on("/roitrack/status").iter().enumerate() {
+        let status = &m.msg["status"][0];
+        let value = |key: &str| -> String {
+            let values = status["values"].as_array().unwrap();
+            let found = values
+                .iter()
+                .find(|kv| kv["key"] == key)
+                .unwrap_or_else(|| panic!("no {key}"));
+            found["value"].as_str().unwrap().to_string()
+        };
+        let row = &diagnostics[k];
+        assert_eq!(
+            status["message"].as_str().unwrap(),
+            row.status.name(),
+            "status {k}"
+        );
+        assert_eq!(value("status"), row.status.name());
+        close(
+            &format!("status {k}"),
+            &[value("residual_rms_px").parse().unwrap()],
+            &[row.residual_rms_px],
+        );
+        assert_eq!(
+            value("measurements_used"),
+            row.measurements_used.to_string(),
+            "status {k}"
+        );
+    }
+    // The camera info once, the demo's camera (latched: reliable and transient local).
+    let infos = on("/roitrack/camera_info");
+    assert_eq!(infos.len(), 1);
+    let camera =
+        roitrack::formats::read_camera_file(out.join("camera.yaml"), &Default::default()).unwrap();
+    let k: Vec<f64> = infos[0].msg["k"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(f)
+        .collect();
+    let i = &camera.intrinsics;
+    close(
+        "camera info K",
+        &k,
+        &[
+            i.fx_px, i.skew_px, i.cx_px, 0.0, i.fy_px, i.cy_px, 0.0, 0.0, 1.0,
+        ],
+    );
+    assert_eq!(infos[0].msg["width"], camera.width_px);
+
+    // The latency, printed: of every message, and of the pose alone (the subscriber takes its topics in turn, the
+    // pose first, so later topics wait for the earlier ones' take).
+    let quantiles = |topic: Option<&str>| {
+        let mut latency_us: Vec<f64> = messages
+            .iter()
+            .filter(|m| topic.is_none_or(|t| m.topic == t) && m.topic != "/roitrack/camera_info")
+            .map(|m| (m.taken_ns - m.source_ns) as f64 * 1e-3)
+            .collect();
+        latency_us.sort_by(f64::total_cmp);
+        let quantile = |q: f64| latency_us[((latency_us.len() - 1) as f64 * q).round() as usize];
+        format!(
+            "{} messages: median {:.0} us, p90 {:.0} us, p99 {:.0} us",
+            latency_us.len(),
+            quantile(0.5),
+            quantile(0.9),
+            quantile(0.99)
+        )
+    };
+    eprintln!(
+        "{} estimates received by Cyclone DDS, none lost; publish-to-receive latency: pose {}; all topics {}",
+        poses.len(),
+        quantiles(Some("/roitrack/pose")),
+        quantiles(None)
+    );
+}
+
+#[test]
+fn a_node_with_no_interface_up_or_an_address_no_interface_has_is_refused_at_start() {
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
+    // The namespace's loopback left down: no interface at all.
+    let out = Command::new("unshare")
+        .args(["-n"])
+        .arg(roitrack)
+        .args(["demo", "--ros2", "--duration-s", "0.1", "--out"])
+        .arg(dir.path().join("a"))
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        stderr.contains("--ros2: no network interface is up"),
+        "{stderr}"
+    );
+    let (ok, log) = in_namespace(
+        r#""$ROITRACK" demo --ros2 --ros2-interface 192.0.2.1 --duration-s 0.1 --out "$OUT""#,
+        &[("ROITRACK", roitrack), ("OUT", &dir.path().join("b"))],
+    );
+    assert!(!ok);
+    assert!(
+        log.contains(
+            "no network interface that is up has the address 192.0.2.1 (those up: 127.0.0.1)"
+        ),
+        "{log}"
+    );
+}
