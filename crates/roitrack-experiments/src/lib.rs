@@ -32,24 +32,6 @@ pub mod faults;
 pub mod frames;
 pub mod tradeoff;
 
-use thiserror::Error;
-
-/// Why an experiment could not run.
-#[derive(Debug, Error)]
-pub enum ExperimentError {
-    #[error("simulation failed: {0}")]
-    Simulation(#[from] roitrack_sim::SimError),
-    #[error("rendering failed: {0}")]
-    Rendering(#[from] roitrack_sim::RenderError),
-    #[error("invalid sensor model: {0}")]
-    Sensor(#[from] roitrack_image::SensorError),
-    #[error("tracking failed: {0}")]
-    Tracking(#[from] roitrack_core::estimator::TrackAllError),
-    #[error("the real-time loop failed: {0}")]
-    Loop(#[from] roitrack_pipeline::PipelineError),
-    #[error("evaluation failed: {0}")]
-    Evaluation(#[from] roitrack_eval::EvalError),
-    /// The demo's image side, or a run's tracking and scoring (`roitrack_demo`).
-    #[error(transparent)]
-    Demo(#[from] roitrack_demo::DemoError),
-}
+/// Why an experiment could not run: the causes of the demo's runs (simulation, rendering, the sensor model,
+/// tracking, the real-time loop, evaluation), since every experiment is made of such runs.
+pub use roitrack_demo::DemoError as ExperimentError;
