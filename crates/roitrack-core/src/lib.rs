@@ -14,7 +14,8 @@
 //! - [`projection`]: the spatio-temporal projection model and its exact and paper (eqs. 17-24) Jacobians;
 //! - [`solver`]: the one nonlinear least-squares solver (Levenberg-Marquardt, and the paper's servo law);
 //! - [`estimator`]: the estimators behind one trait ([`estimator::Estimator`]): Kalman (default), the paper's VVS
-//!   loop, the batch and static baselines, with their shared initialisation and degeneracy gate.
+//!   loop, the batch and static baselines, with their shared initialisation and degeneracy gate;
+//! - [`rig`]: several cameras with their poses and clocks, and the one estimate their measurements give together.
 //!
 //! Conventions (docs/model.md): camera frame x right, y down, z forward. The state holds `cam_r_obj` (c_R_o),
 //! `cam_t_obj_m` (c_t_o), the velocity of the object origin `velocity_mps` and the angular velocity
@@ -25,6 +26,7 @@
 pub mod camera;
 pub mod estimator;
 pub mod projection;
+pub mod rig;
 pub mod roi_order;
 pub mod samples;
 pub mod so3;

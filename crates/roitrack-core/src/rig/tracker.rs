@@ -1,0 +1,912 @@
+//! The rig's tracker: one pose and twist of the target, in the rig's frame and on the rig's clock, from the
+//! centroids of every camera as they come, and each camera's clock learnt from them.
+//!
+//! Every camera also runs the single-camera tracker of its own measurements ([`Tracker`]): it starts the tracks (a
+//! static pose and a 12-dof fit of its first cycles, as a single camera does), learns that camera's centroid noise,
+//! and gives the coarse offset of its clock (the shift that lays its track over the first camera's,
+//! [`search_offset_s`]). The fused filter is then an error-state Kalman filter of the rig's 12-dof state augmented by
+//! each unknown clock offset and drift: every centroid is one update at its own rig time, through its camera's
+//! projection, the image velocity of the point being the clock's column of the Jacobian ([`rig_projection`]).
+//!
+//! A rig of one camera that is the rig (identity mount, reference clock) runs the single-camera tracker alone: its
+//! estimates are today's, bit for bit.
+
+use std::cmp::Reverse;
+use std::collections::{BinaryHeap, VecDeque};
+
+use nalgebra::{DMatrix, DVector, Vector2, Vector3};
+use thiserror::Error;
+
+use super::{Rig, rig_projection, search_offset_s};
+use crate::estimator::{
+    ConfigError, Estimate, Estimator, EstimatorConfig, KalmanTuning, Matrix12, TrackError,
+    TrackStatus, Tracker, TrackerConfig,
+};
+use crate::{Measurement, MotionState, SpatioTemporalModel, Target, Vector12};
+
+use super::RigMeasurement;
+
+/// Options of a [`RigTracker`].
+///
+/// ```
+/// use roitrack_core::rig::RigTrackerConfig;
+/// let config = RigTrackerConfig::default();
+/// assert_eq!(config.max_offset_s, 0.1);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RigTrackerConfig {
+    /// The options of every camera's own tracker, and of the fused one: `every` (an estimate every `every` fused
+    /// measurements), `noise_px` (the starting noise), the Kalman tuning (the gate, the densities and whether the
+    /// process noise adapts).
+    pub tracker: TrackerConfig,
+    /// The search for an unknown clock offset spans `±max_offset_s` (s).
+    pub max_offset_s: f64,
+    /// The stretch of both tracks (s) an offset is searched on.
+    pub sync_span_s: f64,
+    /// The reference camera's track must move at least this far (m) over the stretch: a still target tells no time.
+    pub min_sync_motion_m: f64,
+    /// The standard deviation (s) of an offset found by the search, as the filter starts from it.
+    pub offset_prior_sigma_s: f64,
+    /// The standard deviation (ppm) of an unknown drift as the filter starts from its stated value (or 0).
+    pub drift_prior_sigma_ppm: f64,
+    /// The fused filter takes each measurement this long (s, rig time) after the newest one of any camera, in the
+    /// order of their rig times: the bound of the reorder buffer, and the latency of the fused estimates. Streams
+    /// merged by their cameras' own clocks (their offsets unknown) come out of order by up to twice the largest
+    /// offset.
+    pub reorder_latency_s: f64,
+}
+
+impl Default for RigTrackerConfig {
+    fn default() -> Self {
+        Self {
+            tracker: TrackerConfig::default(),
+            max_offset_s: 0.1,
+            sync_span_s: 0.25,
+            min_sync_motion_m: 0.01,
+            offset_prior_sigma_s: 0.3e-3,
+            drift_prior_sigma_ppm: 100.0,
+            reorder_latency_s: 0.12,
+        }
+    }
+}
+
+/// Why a [`RigTracker`] refused a measurement or its configuration.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum RigError {
+    #[error("invalid tracker options: {0}")]
+    Config(#[from] ConfigError),
+    #[error("a measurement of camera number {camera}, but the rig has {cameras} cameras")]
+    UnknownCamera { camera: usize, cameras: usize },
+    #[error("camera '{camera}': {source}")]
+    Measurement {
+        camera: String,
+        #[source]
+        source: TrackError,
+    },
+    #[error(
+        "camera '{camera}': its track never matches the first camera's within the clock offset search of ±{max_offset_s} s \
+         (best match at the search's edge, {rms_mm:.1} mm apart): check its clock offset, its camera_T_rig and that it \
+         sees the same target"
+    )]
+    ClockBeyondSearch {
+        camera: String,
+        max_offset_s: f64,
+        rms_mm: f64,
+    },
+}
+
+/// A camera's clock as the tracker knows it: the offset and drift, and their standard deviations (0 when known).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ClockEstimate {
+    pub offset_s: f64,
+    pub drift_ppm: f64,
+    pub offset_sigma_s: f64,
+    pub drift_sigma_ppm: f64,
+    /// Whether the offset has been found (known, or searched); `false` while the camera waits for its search.
+    pub synced: bool,
+}
+
+/// One estimate of a [`RigTracker`]: the state is `rig_T_object` with its twist in the rig frame, its time on the
+/// rig's clock; and every camera's clock as known then.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigEstimate {
+    pub estimate: Estimate,
+    pub clocks: Vec<ClockEstimate>,
+}
+
+/// What a [`RigTracker`] has done.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct RigTrackerReport {
+    /// Measurements taken, and those the fused filter used, rejected by its gate.
+    pub measurements: usize,
+    pub fused: usize,
+    pub gated: usize,
+    /// Fused tracks started (a lost one is started again from a camera's own track).
+    pub starts: usize,
+    /// Estimates given.
+    pub estimates: usize,
+}
+
+/// Gated measurements in a row, per target point, after which the fused track is lost.
+const LOST_AFTER_GATED_CYCLES: usize = 4;
+/// One camera's measurements rejected in a row, per target point, after which its clock is searched again (the first
+/// camera's: the fused track is started again from its own).
+const CAMERA_GATED_CYCLES: usize = 2;
+/// Estimates given as converging after a fused track starts.
+const CONVERGING_ESTIMATES: usize = 3;
+/// How far back (s) a measurement may be behind the fused filter's time and still be used (it is predicted back).
+const MAX_LATENESS_S: f64 = 0.05;
+/// Grid step (s) of the coarse offset search.
+const SEARCH_STEP_S: f64 = 0.5e-3;
+/// The process noise scales' rate of adaptation, range and trend spans: the single-camera filter's.
+const PROCESS_ADAPTATION_RATE: f64 = 0.05;
+const PROCESS_SCALE_RANGE: (f64, f64) = (1e-4, 1e4);
+const TREND_MIN_UPDATES: f64 = 32.0;
+
+/// The fused filter: the rig's state, the unknown clocks, their joint covariance.
+#[derive(Debug, Clone)]
+struct Fused {
+    /// The time the track started from: measurements before it are left out.
+    start_s: f64,
+    t_s: f64,
+    state: MotionState,
+    /// Covariance of (δ state (12), then the unknown clock parameters).
+    p: DMatrix<f64>,
+    trend: Vector12,
+    trend_rate: f64,
+    last_dt_s: f64,
+    process_log_scale: [f64; 2],
+    gated_in_a_row: usize,
+    newest_gated: bool,
+    sum_squares_px2: f64,
+    count: usize,
+    estimates: usize,
+}
+
+/// Many asynchronous cameras, one pose and twist (see the [module documentation](self)).
+///
+/// ```
+/// use roitrack_core::rig::{Rig, RigMeasurement, RigTracker, RigTrackerConfig};
+/// use roitrack_core::{CameraModel, Measurement, Target};
+///
+/// let rig = Rig::single("cam", CameraModel::canonical());
+/// let mut tracker = RigTracker::new(rig, Target::grid4x4(), RigTrackerConfig::default()).unwrap();
+/// let m = Measurement { t_s: 0.0, id: 0, u_px: 480.0, v_px: 480.0 };
+/// assert!(tracker.push(&RigMeasurement { camera: 0, measurement: m }).unwrap().is_empty());
+/// assert!(tracker.push(&RigMeasurement { camera: 3, measurement: m }).is_err());
+/// ```
+#[derive(Debug)]
+pub struct RigTracker {
+    rig: Rig,
+    target: Target,
+    config: RigTrackerConfig,
+    tuning: KalmanTuning,
+    models: Vec<SpatioTemporalModel>,
+    singles: Vec<Tracker>,
+    /// Per camera: the newest centroid noise its own tracker learnt (px).
+    noise_px: Vec<f64>,
+    /// Per camera: whether its clock offset is known or found.
+    synced: Vec<bool>,
+    /// Per camera: its own vouched track (time on its clock, position in the rig frame), for the offset search.
+    tracks: Vec<VecDeque<(f64, Vector3<f64>)>>,
+    /// Per camera: the filter's indices of its offset and drift, when estimated.
+    clock_states: Vec<(Option<usize>, Option<usize>)>,
+    /// Per camera: its clock as known now.
+    clocks: Vec<super::ClockModel>,
+    /// Per camera: the newest vouched estimate of its own tracker (rig frame and clock).
+    newest_single: Vec<Option<Estimate>>,
+    fused: Option<Fused>,
+    /// Measurements waiting for the fused filter, by rig time ([`RigTrackerConfig::reorder_latency_s`]).
+    pending: BinaryHeap<Reverse<Pending>>,
+    /// The newest rig time of any measurement, and how many have come (to order equal times by arrival).
+    newest_rig_s: f64,
+    arrivals: u64,
+    since_estimate: usize,
+    last_emitted_s: f64,
+    report: RigTrackerReport,
+    /// Per camera: measurements the fused filter used, and those its gate rejected.
+    camera_counts: Vec<CameraCounts>,
+}
+
+/// What the fused filter did with one camera's measurements.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct CameraCounts {
+    /// Measurements it updated with.
+    pub fused: usize,
+    /// Measurements its gate rejected.
+    pub gated: usize,
+    /// Its newest measurements rejected in a row.
+    pub gated_in_a_row: usize,
+    /// Times its clock was searched again after a run of rejections.
+    pub resyncs: usize,
+}
+
+/// A measurement in the reorder buffer: its rig time when it came, its arrival number, its camera.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    t_rig_s: f64,
+    arrival: u64,
+    camera: usize,
+    measurement: Measurement,
+}
+
+impl PartialEq for Pending {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == std::cmp::Ordering::Equal
+    }
+}
+
+impl Eq for Pending {}
+
+impl PartialOrd for Pending {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+
+impl Ord for Pending {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.t_rig_s
+            .total_cmp(&other.t_rig_s)
+            .then(self.arrival.cmp(&other.arrival))
+    }
+}
+
+impl RigTracker {
+    /// A tracker for `rig` and `target`.
+    pub fn new(rig: Rig, target: Target, config: RigTrackerConfig) -> Result<Self, RigError> {
+        let n = rig.len();
+        let singles = rig
+            .cameras()
+            .iter()
+            .map(|c| Tracker::new(c.camera.clone(), target.clone(), config.tracker))
+            .collect::<Result<Vec<_>, _>>()?;
+        let tuning = match config.tracker.estimator {
+            EstimatorConfig::Kalman(tuning) => tuning,
+            _ => KalmanTuning::default(),
+        };
+        let mut next = 12;
+        let clock_states = rig
+            .cameras()
+            .iter()
+            .map(|c| {
+                let mut take = |known: bool| {
+                    (!known).then(|| {
+                        next += 1;
+                        next - 1
+                    })
+                };
+                let offset = take(c.offset_known);
+                let drift = take(c.drift_known);
+                (offset, drift)
+            })
+            .collect();
+        Ok(Self {
+            models: rig
+                .cameras()
+                .iter()
+                .map(|c| SpatioTemporalModel::new(c.camera.intrinsics))
+                .collect(),
+            noise_px: vec![config.tracker.noise_px; n],
+            synced: rig.cameras().iter().map(|c| c.offset_known).collect(),
+            tracks: vec![VecDeque::new(); n],
+            clock_states,
+            clocks: rig.cameras().iter().map(|c| c.clock).collect(),
+            newest_single: vec![None; n],
+            singles,
+            rig,
+            target,
+            config,
+            tuning,
+            fused: None,
+            pending: BinaryHeap::new(),
+            newest_rig_s: f64::NEG_INFINITY,
+            arrivals: 0,
+            since_estimate: 0,
+            last_emitted_s: f64::NEG_INFINITY,
+            report: RigTrackerReport::default(),
+            camera_counts: vec![CameraCounts::default(); n],
+        })
+    }
+
+    /// The rig.
+    pub fn rig(&self) -> &Rig {
+        &self.rig
+    }
+
+    /// What it has done.
+    pub fn report(&self) -> RigTrackerReport {
+        self.report
+    }
+
+    /// Per camera: what the fused filter did with its measurements.
+    pub fn camera_counts(&self) -> &[CameraCounts] {
+        &self.camera_counts
+    }
+
+    /// Whether the rig is one camera that is the rig: the single-camera tracker alone.
+    pub fn is_single(&self) -> bool {
+        let cameras = self.rig.cameras();
+        cameras.len() == 1 && cameras[0].mount.is_identity() && cameras[0].clock.is_reference()
+    }
+
+    /// The single-camera tracker of camera `camera` (for a one-camera rig, the whole tracker).
+    pub fn camera_tracker(&mut self, camera: usize) -> Option<&mut Tracker> {
+        self.singles.get_mut(camera)
+    }
+
+    /// Every camera's clock as known now.
+    pub fn clocks(&self) -> Vec<ClockEstimate> {
+        (0..self.rig.len())
+            .map(|c| {
+                let (offset, drift) = self.clock_states[c];
+                let sigma = |i: Option<usize>| match (i, &self.fused) {
+                    (Some(i), Some(f)) => f.p[(i, i)].max(0.0).sqrt(),
+                    (Some(_), None) if self.synced[c] => self.config.offset_prior_sigma_s,
+                    (Some(_), None) => f64::INFINITY,
+                    (None, _) => 0.0,
+                };
+                let drift_sigma_ppm = match (drift, &self.fused) {
+                    (Some(_), None) => self.config.drift_prior_sigma_ppm,
+                    _ => sigma(drift),
+                };
+                ClockEstimate {
+                    offset_s: self.clocks[c].offset_s,
+                    drift_ppm: self.clocks[c].drift_ppm,
+                    offset_sigma_s: if self.synced[c] || offset.is_none() {
+                        sigma(offset)
+                    } else {
+                        f64::INFINITY
+                    },
+                    drift_sigma_ppm,
+                    synced: self.synced[c],
+                }
+            })
+            .collect()
+    }
+
+    /// Takes one centroid of one camera (its time on that camera's clock; each camera's times must not decrease; the
+    /// cameras' streams merged in the order of their rig times as far as their clocks are known, within
+    /// [`RigTrackerConfig::reorder_latency_s`]). Returns the estimates that became due: one every `every` fused
+    /// measurements once a fused track runs, [`RigTrackerConfig::reorder_latency_s`] behind the newest measurement
+    /// ([`Self::finish`] gives the last ones). A one-camera rig that is the rig gives the single-camera tracker's
+    /// estimates, as they come.
+    pub fn push(&mut self, m: &RigMeasurement) -> Result<Vec<RigEstimate>, RigError> {
+        let c = m.camera;
+        if c >= self.rig.len() {
+            return Err(RigError::UnknownCamera {
+                camera: c,
+                cameras: self.rig.len(),
+            });
+        }
+        let single = self.singles[c]
+            .push(&m.measurement)
+            .map_err(|source| self.measurement_error(c, source))?;
+        self.report.measurements += 1;
+        if self.is_single() {
+            return Ok(single
+                .map(|estimate| {
+                    self.report.estimates += 1;
+                    RigEstimate {
+                        estimate,
+                        clocks: self.clocks(),
+                    }
+                })
+                .into_iter()
+                .collect());
+        }
+        if let Some(e) = single
+            && e.status.is_vouched_for()
+        {
+            self.take_single(c, &e)?;
+        }
+        let t_rig_s = self.clocks[c].rig_time_s(m.measurement.t_s);
+        self.newest_rig_s = self.newest_rig_s.max(t_rig_s);
+        self.arrivals += 1;
+        self.pending.push(Reverse(Pending {
+            t_rig_s,
+            arrival: self.arrivals,
+            camera: c,
+            measurement: m.measurement,
+        }));
+        Ok(self.release(self.newest_rig_s - self.config.reorder_latency_s))
+    }
+
+    /// Fuses every measurement still waiting in the reorder buffer (at the end of the streams), with their estimates.
+    pub fn finish(&mut self) -> Vec<RigEstimate> {
+        self.release(f64::INFINITY)
+    }
+
+    /// Fuses the waiting measurements up to the rig time `until_s`, in the order of their rig times.
+    fn release(&mut self, until_s: f64) -> Vec<RigEstimate> {
+        let mut estimates = Vec::new();
+        while let Some(Reverse(next)) = self.pending.peek()
+            && next.t_rig_s <= until_s
+        {
+            let Some(Reverse(next)) = self.pending.pop() else {
+                break;
+            };
+            if self.fused.is_none() {
+                self.start_fused();
+            }
+            if self.fused.is_some() && self.synced[next.camera] {
+                self.fuse(next.camera, &next.measurement);
+                estimates.extend(self.estimate_if_due());
+            }
+        }
+        estimates
+    }
+
+    fn measurement_error(&self, c: usize, source: TrackError) -> RigError {
+        RigError::Measurement {
+            camera: self.rig.cameras()[c].name.clone(),
+            source,
+        }
+    }
+
+    /// A vouched estimate of camera `c`'s own tracker: its noise, its track for the offset search, and the search
+    /// when both tracks are long enough.
+    fn take_single(&mut self, c: usize, e: &Estimate) -> Result<(), RigError> {
+        self.noise_px[c] = e.noise_px;
+        let camera = &self.rig.cameras()[c];
+        let rig_state = camera.mount.rig_state(&e.state);
+        let covariance = e.covariance.map(|p| camera.mount.covariance_to_rig(&p));
+        self.newest_single[c] = Some(Estimate {
+            t_ref_s: self.clocks[c].rig_time_s(e.t_ref_s),
+            state: rig_state,
+            covariance,
+            ..*e
+        });
+        if self.synced[c] && c != 0 {
+            return Ok(());
+        }
+        let track = &mut self.tracks[c];
+        track.push_back((e.t_ref_s, rig_state.cam_t_obj_m));
+        let keep_s = 2.0 * self.config.sync_span_s;
+        while track.front().is_some_and(|(t, _)| e.t_ref_s - t > keep_s) {
+            track.pop_front();
+        }
+        if c == 0 {
+            return Ok(());
+        }
+        self.try_sync(c)
+    }
+
+    /// The coarse offset of camera `c` against the first camera, once both tracks span the stretch and the target has
+    /// moved over it.
+    fn try_sync(&mut self, c: usize) -> Result<(), RigError> {
+        let span = |t: &VecDeque<(f64, Vector3<f64>)>| match (t.front(), t.back()) {
+            (Some(a), Some(b)) => b.0 - a.0,
+            _ => 0.0,
+        };
+        let (reference, camera) = (&self.tracks[0], &self.tracks[c]);
+        if span(camera) < self.config.sync_span_s || span(reference) < self.config.sync_span_s {
+            return Ok(());
+        }
+        let path_m: f64 = reference
+            .iter()
+            .zip(reference.iter().skip(1))
+            .map(|(a, b)| (b.1 - a.1).norm())
+            .sum();
+        if path_m < self.config.min_sync_motion_m {
+            return Ok(());
+        }
+        let reference_clock = self.clocks[0];
+        let reference: Vec<(f64, Vector3<f64>)> = reference
+            .iter()
+            .map(|(t, p)| (reference_clock.rig_time_s(*t), *p))
+            .collect();
+        let scale = 1.0 / (1.0 + self.clocks[c].drift_ppm * 1e-6);
+        let own: Vec<(f64, Vector3<f64>)> = camera.iter().map(|(t, p)| (t * scale, *p)).collect();
+        let Some(found) =
+            search_offset_s(&reference, &own, self.config.max_offset_s, SEARCH_STEP_S)
+        else {
+            return Ok(());
+        };
+        if found.at_edge {
+            return Err(RigError::ClockBeyondSearch {
+                camera: self.rig.cameras()[c].name.clone(),
+                max_offset_s: self.config.max_offset_s,
+                rms_mm: found.rms_m * 1e3,
+            });
+        }
+        self.clocks[c].offset_s = found.offset_s;
+        self.synced[c] = true;
+        // Its waiting measurements move to their rig times: taken out of time order, each would carry the filter
+        // back and forth by the offset, and its process noise with it.
+        let clock = self.clocks[c];
+        let mut pending = std::mem::take(&mut self.pending).into_vec();
+        for Reverse(p) in &mut pending {
+            if p.camera == c {
+                p.t_rig_s = clock.rig_time_s(p.measurement.t_s);
+            }
+        }
+        self.pending = BinaryHeap::from(pending);
+        if let (Some(f), (Some(i), drift)) = (&mut self.fused, self.clock_states[c]) {
+            // The camera joins the running filter: its offset uncorrelated with the rest.
+            for k in 0..f.p.nrows() {
+                f.p[(i, k)] = 0.0;
+                f.p[(k, i)] = 0.0;
+            }
+            f.p[(i, i)] = self.config.offset_prior_sigma_s.powi(2);
+            if let Some(j) = drift {
+                for k in 0..f.p.nrows() {
+                    if k != j {
+                        f.p[(j, k)] = 0.0;
+                        f.p[(k, j)] = 0.0;
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Camera `c` leaves the fusion until its clock offset is searched again (a run of its measurements rejected: its
+    /// clock was wrong, or its track).
+    fn resync(&mut self, c: usize) {
+        let (offset, drift) = self.clock_states[c];
+        if offset.is_none() {
+            return;
+        }
+        self.synced[c] = false;
+        self.tracks[c].clear();
+        self.camera_counts[c].resyncs += 1;
+        if let Some(f) = &mut self.fused {
+            for i in [offset, drift].into_iter().flatten() {
+                for k in 0..f.p.nrows() {
+                    f.p[(i, k)] = 0.0;
+                    f.p[(k, i)] = 0.0;
+                }
+            }
+            if let Some(j) = drift {
+                f.p[(j, j)] = self.config.drift_prior_sigma_ppm.powi(2);
+            }
+        }
+    }
+
+    /// Starts the fused track from the newest vouched estimate of a synced camera's own tracker (the first camera's
+    /// if it has one).
+    fn start_fused(&mut self) {
+        let Some(start) = (0..self.rig.len())
+            .filter(|&c| self.synced[c])
+            .find_map(|c| self.newest_single[c])
+        else {
+            return;
+        };
+        let clock_count = self
+            .clock_states
+            .iter()
+            .map(|(o, d)| usize::from(o.is_some()) + usize::from(d.is_some()))
+            .sum::<usize>();
+        let n = 12 + clock_count;
+        let mut p = DMatrix::zeros(n, n);
+        let pose = start.covariance.unwrap_or_else(broad_prior);
+        p.view_mut((0, 0), (12, 12)).copy_from(&pose);
+        for (c, &(offset, drift)) in self.clock_states.iter().enumerate() {
+            if let Some(i) = offset {
+                p[(i, i)] = if self.synced[c] {
+                    self.config.offset_prior_sigma_s.powi(2)
+                } else {
+                    0.0
+                };
+            }
+            if let Some(j) = drift {
+                p[(j, j)] = self.config.drift_prior_sigma_ppm.powi(2);
+            }
+        }
+        let (process_log_scale, trend_rate) = self.fused.as_ref().map_or(
+            (
+                [0.0; 2],
+                1.0 / (2.0 * self.target.len() as f64).max(TREND_MIN_UPDATES),
+            ),
+            |f| (f.process_log_scale, f.trend_rate),
+        );
+        self.fused = Some(Fused {
+            start_s: start.t_ref_s,
+            t_s: start.t_ref_s,
+            state: start.state,
+            p,
+            trend: Vector12::zeros(),
+            trend_rate,
+            last_dt_s: 0.0,
+            process_log_scale,
+            gated_in_a_row: 0,
+            newest_gated: false,
+            sum_squares_px2: 0.0,
+            count: 0,
+            estimates: 0,
+        });
+        self.since_estimate = 0;
+        self.report.starts += 1;
+    }
+
+    /// One update of the fused filter with a centroid of camera `c` (already checked by its own tracker).
+    fn fuse(&mut self, c: usize, m: &Measurement) {
+        let camera = &self.rig.cameras()[c];
+        let Some(point_index) = self.target.index_of(m.id) else {
+            return;
+        };
+        let Ok(ideal_px) = camera.camera.undistort_pixel(&Vector2::new(m.u_px, m.v_px)) else {
+            return;
+        };
+        let clock = self.clocks[c];
+        let t_rig_s = clock.rig_time_s(m.t_s);
+        let tuning = self.tuning;
+        let (offset_index, drift_index) = self.clock_states[c];
+        let Some(f) = self.fused.as_mut() else {
+            return;
+        };
+        let dt = t_rig_s - f.t_s;
+        if dt < -MAX_LATENESS_S || t_rig_s < f.start_s {
+            return;
+        }
+        f.predict(dt, &tuning);
+        let point = self.target.points()[point_index].point_in_obj_m;
+        let Some(projected) = rig_projection(
+            &self.models[c],
+            &camera.mount,
+            &clock,
+            &f.state,
+            &point,
+            m.t_s,
+            f.t_s,
+        ) else {
+            return;
+        };
+        let n = f.p.nrows();
+        let mut h = DMatrix::<f64>::zeros(2, n);
+        h.view_mut((0, 0), (2, 12)).copy_from(&projected.jacobian);
+        if let Some(i) = offset_index {
+            h.view_mut((0, i), (2, 1))
+                .copy_from(&projected.image_velocity_pxps);
+        }
+        if let Some(j) = drift_index {
+            h.view_mut((0, j), (2, 1))
+                .copy_from(&projected.per_drift_px);
+        }
+        let innovation = ideal_px - projected.pixel;
+        let ph_t = &f.p * h.transpose();
+        let hph_t = &h * &ph_t;
+        let noise2 = self.noise_px[c] * self.noise_px[c];
+        let s = nalgebra::Matrix2::new(
+            hph_t[(0, 0)] + noise2,
+            hph_t[(0, 1)],
+            hph_t[(1, 0)],
+            hph_t[(1, 1)] + noise2,
+        );
+        let Some(s_inv) = s.try_inverse() else {
+            return;
+        };
+        let nis = (innovation.transpose() * s_inv * innovation)[0];
+        if !nis.is_finite() {
+            return;
+        }
+        f.sum_squares_px2 += innovation.norm_squared();
+        f.count += 1;
+        self.report.fused += 1;
+        self.since_estimate += 1;
+        // Persistence of the innovation along the displacement the recent corrections predict (the single-camera
+        // filter's adaptation of the process noise).
+        let h12 = projected.jacobian;
+        let mut persistence = [0.0; 2];
+        for (part, rows) in [(0, [0, 6]), (1, [3, 9])] {
+            let expected: Vector2<f64> = rows
+                .iter()
+                .map(|&r| h12.fixed_columns::<3>(r) * f.trend.fixed_rows::<3>(r))
+                .sum();
+            let spread2 = (expected.transpose() * s_inv * expected)[0];
+            persistence[part] = if spread2 > 0.0 {
+                (innovation.transpose() * s_inv * expected)[0] / spread2.sqrt()
+            } else {
+                0.0
+            };
+        }
+        if nis > tuning.gate_sigma * tuning.gate_sigma {
+            f.gated_in_a_row += 1;
+            f.newest_gated = true;
+            self.report.gated += 1;
+            self.camera_counts[c].gated += 1;
+            self.camera_counts[c].gated_in_a_row += 1;
+            let n = self.target.len();
+            if f.gated_in_a_row >= LOST_AFTER_GATED_CYCLES * n {
+                self.fused = None;
+            } else if self.camera_counts[c].gated_in_a_row >= CAMERA_GATED_CYCLES * n {
+                self.camera_counts[c].gated_in_a_row = 0;
+                if c == 0 {
+                    // The first camera, which holds the rig's clock, no longer agrees with the fused track: the other
+                    // clocks have carried it away. Started again from the first camera's own track, every clock
+                    // kept but as uncertain as after its search.
+                    self.fused = None;
+                    self.start_fused();
+                } else {
+                    self.resync(c);
+                }
+            }
+            return;
+        }
+        f.gated_in_a_row = 0;
+        f.newest_gated = false;
+        self.camera_counts[c].fused += 1;
+        self.camera_counts[c].gated_in_a_row = 0;
+        // Huber: beyond `huber_sigma`, the noise is inflated in proportion to the distance.
+        let distance = nis.sqrt();
+        let s_inv = if distance > tuning.huber_sigma {
+            let inflated = noise2 * distance / tuning.huber_sigma;
+            let s = nalgebra::Matrix2::new(
+                hph_t[(0, 0)] + inflated,
+                hph_t[(0, 1)],
+                hph_t[(1, 0)],
+                hph_t[(1, 1)] + inflated,
+            );
+            match s.try_inverse() {
+                Some(inv) => inv,
+                None => return,
+            }
+        } else {
+            s_inv
+        };
+        let s_inv_d = DMatrix::from_row_slice(
+            2,
+            2,
+            &[s_inv[(0, 0)], s_inv[(0, 1)], s_inv[(1, 0)], s_inv[(1, 1)]],
+        );
+        let gain = &ph_t * s_inv_d;
+        let correction: DVector<f64> = &gain * DVector::from_column_slice(innovation.as_slice());
+        let delta = Vector12::from_fn(|i, _| correction[i]);
+        let corrected = f.state.corrected(&delta);
+        if !corrected.is_finite() {
+            return;
+        }
+        f.state = corrected;
+        if let Some(i) = offset_index {
+            self.clocks[c].offset_s += correction[i];
+        }
+        if let Some(j) = drift_index {
+            self.clocks[c].drift_ppm += correction[j];
+        }
+        // P - K (H P): the rank-2 downdate, then symmetrised.
+        f.p -= &gain * ph_t.transpose();
+        let p_t = f.p.transpose();
+        f.p += p_t;
+        f.p *= 0.5;
+        if tuning.adapt_motion {
+            for (scale, z) in f.process_log_scale.iter_mut().zip(persistence) {
+                *scale = (*scale + PROCESS_ADAPTATION_RATE * z.clamp(-3.0, 3.0))
+                    .clamp(PROCESS_SCALE_RANGE.0.ln(), PROCESS_SCALE_RANGE.1.ln());
+            }
+        }
+        let rates = f.trend_rates();
+        for (row, (trend, correction)) in f.trend.iter_mut().zip(&delta).enumerate() {
+            *trend += (correction - *trend) * rates[usize::from(row % 6 >= 3)];
+        }
+    }
+
+    /// An estimate when `every` fused measurements have come since the previous one.
+    fn estimate_if_due(&mut self) -> Option<RigEstimate> {
+        let f = self.fused.as_mut()?;
+        if self.since_estimate < self.config.tracker.every || f.t_s <= self.last_emitted_s {
+            return None;
+        }
+        self.since_estimate = 0;
+        let covariance: Matrix12 = Matrix12::from_fn(|i, j| f.p[(i, j)]);
+        let status = if f.newest_gated {
+            TrackStatus::Disputed
+        } else if f.estimates < CONVERGING_ESTIMATES {
+            TrackStatus::Converging
+        } else {
+            TrackStatus::Tracking
+        };
+        let residual_rms_px = if f.count > 0 {
+            (f.sum_squares_px2 / (2 * f.count) as f64).sqrt()
+        } else {
+            0.0
+        };
+        let measurements_used = f.count;
+        f.sum_squares_px2 = 0.0;
+        f.count = 0;
+        f.estimates += 1;
+        self.last_emitted_s = f.t_s;
+        let noise_px = self.noise_px.iter().copied().fold(f64::INFINITY, f64::min);
+        let estimate = Estimate {
+            t_ref_s: f.t_s,
+            state: f.state,
+            residual_rms_px,
+            inverse_condition: inverse_condition(&covariance),
+            measurements_used,
+            iterations: measurements_used,
+            status,
+            covariance: Some(covariance),
+            noise_px,
+            acceleration: None,
+        };
+        self.report.estimates += 1;
+        Some(RigEstimate {
+            estimate,
+            clocks: self.clocks(),
+        })
+    }
+}
+
+/// The broad prior of a track with no covariance: 1 cm, 0.1 rad, 1 m/s, 10 rad/s.
+fn broad_prior() -> Matrix12 {
+    let sigmas = [
+        1e-2, 1e-2, 1e-2, 0.1, 0.1, 0.1, 1.0, 1.0, 1.0, 10.0, 10.0, 10.0,
+    ];
+    Matrix12::from_diagonal(&Vector12::from_fn(|i, _| sigmas[i] * sigmas[i]))
+}
+
+/// The reciprocal condition number of a covariance's correlation matrix (1: its errors uncorrelated, 0: one of them
+/// a combination of the others): the conditioning figure of a fused estimate.
+fn inverse_condition(covariance: &Matrix12) -> f64 {
+    let d = Vector12::from_fn(|i, _| 1.0 / covariance[(i, i)].max(1e-300).sqrt());
+    let correlation = Matrix12::from_fn(|i, j| covariance[(i, j)] * d[i] * d[j]);
+    let eigen = correlation.symmetric_eigenvalues();
+    let (min, max) = eigen.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &e| {
+        (lo.min(e), hi.max(e))
+    });
+    if max > 0.0 && min.is_finite() {
+        (min / max).clamp(0.0, 1.0)
+    } else {
+        0.0
+    }
+}
+
+impl Fused {
+    /// Moves the state `dt_s` ahead (or back) under its constant twist and grows the covariance.
+    fn predict(&mut self, dt_s: f64, tuning: &KalmanTuning) {
+        if dt_s == 0.0 {
+            return;
+        }
+        self.last_dt_s = dt_s.abs();
+        let f = self.state.transition_jacobian(dt_s);
+        let n = self.p.nrows();
+        // F P Fᵀ on the state's block; F P on its cross-covariances with the clocks.
+        let pss: Matrix12 = Matrix12::from_fn(|i, j| self.p[(i, j)]);
+        let new_pss = f * pss * f.transpose();
+        for i in 0..12 {
+            for j in 0..12 {
+                self.p[(i, j)] = new_pss[(i, j)];
+            }
+        }
+        if n > 12 {
+            let cross = self.p.view((0, 12), (12, n - 12)).into_owned();
+            let f_d = DMatrix::from_fn(12, 12, |i, j| f[(i, j)]);
+            let new_cross = f_d * cross;
+            self.p.view_mut((0, 12), (12, n - 12)).copy_from(&new_cross);
+            self.p
+                .view_mut((12, 0), (n - 12, 12))
+                .copy_from(&new_cross.transpose());
+        }
+        let dt = dt_s.abs();
+        let scale = self.process_log_scale.map(f64::exp);
+        for (pos, vel, psd) in [
+            (0, 6, tuning.linear_accel_psd * scale[0]),
+            (3, 9, tuning.angular_accel_psd * scale[1]),
+        ] {
+            let (qpp, qpv, qvv) = (psd * dt * dt * dt / 3.0, psd * dt * dt / 2.0, psd * dt);
+            for i in 0..3 {
+                self.p[(pos + i, pos + i)] += qpp;
+                self.p[(pos + i, vel + i)] += qpv;
+                self.p[(vel + i, pos + i)] += qpv;
+                self.p[(vel + i, vel + i)] += qvv;
+            }
+        }
+        self.state = self.state.predicted(dt_s);
+        self.t_s += dt_s;
+    }
+
+    /// The trend's weight per update (translational, rotational): as the single-camera filter's, the step over the
+    /// filter's own time constant, at most [`Self::trend_rate`].
+    fn trend_rates(&self) -> [f64; 2] {
+        [0, 3].map(|first| {
+            let pose: f64 = (first..first + 3).map(|i| self.p[(i, i)]).sum();
+            let twist: f64 = (first + 6..first + 9).map(|i| self.p[(i, i)]).sum();
+            let rate = self.last_dt_s / (pose / twist).sqrt();
+            if rate.is_finite() && rate > 0.0 {
+                rate.min(self.trend_rate)
+            } else {
+                self.trend_rate
+            }
+        })
+    }
+}
