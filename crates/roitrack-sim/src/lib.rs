@@ -7,12 +7,14 @@
 //! ([`rois`]); and synthetic photographs of planar circle targets in cluttered, unevenly lit scenes, with the true
 //! circle centres ([`photo`]); and the full frames a global- or rolling-shutter camera takes of a scenario, bright blobs
 //! or dark ones on an unevenly lit background, with dense ground truth and each blob's true centre at its row time
-//! ([`frames`]). A scenario's motion can be seen by any camera and carry any target
+//! ([`frames`]); and several ROI cameras around one scenario, each on its own clock, with the truth in the rig's frame
+//! ([`multi_camera`]). A scenario's motion can be seen by any camera and carry any target
 //! ([`Scenario::with_camera`], [`Scenario::with_target`]).
 
 pub mod frames;
 pub mod glints;
 pub mod measurements;
+pub mod multi_camera;
 pub mod photo;
 pub mod rigs;
 pub mod rois;

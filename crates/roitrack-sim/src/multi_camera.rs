@@ -1,0 +1,214 @@
+//! Several ROI cameras around one scenario, none sharing a clock: each camera's centroids on its own clock, the truth
+//! in the rig's frame (the scenario's camera frame) on the rig's clock.
+//!
+//! The rig's frame is the scenario's camera frame, so the scenario's motion is `rig_T_object`; the first camera of
+//! [`CameraRigScene::random`] is the scenario's own camera (identity mount, the rig's clock), the others look at the
+//! scene's centre (0, 0, 0.6) m from around it. A camera reads one ROI at a time at its own rate, ROI `k` at time
+//! `k / rate_hz` of its clock (a random phase apart from the others), which is `clock.rig_time_s(t)` on the rig's;
+//! its centroid is the projection of the true pose at that rig time, seen through its mount, plus noise. A blob of a
+//! planar target seen from behind or within 10 degrees of edge-on is not measured, nor one outside the image.
+//!
+//! ```
+//! use roitrack_sim::multi_camera::{CameraRigScene, simulate_rig};
+//! use roitrack_sim::{Scenario, ScenarioKind};
+//!
+//! let scene = CameraRigScene::random(Scenario::new(ScenarioKind::Random, 1).with_duration_s(0.5), 3, 7);
+//! let run = simulate_rig(&scene, 4000.0, 0.1, 7).unwrap();
+//! assert_eq!(run.measurements.len(), 3);
+//! // Each camera's times are on its own clock.
+//! let clock = scene.rig.cameras()[1].clock;
+//! let t_rig = clock.rig_time_s(run.measurements[1][0].t_s);
+//! assert!(t_rig >= 0.0 && t_rig < 0.5);
+//! ```
+
+use nalgebra::{Rotation3, Vector2, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera};
+use roitrack_core::roi_order::bit_reversed_indices;
+use roitrack_core::{Measurement, PoseSample, TwistSample};
+
+use crate::{Scenario, SimError};
+
+/// A scenario seen by a rig of cameras (their true mounts and clocks).
+#[derive(Debug, Clone)]
+pub struct CameraRigScene {
+    pub scenario: Scenario,
+    /// The cameras as they are: calibrations, mounts and clocks (every clock stated as known).
+    pub rig: Rig,
+}
+
+/// The scene's centre in the rig's frame, which every camera looks at (m).
+pub const SCENE_CENTRE_M: [f64; 3] = [0.0, 0.0, 0.6];
+
+/// Offsets of the other cameras' clocks are drawn within ±this (s).
+pub const MAX_SIMULATED_OFFSET_S: f64 = 0.05;
+/// Drifts of the other cameras' clocks are drawn within ±this (ppm).
+pub const MAX_SIMULATED_DRIFT_PPM: f64 = 100.0;
+
+impl CameraRigScene {
+    /// `cameras` cameras (at least 1) around `scenario`, drawn from `seed`: the first is the scenario's camera (the
+    /// rig), each other the scenario's camera model looking at the scene's centre from 0.5 to 0.8 m away, turned 30 to
+    /// 50 degrees from the first about the vertical, up to 20 degrees about the horizontal and rolled up to 30
+    /// degrees, its clock offset within ±50 ms and drift within ±100 ppm. Cameras named `cam0`, `cam1`, ...
+    ///
+    /// # Panics
+    ///
+    /// If `cameras` is 0.
+    pub fn random(scenario: Scenario, cameras: usize, seed: u64) -> Self {
+        assert!(cameras > 0, "CameraRigScene::random: at least one camera");
+        let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x6d75_6c74_6963_616d);
+        let centre = Vector3::from(SCENE_CENTRE_M);
+        let mut list = vec![RigCamera::known(
+            "cam0",
+            scenario.camera.clone(),
+            CameraMount::IDENTITY,
+            ClockModel::REFERENCE,
+        )];
+        for k in 1..cameras {
+            // Alternate sides, so that two cameras flank the first.
+            let side = if k % 2 == 1 { 1.0 } else { -1.0 };
+            let yaw = side * rng.random_range(30f64..50.0).to_radians();
+            let pitch = rng.random_range(-20f64..20.0).to_radians();
+            let roll = rng.random_range(-30f64..30.0).to_radians();
+            let distance_m = rng.random_range(0.5..0.8);
+            // rig_R_camera: the camera's axes in the rig; its optical axis through the centre.
+            let rig_r_camera = Rotation3::from_axis_angle(&Vector3::y_axis(), yaw)
+                * Rotation3::from_axis_angle(&Vector3::x_axis(), pitch)
+                * Rotation3::from_axis_angle(&Vector3::z_axis(), roll);
+            let position_m = centre - rig_r_camera * Vector3::new(0.0, 0.0, distance_m);
+            let camera_r_rig = rig_r_camera.inverse();
+            let mount = CameraMount::new(camera_r_rig, -(camera_r_rig * position_m));
+            let clock = ClockModel {
+                offset_s: rng.random_range(-MAX_SIMULATED_OFFSET_S..MAX_SIMULATED_OFFSET_S),
+                drift_ppm: rng.random_range(-MAX_SIMULATED_DRIFT_PPM..MAX_SIMULATED_DRIFT_PPM),
+            };
+            list.push(RigCamera::known(
+                format!("cam{k}"),
+                scenario.camera.clone(),
+                mount,
+                clock,
+            ));
+        }
+        let rig = Rig::new(list).expect("drawn cameras have unique names and finite poses");
+        Self { scenario, rig }
+    }
+}
+
+/// What the rig measured, and what happened.
+#[derive(Debug, Clone)]
+pub struct RigRun {
+    /// Per camera (the rig's order), its centroids in time order, their times on its own clock.
+    pub measurements: Vec<Vec<Measurement>>,
+    /// The truth in the rig's frame on the rig's clock, at `truth_rate_hz` (the ROI rate) over the scenario.
+    pub truth_poses: Vec<PoseSample>,
+    pub truth_twists: Vec<TwistSample>,
+}
+
+/// The most ROIs a simulated rig may take, all cameras together.
+pub const MAX_RIG_ROIS: f64 = 1e8;
+
+/// Samples `scene`: every camera reads one ROI every `1 / rate_hz` seconds of its own clock (in the bit-reversed
+/// order of the target's points), its centroids with Gaussian noise of `noise_px` per axis; the truth at `rate_hz` on
+/// the rig's clock. Seeded by `seed`.
+pub fn simulate_rig(
+    scene: &CameraRigScene,
+    rate_hz: f64,
+    noise_px: f64,
+    seed: u64,
+) -> Result<RigRun, SimError> {
+    let bad = |field, expected, value| SimError::BadOption {
+        field,
+        expected,
+        value,
+    };
+    if !(noise_px.is_finite() && noise_px >= 0.0) {
+        return Err(bad("noise_px", "finite and >= 0", noise_px));
+    }
+    if !(rate_hz.is_finite() && rate_hz > 0.0 && rate_hz <= crate::MAX_ROI_RATE_HZ) {
+        return Err(bad(
+            "rate_hz",
+            "positive, at most 1e6 (a million ROIs a second)",
+            rate_hz,
+        ));
+    }
+    let scenario = &scene.scenario;
+    let duration_s = scenario.duration_s;
+    if duration_s * rate_hz * scene.rig.len() as f64 > MAX_RIG_ROIS {
+        return Err(SimError::TooManyRois {
+            duration_s,
+            rate_hz,
+        });
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let noise = Normal::new(0.0, noise_px).expect("noise_px checked");
+    let target = &scenario.target;
+    // A planar target's face: its plane's normal, turned towards the first camera at the start.
+    let face_in_obj = target.plane().map(|plane| {
+        let normal = plane.obj_r_plane.column(2).into_owned();
+        let start = scenario.state_at(0.0);
+        let towards =
+            (start.cam_r_obj * normal).dot(&(start.cam_r_obj * plane.centre_m + start.cam_t_obj_m));
+        if towards > 0.0 { normal } else { -normal }
+    });
+    let order = bit_reversed_indices(target.len());
+    let min_cos = 10f64.to_radians().sin();
+    let mut measurements = Vec::with_capacity(scene.rig.len());
+    for (c, camera) in scene.rig.cameras().iter().enumerate() {
+        let clock = camera.clock;
+        // ROIs of this camera whose rig times fall within the scenario; the first camera starts at 0, the others at
+        // a random phase of their own ROI period.
+        let phase_s = if c == 0 {
+            0.0
+        } else {
+            rng.random_range(0.0..1.0 / rate_hz)
+        };
+        let first_k = ((clock.camera_time_s(0.0) - phase_s) * rate_hz).ceil() as i64;
+        let last_k = ((clock.camera_time_s(duration_s) - phase_s) * rate_hz).floor() as i64;
+        let mut list = Vec::with_capacity((last_k - first_k + 1).max(0) as usize);
+        for k in first_k..=last_k {
+            let t_camera_s = k as f64 / rate_hz + phase_s;
+            let t_rig_s = clock.rig_time_s(t_camera_s).clamp(0.0, duration_s);
+            let state = camera.mount.camera_state(&scenario.state_at(t_rig_s));
+            let point = target.points()[order[k.rem_euclid(target.len() as i64) as usize]];
+            let noise_px = Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
+            let p = state.point_in_cam_at(&point.point_in_obj_m, 0.0);
+            if let Some(face) = face_in_obj {
+                let normal = state.cam_r_obj * face;
+                if normal.dot(&p) < min_cos * p.norm() {
+                    continue;
+                }
+            }
+            let Some(raw) = camera
+                .camera
+                .raw_pixel_from_cam(&p)
+                .filter(|px| camera.camera.contains_raw_pixel(px))
+            else {
+                continue;
+            };
+            let measured = raw + noise_px;
+            list.push(Measurement {
+                t_s: t_camera_s,
+                id: point.id,
+                u_px: measured.x,
+                v_px: measured.y,
+            });
+        }
+        measurements.push(list);
+    }
+    let samples = (duration_s * rate_hz + 1e-9).floor() as usize + 1;
+    let (mut truth_poses, mut truth_twists) =
+        (Vec::with_capacity(samples), Vec::with_capacity(samples));
+    for k in 0..samples {
+        let t_s = k as f64 / rate_hz;
+        let state = scenario.state_at(t_s);
+        truth_poses.push(PoseSample::from_state(t_s, &state));
+        truth_twists.push(TwistSample::from_state(t_s, &state));
+    }
+    Ok(RigRun {
+        measurements,
+        truth_poses,
+        truth_twists,
+    })
+}
