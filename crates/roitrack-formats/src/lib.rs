@@ -11,6 +11,7 @@
 //! | measurements: CSV `t,id,u,v` (s, raw px) | [`MeasurementReader`] (streaming), [`read_measurements_csv`] | [`MeasurementWriter`], [`write_measurements_csv`] |
 //! | poses: TUM `t tx ty tz qx qy qz qw` (camera_T_object) | [`read_tum`], [`parse_tum`] | [`PoseWriter`], [`write_tum`] |
 //! | ROI recordings ([`roitrack_image::RoiImage`]s): binary, see [`RoiRecordingReader`] | [`RoiRecordingReader`] (streaming) | [`RoiRecordingWriter`] |
+//! | rig: YAML, cameras with their calibration files, poses in the rig and clocks | [`read_rig_yaml`], [`parse_rig_yaml`] | [`write_rig_yaml`], [`rig_yaml_string`] |
 //! | twists: CSV `t,vx,vy,vz,wx,wy,wz` (camera frame) | [`read_twists_csv`], [`parse_twists_csv`] | [`TwistWriter`], [`write_twists_csv`] |
 //! | estimates: poses, twists, diagnostics and covariance CSV together | | [`EstimateWriter`] |
 //! | covariance: CSV `t,c0_0,c0_1,...,c11_11`, the 12 x 12 covariance's upper triangle per estimate | | [`CovarianceWriter`] |
@@ -64,6 +65,7 @@ mod limits;
 mod measurements;
 mod output_set;
 mod overlay;
+mod rig;
 mod roi_recording;
 mod row_writer;
 mod run_readers;
@@ -105,6 +107,9 @@ pub use output_set::{
     remove_dead_temporaries, remove_temporaries_before_exit,
 };
 pub use overlay::{MarkKind, OverlayMark, write_overlay_png};
+pub use rig::{
+    MAX_RIG_CAMERAS, RigFile, parse_rig_yaml, read_rig_yaml, rig_yaml_string, write_rig_yaml,
+};
 pub use roi_recording::{
     MAX_ROI_SIDE_PX, ROI_RECORDING_MAGIC, RoiRecordingReader, RoiRecordingWriter,
 };
