@@ -8,7 +8,7 @@ mod common;
 use common::{fails, ok};
 #[path = "common/rig.rs"]
 mod rig;
-use rig::FISHEYE_YAML;
+use rig::{FISHEYE_YAML, fisheye_camera_and_grid};
 #[path = "common/run.rs"]
 mod run;
 
@@ -169,23 +169,7 @@ fn a_rig_that_loses_the_target_is_refused_with_the_fix() {
 fn demo_takes_the_rig() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let camera = dir.join("fisheye.yaml");
-    std::fs::write(&camera, FISHEYE_YAML).unwrap();
-    let target = dir.join("grid.csv");
-    ok(&[
-        "target",
-        "grid",
-        "--rows",
-        "4",
-        "--cols",
-        "5",
-        "--spacing-m",
-        "0.025",
-        "--diameter-m",
-        "0.01",
-        "--out",
-        p(&target),
-    ]);
+    let (camera, target) = fisheye_camera_and_grid(dir);
     // The demo's loop starts from a full frame, which needs a target whose labelling a view decides: the built-in
     // grid with its larger key blob (a plain grid's half turn is ambiguous, and the loop refuses to start on a guess).
     let out = dir.join("demo");

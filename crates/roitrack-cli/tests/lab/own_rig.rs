@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use crate::common::{fails, ok};
-use crate::rig::FISHEYE_YAML;
+use crate::rig::fisheye_camera_and_grid;
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -14,23 +14,7 @@ fn p(path: &Path) -> &str {
 fn compare_and_tradeoff_take_the_rig() {
     let tmp = tempfile::tempdir().unwrap();
     let dir = tmp.path();
-    let camera = dir.join("fisheye.yaml");
-    std::fs::write(&camera, FISHEYE_YAML).unwrap();
-    let target = dir.join("grid.csv");
-    ok(&[
-        "target",
-        "grid",
-        "--rows",
-        "4",
-        "--cols",
-        "5",
-        "--spacing-m",
-        "0.025",
-        "--diameter-m",
-        "0.01",
-        "--out",
-        p(&target),
-    ]);
+    let (camera, target) = fisheye_camera_and_grid(dir);
     let table = ok(&[
         "lab",
         "compare",
