@@ -201,6 +201,9 @@ def main():
     parser.add_argument("--count", type=int, default=0, help="estimates after which to end (0: no limit)")
     parser.add_argument("--idle-s", type=float, default=3.0)
     parser.add_argument("--timeout-s", type=float, default=120.0)
+    parser.add_argument("--keep-all", action="store_true",
+                        help="keep every sample until taken (else the last 1000 of each topic): for rates Python "
+                             "cannot take as they come, so that only what the network lost is missing")
     args = parser.parse_args()
     namespace = args.namespace.strip().rstrip("/")
     if namespace and not namespace.startswith("/"):
@@ -211,6 +214,8 @@ def main():
     waitset = WaitSet(participant)
     any_sample = SampleState.Any | ViewState.Any | InstanceState.Any
     for name, message_type, qos in TOPICS:
+        if args.keep_all and qos is not LATCHED:
+            qos = Qos(*[p for p in qos if not isinstance(p, Policy.History.KeepLast)], Policy.History.KeepAll)
         # ROS 2's mapping of a topic to DDS: the prefix rt/ before the fully qualified name, less its first slash.
         topic = Topic(participant, "rt" + namespace + name, message_type, qos=qos)
         reader = DataReader(participant, topic, qos=qos)
