@@ -96,6 +96,47 @@ impl CameraRigScene {
     }
 }
 
+/// The rig with every clock offset and drift it leaves unknown drawn from `seed` (offsets within ±50 ms, drifts
+/// within ±100 ppm) and every clock then known: the truth of a simulation of a rig file.
+///
+/// ```
+/// use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera};
+/// use roitrack_core::CameraModel;
+/// use roitrack_sim::multi_camera::draw_clocks;
+///
+/// let cam = |name: &str| RigCamera::known(name, CameraModel::canonical(), CameraMount::IDENTITY, ClockModel::REFERENCE);
+/// let mut right = cam("right");
+/// right.offset_known = false;
+/// let truth = draw_clocks(&Rig::new(vec![cam("left"), right]).unwrap(), 1);
+/// let clock = truth.cameras()[1].clock;
+/// assert!(clock.offset_s.abs() <= 0.05 && clock.drift_ppm == 0.0 && truth.cameras()[1].offset_known);
+/// ```
+pub fn draw_clocks(rig: &Rig, seed: u64) -> Rig {
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x0c10_c45e_ed00);
+    let cameras = rig
+        .cameras()
+        .iter()
+        .map(|camera| {
+            let mut clock = camera.clock;
+            let offset_s = rng.random_range(-MAX_SIMULATED_OFFSET_S..MAX_SIMULATED_OFFSET_S);
+            let drift_ppm = rng.random_range(-MAX_SIMULATED_DRIFT_PPM..MAX_SIMULATED_DRIFT_PPM);
+            if !camera.offset_known {
+                clock.offset_s = offset_s;
+            }
+            if !camera.drift_known {
+                clock.drift_ppm = drift_ppm;
+            }
+            RigCamera::known(
+                camera.name.clone(),
+                camera.camera.clone(),
+                camera.mount,
+                clock,
+            )
+        })
+        .collect();
+    Rig::new(cameras).expect("the same cameras, every clock known")
+}
+
 /// What the rig measured, and what happened.
 #[derive(Debug, Clone)]
 pub struct RigRun {

@@ -33,10 +33,23 @@ pub struct TrackArgs {
     #[command(flatten)]
     pub target: TargetArgs,
     /// Measured centroids (CSV t,id,u,v; raw pixels; time order; `-`: the standard input). Centroids that share a time (the blobs of a
-    /// global-shutter frame) form one readout: an estimate comes only after the last of them.
+    /// global-shutter frame) form one readout: an estimate comes only after the last of them. With --rig, one
+    /// NAME=FILE per camera of the rig (repeated), each file on its own camera's clock.
     /// Default: none; this, --rois or --images is required.
-    #[arg(long, required_unless_present_any = ["rois", "images"], conflicts_with_all = ["rois", "images"])]
-    pub measurements: Option<PathBuf>,
+    #[arg(long, value_name = "FILE | NAME=FILE", required_unless_present_any = ["rois", "images"], conflicts_with_all = ["rois", "images"])]
+    pub measurements: Vec<PathBuf>,
+    /// A rig of several cameras (YAML: each camera's name, calibration file relative to the rig file, camera_T_rig as
+    /// tx ty tz qx qy qz qw, and optionally its clock_offset_s and clock_drift_ppm; docs/rig.md) instead of --camera:
+    /// every camera's --measurements NAME=FILE fused into one pose and twist, written in the rig's frame
+    /// (rig_T_object) on the rig's clock (the first camera's, unless the file says otherwise). Clocks the file leaves
+    /// out are learnt from the measurements (offsets within ±0.1 s). Default: one camera, --camera.
+    #[arg(long = "rig", value_name = "RIG.yaml", conflicts_with_all = ["rois", "images"])]
+    pub camera_rig: Option<PathBuf>,
+    /// With --rig: write the rig file again with every camera's clock as learnt (clock_offset_s, clock_drift_ppm) and
+    /// their standard deviations (clock_offset_sigma_s, clock_drift_sigma_ppm; 0 for a clock the file gave).
+    /// Default: not written.
+    #[arg(long, value_name = "FILE.yaml", requires = "camera_rig")]
+    pub rig_out: Option<PathBuf>,
     /// Instead of centroids: a recording of ROI images (see roitrack_formats::RoiRecordingReader), centroided here.
     /// Default: none.
     #[arg(long, conflicts_with = "images")]
@@ -129,8 +142,16 @@ pub struct TrackArgs {
 }
 
 pub fn run(args: &TrackArgs) -> Result<()> {
+    if let Some(rig) = &args.camera_rig {
+        return run_rig(args, rig);
+    }
+    if args.measurements.len() > 1 {
+        bail!(
+            "several --measurements are for the cameras of a rig: give --rig RIG.yaml and NAME=FILE for each"
+        );
+    }
     check_paths(args)?;
-    if args.time_units.is_some() && args.measurements.is_none() && args.timestamps.is_none() {
+    if args.time_units.is_some() && args.measurements.is_empty() && args.timestamps.is_none() {
         bail!(
             "--time-units is the unit of the times of --measurements or --timestamps, and neither is given"
         );
@@ -187,17 +208,18 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     let start = Instant::now();
     // Measurements replayed from a bag or read from a CSV; checked either way: known ids, centroids on the camera's
     // image, times in order (and, from a CSV, in seconds or converted).
-    let measurements: Option<(PathBuf, MeasurementSource)> = match (replay, &args.measurements) {
-        (Some(source), _) => Some((source.bag().to_path_buf(), Box::new(source))),
-        (None, Some(path)) => {
-            let reader = MeasurementReader::from_reader(open_input(path)?, path)?
-                .with_known_ids(known_ids.iter().copied())
-                .with_image_size(camera.width_px, camera.height_px);
-            let reader = TimedMeasurements::new(reader, args.time_units.map(Into::into));
-            Some((path.clone(), Box::new(reader)))
-        }
-        (None, None) => None,
-    };
+    let measurements: Option<(PathBuf, MeasurementSource)> =
+        match (replay, args.measurements.first()) {
+            (Some(source), _) => Some((source.bag().to_path_buf(), Box::new(source))),
+            (None, Some(path)) => {
+                let reader = MeasurementReader::from_reader(open_input(path)?, path)?
+                    .with_known_ids(known_ids.iter().copied())
+                    .with_image_size(camera.width_px, camera.height_px);
+                let reader = TimedMeasurements::new(reader, args.time_units.map(Into::into));
+                Some((path.clone(), Box::new(reader)))
+            }
+            (None, None) => None,
+        };
     let (path, report, rois) = match (measurements, &args.rois) {
         (Some((path, source)), _) => {
             // Each measurement also goes to the bag's /roitrack/measurements (a RefCell: the estimates' sink
@@ -456,12 +478,13 @@ fn run_frames(
 /// Refuses, before anything is read or written, outputs (the files, the bag and its partial name) that are inputs
 /// (also through symbolic and hard links) or each other, and `-` for more than one output.
 fn check_paths(args: &TrackArgs) -> Result<()> {
+    let first_measurements = args.measurements.first().cloned();
     let mut inputs = vec![("--target", args.target.target.as_path())];
     if let Some(camera) = args.camera.camera_path() {
         inputs.push(("--camera", camera));
     }
     for (name, path) in [
-        ("--measurements", &args.measurements),
+        ("--measurements", &first_measurements),
         ("--rois", &args.rois),
         ("--images", &args.images),
         ("--timestamps", &args.timestamps),
@@ -492,6 +515,269 @@ fn check_paths(args: &TrackArgs) -> Result<()> {
     }
     let outputs: Vec<(&str, &std::path::Path)> =
         outputs.iter().map(|(n, p)| (*n, p.as_path())).collect();
+    check_output_paths(&inputs, &outputs)?;
+    Ok(())
+}
+
+/// One camera's measurements file of a rig run, read and checked against that camera.
+struct CameraStream {
+    camera: usize,
+    path: PathBuf,
+    reader: std::iter::Peekable<MeasurementSource>,
+}
+
+/// `--measurements NAME=FILE` as (name, file); refused without the `=`.
+fn split_camera_file(text: &std::path::Path) -> Result<(String, PathBuf)> {
+    let text = text.to_string_lossy();
+    match text.split_once('=') {
+        Some((name, file)) if !name.is_empty() && !file.is_empty() => {
+            Ok((name.to_string(), PathBuf::from(file)))
+        }
+        _ => bail!(
+            "--measurements {text}: with --rig, give NAME=FILE, the name of a camera of the rig and its measurements"
+        ),
+    }
+}
+
+/// `track --rig`: every camera's measurements merged in the order of their rig times (as far as the rig file gives
+/// the clocks; the tracker's reorder buffer takes the rest), fused into one pose and twist in the rig's frame.
+fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
+    if args.camera.is_some() {
+        bail!("--rig gives the cameras: leave out --camera");
+    }
+    if args.ros.mcap.is_some()
+        || args.ros.foxglove.is_some()
+        || args.mcap_in.measurement_topic.is_some()
+    {
+        bail!(
+            "--rig takes measurement files only (ROS 2 bags in or out are not supported with a rig yet)"
+        );
+    }
+    let file = roitrack::formats::read_rig_yaml(rig_path, &Default::default())?;
+    let rig = &file.rig;
+    let target = args.target.read()?;
+    let known_ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
+    // Each NAME=FILE: a camera of the rig, once.
+    let mut files: Vec<Option<PathBuf>> = vec![None; rig.len()];
+    for given in &args.measurements {
+        let (name, path) = split_camera_file(given)?;
+        let Some(c) = rig.index_of(&name) else {
+            let names: Vec<&str> = rig.cameras().iter().map(|c| c.name.as_str()).collect();
+            bail!(
+                "--measurements {name}={}: {} has no camera '{name}' (its cameras: {})",
+                path.display(),
+                rig_path.display(),
+                names.join(", ")
+            );
+        };
+        if files[c].is_some() {
+            bail!("--measurements: camera '{name}' is given twice");
+        }
+        files[c] = Some(path);
+    }
+    if files[0].is_none() {
+        bail!(
+            "--measurements: the first camera of {}, '{}', holds the rig's clock: give its measurements ({}=FILE)",
+            rig_path.display(),
+            rig.cameras()[0].name,
+            rig.cameras()[0].name
+        );
+    }
+    check_rig_paths(args, rig_path, &file, &files)?;
+    let mut streams = Vec::new();
+    for (c, path) in files.iter().enumerate() {
+        let Some(path) = path else { continue };
+        let camera = &rig.cameras()[c].camera;
+        let reader = MeasurementReader::from_reader(open_input(path)?, path)?
+            .with_known_ids(known_ids.iter().copied())
+            .with_image_size(camera.width_px, camera.height_px);
+        let reader: MeasurementSource = Box::new(TimedMeasurements::new(
+            reader,
+            args.time_units.map(Into::into),
+        ));
+        streams.push(CameraStream {
+            camera: c,
+            path: path.clone(),
+            reader: reader.peekable(),
+        });
+    }
+    let config = roitrack::core::rig::RigTrackerConfig {
+        tracker: args.estimator.config()?,
+        ..Default::default()
+    };
+    let mut tracker = roitrack::core::rig::RigTracker::new(rig.clone(), target, config)
+        .context("invalid tracker options")?;
+    let mut writer =
+        EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
+            .with_covariance(args.covariance.as_deref())?;
+    let start = Instant::now();
+    let mut count = 0usize;
+    let mut estimates = 0usize;
+    if tracker.is_single() {
+        // One camera that is the rig: the single-camera path itself (readouts of one time pushed whole).
+        let stream = streams.remove(0);
+        let path = stream.path.clone();
+        let single = tracker.camera_tracker(0).expect("a rig has a first camera");
+        let measurements = stream.reader.map(|m| {
+            crate::signals::check(&path)?;
+            m
+        });
+        let report = roitrack::track(single, measurements, |e| {
+            estimates += 1;
+            writer.write(e)
+        })
+        .with_context(|| format!("tracking {} failed", path.display()))?;
+        count = report.measurements;
+        if report.estimates.total() == 0 {
+            bail!(
+                "{}: no estimate from {count} measurements: {}",
+                path.display(),
+                report.why_no_start()
+            );
+        }
+    } else {
+        // The clock each file is merged by: the rig file's, or the camera's own when the file leaves it out.
+        let prior: Vec<roitrack::core::rig::ClockModel> =
+            rig.cameras().iter().map(|c| c.clock).collect();
+        loop {
+            let mut next: Option<(f64, usize)> = None;
+            for (k, stream) in streams.iter_mut().enumerate() {
+                match stream.reader.peek() {
+                    Some(Ok(m)) => {
+                        let t = prior[stream.camera].rig_time_s(m.t_s);
+                        if next.is_none_or(|(best, _)| t < best) {
+                            next = Some((t, k));
+                        }
+                    }
+                    Some(Err(_)) => {
+                        next = Some((f64::NEG_INFINITY, k));
+                        break;
+                    }
+                    None => {}
+                }
+            }
+            let Some((_, k)) = next else { break };
+            let stream = &mut streams[k];
+            crate::signals::check(&stream.path)?;
+            let Some(m) = stream.reader.next() else { break };
+            let m = m?;
+            count += 1;
+            let fused = tracker
+                .push(&roitrack::core::rig::RigMeasurement {
+                    camera: stream.camera,
+                    measurement: m,
+                })
+                .with_context(|| format!("tracking {} failed", stream.path.display()))?;
+            for e in fused {
+                writer.write(&e.estimate)?;
+                estimates += 1;
+            }
+        }
+        for e in tracker.finish() {
+            writer.write(&e.estimate)?;
+            estimates += 1;
+        }
+        if estimates == 0 {
+            bail!(
+                "{}: no estimate from {count} measurements: no camera's own track started, or no clock offset was found \
+                 (the target must move)",
+                rig_path.display()
+            );
+        }
+    }
+    writer.finish()?;
+    let clocks = tracker.clocks();
+    if let Some(out) = &args.rig_out {
+        let calibrations = calibrations_for(rig_path, out, &file);
+        roitrack::formats::write_rig_yaml(out, rig, &calibrations, Some(&clocks))?;
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    for (camera, clock) in rig.cameras().iter().zip(&clocks).skip(1) {
+        if !camera.clock_known() {
+            eprintln!(
+                "roitrack: camera '{}': clock offset {:.6} s ± {:.1} us, drift {:.2} ppm ± {:.2} ppm{}",
+                camera.name,
+                clock.offset_s,
+                clock.offset_sigma_s * 1e6,
+                clock.drift_ppm,
+                clock.drift_sigma_ppm,
+                if clock.synced {
+                    ""
+                } else {
+                    " (not found: the camera was left out)"
+                }
+            );
+        }
+    }
+    eprintln!(
+        "roitrack: {count} measurements of {} cameras -> {estimates} estimates in {seconds:.3} s ({:.2} us per \
+         measurement)",
+        rig.len(),
+        1e6 * seconds / count.max(1) as f64
+    );
+    Ok(())
+}
+
+/// The calibration paths a rig written to `out` gives: as the rig file wrote them when `out` is in the same folder,
+/// else absolute.
+fn calibrations_for(
+    rig_path: &std::path::Path,
+    out: &std::path::Path,
+    file: &roitrack::formats::RigFile,
+) -> Vec<String> {
+    let folder = |p: &std::path::Path| {
+        let parent = p.parent().unwrap_or(std::path::Path::new(""));
+        std::fs::canonicalize(if parent.as_os_str().is_empty() {
+            std::path::Path::new(".")
+        } else {
+            parent
+        })
+        .ok()
+    };
+    if folder(rig_path).is_some() && folder(rig_path) == folder(out) {
+        return file.calibrations_as_written.clone();
+    }
+    file.calibration_paths
+        .iter()
+        .map(|p| {
+            std::fs::canonicalize(p)
+                .unwrap_or_else(|_| p.clone())
+                .to_string_lossy()
+                .into_owned()
+        })
+        .collect()
+}
+
+/// The rig run's inputs (the rig, its calibrations, the target, the measurement files) against its outputs.
+fn check_rig_paths(
+    args: &TrackArgs,
+    rig_path: &std::path::Path,
+    file: &roitrack::formats::RigFile,
+    files: &[Option<PathBuf>],
+) -> Result<()> {
+    let mut inputs = vec![
+        ("--target", args.target.target.as_path()),
+        ("--rig", rig_path),
+    ];
+    for path in &file.calibration_paths {
+        inputs.push(("--rig's calibration", path.as_path()));
+    }
+    for path in files.iter().flatten() {
+        inputs.push(("--measurements", path.as_path()));
+    }
+    let mut outputs = vec![
+        ("--poses", args.poses.as_path()),
+        ("--twists", args.twists.as_path()),
+    ];
+    for (name, path) in [
+        ("--diagnostics", &args.diagnostics),
+        ("--covariance", &args.covariance),
+        ("--rig-out", &args.rig_out),
+    ] {
+        if let Some(path) = path {
+            outputs.push((name, path.as_path()));
+        }
+    }
     check_output_paths(&inputs, &outputs)?;
     Ok(())
 }
