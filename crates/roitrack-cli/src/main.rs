@@ -37,6 +37,8 @@ enum Command {
     Live(Box<commands::live::LiveArgs>),
     #[cfg(feature = "genicam")]
     Cameras(commands::live::CamerasArgs),
+    #[cfg(feature = "ros2")]
+    Ros2Node(Box<commands::ros2_node::Ros2NodeArgs>),
 }
 
 /// The error of a run whose outputs stand all the same: they are moved into place, then the error is reported and the
@@ -111,6 +113,11 @@ fn main() -> ExitCode {
     if matches!(cli.command, Command::Live(_)) {
         signals::stop_at_next_estimate();
     }
+    // A node runs until the first signal, then writes its outputs.
+    #[cfg(feature = "ros2")]
+    if matches!(cli.command, Command::Ros2Node(_)) {
+        signals::stop_at_next_estimate();
+    }
     // Every output of the run (files, bags, figures, folders) is written to a temporary and moved into place only
     // when the whole run has succeeded: a failed or interrupted run leaves every previous output as it was.
     let outputs = roitrack::formats::OutputSet::begin();
@@ -129,6 +136,8 @@ fn main() -> ExitCode {
         Command::Live(args) => commands::live::run(&args),
         #[cfg(feature = "genicam")]
         Command::Cameras(args) => commands::live::cameras(&args),
+        #[cfg(feature = "ros2")]
+        Command::Ros2Node(args) => commands::ros2_node::run(&args),
     };
     let signal = signals::received();
     // An error after which the outputs stand (`detect` with some images failed, `live` ended by its camera).

@@ -45,6 +45,35 @@ pub struct Ros2Args {
     pub ros2_wait_s: Option<f64>,
 }
 
+/// Where a node that is always on the bus (`ros2-node`) speaks: --ros2-domain, --ros2-namespace and
+/// --ros2-interface as [`Ros2Args`] has them, without --ros2.
+#[derive(Debug, Clone, Args)]
+pub struct Ros2BusArgs {
+    /// The DDS domain (ROS_DOMAIN_ID), 0 to 232; only nodes of the same domain see each other. Default: the
+    /// environment's ROS_DOMAIN_ID, else 0.
+    #[arg(long, value_name = "ID", value_parser = parse_domain)]
+    pub ros2_domain: Option<u16>,
+    /// The node's namespace, put before every topic, those it subscribes to and those it publishes. Default: none.
+    #[arg(long, value_name = "NS")]
+    pub ros2_namespace: Option<String>,
+    /// Use only the network interface with this IPv4 address (repeat for several). Default: every interface up.
+    #[arg(long, value_name = "ADDR")]
+    pub ros2_interface: Vec<std::net::IpAddr>,
+}
+
+#[cfg(feature = "ros2")]
+impl Ros2BusArgs {
+    /// The options of the node's subscriber and publisher.
+    pub fn options(&self) -> Result<roitrack_ros::ros2::Ros2Options> {
+        Ok(roitrack_ros::ros2::Ros2Options {
+            domain_id: domain(self.ros2_domain)?,
+            namespace: self.ros2_namespace.clone().unwrap_or_default(),
+            wait_for_subscribers_s: None,
+            interfaces: self.ros2_interface.clone(),
+        })
+    }
+}
+
 fn parse_domain(text: &str) -> Result<u16, String> {
     match text.trim().parse::<u16>() {
         Ok(id) if id <= 232 => Ok(id),

@@ -411,3 +411,119 @@ fn a_node_with_no_interface_up_or_an_address_no_interface_has_is_refused_at_star
         "{log}"
     );
 }
+
+fn publisher_script() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../roitrack-ros/tests/ros2_measurement_publisher.py")
+}
+
+#[test]
+fn the_node_tracks_centroids_from_cyclone_dds_as_track_does_the_file_and_names_malformed_messages()
+{
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
+    let sim = dir.path().join("sim");
+    let simulated = Command::new(roitrack)
+        .args([
+            "simulate",
+            "--scenario",
+            "orthoglide",
+            "--duration-s",
+            "1",
+            "--out",
+        ])
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(simulated.status.success());
+    let file = |name: &str| dir.path().join(name);
+    let tracked = Command::new(roitrack)
+        .args(["track", "--camera"])
+        .arg(sim.join("camera.yaml"))
+        .arg("--target")
+        .arg(sim.join("target.csv"))
+        .arg("--measurements")
+        .arg(sim.join("measurements.csv"))
+        .arg("--poses")
+        .arg(file("track.tum"))
+        .arg("--twists")
+        .arg(file("track.csv"))
+        .output()
+        .unwrap();
+    assert!(tracked.status.success());
+    // Cyclone DDS publishes the measurements (with three malformed messages among them) to the node, and takes
+    // the node's estimates.
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 >/dev/null &
+subscriber=$!
+"$PYTHON" "$PUBLISHER" "$SIM/measurements.csv" --malformed --wait-s 60 &
+publisher=$!
+"$ROITRACK" ros2-node --camera "$SIM/camera.yaml" --target "$SIM/target.csv" --idle-s 2 \
+    --poses "$POSES" --twists "$TWISTS" || exit 91
+wait $publisher || exit 92
+wait $subscriber || exit 93
+"#,
+        &[
+            ("PYTHON", &python),
+            ("SUBSCRIBER", &subscriber_script()),
+            ("PUBLISHER", &publisher_script()),
+            ("RECEIVED", &file("received.jsonl")),
+            ("ROITRACK", roitrack),
+            ("SIM", &sim),
+            ("POSES", &file("node.tum")),
+            ("TWISTS", &file("node.csv")),
+        ],
+    );
+    assert!(ok, "{log}");
+    for reason in [
+        "message 0: field u_px: 9 entries for 10 point ids",
+        "centroid 0: unknown point id 9999",
+        "field v_px[0]: NaN is not finite",
+        "3 malformed and left out",
+    ] {
+        assert!(log.contains(reason), "{reason}:\n{log}");
+    }
+    let (node, track) = (
+        roitrack::formats::read_tum(file("node.tum")).unwrap(),
+        roitrack::formats::read_tum(file("track.tum")).unwrap(),
+    );
+    assert!(track.len() >= 390, "{} estimates", track.len());
+    assert_eq!(node.len(), track.len());
+    for (a, b) in node.iter().zip(&track) {
+        let (ta, tb) = (
+            a.cam_from_obj.translation.vector,
+            b.cam_from_obj.translation.vector,
+        );
+        let (qa, qb) = (a.cam_from_obj.rotation, b.cam_from_obj.rotation);
+        close(
+            "node against track",
+            &[a.t_s, ta.x, ta.y, ta.z, qa.i, qa.j, qa.k, qa.w],
+            &[b.t_s, tb.x, tb.y, tb.z, qb.i, qb.j, qb.k, qb.w],
+        );
+    }
+    let (node, track) = (
+        roitrack::formats::read_twists_csv(file("node.csv")).unwrap(),
+        roitrack::formats::read_twists_csv(file("track.csv")).unwrap(),
+    );
+    for (a, b) in node.iter().zip(&track) {
+        let (va, vb) = (a.velocity_mps, b.velocity_mps);
+        let (wa, wb) = (a.angular_velocity_radps, b.angular_velocity_radps);
+        close(
+            "node's twist",
+            &[va.x, va.y, va.z, wa.x, wa.y, wa.z],
+            &[vb.x, vb.y, vb.z, wb.x, wb.y, wb.z],
+        );
+    }
+    // And the node published them all.
+    let received = read_received(&file("received.jsonl"));
+    let poses = received
+        .iter()
+        .filter(|m| m.topic == "/roitrack/pose")
+        .count();
+    assert_eq!(poses, track.len(), "poses the node published");
+}

@@ -12,7 +12,8 @@
 //! [`LiveServer`] serves the same messages, byte for byte, over the Foxglove WebSocket protocol while tracking (open
 //! `ws://127.0.0.1:8765` in Foxglove); [`Pacer`] replays a recording at its own speed so that a viewer can follow it.
 //! With the feature `ros2`, [`ros2::Ros2Publisher`] publishes the same messages live on the ROS 2 DDS bus, as a ROS 2
-//! node that robots, `ros2 topic echo` and RViz subscribe to.
+//! node that robots, `ros2 topic echo` and RViz subscribe to, and [`ros2_input::MeasurementSubscriber`] takes blob
+//! centroids from it (`roitrack ros2-node`).
 //!
 //! [`BagFrameSource`] reads the other way: the image frames of a bag's topic, as a timed frame stream, and the camera
 //! of its CameraInfo; [`BagMeasurementSource`] replays the blob centroids of `/roitrack/measurements`
@@ -38,6 +39,8 @@ mod output;
 mod reader;
 #[cfg(feature = "ros2")]
 pub mod ros2;
+#[cfg(feature = "ros2")]
+pub mod ros2_input;
 mod writer;
 
 pub use background::BackgroundBag;

@@ -143,7 +143,10 @@ impl Iterator for BagMeasurementSource {
 }
 
 /// Decodes one `BlobMeasurements` into `out`; on an error, the field and what is wrong with it.
-fn decode(message: &[u8], out: &mut VecDeque<Measurement>) -> Result<(), (String, String)> {
+pub(crate) fn decode(
+    message: &[u8],
+    out: &mut VecDeque<Measurement>,
+) -> Result<(), (String, String)> {
     let whole = |e: String| ("header".to_string(), e);
     let mut cdr = Cdr::new(message).map_err(whole)?;
     let (stamp_s, _) = cdr.header().map_err(whole)?;

@@ -123,7 +123,7 @@ pub fn qos_of(topic: &str) -> QosProfile {
 }
 
 /// The namespace as ROS 2 writes it: `""` for none, else `/a/b` (a leading slash, none trailing).
-fn normalised_namespace(namespace: &str) -> String {
+pub(crate) fn normalised_namespace(namespace: &str) -> String {
     let trimmed = namespace.trim().trim_end_matches('/');
     match trimmed {
         "" => String::new(),
@@ -441,7 +441,7 @@ fn addresses_up() -> Vec<IpAddr> {
 
 /// Refuses a start with no network interface up (DDS would then publish to nobody, silently), or with an address
 /// asked for that no interface that is up has.
-fn check_interfaces(wanted: &[IpAddr]) -> Result<(), Ros2Error> {
+pub(crate) fn check_interfaces(wanted: &[IpAddr]) -> Result<(), Ros2Error> {
     let up = addresses_up();
     let list = |addresses: &[IpAddr]| {
         addresses

@@ -8,6 +8,8 @@ pub mod lab;
 #[cfg(feature = "genicam")]
 pub mod live;
 pub mod plot;
+#[cfg(feature = "ros2")]
+pub mod ros2_node;
 pub mod servo;
 pub mod simulate;
 pub mod target;

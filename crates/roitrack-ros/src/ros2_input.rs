@@ -1,0 +1,262 @@
+//! [`MeasurementSubscriber`] (feature `ros2`): blob centroids (`roitrack_msgs/msg/BlobMeasurements`, the message
+//! the bags carry on `/roitrack/measurements`) taken live from the ROS 2 DDS bus, for `roitrack ros2-node`.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use roitrack_core::Measurement;
+use roitrack_formats::MeasurementChecks;
+use ros2_client::dds::rustdds::{
+    self, DomainParticipantBuilder, QosPolicies, RepresentationIdentifier, TopicKind, no_key,
+};
+use ros2_client::{MessageTypeName, Name, QosProfile, qos::History};
+
+use crate::measurement_reader::decode;
+use crate::msg::BLOB_MEASUREMENTS;
+use crate::ros2::{Ros2Error, Ros2Options, check_interfaces, normalised_namespace};
+
+/// How often the subscriber looks for a message when none is waiting.
+const POLL: Duration = Duration::from_micros(200);
+/// The messages kept until taken: a tracker behind by this many messages loses the oldest (counted by DDS, not here).
+const DEPTH: usize = 1000;
+/// The malformed messages whose reasons are kept (all are counted).
+const REASONS_KEPT: usize = 16;
+
+/// A message's serialised body as DDS delivered it, with its encoding.
+#[derive(Debug)]
+pub struct RawMessage {
+    encoding: RepresentationIdentifier,
+    bytes: Vec<u8>,
+}
+
+/// Takes every message as its bytes: roitrack decodes them itself, so that a malformed one is named and counted,
+/// never a failure of the subscription.
+#[derive(Debug, Clone, Copy)]
+pub struct RawAdapter;
+
+impl no_key::DeserializerAdapter<RawMessage> for RawAdapter {
+    type Error = std::convert::Infallible;
+    type Decoded = RawMessage;
+
+    fn supported_encodings() -> &'static [RepresentationIdentifier] {
+        &[
+            RepresentationIdentifier::CDR_LE,
+            RepresentationIdentifier::CDR_BE,
+            RepresentationIdentifier::PL_CDR_LE,
+            RepresentationIdentifier::PL_CDR_BE,
+            RepresentationIdentifier::CDR2_LE,
+            RepresentationIdentifier::CDR2_BE,
+            RepresentationIdentifier::D_CDR_LE,
+            RepresentationIdentifier::D_CDR_BE,
+        ]
+    }
+
+    fn transform_decoded(decoded: RawMessage) -> RawMessage {
+        decoded
+    }
+}
+
+impl no_key::DefaultDecoder<RawMessage> for RawAdapter {
+    type Decoder = RawAdapter;
+    const DECODER: RawAdapter = RawAdapter;
+}
+
+impl<'de> no_key::Decode<'de, RawMessage> for RawAdapter {
+    type Error = std::convert::Infallible;
+
+    fn decode_bytes(
+        self,
+        input_bytes: &'de [u8],
+        encoding: RepresentationIdentifier,
+    ) -> Result<RawMessage, Self::Error> {
+        Ok(RawMessage {
+            encoding,
+            bytes: input_bytes.to_vec(),
+        })
+    }
+}
+
+/// What a subscriber received.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SubscriberReport {
+    /// Messages taken.
+    pub messages: u64,
+    /// Centroids handed on to the tracker.
+    pub measurements: u64,
+    /// Messages left out whole because something in them was wrong.
+    pub malformed: u64,
+    /// Why, for the first 16 of them: `message N: field F: what`.
+    pub reasons: Vec<String>,
+}
+
+/// The centroids of a `roitrack_msgs/msg/BlobMeasurements` topic on the ROS 2 DDS bus, as an iterator of
+/// [`Measurement`]s in the order they come (each at `header.stamp + dt_s`), blocking until the next one; it ends when
+/// `stop` is raised, or when no message has come for `idle` after the first one.
+///
+/// Subscribed reliable (keep last 1,000): every centroid matters to the estimator, so a publisher of them must offer
+/// reliable. Every message is checked whole before any of its centroids is handed on, as a measurements file's rows
+/// are (arrays of one entry per centroid, finite values, the target's point ids, centroids on the image, times that
+/// never go back): one that fails, or that is not little-endian CDR, is left out whole, counted, and its reason kept
+/// ([`report`](Self::report)); the subscription goes on.
+pub struct MeasurementSubscriber {
+    reader: no_key::SimpleDataReader<RawMessage, RawAdapter>,
+    // Kept alive with the reader.
+    _participant: rustdds::DomainParticipant,
+    topic: String,
+    checks: MeasurementChecks,
+    pending: std::collections::VecDeque<Measurement>,
+    decoded: std::collections::VecDeque<Measurement>,
+    report: SubscriberReport,
+    stop: Arc<AtomicBool>,
+    idle: Duration,
+    last_message: Option<Instant>,
+}
+
+impl std::fmt::Debug for MeasurementSubscriber {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MeasurementSubscriber")
+            .field("topic", &self.topic)
+            .field("report", &self.report)
+            .finish_non_exhaustive()
+    }
+}
+
+impl MeasurementSubscriber {
+    /// Subscribes to `topic` (in the namespace of `options`) on the domain and interfaces of `options`; `checks`
+    /// are the checks of every centroid (the target's ids, the image's size).
+    pub fn start(
+        options: &Ros2Options,
+        topic: &str,
+        checks: MeasurementChecks,
+        stop: Arc<AtomicBool>,
+        idle: Duration,
+    ) -> Result<Self, Ros2Error> {
+        check_interfaces(&options.interfaces)?;
+        let full = format!("{}{topic}", normalised_namespace(&options.namespace));
+        let name = Name::parse(&full).map_err(|e| Ros2Error::Namespace {
+            namespace: full.clone(),
+            message: e.to_string(),
+        })?;
+        let start_error = |message: String| Ros2Error::Start {
+            domain_id: options.domain_id,
+            message,
+        };
+        let mut builder = DomainParticipantBuilder::new(options.domain_id);
+        if !options.interfaces.is_empty() {
+            builder = builder.with_only_networks(options.interfaces.iter().copied());
+        }
+        let participant = builder.build().map_err(|e| start_error(e.to_string()))?;
+        let qos: QosPolicies = (&QosProfile::subscription_default()
+            .reliability_reliable(ros2_client::qos::WhenFull::Fail)
+            .history(History::KeepLast { depth: DEPTH }))
+            .into();
+        let (package, type_name) = BLOB_MEASUREMENTS
+            .split_once("/msg/")
+            .expect("a pkg/msg/Type name");
+        let dds_topic = participant
+            .create_topic(
+                format!("rt{}", name_string(&name)),
+                MessageTypeName::new(package, type_name).dds_msg_type(),
+                &qos,
+                TopicKind::NoKey,
+            )
+            .map_err(|e| start_error(format!("cannot create the topic {full}: {e}")))?;
+        let reader = participant
+            .create_subscriber(&qos)
+            .and_then(|s| s.create_simple_datareader_no_key(&dds_topic, Some(qos.clone())))
+            .map_err(|e| start_error(format!("cannot subscribe to {full}: {e}")))?;
+        Ok(Self {
+            reader,
+            _participant: participant,
+            topic: full,
+            checks,
+            pending: Default::default(),
+            decoded: Default::default(),
+            report: SubscriberReport::default(),
+            stop,
+            idle,
+            last_message: None,
+        })
+    }
+
+    /// The topic subscribed to (with its namespace).
+    pub fn topic(&self) -> &str {
+        &self.topic
+    }
+
+    /// What was received so far.
+    pub fn report(&self) -> &SubscriberReport {
+        &self.report
+    }
+
+    /// Decodes and checks one message whole; its centroids to `pending`, or the reason it is left out.
+    fn take_message(&mut self, message: RawMessage) {
+        let index = self.report.messages;
+        self.report.messages += 1;
+        let mut bytes = Vec::with_capacity(4 + message.bytes.len());
+        bytes.extend_from_slice(&message.encoding.to_bytes());
+        bytes.extend_from_slice(&[0, 0]);
+        bytes.extend_from_slice(&message.bytes);
+        self.decoded.clear();
+        let checked = decode(&bytes, &mut self.decoded)
+            .map_err(|(field, e)| format!("field {field}: {e}"))
+            .and_then(|()| {
+                // Checked on a copy: a message that fails changes nothing of what later ones are checked against.
+                let mut checks = self.checks.clone();
+                for (k, m) in self.decoded.iter().enumerate() {
+                    checks
+                        .check(m)
+                        .map_err(|problem| format!("centroid {k}: {problem}"))?;
+                }
+                Ok(checks)
+            });
+        match checked {
+            Ok(checks) => {
+                self.checks = checks;
+                self.report.measurements += self.decoded.len() as u64;
+                self.pending.extend(self.decoded.drain(..));
+            }
+            Err(reason) => {
+                self.report.malformed += 1;
+                if self.report.reasons.len() < REASONS_KEPT {
+                    self.report
+                        .reasons
+                        .push(format!("{} message {index}: {reason}", self.topic));
+                }
+            }
+        }
+    }
+}
+
+/// A ROS 2 name as its fully qualified text.
+fn name_string(name: &Name) -> String {
+    name.to_string()
+}
+
+impl Iterator for MeasurementSubscriber {
+    type Item = Result<Measurement, std::convert::Infallible>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(m) = self.pending.pop_front() {
+                return Some(Ok(m));
+            }
+            if self.stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            match self.reader.try_take_one() {
+                Ok(Some(change)) => {
+                    self.last_message = Some(Instant::now());
+                    self.take_message(change.into_value());
+                }
+                Ok(None) | Err(_) => {
+                    if self.last_message.is_some_and(|t| t.elapsed() >= self.idle) {
+                        return None;
+                    }
+                    std::thread::sleep(POLL);
+                }
+            }
+        }
+    }
+}
