@@ -61,6 +61,20 @@ impl Histogram {
             })
             .unwrap_or(0) as u16
     }
+
+    /// The largest value with at least `fraction` of the pixels at or above it: of the image `top - p` (the values
+    /// above `top` counted as `top`), `top - self.percentile_from_top(fraction)` is the percentile.
+    pub fn percentile_from_top(&self, fraction: f64) -> u16 {
+        let rank = (fraction * self.total as f64).ceil().max(1.0) as u64;
+        let mut seen = 0u64;
+        self.counts
+            .iter()
+            .rposition(|&c| {
+                seen += u64::from(c);
+                seen >= rank
+            })
+            .unwrap_or(self.counts.len() - 1) as u16
+    }
 }
 
 #[cfg(test)]
@@ -75,5 +89,34 @@ mod tests {
         assert_eq!(h.percentile(0.01), 0);
         assert_eq!(h.percentile(1.0), 99);
         assert_eq!(Histogram::of(&pixels, 10).percentile(0.5), 10);
+    }
+
+    #[test]
+    fn percentiles_from_the_top_are_those_of_the_inverted_image() {
+        let mut state = 7u64;
+        for top in [255u16, 1023, 4095, 65_535] {
+            // Values above `top` too (counted as `top`), repeated ones, and the extremes.
+            let pixels: Vec<u16> = (0..5000)
+                .map(|k| {
+                    state = state
+                        .wrapping_mul(6_364_136_223_846_793_005)
+                        .wrapping_add(1_442_695_040_888_963_407);
+                    match k % 211 {
+                        0 => 0,
+                        1 => u16::MAX,
+                        _ => ((state >> 40) % (u64::from(top) + 40)) as u16,
+                    }
+                })
+                .collect();
+            let inverted: Vec<u16> = pixels.iter().map(|&p| top.saturating_sub(p)).collect();
+            let (h, hi) = (Histogram::of(&pixels, top), Histogram::of(&inverted, top));
+            for fraction in [0.0, 0.0001, 0.01, 0.3, 0.5, 0.99, 1.0] {
+                assert_eq!(
+                    top - h.percentile_from_top(fraction),
+                    hi.percentile(fraction),
+                    "top {top}, fraction {fraction}"
+                );
+            }
+        }
     }
 }

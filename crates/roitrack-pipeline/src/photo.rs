@@ -318,9 +318,12 @@ pub fn detect_target(
                     (guess_candidates, None)
                 } else if guess_promise == 0 {
                     // Nothing grew: the other polarity cannot promise less.
-                    (find_rough(other, &mut scratch), Some(guess_candidates))
+                    (
+                        guess_candidates.other_polarity_rough(&mut scratch),
+                        Some(guess_candidates),
+                    )
                 } else {
-                    let other_candidates = find_rough(other, &mut scratch);
+                    let other_candidates = guess_candidates.other_polarity_rough(&mut scratch);
                     let other_promise =
                         lattice_promise(camera, target, &rough(&other_candidates)).unwrap_or(0);
                     if other_promise > guess_promise {
@@ -456,22 +459,7 @@ const POLARITY_CELL_PX: usize = 32;
 /// alike. Global statistics (the median against the range) fail on a print in a shadowed or dark scene. It is only
 /// a guess (bright glints outdoors outvote a small print): [`detect_target`] checks it against the blobs.
 pub fn likely_polarity(frame: &Frame) -> Polarity {
-    let (w, h) = (frame.width as usize, frame.height as usize);
-    let (cols, rows) = (w.div_ceil(POLARITY_CELL_PX), h.div_ceil(POLARITY_CELL_PX));
-    // Per cell: minimum, maximum, sum and count of the sampled pixels.
-    let mut cells = vec![(u16::MAX, 0u16, 0u64, 0u32); cols * rows];
-    for j in (0..h).step_by(2) {
-        let row = &frame.pixels[j * w..(j + 1) * w];
-        let cell_row = &mut cells[(j / POLARITY_CELL_PX) * cols..][..cols];
-        for (cell, chunk) in cell_row.iter_mut().zip(row.chunks(POLARITY_CELL_PX)) {
-            for &p in chunk.iter().step_by(2) {
-                cell.0 = cell.0.min(p);
-                cell.1 = cell.1.max(p);
-                cell.2 += u64::from(p);
-                cell.3 += 1;
-            }
-        }
-    }
+    let cells = cell_statistics(frame);
     let mut vote = 0.0;
     for &(lo, hi, sum, n) in &cells {
         if n == 0 {
@@ -485,6 +473,130 @@ pub fn likely_polarity(frame: &Frame) -> Polarity {
         Polarity::Dark
     } else {
         Polarity::Bright
+    }
+}
+
+/// Per [`POLARITY_CELL_PX`] cell of the frame (row-major), the minimum, maximum, sum and count of its pixels at
+/// even columns of even rows.
+fn cell_statistics(frame: &Frame) -> Vec<(u16, u16, u64, u32)> {
+    let (w, h) = (frame.width as usize, frame.height as usize);
+    let (cols, rows) = (w.div_ceil(POLARITY_CELL_PX), h.div_ceil(POLARITY_CELL_PX));
+    let mut cells = vec![(u16::MAX, 0u16, 0u64, 0u32); cols * rows];
+    // Whole cells' rows of pixels 8 at a time (SSE2, every x86_64 CPU), about ten times the speed of a pixel at a
+    // time; a partial cell at the right pixel by pixel.
+    #[cfg(target_arch = "x86_64")]
+    let whole = w / POLARITY_CELL_PX;
+    #[cfg(not(target_arch = "x86_64"))]
+    let whole = 0;
+    #[cfg(target_arch = "x86_64")]
+    let mut lanes = vec![simd::CellLanes::new(); whole];
+    for cell_row in 0..rows {
+        let cell_row_cells = &mut cells[cell_row * cols..][..cols];
+        let rows_in_cell = cell_row * POLARITY_CELL_PX..((cell_row + 1) * POLARITY_CELL_PX).min(h);
+        for j in rows_in_cell.step_by(2) {
+            let row = &frame.pixels[j * w..(j + 1) * w];
+            #[cfg(target_arch = "x86_64")]
+            for (lane, chunk) in lanes.iter_mut().zip(row.as_chunks::<POLARITY_CELL_PX>().0) {
+                lane.add(chunk);
+            }
+            for (cell, chunk) in cell_row_cells[whole..]
+                .iter_mut()
+                .zip(row[whole * POLARITY_CELL_PX..].chunks(POLARITY_CELL_PX))
+            {
+                for &p in chunk.iter().step_by(2) {
+                    cell.0 = cell.0.min(p);
+                    cell.1 = cell.1.max(p);
+                    cell.2 += u64::from(p);
+                    cell.3 += 1;
+                }
+            }
+        }
+        #[cfg(target_arch = "x86_64")]
+        for (cell, lane) in cell_row_cells.iter_mut().zip(&mut lanes) {
+            *cell = lane.take();
+        }
+    }
+    cells
+}
+
+/// [`cell_statistics`] for whole cells with SSE2.
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use super::POLARITY_CELL_PX;
+    use std::arch::x86_64::{
+        __m128i, _mm_add_epi32, _mm_and_si128, _mm_loadu_si128, _mm_max_epi16, _mm_min_epi16,
+        _mm_or_si128, _mm_set1_epi16, _mm_set1_epi32, _mm_setzero_si128, _mm_storeu_si128,
+        _mm_xor_si128,
+    };
+
+    /// One cell's minimum, maximum and sum over its rows so far, in 8 lanes of 16 bits (4 of 32 for the sum): the
+    /// pixels at even columns are the even lanes, the odd lanes hold what changes nothing.
+    #[derive(Clone, Copy)]
+    pub(super) struct CellLanes {
+        /// Signed minimum and maximum of the values with their top bit flipped (SSE2 compares signed 16-bit values
+        /// only).
+        min: __m128i,
+        max: __m128i,
+        sum: __m128i,
+        count: u32,
+    }
+
+    impl CellLanes {
+        pub(super) fn new() -> Self {
+            // SAFETY: SSE2 is part of the x86_64 baseline.
+            unsafe {
+                Self {
+                    min: _mm_set1_epi16(i16::MAX),
+                    max: _mm_set1_epi16(i16::MIN),
+                    sum: _mm_setzero_si128(),
+                    count: 0,
+                }
+            }
+        }
+
+        /// Adds the even columns of one row of the cell.
+        pub(super) fn add(&mut self, pixels: &[u16; POLARITY_CELL_PX]) {
+            // SAFETY: SSE2 is part of the x86_64 baseline; the loads read 16 bytes at offsets 0..=48 of a 64-byte
+            // array.
+            unsafe {
+                let bias = _mm_set1_epi16(i16::MIN);
+                let even = _mm_set1_epi32(0xFFFF);
+                // The odd lanes: the largest signed value (for the minimum), the smallest (for the maximum).
+                let odd_high = _mm_set1_epi32(0x7FFF_0000);
+                let odd_low = _mm_set1_epi32(i32::MIN);
+                let base = pixels.as_ptr().cast::<__m128i>();
+                for k in 0..POLARITY_CELL_PX / 8 {
+                    let v = _mm_loadu_si128(base.add(k));
+                    let evens = _mm_and_si128(v, even);
+                    let biased = _mm_and_si128(_mm_xor_si128(v, bias), even);
+                    self.min = _mm_min_epi16(self.min, _mm_or_si128(biased, odd_high));
+                    self.max = _mm_max_epi16(self.max, _mm_or_si128(biased, odd_low));
+                    // 16 rows of 4 values of at most 65535 a lane: far within 32 bits.
+                    self.sum = _mm_add_epi32(self.sum, evens);
+                }
+            }
+            self.count += (POLARITY_CELL_PX / 2) as u32;
+        }
+
+        /// The cell's minimum, maximum, sum and count, the lanes reset.
+        pub(super) fn take(&mut self) -> (u16, u16, u64, u32) {
+            let (mut min, mut max, mut sum) = ([0i16; 8], [0i16; 8], [0u32; 4]);
+            // SAFETY: SSE2 is part of the x86_64 baseline; each store writes 16 bytes into a 16-byte array.
+            unsafe {
+                _mm_storeu_si128(min.as_mut_ptr().cast(), self.min);
+                _mm_storeu_si128(max.as_mut_ptr().cast(), self.max);
+                _mm_storeu_si128(sum.as_mut_ptr().cast(), self.sum);
+            }
+            let unbias = |v: i16| (v as u16) ^ 0x8000;
+            let found = (
+                unbias(*min.iter().min().unwrap_or(&i16::MAX)),
+                unbias(*max.iter().max().unwrap_or(&i16::MIN)),
+                sum.iter().map(|&s| u64::from(s)).sum(),
+                self.count,
+            );
+            *self = Self::new();
+            found
+        }
     }
 }
 
@@ -527,5 +639,68 @@ fn finish(
         polarities_tried: vec![polarity],
         polarities_measured: vec![polarity],
         hypotheses: found.hypotheses,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The cells' statistics as they were first computed, a pixel at a time: the reference of the fast ones.
+    fn cell_statistics_by_pixel(frame: &Frame) -> Vec<(u16, u16, u64, u32)> {
+        let (w, h) = (frame.width as usize, frame.height as usize);
+        let (cols, rows) = (w.div_ceil(POLARITY_CELL_PX), h.div_ceil(POLARITY_CELL_PX));
+        let mut cells = vec![(u16::MAX, 0u16, 0u64, 0u32); cols * rows];
+        for j in (0..h).step_by(2) {
+            let row = &frame.pixels[j * w..(j + 1) * w];
+            let cell_row = &mut cells[(j / POLARITY_CELL_PX) * cols..][..cols];
+            for (cell, chunk) in cell_row.iter_mut().zip(row.chunks(POLARITY_CELL_PX)) {
+                for &p in chunk.iter().step_by(2) {
+                    cell.0 = cell.0.min(p);
+                    cell.1 = cell.1.max(p);
+                    cell.2 += u64::from(p);
+                    cell.3 += 1;
+                }
+            }
+        }
+        cells
+    }
+
+    #[test]
+    fn cell_statistics_agree_with_a_pixel_at_a_time() {
+        let mut state = 12_345u64;
+        // Sizes with and without partial cells, 8- and 16-bit values (the extremes included).
+        for (width, height, bit_depth) in [
+            (640u32, 480u32, 8u8),
+            (97, 70, 16),
+            (64, 33, 12),
+            (31, 5, 8),
+        ] {
+            let top = (1u32 << bit_depth) - 1;
+            let pixels: Vec<u16> = (0..width * height)
+                .map(|k| {
+                    state = state
+                        .wrapping_mul(6_364_136_223_846_793_005)
+                        .wrapping_add(1_442_695_040_888_963_407);
+                    match k % 97 {
+                        0 => 0,
+                        1 => top as u16,
+                        _ => ((state >> 33) as u32 % (top + 1)) as u16,
+                    }
+                })
+                .collect();
+            let frame = Frame {
+                width,
+                height,
+                bit_depth,
+                pixels,
+                ..Frame::default()
+            };
+            assert_eq!(
+                cell_statistics(&frame),
+                cell_statistics_by_pixel(&frame),
+                "{width} x {height}, {bit_depth} bits"
+            );
+        }
     }
 }

@@ -223,6 +223,11 @@ pub fn detect_photo_blobs(
 #[derive(Debug)]
 pub struct PhotoBlobCandidates<'a> {
     polarity: Polarity,
+    /// The photograph.
+    pixels: &'a [u16],
+    /// The histogram of the photograph (not of its inversion), which sets the levels of either polarity; `None` for
+    /// an image too small to search.
+    histogram: Option<crate::histogram::Histogram>,
     /// The image with the blobs bright: the photograph, or its inversion for dark blobs.
     image: std::borrow::Cow<'a, [u16]>,
     width: usize,
@@ -251,10 +256,49 @@ pub struct RoughBlob {
     pub levels: u32,
 }
 
-impl PhotoBlobCandidates<'_> {
+impl<'a> PhotoBlobCandidates<'a> {
     /// The polarity of the blobs.
     pub fn polarity(&self) -> Polarity {
         self.polarity
+    }
+
+    /// The other polarity's candidates in the same photograph as [`find_rough_photo_blob_candidates`] finds them,
+    /// with the photograph's histogram (which sets either polarity's levels) taken from these instead of counted
+    /// again.
+    ///
+    /// ```
+    /// use roitrack_image::photo::{PhotoBlobOptions, PhotoScratch, Polarity, find_rough_photo_blob_candidates};
+    /// // A bright and a dark square of 6 x 6 px on a grey background.
+    /// let (w, h) = (40usize, 20usize);
+    /// let mut image = vec![100u16; w * h];
+    /// for j in 7..13 {
+    ///     for i in 8..14 {
+    ///         image[j * w + i] = 200;
+    ///         image[j * w + i + 16] = 10;
+    ///     }
+    /// }
+    /// let options = PhotoBlobOptions { ellipse_fill_range: (0.7, 1.3), ..PhotoBlobOptions::default() };
+    /// let mut scratch = PhotoScratch::default();
+    /// let bright = find_rough_photo_blob_candidates(&image, w as u32, h as u32, 8, Polarity::Bright, &options, &mut scratch);
+    /// let dark = bright.other_polarity_rough(&mut scratch);
+    /// assert_eq!(dark.polarity(), Polarity::Dark);
+    /// let direct = find_rough_photo_blob_candidates(&image, w as u32, h as u32, 8, Polarity::Dark, &options, &mut scratch);
+    /// assert_eq!(dark.rough_blobs(), direct.rough_blobs());
+    /// assert_eq!(dark.measure(&mut scratch), direct.measure(&mut scratch));
+    /// ```
+    pub fn other_polarity_rough(&self, scratch: &mut PhotoScratch) -> PhotoBlobCandidates<'a> {
+        let mut candidates = unlabelled(
+            self.pixels,
+            self.width,
+            self.height,
+            self.full_scale,
+            self.polarity.other(),
+            &self.options,
+            self.histogram.clone(),
+            scratch,
+        );
+        candidates.label_rough(scratch);
+        candidates
     }
 
     /// Whether every level has been labelled (not yet for [`find_rough_photo_blob_candidates`]'s).
@@ -302,6 +346,15 @@ impl PhotoBlobCandidates<'_> {
         // Stable: equally strong ones stay in the order they were found.
         rough.sort_by_key(|b| std::cmp::Reverse(b.levels));
         rough
+    }
+
+    /// Labels the levels a third and two thirds of the way up ([`find_rough_photo_blob_candidates`]).
+    fn label_rough(&mut self, scratch: &mut PhotoScratch) {
+        let levels = self.found.len();
+        let mut some = vec![levels / 3, 2 * levels / 3];
+        some.dedup();
+        some.retain(|&k| k < levels);
+        self.label(&some, scratch);
     }
 
     /// Labels the levels `todo` (increasing), half of them on a second thread when the image is large.
@@ -441,7 +494,8 @@ pub fn find_photo_blob_candidates<'a>(
     options: &PhotoBlobOptions,
     scratch: &mut PhotoScratch,
 ) -> PhotoBlobCandidates<'a> {
-    let mut candidates = unlabelled(pixels, width, height, bit_depth, polarity, options, scratch);
+    let mut candidates =
+        unlabelled_photo(pixels, width, height, bit_depth, polarity, options, scratch);
     let every: Vec<usize> = (0..candidates.found.len()).collect();
     candidates.label(&every, scratch);
     candidates
@@ -482,17 +536,14 @@ pub fn find_rough_photo_blob_candidates<'a>(
     options: &PhotoBlobOptions,
     scratch: &mut PhotoScratch,
 ) -> PhotoBlobCandidates<'a> {
-    let mut candidates = unlabelled(pixels, width, height, bit_depth, polarity, options, scratch);
-    let levels = candidates.found.len();
-    let mut some = vec![levels / 3, 2 * levels / 3];
-    some.dedup();
-    some.retain(|&k| k < levels);
-    candidates.label(&some, scratch);
+    let mut candidates =
+        unlabelled_photo(pixels, width, height, bit_depth, polarity, options, scratch);
+    candidates.label_rough(scratch);
     candidates
 }
 
-/// The candidates of an image before any level is labelled: the image of the polarity, the levels' thresholds.
-fn unlabelled<'a>(
+/// The candidates of a photograph before any level is labelled: the image of the polarity, the levels' thresholds.
+fn unlabelled_photo<'a>(
     pixels: &'a [u16],
     width: u32,
     height: u32,
@@ -504,6 +555,25 @@ fn unlabelled<'a>(
     let (w, h) = (width as usize, height as usize);
     assert_eq!(pixels.len(), w * h, "pixel buffer length");
     let full_scale = ((1u32 << bit_depth.clamp(1, 16)) - 1) as u16;
+    let histogram = (w >= 3 && h >= 3).then(|| crate::histogram::Histogram::of(pixels, full_scale));
+    unlabelled(
+        pixels, w, h, full_scale, polarity, options, histogram, scratch,
+    )
+}
+
+/// The candidates of a `w` x `h` photograph of values up to `full_scale` whose histogram is `histogram` (`None`:
+/// too small to search) before any level is labelled.
+#[allow(clippy::too_many_arguments)]
+fn unlabelled<'a>(
+    pixels: &'a [u16],
+    w: usize,
+    h: usize,
+    full_scale: u16,
+    polarity: Polarity,
+    options: &PhotoBlobOptions,
+    histogram: Option<crate::histogram::Histogram>,
+    scratch: &mut PhotoScratch,
+) -> PhotoBlobCandidates<'a> {
     let levels = options.levels.max(1);
     let image = match polarity {
         Polarity::Bright => std::borrow::Cow::Borrowed(pixels),
@@ -516,6 +586,8 @@ fn unlabelled<'a>(
     };
     let mut candidates = PhotoBlobCandidates {
         polarity,
+        pixels,
+        histogram,
         image,
         width: w,
         height: h,
@@ -526,12 +598,19 @@ fn unlabelled<'a>(
         min_contrast: 0.0,
         two_threads: options.threads >= 2 && w * h >= MIN_PIXELS_FOR_TWO_THREADS && levels >= 2,
     };
-    if w < 3 || h < 3 {
+    let Some(histogram) = &candidates.histogram else {
         return candidates;
-    }
-    // The top of the range is the brightest pixel: small blobs can be far fewer than 1 % of the pixels.
-    let histogram = crate::histogram::Histogram::of(&candidates.image, full_scale);
-    let (low, high) = (histogram.percentile(0.01), histogram.percentile(1.0));
+    };
+    // The range of the image with the blobs bright (the photograph's or its inversion's), from its 1st percentile
+    // to its brightest pixel: small blobs can be far fewer than 1 % of the pixels. The inversion's histogram is the
+    // photograph's mirrored.
+    let (low, high) = match polarity {
+        Polarity::Bright => (histogram.percentile(0.01), histogram.percentile(1.0)),
+        Polarity::Dark => (
+            full_scale - histogram.percentile_from_top(0.01),
+            full_scale - histogram.percentile_from_top(1.0),
+        ),
+    };
     let range = f64::from(high.saturating_sub(low));
     if range < 4.0 {
         return candidates;
