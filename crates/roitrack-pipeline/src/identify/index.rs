@@ -110,13 +110,14 @@ impl PointIndex {
             return;
         };
         for j in rows {
-            for i in cols.clone() {
-                let c = j * self.cols + i;
-                for &e in &self.entries[self.starts[c] as usize..self.starts[c + 1] as usize] {
-                    let d = (self.points[e as usize] - p).norm();
-                    if d <= radius {
-                        f(e as usize, d);
-                    }
+            // The entries of a row's cells are contiguous, in the order of the cells.
+            let row = j * self.cols;
+            let entries = &self.entries[self.starts[row + cols.start()] as usize
+                ..self.starts[row + cols.end() + 1] as usize];
+            for &e in entries {
+                let d = (self.points[e as usize] - p).norm();
+                if d <= radius {
+                    f(e as usize, d);
                 }
             }
         }
@@ -188,101 +189,199 @@ impl PointIndex {
     }
 }
 
-/// How many points each rectangle of fine cells holds (a summed-area table): a constant-time test that no point lies
-/// near a position, for searches that test far more positions than there are points.
+/// How far beyond the points the distance field's grid goes (px).
+const FIELD_MARGIN_PX: f64 = 16.0;
+
+/// The distance from the centre of each of a grid of fine cells to the nearest point (up to a cap): whether any point
+/// lies within a radius of a position, answered from one cell for most positions, for searches that test far more
+/// positions than there are points. Exact: where the cell cannot tell, the index is asked.
 #[derive(Debug, Clone)]
-pub(crate) struct Occupancy {
+pub(crate) struct NearestDistance {
+    /// The corner of the first cell (px).
     origin: Vector2<f64>,
     /// The inverse of the cells' side (1/px).
     per_px: f64,
     cols: usize,
     rows: usize,
-    /// `counts[j * (cols + 1) + i]`: the points in the cells left of column `i` and above row `j`.
-    counts: Vec<u32>,
+    /// Per cell (row-major), the distance (px) from its centre to the nearest point, at most `cap_px`.
+    distance_px: Vec<f32>,
+    cap_px: f64,
+    /// Half a cell's diagonal (px), plus a margin for the rounding of the stored distances: how far a position in
+    /// a cell may be nearer to or farther from a point than the cell's centre.
+    half_diagonal_px: f64,
+    /// The bounding box of the points (px).
+    lo: Vector2<f64>,
+    hi: Vector2<f64>,
 }
 
-impl Occupancy {
-    /// The table of `points` (the non-finite ones left out) with cells of `cell` (px), at most 512 a side.
-    pub fn new(points: &[Vector2<f64>], cell: f64) -> Self {
-        let finite = || points.iter().filter(|p| p.x.is_finite() && p.y.is_finite());
+impl NearestDistance {
+    /// The field of the points of `index` with cells of `cell` (px; at most 2^20 cells), over their bounding box
+    /// and `cap` (px) around it, the distances capped at `cap` (less where the points are so many that filling the
+    /// cells near each would cost more than a few passes over the grid).
+    pub fn new(index: &PointIndex, cell: f64, cap: f64) -> Self {
+        let finite: Vec<Vector2<f64>> = index
+            .entries
+            .iter()
+            .map(|&e| index.points[e as usize])
+            .collect();
         let (mut lo, mut hi) = (
             Vector2::repeat(f64::INFINITY),
             Vector2::repeat(f64::NEG_INFINITY),
         );
-        for p in finite() {
+        for p in &finite {
             lo = lo.inf(p);
             hi = hi.sup(p);
         }
-        if !lo.x.is_finite() {
+        if finite.is_empty() {
             lo = Vector2::zeros();
             hi = Vector2::zeros();
         }
-        let cell = cell.max((hi.x - lo.x).max(hi.y - lo.y) / 511.0).max(1e-9);
-        let cols = ((hi.x - lo.x) / cell) as usize + 1;
-        let rows = ((hi.y - lo.y) / cell) as usize + 1;
-        let stride = cols + 1;
-        let mut counts = vec![0u32; stride * (rows + 1)];
-        for p in finite() {
-            let i = (((p.x - lo.x) / cell) as usize).min(cols - 1);
-            let j = (((p.y - lo.y) / cell) as usize).min(rows - 1);
-            counts[(j + 1) * stride + i + 1] += 1;
-        }
-        for j in 1..=rows {
-            for i in 1..=cols {
-                counts[j * stride + i] += counts[j * stride + i - 1] + counts[(j - 1) * stride + i]
-                    - counts[(j - 1) * stride + i - 1];
+        // The grid covers the points and a margin around them; farther out, the distance to their bounding box
+        // tells most positions apart.
+        let margin = cap.min(FIELD_MARGIN_PX);
+        let span = (hi - lo).add_scalar(2.0 * margin);
+        let cell = cell
+            .max((span.x * span.y / f64::from(1u32 << 20)).sqrt())
+            .max(1e-6);
+        let cols = (span.x / cell) as usize + 1;
+        let rows = (span.y / cell) as usize + 1;
+        // Each point fills the cells within the cap around it: at most about four times the grid in all.
+        let cap =
+            cap.min(0.5 * cell * (4.0 * (cols * rows) as f64 / finite.len().max(1) as f64).sqrt());
+        let origin = lo.add_scalar(-margin);
+        // Squared distances first, their roots once per cell at the end.
+        let mut distance_px = vec![(cap * cap) as f32; cols * rows];
+        let reach = (cap / cell).ceil() as isize + 1;
+        for p in &finite {
+            // The cell of the point, and those whose centres are within the cap.
+            let (ci, cj) = (
+                ((p.x - origin.x) / cell) as isize,
+                ((p.y - origin.y) / cell) as isize,
+            );
+            let (i0, i1) = ((ci - reach).max(0), (ci + reach).min(cols as isize - 1));
+            if i0 > i1 {
+                continue;
+            }
+            let x0 = (origin.x + (i0 as f64 + 0.5) * cell - p.x) as f32;
+            for j in (cj - reach).max(0)..=(cj + reach).min(rows as isize - 1) {
+                let dy = (origin.y + (j as f64 + 0.5) * cell - p.y) as f32;
+                let row = &mut distance_px[j as usize * cols..][i0 as usize..=i1 as usize];
+                for (k, stored) in row.iter_mut().enumerate() {
+                    let dx = x0 + k as f32 * cell as f32;
+                    *stored = stored.min(dx * dx + dy * dy);
+                }
             }
         }
+        for d in &mut distance_px {
+            *d = d.sqrt();
+        }
+        // The cap as stored: a cell that holds it may be farther from every point.
+        let cap_stored = f64::from(((cap * cap) as f32).sqrt());
         Self {
-            origin: lo,
+            origin,
             per_px: 1.0 / cell,
             cols,
             rows,
-            counts,
+            distance_px,
+            cap_px: cap_stored,
+            // Distances in f32, from offsets in f32, are within a few thousandths of a px of the exact ones for
+            // grids of thousands of px.
+            half_diagonal_px: 0.5 * std::f64::consts::SQRT_2 * cell + 0.01,
+            lo,
+            hi,
         }
     }
 
-    /// False only if no point lies within `radius` of `p` (true may also mean one lies only near it: the cells
-    /// that cover the disk's bounding square hold one).
-    pub fn maybe_within(&self, p: &Vector2<f64>, radius: f64) -> bool {
-        let (x0, y0) = (
-            (p.x - radius - self.origin.x) * self.per_px,
-            (p.y - radius - self.origin.y) * self.per_px,
+    /// How far from `p` the nearest point of the field is sure to be, if any lies within `radius`: `None` if none
+    /// does, else a radius at most `radius` (`radius` itself where the field cannot tell).
+    #[inline]
+    fn reach(&self, p: &Vector2<f64>, radius: f64) -> Option<f64> {
+        let (x, y) = (
+            (p.x - self.origin.x) * self.per_px,
+            (p.y - self.origin.y) * self.per_px,
         );
-        let (x1, y1) = (
-            (p.x + radius - self.origin.x) * self.per_px,
-            (p.y + radius - self.origin.y) * self.per_px,
-        );
-        // Not finite, or wholly outside: the comparisons fail or the range is empty. Truncation is the floor of a
-        // non-negative value.
-        if !(x1 >= 0.0 && y1 >= 0.0 && x0 < self.cols as f64 && y0 < self.rows as f64) {
-            return false;
+        // Not finite, or outside the grid: the comparisons fail.
+        if x >= 0.0 && y >= 0.0 && x < self.cols as f64 && y < self.rows as f64 {
+            // Truncation is the floor of a non-negative value.
+            let d = f64::from(self.distance_px[y as usize * self.cols + x as usize]);
+            if d - self.half_diagonal_px > radius {
+                return None;
+            }
+            if d < self.cap_px {
+                return Some(radius.min(d + self.half_diagonal_px));
+            }
+        } else if !(p.x.is_finite() && p.y.is_finite()) {
+            return None;
+        } else {
+            // No point is nearer than the points' bounding box.
+            let outside = (self.lo - p).sup(&(p - self.hi)).sup(&Vector2::zeros());
+            if outside.norm() > radius + 1e-9 * (1.0 + radius) {
+                return None;
+            }
         }
-        let (i0, j0) = (x0.max(0.0) as usize, y0.max(0.0) as usize);
-        let (i1, j1) = (
-            (x1 as usize).min(self.cols - 1) + 1,
-            (y1 as usize).min(self.rows - 1) + 1,
-        );
-        let stride = self.cols + 1;
-        let c = &self.counts;
-        c[j1 * stride + i1] + c[j0 * stride + i0] != c[j0 * stride + i1] + c[j1 * stride + i0]
+        Some(radius)
+    }
+
+    /// Whether any point of `index` (the field's) lies within `radius` of `p`: as
+    /// [`PointIndex::any_within`] says, which is asked only where the field cannot tell.
+    #[inline]
+    pub fn any_within(&self, index: &PointIndex, p: &Vector2<f64>, radius: f64) -> bool {
+        match self.reach(p, radius) {
+            None => false,
+            Some(reach) if reach < radius => true,
+            Some(_) => index.any_within(p, radius),
+        }
+    }
+
+    /// [`PointIndex::nearest`] of `index` (the field's points), searched first within the field's [`Self::reach`]
+    /// (the same point: the nearest accepted one is there if the nearest of all is accepted), then, if the point
+    /// there is not accepted, within `radius`.
+    pub fn nearest(
+        &self,
+        index: &PointIndex,
+        p: &Vector2<f64>,
+        radius: f64,
+        mut accept: impl FnMut(usize) -> bool,
+    ) -> Option<(usize, f64)> {
+        let reach = self.reach(p, radius)?;
+        if reach < radius
+            && let Some(found) = index.nearest(p, reach, &mut accept)
+        {
+            return Some(found);
+        }
+        index.nearest(p, radius, accept)
     }
 }
 
 /// Hypotheses from predictions, collected once each.
 #[derive(Debug, Default)]
 pub(crate) struct Hypotheses {
-    seen: std::collections::HashSet<Vec<(usize, usize)>>,
+    seen: std::collections::HashSet<Vec<(usize, usize)>, super::lattice::NodeHasher>,
     pub list: Vec<Vec<(usize, usize)>>,
+    /// Per blob, whether the extension under way has used it (all false between extensions).
+    used: Vec<bool>,
 }
 
 impl Hypotheses {
+    /// Appends the hypotheses of `later` (a search continued from where this one stopped) that this one has not
+    /// made: the list one search through both would have made.
+    pub fn append(&mut self, later: Hypotheses) {
+        for pairs in later.list {
+            if self.seen.insert(pairs.clone()) {
+                self.list.push(pairs);
+            }
+        }
+    }
+
     /// Extends the seed correspondences `pairs` to every other of the `n` target points whose `predicted` position
-    /// has an unused blob within `gate`, and keeps the result if it covers at least `min_matched` points and is new.
+    /// has an unused blob within `gate` (the nearest: found sooner with the `field` of the index's points), and keeps
+    /// the result if it covers at least `min_matched` points and is new.
     /// Gives up as soon as too many points miss.
+    #[allow(clippy::too_many_arguments)]
     pub fn extend_and_keep(
         &mut self,
         index: &PointIndex,
+        field: Option<&NearestDistance>,
         mut pairs: Vec<(usize, usize)>,
         n: usize,
         gate: impl Fn(usize) -> f64,
@@ -291,23 +390,39 @@ impl Hypotheses {
     ) {
         let seeds = pairs.len();
         let mut misses = 0;
+        let used = &mut self.used;
+        used.resize(index.points.len(), false);
+        for &(_, b) in &pairs {
+            used[b] = true;
+        }
+        let mut complete = true;
         for p in 0..n {
             if pairs[..seeds].iter().any(|&(q, _)| q == p) {
                 continue;
             }
-            match index.nearest(&predicted(p), gate(p), |b| {
-                pairs.iter().all(|&(_, pb)| pb != b)
-            }) {
-                Some((b, _)) => pairs.push((p, b)),
+            let unused = |b: usize| !used[b];
+            let found = match field {
+                Some(field) => field.nearest(index, &predicted(p), gate(p), unused),
+                None => index.nearest(&predicted(p), gate(p), unused),
+            };
+            match found {
+                Some((b, _)) => {
+                    used[b] = true;
+                    pairs.push((p, b));
+                }
                 None => {
                     misses += 1;
                     if n - misses < min_matched {
-                        return;
+                        complete = false;
+                        break;
                     }
                 }
             }
         }
-        if pairs.len() >= min_matched {
+        for &(_, b) in &pairs {
+            used[b] = false;
+        }
+        if complete && pairs.len() >= min_matched {
             pairs.sort_unstable();
             if self.seen.insert(pairs.clone()) {
                 self.list.push(pairs);
@@ -355,7 +470,7 @@ mod tests {
     }
 
     #[test]
-    fn occupancy_never_misses_a_point_and_any_within_agrees_with_brute_force() {
+    fn nearest_distance_and_any_within_agree_with_brute_force() {
         let points: Vec<Vector2<f64>> = (0..300)
             .map(|k| {
                 let x = ((k * 7919) % 613) as f64 * 1.03 + 0.37;
@@ -364,28 +479,52 @@ mod tests {
             })
             .collect();
         let index = PointIndex::new(&points, 25.0);
-        let occupancy = Occupancy::new(&points, 3.0);
-        let (mut empty, mut told_empty) = (0, 0);
-        for k in 0..5000 {
-            let q = Vector2::new(
-                ((k * 37) % 700) as f64 * 0.93 - 20.0,
-                ((k * 53) % 520) as f64 * 0.91 - 15.0,
-            );
-            let radius = 0.5 + (k % 13) as f64;
-            let brute = points.iter().any(|p| (p - q).norm() <= radius);
-            assert_eq!(index.any_within(&q, radius), brute, "{q:?} {radius}");
-            if !brute {
-                empty += 1;
+        // A dense set (the cap shrinks) and a sparse one, fine and coarse cells.
+        for (count, cell, cap) in [(300, 3.0, 64.0), (12, 3.0, 64.0), (300, 7.5, 20.0)] {
+            let points = &points[..count];
+            let index = if count == 300 {
+                index.clone()
+            } else {
+                PointIndex::new(points, 25.0)
+            };
+            let field = NearestDistance::new(&index, cell, cap);
+            for k in 0..20_000 {
+                let q = Vector2::new(
+                    ((k * 37) % 800) as f64 * 0.93 - 60.0,
+                    ((k * 53) % 640) as f64 * 0.91 - 50.0,
+                );
+                let radius = 0.5 + (k % 61) as f64;
+                let brute = points.iter().any(|p| (p - q).norm() <= radius);
+                assert_eq!(index.any_within(&q, radius), brute, "{q:?} {radius}");
+                assert_eq!(
+                    field.any_within(&index, &q, radius),
+                    brute,
+                    "{q:?} {radius}"
+                );
+                // The nearest point accepted, every other one refused.
+                for parity in [0, 1] {
+                    let accept = |b: usize| b % 2 == parity;
+                    assert_eq!(
+                        field.nearest(&index, &q, radius, accept),
+                        index.nearest(&q, radius, accept),
+                        "{q:?} {radius}"
+                    );
+                }
             }
-            if !occupancy.maybe_within(&q, radius) {
-                assert!(!brute, "{q:?} {radius}");
-                told_empty += 1;
+            // Positions where the distance to the nearest point is the radius to rounding.
+            for (k, p) in points.iter().enumerate().take(50) {
+                let q = p + Vector2::new(3.0, 4.0);
+                let nearest = points
+                    .iter()
+                    .map(|o| (o - q).norm())
+                    .fold(f64::INFINITY, f64::min);
+                for radius in [nearest, nearest - 1e-12, nearest + 1e-12] {
+                    let brute = points.iter().any(|o| (o - q).norm() <= radius);
+                    assert_eq!(field.any_within(&index, &q, radius), brute, "{k} {radius}");
+                }
             }
+            let nowhere = Vector2::new(f64::NAN, 3.0);
+            assert!(!field.any_within(&index, &nowhere, 10.0));
         }
-        // It tells most empty disks apart: it is worth its table.
-        assert!(
-            told_empty as f64 > 0.5 * empty as f64,
-            "{told_empty} of {empty}"
-        );
     }
 }

@@ -96,12 +96,13 @@ impl TargetLattice {
     }
 }
 
-/// The hash of a lattice node's two small integer coordinates: a multiplication (the keys are not chosen by anyone
-/// who could make them collide on purpose, so a keyed hash buys nothing).
-type NodeHasher = std::hash::BuildHasherDefault<NodeHash>;
+/// The hash of a lattice node's two small integer coordinates (or of a hypothesis' pairs of indices): a
+/// multiplication (the keys are not chosen by anyone who could make them collide on purpose, so a keyed hash buys
+/// nothing).
+pub(crate) type NodeHasher = std::hash::BuildHasherDefault<NodeHash>;
 
 #[derive(Debug, Default)]
-struct NodeHash(u64);
+pub(crate) struct NodeHash(u64);
 
 impl std::hash::Hasher for NodeHash {
     fn finish(&self) -> u64 {
@@ -116,6 +117,10 @@ impl std::hash::Hasher for NodeHash {
 
     fn write_i32(&mut self, x: i32) {
         self.write_u64(u64::from(x as u32));
+    }
+
+    fn write_usize(&mut self, x: usize) {
+        self.write_u64(x as u64);
     }
 
     fn write_u64(&mut self, x: u64) {

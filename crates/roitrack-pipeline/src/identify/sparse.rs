@@ -4,7 +4,7 @@
 
 use nalgebra::{Matrix2, Vector2};
 
-use super::index::{Hypotheses, Occupancy, PointIndex};
+use super::index::{Hypotheses, NearestDistance, PointIndex};
 use super::{MAX_SEED_BLOBS, NOMINAL_AREA_FACTOR};
 
 /// What the search needs of the target: in-plane points and diameters (m, if known).
@@ -18,8 +18,14 @@ pub(crate) struct PlanarModel<'a> {
 /// The sine of the largest tilt of the target's plane to the image plane the predictions allow for (60 degrees).
 const MAX_TILT_SIN: f64 = 0.866;
 
-/// The cells of the occupancy table the predictions are first tested against (px).
-const OCCUPANCY_CELL_PX: f64 = 4.0;
+/// Seeds times model triples from which the search is split between two threads: about a millisecond's work
+/// (a thread costs a few tens of microseconds to start).
+const MIN_SEED_TRIPLES_FOR_TWO_THREADS: usize = 400;
+
+/// The cells of the distance field the predictions are first tested against (px), and the largest distance it
+/// holds: a gate is a few px to a few tens.
+const FIELD_CELL_PX: f64 = 3.0;
+const FIELD_CAP_PX: f64 = 64.0;
 
 /// Target points used as the first point of a triple: all of a small target, else a few spread ones.
 fn anchors(model: &PlanarModel) -> Vec<usize> {
@@ -130,8 +136,6 @@ pub(crate) fn triple_hypotheses_counted(
     min_matched: usize,
 ) -> (Vec<Vec<(usize, usize)>>, TripleWork) {
     let n = model.plane_m.len();
-    let mut hypotheses = Hypotheses::default();
-    let mut work = TripleWork::default();
     // The smallest target spacing, for the prediction gate.
     let mut spacing_m = f64::INFINITY;
     for (k, p) in model.plane_m.iter().enumerate() {
@@ -179,88 +183,117 @@ pub(crate) fn triple_hypotheses_counted(
         .collect();
     // Misses an extension may have and still keep its hypothesis.
     let allowed_misses = n.saturating_sub(min_matched);
-    // Cells of about the smallest gates (a few px): fine enough to tell most empty gates in constant time, coarse
-    // enough for the table to stay in the cache. Only the time depends on it.
-    let occupancy = Occupancy::new(ideal, OCCUPANCY_CELL_PX);
+    // Cells of a fraction of the smallest gates: fine enough to answer most tests from one cell, coarse enough for
+    // the field to stay in the cache. Only the time depends on it.
+    let field = NearestDistance::new(index, FIELD_CELL_PX, FIELD_CAP_PX);
     // Any distance: a sparse target's blobs may be far apart; the nearest twelve are enough.
     let image_radius = 1e6;
     // Seeds among the first blobs only (detectors list the strongest first): the search grows with the square of
     // the seeds' neighbourhoods, and a cluttered frame of thousands of blobs must not take seconds.
-    for b0 in 0..ideal.len().min(MAX_SEED_BLOBS) {
-        if !ideal[b0].x.is_finite() {
-            continue;
-        }
-        let near: Vec<usize> = index
-            .neighbours(b0, 12, image_radius)
-            .into_iter()
-            .map(|(b, _)| b)
-            .filter(|&b| areas_px[b] < 3.0 * areas_px[b0] && areas_px[b] > areas_px[b0] / 3.0)
-            .take(6)
-            .collect();
-        for &b1 in &near {
-            for &b2 in &near {
-                if b1 == b2 {
-                    continue;
-                }
-                let (f1, f2) = (ideal[b1] - ideal[b0], ideal[b2] - ideal[b0]);
-                let image_cross = f1.x * f2.y - f1.y * f2.x;
-                if image_cross.abs() < 0.05 * f1.norm() * f2.norm() {
-                    continue;
-                }
-                let image_edges = Matrix2::from_columns(&[f1, f2]);
-                for triple in &triples {
-                    let [p0, p1, p2] = triple.p;
-                    let map = image_edges * triple.inverse_edges;
-                    let scale = map.determinant().abs();
-                    // The blobs' sizes must agree with the map's scale, to the nominal diameters' error, and
-                    // with each other, to a threshold's.
-                    if !sizes_agree(
-                        model.diameters_m,
-                        areas_px,
-                        [(p0, b0), (p1, b1), (p2, b2)],
-                        scale,
-                    ) {
+    let search = |seeds: std::ops::Range<usize>| {
+        let mut hypotheses = Hypotheses::default();
+        let mut work = TripleWork::default();
+        for b0 in seeds {
+            if !ideal[b0].x.is_finite() {
+                continue;
+            }
+            let near: Vec<usize> = index
+                .neighbours(b0, 12, image_radius)
+                .into_iter()
+                .map(|(b, _)| b)
+                .filter(|&b| areas_px[b] < 3.0 * areas_px[b0] && areas_px[b] > areas_px[b0] / 3.0)
+                .take(6)
+                .collect();
+            for &b1 in &near {
+                for &b2 in &near {
+                    if b1 == b2 {
                         continue;
                     }
-                    work.triples += 1;
-                    // A third of the smallest spacing, plus what perspective adds to the affine prediction at a
-                    // point `d` from the anchor: the plane's depth changes across `d` by `d sin(tilt)`, of a depth
-                    // `f / sqrt(scale)`, which moves the point by that fraction of its `d sqrt(scale)` px offset
-                    // (a tilt up to 60 degrees).
-                    let base_gate_px = 0.3 * spacing_m * scale.sqrt();
-                    let bend = MAX_TILT_SIN * scale / model.focal_px;
-                    let gate_of = |d2_m2: f64| base_gate_px + bend * d2_m2;
-                    let mut misses = 0;
-                    let promising = triple.others.iter().all(|&(offset, d2_m2)| {
-                        work.predictions += 1;
-                        let predicted = ideal[b0] + map * offset;
-                        let gate_px = gate_of(d2_m2);
-                        if !(occupancy.maybe_within(&predicted, gate_px)
-                            && index.any_within(&predicted, gate_px))
-                        {
-                            misses += 1;
+                    let (f1, f2) = (ideal[b1] - ideal[b0], ideal[b2] - ideal[b0]);
+                    let image_cross = f1.x * f2.y - f1.y * f2.x;
+                    if image_cross.abs() < 0.05 * f1.norm() * f2.norm() {
+                        continue;
+                    }
+                    let image_edges = Matrix2::from_columns(&[f1, f2]);
+                    for triple in &triples {
+                        let [p0, p1, p2] = triple.p;
+                        let map = image_edges * triple.inverse_edges;
+                        let scale = map.determinant().abs();
+                        // The blobs' sizes must agree with the map's scale, to the nominal diameters' error, and
+                        // with each other, to a threshold's.
+                        if !sizes_agree(
+                            model.diameters_m,
+                            areas_px,
+                            [(p0, b0), (p1, b1), (p2, b2)],
+                            scale,
+                        ) {
+                            continue;
                         }
-                        misses <= allowed_misses
-                    });
-                    if !promising {
-                        continue;
+                        work.triples += 1;
+                        // A third of the smallest spacing, plus what perspective adds to the affine prediction at a
+                        // point `d` from the anchor: the plane's depth changes across `d` by `d sin(tilt)`, of a depth
+                        // `f / sqrt(scale)`, which moves the point by that fraction of its `d sqrt(scale)` px offset
+                        // (a tilt up to 60 degrees).
+                        let base_gate_px = 0.3 * spacing_m * scale.sqrt();
+                        let bend = MAX_TILT_SIN * scale / model.focal_px;
+                        let gate_of = |d2_m2: f64| base_gate_px + bend * d2_m2;
+                        let mut misses = 0;
+                        let promising = triple.others.iter().all(|&(offset, d2_m2)| {
+                            work.predictions += 1;
+                            let predicted = ideal[b0] + map * offset;
+                            let gate_px = gate_of(d2_m2);
+                            if !field.any_within(index, &predicted, gate_px) {
+                                misses += 1;
+                            }
+                            misses <= allowed_misses
+                        });
+                        if !promising {
+                            continue;
+                        }
+                        work.extended += 1;
+                        let gate = |p: usize| {
+                            gate_of((model.plane_m[p] - model.plane_m[p0]).norm_squared())
+                        };
+                        hypotheses.extend_and_keep(
+                            index,
+                            Some(&field),
+                            vec![(p0, b0), (p1, b1), (p2, b2)],
+                            n,
+                            gate,
+                            min_matched,
+                            |p| ideal[b0] + map * (model.plane_m[p] - model.plane_m[p0]),
+                        );
                     }
-                    work.extended += 1;
-                    let gate =
-                        |p: usize| gate_of((model.plane_m[p] - model.plane_m[p0]).norm_squared());
-                    hypotheses.extend_and_keep(
-                        index,
-                        vec![(p0, b0), (p1, b1), (p2, b2)],
-                        n,
-                        gate,
-                        min_matched,
-                        |p| ideal[b0] + map * (model.plane_m[p] - model.plane_m[p0]),
-                    );
                 }
             }
         }
+        (hypotheses, work)
+    };
+    let seeds = ideal.len().min(MAX_SEED_BLOBS);
+    // A large search is split between two threads, the seeds' first half here and the second beside; the second's
+    // hypotheses follow the first's, those already made left out: the list is the one thread's.
+    if seeds * triples.len() < MIN_SEED_TRIPLES_FOR_TWO_THREADS {
+        let (hypotheses, work) = search(0..seeds);
+        return (hypotheses.list, work);
     }
-    (hypotheses.list, work)
+    let half = seeds / 2;
+    let ((mut first, first_work), (second, second_work)) = std::thread::scope(|scope| {
+        let second = scope.spawn(|| search(half..seeds));
+        let first = search(0..half);
+        (
+            first,
+            second
+                .join()
+                .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
+        )
+    });
+    first.append(second);
+    let work = TripleWork {
+        triples: first_work.triples + second_work.triples,
+        predictions: first_work.predictions + second_work.predictions,
+        extended: first_work.extended + second_work.extended,
+    };
+    (first.list, work)
 }
 
 #[cfg(test)]
@@ -330,6 +363,7 @@ mod tests {
                                 };
                                 hypotheses.extend_and_keep(
                                     index,
+                                    None,
                                     seeds.to_vec(),
                                     n,
                                     gate,

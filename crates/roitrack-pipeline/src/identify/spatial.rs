@@ -118,6 +118,7 @@ pub(crate) fn quadruple_hypotheses(
                         let gate = 0.3 * spacing_m * scale;
                         hypotheses.extend_and_keep(
                             index,
+                            None,
                             quad.iter()
                                 .zip([b0, b1, b2, b3])
                                 .map(|(&p, b)| (p, b))
