@@ -10,13 +10,18 @@
 //! - `outdoor`: the 8 x 10 grid of dark circles among bright specular glints (foliage, water, chrome) where the
 //!   image's local contrast points to bright blobs: `auto` guesses the wrong polarity first.
 //!
-//! Compare `*_auto` with `*_dark` as ratios within one run: the machine is shared and its speed varies.
+//! Compare `*_auto` with `*_dark` as ratios within one run: the machine is shared and its speed varies. After
+//! criterion's figures, each case is run again in interleaved pairs (dark, auto; then auto, dark; ...) and the medians
+//! of the process's CPU time (every thread counted) and of the wall clock are printed with their ratios: on a loaded
+//! machine the CPU time is the steadier of the two.
 //!
-//! `cargo bench -p roitrack-bench --bench photo_detection` (about 40 s).
+//! `cargo bench -p roitrack-bench --bench photo_detection` (about a minute); `PHOTO_BENCH_INTERLEAVED_ONLY=1` for the
+//! interleaved pairs alone, `PHOTO_BENCH_PAIRS=N` pairs a case (60; 0 for none, as when profiling one benchmark),
+//! `PHOTO_BENCH_DUMP=FILE` to append every detection's figures to `FILE` (to compare two builds).
 
 use std::time::Duration;
 
-use criterion::{Criterion, criterion_group, criterion_main};
+use criterion::{Criterion, criterion_group};
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use roitrack_core::camera::{PinholeIntrinsics, PlumbBob};
@@ -77,22 +82,103 @@ fn random_dots() -> Target {
     Target::new(points).unwrap()
 }
 
-/// One case: the frame, its camera and target, with `detect_target` timed with the polarity given and with `auto`.
-fn bench_case(
-    c: &mut Criterion,
-    name: &str,
-    camera: &CameraModel,
-    target: &Target,
-    frame: &Frame,
+/// One benched photograph: the frame, its camera and target, and the fewest points `detect_target` must identify.
+struct Case {
+    name: &'static str,
+    camera: CameraModel,
+    target: Target,
+    frame: Frame,
     points: usize,
-) {
-    let dark = PhotoOptions {
+}
+
+/// The benched photographs (see the file's documentation).
+fn cases() -> Vec<Case> {
+    let camera640 = camera(640, 480);
+    let grid80 = grid(8, 10, 0.025, 0.015, GridLayout::Square);
+    let tilt = Rotation3::from_axis_angle(&Vector3::y_axis(), 30f64.to_radians());
+    let scene = PhotoScene::facing(camera640.clone(), grid80.clone(), 0.45, tilt)
+        .harsh()
+        .with_seed(7);
+    let mut cases = vec![Case {
+        name: "photo",
+        camera: camera640.clone(),
+        target: grid80.clone(),
+        frame: render_photo(&scene).unwrap().frame,
+        points: 80,
+    }];
+
+    let hex = grid(24, 28, 0.012, 0.01, GridLayout::Hexagonal);
+    let hex_tilt = Rotation3::from_euler_angles(0.25, -0.3, 0.1);
+    for (name, width, height) in [("hex336_640", 640, 480), ("hex336_800", 800, 600)] {
+        let camera = camera(width, height);
+        let scene = PhotoScene::facing(camera.clone(), hex.clone(), 0.42, hex_tilt)
+            .harsh()
+            .with_seed(11);
+        let frame = render_photo(&scene).unwrap().frame;
+        cases.push(Case {
+            name,
+            camera,
+            target: hex.clone(),
+            frame,
+            points: 336,
+        });
+    }
+
+    let dots = random_dots();
+    let mut scene = PhotoScene::facing(
+        camera640.clone(),
+        dots.clone(),
+        0.5,
+        Rotation3::from_euler_angles(-0.3, 0.35, 0.6),
+    )
+    .harsh()
+    .with_seed(3);
+    scene.clutter = Clutter {
+        count: 120,
+        ..scene.clutter
+    };
+    cases.push(Case {
+        name: "random30",
+        camera: camera640.clone(),
+        target: dots,
+        frame: render_photo(&scene).unwrap().frame,
+        points: 30,
+    });
+
+    let scene = PhotoScene::facing(camera640.clone(), grid80.clone(), 0.5, tilt)
+        .harsh()
+        .with_seed(5);
+    let mut rendered = render_photo(&scene).unwrap();
+    add_glints(&mut rendered, 400, 5);
+    cases.push(Case {
+        name: "outdoor",
+        camera: camera640,
+        target: grid80,
+        frame: rendered.frame,
+        points: 80,
+    });
+    cases
+}
+
+fn dark() -> PhotoOptions {
+    PhotoOptions {
         polarity: PolarityChoice::Dark,
         ..PhotoOptions::default()
-    };
-    let found = detect_target(camera, target, frame, &dark).unwrap();
+    }
+}
+
+/// Checks what the case's detections find (auto finds what dark finds) and prints it.
+fn check(case: &Case) {
+    let Case {
+        name,
+        camera,
+        target,
+        frame,
+        points,
+    } = case;
+    let found = detect_target(camera, target, frame, &dark()).unwrap();
     assert!(
-        found.points.len() >= points,
+        found.points.len() >= *points,
         "{name}: {}",
         found.points.len()
     );
@@ -109,6 +195,35 @@ fn bench_case(
         auto.polarities_tried,
         found.hypotheses
     );
+    // Every figure of both detections, to compare two builds' results exactly.
+    if let Some(path) = std::env::var_os("PHOTO_BENCH_DUMP") {
+        use std::io::Write;
+        let mut file = std::fs::OpenOptions::new()
+            .create(true)
+            .append(true)
+            .open(path)
+            .unwrap();
+        for (kind, d) in [("dark", &found), ("auto", &auto)] {
+            writeln!(
+                file,
+                "{name} {kind} {:?} {:?} {:?} {:?} {:?} {:?}",
+                d.polarity, d.points, d.state.cam_t_obj_m, d.state.cam_r_obj, d.blobs, d.hypotheses
+            )
+            .unwrap();
+        }
+    }
+}
+
+/// `detect_target` timed with the polarity given and with `auto`.
+fn bench_case(c: &mut Criterion, case: &Case) {
+    let Case {
+        name,
+        camera,
+        target,
+        frame,
+        ..
+    } = case;
+    let dark = dark();
     c.bench_function(&format!("{name}_dark"), |b| {
         b.iter(|| detect_target(camera, target, frame, &dark))
     });
@@ -118,13 +233,9 @@ fn bench_case(
 }
 
 fn photo_detection(c: &mut Criterion) {
-    let camera640 = camera(640, 480);
-    let grid80 = grid(8, 10, 0.025, 0.015, GridLayout::Square);
-    let tilt = Rotation3::from_axis_angle(&Vector3::y_axis(), 30f64.to_radians());
-    let scene = PhotoScene::facing(camera640.clone(), grid80.clone(), 0.45, tilt)
-        .harsh()
-        .with_seed(7);
-    let frame = render_photo(&scene).unwrap().frame;
+    let cases = cases();
+    let photo = &cases[0];
+    let frame = &photo.frame;
     let mut scratch = PhotoScratch::default();
     c.bench_function("photo_blobs_dark", |b| {
         b.iter(|| {
@@ -139,42 +250,104 @@ fn photo_detection(c: &mut Criterion) {
             )
         })
     });
-    bench_case(c, "photo", &camera640, &grid80, &frame, 80);
-
-    let hex = grid(24, 28, 0.012, 0.01, GridLayout::Hexagonal);
-    let hex_tilt = Rotation3::from_euler_angles(0.25, -0.3, 0.1);
-    for (name, width, height) in [("hex336_640", 640, 480), ("hex336_800", 800, 600)] {
-        let camera = camera(width, height);
-        let scene = PhotoScene::facing(camera.clone(), hex.clone(), 0.42, hex_tilt)
-            .harsh()
-            .with_seed(11);
-        let frame = render_photo(&scene).unwrap().frame;
-        bench_case(c, name, &camera, &hex, &frame, 336);
+    for case in &cases {
+        check(case);
+        bench_case(c, case);
     }
+}
 
-    let dots = random_dots();
-    let mut scene = PhotoScene::facing(
-        camera640.clone(),
-        dots.clone(),
-        0.5,
-        Rotation3::from_euler_angles(-0.3, 0.35, 0.6),
-    )
-    .harsh()
-    .with_seed(3);
-    scene.clutter = Clutter {
-        count: 120,
-        ..scene.clutter
-    };
-    let frame = render_photo(&scene).unwrap().frame;
-    bench_case(c, "random30", &camera640, &dots, &frame, 30);
+/// The CPU time (s) this process has used, every thread counted (the wall clock where there is no such clock).
+fn process_cpu_s() -> f64 {
+    #[cfg(target_os = "linux")]
+    {
+        #[repr(C)]
+        struct Timespec {
+            tv_sec: i64,
+            tv_nsec: i64,
+        }
+        unsafe extern "C" {
+            fn clock_gettime(clock: i32, time: *mut Timespec) -> i32;
+        }
+        const CLOCK_PROCESS_CPUTIME_ID: i32 = 2;
+        let mut time = Timespec {
+            tv_sec: 0,
+            tv_nsec: 0,
+        };
+        // SAFETY: `time` is a valid, writable timespec of the C layout on 64-bit Linux.
+        if unsafe { clock_gettime(CLOCK_PROCESS_CPUTIME_ID, &mut time) } == 0 {
+            return time.tv_sec as f64 + 1e-9 * time.tv_nsec as f64;
+        }
+    }
+    static START: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+    START
+        .get_or_init(std::time::Instant::now)
+        .elapsed()
+        .as_secs_f64()
+}
 
-    let scene = PhotoScene::facing(camera640.clone(), grid80.clone(), 0.5, tilt)
-        .harsh()
-        .with_seed(5);
-    let mut rendered = render_photo(&scene).unwrap();
-    add_glints(&mut rendered, 400, 5);
-    let frame = rendered.frame;
-    bench_case(c, "outdoor", &camera640, &grid80, &frame, 80);
+fn median(values: &mut [f64]) -> f64 {
+    values.sort_by(f64::total_cmp);
+    values[values.len() / 2]
+}
+
+/// `auto` against the polarity given, each case measured in interleaved pairs (the order alternating) by the
+/// process's CPU time and by the wall clock: medians and their ratio. On a shared machine the CPU time moves far
+/// less with the load than the wall clock does. `PHOTO_BENCH_PAIRS` pairs a case (default 60; 0: none).
+fn interleaved_ratios(cases: &[Case]) {
+    let pairs: usize = std::env::var("PHOTO_BENCH_PAIRS")
+        .ok()
+        .and_then(|p| p.parse().ok())
+        .unwrap_or(60);
+    if pairs == 0 {
+        return;
+    }
+    println!(
+        "\ninterleaved, {pairs} pairs a case, medians (ms): | case | dark CPU | auto CPU | auto / dark CPU | dark wall | auto wall | auto / dark wall |"
+    );
+    let (dark, auto) = (dark(), PhotoOptions::default());
+    for case in cases {
+        let run = |options: &PhotoOptions| {
+            let (cpu, wall) = (process_cpu_s(), std::time::Instant::now());
+            let found = detect_target(&case.camera, &case.target, &case.frame, options);
+            let times = (
+                1e3 * (process_cpu_s() - cpu),
+                1e3 * wall.elapsed().as_secs_f64(),
+            );
+            assert!(found.is_ok(), "{}", case.name);
+            times
+        };
+        for _ in 0..3 {
+            run(&dark);
+            run(&auto);
+        }
+        let (mut dark_cpu, mut auto_cpu, mut dark_wall, mut auto_wall) =
+            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for k in 0..pairs {
+            let (d, a) = if k % 2 == 0 {
+                let d = run(&dark);
+                (d, run(&auto))
+            } else {
+                let a = run(&auto);
+                (run(&dark), a)
+            };
+            dark_cpu.push(d.0);
+            dark_wall.push(d.1);
+            auto_cpu.push(a.0);
+            auto_wall.push(a.1);
+        }
+        let (dc, ac, dw, aw) = (
+            median(&mut dark_cpu),
+            median(&mut auto_cpu),
+            median(&mut dark_wall),
+            median(&mut auto_wall),
+        );
+        println!(
+            "| {} | {dc:.2} | {ac:.2} | {:.2} | {dw:.2} | {aw:.2} | {:.2} |",
+            case.name,
+            ac / dc,
+            aw / dw
+        );
+    }
 }
 
 fn config() -> Criterion {
@@ -189,4 +362,16 @@ criterion_group! {
     config = config();
     targets = photo_detection
 }
-criterion_main!(benches);
+
+/// Criterion's benchmarks, then the interleaved ratios (`PHOTO_BENCH_INTERLEAVED_ONLY=1`: those alone).
+fn main() {
+    if std::env::var_os("PHOTO_BENCH_INTERLEAVED_ONLY").is_none() {
+        benches();
+    }
+    let cases = cases();
+    if std::env::var_os("PHOTO_BENCH_INTERLEAVED_ONLY").is_some() {
+        cases.iter().for_each(check);
+    }
+    interleaved_ratios(&cases);
+    Criterion::default().configure_from_args().final_summary();
+}
