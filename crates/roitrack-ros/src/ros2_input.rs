@@ -1,6 +1,7 @@
 //! [`MeasurementSubscriber`] (feature `ros2`): blob centroids (`roitrack_msgs/msg/BlobMeasurements`, the message
 //! the bags carry on `/roitrack/measurements`) taken live from the ROS 2 DDS bus, for `roitrack ros2-node`.
 
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
@@ -105,8 +106,8 @@ pub struct MeasurementSubscriber {
     _participant: rustdds::DomainParticipant,
     topic: String,
     checks: MeasurementChecks,
-    pending: std::collections::VecDeque<Measurement>,
-    decoded: std::collections::VecDeque<Measurement>,
+    pending: VecDeque<Measurement>,
+    decoded: VecDeque<Measurement>,
     report: SubscriberReport,
     stop: Arc<AtomicBool>,
     idle: Duration,
@@ -194,39 +195,48 @@ impl MeasurementSubscriber {
     fn take_message(&mut self, message: RawMessage) {
         let index = self.report.messages;
         self.report.messages += 1;
-        let mut bytes = Vec::with_capacity(4 + message.bytes.len());
-        bytes.extend_from_slice(&message.encoding.to_bytes());
-        bytes.extend_from_slice(&[0, 0]);
-        bytes.extend_from_slice(&message.bytes);
-        self.decoded.clear();
-        let checked = decode(&bytes, &mut self.decoded)
-            .map_err(|(field, e)| format!("field {field}: {e}"))
-            .and_then(|()| {
-                // Checked on a copy: a message that fails changes nothing of what later ones are checked against.
-                let mut checks = self.checks.clone();
-                for (k, m) in self.decoded.iter().enumerate() {
-                    checks
-                        .check(m)
-                        .map_err(|problem| format!("centroid {k}: {problem}"))?;
-                }
-                Ok(checks)
-            });
-        match checked {
+        match checked_message(&self.checks, &message, &mut self.decoded) {
             Ok(checks) => {
                 self.checks = checks;
                 self.report.measurements += self.decoded.len() as u64;
                 self.pending.extend(self.decoded.drain(..));
             }
-            Err(reason) => {
-                self.report.malformed += 1;
-                if self.report.reasons.len() < REASONS_KEPT {
-                    self.report
-                        .reasons
-                        .push(format!("{} message {index}: {reason}", self.topic));
-                }
-            }
+            Err(reason) => self.malformed(index, reason),
         }
     }
+
+    /// Counts message `index` as malformed, keeping the reason if there is room.
+    fn malformed(&mut self, index: u64, reason: String) {
+        self.report.malformed += 1;
+        if self.report.reasons.len() < REASONS_KEPT {
+            self.report
+                .reasons
+                .push(format!("{} message {index}: {reason}", self.topic));
+        }
+    }
+}
+
+/// Decodes `message` into `out` and checks it whole against `checks` (on a copy: a message that fails changes
+/// nothing of what later ones are checked against); the checks as they stand after it, or why it is left out.
+fn checked_message(
+    checks: &MeasurementChecks,
+    message: &RawMessage,
+    out: &mut VecDeque<Measurement>,
+) -> Result<MeasurementChecks, String> {
+    // The encapsulation header DDS took off: the representation, then two bytes of options.
+    let mut bytes = Vec::with_capacity(4 + message.bytes.len());
+    bytes.extend_from_slice(&message.encoding.to_bytes());
+    bytes.extend_from_slice(&[0, 0]);
+    bytes.extend_from_slice(&message.bytes);
+    out.clear();
+    decode(&bytes, out).map_err(|(field, e)| format!("field {field}: {e}"))?;
+    let mut checks = checks.clone();
+    for (k, m) in out.iter().enumerate() {
+        checks
+            .check(m)
+            .map_err(|problem| format!("centroid {k}: {problem}"))?;
+    }
+    Ok(checks)
 }
 
 /// A ROS 2 name as its fully qualified text.
@@ -250,13 +260,91 @@ impl Iterator for MeasurementSubscriber {
                     self.last_message = Some(Instant::now());
                     self.take_message(change.into_value());
                 }
-                Ok(None) | Err(_) => {
+                Err(e) => {
+                    // A sample DDS could not hand over (an encoding no adapter takes, ...): counted and named too.
+                    let index = self.report.messages;
+                    self.report.messages += 1;
+                    self.malformed(index, format!("not taken: {e}"));
+                }
+                Ok(None) => {
                     if self.last_message.is_some_and(|t| t.elapsed() >= self.idle) {
                         return None;
                     }
                     std::thread::sleep(POLL);
                 }
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg;
+
+    /// A message of two centroids (points 1 and 2) at 1.5 s, as DDS hands it over: its body and encoding.
+    fn message(u_px: &[f64]) -> RawMessage {
+        let header = msg::Header {
+            stamp: msg::Time {
+                sec: 1,
+                nanosec: 500_000_000,
+            },
+            frame_id: "camera",
+        };
+        let bytes = cdr::serialize::<_, _, cdr::CdrLe>(
+            &msg::BlobMeasurements {
+                header,
+                point_ids: msg::Seq(&[1, 2]),
+                u_px: msg::Seq(u_px),
+                v_px: msg::Seq(&[20.0, 30.0]),
+                dt_s: msg::Seq(&[0.0, 0.25e-3]),
+                sigma_px: msg::Seq(&[]),
+            },
+            cdr::Infinite,
+        )
+        .unwrap();
+        RawMessage {
+            encoding: RepresentationIdentifier::CDR_LE,
+            bytes: bytes[4..].to_vec(),
+        }
+    }
+
+    #[test]
+    fn a_message_is_checked_whole_and_a_bad_one_named_and_left_out() {
+        let checks = MeasurementChecks::new()
+            .with_known_ids([1, 2])
+            .with_image_size(640, 480);
+        let mut out = VecDeque::new();
+        let after = checked_message(&checks, &message(&[10.0, 11.0]), &mut out).unwrap();
+        assert_eq!(out.len(), 2);
+        assert_eq!((out[1].id, out[1].t_s, out[1].u_px), (2, 1.50025, 11.0));
+        // The same message again goes back in time (a point measured twice at a time), on the checks after it.
+        let again = checked_message(&after, &message(&[10.0, 11.0]), &mut out).unwrap_err();
+        assert!(again.starts_with("centroid 0:"), "{again}");
+        for (message, expected) in [
+            (message(&[10.0]), "field u_px: 1 entries for 2 point ids"),
+            (
+                message(&[10.0, f64::NAN]),
+                "field u_px[1]: NaN is not finite",
+            ),
+            (message(&[10.0, 900.0]), "centroid 1:"),
+            (
+                RawMessage {
+                    encoding: RepresentationIdentifier::CDR_BE,
+                    ..message(&[10.0, 11.0])
+                },
+                "big-endian CDR is not supported",
+            ),
+            (
+                RawMessage {
+                    encoding: RepresentationIdentifier::CDR_LE,
+                    bytes: vec![0; 6],
+                },
+                "field header",
+            ),
+        ] {
+            let reason = checked_message(&checks, &message, &mut out).unwrap_err();
+            assert!(reason.contains(expected), "{reason}, not {expected}");
         }
     }
 }
