@@ -14,7 +14,7 @@
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, VecDeque};
 
-use nalgebra::{DMatrix, DVector, Vector2, Vector3};
+use nalgebra::{DMatrix, Vector2, Vector3};
 use thiserror::Error;
 
 use super::{Rig, rig_projection, search_offset_s};
@@ -132,6 +132,8 @@ const LOST_AFTER_GATED_CYCLES: usize = 4;
 /// One camera's measurements rejected in a row, per target point, after which its clock is searched again (the first
 /// camera's: the fused track is started again from its own).
 const CAMERA_GATED_CYCLES: usize = 2;
+/// The covariance is made exactly symmetric again after this many updates (as the single-camera filter's).
+const SYMMETRISE_EVERY_UPDATES: u64 = 16;
 /// Estimates given as converging after a fused track starts.
 const CONVERGING_ESTIMATES: usize = 3;
 /// How far back (s) a measurement may be behind the fused filter's time and still be used (it is predicted back).
@@ -161,6 +163,11 @@ struct Fused {
     sum_squares_px2: f64,
     count: usize,
     estimates: usize,
+    /// Updates applied (the covariance is symmetrised every [`SYMMETRISE_EVERY_UPDATES`]), and the scratch of `P Hᵀ`
+    /// and of the gain, one row per state.
+    updates: u64,
+    ph_t: Vec<[f64; 2]>,
+    gain: Vec<[f64; 2]>,
 }
 
 /// Many asynchronous cameras, one pose and twist (see the [module documentation](self)).
@@ -615,6 +622,9 @@ impl RigTracker {
             sum_squares_px2: 0.0,
             count: 0,
             estimates: 0,
+            updates: 0,
+            ph_t: Vec::with_capacity(n),
+            gain: Vec::with_capacity(n),
         });
         self.since_estimate = 0;
         self.report.starts += 1;
@@ -653,20 +663,40 @@ impl RigTracker {
         ) else {
             return;
         };
+        // H is the state's 12 columns and at most two clock columns: P Hᵀ by those columns of P, into the filter's
+        // own scratch (no allocation per measurement).
         let n = f.p.nrows();
-        let mut h = DMatrix::<f64>::zeros(2, n);
-        h.view_mut((0, 0), (2, 12)).copy_from(&projected.jacobian);
-        if let Some(i) = offset_index {
-            h.view_mut((0, i), (2, 1))
-                .copy_from(&projected.image_velocity_pxps);
+        let mut columns = [(0usize, Vector2::zeros()); 14];
+        for (k, column) in columns.iter_mut().take(12).enumerate() {
+            *column = (k, projected.jacobian.column(k).into_owned());
         }
-        if let Some(j) = drift_index {
-            h.view_mut((0, j), (2, 1))
-                .copy_from(&projected.per_drift_px);
+        let mut used = 12;
+        for (index, column) in [
+            (offset_index, projected.image_velocity_pxps),
+            (drift_index, projected.per_drift_px),
+        ] {
+            if let Some(i) = index {
+                columns[used] = (i, column);
+                used += 1;
+            }
+        }
+        let columns = &columns[..used];
+        f.ph_t.clear();
+        f.ph_t.resize(n, [0.0; 2]);
+        for &(j, h) in columns {
+            for (row, entry) in f.ph_t.iter_mut().zip(f.p.column(j).iter()) {
+                row[0] += entry * h[0];
+                row[1] += entry * h[1];
+            }
+        }
+        let mut hph_t = nalgebra::Matrix2::zeros();
+        for &(j, h) in columns {
+            for r in 0..2 {
+                hph_t[(0, r)] += h[0] * f.ph_t[j][r];
+                hph_t[(1, r)] += h[1] * f.ph_t[j][r];
+            }
         }
         let innovation = ideal_px - projected.pixel;
-        let ph_t = &f.p * h.transpose();
-        let hph_t = &h * &ph_t;
         let noise2 = self.noise_px[c] * self.noise_px[c];
         let s = nalgebra::Matrix2::new(
             hph_t[(0, 0)] + noise2,
@@ -745,30 +775,44 @@ impl RigTracker {
         } else {
             s_inv
         };
-        let s_inv_d = DMatrix::from_row_slice(
-            2,
-            2,
-            &[s_inv[(0, 0)], s_inv[(0, 1)], s_inv[(1, 0)], s_inv[(1, 1)]],
-        );
-        let gain = &ph_t * s_inv_d;
-        let correction: DVector<f64> = &gain * DVector::from_column_slice(innovation.as_slice());
-        let delta = Vector12::from_fn(|i, _| correction[i]);
+        // K = P Hᵀ S⁻¹, the correction K r, and P - K (P Hᵀ)ᵀ as a rank-2 downdate in place.
+        let gain: &mut Vec<[f64; 2]> = &mut f.gain;
+        gain.clear();
+        gain.extend(f.ph_t.iter().map(|row| {
+            [
+                row[0] * s_inv[(0, 0)] + row[1] * s_inv[(1, 0)],
+                row[0] * s_inv[(0, 1)] + row[1] * s_inv[(1, 1)],
+            ]
+        }));
+        let correction = |i: usize| gain[i][0] * innovation[0] + gain[i][1] * innovation[1];
+        let delta = Vector12::from_fn(|i, _| correction(i));
         let corrected = f.state.corrected(&delta);
         if !corrected.is_finite() {
             return;
         }
         f.state = corrected;
         if let Some(i) = offset_index {
-            self.clocks[c].offset_s += correction[i];
+            self.clocks[c].offset_s += correction(i);
         }
         if let Some(j) = drift_index {
-            self.clocks[c].drift_ppm += correction[j];
+            self.clocks[c].drift_ppm += correction(j);
         }
-        // P - K (H P): the rank-2 downdate, then symmetrised.
-        f.p -= &gain * ph_t.transpose();
-        let p_t = f.p.transpose();
-        f.p += p_t;
-        f.p *= 0.5;
+        for (j, mut column) in f.p.column_iter_mut().enumerate() {
+            let (a, b) = (f.ph_t[j][0], f.ph_t[j][1]);
+            for (entry, k) in column.iter_mut().zip(gain.iter()) {
+                *entry -= k[0] * a + k[1] * b;
+            }
+        }
+        f.updates += 1;
+        if f.updates.is_multiple_of(SYMMETRISE_EVERY_UPDATES) {
+            for i in 0..n {
+                for j in i + 1..n {
+                    let mean = 0.5 * (f.p[(i, j)] + f.p[(j, i)]);
+                    f.p[(i, j)] = mean;
+                    f.p[(j, i)] = mean;
+                }
+            }
+        }
         if tuning.adapt_motion {
             for (scale, z) in f.process_log_scale.iter_mut().zip(persistence) {
                 *scale = (*scale + PROCESS_ADAPTATION_RATE * z.clamp(-3.0, 3.0))
@@ -858,24 +902,37 @@ impl Fused {
             return;
         }
         self.last_dt_s = dt_s.abs();
+        // F = [I 0 dt·I 0; 0 E 0 B; 0 0 I 0; 0 0 0 I] (`MotionState::transition_jacobian`) applied by its blocks to
+        // every column of P, then from the right to every row: F P Fᵀ, and F P on the clocks' cross-covariances
+        // (the clocks do not move), in place.
         let f = self.state.transition_jacobian(dt_s);
+        let e = f.fixed_view::<3, 3>(3, 3).into_owned();
+        let b = f.fixed_view::<3, 3>(3, 9).into_owned();
+        let apply = |v: &mut [f64]| {
+            let (p, w, dv, dw) = (
+                Vector3::new(v[0], v[1], v[2]),
+                Vector3::new(v[3], v[4], v[5]),
+                Vector3::new(v[6], v[7], v[8]),
+                Vector3::new(v[9], v[10], v[11]),
+            );
+            let p = p + dv * dt_s;
+            let w = e * w + b * dw;
+            v[..3].copy_from_slice(p.as_slice());
+            v[3..6].copy_from_slice(w.as_slice());
+        };
         let n = self.p.nrows();
-        // F P Fᵀ on the state's block; F P on its cross-covariances with the clocks.
-        let pss: Matrix12 = Matrix12::from_fn(|i, j| self.p[(i, j)]);
-        let new_pss = f * pss * f.transpose();
-        for i in 0..12 {
-            for j in 0..12 {
-                self.p[(i, j)] = new_pss[(i, j)];
-            }
+        for mut column in self.p.column_iter_mut() {
+            apply(&mut column.as_mut_slice()[..12]);
         }
-        if n > 12 {
-            let cross = self.p.view((0, 12), (12, n - 12)).into_owned();
-            let f_d = DMatrix::from_fn(12, 12, |i, j| f[(i, j)]);
-            let new_cross = f_d * cross;
-            self.p.view_mut((0, 12), (12, n - 12)).copy_from(&new_cross);
-            self.p
-                .view_mut((12, 0), (n - 12, 12))
-                .copy_from(&new_cross.transpose());
+        let mut row = [0.0; 12];
+        for r in 0..n {
+            for (k, entry) in row.iter_mut().enumerate() {
+                *entry = self.p[(r, k)];
+            }
+            apply(&mut row);
+            for (k, entry) in row.iter().enumerate() {
+                self.p[(r, k)] = *entry;
+            }
         }
         let dt = dt_s.abs();
         let scale = self.process_log_scale.map(f64::exp);
