@@ -133,41 +133,19 @@ fn close(what: &str, got: &[f64], want: &[f64]) {
     }
 }
 
-#[test]
-fn every_estimate_of_a_paced_demo_reaches_cyclone_dds_equal_to_the_files() {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
-        return;
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let (received, out) = (dir.path().join("received.jsonl"), dir.path().join("demo"));
-    let (ok, log) = in_namespace(
-        r#"
-"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
-subscriber=$!
-"$ROITRACK" demo --ros2 --ros2-wait-s 30 --paced --duration-s 1 --out "$OUT" >/dev/null || exit 91
-wait $subscriber || exit 92
-"#,
-        &[
-            ("PYTHON", &python),
-            ("SUBSCRIBER", &subscriber_script()),
-            ("RECEIVED", &received),
-            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
-            ("OUT", &out),
-        ],
-    );
-    assert!(ok, "{log}");
-    assert!(log.contains("0 dropped"), "{log}");
-    let messages = read_received(&received);
-    let poses = roitrack::formats::read_tum(out.join("kalman_poses.tum")).unwrap();
-    let twists = roitrack::formats::read_twists_csv(out.join("kalman_twists.csv")).unwrap();
-    let diagnostics =
-        roitrack::formats::read_diagnostics_csv(out.join("kalman_diagnostics.csv")).unwrap();
-    assert!(
-        poses.len() >= 390,
-        "{} estimates in 1 s at 400 Hz",
-        poses.len()
-    );
+/// Checks the messages received against a run's files: on every estimate topic one message per row of the poses,
+/// in order, each equal to its rows (1e-9); the status against the diagnostics, if given; the camera info once (the
+/// camera file's, if given). Returns the number of estimates.
+fn check_against_files(
+    messages: &[Received],
+    poses_path: &Path,
+    twists_path: &Path,
+    diagnostics_path: Option<&Path>,
+    camera_path: Option<&Path>,
+) -> usize {
+    let poses = roitrack::formats::read_tum(poses_path).unwrap();
+    let twists = roitrack::formats::read_twists_csv(twists_path).unwrap();
+    let diagnostics = diagnostics_path.map(|p| roitrack::formats::read_diagnostics_csv(p).unwrap());
     let on =
         |topic: &str| -> Vec<&Received> { messages.iter().filter(|m| m.topic == topic).collect() };
 
@@ -304,6 +282,11 @@ wait $subscriber || exit 92
         );
     }
     for (k, m) in on("/roitrack/status").iter().enumerate() {
+        let Some(diagnostics) = &diagnostics else {
+            // Without a diagnostics file: the status is the diagnostics' but for the figures.
+            assert!(m.msg["status"][0]["message"].is_string());
+            continue;
+        };
         let status = &m.msg["status"][0];
         let value = |key: &str| -> String {
             let values = status["values"].as_array().unwrap();
@@ -334,8 +317,10 @@ wait $subscriber || exit 92
     // The camera info once, the demo's camera (latched: reliable and transient local).
     let infos = on("/roitrack/camera_info");
     assert_eq!(infos.len(), 1);
-    let camera =
-        roitrack::formats::read_camera_file(out.join("camera.yaml"), &Default::default()).unwrap();
+    let Some(camera_path) = camera_path else {
+        return poses.len();
+    };
+    let camera = roitrack::formats::read_camera_file(camera_path, &Default::default()).unwrap();
     let k: Vec<f64> = infos[0].msg["k"]
         .as_array()
         .unwrap()
@@ -352,6 +337,43 @@ wait $subscriber || exit 92
     );
     assert_eq!(infos[0].msg["width"], camera.width_px);
 
+    poses.len()
+}
+
+#[test]
+fn every_estimate_of_a_paced_demo_reaches_cyclone_dds_equal_to_the_files() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let (received, out) = (dir.path().join("received.jsonl"), dir.path().join("demo"));
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
+subscriber=$!
+"$ROITRACK" demo --ros2 --ros2-wait-s 30 --paced --duration-s 1 --out "$OUT" >/dev/null || exit 91
+wait $subscriber || exit 92
+"#,
+        &[
+            ("PYTHON", &python),
+            ("SUBSCRIBER", &subscriber_script()),
+            ("RECEIVED", &received),
+            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
+            ("OUT", &out),
+        ],
+    );
+    assert!(ok, "{log}");
+    assert!(log.contains("0 dropped"), "{log}");
+    let messages = read_received(&received);
+    let poses = check_against_files(
+        &messages,
+        &out.join("kalman_poses.tum"),
+        &out.join("kalman_twists.csv"),
+        Some(&out.join("kalman_diagnostics.csv")),
+        Some(&out.join("camera.yaml")),
+    );
+    assert!(poses >= 390, "{poses} estimates in 1 s at 400 Hz");
     // The latency, printed: of every message, and of the pose alone (the subscriber takes its topics in turn, the
     // pose first, so later topics wait for the earlier ones' take).
     let quantiles = |topic: Option<&str>| {
@@ -372,7 +394,7 @@ wait $subscriber || exit 92
     };
     eprintln!(
         "{} estimates received by Cyclone DDS, none lost; publish-to-receive latency: pose {}; all topics {}",
-        poses.len(),
+        poses,
         quantiles(Some("/roitrack/pose")),
         quantiles(None)
     );
@@ -410,6 +432,46 @@ fn a_node_with_no_interface_up_or_an_address_no_interface_has_is_refused_at_star
         ),
         "{log}"
     );
+}
+
+/// `live --fake --ros2` (with the feature genicam too, as CI builds it): Aravis' fake camera on the namespace's
+/// loopback, every estimate of the live loop received, equal to the poses and twists files.
+#[cfg(feature = "genicam")]
+#[test]
+fn every_estimate_of_the_live_fake_camera_reaches_cyclone_dds_equal_to_the_files() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let file = |name: &str| dir.path().join(name);
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
+subscriber=$!
+"$ROITRACK" live --fake --duration 1 --poses "$POSES" --twists "$TWISTS" --ros2 --ros2-wait-s 30 >/dev/null || exit 91
+wait $subscriber || exit 92
+"#,
+        &[
+            ("PYTHON", &python),
+            ("SUBSCRIBER", &subscriber_script()),
+            ("RECEIVED", &file("received.jsonl")),
+            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
+            ("POSES", &file("poses.tum")),
+            ("TWISTS", &file("twists.csv")),
+        ],
+    );
+    assert!(ok, "{log}");
+    assert!(log.contains("0 dropped"), "{log}");
+    let messages = read_received(&file("received.jsonl"));
+    let estimates = check_against_files(
+        &messages,
+        &file("poses.tum"),
+        &file("twists.csv"),
+        None,
+        None,
+    );
+    assert!(estimates >= 390, "{estimates} estimates in 1 s at 400 Hz");
 }
 
 fn publisher_script() -> PathBuf {
