@@ -281,3 +281,71 @@ fn clocks_are_learnt_from_the_measurements() {
         }
     }
 }
+
+/// The target hidden from every camera but one for 0.5 s (its measurements of [1.5, 2.0) s of rig time removed): the
+/// fused track goes on over the one camera and takes the others back, with no new track and no disputed estimate;
+/// during the stretch it is no worse than that camera's own track beyond the spread of its errors.
+#[test]
+fn a_target_hidden_from_all_but_one_camera_is_tracked_on() {
+    for (seed, visible) in [(4, 0), (4, 1), (7, 2), (5, 3)] {
+        let cameras = cameras_of(seed);
+        let scenario = Scenario::new(ScenarioKind::Random, seed);
+        let scene = CameraRigScene::random(scenario, cameras, seed);
+        let mut run = simulate_rig(&scene, 4000.0, 0.1, seed).unwrap();
+        let hidden = |t_rig: f64| (1.5..2.0).contains(&t_rig);
+        for (c, list) in run.measurements.iter_mut().enumerate() {
+            let clock = scene.rig.cameras()[c].clock;
+            if c != visible {
+                list.retain(|m| !hidden(clock.rig_time_s(m.t_s)));
+            }
+        }
+        let mut tracker = RigTracker::new(
+            unknown_clocks(&scene.rig),
+            roitrack_core::Target::grid4x4(),
+            RigTrackerConfig::default(),
+        )
+        .unwrap();
+        let mut estimates = Vec::new();
+        for m in merged(&run) {
+            estimates.extend(tracker.push(&m).unwrap());
+        }
+        estimates.extend(tracker.finish());
+        let report = tracker.report();
+        let not_vouched: Vec<(f64, &str)> = estimates
+            .iter()
+            .filter(|e| e.estimate.t_ref_s > 1.0 && !e.estimate.status.is_vouched_for())
+            .map(|e| (e.estimate.t_ref_s, e.estimate.status.name()))
+            .collect();
+        // The fused error in the stretch against the visible camera's own.
+        let errors = |list: &[(f64, MotionState)]| -> Vec<f64> {
+            list.iter()
+                .filter(|(t, _)| hidden(*t))
+                .map(|(t, s)| (s.cam_t_obj_m - scene.scenario.state_at(*t).cam_t_obj_m).norm())
+                .collect()
+        };
+        let fused: Vec<(f64, MotionState)> = estimates
+            .iter()
+            .map(|e| (e.estimate.t_ref_s, e.estimate.state))
+            .collect();
+        let single = track_single(&scene, &run, visible);
+        let rms = |v: &[f64]| (v.iter().map(|e| e * e).sum::<f64>() / v.len().max(1) as f64).sqrt();
+        let (fused_m, single_m) = (rms(&errors(&fused)), rms(&errors(&single)));
+        println!(
+            "seed {seed}, {cameras} cameras, only camera {visible} sees 1.5-2.0 s: fused {:.4} mm, that camera alone {:.4} \
+             mm; {} starts; not vouched after 1 s: {not_vouched:?}; camera counts {:?}",
+            fused_m * 1e3,
+            single_m * 1e3,
+            report.starts,
+            tracker.camera_counts()
+        );
+        assert_eq!(
+            report.starts, 1,
+            "seed {seed}: the fused track was started again"
+        );
+        assert!(not_vouched.is_empty(), "seed {seed}: {not_vouched:?}");
+        assert!(
+            fused_m <= 1.5 * single_m,
+            "seed {seed}: {fused_m} against {single_m}"
+        );
+    }
+}
