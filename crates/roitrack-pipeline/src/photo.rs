@@ -220,6 +220,25 @@ pub fn detect_target(
     frame: &Frame,
     options: &PhotoOptions,
 ) -> Result<PhotoDetection, PhotoError> {
+    // The detector's buffers (a copy of the image, the labels' runs: about a megabyte for 640 x 480) kept on the
+    // thread from one photograph to the next: allocating them each time costs page faults of their own.
+    thread_local! {
+        static SCRATCH: std::cell::RefCell<PhotoScratch> = std::cell::RefCell::default();
+    }
+    let mut scratch = SCRATCH.with(|kept| std::mem::take(&mut *kept.borrow_mut()));
+    let found = detect_target_with(camera, target, frame, options, &mut scratch);
+    SCRATCH.with(|kept| *kept.borrow_mut() = scratch);
+    found
+}
+
+/// [`detect_target`] with the detector's buffers `scratch`.
+fn detect_target_with(
+    camera: &CameraModel,
+    target: &Target,
+    frame: &Frame,
+    options: &PhotoOptions,
+    scratch: &mut PhotoScratch,
+) -> Result<PhotoDetection, PhotoError> {
     if (frame.width, frame.height) != (camera.width_px, camera.height_px) {
         return Err(PhotoError::ImageSize {
             image_width: frame.width,
@@ -228,7 +247,6 @@ pub fn detect_target(
             camera_height: camera.height_px,
         });
     }
-    let mut scratch = PhotoScratch::default();
     let blob_options = options.blob_options(camera, target);
     let find_rough = |polarity: Polarity, scratch: &mut PhotoScratch| {
         find_rough_photo_blob_candidates(
@@ -284,7 +302,7 @@ pub fn detect_target(
             } else {
                 Polarity::Dark
             };
-            let blobs = measure(find(polarity, &mut scratch), &mut scratch, &mut tally);
+            let blobs = measure(find(polarity, scratch), scratch, &mut tally);
             match identify_among(polarity, &blobs, &mut tally) {
                 Ok(found) => (polarity, blobs, found),
                 Err(source) => {
@@ -311,7 +329,7 @@ pub fn detect_target(
                 // thresholds, before the other levels are labelled and any centre is measured (a wrong polarity's
                 // few hundred glints cost as much to label and measure as identifying the target), and only the
                 // first in that order labelled in full and measured unless it fails.
-                let guess_candidates = find_rough(guess, &mut scratch);
+                let guess_candidates = find_rough(guess, scratch);
                 let guess_promise =
                     lattice_promise(camera, target, &rough(&guess_candidates)).unwrap_or(0);
                 let (first, second) = if guess_promise >= whole_view {
@@ -319,11 +337,11 @@ pub fn detect_target(
                 } else if guess_promise == 0 {
                     // Nothing grew: the other polarity cannot promise less.
                     (
-                        guess_candidates.other_polarity_rough(&mut scratch),
+                        guess_candidates.other_polarity_rough(scratch),
                         Some(guess_candidates),
                     )
                 } else {
-                    let other_candidates = guess_candidates.other_polarity_rough(&mut scratch);
+                    let other_candidates = guess_candidates.other_polarity_rough(scratch);
                     let other_promise =
                         lattice_promise(camera, target, &rough(&other_candidates)).unwrap_or(0);
                     if other_promise > guess_promise {
@@ -333,14 +351,14 @@ pub fn detect_target(
                     }
                 };
                 let first_polarity = first.polarity();
-                let first_blobs = measure(first, &mut scratch, &mut tally);
+                let first_blobs = measure(first, scratch, &mut tally);
                 match identify_among(first_polarity, &first_blobs, &mut tally) {
                     Ok(found) => (first_polarity, first_blobs, found),
                     Err(first_error) => {
                         let second =
-                            second.unwrap_or_else(|| find(first_polarity.other(), &mut scratch));
+                            second.unwrap_or_else(|| find(first_polarity.other(), scratch));
                         let second_polarity = second.polarity();
-                        let second_blobs = measure(second, &mut scratch, &mut tally);
+                        let second_blobs = measure(second, scratch, &mut tally);
                         let outcome = identify_among(second_polarity, &second_blobs, &mut tally);
                         fall_back(
                             (first_polarity, first_blobs, first_error),
@@ -353,14 +371,14 @@ pub fn detect_target(
                 // is measured and its promise known from its search's first hypotheses. If it does not hold the
                 // whole target, the other polarity's is asked for more.
                 {
-                    let guess_blobs = measure(find(guess, &mut scratch), &mut scratch, &mut tally);
+                    let guess_blobs = measure(find(guess, scratch), scratch, &mut tally);
                     let (outcome, guess_promise) =
                         attempt(guess, &guess_blobs, whole_view, &mut tally);
                     match outcome {
                         Some(Ok(found)) => (guess, guess_blobs, found),
                         Some(Err(guess_error)) => {
                             let other_blobs =
-                                measure(find(other, &mut scratch), &mut scratch, &mut tally);
+                                measure(find(other, scratch), scratch, &mut tally);
                             let outcome = identify_among(other, &other_blobs, &mut tally);
                             fall_back(
                                 (guess, guess_blobs, guess_error),
@@ -369,7 +387,7 @@ pub fn detect_target(
                         }
                         None => {
                             let other_blobs =
-                                measure(find(other, &mut scratch), &mut scratch, &mut tally);
+                                measure(find(other, scratch), scratch, &mut tally);
                             let (other_outcome, _) =
                                 attempt(other, &other_blobs, guess_promise + 1, &mut tally);
                             match other_outcome {

@@ -354,7 +354,11 @@ impl<'a> PhotoBlobCandidates<'a> {
         let mut some = vec![levels / 3, 2 * levels / 3];
         some.dedup();
         some.retain(|&k| k < levels);
+        // On one thread: the second level reads only the words of the image that held pixels at the first, and a
+        // thread started for one level's labelling costs about as much as it saves.
+        let two_threads = std::mem::replace(&mut self.two_threads, false);
         self.label(&some, scratch);
+        self.two_threads = two_threads;
     }
 
     /// Labels the levels `todo` (increasing), half of them on a second thread when the image is large.
@@ -763,15 +767,23 @@ fn passes_shape(c: &Component, options: &PhotoBlobOptions, max_area: f64) -> boo
     (options.ellipse_fill_range.0..=options.ellipse_fill_range.1).contains(&fill)
 }
 
-/// Groups' indices by 8 x 8 px cell of their centre, to find the group of a component in constant time.
+/// Groups' indices by 8 x 8 px cell of their centre, to find the group of a component in constant time: per cell, a
+/// list linked through the groups, in the order they were added.
 #[derive(Debug)]
 struct CellGrid {
     cols: usize,
     rows: usize,
-    cells: Vec<Vec<u32>>,
+    /// Per cell, its first and last group (`NONE` for an empty cell).
+    first: Vec<u32>,
+    last: Vec<u32>,
+    /// Per group, the next group of its cell.
+    next: Vec<u32>,
 }
 
 const CELL_PX: f64 = 8.0;
+
+/// No group.
+const NONE: u32 = u32::MAX;
 
 impl CellGrid {
     fn new(width: usize, height: usize) -> Self {
@@ -780,7 +792,9 @@ impl CellGrid {
         Self {
             cols,
             rows,
-            cells: vec![Vec::new(); cols * rows],
+            first: vec![NONE; cols * rows],
+            last: vec![NONE; cols * rows],
+            next: Vec::new(),
         }
     }
 
@@ -789,6 +803,24 @@ impl CellGrid {
             ((u / CELL_PX).max(0.0) as usize).min(self.cols - 1),
             ((v / CELL_PX).max(0.0) as usize).min(self.rows - 1),
         )
+    }
+
+    /// Adds group `g` (the next index) to cell `c`.
+    fn push(&mut self, c: usize, g: u32) {
+        debug_assert_eq!(g as usize, self.next.len());
+        self.next.push(NONE);
+        match self.last[c] {
+            NONE => self.first[c] = g,
+            last => self.next[last as usize] = g,
+        }
+        self.last[c] = g;
+    }
+
+    /// The groups of cell `c`, in the order they were added.
+    fn groups_of(&self, c: usize) -> impl Iterator<Item = u32> + '_ {
+        std::iter::successors(Some(self.first[c]).filter(|&g| g != NONE), |&g| {
+            Some(self.next[g as usize]).filter(|&n| n != NONE)
+        })
     }
 }
 
@@ -801,7 +833,7 @@ fn add_to_group(groups: &mut Vec<Group>, grid: &mut CellGrid, c: &Component) {
     let mut best: Option<(usize, f64)> = None;
     for gj in cj.saturating_sub(reach)..=(cj + reach).min(grid.rows - 1) {
         for gi in ci.saturating_sub(reach)..=(ci + reach).min(grid.cols - 1) {
-            for &g in &grid.cells[gj * grid.cols + gi] {
+            for g in grid.groups_of(gj * grid.cols + gi) {
                 let group = &groups[g as usize];
                 let d = (group.u_px - u).hypot(group.v_px - v);
                 if d < 0.5 * group.radius_px.min(radius) && best.is_none_or(|(_, bd)| d < bd) {
@@ -820,7 +852,7 @@ fn add_to_group(groups: &mut Vec<Group>, grid: &mut CellGrid, c: &Component) {
             group.radius_px = radius;
         }
         None => {
-            grid.cells[cj * grid.cols + ci].push(groups.len() as u32);
+            grid.push(cj * grid.cols + ci, groups.len() as u32);
             groups.push(Group {
                 u_px: u,
                 v_px: v,

@@ -161,26 +161,51 @@ impl PointIndex {
 
     /// Up to `k` nearest points to point `i` (itself excluded) within `radius`, nearest first.
     pub fn neighbours(&self, i: usize, k: usize, radius: f64) -> Vec<(usize, f64)> {
-        // Search a growing disk, not the whole `radius` (often "everything"): once it holds k others, the k nearest
-        // of all are in it, and in the same order (the cells are visited in the same row-major order, the sort is
-        // stable), so this is the full search's answer at the cost of a few cells.
         let mut found = Vec::new();
-        let mut reach = (2.0 * self.cell).min(radius);
+        self.neighbours_into(i, k, radius, &mut found);
+        found
+    }
+
+    /// [`Self::neighbours`] into `found` (cleared first), for a caller that asks for many.
+    pub fn neighbours_into(&self, i: usize, k: usize, radius: f64, found: &mut Vec<(usize, f64)>) {
+        // Search a growing disk, not the whole `radius` (often "everything"): once it holds k others, the k nearest
+        // of all are in it, and in the same order (the cells are visited in the same row-major order, and the k
+        // nearest are kept as a stable sort would order them: a point goes after those as near), so this is the
+        // full search's answer at the cost of a few cells.
+        found.clear();
+        if k == 0 {
+            return;
+        }
+        // The first disk holds about twice k points where they are spread evenly. Any first disk gives the same
+        // answer: points as near as the k-th nearest are all in the last disk searched, visited in the same order
+        // (two cells' order is the same in any rectangle of cells that holds both).
+        let area = (self.cols * self.rows) as f64 * self.cell * self.cell;
+        let even = (2.0 * k as f64 * area
+            / (std::f64::consts::PI * self.entries.len().max(1) as f64))
+            .sqrt();
+        let mut reach = (2.0 * self.cell).max(even).min(radius);
         loop {
             found.clear();
+            let mut seen = 0;
             self.within(&self.points[i], reach, |j, d| {
-                if j != i {
-                    found.push((j, d));
+                if j == i {
+                    return;
                 }
+                seen += 1;
+                if found.len() == k && d >= found[k - 1].1 {
+                    return;
+                }
+                let at = found.partition_point(|&(_, e)| e <= d);
+                if found.len() == k {
+                    found.pop();
+                }
+                found.insert(at, (j, d));
             });
-            if reach >= radius || found.len() >= k.max(1) || reach > self.extent() {
+            if reach >= radius || seen >= k || reach > self.extent() {
                 break;
             }
             reach = (2.0 * reach).min(radius);
         }
-        found.sort_by(|a, b| a.1.total_cmp(&b.1));
-        found.truncate(k);
-        found
     }
 
     /// The diagonal of the indexed area (px): a disk of this radius around any indexed point covers every cell.
@@ -457,6 +482,37 @@ mod tests {
                 .filter(|&(_, d)| d <= 60.0)
                 .min_by(|a, b| a.1.total_cmp(&b.1));
             assert_eq!(index.nearest(&q, 60.0, |_| true), brute);
+        }
+        // The k nearest as a stable sort of every point found orders them (the search as first written), ties
+        // (points repeated) included.
+        let mut repeated = points.clone();
+        repeated.extend_from_slice(&points[..40]);
+        let twice = PointIndex::new(&repeated, 25.0);
+        for i in (0..repeated.len()).step_by(7) {
+            for k in [0, 1, 4, 12] {
+                for radius in [30.0, 1e9] {
+                    let mut reach = (2.0 * twice.cell).min(radius);
+                    let reference = loop {
+                        let mut found = Vec::new();
+                        twice.within(&twice.points[i], reach, |j, d| {
+                            if j != i {
+                                found.push((j, d));
+                            }
+                        });
+                        if reach >= radius || found.len() >= k.max(1) || reach > twice.extent() {
+                            found.sort_by(|a, b| a.1.total_cmp(&b.1));
+                            found.truncate(k);
+                            break found;
+                        }
+                        reach = (2.0 * reach).min(radius);
+                    };
+                    assert_eq!(
+                        twice.neighbours(i, k, radius),
+                        reference,
+                        "{i} {k} {radius}"
+                    );
+                }
+            }
         }
         let n = index.neighbours(5, 4, 1e9);
         let mut brute: Vec<(usize, f64)> = points

@@ -1006,10 +1006,11 @@ fn grown_lattices(
     let mut covered = vec![false; ideal.len()];
     // Seeds: blobs whose neighbours are alike in size, tried from the most regular; a blob already in a grown
     // lattice is not a new seed.
+    let mut near = Vec::new();
     let mut order: Vec<(usize, f64)> = (0..ideal.len())
         .filter(|&b| ideal[b].x.is_finite())
         .filter_map(|b| {
-            let near = index.neighbours(b, 4, 1e6);
+            index.neighbours_into(b, 4, 1e6, &mut near);
             if near.len() < 2 {
                 return None;
             }
