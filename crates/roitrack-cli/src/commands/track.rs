@@ -523,7 +523,7 @@ fn check_paths(args: &TrackArgs) -> Result<()> {
 struct CameraStream {
     camera: usize,
     path: PathBuf,
-    reader: std::iter::Peekable<MeasurementSource>,
+    reader: MeasurementSource,
 }
 
 /// `--measurements NAME=FILE` as (name, file); refused without the `=`.
@@ -598,7 +598,7 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         streams.push(CameraStream {
             camera: c,
             path: path.clone(),
-            reader: reader.peekable(),
+            reader,
         });
     }
     let config = roitrack::core::rig::RigTrackerConfig {
@@ -636,38 +636,21 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
             );
         }
     } else {
-        // The clock each file is merged by: the rig file's, or the camera's own when the file leaves it out.
-        let prior: Vec<roitrack::core::rig::ClockModel> =
+        // Merged by the rig file's clocks, or by the camera's own when the file leaves them out.
+        let clocks: Vec<roitrack::core::rig::ClockModel> =
             rig.cameras().iter().map(|c| c.clock).collect();
-        loop {
-            let mut next: Option<(f64, usize)> = None;
-            for (k, stream) in streams.iter_mut().enumerate() {
-                match stream.reader.peek() {
-                    Some(Ok(m)) => {
-                        let t = prior[stream.camera].rig_time_s(m.t_s);
-                        if next.is_none_or(|(best, _)| t < best) {
-                            next = Some((t, k));
-                        }
-                    }
-                    Some(Err(_)) => {
-                        next = Some((f64::NEG_INFINITY, k));
-                        break;
-                    }
-                    None => {}
-                }
-            }
-            let Some((_, k)) = next else { break };
-            let stream = &mut streams[k];
-            crate::signals::check(&stream.path)?;
-            let Some(m) = stream.reader.next() else { break };
+        let paths: Vec<PathBuf> = streams.iter().map(|s| s.path.clone()).collect();
+        let merged = roitrack::core::rig::merge_streams(
+            streams.into_iter().map(|s| (s.camera, s.reader)).collect(),
+            &clocks,
+        );
+        for (k, m) in merged {
+            crate::signals::check(&paths[k])?;
             let m = m?;
             count += 1;
             let fused = tracker
-                .push(&roitrack::core::rig::RigMeasurement {
-                    camera: stream.camera,
-                    measurement: m,
-                })
-                .with_context(|| format!("tracking {} failed", stream.path.display()))?;
+                .push(&m)
+                .with_context(|| format!("tracking {} failed", paths[k].display()))?;
             for e in fused {
                 writer.write(&e.estimate)?;
                 estimates += 1;

@@ -399,3 +399,82 @@ pub struct RigMeasurement {
     /// The centroid, its time `t_s` on the camera's clock.
     pub measurement: Measurement,
 }
+
+/// Several cameras' streams of centroids (each in its own camera's time order) merged into one, in the order of their
+/// rig times by `clocks` (a camera's clock as the rig file gives it; its own time for one left unknown, which the
+/// tracker's reorder buffer then puts right). Each item is the position of its stream in the list and the
+/// measurement tagged with its camera, or the stream's error (which comes first, as soon as its stream is looked at).
+///
+/// ```
+/// use roitrack_core::rig::{ClockModel, RigMeasurement, merge_streams};
+/// use roitrack_core::Measurement;
+///
+/// let m = |t_s| Ok::<_, ()>(Measurement { t_s, id: 0, u_px: 1.0, v_px: 1.0 });
+/// let clocks = [ClockModel::REFERENCE, ClockModel { offset_s: 0.5, drift_ppm: 0.0 }];
+/// // Camera 1's 0.1 s is the rig's 0.6 s.
+/// let merged: Vec<f64> = merge_streams(vec![(0, vec![m(0.2), m(0.7)].into_iter()), (1, vec![m(0.1)].into_iter())], &clocks)
+///     .map(|(_, r)| r.unwrap().measurement.t_s)
+///     .collect();
+/// assert_eq!(merged, [0.2, 0.1, 0.7]);
+/// ```
+pub fn merge_streams<I, E>(streams: Vec<(usize, I)>, clocks: &[ClockModel]) -> MergedStreams<I>
+where
+    I: Iterator<Item = Result<Measurement, E>>,
+{
+    MergedStreams {
+        streams: streams
+            .into_iter()
+            .map(|(camera, stream)| (camera, stream.peekable()))
+            .collect(),
+        clocks: clocks.to_vec(),
+    }
+}
+
+/// The iterator of [`merge_streams`].
+pub struct MergedStreams<I: Iterator> {
+    streams: Vec<(usize, std::iter::Peekable<I>)>,
+    clocks: Vec<ClockModel>,
+}
+
+impl<I: Iterator> std::fmt::Debug for MergedStreams<I> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("MergedStreams")
+            .field("streams", &self.streams.len())
+            .field("clocks", &self.clocks)
+            .finish()
+    }
+}
+
+impl<I, E> Iterator for MergedStreams<I>
+where
+    I: Iterator<Item = Result<Measurement, E>>,
+{
+    type Item = (usize, Result<RigMeasurement, E>);
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let mut next: Option<(f64, usize)> = None;
+        for (k, (camera, stream)) in self.streams.iter_mut().enumerate() {
+            match stream.peek() {
+                Some(Ok(m)) => {
+                    let clock = self.clocks.get(*camera).copied().unwrap_or_default();
+                    let t = clock.rig_time_s(m.t_s);
+                    if next.is_none_or(|(best, _)| t < best) {
+                        next = Some((t, k));
+                    }
+                }
+                Some(Err(_)) => {
+                    next = Some((f64::NEG_INFINITY, k));
+                    break;
+                }
+                None => {}
+            }
+        }
+        let (_, k) = next?;
+        let (camera, stream) = &mut self.streams[k];
+        let item = stream.next()?.map(|measurement| RigMeasurement {
+            camera: *camera,
+            measurement,
+        });
+        Some((k, item))
+    }
+}
