@@ -589,3 +589,62 @@ wait $subscriber || exit 93
         .count();
     assert_eq!(poses, track.len(), "poses the node published");
 }
+
+/// Without --camera, the node takes the camera from the camera info Cyclone DDS publishes (latched), and tracks as
+/// with the file; with no camera info in time, it stops at start with an error naming the topic.
+#[test]
+fn the_node_takes_its_camera_from_a_latched_camera_info_and_names_a_missing_one() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
+    let sim = dir.path().join("sim");
+    let simulated = Command::new(roitrack)
+        .args([
+            "simulate",
+            "--scenario",
+            "spin",
+            "--duration-s",
+            "0.5",
+            "--out",
+        ])
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(simulated.status.success());
+    let file = |name: &str| dir.path().join(name);
+    let (ok, log) = in_namespace(
+        r#"
+"$ROITRACK" ros2-node --target "$SIM/target.csv" --camera-info-wait-s 0.5 && exit 90
+"$PYTHON" "$PUBLISHER" "$SIM/measurements.csv" --camera-info "$SIM/camera.yaml" --wait-s 60 &
+publisher=$!
+"$ROITRACK" ros2-node --target "$SIM/target.csv" --idle-s 2 --poses "$POSES" --twists "$TWISTS" || exit 91
+wait $publisher || exit 92
+"$ROITRACK" track --camera "$SIM/camera.yaml" --target "$SIM/target.csv" --measurements "$SIM/measurements.csv" \
+    --poses "$TRACK_POSES" --twists "$TRACK_TWISTS" || exit 93
+"#,
+        &[
+            ("PYTHON", &python),
+            ("PUBLISHER", &publisher_script()),
+            ("ROITRACK", roitrack),
+            ("SIM", &sim),
+            ("POSES", &file("node.tum")),
+            ("TWISTS", &file("node.csv")),
+            ("TRACK_POSES", &file("track.tum")),
+            ("TRACK_TWISTS", &file("track.csv")),
+        ],
+    );
+    assert!(ok, "{log}");
+    assert!(
+        log.contains("--camera-info-topic /roitrack/camera_info: no camera info on /roitrack/camera_info within 0.5 s"),
+        "{log}"
+    );
+    let (node, track) = (
+        std::fs::read_to_string(file("node.tum")).unwrap(),
+        std::fs::read_to_string(file("track.tum")).unwrap(),
+    );
+    assert!(track.lines().count() > 100, "{track}");
+    assert_eq!(node, track, "the node's poses, and track's from the file");
+}

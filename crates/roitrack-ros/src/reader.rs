@@ -559,7 +559,7 @@ fn compressed_image(message: &[u8]) -> Result<(f64, String, &[u8]), String> {
 
 /// The camera of a `sensor_msgs/msg/CameraInfo`: size, `k` (fx, skew, cx, fy, cy) and its distortion (plumb_bob,
 /// rational_polynomial, equidistant, or none).
-fn camera_from_info(message: &[u8]) -> Result<CameraModel, String> {
+pub(crate) fn camera_from_info(message: &[u8]) -> Result<CameraModel, String> {
     let mut cdr = Cdr::new(message)?;
     let (_, frame_id) = cdr.header()?;
     let height = cdr.u32()?;

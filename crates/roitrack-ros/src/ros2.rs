@@ -76,6 +76,9 @@ pub enum Ros2Error {
     /// ports taken, ...
     #[error("cannot start the ROS 2 node on domain {domain_id}: {message}")]
     Start { domain_id: u16, message: String },
+    /// What a node needed from the bus did not come (a camera info).
+    #[error("{0}")]
+    Input(String),
     /// A topic or its writer could not be created, or a frame id is empty or holds a NUL.
     #[error(transparent)]
     Topics(#[from] FormatError),

@@ -1,22 +1,29 @@
 //! [`MeasurementSubscriber`] (feature `ros2`): blob centroids (`roitrack_msgs/msg/BlobMeasurements`, the message
-//! the bags carry on `/roitrack/measurements`) taken live from the ROS 2 DDS bus, for `roitrack ros2-node`.
+//! the bags carry on `/roitrack/measurements`) taken live from the ROS 2 DDS bus, for `roitrack ros2-node`, and the
+//! camera of a `sensor_msgs/msg/CameraInfo` topic ([`wait_for_camera_info`]).
 
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use roitrack_core::Measurement;
+use roitrack_core::{CameraModel, Measurement};
 use roitrack_formats::MeasurementChecks;
 use ros2_client::dds::rustdds::{
     self, DomainParticipantBuilder, QosPolicies, RepresentationIdentifier, TopicKind, no_key,
 };
-use ros2_client::{MessageTypeName, Name, QosProfile, qos::History};
+use ros2_client::{
+    MessageTypeName, Name, QosProfile,
+    qos::{Durability, History},
+};
 
 use crate::measurement_reader::decode;
 use crate::msg::BLOB_MEASUREMENTS;
+use crate::reader::camera_from_info;
 use crate::ros2::{Ros2Error, Ros2Options, check_interfaces, normalised_namespace};
 
+/// The type of a camera info.
+const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
 /// How often the subscriber looks for a message when none is waiting.
 const POLL: Duration = Duration::from_micros(200);
 /// The messages kept until taken: a tracker behind by this many messages loses the oldest (counted by DDS, not here).
@@ -139,34 +146,10 @@ impl MeasurementSubscriber {
             namespace: full.clone(),
             message: e.to_string(),
         })?;
-        let start_error = |message: String| Ros2Error::Start {
-            domain_id: options.domain_id,
-            message,
-        };
-        let mut builder = DomainParticipantBuilder::new(options.domain_id);
-        if !options.interfaces.is_empty() {
-            builder = builder.with_only_networks(options.interfaces.iter().copied());
-        }
-        let participant = builder.build().map_err(|e| start_error(e.to_string()))?;
-        let qos: QosPolicies = (&QosProfile::subscription_default()
+        let qos = QosProfile::subscription_default()
             .reliability_reliable(ros2_client::qos::WhenFull::Fail)
-            .history(History::KeepLast { depth: DEPTH }))
-            .into();
-        let (package, type_name) = BLOB_MEASUREMENTS
-            .split_once("/msg/")
-            .expect("a pkg/msg/Type name");
-        let dds_topic = participant
-            .create_topic(
-                format!("rt{}", name_string(&name)),
-                MessageTypeName::new(package, type_name).dds_msg_type(),
-                &qos,
-                TopicKind::NoKey,
-            )
-            .map_err(|e| start_error(format!("cannot create the topic {full}: {e}")))?;
-        let reader = participant
-            .create_subscriber(&qos)
-            .and_then(|s| s.create_simple_datareader_no_key(&dds_topic, Some(qos.clone())))
-            .map_err(|e| start_error(format!("cannot subscribe to {full}: {e}")))?;
+            .history(History::KeepLast { depth: DEPTH });
+        let (participant, reader) = raw_reader(options, &name, BLOB_MEASUREMENTS, &qos)?;
         Ok(Self {
             reader,
             _participant: participant,
@@ -239,9 +222,97 @@ fn checked_message(
     Ok(checks)
 }
 
-/// A ROS 2 name as its fully qualified text.
-fn name_string(name: &Name) -> String {
-    name.to_string()
+/// A participant of the domain and interfaces of `options` and a reader of the topic `name` (a ROS 2 name: the DDS
+/// topic `rt` and the name) of type `full_type` (`pkg/msg/Type`) that takes its messages as their bytes.
+fn raw_reader(
+    options: &Ros2Options,
+    name: &Name,
+    full_type: &str,
+    qos: &QosProfile,
+) -> Result<
+    (
+        rustdds::DomainParticipant,
+        no_key::SimpleDataReader<RawMessage, RawAdapter>,
+    ),
+    Ros2Error,
+> {
+    let start_error = |message: String| Ros2Error::Start {
+        domain_id: options.domain_id,
+        message,
+    };
+    let mut builder = DomainParticipantBuilder::new(options.domain_id);
+    if !options.interfaces.is_empty() {
+        builder = builder.with_only_networks(options.interfaces.iter().copied());
+    }
+    let participant = builder.build().map_err(|e| start_error(e.to_string()))?;
+    let qos: QosPolicies = qos.into();
+    let (package, type_name) = full_type.split_once("/msg/").expect("a pkg/msg/Type name");
+    let dds_topic = participant
+        .create_topic(
+            format!("rt{name}"),
+            MessageTypeName::new(package, type_name).dds_msg_type(),
+            &qos,
+            TopicKind::NoKey,
+        )
+        .map_err(|e| start_error(format!("cannot create the topic {name}: {e}")))?;
+    let reader = participant
+        .create_subscriber(&qos)
+        .and_then(|s| s.create_simple_datareader_no_key(&dds_topic, Some(qos.clone())))
+        .map_err(|e| start_error(format!("cannot subscribe to {name}: {e}")))?;
+    Ok((participant, reader))
+}
+
+/// The camera of the first well-formed `sensor_msgs/msg/CameraInfo` on `topic` (in the namespace of `options`),
+/// waiting up to `timeout` (or until `stop`). Subscribed twice, so that every publisher is matched: best effort and
+/// volatile (a camera driver's camera info beside each image), reliable and transient local (a latched one, sent
+/// once, as `--ros2` publishes it). A malformed camera info is named and waited past; none in time is an error that
+/// names the topic, the wait and what was wrong with those that came.
+pub fn wait_for_camera_info(
+    options: &Ros2Options,
+    topic: &str,
+    timeout: Duration,
+    stop: &AtomicBool,
+) -> Result<CameraModel, Ros2Error> {
+    check_interfaces(&options.interfaces)?;
+    let full = format!("{}{topic}", normalised_namespace(&options.namespace));
+    let name = Name::parse(&full).map_err(|e| Ros2Error::Namespace {
+        namespace: full.clone(),
+        message: e.to_string(),
+    })?;
+    let volatile = QosProfile::subscription_default();
+    let latched = QosProfile::subscription_default()
+        .reliability_reliable(ros2_client::qos::WhenFull::Fail)
+        .durability(Durability::TransientLocal);
+    let readers = [
+        raw_reader(options, &name, CAMERA_INFO, &volatile)?,
+        raw_reader(options, &name, CAMERA_INFO, &latched)?,
+    ];
+    let start = Instant::now();
+    let mut malformed = Vec::new();
+    while start.elapsed() < timeout && !stop.load(Ordering::Relaxed) {
+        for (_, reader) in &readers {
+            while let Ok(Some(change)) = reader.try_take_one() {
+                let message = change.into_value();
+                let mut bytes = message.encoding.to_bytes().to_vec();
+                bytes.extend_from_slice(&[0, 0]);
+                bytes.extend_from_slice(&message.bytes);
+                match camera_from_info(&bytes) {
+                    Ok(camera) => return Ok(camera),
+                    Err(e) => malformed.push(e),
+                }
+            }
+        }
+        std::thread::sleep(POLL);
+    }
+    Err(Ros2Error::Input(format!(
+        "no camera info on {full} within {:.1} s{}",
+        timeout.as_secs_f64(),
+        match malformed.len() {
+            0 => ": give --camera, or publish the camera's sensor_msgs/msg/CameraInfo there"
+                .to_string(),
+            n => format!(", {n} malformed (the first: {})", malformed[0]),
+        }
+    )))
 }
 
 impl Iterator for MeasurementSubscriber {

@@ -8,6 +8,9 @@ With --malformed, three malformed messages go out too, before the first good one
 entry short, a point id the target does not have, a `v_px` that is NaN; the node must leave each out, name it, and
 track the rest to the same estimates.
 
+With --camera-info CAMERA.yaml (a ROS camera_info YAML as `roitrack simulate` writes it), the camera goes out first
+on /roitrack/camera_info, reliable and transient local (latched), for a node without --camera.
+
 It waits (up to --wait-s) for a subscriber, publishes reliably at --rate-hz messages a second, waits for every
 message to be acknowledged, and prints `published N messages`.
 
@@ -18,6 +21,7 @@ import argparse
 import csv
 import dataclasses
 import math
+import re
 import sys
 import time
 
@@ -29,7 +33,7 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from ros2_subscriber import Header, Time, ros_type
+from ros2_subscriber import LATCHED, CameraInfo, Header, RegionOfInterest, Time, ros_type
 
 
 @dataclasses.dataclass
@@ -40,6 +44,29 @@ class BlobMeasurements(IdlStruct, typename=ros_type("roitrack_msgs", "BlobMeasur
     v_px: sequence[float64]
     dt_s: sequence[float64]
     sigma_px: sequence[float64]
+
+
+def camera_info(path):
+    """The CameraInfo of a ROS camera_info YAML (its size, camera matrix and distortion; read by pattern)."""
+    text = open(path).read()
+
+    def number(key):
+        return int(re.search(rf"^{key}: (\d+)$", text, re.M).group(1))
+
+    def data(key):
+        block = re.search(rf"^{key}:\n(?:  .*\n)*?  data: \[(.*)\]", text, re.M).group(1)
+        return [float(x) for x in block.split(",")]
+
+    k = data("camera_matrix")
+    return CameraInfo(
+        header=Header(stamp=Time(sec=0, nanosec=0), frame_id="camera"),
+        height=number("image_height"), width=number("image_width"),
+        distortion_model=re.search(r"^distortion_model: (\w+)$", text, re.M).group(1),
+        d=data("distortion_coefficients"), k=k, r=[1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+        p=[k[0], k[1], k[2], 0.0, k[3], k[4], k[5], 0.0, 0.0, 0.0, 1.0, 0.0],
+        binning_x=0, binning_y=0,
+        roi=RegionOfInterest(x_offset=0, y_offset=0, height=0, width=0, do_rectify=False),
+    )
 
 
 def message(rows, frame_id="camera"):
@@ -77,6 +104,7 @@ def main():
     parser.add_argument("--rate-hz", type=float, default=400.0)
     parser.add_argument("--wait-s", type=float, default=30.0)
     parser.add_argument("--malformed", action="store_true")
+    parser.add_argument("--camera-info", help="a camera_info YAML to publish, latched, on /roitrack/camera_info")
     args = parser.parse_args()
 
     with open(args.measurements) as f:
@@ -88,6 +116,10 @@ def main():
         messages = [bad[0]] + messages[:middle] + bad[1:] + messages[middle:]
 
     participant = DomainParticipant(args.domain)
+    if args.camera_info:
+        info_topic = Topic(participant, "rt/roitrack/camera_info", CameraInfo, qos=LATCHED)
+        info_writer = DataWriter(participant, info_topic, qos=LATCHED)
+        info_writer.write(camera_info(args.camera_info))
     qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepAll)
     topic = Topic(participant, "rt" + args.topic, BlobMeasurements, qos=qos)
     writer = DataWriter(participant, topic, qos=qos)

@@ -13,9 +13,9 @@ use roitrack::core::estimator::{Tracker, track};
 use roitrack::formats::{EstimateWriter, MeasurementChecks};
 use roitrack::ros::BagOptions;
 use roitrack_ros::ros2::{Ros2Options, Ros2Publisher};
-use roitrack_ros::ros2_input::MeasurementSubscriber;
+use roitrack_ros::ros2_input::{MeasurementSubscriber, wait_for_camera_info};
 
-use crate::args::{CameraArgs, EstimatorArgs, TargetArgs};
+use crate::args::{EstimatorArgs, TargetArgs};
 use crate::ros2_args::Ros2BusArgs;
 
 /// Run as a ROS 2 node: take blob centroids (roitrack_msgs/msg/BlobMeasurements) from the DDS bus, track them, and
@@ -25,8 +25,24 @@ use crate::ros2_args::Ros2BusArgs;
 /// image, times going back, big-endian CDR) are left out whole, counted and named; the node goes on.
 #[derive(Debug, Args)]
 pub struct Ros2NodeArgs {
-    #[command(flatten)]
-    pub camera: CameraArgs,
+    /// Camera calibration (any format `track --camera` reads). Default: the camera of the first
+    /// sensor_msgs/msg/CameraInfo on --camera-info-topic.
+    #[arg(long, value_name = "FILE")]
+    pub camera: Option<PathBuf>,
+    /// Without --camera: the topic of the camera's sensor_msgs/msg/CameraInfo (in --ros2-namespace), subscribed both
+    /// best effort (a driver's, beside each image) and reliable, transient local (a latched one, as `--ros2`
+    /// publishes it).
+    #[arg(
+        long,
+        value_name = "TOPIC",
+        default_value = "/roitrack/camera_info",
+        conflicts_with = "camera"
+    )]
+    pub camera_info_topic: String,
+    /// Without --camera: how long to wait for the camera info before giving up (s).
+    #[arg(long, value_name = "S", default_value_t = 10.0, conflicts_with = "camera",
+          value_parser = crate::ranges::positive_up_to(3600.0, " s", "an hour"))]
+    pub camera_info_wait_s: f64,
     #[command(flatten)]
     pub target: TargetArgs,
     /// The topic of the centroids (roitrack_msgs/msg/BlobMeasurements, subscribed reliable: a publisher must offer
@@ -68,30 +84,48 @@ fn stop_flag() -> Arc<AtomicBool> {
 }
 
 pub fn run(args: &Ros2NodeArgs) -> Result<()> {
-    let camera = args.camera.read()?;
     let target = args.target.read()?;
     let config = args.estimator.config()?;
     if let (Some(poses), Some(twists)) = (&args.poses, &args.twists) {
-        let inputs = [
-            ("--camera", args.camera.camera.as_path()),
-            ("--target", args.target.target.as_path()),
-        ];
+        let inputs: Vec<(&str, &std::path::Path)> = [
+            ("--camera", args.camera.as_deref()),
+            ("--target", Some(args.target.target.as_path())),
+        ]
+        .into_iter()
+        .filter_map(|(name, path)| path.map(|p| (name, p)))
+        .collect();
         roitrack::formats::check_output_paths(
             &inputs,
             &[("--poses", poses.as_path()), ("--twists", twists.as_path())],
         )?;
     }
+    let options: Ros2Options = args.bus.options()?;
+    let stop = stop_flag();
+    let camera = match &args.camera {
+        Some(path) => roitrack::formats::read_camera_file(path, &Default::default())?,
+        None => {
+            eprintln!(
+                "roitrack: waiting up to {} s for the camera info on {}",
+                args.camera_info_wait_s, args.camera_info_topic
+            );
+            wait_for_camera_info(
+                &options,
+                &args.camera_info_topic,
+                Duration::from_secs_f64(args.camera_info_wait_s),
+                &stop,
+            )
+            .map_err(|e| anyhow!("--camera-info-topic {}: {e}", args.camera_info_topic))?
+        }
+    };
     let mut writer = match (&args.poses, &args.twists) {
         (Some(poses), Some(twists)) => Some(EstimateWriter::create(poses, twists, None)?),
         _ => None,
     };
-    let options: Ros2Options = args.bus.options()?;
     let bag_options = BagOptions {
         frame_id: args.frame_id.clone(),
         child_frame_id: args.child_frame_id.clone(),
         ..BagOptions::default()
     };
-    let stop = stop_flag();
     let checks = MeasurementChecks::new()
         .with_known_ids(target.points().iter().map(|p| p.id))
         .with_image_size(camera.width_px, camera.height_px);
