@@ -349,3 +349,33 @@ fn a_target_hidden_from_all_but_one_camera_is_tracked_on() {
         );
     }
 }
+
+/// A camera whose clock is off by more than the search (0.3 s against ±0.1 s) is refused, naming it, instead of
+/// being fused at a wrong offset.
+#[test]
+fn a_clock_beyond_the_search_is_refused_naming_the_camera() {
+    for seed in [1, 2, 3] {
+        let scenario = Scenario::new(ScenarioKind::Random, seed);
+        let mut scene = CameraRigScene::random(scenario, 2, seed);
+        let mut cameras = scene.rig.cameras().to_vec();
+        cameras[1].clock.offset_s = 0.3;
+        scene.rig = Rig::new(cameras).unwrap();
+        let run = simulate_rig(&scene, 4000.0, 0.1, seed).unwrap();
+        let mut tracker = RigTracker::new(
+            unknown_clocks(&scene.rig),
+            roitrack_core::Target::grid4x4(),
+            RigTrackerConfig::default(),
+        )
+        .unwrap();
+        let error = merged(&run)
+            .iter()
+            .find_map(|m| tracker.push(m).err())
+            .map(|e| e.to_string());
+        println!("seed {seed}: {error:?}");
+        let error = error.expect("refused");
+        assert!(
+            error.contains("camera 'cam1'") && error.contains("never matches"),
+            "{error}"
+        );
+    }
+}
