@@ -182,24 +182,27 @@ fn mask_of_64(pixels: &[u16; 64], threshold: u16) -> u64 {
         .fold(0, |bits, (b, &p)| bits | (u64::from(p > threshold) << b))
 }
 
-/// The first pixel at or after `from` whose mask bit is `set` (the mask of a row of `width` pixels).
-fn next_bit(mask: &[u64], from: usize, set: bool, width: usize) -> Option<usize> {
-    let mut word = from / 64;
-    if word >= mask.len() {
-        return None;
+/// Calls `run(start, end)` (inclusive) for each run of set bits of the mask of a row of `width` pixels (the bits
+/// past `width` clear), from the mask's edges a word at a time: a bit unlike the one before it starts a run (set)
+/// or ends one (clear); a run that reaches the row's end ends there, or with the last word if the row fills it.
+fn for_each_run(mask: &[u64], width: usize, mut run: impl FnMut(usize, usize)) {
+    let mut carry = 0u64;
+    let mut start = 0usize;
+    for (w, &word) in mask.iter().enumerate() {
+        let mut edges = word ^ ((word << 1) | carry);
+        carry = word >> 63;
+        while edges != 0 {
+            let b = edges.trailing_zeros() as usize;
+            edges &= edges - 1;
+            if word >> b & 1 == 1 {
+                start = w * 64 + b;
+            } else {
+                run(start, w * 64 + b - 1);
+            }
+        }
     }
-    let flip = if set { 0 } else { u64::MAX };
-    let mut bits = (mask[word] ^ flip) & (u64::MAX << (from % 64));
-    loop {
-        if bits != 0 {
-            let found = word * 64 + bits.trailing_zeros() as usize;
-            return (found < width).then_some(found);
-        }
-        word += 1;
-        if word >= mask.len() {
-            return None;
-        }
-        bits = mask[word] ^ flip;
+    if carry == 1 {
+        run(start, width - 1);
     }
 }
 
@@ -279,21 +282,15 @@ impl<S: RunSums> Labeller<S> {
                 continue;
             }
             row_mask_within(row, threshold, &mut self.mask, active);
-            let mut i = 0;
-            while i < width {
-                let Some(start) = next_bit(&self.mask, i, true, width) else {
-                    break;
-                };
-                let end = next_bit(&self.mask, start, false, width).unwrap_or(width);
-                i = end;
-                let id = self.runs.len() as u32;
-                self.runs.push(Run {
+            let (runs, parent) = (&mut self.runs, &mut self.parent);
+            for_each_run(&self.mask, width, |start, end| {
+                parent.push(runs.len() as u32);
+                runs.push(Run {
                     start: start as u32,
-                    end: (end - 1) as u32,
+                    end: end as u32,
                     row: j as u32,
                 });
-                self.parent.push(id);
-            }
+            });
             // Join with the runs of the row above that overlap or touch diagonally. A set's root is its smallest run
             // (the larger root is linked under the smaller), so every run's parent comes before it.
             let mut p = previous_row.start;
@@ -353,6 +350,60 @@ impl<S: RunSums> Labeller<S> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The first pixel at or after `from` whose mask bit is `set` (the mask of a row of `width` pixels).
+    fn next_bit(mask: &[u64], from: usize, set: bool, width: usize) -> Option<usize> {
+        let mut word = from / 64;
+        if word >= mask.len() {
+            return None;
+        }
+        let flip = if set { 0 } else { u64::MAX };
+        let mut bits = (mask[word] ^ flip) & (u64::MAX << (from % 64));
+        loop {
+            if bits != 0 {
+                let found = word * 64 + bits.trailing_zeros() as usize;
+                return (found < width).then_some(found);
+            }
+            word += 1;
+            if word >= mask.len() {
+                return None;
+            }
+            bits = mask[word] ^ flip;
+        }
+    }
+
+    #[test]
+    fn runs_from_edges_are_those_found_bit_by_bit() {
+        let mut state = 99u64;
+        for width in [1usize, 5, 63, 64, 65, 127, 128, 129, 200, 640] {
+            for density in [0.1, 0.5, 0.9, 1.0] {
+                let row: Vec<u16> = (0..width)
+                    .map(|_| {
+                        state = state
+                            .wrapping_mul(6_364_136_223_846_793_005)
+                            .wrapping_add(1_442_695_040_888_963_407);
+                        u16::from(((state >> 11) as f64 / (1u64 << 53) as f64) < density)
+                    })
+                    .collect();
+                let mut mask = vec![0u64; width.div_ceil(64)];
+                row_mask(&row, 0, &mut mask);
+                let mut found = Vec::new();
+                for_each_run(&mask, width, |start, end| found.push((start, end)));
+                // The runs as they were first found: the next set bit, then the next clear one.
+                let mut expected = Vec::new();
+                let mut i = 0;
+                while i < width {
+                    let Some(start) = next_bit(&mask, i, true, width) else {
+                        break;
+                    };
+                    let end = next_bit(&mask, start, false, width).unwrap_or(width);
+                    i = end;
+                    expected.push((start, end - 1));
+                }
+                assert_eq!(found, expected, "width {width}, density {density}");
+            }
+        }
+    }
 
     #[test]
     fn row_masks_agree_with_a_pixel_at_a_time() {
