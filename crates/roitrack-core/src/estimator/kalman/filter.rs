@@ -126,6 +126,62 @@ impl<const N: usize> ErrorStateKalman<N> {
         self.covariance.fixed_view::<12, 12>(0, 0).into_owned()
     }
 
+    /// Widens the covariance when one instant's blobs place the pose farther from the prediction than the two
+    /// uncertainties allow, and returns by what factor (1: unchanged).
+    ///
+    /// `blobs` gives each blob's point, centroid (ideal px) and white noise variance (px²). Their fit of the pose
+    /// alone, linearised at `state`, moves it by `x` with covariance `C = (Σ Jᵢᵀ Jᵢ / σᵢ²)⁻¹`; if the filter is right,
+    /// `x ~ N(0, P_pose + C)` and `xᵀ (P_pose + C)⁻¹ x` is a chi-square of 6 degrees of freedom. Beyond
+    /// `gate_chi2`, the prediction is surer of itself than the motion allows: frames weighed by the white part of
+    /// their noise pin the pose, bias and all, and when the model's error moves with the pose (a plate turning
+    /// through the direction four coplanar dots pin least), the prediction lags it. The whole covariance is then
+    /// scaled by the `α` that makes `xᵀ (α P_pose + C)⁻¹ x` its expected 6 (a fading of the filter's memory by
+    /// covariance matching), so that the frame's update follows its blobs instead of the motion model.
+    pub(super) fn match_pose_innovation(
+        &mut self,
+        model: &SpatioTemporalModel,
+        state: &MotionState,
+        blobs: impl Iterator<Item = (Vector3<f64>, Vector2<f64>, f64)>,
+        gate_chi2: f64,
+    ) -> f64 {
+        let (mut information, mut gradient) = (SMatrix::<f64, 6, 6>::zeros(), Vector6::zeros());
+        for (point_in_obj_m, ideal_px, white_px2) in blobs {
+            let Some(projected) =
+                model.project_with_jacobian(JacobianKind::Exact, state, &point_in_obj_m, 0.0)
+            else {
+                continue;
+            };
+            let j = projected.jacobian.fixed_view::<2, 6>(0, 0).into_owned();
+            information += j.transpose() * j / white_px2;
+            gradient += j.transpose() * (ideal_px - projected.pixel) / white_px2;
+        }
+        let Some(fit_covariance) = information.try_inverse() else {
+            return 1.0;
+        };
+        let x = fit_covariance * gradient;
+        let pose = self.covariance.fixed_view::<6, 6>(0, 0).into_owned();
+        let nis = |alpha: f64| {
+            (pose * alpha + fit_covariance)
+                .cholesky()
+                .map(|c| x.dot(&c.solve(&x)))
+        };
+        match nis(1.0) {
+            Some(v) if v.is_finite() && v > gate_chi2 => {}
+            _ => return 1.0,
+        }
+        // The normalised innovation falls as α grows: bisect in its logarithm for the expected 6.
+        let (mut low, mut high) = (1.0_f64, 1e8_f64);
+        for _ in 0..40 {
+            let mid = (low * high).sqrt();
+            match nis(mid) {
+                Some(v) if v > 6.0 => low = mid,
+                _ => high = mid,
+            }
+        }
+        self.covariance *= high;
+        high
+    }
+
     /// Adds `scale` times `prior` (of the pose and the twist) and of the acceleration prior: a covariance reset.
     pub(super) fn widen(&mut self, prior: &Matrix12, scale: f64) {
         let mut block = self.covariance.fixed_view_mut::<12, 12>(0, 0);
@@ -453,6 +509,16 @@ impl Filter {
 
     pub(super) fn widen(&mut self, prior: &Matrix12, scale: f64) {
         with_filter!(self, f => f.widen(prior, scale))
+    }
+
+    pub(super) fn match_pose_innovation(
+        &mut self,
+        model: &SpatioTemporalModel,
+        state: &MotionState,
+        blobs: impl Iterator<Item = (Vector3<f64>, Vector2<f64>, f64)>,
+        gate_chi2: f64,
+    ) -> f64 {
+        with_filter!(self, f => f.match_pose_innovation(model, state, blobs, gate_chi2))
     }
 
     pub(super) fn predict(&mut self, state: &mut MotionState, dt_s: f64, process_scale: [f64; 2]) {

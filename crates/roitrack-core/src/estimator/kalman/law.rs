@@ -353,6 +353,10 @@ pub(super) const HOLDING_POINTS: usize = 6;
 pub(super) const ORDERED_BY_POINTS_MIN_BLOBS: usize = 4 * HOLDING_POINTS;
 
 /// Whether every observation of `window` has one time (and there is one).
+/// The gate of a frame's pose innovation ([`Filter::match_pose_innovation`]): the 99.9 % quantile of a chi-square
+/// of 6 degrees of freedom, so that a filter whose covariance is right widens it on one frame in a thousand.
+pub(super) const POSE_INNOVATION_GATE_CHI2: f64 = 22.458;
+
 pub(super) fn is_one_instant(window: &[Observation]) -> bool {
     window
         .first()
@@ -462,7 +466,6 @@ impl KalmanLaw {
         dt: f64,
     ) -> usize {
         let first = &batch[0];
-        let prior = (self.filter, core.state);
         let (resets, gated_in_a_row, accepted_in_a_row) = (
             self.resets_total,
             self.gated_in_a_row,
@@ -481,7 +484,29 @@ impl KalmanLaw {
             }));
             let gate2 = self.filter.tuning().gate_sigma.powi(2);
             self.bias_apart = judged.iter().all(|nis| nis.is_some_and(|nis| nis <= gate2));
+            if self.bias_apart {
+                let blobs = batch.iter().map(|obs| {
+                    let white_px = self
+                        .split_noise(self.point_noise_px(core, obs.point_index))
+                        .white_px;
+                    (
+                        core.target.points()[obs.point_index].point_in_obj_m,
+                        obs.ideal_px,
+                        white_px * white_px,
+                    )
+                });
+                // A copy to widen (the blobs' noise reads the law): the filter is a few hundred words.
+                let mut filter = self.filter;
+                filter.match_pose_innovation(
+                    &core.model,
+                    &core.state,
+                    blobs,
+                    POSE_INNOVATION_GATE_CHI2,
+                );
+                self.filter = filter;
+            }
         }
+        let prior = (self.filter, core.state);
         for (i, obs) in batch.iter().enumerate() {
             let dt = if i == 0 {
                 dt

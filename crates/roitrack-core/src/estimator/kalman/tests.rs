@@ -379,3 +379,103 @@ fn a_rolling_readout_is_refined_to_fit_its_blobs() {
     );
     assert!(readout.iter().all(|m| m.used));
 }
+
+/// A 4-dot plate 0.5 m away, turned, on the canonical camera: the pose-innovation test's scene.
+fn plate_scene() -> (SpatioTemporalModel, Vec<Vector3<f64>>, MotionState) {
+    let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+    let points = [(-0.07, -0.06), (0.07, -0.06), (0.07, 0.06), (-0.07, 0.06)]
+        .iter()
+        .map(|&(x, y)| Vector3::new(x, y, 0.0))
+        .collect();
+    let truth = MotionState {
+        cam_r_obj: Rotation3::from_euler_angles(0.2, -0.15, 0.3),
+        cam_t_obj_m: Vector3::new(0.01, -0.02, 0.5),
+        velocity_mps: Vector3::zeros(),
+        angular_velocity_radps: Vector3::zeros(),
+    };
+    (model, points, truth)
+}
+
+/// The frame's pose innovation widens the covariance on about one frame in a thousand when the filter is right (its
+/// belief drawn from its own covariance, the blobs from their white noise): the chi-square gate is the test's, not a
+/// number fitted to the examples. Binomial(2000, 0.001): 9 or more widened frames has a probability of about 1e-4.
+#[test]
+fn the_pose_innovation_widens_a_right_filter_about_once_in_a_thousand_frames() {
+    use rand::{Rng, SeedableRng};
+    let (model, points, truth) = plate_scene();
+    let sigmas = [
+        5e-4, 5e-4, 5e-4, 1e-2, 1e-2, 1e-2, 0.1, 0.1, 0.1, 1.0, 1.0, 1.0,
+    ];
+    let covariance =
+        Matrix12::from_diagonal(&Vector12::from_iterator(sigmas.iter().map(|s| s * s)));
+    let white_px = 0.1;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    // Box-Muller: a standard normal from two uniforms.
+    let mut normal = move || -> f64 {
+        let (u, v): (f64, f64) = (rng.random_range(f64::EPSILON..1.0), rng.random());
+        (-2.0 * u.ln()).sqrt() * (std::f64::consts::TAU * v).cos()
+    };
+    let mut widened = 0;
+    for _ in 0..2000 {
+        let delta = Vector12::from_fn(|i, _| sigmas[i] * normal());
+        let belief = truth.corrected(&delta);
+        let blobs: Vec<_> = points
+            .iter()
+            .map(|p| {
+                let pixel = model.project(&truth, p, 0.0).unwrap();
+                (
+                    *p,
+                    pixel + Vector2::new(normal(), normal()) * white_px,
+                    white_px * white_px,
+                )
+            })
+            .collect();
+        let mut filter = ErrorStateKalman::<12>::new(covariance, KalmanTuning::default(), 0.0);
+        let alpha = filter.match_pose_innovation(
+            &model,
+            &belief,
+            blobs.into_iter(),
+            POSE_INNOVATION_GATE_CHI2,
+        );
+        if alpha > 1.0 {
+            widened += 1;
+        }
+    }
+    assert!(widened <= 8, "{widened} of 2000 frames widened");
+}
+
+/// A filter sure of a pose 1 mm and half a degree off its frame's blobs is widened until the frame's pose
+/// innovation is what its degrees of freedom expect, and then left alone.
+#[test]
+fn the_pose_innovation_widens_a_filter_too_sure_of_a_wrong_pose_to_its_expected_value() {
+    let (model, points, truth) = plate_scene();
+    let white_px = 0.1;
+    let belief = truth.corrected(&Vector12::from_column_slice(&[
+        1e-3, -5e-4, 0.0, 0.008, 0.0, -0.004, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+    ]));
+    let blobs = || {
+        points.iter().map(move |p| {
+            (
+                *p,
+                model.project(&truth, p, 0.0).unwrap(),
+                white_px * white_px,
+            )
+        })
+    };
+    let tight = Matrix12::identity() * 1e-10;
+    let mut filter = ErrorStateKalman::<12>::new(tight, KalmanTuning::default(), 0.0);
+    let alpha = filter.match_pose_innovation(&model, &belief, blobs(), POSE_INNOVATION_GATE_CHI2);
+    assert!(alpha > 100.0, "{alpha}");
+    assert!((filter.covariance[(0, 0)] - 1e-10 * alpha).abs() < 1e-12 * alpha);
+    // Now the innovation is at its expected 6, inside the gate: no second widening.
+    assert_eq!(
+        filter.match_pose_innovation(&model, &belief, blobs(), POSE_INNOVATION_GATE_CHI2),
+        1.0
+    );
+    // And a filter as sure of the right pose is left alone.
+    let mut right = ErrorStateKalman::<12>::new(tight, KalmanTuning::default(), 0.0);
+    assert_eq!(
+        right.match_pose_innovation(&model, &truth, blobs(), POSE_INNOVATION_GATE_CHI2),
+        1.0
+    );
+}
