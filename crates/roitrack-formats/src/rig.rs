@@ -414,4 +414,36 @@ mod tests {
             assert!(e.contains(expected), "{expected}: {e}");
         }
     }
+
+    /// Every truncation of a rig file and every byte of it replaced by a few others: an error or a rig, never a panic,
+    /// and every error names the file.
+    #[test]
+    fn mutated_rig_files_are_refused_without_panicking() {
+        let dir = dir_with_camera();
+        let path = dir.path().join("rig.yaml");
+        let text = format!("{TWO}    clock_offset_s: 0.0123\n    clock_drift_ppm: 40\n");
+        let bytes = text.as_bytes();
+        let options = CameraFileOptions::default();
+        let check = |mutated: &[u8]| {
+            let Ok(mutated) = std::str::from_utf8(mutated) else {
+                return;
+            };
+            if let Err(e) = parse_rig_yaml(mutated, &path, &options) {
+                assert!(
+                    e.to_string().contains("rig.yaml") || e.to_string().contains("cam.yaml"),
+                    "{e}"
+                );
+            }
+        };
+        for end in 0..bytes.len() {
+            check(&bytes[..end]);
+        }
+        for i in 0..bytes.len() {
+            for b in [b' ', b'-', b':', b'9', b'[', b'\n', b'.', b'e'] {
+                let mut mutated = bytes.to_vec();
+                mutated[i] = b;
+                check(&mutated);
+            }
+        }
+    }
 }
