@@ -681,7 +681,8 @@ pub(crate) fn lattice_promise(
     // The largest grown lattice's nodes, as many as the target has at most: an upper bound of the points its
     // placements put on blobs (computing those costs as much again as the growth, for a ranking that the growth
     // alone decides: a polarity's chance lattices are small).
-    let grown = grown_lattices(&ideal, &areas_px, &index);
+    // A lattice of as many nodes as the target has points cannot be beaten: the growth stops there.
+    let grown = grown_lattices(&ideal, &areas_px, &index, target.len());
     Some(grown.first().map_or(0, |g| g.nodes.len().min(target.len())))
 }
 
@@ -982,7 +983,7 @@ fn lattice_hypotheses(
     areas_px: &[f64],
     index: &PointIndex,
 ) -> HypothesisGroups<'static> {
-    let grown_sets = grown_lattices(ideal, areas_px, index);
+    let grown_sets = grown_lattices(ideal, areas_px, index, usize::MAX);
     // First the placements that put nearly every grown blob on the target; then, if none verifies, those that leave
     // up to half of them off it: stray blobs where the lattice goes on beyond the target (printed marks, clutter)
     // join the growth and stick out of the target.
@@ -995,11 +996,13 @@ fn lattice_hypotheses(
 }
 
 /// The lattices grown among the blobs (at most 3, of 4 nodes or more), the largest first: growth from a few seeds,
-/// each blob in one grown lattice at most.
+/// each blob in one grown lattice at most; no seed is grown after a lattice of `enough` nodes (the largest is then
+/// one of at least `enough`).
 fn grown_lattices(
     ideal: &[Vector2<f64>],
     areas_px: &[f64],
     index: &PointIndex,
+    enough: usize,
 ) -> Vec<lattice::GrownLattice> {
     const SEEDS: usize = 12;
     let mut grown_sets: Vec<lattice::GrownLattice> = Vec::new();
@@ -1051,7 +1054,11 @@ fn grown_lattices(
         for &(_, _, b) in &grown.nodes {
             covered[b] = true;
         }
+        let done = grown.nodes.len() >= enough;
         grown_sets.push(grown);
+        if done {
+            break;
+        }
     }
     grown_sets.sort_by_key(|g| std::cmp::Reverse(g.nodes.len()));
     grown_sets
