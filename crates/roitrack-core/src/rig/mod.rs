@@ -103,6 +103,18 @@ impl ClockModel {
 }
 
 /// Where a camera is in the rig: `camera_T_rig`, `x_camera = camera_r_rig x_rig + camera_t_rig_m`.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::MotionState;
+/// use roitrack_core::rig::CameraMount;
+///
+/// // A camera 0.2 m to the rig's left, looking the same way: the target 0.6 m ahead of the rig is 0.2 m to its right.
+/// let mount = CameraMount::new(Rotation3::identity(), Vector3::new(0.2, 0.0, 0.0));
+/// let rig_state = MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.6));
+/// assert_eq!(mount.camera_state(&rig_state).cam_t_obj_m, Vector3::new(0.2, 0.0, 0.6));
+/// assert!(!mount.is_identity() && CameraMount::IDENTITY.is_identity());
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraMount {
     pub camera_r_rig: Rotation3<f64>,
@@ -237,6 +249,19 @@ impl CameraMount {
 }
 
 /// One camera of a rig.
+///
+/// ```
+/// use roitrack_core::rig::{CameraMount, ClockModel, RigCamera};
+/// use roitrack_core::CameraModel;
+///
+/// // Pose known, clock offset and drift to be learnt from the measurements.
+/// let right = RigCamera {
+///     offset_known: false,
+///     drift_known: false,
+///     ..RigCamera::known("right", CameraModel::canonical(), CameraMount::IDENTITY, ClockModel::REFERENCE)
+/// };
+/// assert!(!right.clock_known());
+/// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct RigCamera {
     /// Its name (unique in the rig), as files and measurement streams name it.

@@ -71,6 +71,18 @@ impl Default for RigTrackerConfig {
 }
 
 /// Why a [`RigTracker`] refused a measurement or its configuration.
+///
+/// ```
+/// use roitrack_core::rig::{Rig, RigMeasurement, RigTracker, RigTrackerConfig};
+/// use roitrack_core::{CameraModel, Measurement, Target};
+///
+/// let mut tracker =
+///     RigTracker::new(Rig::single("left", CameraModel::canonical()), Target::grid4x4(), RigTrackerConfig::default())
+///         .unwrap();
+/// let m = Measurement { t_s: 0.0, id: 99, u_px: 500.0, v_px: 500.0 };
+/// let e = tracker.push(&RigMeasurement { camera: 0, measurement: m }).unwrap_err();
+/// assert!(e.to_string().starts_with("camera 'left': ") && e.to_string().contains("id 99"));
+/// ```
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum RigError {
     #[error("invalid tracker options: {0}")]
@@ -96,6 +108,16 @@ pub enum RigError {
 }
 
 /// A camera's clock as the tracker knows it: the offset and drift, and their standard deviations (0 when known).
+///
+/// ```
+/// use roitrack_core::rig::{Rig, RigTracker, RigTrackerConfig};
+/// use roitrack_core::{CameraModel, Target};
+///
+/// let tracker = RigTracker::new(Rig::single("cam", CameraModel::canonical()), Target::grid4x4(), RigTrackerConfig::default())
+///     .unwrap();
+/// let clock = tracker.clocks()[0];
+/// assert!(clock.synced && clock.offset_s == 0.0 && clock.offset_sigma_s == 0.0);
+/// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClockEstimate {
     pub offset_s: f64,
