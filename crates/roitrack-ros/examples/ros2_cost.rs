@@ -45,6 +45,27 @@ fn paced(n: usize, rate_hz: f64, mut each: impl FnMut(usize)) {
     }
 }
 
+/// Each thread's name and CPU time (s) so far, from `/proc/self/task/*/stat`, the busiest first.
+fn threads_cpu_s() -> Vec<(String, f64)> {
+    let mut threads: Vec<(String, f64)> = std::fs::read_dir("/proc/self/task")
+        .map(|tasks| {
+            tasks
+                .flatten()
+                .filter_map(|task| {
+                    let stat = std::fs::read_to_string(task.path().join("stat")).ok()?;
+                    let name = stat[stat.find('(')? + 1..stat.rfind(')')?].to_string();
+                    let rest = &stat[stat.rfind(')')? + 2..];
+                    let fields: Vec<&str> = rest.split_whitespace().collect();
+                    let ticks = fields[11].parse::<f64>().ok()? + fields[12].parse::<f64>().ok()?;
+                    Some((name, ticks / 100.0))
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    threads.sort_by(|a, b| b.1.total_cmp(&a.1));
+    threads
+}
+
 fn argument(name: &str, default: f64) -> f64 {
     let args: Vec<String> = std::env::args().collect();
     args.iter().position(|a| a == name).map_or(default, |i| {
@@ -100,6 +121,9 @@ fn main() {
             .expect("publishing");
         hand_over_us.push(t.elapsed().as_secs_f64() * 1e6);
     });
+    // Where the CPU went, by thread, before the publisher's threads end (the tracking thread included: its
+    // hand-overs and its pacing).
+    let by_thread = threads_cpu_s();
     let report = publisher.finish().expect("the publisher's end");
     let publishing_s = cpu_s() - cpu0;
     hand_over_us.sort_by(f64::total_cmp);
@@ -121,5 +145,14 @@ fn main() {
         "CPU of publishing, all threads: {per_estimate_us:.1} us per estimate ({:.0} % of tracking; {publishing_s:.2} \
          s less {baseline_s:.2} s of pacing, 10 ms ticks)",
         100.0 * per_estimate_us / tracking_us
+    );
+    let threads: Vec<String> = by_thread
+        .iter()
+        .filter(|(_, s)| *s > 0.0)
+        .map(|(name, s)| format!("{name} {s:.2} s"))
+        .collect();
+    println!(
+        "CPU by thread over the whole run (tracking included): {}",
+        threads.join(", ")
     );
 }
