@@ -6,7 +6,7 @@
 //! NEES of a 3 x 3 block `b` (position: rows 0..3, velocity: rows 6..9) is `δ_bᵀ P_b⁻¹ δ_b`. If the errors are
 //! zero-mean Gaussian with covariance `P`, each block's NEES is chi-square with 3 degrees of freedom: it averages 3,
 //! and 99 % of the estimates lie below [`CHI2_3DOF_99`]. A mean well above 3 means an over-confident covariance, well
-//! below 3 a timid one. Only estimates that are vouched for ([`TrackStatus::is_vouched_for`]) and carry a covariance
+//! below 3 a timid one. Only estimates that are vouched for ([`roitrack_core::estimator::TrackStatus::is_vouched_for`]) and carry a covariance
 //! are counted.
 //!
 //! ```

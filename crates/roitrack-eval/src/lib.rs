@@ -16,6 +16,7 @@
 //! [`estimate_errors`] gives the error of every estimate, which the figures plot; [`evaluate_estimates`] takes a
 //! tracker's estimates directly. [`consistency`] tells whether an estimator's covariance matches its errors (the NEES
 //! of position and velocity, [`consistency_of`]). Every metric of roitrack's tables and figures is defined here, once.
+#![deny(missing_docs)]
 
 mod align;
 pub mod consistency;
@@ -83,8 +84,9 @@ pub struct EstimateErrors {
     pub t_s: Vec<f64>,
     /// The clock offset added to the estimates' times (s).
     pub time_offset_s: f64,
-    /// The alignment asked for, and the transformation applied to the estimates (the identity without one).
+    /// The alignment asked for.
     pub alignment: Alignment,
+    /// The transformation applied to the estimates (the identity without an alignment).
     pub transform: SimilarityTransform,
     /// Estimates left out for lying outside the truth's time span ([`EvalOptions::skip_outside_truth`]).
     pub skipped_outside_truth: usize,
@@ -98,8 +100,9 @@ pub struct EstimateErrors {
     /// left perturbation `w` of the covariance (`R_true = Exp(w) R_est`), so the covariance's rotation block is its
     /// covariance too. Its norm is [`Self::rotation_rad`].
     pub rotation_vector_rad: Vec<Vector3<f64>>,
-    /// With twists on both sides: linear and angular velocity errors (m/s, rad/s).
+    /// With twists on both sides: linear velocity errors (m/s).
     pub velocity_mps: Option<Vec<Vector3<f64>>>,
+    /// With twists on both sides: angular velocity errors (rad/s).
     pub angular_velocity_radps: Option<Vec<Vector3<f64>>>,
     /// The true linear velocity at each estimate (m/s), for the velocity lag.
     true_velocity_mps: Option<Vec<Vector3<f64>>>,

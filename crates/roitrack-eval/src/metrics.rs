@@ -43,21 +43,25 @@ pub struct Metrics {
     /// The alignment of the estimates onto the truth's frame: `none`, `se3` or `sim3`.
     #[serde(default)]
     pub alignment: crate::Alignment,
-    /// The alignment's scale (1 unless `sim3`), rotation angle (deg) and translation (mm, truth frame).
+    /// The alignment's scale (1 unless `sim3`).
     #[serde(default = "one")]
     pub alignment_scale: f64,
+    /// The alignment's rotation angle (deg).
     #[serde(default)]
     pub alignment_rotation_deg: f64,
+    /// The alignment's translation (mm, truth frame).
     #[serde(default)]
     pub alignment_translation_mm: [f64; 3],
     /// Estimates left out for lying outside the truth's time span (only when asked to skip them).
     #[serde(default)]
     pub skipped_outside_truth: usize,
-    /// The relative pose error's interval (s), the number of estimate pairs it was measured on, and the RMS of its
-    /// translation (mm) and rotation (deg); absent unless asked for.
+    /// The relative pose error's interval (s); this and the three below are absent unless asked for.
     pub rpe_interval_s: Option<f64>,
+    /// The number of estimate pairs the relative pose error was measured on.
     pub rpe_pairs: Option<usize>,
+    /// The RMS of the relative pose error's translation (mm).
     pub rpe_translation_rmse_mm: Option<f64>,
+    /// The RMS of the relative pose error's rotation (deg).
     pub rpe_rotation_rmse_deg: Option<f64>,
 }
 

@@ -57,8 +57,11 @@ impl Default for TimeOffset {
 /// A similarity transformation `p -> scale * rotation * p + translation_m`, from the estimates' frame to the truth's.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimilarityTransform {
+    /// The rotation.
     pub rotation: Rotation3<f64>,
+    /// The translation (m, truth frame).
     pub translation_m: Vector3<f64>,
+    /// The scale (1 for a rigid transformation).
     pub scale: f64,
 }
 
@@ -327,6 +330,7 @@ pub fn find_time_offset(
 /// jitter over that interval.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct RelativeErrors {
+    /// The interval the pairs span (s).
     pub interval_s: f64,
     /// Translation error of each pair (m).
     pub translation_m: Vec<f64>,

@@ -8,6 +8,7 @@
 //!
 //! A dev-dependency only, and it depends on no roitrack crate (only nalgebra and rand), so that every crate's tests,
 //! roitrack-core's included, can use it without a cycle.
+#![deny(missing_docs)]
 
 pub mod alloc;
 pub mod jacobian;
