@@ -104,10 +104,20 @@ pub struct Ros2Report {
 }
 
 /// The QoS of a topic: the sensor-data profile's best effort and volatile durability for the estimates and the
-/// status, which a tracker outdates at once (keep last 100: see [`ESTIMATE_DEPTH`]); reliable and transient local (keep last 1, latched: a late subscriber
-/// gets it) for the camera info; reliable and volatile (keep last 100) for `/tf`, tf2's own broadcaster's QoS, since
-/// tf2's listeners (RViz's too) request reliable and DDS does not match them with a best-effort writer. A reliable
-/// writer never waits: a message that the send window has no room for is refused and counted.
+/// status, which a tracker outdates at once (keep last 100 rather than 5: RustDDS sends from its own thread out of
+/// the writer's history, and a burst must not overwrite estimates before they are sent; history is not matched on);
+/// reliable and transient local (keep last 1, latched: a late subscriber gets it) for the camera info; reliable and
+/// volatile (keep last 100) for `/tf`, tf2's own broadcaster's QoS, since tf2's listeners (RViz's too) request
+/// reliable and DDS does not match them with a best-effort writer. A reliable writer never waits: a message that the
+/// send window has no room for is refused and counted.
+///
+/// ```
+/// use roitrack_ros::ros2::qos_of;
+/// use ros2_client::qos::{Durability, Reliability};
+///
+/// assert_eq!(qos_of("/roitrack/pose").reliability, Reliability::BestEffort);
+/// assert_eq!(qos_of("/roitrack/camera_info").durability, Durability::TransientLocal);
+/// ```
 pub fn qos_of(topic: &str) -> QosProfile {
     let base = QosProfile::subscription_default();
     if topic == topics::CAMERA_INFO {

@@ -33,7 +33,7 @@ const REASONS_KEPT: usize = 16;
 
 /// A message's serialised body as DDS delivered it, with its encoding.
 #[derive(Debug)]
-pub struct RawMessage {
+pub(crate) struct RawMessage {
     encoding: RepresentationIdentifier,
     bytes: Vec<u8>,
 }
@@ -41,7 +41,7 @@ pub struct RawMessage {
 /// Takes every message as its bytes: roitrack decodes them itself, so that a malformed one is named and counted,
 /// never a failure of the subscription.
 #[derive(Debug, Clone, Copy)]
-pub struct RawAdapter;
+pub(crate) struct RawAdapter;
 
 impl no_key::DeserializerAdapter<RawMessage> for RawAdapter {
     type Error = std::convert::Infallible;
@@ -107,6 +107,26 @@ pub struct SubscriberReport {
 /// are (arrays of one entry per centroid, finite values, the target's point ids, centroids on the image, times that
 /// never go back): one that fails, or that is not little-endian CDR, is left out whole, counted, and its reason kept
 /// ([`report`](Self::report)); the subscription goes on.
+///
+/// ```no_run
+/// use std::sync::{Arc, atomic::AtomicBool};
+/// use std::time::Duration;
+/// use roitrack_formats::MeasurementChecks;
+/// use roitrack_ros::ros2::Ros2Options;
+/// use roitrack_ros::ros2_input::MeasurementSubscriber;
+///
+/// let checks = MeasurementChecks::new().with_known_ids(0..16).with_image_size(1024, 1024);
+/// let stop = Arc::new(AtomicBool::new(false));
+/// let mut centroids = MeasurementSubscriber::start(
+///     &Ros2Options::default(), "/roitrack/measurements", checks, stop, Duration::from_secs(3),
+/// )
+/// .unwrap();
+/// for m in &mut centroids {
+///     let m = m.unwrap();
+///     println!("point {} at {} s: ({}, {}) px", m.id, m.t_s, m.u_px, m.v_px);
+/// }
+/// println!("{} malformed messages: {:?}", centroids.report().malformed, centroids.report().reasons);
+/// ```
 pub struct MeasurementSubscriber {
     reader: no_key::SimpleDataReader<RawMessage, RawAdapter>,
     // Kept alive with the reader.
@@ -267,6 +287,19 @@ fn raw_reader(
 /// volatile (a camera driver's camera info beside each image), reliable and transient local (a latched one, sent
 /// once, as `--ros2` publishes it). A malformed camera info is named and waited past; none in time is an error that
 /// names the topic, the wait and what was wrong with those that came.
+///
+/// ```no_run
+/// use std::sync::atomic::AtomicBool;
+/// use std::time::Duration;
+/// use roitrack_ros::ros2::Ros2Options;
+///
+/// let stop = AtomicBool::new(false);
+/// let camera = roitrack_ros::ros2_input::wait_for_camera_info(
+///     &Ros2Options::default(), "/camera/camera_info", Duration::from_secs(10), &stop,
+/// )
+/// .unwrap();
+/// println!("{} x {} px, fx {} px", camera.width_px, camera.height_px, camera.intrinsics.fx_px);
+/// ```
 pub fn wait_for_camera_info(
     options: &Ros2Options,
     topic: &str,
