@@ -14,6 +14,9 @@ those conventions inside roitrack shows up as an error instead of cancelling out
         projection of each dot's centre at its own row's time), for telling the image side from the estimator.
     rs_outside_render.py table --runs DIR... [--json-out FILE]
         reads the `roitrack eval --json` outputs the driver left in each DIR and prints the table.
+    rs_outside_render.py centres --dir DIR --detect-json FILE --line-delay-s D
+        compares the blob centres of `roitrack detect --json` (one line per frame) with each dot's centre projected at
+        the time of the row the found centre lies on.
 
 Conventions (docs/model.md, docs/frames.md): camera_T_object poses (p_cam = R p_obj + t), x right, y down, z forward;
 pixel (i, j) has its centre at (u, v) = (i, j); a frame's time is the middle of row 0's exposure and row v's exposure
@@ -34,7 +37,7 @@ import numpy as np
 WIDTH_PX, HEIGHT_PX = 1024, 768
 FX_PX, FY_PX, CX_PX, CY_PX = 800.0, 800.0, 511.5, 383.5
 FPS = 30.0
-EXPOSURE_S = 1e-3
+EXPOSURE_S = 1e-3  # default; --exposure-s
 GRID_N = 4
 SPACING_M = 0.030
 DIAMETER_M = 0.011
@@ -182,15 +185,15 @@ class Motion:
 # ---------------------------------------------------------------------------------------------------------------------
 # Rendering
 
-def render_frame(motion, t_frame_s, line_delay_s, time_samples, supersample):
+def render_frame(motion, t_frame_s, line_delay_s, time_samples, supersample, exposure_s):
     """Coverage (H, W) in [0, 1] of the dark dots for a frame whose row 0 is exposed around t_frame_s."""
     _, xy, radius = target_points()
     rows = np.arange(HEIGHT_PX)
     t_rows = t_frame_s + rows * line_delay_s
     # where each dot is while each row is exposed (its centre at the row's mid-exposure; its reach over the exposure)
     r_mid, p_mid = motion.pose(t_rows)
-    r_a, p_a = motion.pose(t_rows - EXPOSURE_S / 2)
-    r_b, p_b = motion.pose(t_rows + EXPOSURE_S / 2)
+    r_a, p_a = motion.pose(t_rows - exposure_s / 2)
+    r_b, p_b = motion.pose(t_rows + exposure_s / 2)
     obj = np.concatenate([xy, np.zeros((len(xy), 1))], 1)
 
     def project(r, p):
@@ -212,7 +215,7 @@ def render_frame(motion, t_frame_s, line_delay_s, time_samples, supersample):
 
     # the rows' poses at each time sample of their exposure
     used_rows, row_index = np.unique(pv, return_inverse=True)
-    offsets = ((np.arange(time_samples) + 0.5) / time_samples - 0.5) * EXPOSURE_S
+    offsets = ((np.arange(time_samples) + 0.5) / time_samples - 0.5) * exposure_s
     t_samples = t_frame_s + used_rows[:, None] * line_delay_s + offsets[None, :]  # (rows, K)
     r_s, p_s = motion.pose(t_samples)  # (rows, K, 3, 3), (rows, K, 3)
     normal = r_s[..., :, 2]
@@ -326,7 +329,7 @@ def cmd_render(args):
     write_target(os.path.join(out, "target.csv"))
     stats = write_truth(motion, out, duration)
     times = T_FIRST_FRAME_S + np.arange(args.frames) / FPS
-    if HEIGHT_PX * args.line_delay_s + EXPOSURE_S >= 1 / FPS:
+    if HEIGHT_PX * args.line_delay_s + args.exposure_s >= 1 / FPS:
         raise SystemExit("the readout does not end before the next frame")
     with open(os.path.join(out, "timestamps.csv"), "w") as f:
         f.write("t,file\n")
@@ -334,12 +337,12 @@ def cmd_render(args):
             f.write(f"{t:.9f},frame_{k:05d}.pgm\n")
     for k, t in enumerate(times):
         for name, delay in (("frames_rs", args.line_delay_s), ("frames_gs", 0.0)):
-            coverage = render_frame(motion, t, delay, args.time_samples, args.supersample)
+            coverage = render_frame(motion, t, delay, args.time_samples, args.supersample, args.exposure_s)
             noise = np.random.default_rng([args.seed, k, 7]).normal(0, NOISE_DN, coverage.shape)  # same for both
             image = BACKGROUND_DN - (BACKGROUND_DN - DOT_DN) * coverage + noise
             write_pgm(os.path.join(out, name, f"frame_{k:05d}.pgm"), np.clip(np.rint(image), 0, 255))
     info = {"seed": args.seed, "frames": args.frames, "fps": FPS, "line_delay_s": args.line_delay_s,
-            "exposure_s": EXPOSURE_S, "size_px": [WIDTH_PX, HEIGHT_PX], "f_px": FX_PX,
+            "exposure_s": args.exposure_s, "size_px": [WIDTH_PX, HEIGHT_PX], "f_px": FX_PX,
             "time_samples": args.time_samples, "supersample": args.supersample, "noise_dn": NOISE_DN,
             "motion_args": [args.peak_speed_mps, args.peak_rate_rps, args.depth_m], **stats}
     with open(os.path.join(out, "render.json"), "w") as f:
@@ -378,12 +381,42 @@ def cmd_ideal(args):
                 f.write("%.9f,%d,%.6f,%.6f\n" % row)
 
 
+def cmd_centres(args):
+    """Blob centres `roitrack detect --json` found against each dot's centre projected at the time of its row."""
+    info = json.load(open(os.path.join(args.dir, "render.json")))
+    motion = Motion(info["seed"], T_FIRST_FRAME_S + info["frames"] / FPS + 0.1, *info["motion_args"])
+    _, xy, _ = target_points()
+    obj = np.concatenate([xy, np.zeros((len(xy), 1))], 1)
+    times = {f"frame_{k:05d}.pgm": T_FIRST_FRAME_S + k / FPS for k in range(info["frames"])}
+    errors = []
+    for line in open(args.detect_json):
+        d = json.loads(line)
+        if not d.get("ok"):
+            continue
+        t = times[os.path.basename(d["image"])]
+        for pt in d["points"]:
+            r, p = motion.pose(t + pt["v_px"] * args.line_delay_s)
+            c = r @ obj[pt["id"]] + p
+            errors.append((pt["u_px"] - (FX_PX * c[0] / c[2] + CX_PX), pt["v_px"] - (FY_PX * c[1] / c[2] + CY_PX)))
+    e = np.array(errors)
+    print(f"{args.detect_json}: {len(e)} centres; mean (u, v) {e.mean(0).round(4)} px, "
+          f"RMS (u, v) {np.sqrt((e ** 2).mean(0)).round(4)} px, largest |e| {np.hypot(*e.T).max():.3f} px")
+
+
 # ---------------------------------------------------------------------------------------------------------------------
 # The table
 
 RUNS = [("gs", "global shutter frames, --shutter global"),
         ("rs", "rolling frames, --shutter rolling (default smoothing)"),
         ("rs_causal", "rolling frames, --shutter rolling --no-rs-smoothing")]
+
+
+def own_position_rmse_mm(truth_dir, poses_path):
+    """Position RMSE computed here, apart from `roitrack eval`: the truth interpolated linearly at each estimate."""
+    gt = np.loadtxt(os.path.join(truth_dir, "gt_poses.tum"))
+    est = np.loadtxt(poses_path, ndmin=2)
+    p = np.stack([np.interp(est[:, 0], gt[:, 0], gt[:, i]) for i in (1, 2, 3)], 1)
+    return float(np.sqrt(np.mean(np.sum((est[:, 1:4] - p) ** 2, axis=1)))) * 1e3
 
 
 def cmd_table(args):
@@ -398,6 +431,11 @@ def cmd_table(args):
             all_ = json.load(open(os.path.join(d, f"eval_{key}_all.json")))
             late = json.load(open(os.path.join(d, f"eval_{key}_after5.json")))
             row[key] = {"all": all_, "after5": late}
+            for part, name in ((all_, f"{key}.tum"), (late, f"{key}_after5.tum")):
+                own = own_position_rmse_mm(d, os.path.join(d, name))
+                if abs(own - part["position_rmse_mm"]) > 1e-3 * own + 1e-4:
+                    raise SystemExit(f"{d}/{name}: roitrack eval says {part['position_rmse_mm']:.5f} mm, "
+                                     f"computed here {own:.5f} mm")
             print(f"| {seed} | {label} | {all_['count']} | {all_['position_rmse_mm']:.4f} | "
                   f"{late['position_rmse_mm']:.4f} | {all_['velocity_rmse_mm_s']:.2f} | "
                   f"{late['velocity_rmse_mm_s']:.2f} | {late['max_position_error_mm']:.3f} |")
@@ -443,9 +481,14 @@ def main():
             p.add_argument("--line-delay-s", type=float, default=30e-6)
             p.add_argument("--time-samples", type=int, default=8)
             p.add_argument("--supersample", type=int, default=4)
+            p.add_argument("--exposure-s", type=float, default=EXPOSURE_S)
         else:
             p.add_argument("--dir", required=True)
             p.add_argument("--noise-px", type=float, default=0.02)
+    p = sub.add_parser("centres")
+    p.add_argument("--dir", required=True)
+    p.add_argument("--detect-json", required=True)
+    p.add_argument("--line-delay-s", type=float, required=True)
     p = sub.add_parser("table")
     p.add_argument("--runs", nargs="+", required=True)
     p.add_argument("--json-out")
@@ -454,6 +497,8 @@ def main():
         cmd_render(args)
     elif args.cmd == "ideal":
         cmd_ideal(args)
+    elif args.cmd == "centres":
+        cmd_centres(args)
     else:
         sys.exit(cmd_table(args))
 

@@ -3,6 +3,7 @@
 # (bench/rs_outside_render.py, numpy only). See bench/README.md.
 #
 #   bash bench/rs_outside_render.sh [--seeds "1 2 3"] [--frames 120] [--line-delay-s 30e-6] [--out target/rs-outside]
+#       [--peak-speed-mps 0.8] [--peak-rate-rps 3] [--exposure-s 1e-3]
 #
 # For each seed: renders one motion as rolling-shutter and global-shutter PGM frames (same noise), tracks them with
 # the release `roitrack track --images` (global; rolling with the default offline smoothing; rolling with
@@ -16,12 +17,18 @@ seeds="1 2 3"
 frames=120
 delay=30e-6
 out=target/rs-outside
+speed=0.8
+rate=3
+exposure=1e-3
 while [ $# -gt 0 ]; do
     case "$1" in
         --seeds) seeds="$2"; shift 2 ;;
         --frames) frames="$2"; shift 2 ;;
         --line-delay-s) delay="$2"; shift 2 ;;
         --out) out="$2"; shift 2 ;;
+        --peak-speed-mps) speed="$2"; shift 2 ;;
+        --peak-rate-rps) rate="$2"; shift 2 ;;
+        --exposure-s) exposure="$2"; shift 2 ;;
         *) echo "rs_outside_render.sh: unknown option $1" >&2; exit 2 ;;
     esac
 done
@@ -46,8 +53,9 @@ for seed in $seeds; do
     d="$out/seed$seed"
     dirs+=("$d")
     rm -rf "$d"
-    "$py" bench/rs_outside_render.py render --seed "$seed" --out "$d" --frames "$frames" --line-delay-s "$delay"
-    common=(--camera "$d/camera.yaml" --target "$d/target.csv" --timestamps "$d/timestamps.csv")
+    "$py" bench/rs_outside_render.py render --seed "$seed" --out "$d" --frames "$frames" --line-delay-s "$delay" \
+        --peak-speed-mps "$speed" --peak-rate-rps "$rate" --exposure-s "$exposure"
+    common=(--camera "$d/camera.yaml" --target "$d/target.csv" --timestamps "$d/timestamps.csv" --exposure-s "$exposure")
     "$bin" track "${common[@]}" --images "$d/frames_gs" --shutter global \
         --poses "$d/gs.tum" --twists "$d/gs.csv" --diagnostics "$d/gs_diag.csv" 2>"$d/gs.log"
     "$bin" track "${common[@]}" --images "$d/frames_rs" --shutter rolling --line-delay-s "$delay" \
