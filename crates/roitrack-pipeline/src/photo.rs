@@ -377,8 +377,7 @@ fn detect_target_with(
                     match outcome {
                         Some(Ok(found)) => (guess, guess_blobs, found),
                         Some(Err(guess_error)) => {
-                            let other_blobs =
-                                measure(find(other, scratch), scratch, &mut tally);
+                            let other_blobs = measure(find(other, scratch), scratch, &mut tally);
                             let outcome = identify_among(other, &other_blobs, &mut tally);
                             fall_back(
                                 (guess, guess_blobs, guess_error),
@@ -386,8 +385,7 @@ fn detect_target_with(
                             )?
                         }
                         None => {
-                            let other_blobs =
-                                measure(find(other, scratch), scratch, &mut tally);
+                            let other_blobs = measure(find(other, scratch), scratch, &mut tally);
                             let (other_outcome, _) =
                                 attempt(other, &other_blobs, guess_promise + 1, &mut tally);
                             match other_outcome {
