@@ -8,6 +8,7 @@
 //! [`Demo::new`] simulates the scenario and measures the centroid noise; [`Demo::from_images`] and
 //! [`Demo::from_centroids`] run one estimator each way. The caller writes the files and shows the progress. Every
 //! run is tracked and scored against its truth by [`scoring`], which the studies of `roitrack-experiments` share.
+#![deny(missing_docs)]
 
 use std::sync::atomic::AtomicUsize;
 
@@ -40,8 +41,11 @@ const ACCURACY_ROI_SIZE_PX: u32 = 32;
 /// An estimator of the demo: its label, the stem of its files, and its configuration.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DemoEstimator {
+    /// Its name in the tables (`kalman (default)`).
     pub label: &'static str,
+    /// The stem of its files (`kalman` for `kalman_poses.tum`).
     pub stem: &'static str,
+    /// Its configuration.
     pub estimator: EstimatorConfig,
 }
 
@@ -80,6 +84,7 @@ pub enum Source {
 }
 
 impl Source {
+    /// Its name in the tables and the JSON lines.
     pub fn name(&self) -> &'static str {
         match self {
             Self::Images => "images",
@@ -91,8 +96,11 @@ impl Source {
 /// One estimator's run, scored.
 #[derive(Debug, Clone)]
 pub struct DemoRun {
+    /// The estimator that ran.
     pub estimator: DemoEstimator,
+    /// What it was fed.
     pub source: Source,
+    /// Its estimates and their errors.
     pub scored: Scored,
     /// What the loop did, for a run from images.
     pub loop_report: Option<LoopReport>,
@@ -129,6 +137,7 @@ impl DemoRun {
 /// Options of the demo.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DemoOptions {
+    /// The simulated motion.
     pub scenario: ScenarioKind,
     /// Seed of the simulation (motion, pixel noise).
     pub seed: u64,
@@ -163,8 +172,11 @@ impl Default for DemoOptions {
 /// ```
 #[derive(Debug, Clone)]
 pub struct Demo {
+    /// The options it was made with.
     pub options: DemoOptions,
+    /// The scenario simulated (camera, target, motion).
     pub scenario: Scenario,
+    /// The simulation's options (rates, noise).
     pub simulation: SimulationOptions,
     /// The ideal-centroid run with its ground truth (also the truth of the image runs).
     pub run: SimulatedRun,
@@ -414,16 +426,22 @@ pub fn json(run: &DemoRun) -> String {
 /// Why the demo (or a run scored against its truth) could not run.
 #[derive(Debug, Error)]
 pub enum DemoError {
+    /// The scenario could not be simulated.
     #[error("simulation failed: {0}")]
     Simulation(#[from] roitrack_sim::SimError),
+    /// The ROIs or frames could not be rendered.
     #[error("rendering failed: {0}")]
     Rendering(#[from] roitrack_sim::RenderError),
+    /// The sensor model is invalid.
     #[error("invalid sensor model: {0}")]
     Sensor(#[from] roitrack_image::SensorError),
+    /// The estimator refused the run.
     #[error("tracking failed: {0}")]
     Tracking(#[from] roitrack_core::estimator::TrackAllError),
+    /// The real-time loop failed.
     #[error("the real-time loop failed: {0}")]
     Loop(#[from] roitrack_pipeline::PipelineError),
+    /// The estimates could not be scored against the truth.
     #[error("evaluation failed: {0}")]
     Evaluation(#[from] roitrack_eval::EvalError),
     /// The real-time loop ran but never started a track.
@@ -432,5 +450,8 @@ pub enum DemoError {
          attempts; a target whose views are ambiguous, such as a plain symmetric grid, needs a marked point, e.g. one \
          larger blob, for the loop to start)"
     )]
-    NeverStarted { attempts: usize },
+    NeverStarted {
+        /// The full-frame identifications tried.
+        attempts: usize,
+    },
 }

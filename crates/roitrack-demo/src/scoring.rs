@@ -11,11 +11,13 @@ use crate::DemoError;
 /// A run tracked and scored.
 #[derive(Debug, Clone)]
 pub struct Scored {
+    /// The estimates, in time order.
     pub estimates: Vec<Estimate>,
     /// The estimates' statuses, counted.
     pub statuses: StatusCounts,
     /// Every estimate's error against the truth, and their metrics.
     pub errors: EstimateErrors,
+    /// The metrics of those errors.
     pub metrics: Metrics,
     /// Wall time of the tracking (s).
     pub seconds: f64,

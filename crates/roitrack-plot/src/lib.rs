@@ -5,6 +5,7 @@
 //!
 //! [`figures`] draws the multi-panel figures of a tracking run (trajectory, position and velocity against the
 //! truth), after figures 5 to 7 of the paper.
+#![deny(missing_docs)]
 
 pub mod figures;
 pub mod run;
@@ -28,7 +29,9 @@ static REGISTER: Once = Once::new();
 /// files its own way (the command line writes them with the run's other outputs, all or none).
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct RenderedFile {
+    /// The file name, without a folder.
     pub name: String,
+    /// The file's content (PNG or SVG).
     pub bytes: Vec<u8>,
 }
 
@@ -103,13 +106,26 @@ fn register_font() {
 pub enum PlotError {
     /// Drawing or writing the file at `path` failed.
     #[error("cannot draw {path}: {message}")]
-    Draw { path: PathBuf, message: String },
+    Draw {
+        /// The file.
+        path: PathBuf,
+        /// What the drawing back-end said.
+        message: String,
+    },
     /// There is no finite value to draw in the chart or figure `title`.
     #[error("nothing to plot in {title}: every series is empty or not finite")]
-    Empty { title: String },
+    Empty {
+        /// The chart's or figure's title.
+        title: String,
+    },
     /// The input `what` is inconsistent (e.g. vectors of different lengths), as `message` says.
     #[error("invalid {what}: {message}")]
-    Invalid { what: String, message: String },
+    Invalid {
+        /// Which input.
+        what: String,
+        /// What is wrong with it.
+        message: String,
+    },
 }
 
 /// How a series is drawn.

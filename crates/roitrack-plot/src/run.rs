@@ -28,12 +28,15 @@ use crate::{FONT, PlotError, register_font};
 pub struct RunFigureInputs {
     /// Title shown on every figure (e.g. the poses file's name).
     pub title: String,
-    /// The estimates' poses and, if written, twists (same times).
+    /// The estimates' poses.
     pub poses: Vec<PoseSample>,
+    /// The estimates' twists, if written (at the poses' times).
     pub twists: Option<Vec<TwistSample>>,
-    /// The truth, sampled densely, and the errors of the estimates against it (roitrack-eval).
+    /// The true poses, sampled densely.
     pub truth_poses: Option<Vec<PoseSample>>,
+    /// The true twists, sampled densely.
     pub truth_twists: Option<Vec<TwistSample>>,
+    /// The errors of the estimates against the truth (roitrack-eval).
     pub errors: Option<EstimateErrors>,
     /// Per estimate (same times as `poses`): the 1-sigma of the 12 error-state components (position m, rotation rad,
     /// velocity m/s, angular velocity rad/s; `NaN` where unknown).

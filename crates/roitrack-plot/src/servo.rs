@@ -33,6 +33,7 @@ const MAX_POINTS: usize = 2500;
 pub struct ServoRunSeries {
     /// Legend text (`ctc / roi`).
     pub label: String,
+    /// The samples' times (s).
     pub t_s: Vec<f64>,
     /// The path's position at each sample (m).
     pub reference_m: Vec<[f64; 3]>,
