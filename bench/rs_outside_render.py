@@ -16,7 +16,10 @@ those conventions inside roitrack shows up as an error instead of cancelling out
         reads the `roitrack eval --json` outputs the driver left in each DIR and prints the table.
     rs_outside_render.py centres --dir DIR --detect-json FILE --line-delay-s D
         compares the blob centres of `roitrack detect --json` (one line per frame) with each dot's centre projected at
-        the time of the row the found centre lies on.
+        the time of the row the found centre lies on (--poses: also each frame's static pose against the truth).
+    rs_outside_render.py starts --dir DIR --roitrack BIN
+        tracks DIR's rolling frames from later frames on (at several speeds of the target), with and without the
+        smoothing, and prints the first estimates' errors: what a track's start speed costs.
 
 Conventions (docs/model.md, docs/frames.md): camera_T_object poses (p_cam = R p_obj + t), x right, y down, z forward;
 pixel (i, j) has its centre at (u, v) = (i, j); a frame's time is the middle of row 0's exposure and row v's exposure
@@ -394,6 +397,11 @@ def cmd_centres(args):
         if not d.get("ok"):
             continue
         t = times[os.path.basename(d["image"])]
+        if args.poses:  # the static pose found, against the truth at the mean time of its blobs' rows
+            t_mean = t + np.mean([pt["v_px"] for pt in d["points"]]) * args.line_delay_s
+            _, p = motion.pose(t_mean)
+            print(f"{os.path.basename(d['image'])}: static pose off by "
+                  f"{np.round((np.array(d['cam_t_obj_m']) - p) * 1e3, 3)} mm (x, y, z)")
         for pt in d["points"]:
             r, p = motion.pose(t + pt["v_px"] * args.line_delay_s)
             c = r @ obj[pt["id"]] + p
@@ -401,6 +409,49 @@ def cmd_centres(args):
     e = np.array(errors)
     print(f"{args.detect_json}: {len(e)} centres; mean (u, v) {e.mean(0).round(4)} px, "
           f"RMS (u, v) {np.sqrt((e ** 2).mean(0)).round(4)} px, largest |e| {np.hypot(*e.T).max():.3f} px")
+
+
+def cmd_starts(args):
+    """Tracks the rolling frames from later frames on (those before left out): how a track's start speed costs."""
+    import subprocess
+    info = json.load(open(os.path.join(args.dir, "render.json")))
+    n = info["frames"]
+    gt = np.loadtxt(os.path.join(args.dir, "gt_poses.tum"))
+    gv = np.loadtxt(os.path.join(args.dir, "gt_twists.csv"), delimiter=",", skiprows=1)
+    ts = T_FIRST_FRAME_S + np.arange(n) / FPS
+    speed = np.linalg.norm(np.stack([np.interp(ts, gv[:, 0], gv[:, i]) for i in (1, 2, 3)], 1), axis=1)
+    fastest = np.argsort(-speed[: n - 20])
+    starts = {int(fastest[0]), int(fastest[3]), int(fastest[8])}
+    starts |= {int(np.argmin(abs(speed[: n - 20] - x))) for x in (0.3, 0.7, 1.0, 1.2)}
+    for s in sorted(starts):
+        d = os.path.join(args.dir, "starts", f"from{s:03d}")
+        os.makedirs(os.path.join(d, "frames"), exist_ok=True)
+        with open(os.path.join(d, "timestamps.csv"), "w") as f:
+            f.write("t,file\n")
+            for k in range(s, n):
+                name = f"frame_{k:05d}.pgm"
+                link = os.path.join(d, "frames", name)
+                if not os.path.lexists(link):
+                    os.symlink(os.path.abspath(os.path.join(args.dir, "frames_rs", name)), link)
+                f.write(f"{ts[k]:.9f},{name}\n")
+        for smoothing in ([], ["--no-rs-smoothing"]):
+            tag = "causal" if smoothing else "rs"
+            subprocess.run([args.roitrack, "track", "--camera", os.path.join(args.dir, "camera.yaml"),
+                            "--target", os.path.join(args.dir, "target.csv"), "--images", os.path.join(d, "frames"),
+                            "--timestamps", os.path.join(d, "timestamps.csv"), "--shutter", "rolling",
+                            "--line-delay-s", str(args.line_delay_s), "--exposure-s", str(info["exposure_s"]),
+                            "--poses", os.path.join(d, f"{tag}.tum"), "--twists", os.path.join(d, f"{tag}.csv"),
+                            "--diagnostics", os.path.join(d, f"{tag}_diag.csv"), *smoothing],
+                           check=True, capture_output=True)
+        line = f"from frame {s:3d} ({speed[s]:.2f} m/s):"
+        for tag in ("rs", "causal"):
+            e = np.loadtxt(os.path.join(d, f"{tag}.tum"), ndmin=2)
+            p = np.stack([np.interp(e[:, 0], gt[:, 0], gt[:, i]) for i in (1, 2, 3)], 1)
+            err = np.linalg.norm(e[:, 1:4] - p, axis=1) * 1e3
+            status = [r.split(",")[1][:4] for r in open(os.path.join(d, f"{tag}_diag.csv")).read().split("\n")[1:6]]
+            line += (f" {tag}: first 5 off {np.round(err[:5], 3).tolist()} mm ({' '.join(status)}), "
+                     f"RMSE all {np.sqrt(np.mean(err ** 2)):.4f}, after 5 {np.sqrt(np.mean(err[5:] ** 2)):.4f} mm;")
+        print(line)
 
 
 # ---------------------------------------------------------------------------------------------------------------------
@@ -489,6 +540,11 @@ def main():
     p.add_argument("--dir", required=True)
     p.add_argument("--detect-json", required=True)
     p.add_argument("--line-delay-s", type=float, required=True)
+    p.add_argument("--poses", action="store_true", help="also each frame's static pose against the truth")
+    p = sub.add_parser("starts")
+    p.add_argument("--dir", required=True)
+    p.add_argument("--roitrack", required=True)
+    p.add_argument("--line-delay-s", type=float, default=30e-6)
     p = sub.add_parser("table")
     p.add_argument("--runs", nargs="+", required=True)
     p.add_argument("--json-out")
@@ -499,6 +555,8 @@ def main():
         cmd_ideal(args)
     elif args.cmd == "centres":
         cmd_centres(args)
+    elif args.cmd == "starts":
+        cmd_starts(args)
     else:
         sys.exit(cmd_table(args))
 
