@@ -322,7 +322,13 @@ def write_truth(motion, out, t_end_s):
             "depth_m": [float(p[:, 2].min()), float(p[:, 2].max())]}
 
 
+def use_key_diameter(diameter_m):
+    global KEY_DIAMETER_M
+    KEY_DIAMETER_M = diameter_m
+
+
 def cmd_render(args):
+    use_key_diameter(args.key_diameter_m)
     out = args.out
     os.makedirs(os.path.join(out, "frames_rs"), exist_ok=True)
     os.makedirs(os.path.join(out, "frames_gs"), exist_ok=True)
@@ -347,7 +353,8 @@ def cmd_render(args):
     info = {"seed": args.seed, "frames": args.frames, "fps": FPS, "line_delay_s": args.line_delay_s,
             "exposure_s": args.exposure_s, "size_px": [WIDTH_PX, HEIGHT_PX], "f_px": FX_PX,
             "time_samples": args.time_samples, "supersample": args.supersample, "noise_dn": NOISE_DN,
-            "motion_args": [args.peak_speed_mps, args.peak_rate_rps, args.depth_m], **stats}
+            "motion_args": [args.peak_speed_mps, args.peak_rate_rps, args.depth_m],
+            "key_diameter_m": KEY_DIAMETER_M, **stats}
     with open(os.path.join(out, "render.json"), "w") as f:
         json.dump(info, f, indent=1)
     print(f"seed {args.seed}: {args.frames} frames x 2 in {out}; speed peak {stats['peak_speed_mps']:.2f} m/s "
@@ -360,6 +367,7 @@ def cmd_render(args):
 
 def cmd_ideal(args):
     info = json.load(open(os.path.join(args.dir, "render.json")))
+    use_key_diameter(info["key_diameter_m"])
     motion = Motion(info["seed"], T_FIRST_FRAME_S + info["frames"] / FPS + 0.1, *info["motion_args"])
     ids, xy, _ = target_points()
     obj = np.concatenate([xy, np.zeros((len(xy), 1))], 1)
@@ -533,6 +541,8 @@ def main():
             p.add_argument("--time-samples", type=int, default=8)
             p.add_argument("--supersample", type=int, default=4)
             p.add_argument("--exposure-s", type=float, default=EXPOSURE_S)
+            p.add_argument("--key-diameter-m", type=float, default=KEY_DIAMETER_M,
+                           help="point 0's diameter (the others': %g m)" % DIAMETER_M)
         else:
             p.add_argument("--dir", required=True)
             p.add_argument("--noise-px", type=float, default=0.02)
