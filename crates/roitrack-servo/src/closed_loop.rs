@@ -56,6 +56,7 @@ pub enum ControllerKind {
 }
 
 impl ControllerKind {
+    /// Every controller, in the table's order.
     pub const ALL: [Self; 4] = [Self::Ctc, Self::CtcPose, Self::Kvs, Self::TrueState];
 
     /// `ctc`, `ctc-pose`, `kvs`, `true-state`.
@@ -68,6 +69,7 @@ impl ControllerKind {
         }
     }
 
+    /// The controller of that [`Self::name`], if any.
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|k| k.name() == name)
     }
@@ -97,6 +99,7 @@ impl CameraKind {
         }
     }
 
+    /// The camera of that [`Self::name`], if any.
     pub fn from_name(name: &str) -> Option<Self> {
         [Self::Roi, Self::Frames120, Self::Frames30, Self::Truth]
             .into_iter()
@@ -135,6 +138,7 @@ impl CameraKind {
 pub struct CameraTiming {
     /// ROIs or frames per second.
     pub rate_hz: f64,
+    /// Exposure of each ROI or frame.
     pub exposure_s: f64,
     /// From the end of the exposure to the image in memory.
     pub readout_s: f64,
@@ -152,14 +156,18 @@ impl CameraTiming {
 /// One closed-loop run.
 #[derive(Debug, Clone)]
 pub struct ServoConfig {
+    /// The law that drives the robot.
     pub controller: ControllerKind,
+    /// What it sees the robot through.
     pub camera: CameraKind,
+    /// The path to follow.
     pub path: ReferencePath,
     /// The simulated robot.
     pub robot: RobotParams,
     /// The controller's model: the robot's masses times this (0.8: a payload 25 % of the model's masses unknown to
     /// it, the model 20 % off) and its friction times `model_friction_factor`.
     pub model_mass_factor: f64,
+    /// The controller's model: the robot's friction times this.
     pub model_friction_factor: f64,
     /// The gains; `None`: from the loop's latency ([`Gains::for_latency`], [`KinematicGains::for_latency`]), with
     /// [`Self::depth_factor`] along the optical axis for a camera.
@@ -366,14 +374,24 @@ pub fn servo_tracker_config() -> TrackerConfig {
 /// Why a run could not be made (an unstable run is not an error: see [`ServoReport::stable`]).
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum ServoError {
+    /// An option is out of its range.
     #[error("servo option {field} is out of range: {value}")]
-    Invalid { field: &'static str, value: f64 },
+    Invalid {
+        /// The option's field name.
+        field: &'static str,
+        /// The value given.
+        value: f64,
+    },
+    /// The simulated camera's sensor model is invalid.
     #[error("the simulated camera: {0}")]
     Sensor(#[from] SensorError),
+    /// The tracker refused its configuration.
     #[error("the tracker refused its configuration: {0}")]
     Tracker(String),
+    /// The frame tracker failed on a frame.
     #[error("the frame tracker failed on a frame: {0}")]
     Frame(#[from] FrameError),
+    /// The tracker refused a measurement.
     #[error("the tracker refused a measurement: {0}")]
     Measurement(#[from] TrackError),
 }
@@ -381,15 +399,20 @@ pub enum ServoError {
 /// One control tick of a run (robot frame).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ServoSample {
+    /// The tick's time (s).
     pub t_s: f64,
+    /// The path there.
     pub reference: ReferencePoint,
+    /// The platform's true position (m).
     pub achieved_m: Vector3<f64>,
+    /// The platform's true velocity (m/s).
     pub achieved_velocity_mps: Vector3<f64>,
     /// The forces acting at `t_s` (N), after clipping.
     pub force_n: Vector3<f64>,
 }
 
 impl ServoSample {
+    /// The distance from the platform to the path (m).
     pub fn error_m(&self) -> f64 {
         (self.achieved_m - self.reference.position_m).norm()
     }
@@ -398,14 +421,19 @@ impl ServoSample {
 /// What a run did.
 #[derive(Debug, Clone)]
 pub struct ServoReport {
+    /// The law that ran.
     pub controller: ControllerKind,
+    /// What it saw the robot through.
     pub camera: CameraKind,
+    /// The path it followed.
     pub path: ReferencePath,
-    /// RMS and largest distance between the platform and the path over the run (mm).
+    /// RMS distance between the platform and the path over the run (mm).
     pub rms_error_mm: f64,
+    /// Largest distance between the platform and the path over the run (mm).
     pub max_error_mm: f64,
-    /// Whether the run went to its end; else why it was stopped.
+    /// Whether the run went to its end.
     pub stable: bool,
+    /// Why it was stopped, if it was.
     pub stop_reason: Option<String>,
     /// The gains used (for `kvs`: λ as the natural frequency).
     pub gains: Gains,
@@ -414,6 +442,7 @@ pub struct ServoReport {
     pub median_feedback_age_s: f64,
     /// Fraction of control ticks at which some actuator was at its force limit.
     pub saturated_fraction: f64,
+    /// Every control tick.
     pub samples: Vec<ServoSample>,
     /// Every estimate of the tracker (camera frame), in order.
     pub estimates: Vec<Estimate>,

@@ -27,8 +27,11 @@ use crate::robot::{Geometry, RobotParams, joint_friction};
 /// estimate refers to (for roitrack, the newest measurement's).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Observation {
+    /// The time the estimate refers to (s).
     pub t_s: f64,
+    /// The platform's position (m, robot frame).
     pub position_m: Vector3<f64>,
+    /// The platform's velocity (m/s, robot frame).
     pub velocity_mps: Vector3<f64>,
     /// The acceleration, when the estimator has it in its state (the Kalman filter's constant-acceleration model).
     pub acceleration_mps2: Option<Vector3<f64>>,
@@ -68,7 +71,9 @@ pub trait Controller {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gains {
+    /// The natural frequency ω of the image-plane axes (rad/s).
     pub natural_frequency_radps: f64,
+    /// The damping ratio ζ (1: critically damped).
     pub damping: f64,
     /// The natural frequency along the camera's optical axis (the robot frame's z) is this times the others': a
     /// camera sees depth an order of magnitude worse than the image-plane directions, and its tracker follows depth
@@ -84,6 +89,7 @@ impl Gains {
     /// first structural modes' typical 150-200 Hz (not simulated, so not to be excited).
     pub const MAX_NATURAL_FREQUENCY_RADPS: f64 = 2.0 * std::f64::consts::PI * 40.0;
 
+    /// Critically damped gains of natural frequency `natural_frequency_radps`, the same on every axis.
     pub fn critically_damped(natural_frequency_radps: f64) -> Self {
         Self {
             natural_frequency_radps,
@@ -301,6 +307,7 @@ pub struct KinematicServo {
 }
 
 impl KinematicServo {
+    /// The servo with the robot model `model` (what the controller believes) and `gains`.
     pub fn new(model: RobotParams, gains: KinematicGains) -> Self {
         Self {
             model,

@@ -46,9 +46,13 @@ pub struct EstimateReader {
 /// [`Estimate::covariance`]) and its publication number (1 for the first).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EstimateSnapshot {
+    /// The time the estimate refers to (s).
     pub t_ref_s: f64,
+    /// The pose and twist there (camera frame).
     pub state: MotionState,
+    /// Its covariance, if the estimator gave one.
     pub covariance: Option<Matrix12>,
+    /// Its publication number: 1 for the first, then one more for each.
     pub sequence: u64,
 }
 

@@ -5,7 +5,7 @@
 //!
 //! - [`robot`]: an Orthoglide-like 3-dof translational parallel robot, its kinematics and joint-space dynamics
 //!   (configuration-dependent inertia, viscous and Coulomb friction, force limits). Pure math.
-//! - [`reference`]: the paths to follow (the simulator's orthoglide path at any speed, seeded random paths).
+//! - [`reference`](mod@reference): the paths to follow (the simulator's orthoglide path at any speed, seeded random paths).
 //! - [`control`]: the controllers behind one trait: computed torque with the tracker's pose and velocity, the same
 //!   with pose only, the kinematic visual servo, and the true-state floor. Pure math.
 //! - [`closed_loop`]: the loop in simulated time through the simulated ROI or frame camera and roitrack's trackers
@@ -13,6 +13,7 @@
 //! - [`output`]: a run's files (reference and achieved poses in TUM, the estimates, the per-tick log) and figures.
 //! - [`handle`]: the newest estimate for a user's control thread, read without locks or allocation.
 //! - [`sweep`]: the largest stable gain against latency, per scheme.
+#![deny(missing_docs)]
 
 pub mod closed_loop;
 pub mod control;

@@ -11,11 +11,17 @@ use roitrack_formats::{AtomicFile, EstimateWriter, FormatError, create_output_di
 
 use crate::ServoReport;
 
+/// The commanded platform poses of a run (TUM, camera_T_object, every control tick).
 pub const REFERENCE_FILE: &str = "reference.tum";
+/// The true platform poses of a run (TUM, every control tick).
 pub const ACHIEVED_FILE: &str = "achieved.tum";
+/// The tracker's estimated poses (TUM).
 pub const ESTIMATES_FILE: &str = "estimates.tum";
+/// The tracker's estimated twists (CSV).
 pub const ESTIMATE_TWISTS_FILE: &str = "estimates_twists.csv";
+/// The tracker's diagnostics per estimate (CSV: status, residual, sigmas).
 pub const ESTIMATE_DIAGNOSTICS_FILE: &str = "estimates_diagnostics.csv";
+/// Per control tick: path, platform, error and actuator forces (CSV).
 pub const SAMPLES_FILE: &str = "servo.csv";
 /// The header of `servo.csv` (robot frame: the camera's axes, origin at the platform's home; metres, newtons).
 pub const SAMPLES_HEADER: &str = "t,ref_x,ref_y,ref_z,x,y,z,error_mm,force_0,force_1,force_2";

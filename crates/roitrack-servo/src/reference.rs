@@ -1,8 +1,8 @@
 //! The paths the robot is asked to follow, in the robot frame (axes of the camera, origin at the platform's home).
 //!
-//! - [`ReferencePath::Orthoglide`]: the simulator's orthoglide scenario (docs/model.md: a line, two laps of a circle
+//! - [`ReferencePath::orthoglide`]: the simulator's orthoglide scenario (docs/model.md: a line, two laps of a circle
 //!   at 1 m/s peak, the line back), played `speed_scale` times faster; the one motion, defined once in roitrack-sim.
-//! - [`ReferencePath::Random`]: a smooth random path for tests, a seeded sum of sinusoids per axis, faded in and out
+//! - [`ReferencePath::random`]: a smooth random path for tests, a seeded sum of sinusoids per axis, faded in and out
 //!   so that it starts and ends at rest at home.
 
 use std::f64::consts::TAU;
@@ -16,8 +16,11 @@ use roitrack_sim::{Scenario, ScenarioKind};
 /// Where the path is at one instant (robot frame).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ReferencePoint {
+    /// Position (m).
     pub position_m: Vector3<f64>,
+    /// Velocity (m/s).
     pub velocity_mps: Vector3<f64>,
+    /// Acceleration (m/s²).
     pub acceleration_mps2: Vector3<f64>,
 }
 
@@ -51,7 +54,9 @@ enum Motion {
 /// [`RandomPath::MAX_EXCURSION_M`] from home.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RandomPath {
+    /// The seed it was drawn from.
     pub seed: u64,
+    /// Its length (s).
     pub duration_s: f64,
     /// (amplitude m, frequency Hz, phase rad) of each sinusoid of each axis.
     terms: [[(f64, f64, f64); 3]; 3],
@@ -183,6 +188,7 @@ impl ReferencePath {
         }
     }
 
+    /// The path's length (s).
     pub fn duration_s(&self) -> f64 {
         match &self.motion {
             Motion::Orthoglide(scenario) => scenario.duration_s,

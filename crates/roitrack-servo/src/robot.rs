@@ -117,8 +117,11 @@ impl RobotParams {
     position_m[0], position_m[1], position_m[2]
 )]
 pub struct WorkspaceError {
+    /// The platform's position (m, robot frame).
     pub position_m: [f64; 3],
+    /// The leg that cannot reach it.
     pub leg: usize,
+    /// That leg's tilt as a fraction of its length (1 or more: out of reach).
     pub tilt: f64,
 }
 
@@ -303,7 +306,9 @@ pub fn acceleration(
 /// The simulated robot's state: platform position and velocity (robot frame).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RobotState {
+    /// Platform position (m).
     pub position_m: Vector3<f64>,
+    /// Platform velocity (m/s).
     pub velocity_mps: Vector3<f64>,
 }
 

@@ -13,7 +13,9 @@ use crate::control::Gains;
 /// The gains that a sweep may try, and its resolution.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct GainSearch {
+    /// The lowest gain tried (rad/s).
     pub lowest_radps: f64,
+    /// The highest gain tried (rad/s).
     pub highest_radps: f64,
     /// Bisection steps after the bracket (a factor 2): the result is within a factor `2^(1 / 2^steps)` of the edge.
     pub steps: u32,
@@ -34,6 +36,7 @@ impl Default for GainSearch {
 /// The largest stable gain of one scheme at one extra latency.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StableGain {
+    /// The latency added to the loop's own (s).
     pub extra_latency_s: f64,
     /// The largest natural frequency found stable (rad/s; λ in 1/s for the kinematic servo); 0 when even
     /// [`GainSearch::lowest_radps`] is not, [`GainSearch::highest_radps`] when that is.
@@ -165,20 +168,26 @@ pub const EXTRA_LATENCIES_S: [f64; 6] = [0.0, 0.25e-3, 0.5e-3, 1e-3, 2e-3, 4e-3]
 
 /// The file of a sweep's rows.
 pub const CSV_FILE: &str = "stable_gain.csv";
+/// The header of [`CSV_FILE`].
 pub const CSV_HEADER: &str =
     "controller,camera,extra_latency_s,largest_stable_radps,rule_radps,margin,runs";
+/// The header of the printed table.
 pub const TABLE_HEADER: &str =
     "controller  camera      extra_ms  largest_stable  rule_radps  margin";
 
 /// One row of a sweep: a scheme and one of its points.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Row {
+    /// The controller.
     pub controller: ControllerKind,
+    /// Its camera.
     pub camera: CameraKind,
+    /// The largest stable gain found at one extra latency.
     pub point: StableGain,
 }
 
 impl Row {
+    /// The row as a line of [`CSV_FILE`] (columns of [`CSV_HEADER`]).
     pub fn csv_row(&self) -> String {
         let p = &self.point;
         format!(
@@ -193,6 +202,7 @@ impl Row {
         )
     }
 
+    /// The row as a line of the printed table (columns of [`TABLE_HEADER`]).
     pub fn table_row(&self) -> String {
         let p = &self.point;
         format!(
