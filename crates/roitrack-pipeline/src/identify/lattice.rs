@@ -137,6 +137,61 @@ pub(crate) struct GrownLattice {
     pub nodes: Vec<(i32, i32, usize)>,
 }
 
+/// The blob at each node of a grown lattice: a table over the box of the nodes so far, grown as they spread.
+#[derive(Debug, Default)]
+struct NodeMap {
+    /// The node of the table's first cell.
+    lo: (i32, i32),
+    cols: i32,
+    rows: i32,
+    /// Row-major over the box; `u32::MAX` where no blob is.
+    blobs: Vec<u32>,
+}
+
+impl NodeMap {
+    fn get(&self, m: i32, n: i32) -> Option<usize> {
+        let (i, j) = (m - self.lo.0, n - self.lo.1);
+        if i < 0 || j < 0 || i >= self.cols || j >= self.rows {
+            return None;
+        }
+        let b = self.blobs[(j * self.cols + i) as usize];
+        (b != u32::MAX).then_some(b as usize)
+    }
+
+    fn insert(&mut self, (m, n): (i32, i32), b: usize) {
+        let (i, j) = (m - self.lo.0, n - self.lo.1);
+        if i < 0 || j < 0 || i >= self.cols || j >= self.rows {
+            // A box twice as large (at least 8 nodes more each way) around the old one and the new node.
+            let margin = 8.max(self.cols.max(self.rows) / 2);
+            let lo = ((m - margin).min(self.lo.0), (n - margin).min(self.lo.1));
+            let hi = if self.blobs.is_empty() {
+                (m + margin, n + margin)
+            } else {
+                (
+                    (m + margin).max(self.lo.0 + self.cols - 1),
+                    (n + margin).max(self.lo.1 + self.rows - 1),
+                )
+            };
+            let (cols, rows) = (hi.0 - lo.0 + 1, hi.1 - lo.1 + 1);
+            let mut blobs = vec![u32::MAX; (cols * rows) as usize];
+            for jj in 0..self.rows {
+                for ii in 0..self.cols {
+                    let (tm, tn) = (self.lo.0 + ii - lo.0, self.lo.1 + jj - lo.1);
+                    blobs[(tn * cols + tm) as usize] = self.blobs[(jj * self.cols + ii) as usize];
+                }
+            }
+            *self = Self {
+                lo,
+                cols,
+                rows,
+                blobs,
+            };
+        }
+        let (i, j) = (m - self.lo.0, n - self.lo.1);
+        self.blobs[(j * self.cols + i) as usize] = b as u32;
+    }
+}
+
 /// Grows an image lattice from `seed` with first steps towards blobs `first` and `second` (positions `ideal`, areas
 /// `areas`). Blobs marked in `taken` are not used.
 pub(crate) fn grow(
@@ -148,10 +203,9 @@ pub(crate) fn grow(
     first: usize,
     second: usize,
 ) -> GrownLattice {
-    // About 200 look-ups a grown node (the 5 x 5 support of each of its 8 neighbours): SipHash, the standard map's
-    // default, was a quarter of the growth's time.
-    let mut at: std::collections::HashMap<(i32, i32), usize, NodeHasher> =
-        std::collections::HashMap::default();
+    // About 200 look-ups a grown node (the 5 x 5 support of each of its 8 neighbours): a dense table of the nodes'
+    // box, not a hash map.
+    let mut at = NodeMap::default();
     let mut used = taken.to_vec();
     let mut nodes = vec![(0, 0, seed), (1, 0, first), (0, 1, second)];
     for &(m, n, b) in &nodes {
@@ -161,7 +215,9 @@ pub(crate) fn grow(
     let mut queue: VecDeque<(i32, i32)> = nodes.iter().map(|&(m, n, _)| (m, n)).collect();
     let mut support: Vec<(f64, f64, Vector2<f64>)> = Vec::with_capacity(25);
     while let Some((m, n)) = queue.pop_front() {
-        let from = at[&(m, n)];
+        let Some(from) = at.get(m, n) else {
+            continue;
+        };
         for (dm, dn) in [
             (1, 0),
             (-1, 0),
@@ -173,14 +229,14 @@ pub(crate) fn grow(
             (-1, 1),
         ] {
             let (tm, tn) = (m + dm, n + dn);
-            if at.contains_key(&(tm, tn)) {
+            if at.get(tm, tn).is_some() {
                 continue;
             }
             // A local affine map from the labelled blobs around the target node.
             support.clear();
             for sm in tm - 2..=tm + 2 {
                 for sn in tn - 2..=tn + 2 {
-                    if let Some(&b) = at.get(&(sm, sn)) {
+                    if let Some(b) = at.get(sm, sn) {
                         support.push((f64::from(sm - tm), f64::from(sn - tn), ideal[b]));
                     }
                 }
