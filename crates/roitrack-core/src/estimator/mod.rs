@@ -396,6 +396,30 @@ pub struct Estimate {
 }
 
 impl Estimate {
+    /// An estimate of the bench pose ([`MotionState::bench`]) at 1 s, tracking, with a covariance of 1e-6 on the
+    /// diagonal: the fixture of the benchmarks and tests that hand estimates around.
+    ///
+    /// ```
+    /// use roitrack_core::estimator::{Estimate, TrackStatus};
+    /// let estimate = Estimate::bench();
+    /// assert_eq!(estimate.status, TrackStatus::Tracking);
+    /// assert!(estimate.covariance.is_some());
+    /// ```
+    pub fn bench() -> Self {
+        Self {
+            t_ref_s: 1.0,
+            state: MotionState::bench(),
+            residual_rms_px: 0.0,
+            inverse_condition: 1.0,
+            measurements_used: 16,
+            iterations: 1,
+            status: TrackStatus::Tracking,
+            covariance: Some(Matrix12::identity() * 1e-6),
+            noise_px: 0.1,
+            acceleration: None,
+        }
+    }
+
     /// The state `dt_s` after `t_ref_s` (before, if negative): with the accelerations when the estimate has them
     /// ([`crate::Acceleration::predicted`]), else under its constant twist ([`MotionState::predicted`]).
     pub fn state_at(&self, dt_s: f64) -> MotionState {

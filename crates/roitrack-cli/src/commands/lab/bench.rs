@@ -250,21 +250,8 @@ pub fn run(args: &BenchArgs) -> Result<()> {
 /// One read of the estimate handle (`roitrack::servo::handle`) with a covariance-carrying estimate published once:
 /// what a user's control thread pays per read.
 fn estimate_handle_read(budget: Duration) -> Timing {
-    use roitrack::core::MotionState;
-    use roitrack::core::estimator::{Estimate, Matrix12, TrackStatus};
     let (mut publisher, reader) = roitrack::servo::handle::estimate_channel();
-    publisher.publish(&Estimate {
-        t_ref_s: 1.0,
-        state: MotionState::bench(),
-        residual_rms_px: 0.1,
-        inverse_condition: 1.0,
-        measurements_used: 16,
-        iterations: 1,
-        status: TrackStatus::Tracking,
-        covariance: Some(Matrix12::identity() * 1e-6),
-        noise_px: 0.1,
-        acceleration: None,
-    });
+    publisher.publish(&roitrack::core::estimator::Estimate::bench());
     time_item(|| reader.read(), budget)
 }
 
