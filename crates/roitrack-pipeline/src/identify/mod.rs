@@ -121,6 +121,8 @@ struct Verified {
     size_mismatches: usize,
     /// The matched blobs' areas over those the target file's diameters predict (their median; 1 without diameters).
     area_scale: f64,
+    /// How far the matched blobs' sizes spread about that common scale ([`SizeSpread`]).
+    size_spread: SizeSpread,
     /// The pose sees the target from its back (+z of the object frame).
     from_back: bool,
 }
@@ -297,8 +299,9 @@ impl Verifier<'_> {
         let front_in_cam = self.front_normal.map(|n| state.cam_r_obj * n);
         let mut used = vec![false; self.ideal.len()];
         let mut pairs = Vec::new();
-        // Each matched blob's area over the area its point's diameter predicts at the pose.
+        // Each matched blob's area over the area its point's diameter predicts at the pose, and its area.
         let mut area_ratios: Vec<f64> = Vec::new();
+        let mut areas_px2: Vec<f64> = Vec::new();
         let (mut visible, mut missing) = (0, 0);
         for (i, p) in points.iter().enumerate() {
             let Some((ideal, depth)) = projected[i] else {
@@ -330,6 +333,7 @@ impl Verifier<'_> {
                         let expected =
                             std::f64::consts::FRAC_PI_4 * (focal * d / depth).powi(2) * normal;
                         area_ratios.push(self.areas_px[b] / expected);
+                        areas_px2.push(self.areas_px[b]);
                     }
                     used[b] = true;
                     pairs.push((i, b));
@@ -341,6 +345,7 @@ impl Verifier<'_> {
                 None => {}
             }
         }
+        let size_spread = SizeSpread::of(&area_ratios, &areas_px2);
         let (size_mismatches, area_scale) = size_mismatches(&mut area_ratios);
         (pairs.len() >= 4).then_some(Verified {
             state: *state,
@@ -351,6 +356,7 @@ impl Verifier<'_> {
             missing,
             size_mismatches,
             area_scale,
+            size_spread,
             from_back: false,
         })
     }
@@ -364,6 +370,57 @@ const BLOB_AREA_FACTOR: f64 = 2.0;
 /// How far the common scale of the matched blobs' areas may be from the target file's diameters, as a factor either
 /// way: nominal diameters may be off by up to 2x (a factor 4 in area) and the threshold adds its factor 2.
 pub(crate) const NOMINAL_AREA_FACTOR: f64 = crate::photo::NOMINAL_DIAMETER_AREA * BLOB_AREA_FACTOR;
+
+/// How far a labelling's blob sizes spread about their common scale: `Σ (ln rᵢ - ln r̃)²` over the matched blobs
+/// whose points have a diameter (`rᵢ` a blob's area over the area its point's diameter predicts, `r̃` their median),
+/// and the part of it that pixel quantisation alone makes: a thresholded disk of `A` px² gains or loses about a
+/// uniform fraction of each pixel along its perimeter `2 √(π A)`, a variance of `2 √(π A) / 12` px² in its area,
+/// `2 √(π A) / (12 A²)` in its logarithm.
+///
+/// Two labellings of the same blobs that tie on every count ([`size_mismatches`] allows a factor 2 in area, the
+/// threshold's reach) may still differ in their sizes: a key dot 20-40 % larger than the rest is within that factor
+/// of the others, yet a labelling that puts it on a small point leaves it, and the small blob put on the key point,
+/// far off the common scale. The spreads are compared as two variances on as many blobs (`f_equal_dof_upper_quantile`):
+/// relative sizes tell the labellings apart whatever the file's nominal diameters, which only move the common scale.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct SizeSpread {
+    sum_sq: f64,
+    quantisation: f64,
+    count: usize,
+}
+
+impl SizeSpread {
+    fn of(ratios: &[f64], areas_px2: &[f64]) -> Self {
+        if ratios.len() < 3 {
+            return Self::default();
+        }
+        let mut logs: Vec<f64> = ratios.iter().map(|r| r.ln()).collect();
+        logs.sort_by(f64::total_cmp);
+        let median = logs[logs.len() / 2];
+        Self {
+            sum_sq: logs.iter().map(|l| (l - median).powi(2)).sum(),
+            quantisation: areas_px2
+                .iter()
+                .map(|&a| 2.0 * (std::f64::consts::PI * a).sqrt() / (12.0 * a * a))
+                .sum(),
+            count: ratios.len(),
+        }
+    }
+
+    /// The degrees of freedom of the spread (one scale taken out); `None` for too few blobs to compare.
+    fn dof(&self) -> Option<f64> {
+        (self.count >= 3).then(|| (self.count - 1) as f64)
+    }
+
+    /// Whether this labelling's sizes fit worse than `other`'s over as many blobs, by more than `ratio` (the upper
+    /// quantile of the ratio of two variances of [`Self::dof`] each): `other`'s spread floored at what
+    /// quantisation makes, so that two nearly exact fits are never told apart by their rounding.
+    fn worse_than(&self, other: &Self, ratio: f64) -> bool {
+        self.count == other.count
+            && self.dof().is_some()
+            && self.sum_sq > ratio * other.sum_sq.max(other.quantisation)
+    }
+}
 
 /// Matched blobs whose size disagrees with their points' diameters (`ratios`: each blob's area over the predicted
 /// one; reordered). The diameters of a target file are nominal: a common scale (the median ratio) within
@@ -790,6 +847,34 @@ fn identify_search(
             expected: n,
         });
     };
+    // A labelling the geometry cannot tell from the best (as many points, missing and mismatched sizes, a residual
+    // within the rivals' ratio) but whose blob sizes fit significantly better is the best: a key dot a little larger
+    // than the rest decides what the layout alone cannot.
+    let size_ratio = best
+        .size_spread
+        .dof()
+        .map(|dof| f_equal_dof_upper_quantile(dof, RIVAL_CONFIDENCE));
+    let best = match size_ratio {
+        Some(ratio) => verified
+            .iter()
+            .filter(|v| {
+                v.from_back == best.from_back
+                    && v.pairs.len() == best.pairs.len()
+                    && v.missing == best.missing
+                    && v.size_mismatches == best.size_mismatches
+                    && best.size_spread.worse_than(&v.size_spread, ratio)
+                    && v.residual_px.powi(2)
+                        <= f_equal_dof_upper_quantile(
+                            (2 * best.pairs.len()).saturating_sub(6) as f64,
+                            RIVAL_CONFIDENCE,
+                        ) * best.residual_px.powi(2)
+                    && v.accepted(&verifier, min_matched)
+            })
+            .min_by(|a, b| a.size_spread.sum_sq.total_cmp(&b.size_spread.sum_sq))
+            .cloned()
+            .unwrap_or(best),
+        None => best,
+    };
     let mut best_pairs = best.pairs.clone();
     best_pairs.sort_unstable();
     // A rival on as many points is told apart from the best only if its cost is larger than noise makes the ratio
@@ -804,6 +889,7 @@ fn identify_search(
             && v.pairs.len() == best.pairs.len()
             && v.missing == best.missing
             && v.size_mismatches == best.size_mismatches
+            && !size_ratio.is_some_and(|ratio| v.size_spread.worse_than(&best.size_spread, ratio))
             && v.accepted(&verifier, min_matched)
             && if same_blobs(&best, v) {
                 // The same measurements labelled otherwise: judged as the static pose judges its rivals, the
