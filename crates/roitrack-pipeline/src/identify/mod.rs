@@ -412,13 +412,18 @@ impl SizeSpread {
         (self.count >= 3).then(|| (self.count - 1) as f64)
     }
 
-    /// Whether this labelling's sizes fit worse than `other`'s over as many blobs, by more than `ratio` (the upper
-    /// quantile of the ratio of two variances of [`Self::dof`] each): `other`'s spread floored at what
-    /// quantisation makes, so that two nearly exact fits are never told apart by their rounding.
-    fn worse_than(&self, other: &Self, ratio: f64) -> bool {
-        self.count == other.count
-            && self.dof().is_some()
-            && self.sum_sq > ratio * other.sum_sq.max(other.quantisation)
+    /// Whether this labelling's sizes fit worse than `other`'s over as many blobs, by more than `quantile` gives
+    /// for [`Self::dof`] (the upper quantile of the ratio of two variances of as many degrees of freedom, asked
+    /// only when needed): `other`'s spread floored at what quantisation makes, so that two nearly exact fits are
+    /// never told apart by their rounding.
+    fn worse_than(&self, other: &Self, quantile: impl FnOnce(f64) -> f64) -> bool {
+        let floor = other.sum_sq.max(other.quantisation);
+        match self.dof() {
+            Some(dof) if self.count == other.count && self.sum_sq > floor => {
+                self.sum_sq > quantile(dof) * floor
+            }
+            _ => false,
+        }
     }
 }
 
@@ -850,38 +855,33 @@ fn identify_search(
     // A labelling the geometry cannot tell from the best (as many points, missing and mismatched sizes, a residual
     // within the rivals' ratio) but whose blob sizes fit significantly better is the best: a key dot a little larger
     // than the rest decides what the layout alone cannot.
-    let size_ratio = best
-        .size_spread
-        .dof()
-        .map(|dof| f_equal_dof_upper_quantile(dof, RIVAL_CONFIDENCE));
-    let best = match size_ratio {
-        Some(ratio) => verified
-            .iter()
-            .filter(|v| {
-                v.from_back == best.from_back
-                    && v.pairs.len() == best.pairs.len()
-                    && v.missing == best.missing
-                    && v.size_mismatches == best.size_mismatches
-                    && best.size_spread.worse_than(&v.size_spread, ratio)
-                    && v.residual_px.powi(2)
-                        <= f_equal_dof_upper_quantile(
-                            (2 * best.pairs.len()).saturating_sub(6) as f64,
-                            RIVAL_CONFIDENCE,
-                        ) * best.residual_px.powi(2)
-                    && v.accepted(&verifier, min_matched)
-            })
-            .min_by(|a, b| a.size_spread.sum_sq.total_cmp(&b.size_spread.sum_sq))
-            .cloned()
-            .unwrap_or(best),
-        None => best,
-    };
-    let mut best_pairs = best.pairs.clone();
-    best_pairs.sort_unstable();
     // A rival on as many points is told apart from the best only if its cost is larger than noise makes the ratio
     // of two fits' costs on as many degrees of freedom, at one chance in a thousand: with 4 points (2 degrees of
     // freedom) a rival a little less than 32 times the best's residual might be the truth.
     let dof = (2 * best.pairs.len()).saturating_sub(6) as f64;
     let rival_cost_ratio = f_equal_dof_upper_quantile(dof, RIVAL_CONFIDENCE);
+    // The sizes' quantile, asked only when a tie is there to break (it costs about 0.1 ms); every spread compared
+    // has the best's number of blobs, hence its degrees of freedom.
+    let size_quantile_cell = std::cell::OnceCell::new();
+    let size_quantile = |dof: f64| {
+        *size_quantile_cell.get_or_init(|| f_equal_dof_upper_quantile(dof, RIVAL_CONFIDENCE))
+    };
+    let sizes_better = verified
+        .iter()
+        .filter(|v| {
+            v.from_back == best.from_back
+                && v.pairs.len() == best.pairs.len()
+                && v.missing == best.missing
+                && v.size_mismatches == best.size_mismatches
+                && best.size_spread.worse_than(&v.size_spread, size_quantile)
+                && v.residual_px.powi(2) <= rival_cost_ratio * best.residual_px.powi(2)
+                && v.accepted(&verifier, min_matched)
+        })
+        .min_by(|a, b| a.size_spread.sum_sq.total_cmp(&b.size_spread.sum_sq))
+        .cloned();
+    let best = sizes_better.unwrap_or(best);
+    let mut best_pairs = best.pairs.clone();
+    best_pairs.sort_unstable();
     let mut equals: Vec<&Verified> = vec![&best];
     for v in &verified {
         // What ranks it below the best is checked first: it is cheaper than whether it is accepted.
@@ -889,7 +889,7 @@ fn identify_search(
             && v.pairs.len() == best.pairs.len()
             && v.missing == best.missing
             && v.size_mismatches == best.size_mismatches
-            && !size_ratio.is_some_and(|ratio| v.size_spread.worse_than(&best.size_spread, ratio))
+            && !v.size_spread.worse_than(&best.size_spread, size_quantile)
             && v.accepted(&verifier, min_matched)
             && if same_blobs(&best, v) {
                 // The same measurements labelled otherwise: judged as the static pose judges its rivals, the
