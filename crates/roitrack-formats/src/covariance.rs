@@ -134,8 +134,8 @@ impl fmt::Display for Row<'_> {
     }
 }
 
-/// Writes the covariance of each estimate as one CSV row (see the [module documentation](self) for the layout and
-/// conventions), atomically: the file appears only on [`Self::finish`]. Usually part of an
+/// Writes the covariance of each estimate as one CSV row (the time, then the upper triangle row by row:
+/// [`covariance_header`](crate::covariance_header)), atomically: the file appears only on [`Self::finish`]. Usually part of an
 /// [`EstimateWriter`](crate::EstimateWriter), see
 /// [`EstimateWriter::with_covariance`](crate::EstimateWriter::with_covariance).
 ///

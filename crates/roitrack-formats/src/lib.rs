@@ -50,6 +50,7 @@
 //! # Ok(())
 //! # }
 //! ```
+#![deny(missing_docs)]
 
 mod atomic;
 mod camera_file;

@@ -29,12 +29,15 @@ pub enum MarkKind {
 /// One mark of an overlay, in the frame's pixel coordinates (pixel `(i, j)` has its centre at `(u, v) = (i, j)`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct OverlayMark {
+    /// Column of the mark's centre (px).
     pub u_px: f64,
+    /// Row of the mark's centre (px).
     pub v_px: f64,
     /// Radius of the circle, or half the size of the `x` of a missing point (px); at least 3 px are drawn.
     pub radius_px: f64,
     /// Text drawn beside the mark (digits, letters and `-.:?+/#_()=`; others are drawn as `?`), e.g. the point id.
     pub label: Option<String>,
+    /// What the mark stands for (how it is drawn).
     pub kind: MarkKind,
 }
 

@@ -56,6 +56,7 @@ struct CameraYaml {
 /// it and as resolved against the rig file's folder.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RigFile {
+    /// The rig, its cameras' calibrations read.
     pub rig: Rig,
     /// Per camera, the `calibration` entry as written.
     pub calibrations_as_written: Vec<String>,
@@ -63,7 +64,8 @@ pub struct RigFile {
     pub calibration_paths: Vec<PathBuf>,
 }
 
-/// Reads a rig file (see the [module documentation](self)) and every calibration it names (relative paths from the
+/// Reads a rig file (YAML: `cameras:`, each with `name`, `calibration`, `camera_T_rig` as tx ty tz qx qy qz qw, and
+/// optionally `clock_offset_s` and `clock_drift_ppm`; docs/rig.md) and every calibration it names (relative paths from the
 /// rig file's folder), with `options` for the calibrations.
 ///
 /// Errors name the rig file and the camera: a name given twice, a calibration missing or unreadable (its own error

@@ -42,6 +42,7 @@ pub struct RoiRecordingReader<R: Read> {
 }
 
 impl RoiRecordingReader<BufReader<File>> {
+    /// Opens the recording at `path` and reads its header.
     pub fn open(path: impl AsRef<Path>) -> Result<Self, FormatError> {
         let path = path.as_ref();
         let file = File::open(path).map_err(|e| FormatError::io(path, "cannot open", e))?;
@@ -50,6 +51,7 @@ impl RoiRecordingReader<BufReader<File>> {
 }
 
 impl<R: Read> RoiRecordingReader<R> {
+    /// Reads a recording's header from `reader`; `path` names it in errors.
     pub fn from_reader(mut reader: R, path: impl AsRef<Path>) -> Result<Self, FormatError> {
         let path = path.as_ref().to_path_buf();
         let mut magic = [0u8; 16];
@@ -221,6 +223,7 @@ pub struct RoiRecordingWriter {
 }
 
 impl RoiRecordingWriter {
+    /// A recording to be written at `path` (atomically: it appears only on [`Self::finish`]).
     pub fn create(path: impl AsRef<Path>) -> Result<Self, FormatError> {
         let path = path.as_ref().to_path_buf();
         let mut file = BufWriter::new(AtomicFile::create(&path)?);
@@ -292,6 +295,7 @@ impl RoiRecordingWriter {
         Ok(())
     }
 
+    /// Flushes the recording and moves it into place.
     pub fn finish(self) -> Result<(), FormatError> {
         let path = self.path.clone();
         let file = self

@@ -31,11 +31,17 @@ const DIAGNOSTICS_COLUMNS: [&str; 12] = [
 /// One row of a diagnostics CSV.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DiagnosticsRow {
+    /// The estimate's time (s).
     pub t_s: f64,
+    /// Its status.
     pub status: TrackStatus,
+    /// RMS residual of its measurements (px).
     pub residual_rms_px: f64,
+    /// The inverse condition number of its fit (1: well posed, near 0: degenerate).
     pub inverse_condition: f64,
+    /// Measurements it used.
     pub measurements_used: u32,
+    /// Solver iterations it took.
     pub iterations: u32,
     /// 1-sigma of the position of the object's origin (m, camera frame); `NaN` without a covariance.
     pub sigma_position_m: [f64; 3],
@@ -142,7 +148,9 @@ pub fn read_diagnostics_csv_limited(
 /// One row of a covariance CSV: the estimate's time and its covariance (`None` where the row is `NaN` throughout).
 #[derive(Debug, Clone, PartialEq)]
 pub struct CovarianceRow {
+    /// The estimate's time (s).
     pub t_s: f64,
+    /// Its covariance (error state `(v, w, dV, dW)`).
     pub covariance: Option<Matrix12>,
 }
 

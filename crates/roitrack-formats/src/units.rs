@@ -17,8 +17,11 @@ use crate::{FormatError, MeasurementReader, parse_target_csv};
 /// A unit of length for target files (`--target-units`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum LengthUnit {
+    /// Metres.
     M,
+    /// Centimetres.
     Cm,
+    /// Millimetres.
     Mm,
 }
 
@@ -32,6 +35,7 @@ impl LengthUnit {
         }
     }
 
+    /// Its name as the option takes it (`m`, `cm`, `mm`).
     pub fn name(self) -> &'static str {
         match self {
             Self::M => "m",
@@ -44,9 +48,13 @@ impl LengthUnit {
 /// A unit of time for measurement files (`--time-units`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum TimeUnit {
+    /// Seconds.
     S,
+    /// Milliseconds.
     Ms,
+    /// Microseconds.
     Us,
+    /// Nanoseconds.
     Ns,
 }
 
@@ -61,6 +69,7 @@ impl TimeUnit {
         }
     }
 
+    /// Its name as the option takes it (`s`, `ms`, `us`, `ns`).
     pub fn name(self) -> &'static str {
         match self {
             Self::S => "s",
@@ -247,6 +256,8 @@ pub struct TimedMeasurements<R: Read> {
 }
 
 impl<R: Read> TimedMeasurements<R> {
+    /// The measurements of `reader`, their times in `units`; `None`: in seconds, and refused, naming the likely
+    /// unit, when their spacing says otherwise.
     pub fn new(reader: MeasurementReader<R>, units: Option<TimeUnit>) -> Self {
         Self {
             reader,
