@@ -28,11 +28,13 @@ pub struct CentroidAccuracy {
     pub count: usize,
     /// ROIs that gave no centroid (the 9 mm key blob, 22 px wide, does not fit a 24 px ROI: about 1 in 16).
     pub rejected: usize,
-    /// Mean error.
+    /// Mean error along u.
     pub bias_u_px: f64,
+    /// Mean error along v.
     pub bias_v_px: f64,
-    /// Standard deviation of the error.
+    /// Standard deviation of the error along u.
     pub std_u_px: f64,
+    /// Standard deviation of the error along v.
     pub std_v_px: f64,
     /// Root mean square of the error vector's length, sqrt(mean(du² + dv²)) (divide by √2 for a per-axis figure).
     pub rms_px: f64,

@@ -14,7 +14,9 @@
 pub struct Frame {
     /// Mid-exposure time (s); for a rolling shutter, that of row 0 (see [`roitrack_core::TimeModel`]).
     pub t_s: f64,
+    /// Columns (px).
     pub width: u32,
+    /// Rows (px).
     pub height: u32,
     /// Bits per pixel value (8 to 16).
     pub bit_depth: u8,

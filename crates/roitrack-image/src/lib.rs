@@ -24,6 +24,7 @@
 //! Pixel convention (everywhere): pixel (i, j) (column i, row j) has its centre at image coordinates (u, v) = (i, j)
 //! and covers [i - 0.5, i + 0.5] x [j - 0.5, j + 0.5], as the raw pixels of [`roitrack_core::CameraModel`]. Images are
 //! row-major `u16` buffers of values 0 to 2^bits - 1.
+#![deny(missing_docs)]
 
 pub mod accuracy;
 pub mod background;

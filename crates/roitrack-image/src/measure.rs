@@ -63,9 +63,13 @@ pub fn measure_roi(
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct RejectionCounts {
+    /// No blob in the ROI.
     pub absent: usize,
+    /// The ROI cut the blob.
     pub touches_border: usize,
+    /// Too few pixels.
     pub too_small: usize,
+    /// Too many pixels.
     pub too_large: usize,
     /// Not centrally symmetric: a reflection or an occluder merged with the blob.
     pub asymmetric: usize,
@@ -83,6 +87,7 @@ impl RejectionCounts {
         }
     }
 
+    /// Every rejection counted.
     pub fn total(&self) -> usize {
         self.absent + self.touches_border + self.too_small + self.too_large + self.asymmetric
     }

@@ -22,7 +22,7 @@
 //!    and is inside the disk when they are within the radius: the exact conic `q₀² + q₁² - r² q₂² ≤ 0`, `q = H⁻¹ (x, y,
 //!    1)`.
 //! 3. **Rays.** Raw (distorted) pixel positions are mapped to undistorted normalised rays with the camera's exact
-//!    inverse distortion ([`roitrack_core::PlumbBob::undistort`], Newton) at every pixel *corner* of the region the
+//!    inverse distortion ([`roitrack_core::CameraModel::undistort_pixel`], Newton) at every pixel *corner* of the region the
 //!    blobs cover; inside a pixel the ray is the bilinear interpolation of its four corners (exact without distortion;
 //!    with the strong distortion of a wide-angle lens, k1 = -0.28, the interpolation error is below 2e-4 px in the
 //!    image's corners).
@@ -64,7 +64,9 @@ const FOOTPRINT_SAFETY: f64 = 1.25;
 pub enum DiskOrientation {
     /// Disks in the target's plane, with orthonormal in-plane axes `e1`, `e2` (object frame).
     InTargetPlane {
+        /// The first in-plane axis.
         e1_obj: Vector3<f64>,
+        /// The second in-plane axis.
         e2_obj: Vector3<f64>,
     },
     /// Disks facing the camera (non-planar targets).
@@ -91,6 +93,7 @@ pub struct RenderScratch {
 }
 
 impl RenderScratch {
+    /// Empty buffers, grown by the first renderings.
     pub fn new() -> Self {
         Self::default()
     }
@@ -236,18 +239,22 @@ impl RoiRenderer {
         })
     }
 
+    /// The camera it renders through.
     pub fn camera(&self) -> &CameraModel {
         &self.camera
     }
 
+    /// The target it renders.
     pub fn target(&self) -> &Target {
         &self.target
     }
 
+    /// The sensor's model (noise, bit depth, exposure).
     pub fn sensor(&self) -> &SensorModel {
         &self.sensor
     }
 
+    /// How its blob disks are oriented.
     pub fn orientation(&self) -> DiskOrientation {
         self.orientation
     }

@@ -16,13 +16,18 @@
 /// index `j * width + i`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub struct Roi {
+    /// Its first column on the sensor.
     pub x0: u32,
+    /// Its first row on the sensor.
     pub y0: u32,
+    /// Columns.
     pub width: u32,
+    /// Rows.
     pub height: u32,
 }
 
 impl Roi {
+    /// The window of `width` x `height` pixels from column `x0` and row `y0`.
     pub fn new(x0: u32, y0: u32, width: u32, height: u32) -> Self {
         Self {
             x0,
@@ -67,6 +72,7 @@ impl Roi {
         self.width as usize * self.height as usize
     }
 
+    /// Whether it holds no pixel.
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }

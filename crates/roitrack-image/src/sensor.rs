@@ -7,18 +7,51 @@ use thiserror::Error;
 /// Why a [`SensorModel`] is unusable.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum SensorError {
+    /// A field is NaN or infinite.
     #[error("{field} must be a finite number, got {value}")]
-    NotFinite { field: &'static str, value: f64 },
+    NotFinite {
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A field that must be positive is not.
     #[error("{field} must be positive, got {value}")]
-    NotPositive { field: &'static str, value: f64 },
+    NotPositive {
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A field that must not be negative is.
     #[error("{field} must not be negative, got {value}")]
-    Negative { field: &'static str, value: f64 },
+    Negative {
+        /// The field.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// The bit depth is out of 1-16.
     #[error("bit depth must be 1 to 16 (typically 8, 10 or 12), got {bits}")]
-    BitDepth { bits: u32 },
+    BitDepth {
+        /// The depth given.
+        bits: u32,
+    },
+    /// A count is 0.
     #[error("{field} must be at least 1, got 0")]
-    Zero { field: &'static str },
+    Zero {
+        /// The field.
+        field: &'static str,
+    },
+    /// Too many sub-rows.
     #[error("supersampling must be at most {max} sub-rows, got {value}")]
-    Supersampling { value: u32, max: u32 },
+    Supersampling {
+        /// The sub-rows asked for.
+        value: u32,
+        /// The most supported.
+        max: u32,
+    },
+    /// The camera's time model is invalid.
     #[error("the camera's time model: {0}")]
     TimeModel(#[from] roitrack_core::time::TimeModelError),
 }

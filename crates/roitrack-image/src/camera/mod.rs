@@ -30,7 +30,9 @@ use crate::{Frame, Roi, RoiImage};
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RoiTrigger {
+    /// The target point the ROI is for.
     pub point_id: u32,
+    /// The window to read.
     pub roi: Roi,
     /// Requested mid-exposure time (s). The camera reports the time it actually exposed in the [`RoiImage`].
     pub t_s: f64,
@@ -42,32 +44,53 @@ pub struct RoiTrigger {
 pub enum GrabError {
     /// No image within the camera's timeout: the grab may be retried.
     #[error("the camera gave no image within {timeout_s} s")]
-    Timeout { timeout_s: f64 },
+    Timeout {
+        /// The camera's timeout.
+        timeout_s: f64,
+    },
     /// The camera delivered an incomplete or corrupt buffer, or dropped it: the grab may be retried.
     #[error("the camera dropped the image: {reason}")]
-    Dropped { reason: String },
+    Dropped {
+        /// What the camera said.
+        reason: String,
+    },
     /// The camera cannot be asked for this ROI (off the sensor, too large, or not on its increments).
     #[error("the camera cannot read ROI {roi:?}: {reason}")]
-    InvalidRoi { roi: Roi, reason: String },
+    InvalidRoi {
+        /// The window asked for.
+        roi: Roi,
+        /// Why the camera cannot read it.
+        reason: String,
+    },
     /// The camera is gone (unplugged, powered off, the link lost): nothing more will come.
     #[error("the camera is disconnected: {reason}")]
-    Disconnected { reason: String },
+    Disconnected {
+        /// What the camera's driver said.
+        reason: String,
+    },
     /// A replayed recording has no more images.
     #[error("the recording has no more images")]
     EndOfRecording,
     /// The run was asked to stop (Ctrl-C): a live camera ends the run like the end of a recording, and what was
     /// estimated until then is kept.
     #[error("stopped: {reason}")]
-    Stopped { reason: String },
+    Stopped {
+        /// What asked it to stop.
+        reason: String,
+    },
     /// The camera's frames are not the size its camera model says: the calibration is of another camera, or of
     /// another mode.
     #[error(
         "the camera delivered a {width} x {height} frame, its camera model is {expected_width} x {expected_height}"
     )]
     FrameSize {
+        /// The frame's width (px).
         width: u32,
+        /// The frame's height (px).
         height: u32,
+        /// The camera model's width (px).
         expected_width: u32,
+        /// The camera model's height (px).
         expected_height: u32,
     },
 }

@@ -32,10 +32,12 @@ pub struct ReplayCamera {
     cursor: usize,
     /// Stamp each ROI with the time it was asked for instead of its recorded time.
     trigger_times: bool,
+    /// Requests for another point than the recorded ROI's.
     pub mismatches: usize,
 }
 
 impl ReplayCamera {
+    /// A camera that gives `rois` in order and `full_frame` when a full frame is asked for.
     pub fn new(rois: Vec<RoiImage>, full_frame: Frame) -> Self {
         Self {
             rois,
@@ -105,6 +107,7 @@ impl ReplayCamera {
         self.rois.len()
     }
 
+    /// Whether the recording holds no ROI.
     pub fn is_empty(&self) -> bool {
         self.rois.is_empty()
     }

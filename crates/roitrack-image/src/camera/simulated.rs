@@ -35,6 +35,8 @@ pub struct SimulatedCamera<F> {
 }
 
 impl<F: Fn(f64) -> MotionState + Send> SimulatedCamera<F> {
+    /// A camera rendering with `renderer` the target at the pose `truth` gives for each ROI's time, its noise drawn
+    /// from `seed`.
     pub fn new(renderer: RoiRenderer, truth: F, seed: u64) -> Self {
         Self {
             renderer,

@@ -83,6 +83,7 @@ pub enum Threshold {
 /// How a blob's centroid is measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CentroidOptions {
+    /// How the level that separates the blob from its background is chosen.
     pub threshold: Threshold,
     /// `true` (the default, the more accurate): first-order moments weighted by `value - threshold` over the
     /// component's pixels. Measuring from the threshold rather than from the background makes the weights vanish
@@ -213,8 +214,9 @@ impl CentroidOptions {
 /// A measured blob.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Centroid {
-    /// Centroid, full-sensor raw (distorted) pixel coordinates (pixel (i, j) is centred on (i, j)).
+    /// Centroid, full-sensor raw (distorted) pixel coordinates (pixel (i, j) is centred on (i, j)): column.
     pub u_px: f64,
+    /// Its row.
     pub v_px: f64,
     /// Pixels in the component.
     pub area_px: u32,
@@ -227,14 +229,25 @@ pub struct Centroid {
 /// Why an ROI gave no centroid.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Error)]
 pub enum BlobRejection {
+    /// Nothing stands out of the background.
     #[error("no blob in the ROI (nothing stands out of the background)")]
     Absent,
+    /// The ROI cuts the blob.
     #[error("the blob touches the ROI's border (the ROI cuts it)")]
     TouchesBorder,
+    /// Fewer pixels than a blob has.
     #[error("the blob is too small ({area_px} px)")]
-    TooSmall { area_px: u32 },
+    TooSmall {
+        /// The component's pixels.
+        area_px: u32,
+    },
+    /// More pixels than a blob has.
     #[error("the blob is too large ({area_px} px)")]
-    TooLarge { area_px: u32 },
+    TooLarge {
+        /// The component's pixels.
+        area_px: u32,
+    },
+    /// Not centrally symmetric: a reflection or an occluder merged with it.
     #[error(
         "the blob is not centrally symmetric (a reflection or an occluder merged with it would bias its centroid)"
     )]

@@ -99,15 +99,18 @@ impl Default for PhotoBlobOptions {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PhotoBlob {
     /// Sub-pixel centre (raw pixels): the centre of the ellipse fitted to the blob's outline (see the module's
-    /// documentation), the centre of the blob's image.
+    /// documentation), the centre of the blob's image: column.
     pub u_px: f64,
+    /// Its row.
     pub v_px: f64,
     /// Area (px²) of the ellipse the blob's second moments describe, at the threshold midway through the levels
     /// that found it.
     pub area_px: f64,
-    /// Semi-axes of that ellipse (px) and the angle of its major axis from the u axis (rad).
+    /// Semi-major axis of that ellipse (px).
     pub semi_major_px: f64,
+    /// Its semi-minor axis (px).
     pub semi_minor_px: f64,
+    /// The angle of its major axis from the u axis (rad).
     pub angle_rad: f64,
     /// How far the blob stands from its local background (DN).
     pub contrast: f64,
@@ -247,8 +250,9 @@ pub struct PhotoBlobCandidates<'a> {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RoughBlob {
     /// Centre of its pixels at the middle level that found it (px): within a few tenths of a pixel of the measured
-    /// centre under even light, farther under a gradient.
+    /// centre under even light, farther under a gradient: column.
     pub u_px: f64,
+    /// Its row.
     pub v_px: f64,
     /// Area of its ellipse (px²): with every level labelled, the same as [`PhotoBlob::area_px`].
     pub area_px: f64,
