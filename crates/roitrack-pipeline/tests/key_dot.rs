@@ -9,7 +9,7 @@
 
 mod common;
 
-use common::{camera, nominal};
+use common::random_photo_camera;
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -37,18 +37,8 @@ fn grid(rows: usize, cols: usize, spacing_m: f64, diameter_m: f64, key_factor: f
 /// Outcome of one photograph: (every dot fully seen, found, right, flagged ambiguous).
 fn run(seed: u64, keyed: bool) -> (bool, bool, bool, bool) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let (width, height) = if rng.random_bool(0.5) {
-        (640, 480)
-    } else {
-        (800, 600)
-    };
-    let f_px = rng.random_range(0.8..1.6) * f64::from(width);
-    let c_px = (
-        0.5 * f64::from(width) + rng.random_range(-15.0..15.0),
-        0.5 * f64::from(height) + rng.random_range(-15.0..15.0),
-    );
-    let truth = camera(width, height, f_px, c_px, rng.random_range(-0.25..0.0));
-    let camera_file = nominal(&truth, &mut rng);
+    let (truth, camera_file, f_px) = random_photo_camera(&mut rng);
+    let width = truth.width_px;
     let (rows, cols) = (rng.random_range(3..=6), rng.random_range(3..=6));
     let spacing_m = rng.random_range(0.015..0.04);
     let diameter_m = spacing_m * rng.random_range(0.3..0.45);

@@ -11,7 +11,7 @@
 
 mod common;
 
-use common::{camera, nominal};
+use common::random_photo_camera;
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -61,18 +61,8 @@ enum Family {
 
 fn case(family: Family, seed: u64) -> Case {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
-    let (width, height) = if rng.random_bool(0.5) {
-        (640, 480)
-    } else {
-        (800, 600)
-    };
-    let f_px = rng.random_range(0.8..1.6) * f64::from(width);
-    let c_px = (
-        0.5 * f64::from(width) + rng.random_range(-15.0..15.0),
-        0.5 * f64::from(height) + rng.random_range(-15.0..15.0),
-    );
-    let truth = camera(width, height, f_px, c_px, rng.random_range(-0.25..0.0));
-    let camera_file = nominal(&truth, &mut rng);
+    let (truth, camera_file, f_px) = random_photo_camera(&mut rng);
+    let width = truth.width_px;
     let (corners, true_diameter_m, spread_px) = match family {
         Family::FourDotPlate => {
             // Half-sides; a plate nearer a square than 1.15 : 1 is a square to a camera file 2 % off (a quarter

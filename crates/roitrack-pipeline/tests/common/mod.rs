@@ -60,3 +60,22 @@ pub fn nominal(truth: &CameraModel, rng: &mut ChaCha8Rng) -> CameraModel {
         }
     }
 }
+
+/// A photograph's camera drawn from `rng`: 640 x 480 or 800 x 600, a focal length of 0.8-1.6 image widths, the
+/// principal point within 15 px of the centre, k1 from -0.25 to 0; and the camera file a user has for it
+/// ([`nominal`]). Returns (the truth, the file, the true focal length in px).
+pub fn random_photo_camera(rng: &mut ChaCha8Rng) -> (CameraModel, CameraModel, f64) {
+    let (width, height) = if rng.random_bool(0.5) {
+        (640, 480)
+    } else {
+        (800, 600)
+    };
+    let f_px = rng.random_range(0.8..1.6) * f64::from(width);
+    let c_px = (
+        0.5 * f64::from(width) + rng.random_range(-15.0..15.0),
+        0.5 * f64::from(height) + rng.random_range(-15.0..15.0),
+    );
+    let truth = camera(width, height, f_px, c_px, rng.random_range(-0.25..0.0));
+    let camera_file = nominal(&truth, rng);
+    (truth, camera_file, f_px)
+}
