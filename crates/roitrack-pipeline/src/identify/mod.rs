@@ -299,9 +299,10 @@ impl Verifier<'_> {
         let front_in_cam = self.front_normal.map(|n| state.cam_r_obj * n);
         let mut used = vec![false; self.ideal.len()];
         let mut pairs = Vec::new();
-        // Each matched blob's area over the area its point's diameter predicts at the pose, and its area.
+        // Each matched blob's area over the area its point's diameter predicts at the pose, and what pixel
+        // quantisation makes of their logarithms' spread ([`SizeSpread`]).
         let mut area_ratios: Vec<f64> = Vec::new();
-        let mut areas_px2: Vec<f64> = Vec::new();
+        let mut quantisation = 0.0;
         let (mut visible, mut missing) = (0, 0);
         for (i, p) in points.iter().enumerate() {
             let Some((ideal, depth)) = projected[i] else {
@@ -333,7 +334,7 @@ impl Verifier<'_> {
                         let expected =
                             std::f64::consts::FRAC_PI_4 * (focal * d / depth).powi(2) * normal;
                         area_ratios.push(self.areas_px[b] / expected);
-                        areas_px2.push(self.areas_px[b]);
+                        quantisation += SizeSpread::quantisation(self.areas_px[b]);
                     }
                     used[b] = true;
                     pairs.push((i, b));
@@ -345,8 +346,8 @@ impl Verifier<'_> {
                 None => {}
             }
         }
-        let size_spread = SizeSpread::of(&area_ratios, &areas_px2);
         let (size_mismatches, area_scale) = size_mismatches(&mut area_ratios);
+        let size_spread = SizeSpread::of_sorted(&area_ratios, quantisation);
         (pairs.len() >= 4).then_some(Verified {
             state: *state,
             pairs,
@@ -390,21 +391,23 @@ struct SizeSpread {
 }
 
 impl SizeSpread {
-    fn of(ratios: &[f64], areas_px2: &[f64]) -> Self {
+    /// The spread of `ratios`, sorted ([`size_mismatches`] sorts them), whose blobs' quantisation adds up to
+    /// `quantisation`.
+    fn of_sorted(ratios: &[f64], quantisation: f64) -> Self {
         if ratios.len() < 3 {
             return Self::default();
         }
-        let mut logs: Vec<f64> = ratios.iter().map(|r| r.ln()).collect();
-        logs.sort_by(f64::total_cmp);
-        let median = logs[logs.len() / 2];
+        let median = ratios[ratios.len() / 2].ln();
         Self {
-            sum_sq: logs.iter().map(|l| (l - median).powi(2)).sum(),
-            quantisation: areas_px2
-                .iter()
-                .map(|&a| 2.0 * (std::f64::consts::PI * a).sqrt() / (12.0 * a * a))
-                .sum(),
+            sum_sq: ratios.iter().map(|r| (r.ln() - median).powi(2)).sum(),
+            quantisation,
             count: ratios.len(),
         }
+    }
+
+    /// What pixel quantisation makes of the variance of the logarithm of a blob's area of `area_px2`.
+    fn quantisation(area_px2: f64) -> f64 {
+        2.0 * (std::f64::consts::PI * area_px2).sqrt() / (12.0 * area_px2 * area_px2)
     }
 
     /// The degrees of freedom of the spread (one scale taken out); `None` for too few blobs to compare.
