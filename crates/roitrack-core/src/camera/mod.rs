@@ -23,24 +23,55 @@ pub use lens::*;
 /// Why a camera model is unusable, or why a pixel could not be undistorted.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum CameraError {
+    /// An intrinsic is NaN or infinite.
     #[error("{field} must be a finite number, got {value}")]
-    NotFinite { field: &'static str, value: f64 },
+    NotFinite {
+        /// The intrinsic: `fx`, `fy`, `skew`, `cx` or `cy`.
+        field: &'static str,
+        /// The value given (px).
+        value: f64,
+    },
+    /// A focal length is zero or negative: the camera matrix would not be invertible.
     #[error("{field} must be positive, got {value}")]
-    NotPositive { field: &'static str, value: f64 },
+    NotPositive {
+        /// The focal length: `fx` or `fy`.
+        field: &'static str,
+        /// The value given (px).
+        value: f64,
+    },
+    /// The image has no pixels.
     #[error("image size must be positive, got {width_px} x {height_px}")]
-    EmptyImage { width_px: u32, height_px: u32 },
+    EmptyImage {
+        /// The image width given (px).
+        width_px: u32,
+        /// The image height given (px).
+        height_px: u32,
+    },
+    /// The iterative inversion of the lens model found no undistorted point for a raw pixel.
     #[error(
         "undistortion did not converge at raw pixel ({u_px}, {v_px}): the pixel lies outside the region where the \
          distortion model is invertible"
     )]
-    UndistortionDiverged { u_px: f64, v_px: f64 },
+    UndistortionDiverged {
+        /// The raw pixel's column (px).
+        u_px: f64,
+        /// The raw pixel's row (px).
+        v_px: f64,
+    },
+    /// The camera's time model (exposure, line delay) is out of range.
     #[error("{0}")]
     TimeModel(#[from] TimeModelError),
+    /// The image is over [`MAX_IMAGE_SIDE_PX`] a side or [`MAX_IMAGE_PIXELS`] in all.
     #[error(
         "image of {width_px} x {height_px} px: an image is at most {MAX_IMAGE_SIDE_PX} px a side and \
          {MAX_IMAGE_PIXELS} px in all (the largest sensors have under 200 million)"
     )]
-    ImageTooLarge { width_px: u32, height_px: u32 },
+    ImageTooLarge {
+        /// The image width given (px).
+        width_px: u32,
+        /// The image height given (px).
+        height_px: u32,
+    },
     /// An intrinsic that no camera has for its image (see [`CameraModel::new`] for the ranges). Boxed, as the
     /// other details below, so that the error stays small to move.
     #[error("{0}")]
@@ -59,8 +90,11 @@ pub enum CameraError {
 pub struct ImplausibleIntrinsic {
     /// `fx`, `fy`, `skew`, `cx` or `cy`.
     pub field: &'static str,
+    /// The value given (px).
     pub value: f64,
+    /// The width of the image it was given for (px).
     pub width_px: u32,
+    /// The height of the image it was given for (px).
     pub height_px: u32,
     /// The range it should be in, and why.
     pub expected: &'static str,
@@ -81,10 +115,15 @@ pub enum LensError {
         number(*.value)
     )]
     Folds {
+        /// The lens model's name (`plumb_bob`, `rational_polynomial`, `equidistant`).
         model: &'static str,
+        /// The coefficient blamed (`k1`, `p2`, ...): the one whose removal most relieves the failure.
         coefficient: &'static str,
+        /// That coefficient's value.
         value: f64,
+        /// The distance from the principal point (px, distorted) where the model folds back.
         radius_px: f64,
+        /// The distance from the principal point to the image's farthest corner (px).
         corner_px: f64,
     },
     /// The lens model does not reach the image's farthest corner before 90° off the axis.
@@ -95,10 +134,15 @@ pub enum LensError {
         number(*.value)
     )]
     Short {
+        /// The lens model's name (`plumb_bob`, `rational_polynomial`, `equidistant`).
         model: &'static str,
+        /// The coefficient blamed (`k1`, `p2`, ...): the one whose removal most relieves the failure.
         coefficient: &'static str,
+        /// That coefficient's value.
         value: f64,
+        /// The farthest distance from the principal point (px, distorted) the model reaches before 90° off the axis.
         radius_px: f64,
+        /// The distance from the principal point to the image's farthest corner (px).
         corner_px: f64,
     },
     /// The lens model moves a point of the image by more than its distance from the principal point.
@@ -109,10 +153,15 @@ pub enum LensError {
         number(*.value)
     )]
     TooStrong {
+        /// The lens model's name (`plumb_bob`, `rational_polynomial`, `equidistant`).
         model: &'static str,
+        /// The coefficient blamed (`k1`, `p2`, ...): the one whose removal most relieves the failure.
         coefficient: &'static str,
+        /// That coefficient's value.
         value: f64,
+        /// The distance from the principal point (px, distorted) of the point scaled too much.
         radius_px: f64,
+        /// The factor by which the model scales that point's distance from the centre (distorted over undistorted).
         scale: f64,
     },
 }
@@ -152,10 +201,15 @@ pub const MAX_CORNER_NORMALISED_RADIUS: f64 = 100.0;
 /// Pinhole intrinsics (pixels): the camera matrix `[[fx, s, cx], [0, fy, cy], [0, 0, 1]]`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PinholeIntrinsics {
+    /// Horizontal focal length (px): pixels per unit of normalised `x`.
     pub fx_px: f64,
+    /// Vertical focal length (px): pixels per unit of normalised `y`.
     pub fy_px: f64,
+    /// Skew (px): how much of normalised `y` enters `u`; 0 for square pixel axes.
     pub skew_px: f64,
+    /// Principal point's column (px): where the optical axis meets the image.
     pub cx_px: f64,
+    /// Principal point's row (px).
     pub cy_px: f64,
 }
 
@@ -465,10 +519,15 @@ fn blame(distortion: &Distortion, goodness: impl Fn(&Distortion) -> f64) -> (&'s
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct CameraModel {
+    /// The camera's name (from its calibration file), for messages and outputs.
     pub name: String,
+    /// Image width (px).
     pub width_px: u32,
+    /// Image height (px).
     pub height_px: u32,
+    /// The pinhole camera matrix: ideal pixels of normalised image points.
     pub intrinsics: PinholeIntrinsics,
+    /// The lens model: raw (distorted) normalised points of ideal ones.
     pub distortion: Distortion,
     /// When each blob is exposed (default: sequential ROIs, 100 µs).
     pub time: TimeModel,

@@ -21,9 +21,13 @@ use super::{LensExample, LensModel};
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Equidistant {
+    /// Coefficient of `θ³` in `θd`.
     pub k1: f64,
+    /// Coefficient of `θ⁵` in `θd`.
     pub k2: f64,
+    /// Coefficient of `θ⁷` in `θd`.
     pub k3: f64,
+    /// Coefficient of `θ⁹` in `θd`.
     pub k4: f64,
 }
 
@@ -38,6 +42,7 @@ impl Equidistant {
         }
     }
 
+    /// `[k1, k2, k3, k4]`, the order of [`Self::from_coefficients`].
     pub fn coefficients(&self) -> [f64; 4] {
         [self.k1, self.k2, self.k3, self.k4]
     }

@@ -91,11 +91,15 @@ pub trait LensModel: Copy + PartialEq + Into<Distortion> {
 /// off the axis) within which it is invertible.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LensExample {
+    /// The example lens.
     pub lens: Distortion,
+    /// The undistorted normalised radius (`tan` of the angle off the axis) within which the lens is invertible: the
+    /// tests sample points inside it.
     pub max_radius: f64,
 }
 
 impl LensExample {
+    /// An example of `lens`, invertible within the normalised radius `max_radius`.
     pub fn new(lens: impl Into<Distortion>, max_radius: f64) -> Self {
         Self {
             lens: lens.into(),

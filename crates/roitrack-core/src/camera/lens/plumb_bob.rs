@@ -8,10 +8,15 @@ use super::{LensExample, LensModel, undistort_by_newton};
 /// the radial factor `1 + k1 r² + k2 r⁴ + k3 r⁶` and the tangential terms `p1 p2`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PlumbBob {
+    /// Radial coefficient of `r²`.
     pub k1: f64,
+    /// Radial coefficient of `r⁴`.
     pub k2: f64,
+    /// First tangential coefficient: adds `2 p1 x y` to `x` and `p1 (r² + 2 y²)` to `y`.
     pub p1: f64,
+    /// Second tangential coefficient: adds `p2 (r² + 2 x²)` to `x` and `2 p2 x y` to `y`.
     pub p2: f64,
+    /// Radial coefficient of `r⁶` (0 when a file gives 4 coefficients).
     pub k3: f64,
 }
 
@@ -27,6 +32,7 @@ impl PlumbBob {
         }
     }
 
+    /// `[k1, k2, p1, p2, k3]`, the order of [`Self::from_coefficients`].
     pub fn coefficients(&self) -> [f64; 5] {
         [self.k1, self.k2, self.p1, self.p2, self.k3]
     }

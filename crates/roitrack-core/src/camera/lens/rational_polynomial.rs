@@ -18,13 +18,21 @@ use super::{LensExample, LensModel, undistort_by_newton};
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RationalPolynomial {
+    /// Numerator coefficient of `r²`.
     pub k1: f64,
+    /// Numerator coefficient of `r⁴`.
     pub k2: f64,
+    /// First tangential coefficient, as [`super::PlumbBob::p1`].
     pub p1: f64,
+    /// Second tangential coefficient, as [`super::PlumbBob::p2`].
     pub p2: f64,
+    /// Numerator coefficient of `r⁶`.
     pub k3: f64,
+    /// Denominator coefficient of `r²`.
     pub k4: f64,
+    /// Denominator coefficient of `r⁴`.
     pub k5: f64,
+    /// Denominator coefficient of `r⁶`.
     pub k6: f64,
 }
 
@@ -43,6 +51,7 @@ impl RationalPolynomial {
         }
     }
 
+    /// `[k1, k2, p1, p2, k3, k4, k5, k6]`, the order of [`Self::from_coefficients`].
     pub fn coefficients(&self) -> [f64; 8] {
         [
             self.k1, self.k2, self.p1, self.p2, self.k3, self.k4, self.k5, self.k6,
