@@ -17,6 +17,8 @@ pub enum JacobianKind {
 /// Projection of model points seen at their own times, in ideal (undistorted) pixels.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SpatioTemporalModel {
+    /// The camera matrix that turns camera-frame points into ideal pixels (the lens is undone before, on the
+    /// measurements).
     pub intrinsics: PinholeIntrinsics,
 }
 
@@ -32,6 +34,7 @@ pub struct ProjectedPoint {
 }
 
 impl SpatioTemporalModel {
+    /// The model of a camera with these intrinsics.
     pub fn new(intrinsics: PinholeIntrinsics) -> Self {
         Self { intrinsics }
     }

@@ -48,6 +48,7 @@ pub struct RotationIncrement {
 }
 
 impl RotationIncrement {
+    /// The increment of rotation vector `a` (rad, axis times angle), its coefficients computed once.
     #[inline]
     pub fn new(a: &Vector3<f64>) -> Self {
         let (s1, c1, c2) = rodrigues_coefficients(a.norm_squared());

@@ -17,9 +17,13 @@ use crate::{Vector12, so3};
 /// perturbations are on the left, about the object's origin, in the camera frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct MotionState {
+    /// c_R_o: the object's orientation in the camera frame (maps object-frame directions to camera-frame ones).
     pub cam_r_obj: Rotation3<f64>,
+    /// c_t_o: the object's origin in the camera frame (m).
     pub cam_t_obj_m: Vector3<f64>,
+    /// V: velocity of the object's origin (m/s), camera frame.
     pub velocity_mps: Vector3<f64>,
+    /// W: angular velocity of the object (rad/s), camera frame.
     pub angular_velocity_radps: Vector3<f64>,
 }
 
@@ -195,7 +199,9 @@ impl MotionState {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Acceleration {
+    /// A: the rate of change of the velocity of the object's origin (m/s²), camera frame.
     pub linear_mps2: Vector3<f64>,
+    /// Α: the rate of change of the angular velocity (rad/s²), camera frame.
     pub angular_radps2: Vector3<f64>,
 }
 

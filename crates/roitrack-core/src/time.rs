@@ -26,7 +26,10 @@ pub enum Readout {
     /// Whole frames, every pixel exposed over the same interval.
     GlobalShutter,
     /// Whole frames, row `v` exposed `v * line_delay_s` after row 0.
-    RollingShutter { line_delay_s: f64 },
+    RollingShutter {
+        /// The time (s) between the exposures of two successive rows: the sensor's readout time over its rows.
+        line_delay_s: f64,
+    },
 }
 
 /// When each blob of a readout was taken, and for how long it was exposed.
@@ -44,6 +47,7 @@ pub enum Readout {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TimeModel {
+    /// How the camera reads its pixels, which sets each blob's time.
     pub readout: Readout,
     /// Exposure duration (s), centred on each blob's time.
     pub exposure_s: f64,
@@ -62,8 +66,10 @@ impl Default for TimeModel {
 /// Why a time model is refused.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum TimeModelError {
+    /// The exposure given (s) is outside 0 to [`MAX_EXPOSURE_S`], or not finite.
     #[error("the exposure must be from 0 to {MAX_EXPOSURE_S} s, got {0} s")]
     Exposure(f64),
+    /// The rolling shutter's line delay given (s) is outside 0 to [`MAX_LINE_DELAY_S`], or not finite.
     #[error(
         "the rolling shutter's line delay must be from 0 to {MAX_LINE_DELAY_S} s (a 1,000-row frame read in a second), \
          got {0} s"
