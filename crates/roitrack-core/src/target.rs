@@ -8,30 +8,59 @@ use thiserror::Error;
 /// Why a set of model points cannot be a target.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum TargetError {
+    /// Fewer than [`MIN_TARGET_POINTS`] points: the pose would not be fixed.
     #[error("a target needs at least {required} points, got {actual}")]
-    TooFewPoints { required: usize, actual: usize },
+    TooFewPoints {
+        /// The least number of points a target has ([`MIN_TARGET_POINTS`]).
+        required: usize,
+        /// The number given.
+        actual: usize,
+    },
+    /// Two points share an id, so a measurement's id would not name one point.
     #[error("point id {id} appears more than once")]
-    DuplicateId { id: u32 },
+    DuplicateId {
+        /// The id repeated.
+        id: u32,
+    },
+    /// A coordinate or a diameter is NaN or infinite.
     #[error("point id {id}: {field} must be a finite number, got {value}")]
     NotFinite {
+        /// The point's id.
         id: u32,
+        /// `x`, `y`, `z` or `diameter`.
         field: &'static str,
+        /// The value given (m).
         value: f64,
     },
+    /// A blob diameter is zero or negative.
     #[error("point id {id}: diameter must be positive, got {value} m")]
-    NotPositiveDiameter { id: u32, value: f64 },
+    NotPositiveDiameter {
+        /// The point's id.
+        id: u32,
+        /// The diameter given (m).
+        value: f64,
+    },
+    /// All points lie on one line: the rotation about that line would be unobservable.
     #[error(
         "the target points are collinear (spread across the line {spread_m:.3e} m): the pose about that line is unobservable"
     )]
-    Collinear { spread_m: f64 },
+    Collinear {
+        /// The points' standard deviation across their best-fit line (m), under a micrometre.
+        spread_m: f64,
+    },
+    /// Two points are less than a micrometre apart: one blob would be the image of both.
     #[error(
         "points {first_id} and {second_id} are at one place ({distance_m:.1e} m apart): a blob cannot be two points"
     )]
     Coincident {
+        /// The id of the point listed first.
         first_id: u32,
+        /// The id of the point listed second.
         second_id: u32,
+        /// Their distance (m).
         distance_m: f64,
     },
+    /// A [`CircleGrid`] specification is refused ([`Target::circle_grid`]).
     #[error("circle grid: {0}")]
     CircleGrid(CircleGridError),
 }
@@ -39,16 +68,40 @@ pub enum TargetError {
 /// Why a [`CircleGrid`] specification cannot make a target (see [`Target::circle_grid`]).
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum CircleGridError {
+    /// The grid has no rows or no columns.
     #[error("a grid needs at least 1 row and 1 column, got {rows} x {cols}")]
-    NoRowsOrColumns { rows: u32, cols: u32 },
+    NoRowsOrColumns {
+        /// The rows given.
+        rows: u32,
+        /// The columns given.
+        cols: u32,
+    },
+    /// The spacing or the diameter is zero, negative or not finite.
     #[error("{field} must be a finite positive length, got {value} m")]
-    NotPositiveLength { field: &'static str, value: f64 },
+    NotPositiveLength {
+        /// `spacing` or `diameter`.
+        field: &'static str,
+        /// The value given (m).
+        value: f64,
+    },
+    /// The circles are at least as wide as their spacing, so neighbours would touch or overlap.
     #[error(
         "the diameter ({diameter_m} m) must be smaller than the spacing ({spacing_m} m), or neighbouring circles touch"
     )]
-    Overlapping { diameter_m: f64, spacing_m: f64 },
+    Overlapping {
+        /// The circles' diameter given (m).
+        diameter_m: f64,
+        /// The spacing given (m).
+        spacing_m: f64,
+    },
+    /// The grid has more than [`MAX_GRID_POINTS`] circles.
     #[error("{count} circles is more than the {max} a grid may have")]
-    TooManyPoints { count: u64, max: u64 },
+    TooManyPoints {
+        /// The number of circles the grid would have.
+        count: u64,
+        /// The most a grid may have ([`MAX_GRID_POINTS`]).
+        max: u64,
+    },
 }
 
 /// The arrangement of a [`CircleGrid`]'s circles; `S` is its `spacing_m`.
@@ -79,6 +132,7 @@ pub struct CircleGrid {
     pub spacing_m: f64,
     /// Diameter of every circle (m), smaller than the spacing.
     pub diameter_m: f64,
+    /// Which positions hold a circle: all of them, or a hexagonal packing.
     pub layout: GridLayout,
 }
 
@@ -127,7 +181,9 @@ impl CircleGrid {
 /// One model point: its id (as in the measurements) and position in the object frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TargetPoint {
+    /// The point's id, unique in its target: the `id` of the [`crate::Measurement`]s of its blob.
     pub id: u32,
+    /// The point's position in the object frame (m).
     pub point_in_obj_m: Vector3<f64>,
     /// Diameter of the blob's disk (m), if known. The key blob is the one with the largest diameter.
     pub diameter_m: Option<f64>,
@@ -146,6 +202,7 @@ pub struct Target {
 /// The plane of a planar target: `point_in_obj = centre + obj_r_plane (x, y, 0)`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TargetPlane {
+    /// The points' centroid, the plane's origin (m, object frame).
     pub centre_m: Vector3<f64>,
     /// Columns: the two in-plane axes (largest spread first) and their cross product.
     pub obj_r_plane: Matrix3<f64>,
@@ -196,7 +253,10 @@ pub enum TargetAmbiguity {
     ThreePoints,
     /// Rigid motions that take the target onto itself (points onto points of the same diameter), besides the
     /// identity: from unlabelled blobs the labelling, and so the pose, is known only up to these.
-    Symmetric { motions: Vec<Symmetry> },
+    Symmetric {
+        /// The motions other than the identity that take the target onto itself.
+        motions: Vec<Symmetry>,
+    },
 }
 
 impl std::fmt::Display for TargetAmbiguity {
@@ -227,11 +287,16 @@ impl std::fmt::Display for TargetAmbiguity {
 /// A rigid motion `x -> obj_r * x + obj_t_m` of the object frame that takes the target's points onto its points.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Symmetry {
+    /// The motion's rotation, in the object frame.
     pub obj_r: nalgebra::Rotation3<f64>,
+    /// The motion's translation (m), in the object frame.
     pub obj_t_m: Vector3<f64>,
 }
 
 impl Target {
+    /// Validates `points` into a target, refusing fewer than [`MIN_TARGET_POINTS`], duplicate ids, non-finite
+    /// coordinates or diameters, non-positive diameters, two points within a micrometre of each other and points all
+    /// on one line (within a micrometre). A planar target's plane ([`Self::plane`]) is computed here, once.
     pub fn new(points: Vec<TargetPoint>) -> Result<Self, TargetError> {
         if points.len() < MIN_TARGET_POINTS {
             return Err(TargetError::TooFewPoints {
@@ -336,7 +401,7 @@ impl Target {
     ///
     /// Refuses (as [`TargetError::CircleGrid`]) no rows or columns, a spacing or diameter that is not a finite
     /// positive length, a diameter not smaller than the spacing and more than [`MAX_GRID_POINTS`] circles; and, as
-    /// [`Target::new`] does, fewer than 4 circles and circles all on one line (a single row, say).
+    /// [`Target::new`] does, fewer than [`MIN_TARGET_POINTS`] circles and circles all on one line (a single row, say).
     ///
     /// ```
     /// use roitrack_core::Target;
@@ -381,14 +446,17 @@ impl Target {
         Self::new(points)
     }
 
+    /// The model points, in the order given to [`Self::new`].
     pub fn points(&self) -> &[TargetPoint] {
         &self.points
     }
 
+    /// The number of model points (at least [`MIN_TARGET_POINTS`]).
     pub fn len(&self) -> usize {
         self.points.len()
     }
 
+    /// Whether the target has no points: never, for a validated target (kept beside [`Self::len`] by convention).
     pub fn is_empty(&self) -> bool {
         self.points.is_empty()
     }
