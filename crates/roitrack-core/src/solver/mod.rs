@@ -73,9 +73,11 @@ pub struct DampingSchedule {
     pub initial: f64,
     /// After a step that lowered the cost: `μ <- max(μ * decrease, min)`.
     pub decrease: f64,
+    /// The floor of `μ` after a success (0: back to Gauss-Newton).
     pub min: f64,
     /// After a step that raised the cost: `μ <- μ * increase`, or `first_increase` when `μ` was 0.
     pub increase: f64,
+    /// `μ` after a failed undamped (`μ = 0`) step, where multiplying would leave it 0.
     pub first_increase: f64,
     /// The solver stops when `μ` exceeds this: no descent direction is left.
     pub max: f64,
@@ -83,6 +85,8 @@ pub struct DampingSchedule {
     pub max_means_converged: bool,
     /// A step is kept when the new cost is at most `(1 + cost_slack) x` the old one plus `cost_slack_px2`.
     pub cost_slack: f64,
+    /// The absolute slack (px²) added to the relative one, so that at a cost near zero, where the relative slack is
+    /// nothing, a step is not refused for rounding.
     pub cost_slack_px2: f64,
     /// Converged when a kept step lowered the cost by at most this fraction of it (plus 1e-24 px²); `None`: never on
     /// the cost.
@@ -131,7 +135,10 @@ pub enum Method {
     /// The paper's control law: undamped steps scaled by `gain`, all applied, refused when the reciprocal condition
     /// number of the column-scaled system is below `min_inverse_condition`.
     Servo {
+        /// λ: the fraction of each Gauss-Newton step applied (1: the full step).
         gain: f64,
+        /// The degeneracy gate: the least reciprocal condition number (0 to 1) of the column-scaled normal equations
+        /// at which a step is still taken.
         min_inverse_condition: f64,
     },
 }
@@ -141,6 +148,7 @@ pub enum Method {
 pub struct SolverOptions {
     /// Most linearisations (and steps tried).
     pub max_iterations: usize,
+    /// Levenberg-Marquardt with its damping schedule, or the paper's servo law.
     pub method: Method,
 }
 
@@ -211,9 +219,11 @@ pub struct SolverReport {
     pub iterations: usize,
     /// Steps applied to the parameters.
     pub steps_applied: usize,
-    /// Weighted cost Σ w |e|² (px²) at the start and in the returned normal equations.
+    /// Weighted cost Σ w |e|² (px²) at the initial parameters.
     pub initial_cost_px2: f64,
+    /// Weighted cost Σ w |e|² (px²) in the returned normal equations ([`Solution::normal_equations`]).
     pub final_cost_px2: f64,
+    /// Why the solver stopped.
     pub stop: StopReason,
     /// Servo: the reciprocal condition number of the last system solved (1 perfect, 0 singular).
     pub inverse_condition: Option<f64>,
@@ -222,11 +232,13 @@ pub struct SolverReport {
 /// The result of [`solve`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Solution<P, const N: usize> {
+    /// The parameters reached: the last kept (Levenberg-Marquardt) or applied (servo) ones.
     pub params: P,
     /// The normal equations last evaluated at parameters that were kept: at `params`, except after a negligible
     /// step (taken without evaluating again) and after a servo step (they are those the step was solved from, which
     /// gives its covariance).
     pub normal_equations: NormalEquations<N>,
+    /// How the solve went: iterations, costs, why it stopped.
     pub report: SolverReport,
 }
 

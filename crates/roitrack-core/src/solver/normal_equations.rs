@@ -168,8 +168,10 @@ impl<const N: usize> NormalEquations<N> {
         Some((step, inverse_condition))
     }
 
-    /// The conditioning estimate of [`Self::solve_with_conditioning`] alone (0 when singular): a quarter of the cost
-    /// of the exact eigenvalue figure.
+    /// An estimate of the reciprocal condition number of the column-scaled `JᵀWJ` (0 when singular) from one
+    /// Cholesky factorisation, λmax by power iteration and λmin by inverse iteration: a quarter of the cost of the
+    /// exact eigenvalue figure ([`Self::inverse_condition`]), which it may over-estimate (λmin is a Rayleigh
+    /// quotient). The servo's degeneracy gate uses the same estimate.
     pub fn fast_inverse_condition(&self) -> f64 {
         self.solve_with_conditioning().map_or(0.0, |(_, c)| c)
     }
