@@ -133,6 +133,7 @@ impl EstimatorConfig {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrackerConfig {
+    /// Which estimator runs, with its own settings (default: the Kalman filter).
     pub estimator: EstimatorConfig,
     /// Which measurements a control step uses (VVS, batch, and the conditioning figure of every estimator).
     pub window: WindowMode,
@@ -307,10 +308,14 @@ impl TrackerConfig {
 /// Why a configuration is refused.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum ConfigError {
+    /// An option is outside its range.
     #[error("{field} must be {expected}, got {value}")]
     Invalid {
+        /// The option, as the command line and configuration files name it (`noise_px`, `kalman.gate_sigma`, ...).
         field: &'static str,
+        /// The range it must be in.
         expected: &'static str,
+        /// The value given (a count converted to a number).
         value: f64,
     },
 }
@@ -372,6 +377,7 @@ pub struct Estimate {
     /// Reference time (s): the time of the newest measurement used (the frame tracker moves its estimates to the
     /// mean time of each frame's measurements).
     pub t_ref_s: f64,
+    /// The pose and twist at `t_ref_s`, camera frame.
     pub state: MotionState,
     /// RMS of the window's reprojection residual at the emitted state (px, per coordinate); for the Kalman filter,
     /// of the innovations of the measurements since the previous estimate (each against the prediction from the
@@ -383,6 +389,7 @@ pub struct Estimate {
     pub measurements_used: usize,
     /// Iterations (or Kalman updates since the last estimate).
     pub iterations: usize,
+    /// What the track is doing, and whether the estimate is vouched for ([`TrackStatus::is_vouched_for`]).
     pub status: TrackStatus,
     /// Covariance of the error state (v, w, dV, dW) where the estimator has one (Kalman; batch and VVS give the
     /// Gauss-Newton covariance σ² (JᵀJ)⁻¹ of the window).
@@ -439,21 +446,40 @@ impl Estimate {
 /// Why a measurement was refused. The estimator's state is unchanged by a refused measurement.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum TrackError {
+    /// The time or a pixel coordinate is NaN or infinite.
     #[error("measurement at t = {t_s} s: {field} is not finite ({value})")]
     NotFinite {
+        /// The measurement's time (s).
         t_s: f64,
+        /// `t`, `u` or `v`.
         field: &'static str,
+        /// The value given.
         value: f64,
     },
+    /// The measurement is older than the one before it: the estimators move forward in time only.
     #[error(
         "measurement at t = {t_s} s is older than the previous one ({previous_s} s): times must not decrease"
     )]
-    TimeOutOfOrder { t_s: f64, previous_s: f64 },
+    TimeOutOfOrder {
+        /// The measurement's time (s).
+        t_s: f64,
+        /// The time of the measurement accepted before it (s).
+        previous_s: f64,
+    },
+    /// The measurement's point id is not one of the target's.
     #[error("measurement at t = {t_s} s: point id {id} is not in the target")]
-    UnknownId { t_s: f64, id: u32 },
+    UnknownId {
+        /// The measurement's time (s).
+        t_s: f64,
+        /// The id given.
+        id: u32,
+    },
+    /// The raw pixel could not be undistorted ([`crate::CameraError::UndistortionDiverged`]).
     #[error("measurement at t = {t_s} s: {source}")]
     Undistortion {
+        /// The measurement's time (s).
         t_s: f64,
+        /// The camera's refusal.
         #[source]
         source: crate::CameraError,
     },
@@ -465,11 +491,17 @@ pub enum TrackError {
         if *z_m <= 0.0 { ", behind it".to_string() } else { format!(", more than {max_m} m away") }
     )]
     ImplausibleFirstPose {
+        /// The time of the first estimate (s).
         t_s: f64,
+        /// The target origin's x in the camera frame (m).
         x_m: f64,
+        /// The target origin's y in the camera frame (m).
         y_m: f64,
+        /// The target origin's z in the camera frame (m): depth, negative behind the camera.
         z_m: f64,
+        /// The target origin's distance from the camera (m).
         distance_m: f64,
+        /// The farthest allowed ([`TrackerConfig::max_first_distance_m`], m).
         max_m: f64,
     },
 }
@@ -516,10 +548,15 @@ pub enum Emit {
 /// Estimates counted by status.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct StatusCounts {
+    /// Estimates with [`TrackStatus::Converging`].
     pub converging: usize,
+    /// Estimates with [`TrackStatus::Tracking`].
     pub tracking: usize,
+    /// Estimates with [`TrackStatus::Degenerate`].
     pub degenerate: usize,
+    /// Estimates with [`TrackStatus::Disputed`].
     pub disputed: usize,
+    /// Estimates with [`TrackStatus::Lost`].
     pub lost: usize,
 }
 
@@ -578,7 +615,10 @@ pub enum StartFailure {
         "{poses} poses fit the measurements equally well within the noise (3 points, a symmetric target, or a small \
          target far away whose tilt cannot be told from its mirror tilt)"
     )]
-    Ambiguous { poses: usize },
+    Ambiguous {
+        /// How many poses fit equally well (the best and its rivals).
+        poses: usize,
+    },
     /// A pose decided with little margin over a rival was not decided the same way by the cycle before: the track
     /// waits for views that agree.
     #[error(
@@ -587,14 +627,18 @@ pub enum StartFailure {
     Unconfirmed,
     /// The 12-dof fit of the first cycles left residuals above the noise (a wrong correspondence, or bad data).
     #[error("the first cycles fit no motion: median residual {median_px:.2} px")]
-    Residual { median_px: f64 },
+    Residual {
+        /// The median residual norm of the fit (px), over the bound set by the noise.
+        median_px: f64,
+    },
 }
 
 /// What an estimator has done since it was built.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct EstimatorReport {
-    /// Measurements accepted, and refused ([`TrackError`]).
+    /// Measurements accepted.
     pub measurements: usize,
+    /// Measurements refused ([`TrackError`]), which left the estimator as it was.
     pub refused: usize,
     /// Estimates emitted, by status.
     pub estimates: StatusCounts,
@@ -602,8 +646,9 @@ pub struct EstimatorReport {
     pub initialisations: usize,
     /// Why the newest attempt to start a track from the measurements started none (`None` once one has started).
     pub start_failure: Option<StartFailure>,
-    /// Kalman: measurements rejected by the innovation gate, and covariance resets after runs of them.
+    /// Kalman: measurements rejected by the innovation gate.
     pub gated: usize,
+    /// Kalman: covariance resets after runs of gated measurements.
     pub covariance_resets: usize,
 }
 
@@ -782,7 +827,9 @@ pub enum StreamError<S, K = S> {
     /// The estimator refused measurement number `index` (0-based) of the stream.
     #[error("measurement {index}: {source}")]
     Refused {
+        /// The measurement's index in the stream (0-based).
         index: usize,
+        /// Why the estimator refused it.
         #[source]
         source: TrackError,
     },
@@ -936,11 +983,15 @@ pub fn track_all(
 /// Why [`track_all`] failed.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum TrackAllError {
+    /// The tracker's configuration was refused.
     #[error("invalid tracker options: {0}")]
     Config(#[from] ConfigError),
+    /// The estimator refused a measurement.
     #[error("measurement {index}: {source}")]
     Refused {
+        /// The measurement's index in the slice (0-based).
         index: usize,
+        /// Why the estimator refused it.
         #[source]
         source: TrackError,
     },
