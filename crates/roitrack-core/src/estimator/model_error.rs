@@ -102,8 +102,8 @@ fn model_jacobians(
     Some((intrinsics, k.pixel_jacobian_wrt_cam(&p) * r.matrix()))
 }
 
-/// How the excess cost of a rival over the best fit could change with the model's error ([`cost_difference_effect`]):
-/// along the direction that lowers it fastest, by `-s slope_px2 + s² curvature_px2` for a model `s` standard deviations
+/// How the excess cost of a rival over the best fit could change with the model's error (the camera's and the
+/// target's, off as [`MODEL_UNCERTAINTY`] says files are): along the direction that lowers it fastest, by `-s slope_px2 + s² curvature_px2` for a model `s` standard deviations
 /// off (the posterior ones, given what the best's residual shows).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct ModelEffect {

@@ -40,9 +40,14 @@ pub enum EstimatorKind {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Adaptation {
+    /// The centroid noise and the process noise ([`KalmanTuning::adapt_noise`] and
+    /// [`KalmanTuning::adapt_motion`]).
     Both,
+    /// The centroid noise only; the process noise stays as configured.
     Noise,
+    /// The process noise only; the centroid noise stays as configured.
     Motion,
+    /// Neither: the configured noise and densities are taken as the truth (a hand-tuned filter).
     None,
 }
 
@@ -54,7 +59,9 @@ pub enum Adaptation {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum MotionModelKind {
+    /// [`MotionModel::ConstantVelocity`]: the twist drifts under white acceleration.
     ConstantVelocity,
+    /// [`MotionModel::ConstantAcceleration`]: the accelerations are states too, drifting under white jerk.
     ConstantAcceleration,
 }
 
@@ -78,8 +85,9 @@ pub enum MotionModelKind {
 pub struct OptionConflict {
     /// The option given (its command-line name).
     pub given: &'static str,
-    /// The model in force, and the model the option belongs to.
+    /// The motion model in force (`constant-velocity` or `constant-acceleration`).
     pub model: &'static str,
+    /// The motion model the option is a density of.
     pub other: &'static str,
 }
 
@@ -87,8 +95,11 @@ pub struct OptionConflict {
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 #[error("{option}: unknown value '{value}' (expected one of {expected})")]
 pub struct UnknownName {
+    /// The option (its command-line name: `estimator`, `adapt`, ...).
     pub option: &'static str,
+    /// The name given.
     pub value: String,
+    /// The option's names, joined by commas.
     pub expected: String,
 }
 

@@ -21,8 +21,11 @@ use crate::{JacobianKind, MotionState, SpatioTemporalModel, TargetPoint};
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Observation {
+    /// Mid-exposure time of the blob (s), as measured.
     pub t_s: f64,
+    /// Index of the model point into the target's points ([`crate::Target::points`]), not its id.
     pub point_index: usize,
+    /// The centroid with the lens distortion removed (ideal px).
     pub ideal_px: Vector2<f64>,
 }
 
@@ -48,7 +51,9 @@ pub enum RobustLoss {
 }
 
 impl RobustLoss {
+    /// Huber's threshold (scales): residuals beyond it weigh `k / r`. 1.345 gives 95 % efficiency on Gaussian noise.
     pub const HUBER_K: f64 = 1.345;
+    /// Tukey's threshold (scales): residuals beyond it weigh nothing. 4.685 gives 95 % efficiency on Gaussian noise.
     pub const TUKEY_C: f64 = 4.685;
 
     /// IRLS weight of a residual of `r` scales.
@@ -209,13 +214,17 @@ impl ResidualTally {
 /// ```
 #[derive(Debug, Clone, Copy)]
 pub struct WindowProblem<'a> {
+    /// The projection model (the camera's intrinsics) that predicts each observation.
     pub model: &'a SpatioTemporalModel,
+    /// The target's model points, indexed by [`Observation::point_index`].
     pub points: &'a [TargetPoint],
+    /// The observations fitted, at their own times.
     pub window: &'a [Observation],
     /// The reference time of the state (s).
     pub t_ref_s: f64,
     /// Which interaction matrix the linearisation uses (the paper's loop may use its own).
     pub jacobian: JacobianKind,
+    /// The M-estimator that weighs the residuals (in units of `scale_px`).
     pub loss: RobustLoss,
     /// Residual scale of the loss (px per axis).
     pub scale_px: f64,
@@ -317,8 +326,8 @@ impl<'a> WindowProblem<'a> {
             .sum()
     }
 
-    /// The robust scale (px per axis) of the window's residuals at `state` ([`scale_from_median_px`] of the median
-    /// residual), never below `floor_px`.
+    /// The robust scale (px per axis) of the window's residuals at `state`: the median residual norm over 1.1774 (the
+    /// median norm of a 2-D Gaussian residual of unit standard deviation per axis), never below `floor_px`.
     pub fn robust_scale_px(&self, state: &MotionState, floor_px: f64) -> f64 {
         self.median_residual_px(state)
             .map_or(floor_px, |median| scale_from_median_px(median, floor_px))

@@ -23,8 +23,11 @@ pub const MAX_STENCIL_POSES: usize = 5;
 /// A pose at a time (a frame's estimate at the mean time of its blobs).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TimedPose {
+    /// The pose's time (s).
     pub t_s: f64,
+    /// The object's orientation in the camera frame (c_R_o).
     pub cam_r_obj: Rotation3<f64>,
+    /// The object's origin in the camera frame (m).
     pub cam_t_obj_m: Vector3<f64>,
 }
 
@@ -189,6 +192,7 @@ pub struct PoseRefit {
     pub pose_covariance: Matrix6<f64>,
     /// RMS of the weighted residual at the fitted pose (px, per coordinate).
     pub residual_rms_px: f64,
+    /// Linearisations the solver took.
     pub iterations: usize,
     /// The solver converged (its last step negligible).
     pub converged: bool,

@@ -68,10 +68,12 @@ pub enum MotionModel {
     /// driven by white jerk of these spectral densities ((m/s³)²/Hz and (rad/s³)²/Hz). It predicts across the gaps
     /// where a constant twist falls behind a changing one: between rolling-shutter frames, whose blobs are read one
     /// row band after the other, a turn that speeds up between two frames leaves a constant-twist filter a twist
-    /// that is wrong over the next frame's readout, which the frame's depth absorbs. About 1.45 times the work per
-    /// update (`roitrack bench --json`: `kalman_update_constant_acceleration_us_median`).
+    /// that is wrong over the next frame's readout, which the frame's depth absorbs. More work per update than the
+    /// 12-state filter (`roitrack bench --json` measures it: `kalman_update_constant_acceleration_us_median`).
     ConstantAcceleration {
+        /// Spectral density of the white linear jerk ((m/s³)²/Hz): how fast the linear acceleration may drift.
         linear_jerk_psd: f64,
+        /// Spectral density of the white angular jerk ((rad/s³)²/Hz): how fast the angular acceleration may drift.
         angular_jerk_psd: f64,
     },
 }

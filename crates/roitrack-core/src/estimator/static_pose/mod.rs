@@ -35,10 +35,21 @@ use object_space::ObjectSpaceCost;
 /// Why no static pose could be found.
 #[derive(Debug, Clone, Copy, PartialEq, Error)]
 pub enum InitError {
+    /// Fewer distinct points were observed than a pose needs.
     #[error("a static pose needs at least {required} distinct points, got {actual}")]
-    TooFewPoints { required: usize, actual: usize },
+    TooFewPoints {
+        /// The least number of distinct points a static pose needs (3).
+        required: usize,
+        /// The number of distinct points observed.
+        actual: usize,
+    },
+    /// The observations fix no pose: points at one place or seen on one line, parallel rays, non-finite pixels, or
+    /// no pose with the points in front of the camera.
     #[error("no static pose: {reason}")]
-    Degenerate { reason: &'static str },
+    Degenerate {
+        /// Which of those, in words.
+        reason: &'static str,
+    },
 }
 
 /// A fitted static pose and how well it fits.
@@ -50,8 +61,12 @@ pub struct PoseFit {
     pub cost_px2: f64,
     /// RMS reprojection residual (px, per coordinate).
     pub residual_rms_px: f64,
+    /// Estimated reciprocal condition number of the fit's column-scaled normal equations (1 perfect, 0 singular):
+    /// how well the observations fix the pose.
     pub inverse_condition: f64,
+    /// Linearisations the refinement took.
     pub iterations: usize,
+    /// Whether the refinement reached a minimum of the cost.
     pub converged: bool,
     /// For a rival of the best pose ([`StaticPoses`]): how its cost's excess over the best's could move if the
     /// camera and target were off the user's files as users' files are ([`super::MODEL_UNCERTAINTY`]), given what the
