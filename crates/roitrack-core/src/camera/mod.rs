@@ -23,12 +23,12 @@ pub use lens::*;
 /// Why a camera model is unusable, or why a pixel could not be undistorted.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum CameraError {
-    /// An intrinsic is NaN or infinite.
+    /// An intrinsic or a lens coefficient is NaN or infinite.
     #[error("{field} must be a finite number, got {value}")]
     NotFinite {
-        /// The intrinsic: `fx`, `fy`, `skew`, `cx` or `cy`.
+        /// The intrinsic (`fx`, `fy`, `skew`, `cx`, `cy`) or the lens coefficient (`k1`, `p1`, ...).
         field: &'static str,
-        /// The value given (px).
+        /// The value given (px for an intrinsic).
         value: f64,
     },
     /// A focal length is zero or negative: the camera matrix would not be invertible.

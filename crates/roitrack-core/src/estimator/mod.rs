@@ -311,7 +311,8 @@ pub enum ConfigError {
     /// An option is outside its range.
     #[error("{field} must be {expected}, got {value}")]
     Invalid {
-        /// The option, as the command line and configuration files name it (`noise_px`, `kalman.gate_sigma`, ...).
+        /// The option's field: a [`TrackerConfig`] one (`noise_px`, ...), a [`KalmanTuning`] one after `kalman.`
+        /// (`kalman.gate_sigma`, ...) or a [`VvsSettings`] one (`gain`, `iterations`).
         field: &'static str,
         /// The range it must be in.
         expected: &'static str,
