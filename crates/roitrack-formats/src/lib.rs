@@ -109,7 +109,8 @@ pub use output_set::{
 };
 pub use overlay::{MarkKind, OverlayMark, write_overlay_png};
 pub use rig::{
-    MAX_RIG_CAMERAS, RigFile, parse_rig_yaml, read_rig_yaml, rig_yaml_string, write_rig_yaml,
+    MAX_RIG_CAMERAS, RigFile, calibrated_rig_yaml_string, parse_rig_yaml, read_rig_yaml,
+    rig_yaml_string, write_calibrated_rig_yaml, write_rig_yaml,
 };
 pub use roi_recording::{
     MAX_ROI_SIDE_PX, ROI_RECORDING_MAGIC, RoiRecordingReader, RoiRecordingWriter,

@@ -21,7 +21,7 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
-use roitrack_core::rig::{CameraMount, ClockEstimate, ClockModel, Rig, RigCamera};
+use roitrack_core::rig::{CameraMount, ClockEstimate, ClockModel, Rig, RigCalibration, RigCamera};
 use serde::Deserialize;
 
 use crate::limits::{check_yaml_depth, read_text_file};
@@ -45,7 +45,11 @@ struct CameraYaml {
     name: String,
     calibration: String,
     #[serde(rename = "camera_T_rig")]
-    camera_t_rig: Vec<f64>,
+    camera_t_rig: Option<Vec<f64>>,
+    #[serde(rename = "camera_T_rig_sigma_m")]
+    camera_t_rig_sigma_m: Option<Vec<f64>>,
+    #[serde(rename = "camera_T_rig_sigma_deg")]
+    camera_t_rig_sigma_deg: Option<Vec<f64>>,
     clock_offset_s: Option<f64>,
     clock_drift_ppm: Option<f64>,
     clock_offset_sigma_s: Option<f64>,
@@ -155,7 +159,25 @@ pub fn parse_rig_yaml(
                 "listed twice: camera names must be unique".into(),
             ));
         }
-        let mount = mount_from(&c.camera_t_rig).map_err(|m| error("camera_T_rig", m))?;
+        // A pose left out is to be found by calibrate-rig; the tracker refuses the rig until then.
+        let mount_known = c.camera_t_rig.is_some();
+        let mount = match &c.camera_t_rig {
+            Some(values) => mount_from(values).map_err(|m| error("camera_T_rig", m))?,
+            None => CameraMount::IDENTITY,
+        };
+        for (key, values) in [
+            ("camera_T_rig_sigma_m", &c.camera_t_rig_sigma_m),
+            ("camera_T_rig_sigma_deg", &c.camera_t_rig_sigma_deg),
+        ] {
+            if let Some(values) = values
+                && (values.len() != 3 || values.iter().any(|v| !v.is_finite() || *v < 0.0))
+            {
+                return Err(error(
+                    key,
+                    format!("expected 3 finite numbers of at least 0 (x y z), got {values:?}"),
+                ));
+            }
+        }
         let first = index == 0;
         for (key, value) in [
             ("clock_offset_s", c.clock_offset_s),
@@ -193,6 +215,7 @@ pub fn parse_rig_yaml(
             name: c.name.clone(),
             camera,
             mount,
+            mount_known,
             clock: ClockModel {
                 offset_s: c.clock_offset_s.unwrap_or(0.0),
                 drift_ppm: c.clock_drift_ppm.unwrap_or(0.0),
@@ -259,6 +282,66 @@ pub fn rig_yaml_string(
     calibrations: &[String],
     clocks: Option<&[ClockEstimate]>,
 ) -> String {
+    rig_text(rig, calibrations, clocks, None)
+}
+
+/// A rig found by calibration ([`roitrack_core::rig::RigCalibrator`]) as rig-file text: every camera's pose and
+/// clock, with their standard deviations (`camera_T_rig_sigma_m`, `camera_T_rig_sigma_deg` about the camera's axes,
+/// `clock_offset_sigma_s`, `clock_drift_sigma_ppm`; 0 for what was known), each camera's calibration written as
+/// `calibrations[i]`.
+///
+/// ```
+/// use roitrack_core::rig::{CameraCalibration, CameraMount, ClockModel, Rig, RigCalibration};
+/// use roitrack_core::CameraModel;
+/// use roitrack_formats::calibrated_rig_yaml_string;
+///
+/// let rig = Rig::single("cam", CameraModel::canonical());
+/// let camera = CameraCalibration {
+///     mount: CameraMount::IDENTITY,
+///     mount_sigma_m: nalgebra::Vector3::zeros(),
+///     mount_sigma_rad: nalgebra::Vector3::zeros(),
+///     clock: ClockModel::REFERENCE,
+///     offset_sigma_s: 0.0,
+///     drift_sigma_ppm: 0.0,
+///     placed_against: None,
+///     samples: 0,
+///     rms_residual_m: 0.0,
+///     covariance: nalgebra::DMatrix::zeros(0, 0),
+/// };
+/// let text = calibrated_rig_yaml_string(&RigCalibration { rig, cameras: vec![camera] }, &["camera.yaml".into()]);
+/// assert!(text.contains("camera_T_rig_sigma_m: [0, 0, 0]") && text.contains("clock_offset_sigma_s: 0"));
+/// ```
+pub fn calibrated_rig_yaml_string(calibration: &RigCalibration, calibrations: &[String]) -> String {
+    let clocks: Vec<ClockEstimate> = calibration
+        .cameras
+        .iter()
+        .map(|c| ClockEstimate {
+            offset_s: c.clock.offset_s,
+            drift_ppm: c.clock.drift_ppm,
+            offset_sigma_s: c.offset_sigma_s,
+            drift_sigma_ppm: c.drift_sigma_ppm,
+            synced: true,
+        })
+        .collect();
+    let sigmas: Vec<[f64; 6]> = calibration
+        .cameras
+        .iter()
+        .map(|c| {
+            let m = c.mount_sigma_m;
+            let r = c.mount_sigma_rad.map(f64::to_degrees);
+            [m.x, m.y, m.z, r.x, r.y, r.z]
+        })
+        .collect();
+    rig_text(&calibration.rig, calibrations, Some(&clocks), Some(&sigmas))
+}
+
+/// The rig file's text; with `mount_sigmas` (per camera: translation m, rotation deg, about its axes) their lines.
+fn rig_text(
+    rig: &Rig,
+    calibrations: &[String],
+    clocks: Option<&[ClockEstimate]>,
+    mount_sigmas: Option<&[[f64; 6]]>,
+) -> String {
     let mut text = String::from("cameras:\n");
     for (i, c) in rig.cameras().iter().enumerate() {
         let iso = c.mount.to_isometry();
@@ -267,11 +350,33 @@ pub fn rig_yaml_string(
         let _ = writeln!(text, "  - name: {}", yaml_string(&c.name));
         let calibration = calibrations.get(i).map_or("", String::as_str);
         let _ = writeln!(text, "    calibration: {}", yaml_string(calibration));
-        let _ = writeln!(
-            text,
-            "    camera_T_rig: [{}]",
-            [t.x, t.y, t.z, q.i, q.j, q.k, q.w].map(number).join(", ")
-        );
+        if c.mount_known {
+            let _ = writeln!(
+                text,
+                "    camera_T_rig: [{}]",
+                [t.x, t.y, t.z, q.i, q.j, q.k, q.w].map(number).join(", ")
+            );
+        }
+        if let Some(s) = mount_sigmas.and_then(|s| s.get(i)) {
+            let _ = writeln!(
+                text,
+                "    camera_T_rig_sigma_m: [{}]",
+                s[..3]
+                    .iter()
+                    .map(|v| number(*v))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+            let _ = writeln!(
+                text,
+                "    camera_T_rig_sigma_deg: [{}]",
+                s[3..]
+                    .iter()
+                    .map(|v| number(*v))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            );
+        }
         match clocks.and_then(|clocks| clocks.get(i)) {
             Some(clock) => {
                 if clock.synced {
@@ -330,6 +435,18 @@ pub fn write_rig_yaml(
 ) -> Result<(), FormatError> {
     let mut file = AtomicFile::create(path.as_ref())?;
     file.write_all(rig_yaml_string(rig, calibrations, clocks).as_bytes())
+        .map_err(|e| file.write_error(e))?;
+    file.finish()
+}
+
+/// Writes a calibrated rig file atomically ([`calibrated_rig_yaml_string`]).
+pub fn write_calibrated_rig_yaml(
+    path: impl AsRef<Path>,
+    calibration: &RigCalibration,
+    calibrations: &[String],
+) -> Result<(), FormatError> {
+    let mut file = AtomicFile::create(path.as_ref())?;
+    file.write_all(calibrated_rig_yaml_string(calibration, calibrations).as_bytes())
         .map_err(|e| file.write_error(e))?;
     file.finish()
 }

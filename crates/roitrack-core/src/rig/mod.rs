@@ -26,6 +26,7 @@
 //! assert!((mount.rig_from_camera(&mount.camera_from_rig(&p_rig)) - p_rig).norm() < 1e-15);
 //! ```
 
+mod calibrate;
 mod projection;
 mod sync;
 #[cfg(test)]
@@ -36,6 +37,9 @@ use nalgebra::{Isometry3, Matrix3, Rotation3, Translation3, UnitQuaternion, Vect
 use thiserror::Error;
 
 use crate::{CameraModel, Matrix2x12, Measurement, MotionState, Vector12};
+pub use calibrate::{
+    CameraCalibration, RigCalibration, RigCalibrationConfig, RigCalibrationError, RigCalibrator,
+};
 pub use projection::{RigProjection, rig_projection};
 pub use sync::{OffsetSearch, search_offset_s};
 pub use tracker::{
@@ -270,6 +274,9 @@ pub struct RigCamera {
     pub camera: CameraModel,
     /// Where it is in the rig.
     pub mount: CameraMount,
+    /// Whether `mount` is known; else it is a placeholder (the identity) that [`RigCalibrator`] finds from the
+    /// target, and a [`RigTracker`] refuses the rig.
+    pub mount_known: bool,
     /// Its clock: its offset and drift, known or (with `offset_known` / `drift_known` false) a starting value to be
     /// estimated.
     pub clock: ClockModel,
@@ -291,6 +298,7 @@ impl RigCamera {
             name: name.into(),
             camera,
             mount,
+            mount_known: true,
             clock,
             offset_known: true,
             drift_known: true,

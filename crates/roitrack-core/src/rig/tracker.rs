@@ -89,6 +89,10 @@ pub enum RigError {
     Config(#[from] ConfigError),
     #[error("a measurement of camera number {camera}, but the rig has {cameras} cameras")]
     UnknownCamera { camera: usize, cameras: usize },
+    #[error(
+        "camera '{camera}': its camera_T_rig is not given: find it with calibrate-rig (RigCalibrator) first"
+    )]
+    MountUnknown { camera: String },
     #[error("camera '{camera}': {source}")]
     Measurement {
         camera: String,
@@ -292,6 +296,11 @@ impl Ord for Pending {
 impl RigTracker {
     /// A tracker for `rig` and `target`.
     pub fn new(rig: Rig, target: Target, config: RigTrackerConfig) -> Result<Self, RigError> {
+        if let Some(c) = rig.cameras().iter().find(|c| !c.mount_known) {
+            return Err(RigError::MountUnknown {
+                camera: c.name.clone(),
+            });
+        }
         let n = rig.len();
         let singles = rig
             .cameras()
