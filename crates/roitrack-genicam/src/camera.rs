@@ -31,10 +31,17 @@ use crate::fake::SceneClock;
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum PixelFormatChoice {
+    /// 8 bits a pixel, one byte each.
     Mono8,
+    /// 12 bits a pixel in a 16-bit little-endian container.
     Mono12,
+    /// 16 bits a pixel, little-endian.
     Mono16,
+    /// 12 bits a pixel, two pixels in three bytes, GigE Vision's layout: each pixel's 8 high bits in a byte of its
+    /// own, their low 4 bits together in the middle byte.
     Mono12Packed,
+    /// 12 bits a pixel, two pixels in three bytes, PFNC's layout (USB3 Vision, newer GigE cameras): least
+    /// significant bits first.
     Mono12p,
 }
 
@@ -191,6 +198,7 @@ pub struct GenicamOptions {
     pub roi_size_px: u32,
     /// `ExposureTime` (µs); `None` keeps the camera's.
     pub exposure_us: Option<f64>,
+    /// How each ROI is started: software trigger (the default) or free run.
     pub trigger: TriggerChoice,
     /// Free run: the frame rate asked for (`AcquisitionFrameRate`, Hz), if the camera has it.
     pub frame_rate_hz: Option<f64>,
@@ -233,24 +241,40 @@ impl Default for GenicamOptions {
 /// ```
 #[derive(Debug, Error)]
 pub enum GenicamError {
+    /// The camera could not be opened (no answer, refused address, no stream).
     #[error("cannot open the camera at '{address}': {reason}")]
-    Open { address: String, reason: String },
-    #[error("camera '{address}': {feature}: {reason}")]
-    Feature {
+    Open {
+        /// The address or id the camera was asked for by.
         address: String,
-        feature: &'static str,
+        /// What Aravis (or roitrack's own check) said.
         reason: String,
     },
+    /// A GenICam feature could not be read or set (missing, out of range, not writable).
+    #[error("camera '{address}': {feature}: {reason}")]
+    Feature {
+        /// The camera's address or id.
+        address: String,
+        /// The GenICam feature's name (`PixelFormat`, `OffsetX`, ...).
+        feature: &'static str,
+        /// What went wrong with it.
+        reason: String,
+    },
+    /// The camera that answered is not the one [`GenicamOptions::expected_serial`] names.
     #[error(
         "camera '{address}' has serial number '{found}', not '{expected}' (another camera at that address?)"
     )]
     Serial {
+        /// The camera's address.
         address: String,
+        /// The serial number the camera reported.
         found: String,
+        /// The serial number asked for.
         expected: String,
     },
+    /// Aravis' fake GigE Vision camera could not be started.
     #[error("the fake camera: {0}")]
     Fake(String),
+    /// The real-time loop run on the camera failed.
     #[error("the loop: {0}")]
     Loop(#[from] roitrack_pipeline::PipelineError),
 }
@@ -272,8 +296,9 @@ pub struct CameraStats {
     pub incomplete: u64,
     /// Complete buffers read from another window than the one asked for (the offset had not moved yet): skipped.
     pub stale: u64,
-    /// Times the window was moved, and the moves the camera refused.
+    /// Times the window was moved (its `OffsetX`/`OffsetY` written).
     pub moves: u64,
+    /// Moves the camera refused (the offsets not written).
     pub refused_moves: u64,
     /// Full frames read.
     pub full_frames: u64,
@@ -287,12 +312,16 @@ pub struct CameraStats {
     /// The fake camera: ROIs it exposed at another scene time than the ROI's slot (free run: a frame begun before
     /// the slot's time was set), each placed at its own time.
     pub retimed: u64,
-    /// Aravis' stream: buffers it dropped because none was free to receive them (`underruns`), and buffers it gave
-    /// up on (`failures`: missing packets, timeouts), whether or not roitrack was waiting for them.
+    /// Aravis' stream: buffers it dropped because none was free to receive them (its `underruns`), whether or not
+    /// roitrack was waiting for them.
     pub driver_underruns: u64,
+    /// Aravis' stream: buffers it gave up on (its `failures`: missing packets, timeouts), whether or not roitrack
+    /// was waiting for them.
     pub driver_failures: u64,
-    /// `device - host` clock offset (s): the estimate at the end, and how far it moved during the run.
+    /// `device - host` clock offset (s): the estimate at the end of the run; `None` before any buffer.
     pub clock_offset_s: Option<f64>,
+    /// How far the `device - host` clock offset's estimate moved since the first block of buffers (s): the clocks'
+    /// drift over the run, plus any change of the smallest arrival latency.
     pub clock_change_s: Option<f64>,
     /// Mean and standard deviation of the buffers' arrival latency above the smallest (s).
     pub arrival_jitter_s: Option<(f64, f64)>,

@@ -52,10 +52,12 @@ pub struct SceneClock {
 const RENDERED_KEPT: usize = 256;
 
 impl SceneClock {
+    /// Sets the scene time (s) the fake camera renders its next frame at.
     pub fn set(&self, t_s: f64) {
         self.t_s.store(t_s.to_bits(), Ordering::SeqCst);
     }
 
+    /// The scene time (s) last set (0 before any).
     pub fn get(&self) -> f64 {
         f64::from_bits(self.t_s.load(Ordering::SeqCst))
     }
@@ -288,6 +290,7 @@ impl FakeGigeCamera {
         })
     }
 
+    /// The address to open it at ([`FAKE_ADDRESS`]).
     pub fn address(&self) -> &str {
         FAKE_ADDRESS
     }

@@ -15,6 +15,9 @@
 //!
 //! Never enumerate devices: Aravis' discovery broadcasts on every network interface. Only `roitrack cameras --scan`
 //! ([`scan`]) does, when asked.
+#![deny(missing_docs)]
+// The links above name the items of the feature `genicam`: without it they have nothing to point to.
+#![cfg_attr(not(feature = "genicam"), allow(rustdoc::broken_intra_doc_links))]
 
 mod clock;
 

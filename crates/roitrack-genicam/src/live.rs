@@ -23,12 +23,14 @@ use crate::{
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct LiveOptions {
+    /// The camera to open and how to drive it.
     pub camera: GenicamOptions,
     /// Length of the run (s of the loop's clock).
     pub duration_s: f64,
     /// ROI slots per second: a real camera is paced at this rate (its ROIs are taken at the wall-clock times of
     /// their slots, so the camera must sustain it); the fake camera runs free, each ROI at its slot's scenario time.
     pub rate_hz: f64,
+    /// The tracker run on the camera's centroids: estimator, window, control period, noise, gates.
     pub tracker: TrackerConfig,
     /// Keep every measurement handed to the estimator in the report's [`LoopReport::measured`] (a record of what
     /// the tracker saw, the ROS 2 bag's `/roitrack/measurements`). Default: false.
@@ -61,7 +63,9 @@ impl Default for LiveOptions {
 /// ```
 #[derive(Debug, Clone)]
 pub struct LiveReport {
+    /// The real-time loop's report: estimates, latencies, rejections, why it stopped.
     pub loop_report: LoopReport,
+    /// What the camera did: ROIs grabbed, lost, incomplete, stale, moves, clock offset.
     pub camera: CameraStats,
     /// The camera, as opened ([`GenicamCamera::description`]).
     pub description: String,
@@ -74,6 +78,12 @@ pub struct LiveReport {
     pub true_clock_offset_s: Option<f64>,
 }
 
+/// The latency from buffer timestamp to estimate, per estimate (µs): for the estimate of reference time
+/// `t_ref_s[i]` (the time of the newest measurement it used), the age of that ROI's buffer when its grab returned
+/// (measured by the camera: the host time then, less the buffer's device timestamp on the host's clock) plus the time
+/// from that return to the estimate (`grab_to_estimate_us[i]`, measured by the loop); both on the host's monotonic
+/// clock. An estimate without such a ROI (none recorded at or before its time) has none.
+///
 /// ```
 /// use roitrack_genicam::{CameraStats, timestamp_to_estimate_us};
 /// // Two ROIs at 0.25 and 0.5 ms, their buffers 120 and 80 us old when the grab returned; an estimate from the
@@ -81,12 +91,6 @@ pub struct LiveReport {
 /// let camera = CameraStats { timestamp_to_grab_us: vec![(0.25e-3, 120.0), (0.5e-3, 80.0)], ..Default::default() };
 /// assert_eq!(timestamp_to_estimate_us(&[0.5e-3], &[30.0], &camera), vec![110.0]);
 /// ```
-///
-/// The latency from buffer timestamp to estimate, per estimate (µs): for the estimate of reference time
-/// `t_ref_s[i]` (the time of the newest measurement it used), the age of that ROI's buffer when its grab returned
-/// (measured by the camera: the host time then, less the buffer's device timestamp on the host's clock) plus the time
-/// from that return to the estimate (`grab_to_estimate_us[i]`, measured by the loop); both on the host's monotonic
-/// clock. An estimate without such a ROI (none recorded at or before its time) has none.
 pub fn timestamp_to_estimate_us(
     t_ref_s: &[f64],
     grab_to_estimate_us: &[f64],
