@@ -92,6 +92,8 @@
 //! camera of your own), `find_target` (the target in a full frame, no prior) and `detect_photo` (a circle grid in a
 //! photograph: yours, or a synthetic one checked against its truth).
 
+pub mod camera_input;
+
 pub use nalgebra;
 pub use roitrack_core as core;
 #[cfg(feature = "demo")]

@@ -1,0 +1,227 @@
+//! One camera's input of any kind turned into its stream of measurements, in time order, on the camera's own clock:
+//! a measurements file, a ROI recording (each ROI centroided) or frames (an image folder, a numbered pattern, a glob
+//! or a video, measured by the camera's own [`FrameTracker`]). A rig's cameras each give one such stream, and
+//! [`crate::core::rig::merge_streams`] merges them for the [`crate::core::rig::RigTracker`].
+//!
+//! ```
+//! use roitrack::camera_input::{CameraInput, open_camera_input};
+//! use roitrack::{CameraModel, Target};
+//!
+//! // A camera's measurements file that is not there: the error names it.
+//! let input = CameraInput::Measurements { path: "no/such/file.csv".into(), time_units: None };
+//! let err = open_camera_input(&input, &CameraModel::canonical(), &Target::grid4x4()).err().unwrap();
+//! assert!(err.to_string().contains("no/such/file.csv"));
+//! ```
+
+use std::collections::VecDeque;
+use std::fmt;
+use std::path::PathBuf;
+
+use roitrack_core::estimator::ConfigError;
+use roitrack_core::{CameraModel, Measurement, Target, TimeModel};
+use roitrack_formats::{
+    FormatError, FrameSource, FrameTiming, MeasurementReader, RoiRecordingReader, TimeUnit,
+    TimedMeasurements, open_input,
+};
+use roitrack_image::{CentroidOptions, Frame, RoiImage, measure_roi};
+use roitrack_pipeline::{FrameError, FrameTracker, FrameTrackerConfig};
+
+/// One camera's input: what `roitrack track` takes for a single camera.
+#[derive(Debug, Clone)]
+pub enum CameraInput {
+    /// A measurements CSV (t,id,u,v; `-`: the standard input), its times in `time_units` (`None`: seconds, and
+    /// times that look like another unit refused).
+    Measurements {
+        path: PathBuf,
+        time_units: Option<TimeUnit>,
+    },
+    /// A ROI recording, each ROI's blob centroided with `options` and timed by the camera's time model; ROIs whose
+    /// blob is rejected give no measurement.
+    Rois {
+        path: PathBuf,
+        options: CentroidOptions,
+    },
+    /// Frames, timed by `timing`, measured by a [`FrameTracker`] of the camera (its time model says how the rows
+    /// are read) with `config`: each frame gives the measurements of the blobs it found, in time order.
+    Images {
+        source: PathBuf,
+        timing: FrameTiming,
+        config: Box<FrameTrackerConfig>,
+    },
+}
+
+impl CameraInput {
+    /// The file or source read.
+    pub fn path(&self) -> &std::path::Path {
+        match self {
+            Self::Measurements { path, .. } | Self::Rois { path, .. } => path,
+            Self::Images { source, .. } => source,
+        }
+    }
+
+    /// The command-line option of this kind of input (`--measurements`, `--rois`, `--images`).
+    pub fn option(&self) -> &'static str {
+        match self {
+            Self::Measurements { .. } => "--measurements",
+            Self::Rois { .. } => "--rois",
+            Self::Images { .. } => "--images",
+        }
+    }
+}
+
+/// Why a camera's input could not be opened or read on.
+#[derive(Debug)]
+pub enum CameraInputError {
+    /// The file or source (its own error names it, and the line or frame).
+    Format(FormatError),
+    /// The frame tracker refused its options.
+    Config(ConfigError),
+    /// A frame that could not be processed (its index and name in the source).
+    Frame {
+        index: usize,
+        name: String,
+        source: FrameError,
+    },
+}
+
+impl fmt::Display for CameraInputError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Format(e) => write!(f, "{e}"),
+            Self::Config(e) => write!(f, "invalid frame tracker options: {e}"),
+            Self::Frame {
+                index,
+                name,
+                source,
+            } => write!(f, "frame {index} ({name}): {source}"),
+        }
+    }
+}
+
+impl std::error::Error for CameraInputError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Format(e) => Some(e),
+            Self::Config(e) => Some(e),
+            Self::Frame { source, .. } => Some(source),
+        }
+    }
+}
+
+impl From<FormatError> for CameraInputError {
+    fn from(e: FormatError) -> Self {
+        Self::Format(e)
+    }
+}
+
+/// A camera's measurements in time order (own clock), each checked: a known point, on the camera's image.
+pub type MeasurementStream = Box<dyn Iterator<Item = Result<Measurement, CameraInputError>>>;
+
+/// Opens `input` of `camera` showing `target` as its stream of measurements. Frames get their own
+/// [`FrameTracker`], whose camera is `camera` (set its time model for the shutter and exposure first).
+pub fn open_camera_input(
+    input: &CameraInput,
+    camera: &CameraModel,
+    target: &Target,
+) -> Result<MeasurementStream, CameraInputError> {
+    let known_ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
+    match input {
+        CameraInput::Measurements { path, time_units } => {
+            let reader = MeasurementReader::from_reader(open_input(path)?, path)?
+                .with_known_ids(known_ids)
+                .with_image_size(camera.width_px, camera.height_px);
+            Ok(Box::new(
+                TimedMeasurements::new(reader, *time_units).map(|m| m.map_err(Into::into)),
+            ))
+        }
+        CameraInput::Rois { path, options } => {
+            let reader = RoiRecordingReader::open(path)?.with_known_ids(known_ids);
+            Ok(Box::new(RoiMeasurements {
+                images: reader,
+                options: options.clone(),
+                time: camera.time,
+            }))
+        }
+        CameraInput::Images {
+            source,
+            timing,
+            config,
+        } => {
+            let frames = FrameSource::open(source, timing)?;
+            let tracker = FrameTracker::new(camera.clone(), target.clone(), **config)
+                .map_err(CameraInputError::Config)?;
+            Ok(Box::new(FrameMeasurements {
+                frames,
+                tracker,
+                frame: Frame::default(),
+                pending: VecDeque::new(),
+                failed: false,
+            }))
+        }
+    }
+}
+
+/// The centroids of a ROI recording's images, timed (ROIs whose blob is rejected left out).
+struct RoiMeasurements<I> {
+    images: I,
+    options: CentroidOptions,
+    time: TimeModel,
+}
+
+impl<I: Iterator<Item = Result<RoiImage, FormatError>>> Iterator for RoiMeasurements<I> {
+    type Item = Result<Measurement, CameraInputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            match self.images.next()? {
+                Err(e) => return Some(Err(e.into())),
+                Ok(image) => {
+                    if let Ok(m) = measure_roi(&image, &self.options, &self.time) {
+                        return Some(Ok(m));
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The measurements of each frame as its frame tracker found them, frame after frame; ends after an error.
+struct FrameMeasurements {
+    frames: FrameSource,
+    tracker: FrameTracker,
+    frame: Frame,
+    pending: VecDeque<Measurement>,
+    failed: bool,
+}
+
+impl Iterator for FrameMeasurements {
+    type Item = Result<Measurement, CameraInputError>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        loop {
+            if let Some(m) = self.pending.pop_front() {
+                return Some(Ok(m));
+            }
+            if self.failed {
+                return None;
+            }
+            let info = match self.frames.next_frame(&mut self.frame)? {
+                Ok(info) => info,
+                Err(e) => {
+                    self.failed = true;
+                    return Some(Err(e.into()));
+                }
+            };
+            if let Err(source) = self.tracker.process(&self.frame) {
+                self.failed = true;
+                return Some(Err(CameraInputError::Frame {
+                    index: info.index,
+                    name: info.name,
+                    source,
+                }));
+            }
+            self.pending
+                .extend(self.tracker.measurements().iter().copied());
+        }
+    }
+}
