@@ -152,54 +152,91 @@ impl Default for FrameOptions {
 /// ```
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum FrameSequenceError {
+    /// The frame rate is not a finite positive number.
     #[error("the frame rate must be a finite positive number, got {fps_hz} Hz")]
-    FrameRate { fps_hz: f64 },
+    FrameRate {
+        /// The frame rate given (Hz).
+        fps_hz: f64,
+    },
+    /// The first frame's time is not finite.
     #[error("the start time must be finite, got {start_s} s")]
-    StartTime { start_s: f64 },
+    StartTime {
+        /// The start time given (s).
+        start_s: f64,
+    },
+    /// The time model reads one ROI at a time: a frame needs a global or a rolling shutter.
     #[error("frames are read by a global or a rolling shutter, not one ROI at a time")]
     SequentialRois,
+    /// The camera's time model is invalid.
     #[error("the time model: {0}")]
     TimeModel(#[from] TimeModelError),
+    /// The exposure does not fit in one frame period.
     #[error(
         "the exposure ({exposure_s} s) is longer than the frame period ({period_s} s at {fps_hz} Hz)"
     )]
     ExposureTooLong {
+        /// The exposure (s).
         exposure_s: f64,
+        /// The frame period, `1 / fps_hz` (s).
         period_s: f64,
+        /// The frame rate (Hz).
         fps_hz: f64,
     },
+    /// A rolling shutter's readout plus the exposure does not fit in one frame period.
     #[error(
         "a rolling shutter reading {rows} rows {line_delay_s} s apart takes {readout_s} s; with the {exposure_s} s \
          exposure that is more than the frame period ({period_s} s at {fps_hz} Hz): lower the frame rate, the line \
          delay or the exposure"
     )]
     ReadoutTooLong {
+        /// The sensor's rows.
         rows: u32,
+        /// The time between the starts of two consecutive rows (s).
         line_delay_s: f64,
+        /// The time from the first row to the last, `rows * line_delay_s` (s).
         readout_s: f64,
+        /// The exposure (s).
         exposure_s: f64,
+        /// The frame period, `1 / fps_hz` (s).
         period_s: f64,
+        /// The frame rate (Hz).
         fps_hz: f64,
     },
+    /// No frame fits in the scenario from the start time on.
     #[error(
         "no frame: {frame_count} frames asked for from {start_s} s (the scenario lasts {duration_s} s, a frame's \
          readout {readout_s} s)"
     )]
     NoFrames {
+        /// The frames asked for, or the number that fit when none was asked for.
         frame_count: usize,
+        /// The first frame's time (s).
         start_s: f64,
+        /// The scenario's length (s).
         duration_s: f64,
+        /// A frame's readout, first row to last (s; 0 for a global shutter).
         readout_s: f64,
     },
+    /// The sensor model is invalid.
     #[error("the sensor: {0}")]
     Sensor(#[from] SensorError),
+    /// The rate of the ground-truth samples is not a finite positive number.
     #[error("the truth rate must be a finite positive number, got {rate_hz} Hz")]
-    TruthRate { rate_hz: f64 },
+    TruthRate {
+        /// The rate given (Hz).
+        rate_hz: f64,
+    },
+    /// More than [`MAX_FRAMES`] frames would be written.
     #[error(
         "{frame_count} frames at {fps_hz} Hz: a simulated sequence has at most {MAX_FRAMES} frames (each a PNG file); \
          lower the frame rate or the duration"
     )]
-    TooManyFrames { frame_count: usize, fps_hz: f64 },
+    TooManyFrames {
+        /// The frames the sequence would have.
+        frame_count: usize,
+        /// The frame rate (Hz).
+        fps_hz: f64,
+    },
 }
 
 /// The most frames a sequence may have: 100,000 (55 minutes at 30 Hz), each written as a file of up to a few MB.
@@ -217,7 +254,9 @@ pub const MAX_FRAMES: usize = 100_000;
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct FrameTruth {
+    /// The true pose of the target in the camera frame at each time.
     pub poses: Vec<PoseSample>,
+    /// The true twist at the same times as [`Self::poses`].
     pub twists: Vec<TwistSample>,
 }
 

@@ -10,6 +10,7 @@
 //! ([`frames`]); and several ROI cameras around one scenario, each on its own clock, with the truth in the rig's frame
 //! ([`multi_camera`]). A scenario's motion can be seen by any camera and carry any target
 //! ([`Scenario::with_camera`], [`Scenario::with_target`]).
+#![deny(missing_docs)]
 
 pub mod frames;
 pub mod glints;

@@ -22,6 +22,7 @@ pub struct SimulationOptions {
     pub noise_px: f64,
     /// ROI rate (Hz): sample k is taken at t = k / rate, its exposure midpoint. The built-in scene: 4 kHz.
     pub rate_hz: f64,
+    /// The order in which the ROIs cycle through the points.
     pub order: RoiOrder,
     /// Fraction of ROIs whose measurement is lost, in [0, 1).
     pub drop_fraction: f64,
@@ -45,29 +46,38 @@ pub struct SimulationOptions {
 /// The points `ids` are not measured during `[t0_s, t1_s)` (their ROIs are read but find nothing).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Occlusion {
+    /// The ids of the hidden points.
     pub ids: Vec<u32>,
+    /// Start of the occlusion (s), included.
     pub t0_s: f64,
+    /// End of the occlusion (s), excluded.
     pub t1_s: f64,
 }
 
 /// No measurement during `[t0_s, t0_s + duration_s)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TimeGap {
+    /// Start of the gap (s).
     pub t0_s: f64,
+    /// Length of the gap (s).
     pub duration_s: f64,
 }
 
 /// `count` consecutive ROIs lost, starting with the first ROI at or after `t0_s`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RoiBurst {
+    /// The burst starts at the first ROI at or after this time (s).
     pub t0_s: f64,
+    /// Consecutive ROIs lost.
     pub count: usize,
 }
 
 /// From `t_s` on, the true target position (camera frame) is offset by `offset_m`; the twist is unchanged.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Jump {
+    /// When the jump happens (s).
     pub t_s: f64,
+    /// The translation added to the target's position from then on (m, camera frame).
     pub offset_m: Vector3<f64>,
 }
 
@@ -86,8 +96,11 @@ impl Jump {
 /// the bump's derivative added to the true velocity (the truth stays a consistent motion).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Excursion {
+    /// Start of the excursion (s).
     pub t0_s: f64,
+    /// End of the excursion (s), the target back on its path.
     pub t1_s: f64,
+    /// The largest displacement, reached half-way (m, camera frame).
     pub offset_m: Vector3<f64>,
 }
 
@@ -155,23 +168,39 @@ impl Default for SimulationOptions {
     }
 }
 
+/// A simulation's options are invalid, or a blob left the image.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum SimError {
+    /// An option is out of its range or not finite.
     #[error("{field} must be {expected}, got {value}")]
     BadOption {
+        /// The option's field name.
         field: &'static str,
+        /// The range it must be in, in words.
         expected: &'static str,
+        /// The value given.
         value: f64,
     },
+    /// The run would have more than [`MAX_SIMULATED_ROIS`] ROIs.
     #[error(
         "{duration_s} s at {rate_hz} Hz is more than {MAX_SIMULATED_ROIS} ROIs: shorten the run or lower the ROI rate"
     )]
-    TooManyRois { duration_s: f64, rate_hz: f64 },
+    TooManyRois {
+        /// The run's length (s).
+        duration_s: f64,
+        /// The ROI rate (Hz).
+        rate_hz: f64,
+    },
+    /// A blob projects outside the image (and [`SimulationOptions::skip_off_image`] is off).
     #[error("point id {id} leaves the image at t = {t_s} s (raw pixel {u_px:.1}, {v_px:.1})")]
     BlobOffImage {
+        /// The point's id.
         id: u32,
+        /// The ROI's time (s).
         t_s: f64,
+        /// Where the pinhole projection (without distortion) puts it: column (px).
         u_px: f64,
+        /// Where the pinhole projection (without distortion) puts it: row (px).
         v_px: f64,
     },
 }
@@ -179,12 +208,15 @@ pub enum SimError {
 /// A simulated acquisition: what the camera measured and what really happened.
 #[derive(Debug, Clone)]
 pub struct SimulatedRun {
+    /// The camera that took the measurements.
     pub camera: CameraModel,
+    /// The target measured.
     pub target: Target,
     /// In time order; dropped ROIs are absent.
     pub measurements: Vec<Measurement>,
     /// Ground truth at every ROI time (dropped or not).
     pub truth_poses: Vec<PoseSample>,
+    /// Ground truth twists at the same times as [`Self::truth_poses`].
     pub truth_twists: Vec<TwistSample>,
 }
 
@@ -214,11 +246,13 @@ pub const MAX_SIMULATED_ROIS: u64 = 1_000_000_000;
 /// One ROI of a simulated run, as [`Simulation`] gives them, in time order.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimulatedRoi {
-    /// The ROI's index from 0, and its time (s): `index / rate_hz`.
+    /// The ROI's index from 0.
     pub index: usize,
+    /// The ROI's time (s): `index / rate_hz`.
     pub t_s: f64,
-    /// The ground truth at the ROI's time (with the options' jump and excursion).
+    /// The true pose at the ROI's time (with the options' jump and excursion).
     pub truth_pose: PoseSample,
+    /// The true twist at the ROI's time (with the options' jump and excursion).
     pub truth_twist: TwistSample,
     /// What the ROI measured: `None` when it was dropped, hidden by a fault, or its blob was off the image (with
     /// `skip_off_image`).

@@ -34,6 +34,7 @@ use crate::{Scenario, SimError};
 /// A scenario seen by a rig of cameras (their true mounts and clocks).
 #[derive(Debug, Clone)]
 pub struct CameraRigScene {
+    /// The target's motion: its camera frame is the rig's frame, its clock the rig's.
     pub scenario: Scenario,
     /// The cameras as they are: calibrations, mounts and clocks (every clock stated as known).
     pub rig: Rig,
@@ -144,6 +145,7 @@ pub struct RigRun {
     pub measurements: Vec<Vec<Measurement>>,
     /// The truth in the rig's frame on the rig's clock, at `truth_rate_hz` (the ROI rate) over the scenario.
     pub truth_poses: Vec<PoseSample>,
+    /// The true twists at the same times as [`Self::truth_poses`], rig frame.
     pub truth_twists: Vec<TwistSample>,
 }
 

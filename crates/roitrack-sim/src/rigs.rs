@@ -55,6 +55,7 @@ pub enum RigFamily {
 }
 
 impl RigFamily {
+    /// Every family, from the fewest points to the symmetric grids.
     pub const ALL: [Self; 8] = [
         Self::ThreePoints,
         Self::FewPlanar,
@@ -66,6 +67,7 @@ impl RigFamily {
         Self::SymmetricGrid,
     ];
 
+    /// A short description of the family for tables (its point count and shape).
     pub fn name(&self) -> &'static str {
         match self {
             Self::ThreePoints => "3 points",
@@ -83,7 +85,9 @@ impl RigFamily {
 /// A camera, a target and their motion as they are, and the user's model of the camera and target.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Rig {
+    /// The family the rig was drawn from.
     pub family: RigFamily,
+    /// The seed it was drawn from ([`Self::random`] gives the same rig again).
     pub seed: u64,
     /// The camera as it is.
     pub camera: CameraModel,

@@ -18,12 +18,26 @@ pub const RECORDED_ROI_OFFSET_PX: f64 = 4.0;
 /// Why a ROI could not be rendered.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum RenderError {
+    /// The sensor model is invalid.
     #[error("invalid sensor model: {0}")]
     Sensor(#[from] roitrack_image::SensorError),
+    /// A measurement names a point the target does not have.
     #[error("measurement at t = {t_s} s: point id {id} is not in the target")]
-    UnknownId { t_s: f64, id: u32 },
+    UnknownId {
+        /// The measurement's time (s).
+        t_s: f64,
+        /// The unknown point id.
+        id: u32,
+    },
+    /// A measurement's blob is behind the camera or outside the image at its time.
     #[error("measurement at t = {t_s} s: the blob of point {id} is not visible")]
-    NotVisible { t_s: f64, id: u32 },
+    NotVisible {
+        /// The measurement's time (s).
+        t_s: f64,
+        /// The point's id.
+        id: u32,
+    },
+    /// The camera's image cannot hold one recorded ROI.
     #[error("the camera's image is smaller than a {RECORDED_ROI_SIZE_PX} px ROI")]
     SensorTooSmall,
 }

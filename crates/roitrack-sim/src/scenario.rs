@@ -1,7 +1,7 @@
 //! Scenario trajectories: the true pose and twist of the target at any time.
 //!
 //! Each scenario gives, at time `t`, a [`MotionState`] whose pose is the true pose at `t` and whose twist is the true
-//! instantaneous twist at `t` (V = d t/dt, and W with dR/dt = [W]× R, both in the camera frame; docs/model.md).
+//! instantaneous twist at `t` (V = d t/dt, and W with dR/dt = \[W\]× R, both in the camera frame; docs/model.md).
 
 use std::f64::consts::PI;
 
@@ -27,6 +27,7 @@ pub enum ScenarioKind {
 }
 
 impl ScenarioKind {
+    /// Every scenario, in the order they are listed to the user.
     pub const ALL: [ScenarioKind; 5] = [
         Self::Static,
         Self::Orthoglide,
@@ -35,6 +36,7 @@ impl ScenarioKind {
         Self::Sweep,
     ];
 
+    /// The scenario's name on the command line and in file names.
     pub fn name(&self) -> &'static str {
         match self {
             Self::Static => "static",
@@ -45,6 +47,7 @@ impl ScenarioKind {
         }
     }
 
+    /// The scenario of that [`Self::name`], if there is one.
     pub fn from_name(name: &str) -> Option<Self> {
         Self::ALL.into_iter().find(|k| k.name() == name)
     }
@@ -137,9 +140,13 @@ enum Motion {
 /// ```
 #[derive(Debug, Clone)]
 pub struct Scenario {
+    /// Which motion this is.
     pub kind: ScenarioKind,
+    /// The camera that sees it.
     pub camera: CameraModel,
+    /// The target that moves.
     pub target: Target,
+    /// Length of the motion (s), from time 0.
     pub duration_s: f64,
     motion: Motion,
     /// The motion played this many times faster ([`Self::with_speed_scale`]).

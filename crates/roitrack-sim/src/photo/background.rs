@@ -19,12 +19,18 @@ const TEXTURE_SALT: u64 = 0x7e57_u64 << 40;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Background {
     /// One flat level.
-    Uniform { level: f64 },
+    Uniform {
+        /// The level (fraction of full scale under unit light).
+        level: f64,
+    },
     /// A smooth random pattern (fractal value noise, four octaves from `scale_px` down): `mean_level` ± at most
     /// `contrast`, clipped to 0..1.
     Texture {
+        /// The pattern's mean level (fraction of full scale under unit light).
         mean_level: f64,
+        /// The most the pattern departs from its mean (fraction of full scale).
         contrast: f64,
+        /// Size of the pattern's coarsest features (px).
         scale_px: f64,
     },
 }

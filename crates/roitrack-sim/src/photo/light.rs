@@ -69,8 +69,11 @@ impl Shadow {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Glare {
+    /// The spot's centre (raw pixel).
     pub centre_px: Vector2<f64>,
+    /// The Gaussian's standard deviation (px).
     pub radius_px: f64,
+    /// Light added at the centre (fraction of full scale).
     pub level: f64,
 }
 
@@ -90,7 +93,9 @@ pub struct Illumination {
     pub gradient_angle_rad: f64,
     /// Vignetting strength (0..1): light times `1 - s + s cos⁴θ`, θ the ray's angle off the optical axis.
     pub vignetting: f64,
+    /// A soft-edged shadow over part of the image; `None`: none.
     pub shadow: Option<Shadow>,
+    /// A glare spot added on top of the reflected light; `None`: none.
     pub glare: Option<Glare>,
 }
 

@@ -97,22 +97,36 @@ const MARKS_STREAM: u64 = 3;
 /// Why a scene cannot be rendered.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum PhotoError {
+    /// The target's points do not lie in one plane.
     #[error("the target is not planar: its circles need a plane to lie in")]
     NotPlanar,
+    /// Every corner of the board is behind the camera.
     #[error("the board is behind the camera (every corner at z <= 0)")]
     BoardBehindCamera,
+    /// The bit depth asked for is not 8 to 16.
     #[error("bit depth must be 8 to 16, got {0}")]
     BitDepth(u8),
+    /// A scene parameter is out of its range or not finite.
     #[error("{field} must be {expected}, got {value}")]
     InvalidParameter {
+        /// The parameter's name.
         field: &'static str,
+        /// The value given.
         value: f64,
+        /// The range it must be in, in words.
         expected: &'static str,
     },
+    /// The camera's image has more than `MAX_PIXELS` pixels.
     #[error(
         "an image of {width_px} x {height_px} px is too large to render (at most {MAX_PIXELS} px)"
     )]
-    ImageTooLarge { width_px: u32, height_px: u32 },
+    ImageTooLarge {
+        /// The image's width (px).
+        width_px: u32,
+        /// The image's height (px).
+        height_px: u32,
+    },
+    /// The camera model is invalid.
     #[error("camera: {0}")]
     Camera(#[from] CameraError),
 }

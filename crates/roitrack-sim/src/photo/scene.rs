@@ -69,18 +69,23 @@ pub struct PhotoScene {
     pub camera: CameraModel,
     /// A planar target: one circle per point.
     pub target: Target,
-    /// Pose of the object in the camera: `x_cam = cam_r_obj x_obj + cam_t_obj_m`.
+    /// Rotation of the object in the camera: `x_cam = cam_r_obj x_obj + cam_t_obj_m`.
     pub cam_r_obj: Rotation3<f64>,
+    /// Position of the object's origin in the camera frame (m): `x_cam = cam_r_obj x_obj + cam_t_obj_m`.
     pub cam_t_obj_m: Vector3<f64>,
     /// Diameter of the circles of points without one (m).
     pub default_diameter_m: f64,
     /// How far the board reaches beyond the outermost circle edges, in its plane (m).
     pub paper_margin_m: f64,
-    /// Reflectance of the paper and of the circles (fractions of full scale under unit light).
+    /// Reflectance of the paper (fraction of full scale under unit light).
     pub paper_level: f64,
+    /// Reflectance of the circles (fraction of full scale under unit light).
     pub circle_level: f64,
+    /// What is seen around the board.
     pub background: Background,
+    /// How the scene is lit (gradient, vignetting, shadow, glare).
     pub illumination: Illumination,
+    /// Distractor shapes scattered over the background.
     pub clutter: Clutter,
     /// Sigma of the Gaussian blur of the optics (px; 0: none).
     pub blur_sigma_px: f64,
