@@ -26,6 +26,7 @@ enum Command {
     Simulate(Box<commands::simulate::SimulateArgs>),
     // Boxed: the largest arguments by far (the --mcap and --mcap-in options made the enum trip clippy's size check).
     Track(Box<commands::track::TrackArgs>),
+    CalibrateRig(commands::calibrate_rig::CalibrateRigArgs),
     Eval(commands::eval::EvalArgs),
     Plot(commands::plot::PlotArgs),
     Detect(commands::detect::DetectArgs),
@@ -105,7 +106,11 @@ fn main() -> ExitCode {
     // the others end at once.
     if matches!(
         cli.command,
-        Command::Demo(_) | Command::Simulate(_) | Command::Track(_) | Command::Detect(_)
+        Command::Demo(_)
+            | Command::Simulate(_)
+            | Command::Track(_)
+            | Command::CalibrateRig(_)
+            | Command::Detect(_)
     ) {
         signals::stop_at_next_estimate();
     }
@@ -125,6 +130,7 @@ fn main() -> ExitCode {
         Command::Demo(args) => commands::demo::run(&args),
         Command::Simulate(args) => commands::simulate::run(&args),
         Command::Track(args) => commands::track::run(&args),
+        Command::CalibrateRig(args) => commands::calibrate_rig::run(&args),
         Command::Eval(args) => commands::eval::run(&args),
         Command::Plot(args) => commands::plot::run(&args),
         Command::Detect(args) => commands::detect::run(&args),

@@ -13,8 +13,10 @@
 //! ```
 //!
 //! The clock model is `t_rig = clock_offset_s + t_camera / (1 + clock_drift_ppm * 1e-6)`; the first camera's clock is
-//! the rig's (offset 0, drift 0) unless the file gives it. A written rig may also carry the standard deviations of
-//! learnt clocks (`clock_offset_sigma_s`, `clock_drift_sigma_ppm`), which the reader takes as comments on the values.
+//! the rig's (offset 0, drift 0) unless the file gives it. A camera's `camera_T_rig` may be left out for
+//! calibrate-rig to find (the first camera's frame is then the rig's). A written rig may also carry the standard
+//! deviations of learnt poses and clocks (`camera_T_rig_sigma_m`, `camera_T_rig_sigma_deg`, `clock_offset_sigma_s`,
+//! `clock_drift_sigma_ppm`), which the reader takes as comments on the values.
 
 use std::fmt::Write as _;
 use std::io::Write as _;
@@ -66,10 +68,52 @@ pub struct RigFile {
     pub calibrations_as_written: Vec<String>,
     /// Per camera, its calibration file's path (relative to the rig file's folder when written so).
     pub calibration_paths: Vec<PathBuf>,
+    /// The rig file's own path, as given to the reader.
+    pub path: PathBuf,
 }
 
-/// Reads a rig file (YAML: `cameras:`, each with `name`, `calibration`, `camera_T_rig` as tx ty tz qx qy qz qw, and
-/// optionally `clock_offset_s` and `clock_drift_ppm`; docs/rig.md) and every calibration it names (relative paths from the
+impl RigFile {
+    /// The `calibration` entries of a rig file written to `out` from this one: as this file wrote them when `out` is
+    /// in the same folder, else absolute paths (so that the written rig still finds its calibrations).
+    ///
+    /// ```
+    /// use roitrack_formats::{CameraFileOptions, read_rig_yaml, write_camera_yaml};
+    /// use roitrack_core::CameraModel;
+    ///
+    /// let dir = tempfile::tempdir().unwrap();
+    /// write_camera_yaml(dir.path().join("left.yaml"), &CameraModel::canonical()).unwrap();
+    /// std::fs::write(dir.path().join("rig.yaml"), "cameras:\n  - name: left\n    calibration: left.yaml\n").unwrap();
+    /// let file = read_rig_yaml(dir.path().join("rig.yaml"), &CameraFileOptions::default()).unwrap();
+    /// assert_eq!(file.calibrations_for_output(dir.path().join("out.yaml")), ["left.yaml"]);
+    /// ```
+    pub fn calibrations_for_output(&self, out: impl AsRef<Path>) -> Vec<String> {
+        let folder = |p: &Path| {
+            let parent = p.parent().unwrap_or(Path::new(""));
+            std::fs::canonicalize(if parent.as_os_str().is_empty() {
+                Path::new(".")
+            } else {
+                parent
+            })
+            .ok()
+        };
+        let here = folder(&self.path);
+        if here.is_some() && here == folder(out.as_ref()) {
+            return self.calibrations_as_written.clone();
+        }
+        self.calibration_paths
+            .iter()
+            .map(|p| {
+                std::fs::canonicalize(p)
+                    .unwrap_or_else(|_| p.clone())
+                    .to_string_lossy()
+                    .into_owned()
+            })
+            .collect()
+    }
+}
+
+/// Reads a rig file (YAML: `cameras:`, each with `name`, `calibration`, and optionally `camera_T_rig` as tx ty tz qx
+/// qy qz qw (left out: to be found, [`RigCamera::mount_known`]), `clock_offset_s` and `clock_drift_ppm`; docs/rig.md) and every calibration it names (relative paths from the
 /// rig file's folder), with `options` for the calibrations.
 ///
 /// Errors name the rig file and the camera: a name given twice, a calibration missing or unreadable (its own error
@@ -159,8 +203,9 @@ pub fn parse_rig_yaml(
                 "listed twice: camera names must be unique".into(),
             ));
         }
-        // A pose left out is to be found by calibrate-rig; the tracker refuses the rig until then.
-        let mount_known = c.camera_t_rig.is_some();
+        // A pose left out is to be found by calibrate-rig (the tracker refuses the rig until then), but the first
+        // camera's, whose frame is then the rig's.
+        let mount_known = index == 0 || c.camera_t_rig.is_some();
         let mount = match &c.camera_t_rig {
             Some(values) => mount_from(values).map_err(|m| error("camera_T_rig", m))?,
             None => CameraMount::IDENTITY,
@@ -231,6 +276,7 @@ pub fn parse_rig_yaml(
         rig,
         calibrations_as_written: written,
         calibration_paths: paths,
+        path: path.to_path_buf(),
     })
 }
 

@@ -1,5 +1,6 @@
 //! One module per subcommand; the lab's (feature `lab`) under `lab/`.
 
+pub mod calibrate_rig;
 pub mod demo;
 pub mod detect;
 pub mod eval;
