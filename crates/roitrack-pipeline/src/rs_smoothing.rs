@@ -12,9 +12,10 @@ use std::collections::VecDeque;
 
 use nalgebra::Matrix6;
 use roitrack_core::estimator::{
-    Estimate, Matrix12, Observation, TimedPose, TrackStatus, refit_pose, stencil_motion,
-    stencil_motion_at_start,
+    Estimate, Matrix12, Observation, TimedPose, TrackStatus, pose_residuals, refit_pose,
+    stencil_motion, stencil_motion_at_start,
 };
+use roitrack_core::stats::chi2_upper_0_1_percent;
 use roitrack_core::{CameraModel, Measurement, SpatioTemporalModel, Target};
 
 use crate::frames::FrameOutcome;
@@ -223,12 +224,22 @@ impl<I> RollingSmoother<I> {
         let shift_m = (fit.state.cam_t_obj_m - filter.state.cam_t_obj_m).norm();
         let shift_rad =
             roitrack_core::so3::angle_between(&fit.state.cam_r_obj, &filter.state.cam_r_obj);
-        // A track's degenerate first pose was fitted with no twist: it may be off by more than the shifts allowed
-        // (a rolling frame's, by millimetres and degrees), and the refit is taken when it explains the frame's blobs
-        // better.
+        // A track's first pose was fitted with no twist, or with one the frames after it have not pinned yet: it may
+        // be off by more than the shifts allowed (a rolling frame's, by millimetres and degrees), and the refit is
+        // taken when it explains the frame's blobs better: a degenerate start by the filter's residual, any start when
+        // its own blobs refute the filter's pose ([`refutes_the_filter`]).
         let within_shifts = shift_m <= MAX_SHIFT_M && shift_rad <= MAX_SHIFT_RAD;
-        let explains_a_start_better = filter.status == TrackStatus::Degenerate
-            && fit.residual_rms_px <= filter.residual_rms_px;
+        let explains_a_start_better = position == first
+            && ((filter.status == TrackStatus::Degenerate
+                && fit.residual_rms_px <= filter.residual_rms_px)
+                || refutes_the_filter(
+                    &self.model,
+                    &self.target,
+                    &held.observations,
+                    filter,
+                    &fit.state,
+                    &motion.acceleration,
+                ));
         if !fit.state.is_finite() || !(within_shifts || explains_a_start_better) {
             return;
         }
@@ -276,6 +287,40 @@ impl<I> RollingSmoother<I> {
         }
         Some((held.info, held.outcome, held.measurements))
     }
+}
+
+/// Whether a frame's blobs (`observations`) refute the filter's estimate of it and `refit` (under `acceleration`)
+/// explains them better: the filter's residual cost over the noise variance beyond the chi-square's upper 0.1 % point
+/// (a pose off by more than its blobs' noise allows, as a rolling-shutter start fitted with a twist the frames had not
+/// shown yet), and the refit's cost below it.
+fn refutes_the_filter(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    observations: &[Observation],
+    filter: &Estimate,
+    refit: &roitrack_core::MotionState,
+    acceleration: &roitrack_core::Acceleration,
+) -> bool {
+    let cost_px2 = |state: &roitrack_core::MotionState, acceleration| {
+        pose_residuals(
+            model,
+            target,
+            observations,
+            filter.t_ref_s,
+            state,
+            acceleration,
+        )
+        .map_or(f64::INFINITY, |(residuals, _)| residuals.norm_squared())
+    };
+    let filter_px2 = cost_px2(&filter.state, filter.acceleration.as_ref());
+    let refit_px2 = cost_px2(refit, Some(acceleration));
+    // Six pose parameters fitted to two coordinates a blob.
+    let dof = 2.0 * observations.len() as f64 - 6.0;
+    let noise_px2 = filter.noise_px * filter.noise_px;
+    dof > 0.0
+        && noise_px2 > 0.0
+        && filter_px2 > chi2_upper_0_1_percent(dof) * noise_px2
+        && refit_px2 < filter_px2
 }
 
 /// The pose block of an estimate's covariance; without one, the centroid noise's order of magnitude (used only to

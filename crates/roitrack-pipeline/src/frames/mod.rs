@@ -32,6 +32,7 @@
 
 mod centre_blend;
 mod config;
+mod joint_start;
 mod outcome;
 mod restart;
 mod search;
@@ -54,6 +55,7 @@ use roitrack_image::{Frame, PhotoScratch, Polarity};
 
 use crate::photo::PolarityChoice;
 use crate::scheduler::{Predictor, RoiScheduler};
+use joint_start::RecentFrames;
 use restart::{TrackMemory, symmetric_twins};
 use search::WholeFrameSearch;
 use windows::{Windows, carried_with_acceleration};
@@ -116,6 +118,8 @@ pub struct FrameTracker {
     search: WholeFrameSearch,
     /// What the track carries from one frame to the next: the predictor, the last times, the last trusted pose.
     memory: TrackMemory,
+    /// With a rolling shutter, the last frames' measurements, from which a new track's start is fitted.
+    recent: RecentFrames,
     /// The frame's measurements, in time order.
     measurements: Vec<Measurement>,
     report: FrameTrackReport,
@@ -178,6 +182,7 @@ impl FrameTracker {
                 twins: symmetric_twins(&target),
             },
             memory: TrackMemory::default(),
+            recent: RecentFrames::default(),
             measurements: Vec::with_capacity(points),
             camera,
             target,
@@ -269,7 +274,15 @@ impl FrameTracker {
         // The target's static pose in this frame, when it was identified whole.
         let mut found = None;
         if method == FrameMethod::NotFound {
-            (method, found) = self.search_whole_frame(frame);
+            (method, found) = self.search_whole_frame(frame)?;
+        }
+        // A rolling-shutter track still resting on fewer frames than a joint start takes starts again from them and
+        // this frame fitted together, before the filter is given this frame.
+        if matches!(method, FrameMethod::Windows | FrameMethod::FullFrame)
+            && self.wants_joint_start()
+        {
+            let guesses = self.joint_guesses(found);
+            self.joint_start(frame.t_s, &guesses)?;
         }
         let resets_before = self.tracker.report().covariance_resets;
         let mut estimate = self.estimate_frame(method)?;
@@ -298,7 +311,7 @@ impl FrameTracker {
             // (A frame matched to the predictions is one where the identification has already failed.)
             if let Some(pose) = found {
                 self.windows.scheduler.reset();
-                self.restart(frame.t_s, pose);
+                self.restart(frame.t_s, pose)?;
                 method = FrameMethod::Restart;
                 estimate = self.estimate_frame(method)?;
             }
@@ -352,6 +365,12 @@ impl FrameTracker {
             FrameMethod::FullFrame => self.report.by_full_frame += 1,
             FrameMethod::Restart => self.report.restarts += 1,
             FrameMethod::NotFound => self.report.not_found += 1,
+        }
+        if self.camera.time.is_rolling() {
+            if estimate.is_some() {
+                self.recent.track_frames += 1;
+            }
+            self.recent.remember(frame.t_s, &self.measurements);
         }
         // The measurements are in time order: the last is the frame's latest time, if later than its row 0.
         let latest_s = self.measurements.last().map_or(frame.t_s, |m| m.t_s);

@@ -6,14 +6,14 @@ use roitrack_core::estimator::Matrix12;
 use roitrack_core::target::{Symmetry, TargetAmbiguity};
 use roitrack_core::{Acceleration, MotionState, Target};
 
-use super::FrameTracker;
+use super::{FrameError, FrameTracker};
 use crate::realtime::full_frame_covariance;
 use crate::scheduler::Predictor;
 
 /// The oldest last trusted pose a new track takes its twist from (s): three frames at 30 Hz.
 pub(super) const RESTART_TWIST_MAX_GAP_S: f64 = 0.1;
 /// The standard deviations of that twist (m/s, rad/s).
-const RESTART_TWIST_SIGMAS: [f64; 2] = [0.3, 1.0];
+pub(super) const RESTART_TWIST_SIGMAS: [f64; 2] = [0.3, 1.0];
 
 /// What the track carries from one frame to the next.
 #[derive(Debug, Default)]
@@ -65,8 +65,9 @@ impl FrameTracker {
     /// A new track from the static pose `found` of the frame whose row 0 is read at `t_s`; the frame's measurements
     /// (`self.measurements`, those the pose was found from) follow at their own times. The pose is that of their mean
     /// time (a rolling shutter reads them over the rows the target spans); the track starts at `t_s`, carried back by
-    /// its twist.
-    pub(super) fn restart(&mut self, t_s: f64, found: MotionState) {
+    /// its twist. With a rolling shutter and the frames before it kept, the track starts from them and this frame
+    /// fitted together instead ([`Self::joint_start`]), when that fit agrees with their blobs.
+    pub(super) fn restart(&mut self, t_s: f64, found: MotionState) -> Result<(), FrameError> {
         let count = self.measurements.len();
         let found_s = if count == 0 {
             t_s
@@ -74,9 +75,14 @@ impl FrameTracker {
             self.measurements.iter().map(|m| m.t_s).sum::<f64>() / count as f64
         };
         let (state, covariance) = self.restart_state(found_s, found);
+        if !self.recent.is_empty() && self.joint_start(t_s, &[state])? {
+            return Ok(());
+        }
+        self.recent.track_frames = 0;
         self.tracker.reset();
         self.tracker
             .start_from(t_s, state.predicted(t_s - found_s), Some(covariance));
+        Ok(())
     }
 
     /// The state and covariance a new track starts from at `t_s`, given the static pose `found` there: with the

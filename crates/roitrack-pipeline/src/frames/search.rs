@@ -7,7 +7,7 @@ use roitrack_core::target::Symmetry;
 use roitrack_core::{Measurement, MotionState};
 use roitrack_image::{Frame, PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs};
 
-use super::{FrameMethod, FrameTracker};
+use super::{FrameError, FrameMethod, FrameTracker};
 use crate::photo::{PolarityChoice, detect_target};
 use crate::scheduler::Predictor;
 
@@ -34,26 +34,26 @@ impl FrameTracker {
     pub(super) fn search_whole_frame(
         &mut self,
         frame: &Frame,
-    ) -> (FrameMethod, Option<MotionState>) {
+    ) -> Result<(FrameMethod, Option<MotionState>), FrameError> {
         self.measurements.clear();
         let running = self.memory.predictor.is_some() && self.tracker.state().is_some();
         if let Some(found) = self.find_whole(frame) {
             self.windows.scheduler.reset();
             if running {
-                return (FrameMethod::FullFrame, Some(found));
+                return Ok((FrameMethod::FullFrame, Some(found)));
             }
-            self.restart(frame.t_s, found);
-            return (FrameMethod::Restart, Some(found));
+            self.restart(frame.t_s, found)?;
+            return Ok((FrameMethod::Restart, Some(found)));
         }
         if let (true, Some(predictor), Some(polarity)) =
             (running, self.memory.predictor, self.search.polarity)
             && self.associate_blobs(frame, &predictor, polarity) >= self.min_window_points()
         {
             self.windows.scheduler.reset();
-            return (FrameMethod::FullFrame, None);
+            return Ok((FrameMethod::FullFrame, None));
         }
         self.measurements.clear();
-        (FrameMethod::NotFound, None)
+        Ok((FrameMethod::NotFound, None))
     }
 
     /// Finds and identifies the target in the whole frame: its blobs into `self.measurements` (each at its row's
