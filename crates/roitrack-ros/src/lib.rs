@@ -11,9 +11,15 @@
 //!
 //! [`LiveServer`] serves the same messages, byte for byte, over the Foxglove WebSocket protocol while tracking (open
 //! `ws://127.0.0.1:8765` in Foxglove); [`Pacer`] replays a recording at its own speed so that a viewer can follow it.
-//! With the feature `ros2`, [`ros2::Ros2Publisher`] publishes the same messages live on the ROS 2 DDS bus, as a ROS 2
-//! node that robots, `ros2 topic echo` and RViz subscribe to, and [`ros2_input::MeasurementSubscriber`] takes blob
-//! centroids from it (`roitrack ros2-node`).
+//! With the feature `ros2`,
+// The two modules exist only with the feature: without it, their names are shown but not linked.
+#![cfg_attr(feature = "ros2", doc = "[`ros2::Ros2Publisher`]")]
+#![cfg_attr(not(feature = "ros2"), doc = "`ros2::Ros2Publisher`")]
+//! publishes the same messages live on the ROS 2 DDS bus, as a ROS 2 node that robots, `ros2 topic echo` and RViz
+//! subscribe to, and
+#![cfg_attr(feature = "ros2", doc = "[`ros2_input::MeasurementSubscriber`]")]
+#![cfg_attr(not(feature = "ros2"), doc = "`ros2_input::MeasurementSubscriber`")]
+//! takes blob centroids from it (`roitrack ros2-node`).
 //!
 //! [`BagFrameSource`] reads the other way: the image frames of a bag's topic, as a timed frame stream, and the camera
 //! of its CameraInfo; [`BagMeasurementSource`] replays the blob centroids of `/roitrack/measurements`
@@ -28,6 +34,7 @@
 //! let bag = BagWriter::create(dir.path().join("empty.mcap"), &BagOptions::default(), None).unwrap();
 //! assert_eq!(bag.finish().unwrap(), 0);
 //! ```
+#![deny(missing_docs)]
 
 mod background;
 pub mod convert;

@@ -39,7 +39,9 @@ pub enum LiveError {
     /// The address is taken, not local, or not allowed.
     #[error("cannot listen on {address}: {message}")]
     Listen {
+        /// The address asked for.
         address: SocketAddr,
+        /// Why it could not be listened on.
         message: String,
     },
     /// The server's thread could not be started.

@@ -6,38 +6,51 @@ use serde::ser::{Serialize, SerializeTuple, Serializer};
 /// `builtin_interfaces/msg/Time`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 pub struct Time {
+    /// Whole seconds.
     pub sec: i32,
+    /// Nanoseconds past `sec`, below 10⁹.
     pub nanosec: u32,
 }
 
 /// `std_msgs/msg/Header`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct Header<'a> {
+    /// When the data was taken.
     pub stamp: Time,
+    /// The frame the data is expressed in.
     pub frame_id: &'a str,
 }
 
 /// `geometry_msgs/msg/Vector3`, also `geometry_msgs/msg/Point` (same fields and layout).
 #[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
 pub struct Vector3 {
+    /// x component.
     pub x: f64,
+    /// y component.
     pub y: f64,
+    /// z component.
     pub z: f64,
 }
 
 /// `geometry_msgs/msg/Quaternion`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Quaternion {
+    /// Vector part, x.
     pub x: f64,
+    /// Vector part, y.
     pub y: f64,
+    /// Vector part, z.
     pub z: f64,
+    /// Scalar part.
     pub w: f64,
 }
 
 /// `geometry_msgs/msg/Pose` (and, with the same layout, `geometry_msgs/msg/Transform`).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Pose {
+    /// Position (m; for a transform, its translation).
     pub position: Vector3,
+    /// Orientation as a unit quaternion (for a transform, its rotation).
     pub orientation: Quaternion,
 }
 
@@ -68,52 +81,69 @@ impl Serialize for Bytes<'_> {
 /// `geometry_msgs/msg/PoseWithCovariance`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct PoseWithCovariance {
+    /// The pose.
     pub pose: Pose,
+    /// Row-major 6 x 6 covariance of (x, y, z, rotation about x, y, z) (m², rad²).
     pub covariance: Fixed<36>,
 }
 
 /// `geometry_msgs/msg/Twist`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct Twist {
+    /// Linear velocity (m/s).
     pub linear: Vector3,
+    /// Angular velocity (rad/s).
     pub angular: Vector3,
 }
 
 /// `geometry_msgs/msg/TwistWithCovariance`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct TwistWithCovariance {
+    /// The twist.
     pub twist: Twist,
+    /// Row-major 6 x 6 covariance of (linear x, y, z, angular x, y, z) ((m/s)², (rad/s)²).
     pub covariance: Fixed<36>,
 }
 
 /// `geometry_msgs/msg/PoseWithCovarianceStamped`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct PoseWithCovarianceStamped<'a> {
+    /// When, and the frame the pose is expressed in.
     pub header: Header<'a>,
+    /// The pose and its covariance.
     pub pose: PoseWithCovariance,
 }
 
 /// `geometry_msgs/msg/TwistWithCovarianceStamped`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct TwistWithCovarianceStamped<'a> {
+    /// When, and the frame the twist is expressed in.
     pub header: Header<'a>,
+    /// The twist and its covariance.
     pub twist: TwistWithCovariance,
 }
 
 /// `nav_msgs/msg/Odometry`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct Odometry<'a> {
+    /// When, and the frame of the pose (the parent frame).
     pub header: Header<'a>,
+    /// The frame whose pose this is (the moving body).
     pub child_frame_id: &'a str,
+    /// The child frame's pose in the header's frame, with covariance.
     pub pose: PoseWithCovariance,
+    /// The twist, with covariance.
     pub twist: TwistWithCovariance,
 }
 
 /// `geometry_msgs/msg/TransformStamped` (its `Transform` has the layout of [`Pose`]: translation, rotation).
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct TransformStamped<'a> {
+    /// When, and the parent frame.
     pub header: Header<'a>,
+    /// The frame the transform places in the parent frame.
     pub child_frame_id: &'a str,
+    /// The child frame's pose in the parent frame (translation in m, rotation).
     pub transform: Pose,
 }
 
@@ -133,32 +163,49 @@ impl<T: Serialize> Serialize for One<T> {
 /// `tf2_msgs/msg/TFMessage` with one transform.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct TfMessage<'a> {
+    /// The transform.
     pub transforms: One<TransformStamped<'a>>,
 }
 
 /// `sensor_msgs/msg/RegionOfInterest`.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
 pub struct RegionOfInterest {
+    /// Leftmost column of the region (px).
     pub x_offset: u32,
+    /// Top row of the region (px).
     pub y_offset: u32,
+    /// Height of the region (px); 0 with `width` 0: the full image.
     pub height: u32,
+    /// Width of the region (px).
     pub width: u32,
+    /// Whether the region is to be rectified.
     pub do_rectify: bool,
 }
 
 /// `sensor_msgs/msg/CameraInfo`.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct CameraInfo<'a> {
+    /// When, and the camera's optical frame.
     pub header: Header<'a>,
+    /// Image height (px).
     pub height: u32,
+    /// Image width (px).
     pub width: u32,
+    /// The distortion model's name (`plumb_bob`, `rational_polynomial`, `equidistant`).
     pub distortion_model: &'a str,
+    /// The distortion coefficients, in the model's order.
     pub d: Vec<f64>,
+    /// The intrinsic matrix, row-major 3 x 3 (px).
     pub k: Fixed<9>,
+    /// The rectification rotation, row-major 3 x 3.
     pub r: Fixed<9>,
+    /// The projection matrix, row-major 3 x 4 (px).
     pub p: Fixed<12>,
+    /// Horizontal binning (0 or 1: none).
     pub binning_x: u32,
+    /// Vertical binning (0 or 1: none).
     pub binning_y: u32,
+    /// The part of the sensor the image comes from (all zero: the full image).
     pub roi: RegionOfInterest,
 }
 
@@ -180,94 +227,138 @@ impl<T: Serialize> Serialize for Seq<'_, T> {
 /// `diagnostic_msgs/msg/KeyValue`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct KeyValue<'a> {
+    /// The value's name.
     pub key: &'a str,
+    /// The value, as text.
     pub value: &'a str,
 }
 
 /// `diagnostic_msgs/msg/DiagnosticStatus`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct DiagnosticStatus<'a> {
+    /// 0 OK, 1 warning, 2 error, 3 stale.
     pub level: u8,
+    /// What is reported on.
     pub name: &'a str,
+    /// The status in words.
     pub message: &'a str,
+    /// The device reported on.
     pub hardware_id: &'a str,
+    /// Named values of the status.
     pub values: Seq<'a, KeyValue<'a>>,
 }
 
 /// `diagnostic_msgs/msg/DiagnosticArray` with one status.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct DiagnosticArray<'a> {
+    /// When.
     pub header: Header<'a>,
+    /// The status.
     pub status: One<DiagnosticStatus<'a>>,
 }
 
 /// `sensor_msgs/msg/Image`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct Image<'a> {
+    /// When the image was taken, and the camera's optical frame.
     pub header: Header<'a>,
+    /// Rows (px).
     pub height: u32,
+    /// Columns (px).
     pub width: u32,
+    /// The pixels' encoding (`mono8`, `mono16`, ...).
     pub encoding: &'a str,
+    /// 1 if multi-byte pixel values are big-endian.
     pub is_bigendian: u8,
+    /// Bytes of a row.
     pub step: u32,
+    /// The pixels, row after row.
     pub data: Bytes<'a>,
 }
 
 /// `foxglove_msgs/msg/Point2`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Point2 {
+    /// Column (px).
     pub x: f64,
+    /// Row (px).
     pub y: f64,
 }
 
 /// `foxglove_msgs/msg/Color`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Color {
+    /// Red, 0..1.
     pub r: f64,
+    /// Green, 0..1.
     pub g: f64,
+    /// Blue, 0..1.
     pub b: f64,
+    /// Opacity, 0..1.
     pub a: f64,
 }
 
 /// `foxglove_msgs/msg/CircleAnnotation`.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct CircleAnnotation {
+    /// The image's time.
     pub timestamp: Time,
+    /// The circle's centre (px).
     pub position: Point2,
+    /// The circle's diameter (px).
     pub diameter: f64,
+    /// The outline's width (px).
     pub thickness: f64,
+    /// The inside's colour.
     pub fill_color: Color,
+    /// The outline's colour.
     pub outline_color: Color,
 }
 
 /// `foxglove_msgs/msg/PointsAnnotation`.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct PointsAnnotation {
+    /// The image's time.
     pub timestamp: Time,
+    /// How the points are drawn: 1 points, 2 a closed loop, 3 a line strip, 4 line segments.
     pub r#type: u8,
+    /// The points (px).
     pub points: Vec<Point2>,
+    /// The colour of every point, unless `outline_colors` is given.
     pub outline_color: Color,
+    /// One colour per point (empty: `outline_color` for all).
     pub outline_colors: Vec<Color>,
+    /// The colour inside a closed loop.
     pub fill_color: Color,
+    /// Width of the lines or size of the points (px).
     pub thickness: f64,
 }
 
 /// `foxglove_msgs/msg/TextAnnotation`.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct TextAnnotation {
+    /// The image's time.
     pub timestamp: Time,
+    /// Where the text starts: its bottom-left corner (px).
     pub position: Point2,
+    /// The text.
     pub text: String,
+    /// Font size (px).
     pub font_size: f64,
+    /// The text's colour.
     pub text_color: Color,
+    /// The colour behind the text.
     pub background_color: Color,
 }
 
 /// `foxglove_msgs/msg/ImageAnnotations`.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct ImageAnnotations {
+    /// The circles drawn.
     pub circles: Vec<CircleAnnotation>,
+    /// The point sets and lines drawn.
     pub points: Vec<PointsAnnotation>,
+    /// The texts drawn.
     pub texts: Vec<TextAnnotation>,
 }
 
@@ -277,11 +368,15 @@ pub struct ImageAnnotations {
 pub struct BlobMeasurements<'a> {
     /// Stamped with the time of the first centroid; the camera's frame.
     pub header: Header<'a>,
+    /// Each centroid's target point id.
     pub point_ids: Seq<'a, u32>,
+    /// Each centroid's column (px, raw image).
     pub u_px: Seq<'a, f64>,
+    /// Each centroid's row (px, raw image).
     pub v_px: Seq<'a, f64>,
     /// Each centroid's time less the header stamp (s).
     pub dt_s: Seq<'a, f64>,
+    /// Each centroid's noise standard deviation (px); empty when not known.
     pub sigma_px: Seq<'a, f64>,
 }
 

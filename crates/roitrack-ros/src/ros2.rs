@@ -71,11 +71,21 @@ pub enum Ros2Error {
     Interface(String),
     /// A namespace ROS 2 does not accept.
     #[error("namespace {namespace:?}: {message}")]
-    Namespace { namespace: String, message: String },
+    Namespace {
+        /// The namespace given.
+        namespace: String,
+        /// Why ROS 2 refuses it.
+        message: String,
+    },
     /// The DDS participant, the node or a topic could not be created: no usable network interface, the domain's
     /// ports taken, ...
     #[error("cannot start the ROS 2 node on domain {domain_id}: {message}")]
-    Start { domain_id: u16, message: String },
+    Start {
+        /// The DDS domain the node was to join.
+        domain_id: u16,
+        /// What RustDDS or ros2-client said.
+        message: String,
+    },
     /// What a node needed from the bus did not come (a camera info).
     #[error("{0}")]
     Input(String),

@@ -15,14 +15,24 @@ use crate::output::{McapFile, Output};
 
 /// The topics of a roitrack bag.
 pub mod topics {
+    /// Each estimate's pose of the target in the camera frame, with covariance (`PoseWithCovarianceStamped`).
     pub const POSE: &str = "/roitrack/pose";
+    /// Each estimate's twist, with covariance (`TwistWithCovarianceStamped`).
     pub const TWIST: &str = "/roitrack/twist";
+    /// Each estimate's pose and twist together (`nav_msgs/msg/Odometry`).
     pub const ODOMETRY: &str = "/roitrack/odometry";
+    /// Each estimate's pose as a transform from the camera frame to the target's (`tf2_msgs/msg/TFMessage`).
     pub const TF: &str = "/tf";
+    /// The camera's calibration (`sensor_msgs/msg/CameraInfo`).
     pub const CAMERA_INFO: &str = "/roitrack/camera_info";
+    /// Each estimate's status, residual and conditioning (`diagnostic_msgs/msg/DiagnosticArray`).
     pub const STATUS: &str = "/roitrack/status";
+    /// The frames written, mono8 or mono16 (`sensor_msgs/msg/Image`).
     pub const IMAGE: &str = "/roitrack/image";
+    /// Over each frame: the centroids measured and the target projected by the estimate
+    /// (`foxglove_msgs/msg/ImageAnnotations`).
     pub const ANNOTATIONS: &str = "/roitrack/annotations";
+    /// The blob centroids handed to the estimator ([`crate::msg::BlobMeasurements`]).
     pub const MEASUREMENTS: &str = "/roitrack/measurements";
     /// Each ROI image, as recorded (optional: `track --rois --mcap-rois`).
     pub const ROI_IMAGE: &str = "/roitrack/roi/image";
