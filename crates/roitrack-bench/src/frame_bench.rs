@@ -36,8 +36,9 @@ use roitrack_pipeline::frames::{
 };
 use roitrack_sim::{FrameOptions, FrameSequence, FrameSequenceError, Scenario, ScenarioKind};
 
-/// Frame size (px).
+/// Frame width (px).
 pub const WIDTH_PX: u32 = 640;
+/// Frame height (px).
 pub const HEIGHT_PX: u32 = 480;
 /// Focal length (px): a vertical field of view of 37.8°, the canonical camera's (1500 px on 1024 rows).
 pub const FOCAL_PX: f64 = 700.0;
@@ -95,13 +96,15 @@ pub fn rolling_shutter() -> Readout {
 pub struct SteadyCheck {
     /// Frames per pass after the warm-up.
     pub steady_frames: usize,
-    /// Of those, frames measured in their windows, and with an estimate.
+    /// Of those, frames measured in their windows (around the predicted blobs).
     pub by_windows: usize,
+    /// Of those, frames with an estimate.
     pub estimates: usize,
     /// Blobs measured per frame, fewest.
     pub min_blobs: usize,
-    /// Largest and RMS position error of the estimates (m).
+    /// Largest position error of the estimates (m).
     pub max_position_error_m: f64,
+    /// RMS position error of the estimates (m).
     pub rms_position_error_m: f64,
 }
 
@@ -191,6 +194,7 @@ impl FrameBench {
         self.sequence.camera()
     }
 
+    /// The target the frames show ([`Target::grid4x4`]).
     pub fn target(&self) -> &Target {
         &self.sequence.scenario().target
     }

@@ -37,6 +37,7 @@
 //!   an estimate period so long that none is due) on a running track of the bench scene: the prediction, the update
 //!   and the window's bookkeeping of one centroid, the per-measurement cost of tracking ([`KalmanStream`]);
 //! - `kalman_update_constant_acceleration`: the same with [`MotionModel::ConstantAcceleration`] (18 states).
+#![deny(missing_docs)]
 
 pub mod frame_bench;
 pub mod loop_bench;
@@ -89,8 +90,11 @@ pub const SEED: u64 = 2024;
 /// The built-in scene (docs/model.md) with the true motion.
 #[derive(Debug, Clone)]
 pub struct Scene {
+    /// The camera: [`CameraModel::canonical`].
     pub camera: CameraModel,
+    /// The target: [`Target::grid4x4`].
     pub target: Target,
+    /// The spatio-temporal projection model of that camera and target.
     pub model: SpatioTemporalModel,
     /// The true state at the reference time: the bench pose, moving with the twist above.
     pub truth: MotionState,
@@ -214,12 +218,15 @@ impl Scene {
 /// The ROI items' inputs: the simulator, a 24 x 24 ROI around a 6 mm blob and its rendered 8-bit pixels.
 #[derive(Debug, Clone)]
 pub struct RoiProblem {
+    /// The simulated camera that renders the ROI (default sensor).
     pub renderer: RoiRenderer,
+    /// The ROI: [`ROI_SIZE_PX`] square around the blob of point [`ROI_POINT_INDEX`].
     pub roi: Roi,
     /// The state the ROI is rendered at (its reference time is the exposure midpoint, 0).
     pub state: MotionState,
     /// The ROI rendered once (default sensor: 8 bits, shot and read noise).
     pub pixels: Vec<u16>,
+    /// The centroid options of `centroid_24` (defaults: with the symmetry check).
     pub options: CentroidOptions,
     rng: ChaCha8Rng,
     scratch: RenderScratch,
@@ -432,10 +439,15 @@ impl KalmanStream {
 /// Every hot path's inputs, built once.
 #[derive(Debug, Clone)]
 pub struct HotPaths {
+    /// The scene every input is drawn from.
     pub scene: Scene,
+    /// The 16-measurement window of `jacobian_residual_w16` and `control_step_w16`.
     pub w16: BenchWindow,
+    /// The 32-measurement window of `control_step_w32` and `gauss_newton_solve`.
     pub w32: BenchWindow,
+    /// The static pose problem of `static_pose`: one noisy measurement per point, the target at rest.
     pub static_observations: Vec<Observation>,
+    /// The ROI of `centroid_24`, `centroid_24_moments` and `render_roi`.
     pub roi: RoiProblem,
     /// The running Kalman filter of `kalman_update`, no estimate due.
     pub kalman: KalmanStream,
@@ -450,6 +462,7 @@ impl Default for HotPaths {
 }
 
 impl HotPaths {
+    /// Every input built from the scene, each with its own seed from [`SEED`].
     pub fn new() -> Self {
         let scene = scene();
         Self {
@@ -578,19 +591,30 @@ impl HotPaths {
 /// A timed hot path. [`Item::key`] is the prefix of its `roitrack bench --json` keys and its criterion benchmark id.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Item {
+    /// `JᵀJ` and `Jᵀe` of the 16-measurement window, exact Jacobian.
     JacobianResidualW16,
+    /// One virtual visual servoing step on 16 measurements, conditioning figure included.
     ControlStepW16,
+    /// One virtual visual servoing step on 32 measurements, conditioning figure included.
     ControlStepW32,
+    /// Levenberg-Marquardt of the 12 parameters to convergence on 32 measurements.
     GaussNewtonSolve,
+    /// The static pose of 16 points from scratch, no prior.
     StaticPose,
+    /// The centroid of the 24 x 24 ROI, with the symmetry check.
     Centroid24,
+    /// The centroid of the same ROI from the first-order moments alone.
     Centroid24Moments,
+    /// The simulator's rendering of that ROI, noise drawn.
     RenderRoi,
+    /// One measurement pushed into the default Kalman filter.
     KalmanUpdate,
+    /// One measurement pushed into the constant-acceleration Kalman filter.
     KalmanUpdateConstantAcceleration,
 }
 
 impl Item {
+    /// Every item, in the order they are timed and printed.
     pub const ALL: [Item; 10] = [
         Item::JacobianResidualW16,
         Item::ControlStepW16,

@@ -22,12 +22,15 @@ pub const ROI_SIZE_PX: u32 = 32;
 pub struct LoopFigures {
     /// The best throughput (ROIs per second of wall time).
     pub rois_per_s: f64,
-    /// Median over the runs of each run's latency quantile (µs).
+    /// Median over the runs of each run's median ROI-to-estimate latency (µs).
     pub latency_p50_us: f64,
+    /// Median over the runs of each run's 99th-percentile ROI-to-estimate latency (µs).
     pub latency_p99_us: f64,
-    /// Of the best run: measurements dropped (queue full), late triggers (paced) and rejected blobs.
+    /// Of the best run: measurements dropped because the queue was full.
     pub dropped: usize,
+    /// Of the best run: triggers sent after their slot's time (paced camera).
     pub late: usize,
+    /// Of the best run: blobs the centroid rejected.
     pub rejected: usize,
 }
 

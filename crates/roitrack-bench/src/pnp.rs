@@ -56,6 +56,7 @@ pub const SUITE_FORMAT: &str = "roitrack-pnp-suite/1";
 #[derive(Debug, Clone, PartialEq, Error)]
 #[error("{message}")]
 pub struct PnpError {
+    /// What is wrong, naming the instance and field where it applies.
     pub message: String,
 }
 
@@ -252,15 +253,20 @@ fn parse_instance(value: &Value, path: &str) -> Result<InstanceJson, PnpError> {
 /// One problem instance, validated: the true pose and the observations.
 #[derive(Debug, Clone)]
 pub struct PnpInstance {
+    /// The true pose of the target in the camera (at rest).
     pub truth: MotionState,
+    /// One noisy pixel per target point.
     pub observations: Vec<Observation>,
 }
 
 /// A validated PnP problem: the camera's pinhole model, the target, and the instances.
 #[derive(Debug, Clone)]
 pub struct PnpProblem {
+    /// The camera's pinhole model as a projection model (every pixel taken at one time).
     pub model: SpatioTemporalModel,
+    /// The target's points (m, object frame).
     pub target: Target,
+    /// The instances, in the file's order.
     pub instances: Vec<PnpInstance>,
     /// The pixels' noise (px per coordinate).
     pub noise_px: f64,
@@ -387,22 +393,32 @@ fn reprojection_rms_px(
 /// What one instance gave: the pose found (or the error) and its accuracy.
 #[derive(Debug, Clone)]
 pub struct Solved {
+    /// The pose found; `None` when the solver refused the instance.
     pub pose: Option<MotionState>,
+    /// The solver's error when it found no pose.
     pub error: Option<String>,
+    /// Distance from the true position of the target's origin (mm; NaN without a pose).
     pub position_error_mm: f64,
+    /// Angle of the rotation from the true orientation (degrees; NaN without a pose).
     pub rotation_error_deg: f64,
+    /// RMS reprojection error of the pose against the observed pixels, per coordinate (px; NaN without a pose).
     pub reprojection_rms_px: f64,
+    /// Iterations the solver took (0 without a pose).
     pub iterations: usize,
+    /// Whether the solver reached its convergence test.
     pub converged: bool,
 }
 
 /// The benchmark's result: every instance solved once for accuracy, and every timed solve.
 #[derive(Debug, Clone)]
 pub struct PnpReport {
+    /// Each instance's accuracy, in the problem's order.
     pub solved: Vec<Solved>,
     /// Every timed solve (µs), in order.
     pub times_us: Vec<f64>,
+    /// Points of the target.
     pub points: usize,
+    /// Times every instance was timed.
     pub repeats: usize,
 }
 
@@ -606,7 +622,9 @@ impl PnpReport {
 /// One problem of a suite: the family it was drawn from and the problem (one instance, its noise given).
 #[derive(Debug, Clone)]
 pub struct SuiteProblem {
+    /// The family's name, as the suite file gives it.
     pub family: String,
+    /// The problem: one instance.
     pub problem: PnpProblem,
 }
 
@@ -614,6 +632,7 @@ pub struct SuiteProblem {
 /// [module documentation](self)).
 #[derive(Debug, Clone)]
 pub struct PnpSuite {
+    /// The problems, in the file's order.
     pub problems: Vec<SuiteProblem>,
 }
 
@@ -693,6 +712,7 @@ fn suite_problem(entry: &Value, path: &str) -> Result<SuiteProblem, PnpError> {
 /// What the solver gave on one problem of a suite.
 #[derive(Debug, Clone)]
 pub struct SuiteSolve {
+    /// The problem's family.
     pub family: String,
     /// Every pose returned, best first (empty when the solver refused the problem).
     pub poses: Vec<PoseFit>,
@@ -707,7 +727,9 @@ pub struct SuiteSolve {
 /// The suite's result, problem by problem in the file's order.
 #[derive(Debug, Clone)]
 pub struct SuiteReport {
+    /// One result per problem, in the file's order.
     pub solves: Vec<SuiteSolve>,
+    /// Times each problem was solved in a row for its median time.
     pub repeats: usize,
 }
 

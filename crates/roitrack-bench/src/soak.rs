@@ -16,8 +16,9 @@ use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_sim::{Scenario, ScenarioKind};
 use thiserror::Error;
 
-/// ROI rate of the soak stream (Hz) and its centroid noise (px).
+/// ROI rate of the soak stream (Hz).
 pub const RATE_HZ: f64 = 4000.0;
+/// Standard deviation of the soak stream's centroid noise, per image axis (px).
 pub const NOISE_PX: f64 = 0.1;
 /// Longest soak run (minutes).
 pub const MAX_MINUTES: f64 = 120.0;
@@ -25,29 +26,39 @@ pub const MAX_MINUTES: f64 = 120.0;
 /// Figures of one simulated minute (or the last, partial one).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Slice {
+    /// RMS error of the estimated position against the truth (mm).
     pub position_rmse_mm: f64,
+    /// RMS error of the estimated velocity against the truth (mm/s).
     pub velocity_rmse_mm_s: f64,
+    /// Processing time per measurement, the estimator's calls only (µs of wall time).
     pub us_per_measurement: f64,
     /// The process's resident memory at the end of the slice (MiB; NaN where /proc is not available).
     pub resident_mib: f64,
+    /// Estimates whose status was lost.
     pub lost: usize,
 }
 
 /// A soak run, minute by minute.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SoakReport {
+    /// Length of the run (simulated minutes).
     pub minutes: f64,
+    /// Measurements tracked.
     pub measurements: usize,
+    /// The figures of each simulated minute, in order.
     pub slices: Vec<Slice>,
 }
 
 /// Why a soak run could not run.
 #[derive(Debug, Error)]
 pub enum SoakError {
+    /// The length asked for (minutes) is not in (0, [`MAX_MINUTES`]].
     #[error("the length must be in (0, {MAX_MINUTES}] minutes, got {0}")]
     Length(f64),
+    /// The tracker refused its configuration.
     #[error("invalid tracker options: {0}")]
     Config(#[from] ConfigError),
+    /// The tracker refused a measurement.
     #[error("a measurement was refused: {0}")]
     Refused(#[from] TrackError),
 }

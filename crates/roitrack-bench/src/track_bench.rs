@@ -25,8 +25,11 @@ pub const SEED: u64 = 1;
 /// The measurements of the orthoglide scenario, held in memory, and the tracker's inputs.
 #[derive(Debug, Clone)]
 pub struct TrackLibraryBench {
+    /// The scenario's camera.
     pub camera: CameraModel,
+    /// The scenario's target.
     pub target: Target,
+    /// The simulated measurements, in time order.
     pub measurements: Vec<Measurement>,
 }
 
@@ -35,7 +38,9 @@ pub struct TrackLibraryBench {
 pub struct TrackFigures {
     /// Measurements tracked per second of wall time, the best of the runs.
     pub meas_per_s: f64,
+    /// Measurements tracked in a run.
     pub measurements: usize,
+    /// Estimates a run gave.
     pub estimates: usize,
 }
 
