@@ -104,11 +104,19 @@ pub enum Scene {
     Spec(ScenarioKind),
     /// The target at rest `distance_m` in front of the camera, [`Scenario::still`] at the bench rotation and
     /// t = (0.02, -0.01, distance) m.
-    Still { distance_m: f64, duration_s: f64 },
+    Still {
+        /// Depth of the target's origin in front of the camera (m).
+        distance_m: f64,
+        /// Length of the scenario (s).
+        duration_s: f64,
+    },
     /// Smooth random 6-dof motion at these peaks, [`Scenario::random_with`].
     Random {
+        /// Peak speed of the target's origin (m/s).
         peak_speed_mps: f64,
+        /// Peak angular speed (rad/s).
         peak_angular_radps: f64,
+        /// Length of the scenario (s).
         duration_s: f64,
     },
 }
@@ -397,9 +405,13 @@ pub enum Purpose {
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Case {
+    /// The case's name in tables and on the command line.
     pub name: &'static str,
+    /// The motion.
     pub scene: Scene,
+    /// The camera that sees it.
     pub camera: CameraChoice,
+    /// The target it carries.
     pub target: TargetChoice,
     /// ROI rate (Hz): one centroid every 1 / rate s.
     pub rate_hz: f64,
@@ -407,6 +419,7 @@ pub struct Case {
     pub noise_px: f64,
     /// Each seed is a simulation (the noise, and the motion of a random scene); figures are pooled over seeds.
     pub seeds: Vec<u64>,
+    /// What the case is for: every accuracy target, or the covariance's calibration only.
     pub purpose: Purpose,
     /// One of the calibration set: a built-in scenario at 4 kHz, canonical camera and target, 0.03 to 1 px.
     pub in_calibration_set: bool,
@@ -846,11 +859,15 @@ pub struct RunSummary {
     pub max_vouched_error_mm: f64,
     /// The velocity lag (estimator samples), the largest in magnitude over the seeds.
     pub velocity_lag_samples: Option<i64>,
-    /// Estimates by status.
+    /// Estimates whose status was converging.
     pub converging: usize,
+    /// Estimates whose status was tracking.
     pub tracking: usize,
+    /// Estimates whose status was degenerate (the update not applied, the state only predicted).
     pub degenerate: usize,
+    /// Estimates whose status was disputed (the newest measurement at odds with the earlier ones).
     pub disputed: usize,
+    /// Estimates whose status was lost.
     pub lost: usize,
     /// NEES of position and velocity of the vouched estimates with a covariance.
     pub consistency: Consistency,
@@ -926,15 +943,18 @@ impl RunSummary {
 /// A hand-tuned filter and its figures.
 #[derive(Debug, Clone, Serialize)]
 pub struct HandTuned {
+    /// The filter's settings.
     pub tuning: HandTuning,
     /// Whether the settings lie on the grid's boundary along some axis (for the best: a better one may lie beyond).
     pub on_edge: bool,
+    /// Its figures over the case's seeds.
     pub summary: RunSummary,
 }
 
 /// One grid point visited by the search, and its pooled position RMSE (mm).
 #[derive(Debug, Clone, Copy, Serialize)]
 pub struct Visited {
+    /// The grid point's settings.
     pub tuning: HandTuning,
     /// Position RMSE over the runs that gave estimates.
     pub position_rmse_mm: f64,
@@ -945,6 +965,7 @@ pub struct Visited {
 /// A case's figures.
 #[derive(Debug, Clone, Serialize)]
 pub struct CaseResult {
+    /// The case.
     pub case: Case,
     /// Measurements simulated, over every seed.
     pub measurements: usize,
@@ -1088,10 +1109,13 @@ impl Goal {
 /// One target checked on one case.
 #[derive(Debug, Clone, Serialize)]
 pub struct Check {
+    /// The case's name.
     pub case: &'static str,
+    /// The target checked.
     pub goal: Goal,
     /// The figure judged, as text.
     pub figure: String,
+    /// Whether the case meets the target.
     pub holds: bool,
 }
 
@@ -1107,7 +1131,9 @@ pub struct Check {
 /// ```
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SweepOptions {
+    /// The cases run, in order.
     pub cases: Vec<Case>,
+    /// The hand-tuned filter's grid, searched on the accuracy cases.
     pub grid: Grid,
     /// Scenarios cut to at most this long (s); `None`: whole.
     pub max_duration_s: Option<f64>,
@@ -1179,15 +1205,24 @@ impl SweepOptions {
 /// Why the sweep could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum SweepError {
+    /// The grid is invalid: what is wrong with which axis.
     #[error("invalid grid: {0}")]
     Grid(String),
+    /// Zero threads asked for.
     #[error("the sweep needs at least one thread")]
     NoThreads,
+    /// A case has no seed.
     #[error("case {case} has no seed to simulate")]
-    NoSeeds { case: &'static str },
+    NoSeeds {
+        /// The case's name.
+        case: &'static str,
+    },
+    /// A case's simulation or tracking failed.
     #[error("case {case}: {source}")]
     Case {
+        /// The case's name.
         case: &'static str,
+        /// What failed.
         #[source]
         source: ExperimentError,
     },
@@ -1196,6 +1231,7 @@ pub enum SweepError {
 /// The sweep's results.
 #[derive(Debug, Clone, Serialize)]
 pub struct Sweep {
+    /// What was run.
     pub options: SweepOptions,
     /// One per case, in the options' order.
     pub cases: Vec<CaseResult>,

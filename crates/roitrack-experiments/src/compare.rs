@@ -35,7 +35,9 @@ pub fn lineup() -> [(&'static str, EstimatorConfig); 5] {
 /// One estimator's accuracy.
 #[derive(Debug, Clone)]
 pub struct CompareRow {
+    /// The estimator's name in the table ([`lineup`]).
     pub label: &'static str,
+    /// Its accuracy against the truth.
     pub metrics: Metrics,
     /// Estimates flagged degenerate.
     pub degenerate: usize,

@@ -216,10 +216,15 @@ fn cases(scenario: &Scenario, quick: bool) -> Vec<Case> {
 /// One row of the table.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct FaultRow {
+    /// The scenario's name.
     pub scenario: &'static str,
+    /// The fault's name.
     pub fault: &'static str,
+    /// Estimates the default estimator gave.
     pub estimates: usize,
+    /// RMS position error over the estimates (mm).
     pub position_rmse_mm: f64,
+    /// RMS velocity error over the estimates (mm/s); `None` without twists.
     pub velocity_rmse_mm_s: Option<f64>,
     /// When the fault ends (s); None for faults spread over the whole run.
     pub fault_end_s: Option<f64>,

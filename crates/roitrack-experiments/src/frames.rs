@@ -289,29 +289,43 @@ impl FrameStudyOptions {
 /// ```
 #[derive(Debug, Error)]
 pub enum FrameStudyError {
+    /// The options list no seed.
     #[error("no seed given")]
     NoSeeds,
+    /// Zero threads asked for.
     #[error("the study needs at least one thread")]
     NoThreads,
+    /// A seed's frame sequence could not be simulated.
     #[error("seed {seed}: {source}")]
     Sequence {
+        /// The seed.
         seed: u64,
+        /// Why the sequence was refused.
         #[source]
         source: FrameSequenceError,
     },
+    /// The frame tracker refused its configuration.
     #[error("the frame tracker: {0}")]
     Tracker(#[from] ConfigError),
+    /// The frame tracker failed on a frame.
     #[error("seed {seed}, {sequence} frames, {model} model: frame {frame}: {source}")]
     Frame {
+        /// The seed.
         seed: u64,
+        /// The sequence's shutter and blobs ([`FrameCase::sequence_label`]).
         sequence: String,
+        /// The name of the time model the tracker was given.
         model: &'static str,
+        /// The frame's index in the sequence, from 0.
         frame: usize,
+        /// What failed.
         #[source]
         source: FrameError,
     },
+    /// The estimates could not be scored against the truth.
     #[error("evaluation failed: {0}")]
     Evaluation(#[from] EvalError),
+    /// A worker thread panicked.
     #[error("a worker thread panicked")]
     Panicked,
 }
@@ -329,8 +343,11 @@ pub enum FrameStudyError {
 /// ```
 #[derive(Debug, Clone, Serialize)]
 pub struct FrameRun {
+    /// The case tracked.
     pub case: FrameCase,
+    /// The seed of the sequence.
     pub seed: u64,
+    /// Frames in the sequence.
     pub frames: usize,
     /// Estimates given (at most one per frame).
     pub estimates: usize,
@@ -340,11 +357,13 @@ pub struct FrameRun {
     pub flagged: usize,
     /// The scored estimates' metrics (`None` when none is scored).
     pub metrics: Option<Metrics>,
-    /// Frames measured in windows, by a full-frame search continuing the track, by one starting a new track, and
-    /// frames where the target was not found.
+    /// Frames measured in windows around the predicted blobs.
     pub by_windows: usize,
+    /// Frames measured by a full-frame search continuing the track.
     pub by_full_frame: usize,
+    /// Frames measured by a full-frame search starting a new track.
     pub restarts: usize,
+    /// Frames where the target was not found.
     pub not_found: usize,
     /// Wall time of the tracker's processing of the frames (s), rendering not included.
     pub tracking_s: f64,
@@ -412,18 +431,29 @@ impl Pool {
 /// ```
 #[derive(Debug, Clone, Serialize)]
 pub struct FrameStudyRow {
+    /// The case.
     pub case: FrameCase,
+    /// Frames, over every seed.
     pub frames: usize,
+    /// Estimates given, over every seed.
     pub estimates: usize,
+    /// Estimates scored, over every seed.
     pub scored: usize,
+    /// RMS position error over the scored estimates of every seed (mm).
     pub position_rmse_mm: f64,
+    /// RMS velocity error over the scored estimates of every seed (mm/s).
     pub velocity_rmse_mm_s: f64,
+    /// RMS rotation error over the scored estimates of every seed (degrees).
     pub rotation_rmse_deg: f64,
     /// Largest position error of a scored estimate (mm).
     pub worst_position_mm: f64,
+    /// Frames measured in windows, over every seed.
     pub by_windows: usize,
+    /// Frames measured by a full-frame search continuing the track, over every seed.
     pub by_full_frame: usize,
+    /// Frames measured by a full-frame search starting a new track, over every seed.
     pub restarts: usize,
+    /// Frames where the target was not found, over every seed.
     pub not_found: usize,
     /// Tracking time per frame (ms): the frame tracker's processing only, one thread.
     pub ms_per_frame: f64,
@@ -553,18 +583,21 @@ fn targets() -> Vec<Target> {
 pub struct Check {
     /// What is compared with what.
     pub target: &'static str,
+    /// Which error is compared.
     pub quantity: Quantity,
     /// The figure checked (pooled over the seeds).
     pub value: f64,
-    /// The reference figure (pooled), and the limit it gives: `max(factor * reference, floor)`.
+    /// The reference figure (pooled).
     pub reference: f64,
+    /// The limit the reference gives: `max(factor * reference, floor)`.
     pub limit: f64,
     /// `value / reference`.
     pub ratio: f64,
     /// Whether `value <= limit` (pooled figures).
     pub holds: bool,
-    /// Seeds on which the target holds, of how many.
+    /// Seeds on which the target holds.
     pub seeds_holding: usize,
+    /// Seeds checked.
     pub seeds: usize,
 }
 
@@ -586,6 +619,7 @@ pub struct Check {
 /// ```
 #[derive(Debug, Clone)]
 pub struct FrameStudy {
+    /// What was run.
     pub options: FrameStudyOptions,
     /// Frames per sequence.
     pub frames_per_sequence: usize,

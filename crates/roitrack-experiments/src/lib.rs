@@ -25,6 +25,7 @@
 //! assert!(rows[0].metrics.position_rmse_mm < 0.5);
 //! assert!(table(&rows).starts_with("estimator"));
 //! ```
+#![deny(missing_docs)]
 
 pub mod adaptive;
 pub mod compare;

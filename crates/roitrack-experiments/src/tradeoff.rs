@@ -10,8 +10,9 @@ use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 use crate::ExperimentError;
 use roitrack_demo::scoring::track_and_score;
 
-/// Paper gains and Kalman linear-acceleration spectral densities ((m/s²)²/Hz) swept.
+/// The gains λ of the paper's loop swept.
 pub const GAINS: [f64; 9] = [0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0];
+/// The Kalman filter's linear-acceleration spectral densities swept ((m/s²)²/Hz).
 pub const ACCEL_PSDS: [f64; 9] = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0, 30.0, 100.0];
 
 /// Which scheme a point of the trade-off belongs to.
@@ -24,6 +25,7 @@ pub enum Scheme {
 }
 
 impl Scheme {
+    /// The scheme's name in tables and files.
     pub fn name(&self) -> &'static str {
         match self {
             Self::Paper => "paper",
@@ -43,9 +45,11 @@ impl Scheme {
 /// One point of the trade-off.
 #[derive(Debug, Clone)]
 pub struct TradeoffPoint {
+    /// The scheme swept.
     pub scheme: Scheme,
     /// The parameter's value (gain, or (m/s²)²/Hz).
     pub value: f64,
+    /// The accuracy at that value, lag included.
     pub metrics: Metrics,
 }
 
