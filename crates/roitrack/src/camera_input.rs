@@ -138,7 +138,7 @@ pub fn open_camera_input(
             let reader = RoiRecordingReader::open(path)?.with_known_ids(known_ids);
             Ok(Box::new(RoiMeasurements {
                 images: reader,
-                options: options.clone(),
+                options: *options,
                 time: camera.time,
             }))
         }

@@ -36,14 +36,14 @@ pub struct TrackArgs {
     /// global-shutter frame) form one readout: an estimate comes only after the last of them. With --rig, one
     /// NAME=FILE per camera of the rig (repeated), each file on its own camera's clock.
     /// Default: none; this, --rois or --images is required.
-    #[arg(long, value_name = "FILE | NAME=FILE", required_unless_present_any = ["rois", "images"], conflicts_with_all = ["rois", "images"])]
+    #[arg(long, value_name = "FILE | NAME=FILE", required_unless_present_any = ["rois", "images"])]
     pub measurements: Vec<PathBuf>,
     /// A rig of several cameras (YAML: each camera's name, calibration file relative to the rig file, camera_T_rig as
     /// tx ty tz qx qy qz qw, and optionally its clock_offset_s and clock_drift_ppm; docs/rig.md) instead of --camera:
-    /// every camera's --measurements NAME=FILE fused into one pose and twist, written in the rig's frame
+    /// every camera's input (--measurements, --rois or --images NAME=...) fused into one pose and twist, written in the rig's frame
     /// (rig_T_object) on the rig's clock (the first camera's, unless the file says otherwise). Clocks the file leaves
     /// out are learnt from the measurements (offsets within ±0.1 s). Default: one camera, --camera.
-    #[arg(long = "rig", value_name = "RIG.yaml", conflicts_with_all = ["rois", "images"])]
+    #[arg(long = "rig", value_name = "RIG.yaml")]
     pub camera_rig: Option<PathBuf>,
     /// With --rig: write the rig file again with every camera's clock as learnt (clock_offset_s, clock_drift_ppm) and
     /// their standard deviations (clock_offset_sigma_s, clock_drift_sigma_ppm; 0 for a clock the file gave).
@@ -51,9 +51,9 @@ pub struct TrackArgs {
     #[arg(long, value_name = "FILE.yaml", requires = "camera_rig")]
     pub rig_out: Option<PathBuf>,
     /// Instead of centroids: a recording of ROI images (see roitrack_formats::RoiRecordingReader), centroided here.
-    /// Default: none.
-    #[arg(long, conflicts_with = "images")]
-    pub rois: Option<PathBuf>,
+    /// With --rig, one NAME=FILE per camera (repeated). Default: none.
+    #[arg(long, value_name = "FILE | NAME=FILE")]
+    pub rois: Vec<PathBuf>,
     /// With --measurements or --timestamps: the unit of the times. Default: seconds, and times more than 0.2 apart
     /// (median over the first 1,000 rows, slower than 5 Hz) or past the year 5000 are refused as likely ms, us or ns
     /// (give s to read them as seconds anyway).
@@ -62,9 +62,12 @@ pub struct TrackArgs {
     /// Instead of centroids: frames. A folder of images (PNG, JPEG, PGM/PPM, TIFF, in natural order: frame2 before
     /// frame10), a numbered pattern (`frames/frame_%05d.png`), a quoted glob (`'frames/*.png'`), or a video (mp4,
     /// mkv, avi, mov, webm; decoded by Debian's `ffmpeg`). One estimate per frame where the target is found.
-    /// Also a ROS 2 bag (a .mcap file or a rosbag2 folder; `--mcap-in BAG`) with --image-topic. Default: none.
-    #[arg(long, value_name = "SOURCE", visible_alias = "mcap-in")]
-    pub images: Option<PathBuf>,
+    /// Also a ROS 2 bag (a .mcap file or a rosbag2 folder; `--mcap-in BAG`) with --image-topic. With --rig, one
+    /// NAME=SOURCE per camera (repeated; not a bag), each on its own camera's clock, every camera with the options
+    /// below (--fps, --shutter, --polarity...; --timestamps is refused: give each camera's frames their times by
+    /// --fps, or a video's own). Default: none.
+    #[arg(long, value_name = "SOURCE | NAME=SOURCE", visible_alias = "mcap-in")]
+    pub images: Vec<PathBuf>,
     /// With --images: the frames' times, a CSV file with a header, a column `t` (s: the mid-exposure time of the
     /// frame's row 0) and one row per frame in order; an optional column `file` must match each frame's file name.
     /// Default: none (then --fps, or a video's own timestamps).
@@ -150,15 +153,36 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             "several --measurements are for the cameras of a rig: give --rig RIG.yaml and NAME=FILE for each"
         );
     }
+    for (name, given) in [("--rois", &args.rois), ("--images", &args.images)] {
+        if given.len() > 1 {
+            bail!(
+                "several {name} are for the cameras of a rig: give --rig RIG.yaml and NAME=... for each"
+            );
+        }
+    }
+    let kinds = [
+        !args.measurements.is_empty(),
+        !args.rois.is_empty(),
+        !args.images.is_empty(),
+    ];
+    if kinds.iter().filter(|&&k| k).count() > 1 {
+        bail!(
+            "give one of --measurements, --rois and --images (several kinds are for the cameras of a rig, --rig)"
+        );
+    }
     check_paths(args)?;
     if args.time_units.is_some() && args.measurements.is_empty() && args.timestamps.is_none() {
         bail!(
             "--time-units is the unit of the times of --measurements or --timestamps, and neither is given"
         );
     }
-    let camera = crate::ros::camera(args.camera.as_ref(), args.images.as_deref(), &args.mcap_in)?;
+    let camera = crate::ros::camera(
+        args.camera.as_ref(),
+        args.images.first().map(PathBuf::as_path),
+        &args.mcap_in,
+    )?;
     let target = args.target.read()?;
-    if let Some(source) = &args.images
+    if let Some(source) = args.images.first()
         && args.mcap_in.measurement_topic.is_none()
     {
         return run_frames(args, source, camera, target);
@@ -189,10 +213,12 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             progress.set_position(count as u64);
         }
     };
-    let replay =
-        args.mcap_in
-            .measurement_replay(args.images.as_deref(), known_ids.clone(), &camera)?;
-    let mut bag = if args.rois.is_some() {
+    let replay = args.mcap_in.measurement_replay(
+        args.images.first().map(PathBuf::as_path),
+        known_ids.clone(),
+        &camera,
+    )?;
+    let mut bag = if !args.rois.is_empty() {
         args.ros.open_for_rois(&camera, None)?
     } else {
         args.ros.open(&camera, None)?
@@ -220,7 +246,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             }
             (None, None) => None,
         };
-    let (path, report, rois) = match (measurements, &args.rois) {
+    let (path, report, rois) = match (measurements, args.rois.first()) {
         (Some((path, source)), _) => {
             // Each measurement also goes to the bag's /roitrack/measurements (a RefCell: the estimates' sink
             // writes to the bag too).
@@ -307,40 +333,13 @@ pub fn run(args: &TrackArgs) -> Result<()> {
 fn run_frames(
     args: &TrackArgs,
     source: &std::path::Path,
-    mut camera: roitrack::CameraModel,
+    camera: roitrack::CameraModel,
     target: roitrack::Target,
 ) -> Result<()> {
-    use roitrack::core::time::TimeModel;
-    use roitrack::pipeline::{FrameStreamError, FrameTracker, FrameTrackerConfig, PhotoOptions};
+    use roitrack::pipeline::{FrameStreamError, FrameTracker};
 
-    let readout = args.shutter.readout(args.line_delay_s)?;
-    camera.time = TimeModel {
-        readout,
-        exposure_s: args.exposure_s,
-    };
-    camera
-        .time
-        .validate()
-        .context("invalid --line-delay-s or --exposure-s")?;
-    let config = FrameTrackerConfig {
-        // Without --adapt or --motion-model, the frame tracker's own defaults: the noise learnt, the process noise as
-        // given, constant acceleration.
-        tracker: FrameTrackerConfig::frame_estimator(
-            args.estimator.config()?,
-            args.estimator.adaptation(),
-            args.estimator.named_motion_model(),
-        ),
-        detection: PhotoOptions {
-            polarity: args.polarity.into(),
-            distance_range_m: distance_range(args.distance_m.as_deref())?,
-            ..PhotoOptions::default()
-        },
-        // Densities given are the user's, kept whatever the shutter (even equal to the global-shutter defaults).
-        jerk_psd_given: args.estimator.jerk_psd.is_some()
-            || args.estimator.angular_jerk_psd.is_some(),
-        rs_smoothing: !args.no_rs_smoothing,
-        ..FrameTrackerConfig::default()
-    };
+    let camera = frame_camera(args, camera)?;
+    let config = frame_config(args)?;
     let timing = roitrack::formats::FrameTiming {
         timestamps: args.timestamps.clone(),
         fps: args.fps,
@@ -479,14 +478,15 @@ fn run_frames(
 /// (also through symbolic and hard links) or each other, and `-` for more than one output.
 fn check_paths(args: &TrackArgs) -> Result<()> {
     let first_measurements = args.measurements.first().cloned();
+    let (first_rois, first_images) = (args.rois.first().cloned(), args.images.first().cloned());
     let mut inputs = vec![("--target", args.target.target.as_path())];
     if let Some(camera) = args.camera.camera_path() {
         inputs.push(("--camera", camera));
     }
     for (name, path) in [
         ("--measurements", &first_measurements),
-        ("--rois", &args.rois),
-        ("--images", &args.images),
+        ("--rois", &first_rois),
+        ("--images", &first_images),
         ("--timestamps", &args.timestamps),
     ] {
         if let Some(path) = path {
@@ -519,27 +519,131 @@ fn check_paths(args: &TrackArgs) -> Result<()> {
     Ok(())
 }
 
-/// One camera's measurements file of a rig run, read and checked against that camera.
+/// One camera's input of a rig run, read and checked against that camera.
 struct CameraStream {
     camera: usize,
-    path: PathBuf,
-    reader: MeasurementSource,
+    /// The option and its file or source, for messages: `--images cam1=frames/`.
+    label: String,
+    reader: roitrack::camera_input::MeasurementStream,
 }
 
-/// `--measurements NAME=FILE` as (name, file); refused without the `=`.
-fn split_camera_file(text: &std::path::Path) -> Result<(String, PathBuf)> {
+/// `--measurements NAME=FILE` (or `--rois`, `--images`) as (name, file); refused without the `=`.
+fn split_camera_file(option: &str, text: &std::path::Path) -> Result<(String, PathBuf)> {
     let text = text.to_string_lossy();
     match text.split_once('=') {
         Some((name, file)) if !name.is_empty() && !file.is_empty() => {
             Ok((name.to_string(), PathBuf::from(file)))
         }
         _ => bail!(
-            "--measurements {text}: with --rig, give NAME=FILE, the name of a camera of the rig and its measurements"
+            "{option} {text}: with --rig, give NAME=FILE, the name of a camera of the rig and its input"
         ),
     }
 }
 
-/// `track --rig`: every camera's measurements merged in the order of their rig times (as far as the rig file gives
+/// The frame tracker's options of `track --images`, from the command line (the same for every camera of a rig).
+fn frame_config(args: &TrackArgs) -> Result<roitrack::pipeline::FrameTrackerConfig> {
+    use roitrack::pipeline::{FrameTrackerConfig, PhotoOptions};
+    Ok(FrameTrackerConfig {
+        // Without --adapt or --motion-model, the frame tracker's own defaults: the noise learnt, the process noise as
+        // given, constant acceleration.
+        tracker: FrameTrackerConfig::frame_estimator(
+            args.estimator.config()?,
+            args.estimator.adaptation(),
+            args.estimator.named_motion_model(),
+        ),
+        detection: PhotoOptions {
+            polarity: args.polarity.into(),
+            distance_range_m: distance_range(args.distance_m.as_deref())?,
+            ..PhotoOptions::default()
+        },
+        // Densities given are the user's, kept whatever the shutter (even equal to the global-shutter defaults).
+        jerk_psd_given: args.estimator.jerk_psd.is_some()
+            || args.estimator.angular_jerk_psd.is_some(),
+        rs_smoothing: !args.no_rs_smoothing,
+        ..FrameTrackerConfig::default()
+    })
+}
+
+/// The camera model `track --images` tracks frames with: `camera`, read as --shutter and --exposure-s say.
+fn frame_camera(
+    args: &TrackArgs,
+    mut camera: roitrack::CameraModel,
+) -> Result<roitrack::CameraModel> {
+    let readout = args.shutter.readout(args.line_delay_s)?;
+    camera.time = roitrack::core::time::TimeModel {
+        readout,
+        exposure_s: args.exposure_s,
+    };
+    camera
+        .time
+        .validate()
+        .context("invalid --line-delay-s or --exposure-s")?;
+    Ok(camera)
+}
+
+/// Every camera's input of a rig run (`NAME=...` of --measurements, --rois, --images), by camera: each name a camera
+/// of the rig, given once.
+fn rig_inputs(
+    args: &TrackArgs,
+    rig_path: &std::path::Path,
+    rig: &roitrack::core::rig::Rig,
+) -> Result<Vec<Option<roitrack::camera_input::CameraInput>>> {
+    use roitrack::camera_input::CameraInput;
+    let mut inputs: Vec<Option<CameraInput>> = vec![None; rig.len()];
+    let given = [
+        ("--measurements", &args.measurements),
+        ("--rois", &args.rois),
+        ("--images", &args.images),
+    ];
+    for (option, values) in given {
+        for value in values {
+            let (name, path) = split_camera_file(option, value)?;
+            let Some(c) = rig.index_of(&name) else {
+                let names: Vec<&str> = rig.cameras().iter().map(|c| c.name.as_str()).collect();
+                bail!(
+                    "{option} {name}={}: {} has no camera '{name}' (its cameras: {})",
+                    path.display(),
+                    rig_path.display(),
+                    names.join(", ")
+                );
+            };
+            if let Some(before) = &inputs[c] {
+                bail!(
+                    "{option} {name}={}: camera '{name}' is given twice (also {} {name}={}): one input per camera",
+                    path.display(),
+                    before.option(),
+                    before.path().display()
+                );
+            }
+            inputs[c] = Some(match option {
+                "--measurements" => CameraInput::Measurements {
+                    path,
+                    time_units: args.time_units.map(Into::into),
+                },
+                "--rois" => {
+                    let mut options = CentroidOptions::default();
+                    if args.no_symmetry_check {
+                        options.symmetry = None;
+                    }
+                    CameraInput::Rois { path, options }
+                }
+                _ => CameraInput::Images {
+                    source: path,
+                    timing: roitrack::formats::FrameTiming {
+                        timestamps: None,
+                        fps: args.fps,
+                        time_units: None,
+                    },
+                    config: Box::new(frame_config(args)?),
+                },
+            });
+        }
+    }
+    Ok(inputs)
+}
+
+/// `track --rig`: every camera's input turned into measurements (frames through the camera's own frame tracker) and
+/// merged in the order of their rig times (as far as the rig file gives
 /// the clocks; the tracker's reorder buffer takes the rest), fused into one pose and twist in the rig's frame.
 fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     if args.camera.is_some() {
@@ -556,48 +660,39 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     let file = roitrack::formats::read_rig_yaml(rig_path, &Default::default())?;
     let rig = &file.rig;
     let target = args.target.read()?;
-    let known_ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
-    // Each NAME=FILE: a camera of the rig, once.
-    let mut files: Vec<Option<PathBuf>> = vec![None; rig.len()];
-    for given in &args.measurements {
-        let (name, path) = split_camera_file(given)?;
-        let Some(c) = rig.index_of(&name) else {
-            let names: Vec<&str> = rig.cameras().iter().map(|c| c.name.as_str()).collect();
-            bail!(
-                "--measurements {name}={}: {} has no camera '{name}' (its cameras: {})",
-                path.display(),
-                rig_path.display(),
-                names.join(", ")
-            );
-        };
-        if files[c].is_some() {
-            bail!("--measurements: camera '{name}' is given twice");
-        }
-        files[c] = Some(path);
-    }
-    if files[0].is_none() {
+    if args.timestamps.is_some() {
         bail!(
-            "--measurements: the first camera of {}, '{}', holds the rig's clock: give its measurements ({}=FILE)",
-            rig_path.display(),
-            rig.cameras()[0].name,
-            rig.cameras()[0].name
+            "--timestamps is one file of frame times, and a rig's cameras each have their own: with --rig, give the \
+             frames' times by --fps, or use videos (their own timestamps)"
         );
     }
-    check_rig_paths(args, rig_path, &file, &files)?;
+    // Each NAME=...: a camera of the rig, once.
+    let inputs = rig_inputs(args, rig_path, rig)?;
+    if inputs[0].is_none() {
+        let first = &rig.cameras()[0].name;
+        bail!(
+            "the first camera of {}, '{first}', holds the rig's clock: give its input ({first}=FILE to \
+             --measurements, --rois or --images)",
+            rig_path.display(),
+        );
+    }
+    check_rig_paths(args, rig_path, &file, &inputs)?;
     let mut streams = Vec::new();
-    for (c, path) in files.iter().enumerate() {
-        let Some(path) = path else { continue };
-        let camera = &rig.cameras()[c].camera;
-        let reader = MeasurementReader::from_reader(open_input(path)?, path)?
-            .with_known_ids(known_ids.iter().copied())
-            .with_image_size(camera.width_px, camera.height_px);
-        let reader: MeasurementSource = Box::new(TimedMeasurements::new(
-            reader,
-            args.time_units.map(Into::into),
-        ));
+    for (c, input) in inputs.iter().enumerate() {
+        let Some(input) = input else { continue };
+        let name = &rig.cameras()[c].name;
+        let label = format!("{} {name}={}", input.option(), input.path().display());
+        let camera = match input {
+            roitrack::camera_input::CameraInput::Images { .. } => {
+                frame_camera(args, rig.cameras()[c].camera.clone())?
+            }
+            _ => rig.cameras()[c].camera.clone(),
+        };
+        let reader = roitrack::camera_input::open_camera_input(input, &camera, &target)
+            .with_context(|| format!("camera '{name}' ({label})"))?;
         streams.push(CameraStream {
             camera: c,
-            path: path.clone(),
+            label,
             reader,
         });
     }
@@ -616,22 +711,21 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     if tracker.is_single() {
         // One camera that is the rig: the single-camera path itself (readouts of one time pushed whole).
         let stream = streams.remove(0);
-        let path = stream.path.clone();
+        let path = stream.label.clone();
         let single = tracker.camera_tracker(0).expect("a rig has a first camera");
         let measurements = stream.reader.map(|m| {
-            crate::signals::check(&path)?;
+            crate::signals::check(rig_path)?;
             m
         });
         let report = roitrack::track(single, measurements, |e| {
             estimates += 1;
             writer.write(e)
         })
-        .with_context(|| format!("tracking {} failed", path.display()))?;
+        .with_context(|| format!("tracking {path} failed"))?;
         count = report.measurements;
         if report.estimates.total() == 0 {
             bail!(
-                "{}: no estimate from {count} measurements: {}",
-                path.display(),
+                "{path}: no estimate from {count} measurements: {}",
                 report.why_no_start()
             );
         }
@@ -639,18 +733,26 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         // Merged by the rig file's clocks, or by the camera's own when the file leaves them out.
         let clocks: Vec<roitrack::core::rig::ClockModel> =
             rig.cameras().iter().map(|c| c.clock).collect();
-        let paths: Vec<PathBuf> = streams.iter().map(|s| s.path.clone()).collect();
+        let labels: Vec<String> = streams.iter().map(|s| s.label.clone()).collect();
+        let streams_cameras: Vec<usize> = streams.iter().map(|s| s.camera).collect();
         let merged = roitrack::core::rig::merge_streams(
             streams.into_iter().map(|s| (s.camera, s.reader)).collect(),
             &clocks,
         );
         for (k, m) in merged {
-            crate::signals::check(&paths[k])?;
-            let m = m?;
+            crate::signals::check(rig_path)?;
+            // k: the stream's position among the streams given.
+            let label = &labels[k];
+            let m = m.with_context(|| {
+                format!(
+                    "camera '{}' ({label})",
+                    rig.cameras()[streams_cameras[k]].name
+                )
+            })?;
             count += 1;
             let fused = tracker
                 .push(&m)
-                .with_context(|| format!("tracking {} failed", paths[k].display()))?;
+                .with_context(|| format!("tracking {label} failed"))?;
             for e in fused {
                 writer.write(&e.estimate)?;
                 estimates += 1;
@@ -736,7 +838,7 @@ fn check_rig_paths(
     args: &TrackArgs,
     rig_path: &std::path::Path,
     file: &roitrack::formats::RigFile,
-    files: &[Option<PathBuf>],
+    given: &[Option<roitrack::camera_input::CameraInput>],
 ) -> Result<()> {
     let mut inputs = vec![
         ("--target", args.target.target.as_path()),
@@ -745,8 +847,8 @@ fn check_rig_paths(
     for path in &file.calibration_paths {
         inputs.push(("--rig's calibration", path.as_path()));
     }
-    for path in files.iter().flatten() {
-        inputs.push(("--measurements", path.as_path()));
+    for input in given.iter().flatten() {
+        inputs.push((input.option(), input.path()));
     }
     let mut outputs = vec![
         ("--poses", args.poses.as_path()),
