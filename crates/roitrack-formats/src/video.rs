@@ -4,14 +4,17 @@
 //! `ffprobe` first tells the size, the pixel format, the time base and (when the container says it, or by counting
 //! packets without decoding) the number of frames. Then `ffmpeg` decodes the first video stream to raw grey pixels on
 //! its standard output, every frame as it is (`-fps_mode passthrough`: none dropped or duplicated), read one frame of
-//! exactly `width * height * bytes` at a time. When the video's own times are wanted, a second `ffprobe` lists each
-//! decoded frame's timestamp alongside, read one line per frame.
+//! exactly `width * height * bytes` at a time. When the video's own times are wanted, the same `ffmpeg` logs each
+//! decoded frame's timestamp as its first filter (`showinfo`) receives it, and we read that log alongside the pixels:
+//! the video is decoded once.
 
 use std::ffi::{OsStr, OsString};
 use std::fs::File;
-use std::io::{self, BufRead, BufReader, Read, Seek};
+use std::io::{self, BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::process::{Child, ChildStdout, Command, ExitStatus, Stdio};
+
+use tempfile::NamedTempFile;
 
 use roitrack_image::Frame;
 
@@ -43,38 +46,41 @@ impl Default for Tools {
     }
 }
 
-/// A running program whose error output goes to an unnamed temporary file: unlike a pipe, the file never fills up, so
-/// the program can never block on it while we read its standard output, and it needs no thread.
+/// A running ffmpeg whose log (its error output) goes to a temporary file: unlike a pipe, the file never fills up, so
+/// ffmpeg can never block on it while we read its standard output, and reading it needs no thread. We read the file
+/// through a second handle of our own, with its own position, while ffmpeg writes it.
 #[derive(Debug)]
 struct Process {
     name: String,
     child: Child,
-    stderr: File,
+    log: Log,
+    /// The log's file, named so that it can be opened a second time; removed when the process is dropped.
+    _log_file: NamedTempFile,
 }
 
 impl Process {
-    /// Starts `program args`, its standard output piped to us.
+    /// Starts `program args`, its standard output piped to us, its log to a temporary file.
     fn spawn(
         program: &OsStr,
         args: &[OsString],
         video: &Path,
     ) -> Result<(Self, ChildStdout), FormatError> {
         let name = program.to_string_lossy().into_owned();
-        let stderr = tempfile::tempfile().map_err(|e| {
+        let file_error = |e| {
             FormatError::io(
                 video,
                 &format!("cannot create a temporary file for {name}'s messages"),
                 e,
             )
-        })?;
-        let stderr_for_child = stderr
-            .try_clone()
-            .map_err(|e| FormatError::io(video, "cannot duplicate a file handle", e))?;
+        };
+        let log_file = NamedTempFile::new().map_err(file_error)?;
+        let reader = log_file.reopen().map_err(file_error)?;
+        let log_for_child = log_file.as_file().try_clone().map_err(file_error)?;
         let mut child = Command::new(program)
             .args(args)
             .stdin(Stdio::null())
             .stdout(Stdio::piped())
-            .stderr(stderr_for_child)
+            .stderr(log_for_child)
             .spawn()
             .map_err(|e| spawn_error(&name, video, e))?;
         let Some(stdout) = child.stdout.take() else {
@@ -90,7 +96,8 @@ impl Process {
             Self {
                 name,
                 child,
-                stderr,
+                log: Log::new(reader),
+                _log_file: log_file,
             },
             stdout,
         ))
@@ -103,13 +110,11 @@ impl Process {
             .map_err(|e| FormatError::io(video, &format!("cannot wait for {}", self.name), e))
     }
 
-    /// What the program wrote to its error output so far (its end, when long), trimmed.
-    fn stderr_text(&mut self) -> String {
-        let mut bytes = Vec::new();
-        if self.stderr.rewind().is_err() || self.stderr.read_to_end(&mut bytes).is_err() {
-            return String::new();
-        }
-        tail(&String::from_utf8_lossy(&bytes))
+    /// The error messages of the log (its end, when long), trimmed, once the program has ended; with the number of
+    /// frame times in the log not yet read.
+    fn messages_at_end(&mut self) -> (String, usize) {
+        let unread_times = self.log.read_to_end();
+        (tail(&self.log.errors), unread_times)
     }
 }
 
@@ -121,6 +126,200 @@ impl Drop for Process {
             let _ = self.child.kill();
         }
         let _ = self.child.wait();
+    }
+}
+
+/// The levels ffmpeg's `-loglevel level+...` writes in brackets before each message.
+const LOG_LEVELS: &[&str] = &[
+    "quiet", "panic", "fatal", "error", "warning", "info", "verbose", "debug", "trace",
+];
+
+/// The levels of the messages that are errors (what `-v error` shows).
+const ERROR_LEVELS: &[&str] = &["panic", "fatal", "error"];
+
+/// The name ffmpeg gives the first filter of `-vf`, when it is `showinfo`: it logs the frames' timestamps.
+const TIME_FILTER: &str = "Parsed_showinfo_0";
+
+/// One line of ffmpeg's log, written with `-loglevel level+...`: `[context @ 0x55...] [level] message`, the context
+/// (nested contexts, or none) telling which part of ffmpeg speaks.
+#[derive(Debug, PartialEq)]
+enum LogLine {
+    /// The time filter's line for a frame: its number (from 0) and its timestamp in the stream's time base (none
+    /// when the video has none for it: `NOPTS`).
+    Frame { number: u64, timestamp: Option<i64> },
+    /// A line of the time filter that starts as a frame's but cannot be read (another format of another ffmpeg).
+    UnreadableFrame(String),
+    /// A message at an error level, as `-v error` would show it (without the level).
+    Error(String),
+    /// A message at another level.
+    Other,
+    /// A line without a level: the rest of the message before it, which had a line break in it.
+    Continuation(String),
+}
+
+/// Reads one line of ffmpeg's log (its line break removed or not).
+fn parse_log_line(line: &str) -> LogLine {
+    let line = line.trim_end_matches(['\n', '\r']);
+    let mut rest = line;
+    let mut first_context: Option<&str> = None;
+    while let Some(group) = rest.strip_prefix('[') {
+        let Some(end) = group.find(']') else {
+            break;
+        };
+        let name = &group[..end];
+        let after = group[end + 1..]
+            .strip_prefix(' ')
+            .unwrap_or(&group[end + 1..]);
+        if LOG_LEVELS.contains(&name) {
+            let level_start = line.len() - rest.len();
+            if ERROR_LEVELS.contains(&name) {
+                return LogLine::Error(format!("{}{after}", &line[..level_start]));
+            }
+            if name == "info"
+                && first_context == Some(TIME_FILTER)
+                && let Some(numbers) = after.strip_prefix("n:")
+            {
+                return parse_frame_line(numbers)
+                    .unwrap_or_else(|| LogLine::UnreadableFrame(after.to_string()));
+            }
+            return LogLine::Other;
+        }
+        match name.split_once(" @ ") {
+            Some((context, _)) => {
+                first_context.get_or_insert(context);
+                rest = after;
+            }
+            None => break,
+        }
+    }
+    LogLine::Continuation(line.to_string())
+}
+
+/// The frame number and timestamp of the time filter's line, after its `n:` (`   0 pts:  15360 pts_time:1 ...`).
+fn parse_frame_line(text: &str) -> Option<LogLine> {
+    let mut words = text.split_whitespace();
+    let number = words.next()?.parse().ok()?;
+    // `pts:` and its value are one word or two (`pts:      0`, or `pts:12345678` when the value fills the column).
+    let value = match words.next()?.strip_prefix("pts:")? {
+        "" => words.next()?,
+        value => value,
+    };
+    let timestamp = match value {
+        "NOPTS" => None,
+        value => Some(value.parse().ok()?),
+    };
+    Some(LogLine::Frame { number, timestamp })
+}
+
+/// At most this many bytes of error messages are kept while reading a log (more than [`MAX_STDERR_CHARS`], which
+/// the messages shown are cut to, so that the cut is at a character).
+const MAX_KEPT_ERROR_BYTES: usize = 8 * MAX_STDERR_CHARS;
+
+/// A frame line of the log: the frame's number and timestamp, or the text of a frame line that cannot be read.
+type LoggedFrame = Result<(u64, Option<i64>), String>;
+
+/// ffmpeg's log, read line by line as ffmpeg writes it.
+#[derive(Debug)]
+struct Log {
+    reader: BufReader<File>,
+    /// The line being read: ffmpeg may not have written its end yet.
+    line: Vec<u8>,
+    /// Whether the last message with a level was an error (its continuation lines are then part of it).
+    in_error: bool,
+    /// The error messages read so far, one a line (their end, when long).
+    errors: String,
+}
+
+impl Log {
+    fn new(file: File) -> Self {
+        Self {
+            reader: BufReader::new(file),
+            line: Vec::new(),
+            in_error: false,
+            errors: String::new(),
+        }
+    }
+
+    /// Reads the log up to the next frame line of the time filter, keeping the error messages on the way. `Ok(None)`
+    /// when the log has no complete line left (for now, while ffmpeg runs); `Err` with the text of a frame line that
+    /// cannot be read.
+    fn next_frame(&mut self) -> io::Result<Option<LoggedFrame>> {
+        loop {
+            let n = self.reader.read_until(b'\n', &mut self.line)?;
+            if n == 0 || self.line.last() != Some(&b'\n') {
+                // The end of what ffmpeg has written so far: a part of a line waits for the rest.
+                return Ok(None);
+            }
+            if let Some(frame) = self.take_line() {
+                return Ok(Some(frame));
+            }
+        }
+    }
+
+    /// Reads the rest of the log, once ffmpeg has ended, keeping the error messages; returns how many frame lines
+    /// were in it.
+    fn read_to_end(&mut self) -> usize {
+        let mut frames = 0;
+        loop {
+            match self.reader.read_until(b'\n', &mut self.line) {
+                Ok(0) | Err(_) => break,
+                Ok(_) => {
+                    if self.take_line().is_some() {
+                        frames += 1;
+                    }
+                }
+            }
+        }
+        // A last line without a line break.
+        if !self.line.is_empty() && self.take_line().is_some() {
+            frames += 1;
+        }
+        frames
+    }
+
+    /// Reads the line in `self.line` (and empties it): the frame it tells of, if it is a frame line.
+    fn take_line(&mut self) -> Option<LoggedFrame> {
+        let line = String::from_utf8_lossy(&self.line).into_owned();
+        self.line.clear();
+        match parse_log_line(&line) {
+            LogLine::Frame { number, timestamp } => {
+                self.in_error = false;
+                Some(Ok((number, timestamp)))
+            }
+            LogLine::UnreadableFrame(text) => {
+                self.in_error = false;
+                Some(Err(text))
+            }
+            LogLine::Error(text) => {
+                self.in_error = true;
+                self.push_error(&text);
+                None
+            }
+            LogLine::Other => {
+                self.in_error = false;
+                None
+            }
+            LogLine::Continuation(text) => {
+                if self.in_error {
+                    self.push_error(&text);
+                }
+                None
+            }
+        }
+    }
+
+    fn push_error(&mut self, text: &str) {
+        if !self.errors.is_empty() {
+            self.errors.push('\n');
+        }
+        self.errors.push_str(text);
+        if self.errors.len() > MAX_KEPT_ERROR_BYTES {
+            let mut cut = self.errors.len() - MAX_KEPT_ERROR_BYTES / 2;
+            while !self.errors.is_char_boundary(cut) {
+                cut += 1;
+            }
+            self.errors.drain(..cut);
+        }
     }
 }
 
@@ -270,45 +469,6 @@ fn bit_depth_from_table(table: &str, pix_fmt: &str) -> Option<u32> {
     })
 }
 
-/// One frame time read from the lister, in timestamp units, or none when the video has none for that frame.
-fn parse_timestamp_line(line: &str) -> Option<Option<i64>> {
-    let v = line.trim().strip_prefix("best_effort_timestamp=")?;
-    Some(v.parse::<i64>().ok())
-}
-
-/// The video's own frame times, listed by a second `ffprobe` as it decodes, one line per frame.
-///
-/// Why decoded frames' `best_effort_timestamp` and not packets sorted by their pts: with B-frames, packets come in
-/// decoding order and a decoder may drop some, hold others back, or (edit lists, open GOPs) emit a different number
-/// of frames than there are packets; a packet list re-sorted by pts is only usually right. `best_effort_timestamp` is
-/// the time the decoder gives each frame it outputs, in output order, and is the very timestamp `ffmpeg` itself gives
-/// a decoded frame: with `-fps_mode passthrough` the n-th line is the time of the n-th frame on ffmpeg's pipe. The
-/// cost is a second decoding, run alongside ffmpeg's (so it adds no wait before the first frame), not before it.
-#[derive(Debug)]
-struct TimeLister {
-    process: Process,
-    lines: BufReader<ChildStdout>,
-    line: String,
-}
-
-impl TimeLister {
-    /// The next listed frame's timestamp: `Ok(None)` when ffprobe's list has ended.
-    fn next(&mut self, video: &Path) -> Result<Option<Option<i64>>, FormatError> {
-        loop {
-            self.line.clear();
-            let n = self.lines.read_line(&mut self.line).map_err(|e| {
-                FormatError::io(video, "cannot read the frame times from ffprobe", e)
-            })?;
-            if n == 0 {
-                return Ok(None);
-            }
-            if let Some(timestamp) = parse_timestamp_line(&self.line) {
-                return Ok(Some(timestamp));
-            }
-        }
-    }
-}
-
 /// A video being decoded frame by frame.
 #[derive(Debug)]
 pub(crate) struct VideoDecoder {
@@ -322,7 +482,8 @@ pub(crate) struct VideoDecoder {
     // The pipe is declared before its process so that it is closed first when dropped.
     pixels: ChildStdout,
     ffmpeg: Process,
-    times: Option<TimeLister>,
+    /// Whether ffmpeg logs the frames' times (they are wanted).
+    times: bool,
     bytes: Vec<u8>,
     decoded: usize,
 }
@@ -366,61 +527,58 @@ impl VideoDecoder {
             None => count_packets(video, tools),
         };
 
+        if want_times && info.time_base.0 == 0 {
+            return Err(FormatError::new(
+                video,
+                "ffprobe gives no time base for the video's timestamps: give --fps F or --timestamps FILE.csv",
+            ));
+        }
         let mut args = os_args(&[
             "-nostdin",
             "-hide_banner",
-            "-v",
-            "error",
+            "-nostats",
+            // Each message with its level in brackets, so that the errors can be told from the frame times (which
+            // showinfo logs as information); every message, even one that repeats the one before.
+            "-loglevel",
+            if want_times {
+                "repeat+level+info"
+            } else {
+                "repeat+level+error"
+            },
             // The pixels as stored: a camera's calibration is of its sensor, not of a player's rotated view (and the
             // size stays the one ffprobe said).
             "-noautorotate",
-            "-i",
         ]);
+        if want_times {
+            // The timestamps as the file has them: without this, ffmpeg shifts them to start at 0.
+            args.push("-copyts".into());
+        }
+        args.push("-i".into());
         args.push(input_arg(video));
         args.extend(os_args(&[
             "-map",
             "0:V:0",
             "-fps_mode",
             "passthrough",
-            // The raw output's own timestamps are never used (the times come from ffprobe, a CSV or --fps); numbering
-            // the frames 0, 1, 2... in seconds keeps them increasing, so that a video whose timestamps repeat (ours
-            // then reports it) does not make the muxer complain, which would read as a decoding error.
             "-vf",
-            "settb=1,setpts=N",
+            // showinfo (first, so that it sees the frames as decoded) logs each frame's number and timestamp: the
+            // decoder's best_effort_timestamp, which ffmpeg gives the frame, in the stream's time base (what
+            // `ffprobe -show_entries frame=best_effort_timestamp` lists, without a second decoding). Its checksums
+            // are not needed. The raw output's own timestamps are never used (the times come from that log, a CSV
+            // or --fps); numbering the frames 0, 1, 2... in seconds keeps them increasing, so that a video whose
+            // timestamps repeat (ours then reports it) does not make the muxer complain, which would read as a
+            // decoding error.
+            if want_times {
+                "showinfo=checksum=0,settb=1,setpts=N"
+            } else {
+                "settb=1,setpts=N"
+            },
             "-f",
             "rawvideo",
             "-pix_fmt",
             out_pix_fmt,
             "-",
         ]));
-        let times = if want_times {
-            if info.time_base.0 == 0 {
-                return Err(FormatError::new(
-                    video,
-                    "ffprobe gives no time base for the video's timestamps: give --fps F or --timestamps FILE.csv",
-                ));
-            }
-            let mut args = os_args(&[
-                "-v",
-                "error",
-                "-select_streams",
-                "V:0",
-                "-show_entries",
-                "frame=best_effort_timestamp",
-                "-of",
-                "default=nw=1",
-                "-i",
-            ]);
-            args.push(input_arg(video));
-            let (process, stdout) = Process::spawn(&tools.ffprobe, &args, video)?;
-            Some(TimeLister {
-                process,
-                lines: BufReader::new(stdout),
-                line: String::new(),
-            })
-        } else {
-            None
-        };
         let (ffmpeg, pixels) = Process::spawn(&tools.ffmpeg, &args, video)?;
         Ok(Self {
             path: video.to_path_buf(),
@@ -431,7 +589,7 @@ impl VideoDecoder {
             frame_count,
             pixels,
             ffmpeg,
-            times,
+            times: want_times,
             bytes: Vec::new(),
             decoded: 0,
         })
@@ -457,7 +615,7 @@ impl VideoDecoder {
         }
         if got < size {
             let _ = self.ffmpeg.wait(&self.path);
-            let messages = self.ffmpeg.stderr_text();
+            let (messages, _) = self.ffmpeg.messages_at_end();
             return Err(FormatError::new(
                 &self.path,
                 with_messages(
@@ -480,54 +638,50 @@ impl VideoDecoder {
             }
         }
         self.decoded += 1;
-        let listed = match &mut self.times {
-            None => return Ok(Some(None)),
-            Some(times) => times.next(&self.path)?,
-        };
-        Ok(Some(Some(self.time_of(index, listed)?)))
+        if !self.times {
+            return Ok(Some(None));
+        }
+        Ok(Some(Some(self.time_of(index)?)))
     }
 
-    /// The time (s) of frame `index` from its listed timestamp.
-    fn time_of(&mut self, index: usize, listed: Option<Option<i64>>) -> Result<f64, FormatError> {
-        match listed {
-            Some(Some(timestamp)) => {
+    /// The time (s) of frame `index`, which ffmpeg has just output, from ffmpeg's log.
+    ///
+    /// ffmpeg logs a frame's line (its showinfo filter) before the frame goes on to the output, so once a frame's
+    /// pixels are read its line is in the log: this never waits, and a line that is not there is an error at once.
+    fn time_of(&mut self, index: usize) -> Result<f64, FormatError> {
+        let logged = self.ffmpeg.log.next_frame().map_err(|e| {
+            FormatError::io(&self.path, "cannot read ffmpeg's log of the frame times", e)
+        })?;
+        let fallback = "give --fps F or --timestamps FILE.csv";
+        let problem = match logged {
+            Some(Ok((number, Some(timestamp)))) if number == index as u64 => {
                 let (num, den) = self.time_base;
                 // Exact product in integers, one rounding in the division.
-                Ok((i128::from(timestamp) * i128::from(num)) as f64 / den as f64)
+                return Ok((i128::from(timestamp) * i128::from(num)) as f64 / den as f64);
             }
-            Some(None) => Err(FormatError::new(
-                &self.path,
-                format!(
-                    "frame {index} has no timestamp in the video: give --fps F or --timestamps FILE.csv"
-                ),
-            )),
-            None => {
-                let messages = match &mut self.times {
-                    Some(times) => {
-                        let _ = times.process.wait(&self.path);
-                        times.process.stderr_text()
-                    }
-                    None => String::new(),
-                };
-                Err(FormatError::new(
-                    &self.path,
-                    with_messages(
-                        format!(
-                            "frame {index}: ffprobe lists the times of only {index} frames, but ffmpeg decodes more"
-                        ),
-                        "ffprobe",
-                        &messages,
-                    ),
-                ))
+            Some(Ok((number, None))) if number == index as u64 => {
+                format!("frame {index} has no timestamp in the video: {fallback}")
             }
-        }
+            Some(Ok((number, _))) => format!(
+                "frame {index}: ffmpeg's log gives the time of its frame {number} instead (does the video change \
+                 size or format midway?): {fallback}"
+            ),
+            Some(Err(text)) => format!(
+                "frame {index}: cannot read its time in ffmpeg's log (showinfo says {text:?}): {fallback}"
+            ),
+            None => format!(
+                "frame {index}: ffmpeg outputs it, but its log gives no time for it: {fallback}"
+            ),
+        };
+        Err(FormatError::new(&self.path, problem))
     }
 
-    /// At the end of ffmpeg's output: checks that ffmpeg succeeded without complaint and that the time list ends too.
+    /// At the end of ffmpeg's output: checks that ffmpeg succeeded without complaint and that its log has no more
+    /// frame times than it output frames.
     fn finish(&mut self) -> Result<(), FormatError> {
         let decoded = self.decoded;
         let status = self.ffmpeg.wait(&self.path)?;
-        let messages = self.ffmpeg.stderr_text();
+        let (messages, unread_times) = self.ffmpeg.messages_at_end();
         if !status.success() {
             return Err(FormatError::new(
                 &self.path,
@@ -548,8 +702,8 @@ impl VideoDecoder {
                 ),
             ));
         }
-        // With `-v error`, anything ffmpeg says is an error: a truncated file ("File ended prematurely") or damaged
-        // frames still end with exit status 0 and the frames before the damage.
+        // Any error message is an error: a truncated file ("File ended prematurely") or damaged frames still end
+        // with exit status 0 and the frames before the damage.
         if !messages.is_empty() {
             return Err(FormatError::new(
                 &self.path,
@@ -558,27 +712,14 @@ impl VideoDecoder {
                 ),
             ));
         }
-        if let Some(times) = &mut self.times {
-            if times.next(&self.path)?.is_some() {
-                return Err(FormatError::new(
-                    &self.path,
-                    format!(
-                        "ffprobe lists more frame times than the {decoded} frames ffmpeg decodes"
-                    ),
-                ));
-            }
-            let status = times.process.wait(&self.path)?;
-            if !status.success() {
-                let messages = times.process.stderr_text();
-                return Err(FormatError::new(
-                    &self.path,
-                    with_messages(
-                        format!("ffprobe failed ({status}) listing the frame times"),
-                        "ffprobe",
-                        &messages,
-                    ),
-                ));
-            }
+        if unread_times > 0 {
+            return Err(FormatError::new(
+                &self.path,
+                format!(
+                    "ffmpeg logs the times of {} frames but outputs {decoded}",
+                    decoded + unread_times
+                ),
+            ));
         }
         Ok(())
     }
@@ -666,17 +807,106 @@ mod tests {
     }
 
     #[test]
-    fn timestamp_lines_are_parsed() {
+    fn log_lines_are_told_apart() {
+        let frame = |number, timestamp| LogLine::Frame { number, timestamp };
         assert_eq!(
-            parse_timestamp_line("best_effort_timestamp=1024\n"),
-            Some(Some(1024))
+            parse_log_line(
+                "[Parsed_showinfo_0 @ 0x564dd01d8480] [info] n:   0 pts:      0 pts_time:0       pos:       48 \
+                 fmt:yuv420p sar:1/1 s:320x240 i:P iskey:1 type:I \n"
+            ),
+            frame(0, Some(0))
+        );
+        // A value that fills its column, a negative one, none.
+        assert_eq!(
+            parse_log_line("[Parsed_showinfo_0 @ 0x1] [info] n:1234 pts:12345678 pts_time:803.7\n"),
+            frame(1234, Some(12_345_678))
         );
         assert_eq!(
-            parse_timestamp_line("best_effort_timestamp=N/A\n"),
-            Some(None)
+            parse_log_line("[Parsed_showinfo_0 @ 0x1] [info] n:   3 pts:  -1024 pts_time:-0.08"),
+            frame(3, Some(-1024))
         );
-        assert_eq!(parse_timestamp_line("\n"), None);
-        assert_eq!(parse_timestamp_line("pkt_dts=3\n"), None);
+        assert_eq!(
+            parse_log_line("[Parsed_showinfo_0 @ 0x1] [info] n:   3 pts:  NOPTS pts_time:NOPTS"),
+            frame(3, None)
+        );
+        assert_eq!(
+            parse_log_line("[Parsed_showinfo_0 @ 0x1] [info] n:   3 time:  1024"),
+            LogLine::UnreadableFrame("n:   3 time:  1024".into())
+        );
+        // The filter's other lines, and another filter's.
+        for line in [
+            "[Parsed_showinfo_0 @ 0x1] [info] config in time_base: 1/15360, frame_rate: 30/1",
+            "[Parsed_showinfo_0 @ 0x1] [info] color_range:unknown color_space:unknown",
+            "[Parsed_showinfo_1 @ 0x1] [info] n:   0 pts:      0",
+            "[Parsed_showinfo_0 @ 0x1] [warning] n:   0 pts:      0",
+            "[info] Input #0, mov,mp4,m4a,3gp,3g2,mj2, from 'file:n: 0 pts: 0.mp4':",
+        ] {
+            assert_eq!(parse_log_line(line), LogLine::Other, "{line}");
+        }
+        // Errors as `-v error` shows them, from nested contexts or none.
+        assert_eq!(
+            parse_log_line(
+                "[mov,mp4,m4a,3gp,3g2,mj2 @ 0x5] [error] stream 0, offset 0x30: partial file\n"
+            ),
+            LogLine::Error(
+                "[mov,mp4,m4a,3gp,3g2,mj2 @ 0x5] stream 0, offset 0x30: partial file".into()
+            )
+        );
+        assert_eq!(
+            parse_log_line("[fatal] Conversion failed!"),
+            LogLine::Error("Conversion failed!".into())
+        );
+        assert_eq!(
+            parse_log_line("[a @ 0x1] [h264 @ 0x2] [panic] Assertion failed"),
+            LogLine::Error("[a @ 0x1] [h264 @ 0x2] Assertion failed".into())
+        );
+        for line in ["    vendor_id [0][0][0][0]", "[0][0] more", ""] {
+            assert_eq!(
+                parse_log_line(line),
+                LogLine::Continuation(line.into()),
+                "{line}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_log_is_read_as_it_grows_and_keeps_the_errors() {
+        let mut file = tempfile::NamedTempFile::new().unwrap();
+        let mut log = Log::new(file.reopen().unwrap());
+        let mut write = |text: &str| {
+            use std::io::Write;
+            file.write_all(text.as_bytes()).unwrap();
+            file.flush().unwrap();
+        };
+        write(
+            "[info] Stream mapping:\n[h264 @ 0x1] [error] bad slice\n  at 3\n[Parsed_showinfo_0 @ 0x2] [info] n:",
+        );
+        // The frame line is not complete yet.
+        assert_eq!(log.next_frame().unwrap(), None);
+        write("   0 pts:   512 pts_time:0.03\n[Parsed_showinfo_0 @ 0x2] [info] color_range:tv\n");
+        assert_eq!(log.next_frame().unwrap(), Some(Ok((0, Some(512)))));
+        assert_eq!(log.next_frame().unwrap(), None);
+        write("[Parsed_showinfo_0 @ 0x2] [info] n:   1 pts:  NOPTS\n  continued\n[error] last");
+        assert_eq!(log.next_frame().unwrap(), Some(Ok((1, None))));
+        // At the end: the last line even without its line break; one frame line left unread.
+        write("\n[Parsed_showinfo_0 @ 0x2] [info] n:   2 pts:  1024\n[error] really last");
+        assert_eq!(log.read_to_end(), 1);
+        assert_eq!(
+            log.errors,
+            "[h264 @ 0x1] bad slice\n  at 3\nlast\nreally last"
+        );
+
+        // Many errors: the last ones are kept, cut at a character.
+        let mut log = Log::new(tempfile::tempfile().unwrap());
+        for i in 0..2000 {
+            log.push_error(&format!("é{i}"));
+        }
+        assert!(log.errors.len() <= MAX_KEPT_ERROR_BYTES);
+        assert!(
+            log.errors.ends_with("\né1999"),
+            "{}",
+            &log.errors[log.errors.len() - 20..]
+        );
     }
 
     #[test]

@@ -988,3 +988,102 @@ fn frame_times_in_milliseconds_are_caught() {
         &[":2: field 't'", "past the year 5000", "--time-units ns"],
     );
 }
+
+/// The decoded frames' `best_effort_timestamp` as a second, independent ffprobe decoding lists them, in seconds.
+fn ffprobe_frame_times_s(video: &Path) -> Vec<f64> {
+    let run = |entries: &str| {
+        let output = Command::new("ffprobe")
+            .args([
+                "-v",
+                "error",
+                "-select_streams",
+                "V:0",
+                "-show_entries",
+                entries,
+            ])
+            .args(["-of", "default=nw=1:nk=1"])
+            .arg(video)
+            .output()
+            .unwrap();
+        assert!(output.status.success(), "ffprobe {}", video.display());
+        String::from_utf8_lossy(&output.stdout).into_owned()
+    };
+    let time_base = run("stream=time_base");
+    let (num, den) = time_base.trim().split_once('/').unwrap();
+    let (num, den): (i128, i128) = (num.parse().unwrap(), den.parse().unwrap());
+    run("frame=best_effort_timestamp")
+        .lines()
+        .filter(|l| !l.trim().is_empty())
+        .map(|l| (l.trim().parse::<i128>().unwrap() * num) as f64 / den as f64)
+        .collect()
+}
+
+#[test]
+fn video_times_are_those_an_independent_decoding_lists() {
+    let _lock = VIDEO_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    if !have_ffmpeg("video_times_are_those_an_independent_decoding_lists") {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let frames = squares(12, 1, 8);
+    let h264 = ["-c:v", "libx264", "-pix_fmt", "yuv420p"];
+    // Irregular, increasing times (in milliseconds, so that none round onto another): 10 Hz, then 20 Hz, then steps
+    // of 0.12 and 0.14 s.
+    let vfr = "settb=1/1000,setpts='if(lt(N\\,4)\\,N/10\\,if(lt(N\\,8)\\,0.3+(N-3)/20\\,0.5+(N-7)*0.13+0.01*mod(N\\,2)))/TB'";
+    let mut videos = Vec::new();
+    // Constant rate, libx264's default B-frames (and the edit list that mp4 then has for their delay).
+    videos.push(make_video(dir.path(), "cfr.mp4", &frames, &h264));
+    for name in ["vfr.mkv", "vfr.mp4"] {
+        let mut args = vec![
+            "-vf",
+            vfr,
+            "-fps_mode",
+            "passthrough",
+            "-enc_time_base",
+            "1/1000",
+        ];
+        args.extend(h264);
+        videos.push(make_video(dir.path(), name, &frames, &args));
+    }
+    // A first timestamp of 7.5 s.
+    for name in ["late.mp4", "late.mkv"] {
+        let mut args = vec!["-output_ts_offset", "7.5"];
+        args.extend(h264);
+        videos.push(make_video(dir.path(), name, &frames, &args));
+    }
+    // An edit list that starts after the first frames, which are decoded (their successors need them) and dropped.
+    let trimmed = dir.path().join("trimmed.mp4");
+    let output = Command::new("ffmpeg")
+        .args(["-nostdin", "-v", "error", "-y", "-ss", "0.35", "-i"])
+        .arg(&videos[0])
+        .args(["-c", "copy"])
+        .arg(&trimmed)
+        .output()
+        .unwrap();
+    assert!(
+        output.status.success(),
+        "{}",
+        String::from_utf8_lossy(&output.stderr)
+    );
+    videos.push(trimmed);
+
+    for video in &videos {
+        let expected = ffprobe_frame_times_s(video);
+        let (frames, error) = read_all(&mut open(video, &FrameTiming::default()));
+        assert_eq!(error, None, "{}", video.display());
+        let times: Vec<f64> = frames.iter().map(|(info, _)| info.t_s).collect();
+        assert_eq!(times, expected, "{}", video.display());
+    }
+    // The files are what they are said to be.
+    let steps: Vec<f64> = ffprobe_frame_times_s(&videos[1])
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .collect();
+    assert!(
+        steps.iter().any(|&s| s < 0.06) && steps.iter().any(|&s| s > 0.12),
+        "{steps:?}"
+    );
+    assert_eq!(ffprobe_frame_times_s(&videos[3])[0], 7.5);
+    let trimmed_times = ffprobe_frame_times_s(&videos[5]);
+    assert!((1..12).contains(&trimmed_times.len()), "{trimmed_times:?}");
+}
