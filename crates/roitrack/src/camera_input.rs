@@ -69,7 +69,8 @@ impl CameraInput {
     }
 }
 
-/// Why a camera's input could not be opened or read on.
+/// Why a camera's input could not be opened or read on (the cause of a frame's or the options' error is its
+/// [`std::error::Error::source`]).
 #[derive(Debug)]
 pub enum CameraInputError {
     /// The file or source (its own error names it, and the line or frame).
@@ -88,12 +89,8 @@ impl fmt::Display for CameraInputError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Format(e) => write!(f, "{e}"),
-            Self::Config(e) => write!(f, "invalid frame tracker options: {e}"),
-            Self::Frame {
-                index,
-                name,
-                source,
-            } => write!(f, "frame {index} ({name}): {source}"),
+            Self::Config(_) => write!(f, "invalid frame tracker options"),
+            Self::Frame { index, name, .. } => write!(f, "frame {index} ({name})"),
         }
     }
 }
@@ -101,7 +98,8 @@ impl fmt::Display for CameraInputError {
 impl std::error::Error for CameraInputError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
-            Self::Format(e) => Some(e),
+            // Transparent: its message is the error's own.
+            Self::Format(e) => e.source(),
             Self::Config(e) => Some(e),
             Self::Frame { source, .. } => Some(source),
         }
