@@ -22,6 +22,7 @@
 //! `angular_velocity_radps`, both in the camera frame. A model point `p` observed `d` seconds after the reference time is
 //! at `Exp(W d) R p + t + V d`. A 12-vector correction `(v, w, dV, dW)` acts as `R <- Exp(w) R`, `t <- t + v`,
 //! `V <- V + dV`, `W <- W + dW`.
+#![deny(missing_docs)]
 
 pub mod camera;
 pub mod estimator;

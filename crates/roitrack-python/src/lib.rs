@@ -6,6 +6,7 @@
 //! invalid option or a refused measurement raises `roitrack.RoitrackError` (a `ValueError`) with the command line's
 //! message (file, line and field for files); an array of the wrong shape raises `ValueError` and one of the wrong
 //! dtype `TypeError`, both naming the argument.
+#![deny(missing_docs)]
 
 use std::path::PathBuf;
 use std::sync::Mutex;

@@ -32,20 +32,27 @@ pub enum CameraInput {
     /// A measurements CSV (t,id,u,v; `-`: the standard input), its times in `time_units` (`None`: seconds, and
     /// times that look like another unit refused).
     Measurements {
+        /// The CSV file (`-`: the standard input).
         path: PathBuf,
+        /// The unit of its times (`None`: seconds).
         time_units: Option<TimeUnit>,
     },
     /// A ROI recording, each ROI's blob centroided with `options` and timed by the camera's time model; ROIs whose
     /// blob is rejected give no measurement.
     Rois {
+        /// The ROI recording.
         path: PathBuf,
+        /// How each ROI's blob is centroided.
         options: CentroidOptions,
     },
     /// Frames, timed by `timing`, measured by a [`FrameTracker`] of the camera (its time model says how the rows
     /// are read) with `config`: each frame gives the measurements of the blobs it found, in time order.
     Images {
+        /// An image file, a folder of images or a video.
         source: PathBuf,
+        /// How each frame's time is found.
         timing: FrameTiming,
+        /// The frame tracker's options.
         config: Box<FrameTrackerConfig>,
     },
 }
@@ -79,8 +86,11 @@ pub enum CameraInputError {
     Config(ConfigError),
     /// A frame that could not be processed (its index and name in the source).
     Frame {
+        /// The frame's index in the source, from 0.
         index: usize,
+        /// The frame's name in the source (its file name, or its number in a video).
         name: String,
+        /// Why it could not be processed.
         source: FrameError,
     },
 }

@@ -91,6 +91,7 @@
 //! `simulate_and_evaluate` (your own camera and target, ground truth, metrics), `own_camera` (the real-time loop on a
 //! camera of your own), `find_target` (the target in a full frame, no prior) and `detect_photo` (a circle grid in a
 //! photograph: yours, or a synthetic one checked against its truth).
+#![deny(missing_docs)]
 
 pub mod camera_input;
 

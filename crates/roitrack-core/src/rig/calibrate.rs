@@ -1,31 +1,5 @@
 //! Calibration of a rig from the target: each camera's pose in the rig and its clock, found from a recording in which
 //! the moving target is seen by at least two cameras at a time.
-//!
-//! Every camera runs the single-camera tracker of its own measurements ([`Tracker`]), which gives its track of the
-//! target, `camera_T_object` and its twist, on its own clock. A camera whose pose or clock is unknown is then placed
-//! against a camera already placed (the first camera, whose frame and clock are the rig's, to begin with): for each of
-//! its estimates at camera time `s`, the rig time is `τ = offset + s / (1 + drift 1e-6)`, the placed camera's track is
-//! interpolated at `τ` and carried into the rig's frame, and every model point `p` gives the residual
-//!
-//! ```text
-//! r = X (rig_T_object(τ) p) - camera_T_object(s) p        (metres, the camera's frame; X = camera_T_rig)
-//! ```
-//!
-//! An unknown offset is first searched on a grid (the shift whose best `X` lays the two tracks over each other most
-//! closely); `X`, the offset and the drift are then refined by Gauss-Newton with Huber weights. A clock's columns are
-//! the point's velocity, `X R (W × (R_c p) + V)` carried from the placed camera, times `dτ/d offset = 1` and
-//! `dτ/d drift = -s 1e-6 / (1 + drift 1e-6)²`.
-//!
-//! The mount is fitted with every point weighed alike; the clock is then fitted again, the mount held, with each
-//! residual weighed by the covariance the two tracks state at its point. On simulated rigs, weighing the mount's fit
-//! so (or by the residuals' own covariance) doubled its error, the tracks' well-determined directions carrying errors
-//! that their covariances do not account for; the clock's error it cuts several times.
-//!
-//! The standard deviations come from the spread of the residuals, not from a noise model of the tracks: consecutive
-//! estimates of a tracker are correlated, so the covariance is the sandwich `H⁻¹ (Σ_b g_b g_bᵀ) H⁻¹` over contiguous
-//! batches `b` of [`RigCalibrationConfig::batch_s`] (`g_b` the batch's gradient, `H` the Gauss-Newton matrix), with
-//! the small-sample factor `B / (B - n)` for `B` batches and `n` parameters. A camera placed against another than the
-//! first also carries that camera's uncertainty.
 
 use nalgebra::{DMatrix, DVector, Matrix3, Matrix3x6, Matrix6, Rotation3, SMatrix, Vector3};
 use thiserror::Error;
@@ -193,7 +167,35 @@ pub struct RigCalibration {
 /// Finds the unknown poses and clocks of a rig's cameras from their measurements of the moving target.
 ///
 /// The first camera's frame is the rig's when its pose is not given; its clock is the rig's. Poses and clocks the rig
-/// gives are kept. See the [module documentation](self) for the method.
+/// gives are kept.
+///
+/// # How it works
+///
+/// Every camera runs the single-camera tracker of its own measurements ([`Tracker`]), which gives its track of the
+/// target, `camera_T_object` and its twist, on its own clock. A camera whose pose or clock is unknown is then placed
+/// against a camera already placed (the first camera, whose frame and clock are the rig's, to begin with): for each of
+/// its estimates at camera time `s`, the rig time is `τ = offset + s / (1 + drift 1e-6)`, the placed camera's track is
+/// interpolated at `τ` and carried into the rig's frame, and every model point `p` gives the residual
+///
+/// ```text
+/// r = X (rig_T_object(τ) p) - camera_T_object(s) p        (metres, the camera's frame; X = camera_T_rig)
+/// ```
+///
+/// An unknown offset is first searched on a grid (the shift whose best `X` lays the two tracks over each other most
+/// closely); `X`, the offset and the drift are then refined by Gauss-Newton with Huber weights. A clock's columns are
+/// the point's velocity, `X R (W × (R_c p) + V)` carried from the placed camera, times `dτ/d offset = 1` and
+/// `dτ/d drift = -s 1e-6 / (1 + drift 1e-6)²`.
+///
+/// The mount is fitted with every point weighed alike; the clock is then fitted again, the mount held, with each
+/// residual weighed by the covariance the two tracks state at its point. On simulated rigs, weighing the mount's fit
+/// so (or by the residuals' own covariance) doubled its error, the tracks' well-determined directions carrying errors
+/// that their covariances do not account for; the clock's error it cuts several times.
+///
+/// The standard deviations come from the spread of the residuals, not from a noise model of the tracks: consecutive
+/// estimates of a tracker are correlated, so the covariance is the sandwich `H⁻¹ (Σ_b g_b g_bᵀ) H⁻¹` over contiguous
+/// batches `b` of [`RigCalibrationConfig::batch_s`] (`g_b` the batch's gradient, `H` the Gauss-Newton matrix), with
+/// the small-sample factor `B / (B - n)` for `B` batches and `n` parameters. A camera placed against another than the
+/// first also carries that camera's uncertainty.
 ///
 /// ```
 /// use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCalibrator, RigCalibrationConfig, RigCamera};

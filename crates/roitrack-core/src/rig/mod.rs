@@ -121,7 +121,9 @@ impl ClockModel {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CameraMount {
+    /// The rotation taking a direction in the rig frame to the camera frame.
     pub camera_r_rig: Rotation3<f64>,
+    /// The rig's origin in the camera frame (m).
     pub camera_t_rig_m: Vector3<f64>,
 }
 
@@ -140,6 +142,7 @@ impl CameraMount {
         camera_t_rig_m: Vector3::new(0.0, 0.0, 0.0),
     };
 
+    /// The mount `camera_T_rig` from its rotation and the rig's origin in the camera frame (m).
     pub fn new(camera_r_rig: Rotation3<f64>, camera_t_rig_m: Vector3<f64>) -> Self {
         Self {
             camera_r_rig,
@@ -314,18 +317,41 @@ impl RigCamera {
 /// Why a rig is refused.
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum RigDefinitionError {
+    /// The rig lists no camera.
     #[error("a rig needs at least one camera")]
     Empty,
+    /// Two cameras share a name.
     #[error("camera '{name}' is listed twice")]
-    DuplicateCamera { name: String },
+    DuplicateCamera {
+        /// The name given twice.
+        name: String,
+    },
+    /// A mount or clock value is NaN or infinite.
     #[error("camera '{name}': {what} is not finite")]
-    NotFinite { name: String, what: &'static str },
+    NotFinite {
+        /// The camera.
+        name: String,
+        /// Which value.
+        what: &'static str,
+    },
+    /// A clock drift beyond [`MAX_DRIFT_PPM`].
     #[error("camera '{name}': the clock drift must be within ±{max} ppm, got {value} ppm")]
-    Drift { name: String, value: f64, max: f64 },
+    Drift {
+        /// The camera.
+        name: String,
+        /// The drift given (ppm).
+        value: f64,
+        /// The largest drift allowed (ppm).
+        max: f64,
+    },
+    /// The first camera, whose clock is the rig's, has an unknown offset or drift.
     #[error(
         "the first camera '{name}' is the rig's clock: its clock offset and drift must be known (give both, or neither)"
     )]
-    ReferenceClockUnknown { name: String },
+    ReferenceClockUnknown {
+        /// The first camera.
+        name: String,
+    },
 }
 
 /// The largest clock drift a rig may state (ppm): a tenth of a percent, ten times a cheap crystal's.
@@ -398,10 +424,12 @@ impl Rig {
         }
     }
 
+    /// The cameras, the first one the rig's reference.
     pub fn cameras(&self) -> &[RigCamera] {
         &self.cameras
     }
 
+    /// How many cameras.
     pub fn len(&self) -> usize {
         self.cameras.len()
     }

@@ -1,15 +1,5 @@
 //! The rig's tracker: one pose and twist of the target, in the rig's frame and on the rig's clock, from the
 //! centroids of every camera as they come, and each camera's clock learnt from them.
-//!
-//! Every camera also runs the single-camera tracker of its own measurements ([`Tracker`]): it starts the tracks (a
-//! static pose and a 12-dof fit of its first cycles, as a single camera does), learns that camera's centroid noise,
-//! and gives the coarse offset of its clock (the shift that lays its track over the first camera's,
-//! [`search_offset_s`]). The fused filter is then an error-state Kalman filter of the rig's 12-dof state augmented by
-//! each unknown clock offset and drift: every centroid is one update at its own rig time, through its camera's
-//! projection, the image velocity of the point being the clock's column of the Jacobian ([`rig_projection`]).
-//!
-//! A rig of one camera that is the rig (identity mount, reference clock) runs the single-camera tracker alone: its
-//! estimates are today's, bit for bit.
 
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, VecDeque};
@@ -85,28 +75,46 @@ impl Default for RigTrackerConfig {
 /// ```
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum RigError {
+    /// The tracker's options are refused.
     #[error("invalid tracker options: {0}")]
     Config(#[from] ConfigError),
+    /// A measurement names a camera number the rig does not have.
     #[error("a measurement of camera number {camera}, but the rig has {cameras} cameras")]
-    UnknownCamera { camera: usize, cameras: usize },
+    UnknownCamera {
+        /// The camera number given.
+        camera: usize,
+        /// How many cameras the rig has.
+        cameras: usize,
+    },
+    /// A camera's `camera_T_rig` is unknown: the tracker needs every mount.
     #[error(
         "camera '{camera}': its camera_T_rig is not given: find it with calibrate-rig (RigCalibrator) first"
     )]
-    MountUnknown { camera: String },
+    MountUnknown {
+        /// The camera.
+        camera: String,
+    },
+    /// A camera's own tracker refused a measurement.
     #[error("camera '{camera}': {source}")]
     Measurement {
+        /// The camera.
         camera: String,
+        /// Why its tracker refused it.
         #[source]
         source: TrackError,
     },
+    /// A camera's clock offset was searched and the best match lies at the search's edge.
     #[error(
         "camera '{camera}': its track never matches the first camera's within the clock offset search of ±{max_offset_s} s \
          (best match at the search's edge, {rms_mm:.1} mm apart): check its clock offset, its camera_T_rig and that it \
          sees the same target"
     )]
     ClockBeyondSearch {
+        /// The camera.
         camera: String,
+        /// The half-width of the offset search (s).
         max_offset_s: f64,
+        /// The RMS distance between the tracks at the best offset searched (mm).
         rms_mm: f64,
     },
 }
@@ -124,9 +132,13 @@ pub enum RigError {
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ClockEstimate {
+    /// The camera clock's offset from the rig's (s).
     pub offset_s: f64,
+    /// The camera clock's drift against the rig's (ppm).
     pub drift_ppm: f64,
+    /// The offset's standard deviation (s).
     pub offset_sigma_s: f64,
+    /// The drift's standard deviation (ppm).
     pub drift_sigma_ppm: f64,
     /// Whether the offset has been found (known, or searched); `false` while the camera waits for its search.
     pub synced: bool,
@@ -136,16 +148,20 @@ pub struct ClockEstimate {
 /// rig's clock; and every camera's clock as known then.
 #[derive(Debug, Clone, PartialEq)]
 pub struct RigEstimate {
+    /// The fused estimate of `rig_T_object`, in the rig frame and on the rig's clock.
     pub estimate: Estimate,
+    /// Every camera's clock at that time, in the rig's camera order.
     pub clocks: Vec<ClockEstimate>,
 }
 
 /// What a [`RigTracker`] has done.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct RigTrackerReport {
-    /// Measurements taken, and those the fused filter used, rejected by its gate.
+    /// Measurements taken.
     pub measurements: usize,
+    /// Measurements the fused filter used.
     pub fused: usize,
+    /// Measurements the fused filter's gate rejected.
     pub gated: usize,
     /// Fused tracks started (a lost one is started again from a camera's own track).
     pub starts: usize,
@@ -204,7 +220,19 @@ struct Fused {
     gain: Vec<[f64; 2]>,
 }
 
-/// Many asynchronous cameras, one pose and twist (see the [module documentation](self)).
+/// Many asynchronous cameras, one pose and twist.
+///
+/// # How it works
+///
+/// Every camera also runs the single-camera tracker of its own measurements ([`Tracker`]): it starts the tracks (a
+/// static pose and a 12-dof fit of its first cycles, as a single camera does), learns that camera's centroid noise,
+/// and gives the coarse offset of its clock (the shift that lays its track over the first camera's,
+/// [`search_offset_s`]). The fused filter is then an error-state Kalman filter of the rig's 12-dof state augmented by
+/// each unknown clock offset and drift: every centroid is one update at its own rig time, through its camera's
+/// projection, the image velocity of the point being the clock's column of the Jacobian ([`rig_projection`]).
+///
+/// A rig of one camera that is the rig (identity mount, reference clock) runs the single-camera tracker alone: its
+/// estimates are the single-camera tracker's, bit for bit.
 ///
 /// ```
 /// use roitrack_core::rig::{Rig, RigMeasurement, RigTracker, RigTrackerConfig};
