@@ -20,6 +20,9 @@ pub struct FrameTrackerConfig {
     pub detection: PhotoOptions,
     /// Window sizing (sizes between `min_size_px` and `max_size_px`, at most 64).
     pub windows: SchedulerConfig,
+    /// How each blob is measured in its window once the window is flattened: the threshold (an automatic one is
+    /// taken from the background the flattening found), the weighting, the area limits and the symmetry check. The
+    /// whole-frame search measures with `detection` instead.
     pub centroid: CentroidOptions,
     /// Fewest blobs found in their windows for a frame to be tracked from its windows; with fewer, the frame is
     /// searched whole. `None`: half the target's points, and at least 4.

@@ -15,18 +15,25 @@ use crate::rs_smoothing::RollingSmoother;
 /// are kept.
 #[derive(Debug, Error)]
 pub enum FrameStreamError<S, K, I> {
+    /// `next_frame` returned this error.
     #[error(transparent)]
     Source(S),
     /// Frame number `index` (0-based), which `next_frame` described as `info`, could not be processed.
     #[error("frame {index}: {source}")]
     Frame {
+        /// The frame's position in the stream (0-based).
         index: usize,
+        /// What `next_frame` returned for it.
         info: I,
+        /// Why the tracker refused it.
         #[source]
         source: FrameError,
     },
+    /// `sink` returned this error.
     #[error(transparent)]
     Sink(K),
+    /// `next_frame` panicked on the decoding thread (the frames it decoded before were tracked and handed to
+    /// `sink`).
     #[error("the decoding thread panicked")]
     DecoderPanicked,
 }
