@@ -1,5 +1,5 @@
 //! Initialisation from a full frame: detect the blobs, identify the target among them with no prior
-//! ([`crate::identify`]), and time each matched blob by the camera's time model.
+//! ([`identify`](mod@crate::identify)), and time each matched blob by the camera's time model.
 
 use roitrack_core::{CameraModel, Measurement, MotionState, Target};
 use roitrack_image::{CentroidOptions, Frame, detect_blobs};
@@ -8,8 +8,12 @@ use thiserror::Error;
 /// A blob detected in a full frame: raw (distorted) pixel centre and area.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DetectedBlob {
+    /// Its centre's column (raw, distorted pixels; pixel (i, j) is centred on (i, j)).
     pub u_px: f64,
+    /// Its centre's row (raw, distorted pixels).
     pub v_px: f64,
+    /// Its area (px²): a centroid's pixel count, or a photograph blob's ellipse area. Identification compares it
+    /// with the area a target point's diameter predicts.
     pub area_px: f64,
 }
 
@@ -23,50 +27,91 @@ impl From<&roitrack_image::Centroid> for DetectedBlob {
     }
 }
 
+/// Why the target was not identified among the blobs of a frame or a photograph ([`find_target`],
+/// [`match_full_frame`], [`crate::identify::identify`]).
+///
+/// ```
+/// use roitrack_core::{CameraModel, Target};
+/// use roitrack_pipeline::matching::{DetectedBlob, MatchError, match_full_frame};
+///
+/// // Three blobs cannot show a 16-point target: identification takes 6 at least.
+/// let blobs = [DetectedBlob { u_px: 500.0, v_px: 500.0, area_px: 30.0 }; 3];
+/// let e = match_full_frame(&CameraModel::canonical(), &Target::grid4x4(), &blobs).unwrap_err();
+/// assert_eq!(e, MatchError::TooFewBlobs { found: 3, expected: 16, required: 6 });
+/// ```
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum MatchError {
+    /// Fewer blobs than identification takes: as many as the target has points, 6 at most.
     #[error("found {found} blobs, the target has {expected} points: need at least {required}")]
     TooFewBlobs {
+        /// The blobs given.
         found: usize,
+        /// The target's points.
         expected: usize,
+        /// The fewest blobs identification takes (and the fewest points a match must have).
         required: usize,
     },
+    /// The target has fewer than 4 points: any three blobs are the image of three points in some pose, so no
+    /// labelling can be checked.
     #[error(
         "a target of 3 points cannot be identified among blobs: any three blobs are its image in some pose (give a \
          fourth point, or measurements with the points' ids)"
     )]
     ThreePoints,
+    /// The blobs' convex hull has another number of corners than the target's: the view is not of the whole target.
+    /// Identification, which takes partial views, never returns it.
     #[error(
         "the blobs' convex hull has {image} corners, the target's has {model}: the view is not of the whole target"
     )]
-    HullMismatch { image: usize, model: usize },
+    HullMismatch {
+        /// Corners of the blobs' convex hull.
+        image: usize,
+        /// Corners of the target's convex hull.
+        model: usize,
+    },
+    /// No hypothesis was accepted: none matched enough points with few enough target points missing or of the
+    /// wrong size, at a residual the centroid noise and the model's error explain.
     #[error(
         "no match hypothesis fits: best residual {residual_px:.2} px with {matched} of {expected} points matched"
     )]
     NoFit {
+        /// The RMS reprojection residual (px, per coordinate) of the best-ranked hypothesis verified; infinite if
+        /// none was.
         residual_px: f64,
+        /// The target points that hypothesis matched to blobs (0 if none was verified).
         matched: usize,
+        /// The target's points.
         expected: usize,
     },
+    /// The target's symmetry leaves the labelling undecided (it has no key point of another diameter):
+    /// [`match_full_frame`] refuses it, since tracking needs each point's true identity.
     #[error(
         "the match is ambiguous (the target is symmetric and has no key blob): mark one point with a larger diameter in \
          the target file"
     )]
     Ambiguous,
+    /// Placements of the target not related by its symmetry fit the blobs equally well: the view shows too little
+    /// of the target to tell which part it is.
     #[error(
         "the view does not tell which part of the target it shows: several placements of the target fit the blobs \
          equally well (show more of the target, with at least one of its edges)"
     )]
     PartialView,
+    /// A blob's centre could not be undistorted. Identification, which leaves such a blob out, never returns it.
     #[error("a blob could not be undistorted: {0}")]
     Undistortion(#[from] roitrack_core::CameraError),
+    /// The frame is not of the camera model's size ([`find_target`]).
     #[error(
         "the frame is {frame_width} x {frame_height} px, the camera's image {camera_width} x {camera_height} px"
     )]
     FrameSize {
+        /// The frame's width (px).
         frame_width: u32,
+        /// The frame's height (px).
         frame_height: u32,
+        /// The camera model's image width (px).
         camera_width: u32,
+        /// The camera model's image height (px).
         camera_height: u32,
     },
 }
@@ -154,12 +199,15 @@ pub fn find_target(
     })
 }
 
-/// The result of a full-frame initialisation.
+/// The result of a full-frame initialisation ([`match_full_frame`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FullFrameMatch {
+    /// The static pose of the target in the camera frame (velocity and angular velocity zero).
     pub state: MotionState,
     /// For each matched model point (index into the target's points), the blob index.
     pub pairs: Vec<(usize, usize)>,
+    /// The pose's RMS reprojection residual (px, per coordinate), against the blobs' centres corrected for the
+    /// perspective displacement of a disk's centre.
     pub residual_rms_px: f64,
 }
 

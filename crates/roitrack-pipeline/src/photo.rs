@@ -1,5 +1,5 @@
 //! The target in a photograph: blobs of either polarity ([`roitrack_image::photo`]), identified with no prior
-//! ([`crate::identify`]), the pose, each point's centre.
+//! ([`identify`](mod@crate::identify)), the pose, each point's centre.
 
 use nalgebra::{UnitQuaternion, Vector2};
 use roitrack_core::{CameraModel, MotionState, Target};
@@ -29,7 +29,9 @@ pub enum PolarityChoice {
 /// Settings of [`detect_target`].
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct PhotoOptions {
+    /// Which blobs to look for: bright, dark, or both in the likelier order ([`PolarityChoice::Auto`], the default).
     pub polarity: PolarityChoice,
+    /// The blob detector's settings, whose area range [`Self::distance_range_m`] narrows ([`Self::blob_options`]).
     pub blobs: PhotoBlobOptions,
     /// The distances (m) at which the target may be, nearest and farthest, if known: blobs whose area no target
     /// circle can have at such a distance (from the target's diameters, taken as up to 2x off, and the focal length,
@@ -102,7 +104,7 @@ pub struct PhotoDetection {
     /// The identified points, by increasing id.
     pub points: Vec<PhotoPoint>,
     /// The target's symmetry leaves the labelling undecided; the labelling is the canonical one
-    /// ([`crate::identify`]).
+    /// ([`identify`](mod@crate::identify)).
     pub ambiguous: bool,
     /// Root mean square of the reprojection distance (px): sqrt(mean |projection - centre|²), as OpenCV's
     /// calibration reports it (√2 times the per-coordinate RMS).
@@ -130,34 +132,60 @@ impl PhotoDetection {
 }
 
 /// Why the target was not found in a photograph.
+///
+/// ```
+/// use roitrack_core::{CameraModel, Target};
+/// use roitrack_image::Frame;
+/// use roitrack_pipeline::photo::{PhotoError, PhotoOptions, detect_target};
+///
+/// let mut frame = Frame::default();
+/// frame.resize(640, 480, 8);
+/// let (camera, target) = (CameraModel::canonical(), Target::grid4x4());
+/// let e = detect_target(&camera, &target, &frame, &PhotoOptions::default()).unwrap_err();
+/// assert!(matches!(e, PhotoError::ImageSize { image_width: 640, camera_width: 1024, .. }));
+/// assert_eq!(e.blobs_seen().count(), 0);
+/// ```
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PhotoError {
+    /// The image is not of the camera model's size; nothing was looked for.
     #[error(
         "the image is {image_width} x {image_height} px, the camera's {camera_width} x {camera_height} px"
     )]
     ImageSize {
+        /// The image's width (px).
         image_width: u32,
+        /// The image's height (px).
         image_height: u32,
+        /// The camera model's image width (px).
         camera_width: u32,
+        /// The camera model's image height (px).
         camera_height: u32,
     },
+    /// The target was not identified among the blobs of the one polarity asked for ([`PolarityChoice::Bright`] or
+    /// [`PolarityChoice::Dark`]).
     #[error("{polarity} blobs: {source}")]
     NotFound {
+        /// `"bright"` or `"dark"` ([`Polarity::name`]).
         polarity: &'static str,
         /// The candidate blobs of that polarity, among which the target was not identified.
         blobs: Vec<PhotoBlob>,
+        /// Why identification failed among them.
         source: MatchError,
     },
+    /// With [`PolarityChoice::Auto`], the target was identified among the blobs of neither polarity.
     #[error(
         "neither polarity: dark blobs ({}): {dark}; bright blobs ({}): {bright}",
         .dark_blobs.len(),
         .bright_blobs.len()
     )]
     NotFoundEither {
-        /// The candidate blobs of each polarity, among which the target was not identified.
+        /// The candidate dark blobs, among which the target was not identified.
         dark_blobs: Vec<PhotoBlob>,
+        /// Why identification failed among the dark blobs.
         dark: MatchError,
+        /// The candidate bright blobs, among which the target was not identified.
         bright_blobs: Vec<PhotoBlob>,
+        /// Why identification failed among the bright blobs.
         bright: MatchError,
     },
 }
@@ -192,8 +220,9 @@ fn detected(blobs: &[PhotoBlob]) -> Vec<DetectedBlob> {
         .collect()
 }
 
-/// Finds, identifies and measures the target in a photograph: blob detection ([`detect_photo_blobs`](roitrack_image::detect_photo_blobs)) in the
-/// polarity asked for or, with [`PolarityChoice::Auto`], in both; identification ([`identify`]); the pose.
+/// Finds, identifies and measures the target in a photograph: blob detection
+/// ([`detect_photo_blobs`](roitrack_image::detect_photo_blobs)) in the polarity asked for or, with
+/// [`PolarityChoice::Auto`], in both; identification ([`identify`](crate::identify::identify)); the pose.
 ///
 /// ```
 /// use nalgebra::{Rotation3, Vector3};

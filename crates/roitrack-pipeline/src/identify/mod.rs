@@ -2,10 +2,11 @@
 //!
 //! Hypotheses come from the target's structure. A grid (square or hexagonal: the points on a lattice) is matched by
 //! growing a lattice through the blobs from a seed and laying it on the target's lattice every way the lattice allows
-//! ([`lattice`]); any other planar layout by triples of neighbouring points mapped onto triples of neighbouring blobs
-//! ([`sparse`]); one spread in depth (at least 4 points) by quadruples of neighbouring points and blobs, through an
-//! affine camera ([`spatial`]). A target nearly flat (pins off a plate, a post on a grid) is searched as a planar
-//! one on its best plane. None needs every point to be seen nor the blobs to be only the target's.
+//! (`identify/lattice.rs` in the source); any other planar layout by triples of neighbouring points mapped onto
+//! triples of neighbouring blobs (`identify/sparse.rs`); one spread in depth (at least 4 points) by quadruples of
+//! neighbouring points and blobs, through an affine camera (`identify/spatial.rs`). A target nearly flat (pins off a
+//! plate, a post on a grid) is searched as a planar one on its best plane. None needs every point to be seen nor the
+//! blobs to be only the target's.
 //!
 //! Every hypothesis is verified the same way: the static pose from its correspondences (intrinsics and distortion
 //! known), then the projection of every target point with that pose. A point projected well inside the image must
