@@ -62,7 +62,9 @@ pub enum RoiEvent<'a> {
     /// A ROI image read and centroided, before its measurement goes to the estimator: `measured` is the measurement
     /// (the centroid in the sensor's pixels, at its time) or why the blob was rejected.
     Roi {
+        /// The ROI image as read: its point id, its place on the sensor, its time and its pixels.
         image: &'a RoiImage,
+        /// The measurement its blob gave, or why the blob was rejected (then nothing goes to the estimator).
         measured: Result<&'a Measurement, BlobRejection>,
     },
     /// An estimate.

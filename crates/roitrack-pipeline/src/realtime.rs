@@ -30,6 +30,8 @@ pub struct LoopConfig {
     pub paced: bool,
     /// Number of ROI slots to run.
     pub roi_slots: usize,
+    /// Trigger time of slot 0 (s): the origin of the trigger times the camera is given, and so of the ROIs' and
+    /// the measurements' times.
     pub t_start_s: f64,
     /// ROI slots a full-frame read costs (its readout time).
     pub full_frame_slots: usize,
@@ -39,7 +41,11 @@ pub struct LoopConfig {
     /// Without it a camera faster than the estimator would place its ROIs from ever staler estimates; a paced camera
     /// cannot wait, and the queue absorbs (or drops) what the estimator does not keep up with.
     pub max_queued: usize,
+    /// Where each ROI is placed and how large it is: `min_size_px` at least 1, `max_size_px` at most 64, the widest
+    /// ROI the centroid measures ([`roitrack_image::MAX_ROI_WIDTH`]).
     pub scheduler: SchedulerConfig,
+    /// How each ROI's blob is measured, and how the blobs of the full frames that (re)start the track are detected
+    /// ([`find_target`]).
     pub centroid: CentroidOptions,
     /// Keep every measurement handed to the estimator in [`LoopReport::measured`] (for a record of what the tracker
     /// saw, the ROS 2 bag's `/roitrack/measurements`); room for `roi_slots` is reserved before the run, so the loop
@@ -105,6 +111,8 @@ impl Default for LoopConfig {
 /// What a run of the loop did.
 #[derive(Debug, Clone)]
 pub struct LoopReport {
+    /// The estimates, in order. Room for `roi_slots / every + 64` (`every` of the tracker's options) is reserved
+    /// before the run; estimates beyond it reach the sink of [`run_loop_with_sink`] but are not kept.
     pub estimates: Vec<Estimate>,
     /// Per estimate: wall time from the grab of the ROI that completed it to the estimate (µs).
     pub latencies_us: Vec<f64>,
@@ -112,13 +120,16 @@ pub struct LoopReport {
     pub rois: usize,
     /// Centroids sent to the estimator.
     pub measurements: usize,
+    /// ROIs that gave no centroid, by reason; `absent` also counts the slots in which the scheduler placed no ROI
+    /// ([`RoiScheduler::next`] gave `None`).
     pub rejections: RejectionCounts,
     /// Measurements lost because the queue was full.
     pub dropped: usize,
     /// Paced mode: triggers the camera side reached more than one period late.
     pub late: usize,
-    /// Full-frame (re-)initialisations that succeeded, and those that failed.
+    /// Full-frame (re-)initialisations that found the target and restarted the track.
     pub initialisations: usize,
+    /// Full frames in which the target was not found ([`find_target`] failed): the loop reads another full frame next.
     pub failed_initialisations: usize,
     /// Measurements the tracker refused (none expected).
     pub refused: usize,
@@ -144,18 +155,35 @@ impl LoopReport {
     }
 }
 
+/// Why the real-time loop did not run, or ended without a report. A camera that fails or ends is not an error
+/// ([`LoopReport::stopped_by`]).
+///
+/// ```
+/// use roitrack_pipeline::{LoopConfig, PipelineError};
+///
+/// let e = LoopConfig { rate_hz: 0.0, ..LoopConfig::default() }.validate().unwrap_err();
+/// assert!(matches!(e, PipelineError::LoopConfig { field: "rate_hz", .. }));
+/// ```
 #[derive(Debug, Error)]
 pub enum PipelineError {
+    /// The tracker's options are refused ([`Tracker::new`]).
     #[error("invalid tracker options: {0}")]
     Config(#[from] roitrack_core::estimator::ConfigError),
+    /// A loop option is out of its range ([`LoopConfig::validate`]).
     #[error("invalid loop option: {field} must be {expected}, got {value}")]
     LoopConfig {
+        /// The option, as `LoopConfig` names it (`scheduler.max_size_px` for a field of `scheduler`).
         field: &'static str,
+        /// What it must be.
         expected: &'static str,
+        /// The value given.
         value: f64,
     },
+    /// The camera model's time model is refused: its exposure or line delay is out of range
+    /// ([`roitrack_core::TimeModel::validate`]).
     #[error("the camera's time model: {0}")]
     TimeModel(#[from] roitrack_core::time::TimeModelError),
+    /// The estimation thread panicked; what it estimated is lost.
     #[error("the estimation thread panicked")]
     EstimatorPanicked,
 }

@@ -17,6 +17,8 @@ use roitrack_image::Roi;
 pub struct Predictor {
     /// Reference time of `state` (s).
     pub t_ref_s: f64,
+    /// The estimated pose of the target in the camera frame and its twist at `t_ref_s`, carried by the twist to
+    /// each ROI's exposure.
     pub state: MotionState,
     /// Covariance of the error state (v, w, dV, dW), if the estimator has one.
     pub covariance: Option<Matrix12>,
@@ -39,8 +41,12 @@ pub enum ScheduleOrder {
 /// Options of the scheduler.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SchedulerConfig {
+    /// The order in which the points are read.
     pub order: ScheduleOrder,
+    /// Smallest ROI side (px): a smaller computed size is raised to it.
     pub min_size_px: u32,
+    /// Largest ROI side (px): a larger computed size is cut to it. The real-time loop and the frame tracker take at
+    /// most 64 ([`roitrack_image::MAX_ROI_WIDTH`]).
     pub max_size_px: u32,
     /// Standard deviations of the predicted image position added on each side.
     pub sigma_margin: f64,
@@ -79,7 +85,10 @@ impl Default for SchedulerConfig {
 /// One scheduled ROI.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RoiRequest {
+    /// The point to read: its index in the target's points (not its id).
     pub point_index: usize,
+    /// The square ROI to read (px): centred on `predicted_px` to the nearest pixel, moved as little as needed to lie
+    /// on the sensor.
     pub roi: Roi,
     /// Predicted raw pixel of the blob centre.
     pub predicted_px: Vector2<f64>,
@@ -88,6 +97,26 @@ pub struct RoiRequest {
 }
 
 /// Places ROIs. Built once; `next` does not allocate.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::{CameraModel, MotionState, Target};
+/// use roitrack_pipeline::scheduler::{Predictor, RoiScheduler, SchedulerConfig};
+///
+/// let mut scheduler =
+///     RoiScheduler::new(CameraModel::canonical(), Target::grid4x4(), SchedulerConfig::default(), 0.1);
+/// let state = MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.6));
+/// let predictor = Predictor { t_ref_s: 0.0, state, covariance: None };
+/// let request = scheduler.next(&predictor, 1e-3).unwrap();
+/// assert_eq!(request.roi.width, request.roi.height);
+/// assert!((12..=64).contains(&request.roi.width) && request.sigma_px.is_none());
+/// // Two misses in a row lose a point; four lost points ask for a full frame.
+/// for i in 0..4 {
+///     scheduler.report(i, false);
+///     scheduler.report(i, false);
+/// }
+/// assert!(scheduler.needs_reinitialisation());
+/// ```
 #[derive(Debug, Clone)]
 pub struct RoiScheduler {
     camera: CameraModel,
@@ -130,6 +159,7 @@ impl RoiScheduler {
         }
     }
 
+    /// The options it was built with.
     pub fn config(&self) -> &SchedulerConfig {
         &self.config
     }
