@@ -2,10 +2,12 @@
 //!
 //! The system end to end, around the pure estimator: finding the target in a full frame with no prior
 //! ([`matching`], [`find_target`]) or in a photograph ([`photo`], [`detect_target`]: either polarity, clutter, partial
-//! views, symmetric and hexagonal grids, by hypothesis and verification in [`identify`]), the placement of each next ROI ([`scheduler`]), and the real-time loop of two
-//! threads, acquisition and estimation, joined by lock-free single-producer single-consumer queues ([`realtime`]),
-//! driving any [`roitrack_image::RoiCamera`]; the same tracking offline, from recorded ROI images ([`offline`]); and
-//! tracking from whole frames of a global or rolling shutter, one estimate per frame ([`frames`]).
+//! views, symmetric and hexagonal grids, by hypothesis and verification in [`identify`](mod@identify)), the placement
+//! of each next ROI ([`scheduler`]), and the real-time loop of two threads, acquisition and estimation, joined by
+//! lock-free single-producer single-consumer queues ([`realtime`]), driving any [`roitrack_image::RoiCamera`]; the same
+//! tracking offline, from recorded ROI images ([`offline`]); and tracking from whole frames of a global or rolling
+//! shutter, one estimate per frame ([`frames`]).
+#![deny(missing_docs)]
 
 pub mod frames;
 pub mod identify;
