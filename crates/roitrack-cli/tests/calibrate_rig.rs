@@ -127,7 +127,9 @@ fn a_rig_without_poses_is_calibrated_then_tracked() {
     }
     let e = fails(&args);
     assert!(
-        e.contains("camera 'cam1'") && e.contains("calibrate-rig"),
+        e.contains("bare.yaml: camera 'cam1'")
+            && e.contains("calibrate-rig")
+            && !e.contains("tracker options"),
         "{e}"
     );
     // A camera to be found without its measurements, and an unknown camera, are named.

@@ -117,12 +117,7 @@ fn a_one_camera_rig_of_a_roi_recording_is_track_rois_byte_for_byte() {
 
 /// Two cameras at the same place and clock, each with its own frames of the same motion (independent sensor noise):
 /// the fused track is no worse than the better camera's own by more than the sampling spread of an RMS error.
-///
-/// Ignored: the rig's fused filter is about 12 times less accurate than one camera's tracker on 30 Hz global-shutter
-/// frames (0.13 mm against 0.011 mm here, the same with only the first camera's frames given to the 2-camera rig);
-/// the fusion, not the frames' conversion, is the cause (a one-camera rig of the same frames matches one camera).
 #[test]
-#[ignore = "the rig's fused filter is far less accurate than one camera's on 30 Hz frames (docs/rig.md, Limits)"]
 fn two_cameras_of_frames_fuse_no_worse_than_the_better_one() {
     let tmp = tempfile::tempdir().unwrap();
     let frames = 150;

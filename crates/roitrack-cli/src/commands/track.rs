@@ -696,12 +696,26 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
             reader,
         });
     }
+    let any_frames = inputs
+        .iter()
+        .flatten()
+        .any(|i| matches!(i, roitrack::camera_input::CameraInput::Images { .. }));
     let config = roitrack::core::rig::RigTrackerConfig {
-        tracker: args.estimator.config()?,
+        tracker: if any_frames {
+            frame_config(args)?.tracker
+        } else {
+            args.estimator.config()?
+        },
         ..Default::default()
     };
-    let mut tracker = roitrack::core::rig::RigTracker::new(rig.clone(), target, config)
-        .context("invalid tracker options")?;
+    // A pose left out of the rig file is the file's fault, not the options'.
+    let mut tracker =
+        roitrack::core::rig::RigTracker::new(rig.clone(), target, config).map_err(|e| match e {
+            roitrack::core::rig::RigError::MountUnknown { .. } => {
+                anyhow::anyhow!("{}: {e}", rig_path.display())
+            }
+            e => anyhow::Error::new(e),
+        })?;
     let mut writer =
         EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
             .with_covariance(args.covariance.as_deref())?;
@@ -773,7 +787,7 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     writer.finish()?;
     let clocks = tracker.clocks();
     if let Some(out) = &args.rig_out {
-        let calibrations = calibrations_for(rig_path, out, &file);
+        let calibrations = file.calibrations_for_output(out);
         roitrack::formats::write_rig_yaml(out, rig, &calibrations, Some(&clocks))?;
     }
     let seconds = start.elapsed().as_secs_f64();
@@ -794,43 +808,17 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
             );
         }
     }
+    let report = tracker.report();
     eprintln!(
         "roitrack: {count} measurements of {} cameras -> {estimates} estimates in {seconds:.3} s ({:.2} us per \
-         measurement)",
+         measurement); fused {}, rejected by the gate {}, fused tracks started {}",
         rig.len(),
-        1e6 * seconds / count.max(1) as f64
+        1e6 * seconds / count.max(1) as f64,
+        report.fused,
+        report.gated,
+        report.starts
     );
     Ok(())
-}
-
-/// The calibration paths a rig written to `out` gives: as the rig file wrote them when `out` is in the same folder,
-/// else absolute.
-fn calibrations_for(
-    rig_path: &std::path::Path,
-    out: &std::path::Path,
-    file: &roitrack::formats::RigFile,
-) -> Vec<String> {
-    let folder = |p: &std::path::Path| {
-        let parent = p.parent().unwrap_or(std::path::Path::new(""));
-        std::fs::canonicalize(if parent.as_os_str().is_empty() {
-            std::path::Path::new(".")
-        } else {
-            parent
-        })
-        .ok()
-    };
-    if folder(rig_path).is_some() && folder(rig_path) == folder(out) {
-        return file.calibrations_as_written.clone();
-    }
-    file.calibration_paths
-        .iter()
-        .map(|p| {
-            std::fs::canonicalize(p)
-                .unwrap_or_else(|_| p.clone())
-                .to_string_lossy()
-                .into_owned()
-        })
-        .collect()
 }
 
 /// The rig run's inputs (the rig, its calibrations, the target, the measurement files) against its outputs.

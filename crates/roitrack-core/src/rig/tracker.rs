@@ -505,7 +505,15 @@ impl RigTracker {
             }
             if self.fused.is_some() && self.synced[next.camera] {
                 self.fuse(next.camera, &next.measurement);
-                estimates.extend(self.estimate_if_due());
+                // The blobs of one instant (a global-shutter frame's) are one readout: an estimate between two of them
+                // would be the prediction corrected by a few points only. It waits for the instant's last blob.
+                let instant_continues = self
+                    .pending
+                    .peek()
+                    .is_some_and(|Reverse(after)| after.t_rig_s == next.t_rig_s);
+                if !instant_continues {
+                    estimates.extend(self.estimate_if_due());
+                }
             }
         }
         estimates
