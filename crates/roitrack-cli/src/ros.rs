@@ -1,6 +1,7 @@
 //! `--mcap OUT.mcap` on `track`, `demo` and `live`: the estimates also as a ROS 2 bag; `--foxglove [ADDR:PORT]`: the
 //! same topics served live to Foxglove; `track --paced`: at the recording's speed; `track --mcap-in BAG
-//! --image-topic TOPIC`: the frames of a bag (see `roitrack::ros`, docs/ros2.md).
+//! --image-topic TOPIC`: the frames of a bag (see `roitrack::ros`, docs/ros2.md). `track --ros2` publishes through
+//! the same [`Bag`] ([`Bag::publish_on_ros2`]).
 
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
@@ -18,7 +19,8 @@ use roitrack::{CameraModel, Estimate, Frame, Measurement, MotionState, Target};
 
 /// The options of the ROS 2 outputs: the bag and the live view.
 #[derive(Debug, Args)]
-#[command(group = clap::ArgGroup::new("ros_output").multiple(true).args(["mcap", "foxglove"]))]
+// Every command that takes these also takes --ros2 (`crate::ros2_args::Ros2Args`), which the frame ids go with too.
+#[command(group = clap::ArgGroup::new("ros_output").multiple(true).args(["mcap", "foxglove", "ros2"]))]
 pub struct McapArgs {
     /// Also write the estimates as a ROS 2 bag in MCAP storage (profile ros2, CDR): /roitrack/pose, /roitrack/twist,
     /// /roitrack/odometry, /tf, /roitrack/status per estimate, /roitrack/camera_info once, and with --images the
@@ -44,7 +46,7 @@ pub struct McapArgs {
     /// anyway), so that it sees the run from its start. Default: no wait.
     #[arg(long, value_name = "S", requires = "foxglove", value_parser = parse_wait_s)]
     pub foxglove_wait_s: Option<f64>,
-    /// With --mcap or --foxglove: the camera's frame id, the header frame of every message.
+    /// With --mcap, --foxglove or --ros2: the camera's frame id, the header frame of every message.
     #[arg(
         long,
         default_value = "camera",
@@ -52,7 +54,7 @@ pub struct McapArgs {
         requires = "ros_output"
     )]
     pub frame_id: String,
-    /// With --mcap or --foxglove: the target's frame id, the child frame of /tf and of the odometry.
+    /// With --mcap, --foxglove or --ros2: the target's frame id, the child frame of /tf and of the odometry.
     #[arg(
         long,
         default_value = "target",
@@ -85,11 +87,12 @@ fn parse_wait_s(text: &str) -> Result<f64, String> {
     }
 }
 
-/// The bag (--mcap) and the live view (--foxglove), each if asked for, and whether the bag takes the ROI images
-/// (--mcap-rois).
+/// The bag (--mcap), the live view (--foxglove) and the DDS bus (`track --ros2`, [`Bag::publish_on_ros2`]), each if
+/// asked for, and whether the bag takes the ROI images (--mcap-rois).
 pub struct Bag {
     bag: Option<BackgroundBag>,
     live: Option<LiveServer>,
+    ros2: crate::ros2_args::Ros2,
     rois: bool,
 }
 
@@ -113,11 +116,7 @@ impl McapArgs {
 
     /// [`Self::open`] for a run from ROI images (`track --rois`, `demo`), which --mcap-rois writes to the bag.
     pub fn open_for_rois(&self, camera: &CameraModel, target: Option<&Target>) -> Result<Bag> {
-        let options = BagOptions {
-            frame_id: self.frame_id.clone(),
-            child_frame_id: self.child_frame_id.clone(),
-            ..BagOptions::default()
-        };
+        let options = self.bag_options();
         // The live server first: an address that cannot be served fails before the bag is created.
         let live = match self.foxglove {
             Some(address) => {
@@ -148,8 +147,18 @@ impl McapArgs {
         Ok(Bag {
             bag,
             live,
+            ros2: crate::ros2_args::Ros2::default(),
             rois: self.mcap_rois,
         })
+    }
+
+    /// The frame ids (--frame-id, --child-frame-id) of the bag, the live view and --ros2.
+    pub fn bag_options(&self) -> BagOptions {
+        BagOptions {
+            frame_id: self.frame_id.clone(),
+            child_frame_id: self.child_frame_id.clone(),
+            ..BagOptions::default()
+        }
     }
 
     /// Whether frames are to be copied for the bag or the live view.
@@ -159,10 +168,18 @@ impl McapArgs {
 }
 
 impl Bag {
+    /// Publishes every estimate on the ROS 2 DDS bus too, through `ros2` (started by `Ros2Args::start`; nothing
+    /// without --ros2), finished with the bag.
+    pub fn publish_on_ros2(&mut self, ros2: crate::ros2_args::Ros2) {
+        self.ros2 = ros2;
+    }
+
+    /// An estimate, to the live view, the DDS bus and the bag.
     pub fn estimate(&mut self, e: &Estimate) -> Result<(), roitrack::formats::FormatError> {
         if let Some(live) = &mut self.live {
             live.publish_estimate(e)?;
         }
+        self.ros2.estimate(e)?;
         match &mut self.bag {
             Some(bag) => {
                 check_interrupt(bag)?;
@@ -218,6 +235,7 @@ impl Bag {
             if let Some(live) = &mut self.live {
                 live.publish_estimate(e)?;
             }
+            self.ros2.estimate(e)?;
             if let Some(bag) = &mut self.bag {
                 bag.write_estimate(e)?;
             }
@@ -275,7 +293,7 @@ impl Bag {
         if let Some(live) = self.live {
             finish_live(live)?;
         }
-        Ok(())
+        self.ros2.finish()
     }
 
     /// Takes the live view out, to be fed from another thread while tracking (see `finish_live`); the bag stays.
@@ -301,7 +319,7 @@ pub fn finish_live(live: LiveServer) -> Result<()> {
 pub struct PaceArgs {
     /// Replay the input at its own speed (FACTOR times it; default 1): each estimate (each frame with --images) is
     /// released when its time, counted from the first one's, has passed on the wall clock, so that a viewer of
-    /// --foxglove follows the run as it was recorded. Default: as fast as possible.
+    /// --foxglove or a subscriber of --ros2 follows the run as it was recorded. Default: as fast as possible.
     #[arg(long, value_name = "FACTOR", num_args = 0..=1, default_missing_value = "1", value_parser = parse_factor)]
     pub paced: Option<f64>,
 }

@@ -1,4 +1,4 @@
-//! `roitrack demo --ros2` (feature `ros2`) against an independent DDS: Eclipse Cyclone DDS (PyPI `cyclonedds`, one of
+//! `roitrack demo --ros2` and `track --ros2` (feature `ros2`) against an independent DDS: Eclipse Cyclone DDS (PyPI `cyclonedds`, one of
 //! ROS 2's middlewares) subscribes with the ROS 2 topic and type names through `crates/roitrack-ros/tests/
 //! ros2_subscriber.py`, and every estimate of a paced demo (400 Hz estimates from 4 kHz ROIs, in real time) must
 //! arrive, in order, equal to what the demo wrote to its TUM and CSV files (1e-9): pose, twist, odometry (its twist
@@ -123,9 +123,16 @@ fn stamp_s(header: &serde_json::Value) -> f64 {
     f(&header["stamp"]["sec"]) + 1e-9 * f(&header["stamp"]["nanosec"])
 }
 
+thread_local! {
+    /// The largest difference [`close`] has seen on this test's thread, printed by the tests.
+    static MAX_DIFFERENCE: std::cell::Cell<f64> = const { std::cell::Cell::new(0.0) };
+}
+
 /// Equal to 1e-9 (the files hold every digit; a stamp is rounded to the nanosecond).
 fn close(what: &str, got: &[f64], want: &[f64]) {
+    assert_eq!(got.len(), want.len(), "{what}: {got:?} and {want:?}");
     for (g, w) in got.iter().zip(want) {
+        MAX_DIFFERENCE.with(|max| max.set(max.get().max((g - w).abs())));
         assert!(
             (g - w).abs() <= 1e-9,
             "{what}: {got:?} received, {want:?} in the files"
@@ -398,6 +405,129 @@ wait $subscriber || exit 92
         quantiles(Some("/roitrack/pose")),
         quantiles(None)
     );
+}
+
+/// `roitrack simulate --scenario SCENARIO --duration-s 1 --out DIR` plus `extra`: the run's folder.
+fn simulate(dir: &Path, extra: &[&str]) -> PathBuf {
+    let sim = dir.join("sim");
+    let out = Command::new(env!("CARGO_BIN_EXE_roitrack"))
+        .args(["simulate", "--scenario", "orthoglide", "--duration-s", "1"])
+        .args(extra)
+        .arg("--out")
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    sim
+}
+
+/// Runs `roitrack track --camera SIM/camera.yaml --target SIM/target.csv INPUT... --poses --twists --diagnostics
+/// --ros2 --ros2-wait-s 30 --paced` beside the Cyclone DDS subscriber in a namespace of its own, and checks every
+/// message received against the files the run wrote; the number of estimates.
+fn track_to_cyclone_dds(python: &Path, dir: &Path, sim: &Path, input: &[&str]) -> usize {
+    MAX_DIFFERENCE.with(|max| max.set(0.0));
+    let file = |name: &str| dir.join(name);
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
+subscriber=$!
+"$ROITRACK" track --camera "$SIM/camera.yaml" --target "$SIM/target.csv" $INPUT \
+    --poses "$POSES" --twists "$TWISTS" --diagnostics "$DIAGNOSTICS" --ros2 --ros2-wait-s 30 --paced || exit 91
+wait $subscriber || exit 92
+"#,
+        &[
+            ("PYTHON", python),
+            ("SUBSCRIBER", &subscriber_script()),
+            ("RECEIVED", &file("received.jsonl")),
+            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
+            ("SIM", sim),
+            // Split by the shell: the input's option and paths (no spaces in a temporary folder's name).
+            ("INPUT", Path::new(&input.join(" "))),
+            ("POSES", &file("poses.tum")),
+            ("TWISTS", &file("twists.csv")),
+            ("DIAGNOSTICS", &file("diagnostics.csv")),
+        ],
+    );
+    assert!(ok, "{log}");
+    assert!(log.contains(" 0 dropped"), "{log}");
+    let estimates = check_against_files(
+        &read_received(&file("received.jsonl")),
+        &file("poses.tum"),
+        &file("twists.csv"),
+        Some(&file("diagnostics.csv")),
+        Some(&sim.join("camera.yaml")),
+    );
+    eprintln!(
+        "track {}: {estimates} estimates received by Cyclone DDS on every topic, none lost; largest difference \
+         from the files {:.1e}",
+        input[0],
+        MAX_DIFFERENCE.with(|max| max.get())
+    );
+    estimates
+}
+
+#[test]
+fn every_estimate_of_a_paced_track_of_measurements_reaches_cyclone_dds_equal_to_the_files() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let sim = simulate(dir.path(), &[]);
+    let measurements = sim.join("measurements.csv");
+    let estimates = track_to_cyclone_dds(
+        &python,
+        dir.path(),
+        &sim,
+        &["--measurements", measurements.to_str().unwrap()],
+    );
+    assert!(estimates >= 390, "{estimates} estimates in 1 s at 400 Hz");
+}
+
+/// `track --rois` and `track --images` publish through the same sink as `--measurements`: every estimate, the files'.
+#[test]
+fn every_estimate_of_a_paced_track_of_rois_and_of_frames_reaches_cyclone_dds() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let sim = simulate(dir.path(), &["--rois"]);
+    let rois = sim.join("rois.bin");
+    assert!(
+        rois.is_file(),
+        "simulate --rois wrote no {}",
+        rois.display()
+    );
+    let estimates = track_to_cyclone_dds(
+        &python,
+        dir.path(),
+        &sim,
+        &["--rois", rois.to_str().unwrap()],
+    );
+    assert!(estimates >= 390, "{estimates} estimates in 1 s at 400 Hz");
+
+    let dir = tempfile::tempdir().unwrap();
+    let sim = simulate(dir.path(), &["--frames"]);
+    let (frames, timestamps) = (sim.join("frames"), sim.join("timestamps.csv"));
+    let estimates = track_to_cyclone_dds(
+        &python,
+        dir.path(),
+        &sim,
+        &[
+            "--images",
+            frames.to_str().unwrap(),
+            "--timestamps",
+            timestamps.to_str().unwrap(),
+            "--polarity",
+            "bright",
+        ],
+    );
+    assert!(estimates >= 25, "{estimates} estimates of 30 frames");
 }
 
 #[test]

@@ -145,12 +145,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     // The live view follows the default estimator's run from the loop's estimation thread, as it tracks.
     let mut live = bag.as_mut().and_then(|b| b.take_live());
     // --ros2 publishes the same run's estimates on the DDS bus, from the estimation thread too.
-    let ros2_options = roitrack::ros::BagOptions {
-        frame_id: args.ros.frame_id.clone(),
-        child_frame_id: args.ros.child_frame_id.clone(),
-        ..roitrack::ros::BagOptions::default()
-    };
-    let mut ros2 = Some(args.ros2.start(&demo.run.camera, &ros2_options)?);
+    let mut ros2 = Some(args.ros2.start(&demo.run.camera, &args.ros.bag_options())?);
     let mut runs = Vec::new();
     for (k, estimator) in lineup.iter().enumerate() {
         // A signal stops the demo here, between two estimators' runs (a second or so after it came), through the

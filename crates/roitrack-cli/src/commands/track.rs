@@ -139,6 +139,8 @@ pub struct TrackArgs {
     #[command(flatten)]
     pub ros: crate::ros::McapArgs,
     #[command(flatten)]
+    pub ros2: crate::ros2_args::Ros2Args,
+    #[command(flatten)]
     pub pace: crate::ros::PaceArgs,
     #[command(flatten)]
     pub mcap_in: crate::ros::McapInArgs,
@@ -223,8 +225,10 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     } else {
         args.ros.open(&camera, None)?
     };
+    // --ros2: a node that cannot start fails here, before tracking (and --ros2-wait-s waits here for subscribers).
+    bag.publish_on_ros2(args.ros2.start(&camera, &args.ros.bag_options())?);
     let mut pacer = args.pace.pacer();
-    // Every estimate: paced (--paced), then to the files and the bag.
+    // Every estimate: paced (--paced), then to the files, the bag, the live view and the DDS bus.
     let mut on_estimate = |e: &roitrack::Estimate, bag: &mut crate::ros::Bag| {
         if let Some(pacer) = &mut pacer {
             pacer.wait_until(e.t_ref_s);
@@ -350,6 +354,8 @@ fn run_frames(
         args.ros.open(&camera, Some(&target))?,
         args.ros.wants_frames(),
     );
+    // --ros2: the estimates (not the frames) on the DDS bus, as --mcap writes them.
+    bag.publish_on_ros2(args.ros2.start(&camera, &args.ros.bag_options())?);
     let mut tracker =
         FrameTracker::new(camera, target, config).context("invalid tracker options")?;
     let mut writer =
@@ -651,10 +657,12 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     }
     if args.ros.mcap.is_some()
         || args.ros.foxglove.is_some()
+        || args.ros2.ros2
         || args.mcap_in.measurement_topic.is_some()
     {
         bail!(
-            "--rig takes measurement files only (ROS 2 bags in or out are not supported with a rig yet)"
+            "--rig takes measurement files only (ROS 2 bags in or out, --foxglove and --ros2 are not supported with a \
+             rig yet)"
         );
     }
     let file = roitrack::formats::read_rig_yaml(rig_path, &Default::default())?;
