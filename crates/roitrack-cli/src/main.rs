@@ -2,10 +2,14 @@
 
 use std::process::ExitCode;
 
+#[cfg(feature = "ros2")]
+use clap::CommandFactory;
 use clap::{Parser, Subcommand};
 
 mod args;
 mod commands;
+#[cfg(feature = "ros2")]
+mod params_file;
 mod ranges;
 mod ros;
 mod ros2_args;
@@ -93,6 +97,32 @@ fn moved_to_the_lab(command: Option<std::ffi::OsString>) -> Option<String> {
     })
 }
 
+/// The command line, parsed; `ros2-node --params-file FILE` first puts the file's parameters before the node's own
+/// options (src/params_file.rs). A command line that clap refuses, or a parameters file that is wrong, ends the
+/// process with its code.
+fn parse() -> Result<Cli, ExitCode> {
+    #[cfg(feature = "ros2")]
+    if std::env::args_os().nth(1).is_some_and(|c| c == "ros2-node") {
+        let given: Vec<std::ffi::OsString> = std::env::args_os().collect();
+        let argv = match params_file::expand(given.clone(), &Cli::command()) {
+            Ok(argv) => argv,
+            Err(e) => {
+                eprintln!("roitrack: error: {e:#}");
+                return Err(ExitCode::from(2));
+            }
+        };
+        let from_file = argv.len() != given.len();
+        return Cli::try_parse_from(argv).map_err(|e| {
+            let _ = e.print();
+            if from_file && e.use_stderr() {
+                eprintln!("roitrack: note: some of these options came from the --params-file");
+            }
+            ExitCode::from(e.exit_code().clamp(0, 255) as u8)
+        });
+    }
+    Ok(Cli::parse())
+}
+
 fn main() -> ExitCode {
     // SIGINT, SIGTERM, SIGHUP and SIGPIPE alike (src/signals.rs). A reader of our output that goes away
     // (`roitrack eval | head`) still ends the process quietly, by SIGPIPE, as the default action did.
@@ -101,7 +131,10 @@ fn main() -> ExitCode {
         eprintln!("roitrack: error: {message}");
         return ExitCode::from(2);
     }
-    let cli = Cli::parse();
+    let cli = match parse() {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
     // The commands that track or render stop at their next estimate at the first signal, keeping what they promise;
     // the others end at once.
     if matches!(

@@ -778,3 +778,121 @@ wait $publisher || exit 92
     assert!(track.lines().count() > 100, "{track}");
     assert_eq!(node, track, "the node's poses, and track's from the file");
 }
+
+/// `ros2-node --params-file`: the node's options from a ROS 2 parameters file (target, camera, topic, idle time,
+/// estimator options), the command line overriding it (--every, --poses): the node then tracks as `track` does the
+/// file with the same options, byte for byte.
+#[test]
+fn the_node_takes_its_options_from_a_parameters_file_and_the_command_line_overrides_it() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
+    let sim = dir.path().join("sim");
+    let simulated = Command::new(roitrack)
+        .args([
+            "simulate",
+            "--scenario",
+            "spin",
+            "--duration-s",
+            "0.5",
+            "--out",
+        ])
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(simulated.status.success());
+    let file = |name: &str| dir.path().join(name);
+    // every: 3 and poses are overridden by the command line; the rest is the file's.
+    let params = file("params.yaml");
+    std::fs::write(
+        &params,
+        format!(
+            "# roitrack's node\n/**:\n  ros__parameters:\n    every: 3\nroitrack:\n  ros__parameters:\n    \
+             target: {}\n    camera: {}\n    measurement_topic: /centroids\n    idle_s: 2.0\n    every: 3\n    \
+             poses: {}\n",
+            sim.join("target.csv").display(),
+            sim.join("camera.yaml").display(),
+            file("not_these.tum").display()
+        ),
+    )
+    .unwrap();
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$PUBLISHER" "$SIM/measurements.csv" --topic /centroids --wait-s 60 &
+publisher=$!
+"$ROITRACK" ros2-node --params-file "$PARAMS" --every 10 --poses "$POSES" --twists "$TWISTS" || exit 91
+wait $publisher || exit 92
+"$ROITRACK" track --camera "$SIM/camera.yaml" --target "$SIM/target.csv" --measurements "$SIM/measurements.csv" \
+    --every 10 --poses "$TRACK_POSES" --twists "$TRACK_TWISTS" || exit 93
+"#,
+        &[
+            ("PYTHON", &python),
+            ("PUBLISHER", &publisher_script()),
+            ("ROITRACK", roitrack),
+            ("SIM", &sim),
+            ("PARAMS", &params),
+            ("POSES", &file("node.tum")),
+            ("TWISTS", &file("node.csv")),
+            ("TRACK_POSES", &file("track.tum")),
+            ("TRACK_TWISTS", &file("track.csv")),
+        ],
+    );
+    assert!(ok, "{log}");
+    assert!(log.contains("takes centroids from /centroids"), "{log}");
+    assert!(!file("not_these.tum").exists());
+    let (node, track) = (
+        std::fs::read_to_string(file("node.tum")).unwrap(),
+        std::fs::read_to_string(file("track.tum")).unwrap(),
+    );
+    assert!(track.lines().count() > 100, "{track}");
+    assert_eq!(node, track, "the node's poses, and track's from the file");
+}
+
+/// A parameters file that is wrong stops the node before it starts, naming the file, the key and its line.
+#[test]
+fn a_wrong_parameters_file_is_refused_naming_the_file_the_key_and_the_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let params = dir.path().join("params.yaml");
+    let run = |text: &str| {
+        std::fs::write(&params, text).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_roitrack"))
+            .args(["ros2-node", "--params-file"])
+            .arg(&params)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{text}");
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let named = |line: usize, rest: &str| {
+        format!(
+            "roitrack: error: --params-file {}: line {line}: {rest}",
+            params.display()
+        )
+    };
+    let e = run("roitrack:\n  ros__parameters:\n    target: t.csv\n    noise: 0.1\n");
+    assert!(
+        e.contains(&named(4, "roitrack: ros__parameters: noise: unknown key")),
+        "{e}"
+    );
+    let e = run("roitrack:\n  ros__parameters:\n    every: many\n");
+    assert!(
+        e.contains(&named(
+            3,
+            "roitrack: ros__parameters: every: invalid value 'many' for '--every"
+        )),
+        "{e}"
+    );
+    let e = run("roitrack:\n  target: t.csv\n");
+    assert!(
+        e.contains(&named(2, "roitrack: unknown key \"target\"")),
+        "{e}"
+    );
+    let e = run("roitrack:\n  ros__parameters:\n    every: [1\n");
+    assert!(
+        e.contains(&format!("--params-file {}: line ", params.display())) && e.contains("not YAML"),
+        "{e}"
+    );
+}

@@ -25,6 +25,13 @@ use crate::ros2_args::Ros2BusArgs;
 /// image, times going back, big-endian CDR) are left out whole, counted and named; the node goes on.
 #[derive(Debug, Args)]
 pub struct Ros2NodeArgs {
+    /// Options from a ROS 2 parameters file (YAML, as `ros2 run --ros-args --params-file` reads): `roitrack:` (or
+    /// `/**:`, `/NS/roitrack:` with --ros2-namespace /NS) then `ros__parameters:` then keys, each an option of this
+    /// command with _ for - (`target: target.csv`, `every: 10`, `ros2_interface: [127.0.0.1]`). The command line
+    /// overrides the file; an unknown key, a value of the wrong type or out of range, or no `ros__parameters` is an
+    /// error naming the file, the key and its line (docs/ros2.md). Default: none.
+    #[arg(long, value_name = "FILE.yaml")]
+    pub params_file: Option<PathBuf>,
     /// Camera calibration (any format `track --camera` reads). Default: the camera of the first
     /// sensor_msgs/msg/CameraInfo on --camera-info-topic.
     #[arg(long, value_name = "FILE")]
@@ -90,6 +97,7 @@ pub fn run(args: &Ros2NodeArgs) -> Result<()> {
         let inputs: Vec<(&str, &std::path::Path)> = [
             ("--camera", args.camera.as_deref()),
             ("--target", Some(args.target.target.as_path())),
+            ("--params-file", args.params_file.as_deref()),
         ]
         .into_iter()
         .filter_map(|(name, path)| path.map(|p| (name, p)))
