@@ -161,6 +161,40 @@ pub fn simulate_rig(
     noise_px: f64,
     seed: u64,
 ) -> Result<RigRun, SimError> {
+    sample_rig(scene, rate_hz, noise_px, seed, false)
+}
+
+/// Samples `scene` as global-shutter cameras do: every camera reads every point of the target at once, `fps` times a
+/// second of its own clock (at a random phase, the cameras not triggered together), each centroid with Gaussian noise
+/// of `noise_px` per axis; the truth at `fps` on the rig's clock. Seeded by `seed`.
+///
+/// ```
+/// use roitrack_sim::multi_camera::{CameraRigScene, simulate_rig_frames};
+/// use roitrack_sim::{Scenario, ScenarioKind};
+///
+/// let scene = CameraRigScene::random(Scenario::new(ScenarioKind::Random, 1), 2, 1);
+/// let run = simulate_rig_frames(&scene, 30.0, 0.05, 1).unwrap();
+/// // The first camera's first frame: all 16 points at one time.
+/// let first = &run.measurements[0];
+/// assert!(first[..16].iter().all(|m| m.t_s == first[0].t_s) && first[16].t_s > first[0].t_s);
+/// ```
+pub fn simulate_rig_frames(
+    scene: &CameraRigScene,
+    fps: f64,
+    noise_px: f64,
+    seed: u64,
+) -> Result<RigRun, SimError> {
+    sample_rig(scene, fps, noise_px, seed, true)
+}
+
+/// [`simulate_rig`] (one point per reading) or [`simulate_rig_frames`] (every point per reading).
+fn sample_rig(
+    scene: &CameraRigScene,
+    rate_hz: f64,
+    noise_px: f64,
+    seed: u64,
+    whole_frames: bool,
+) -> Result<RigRun, SimError> {
     let bad = |field, expected, value| SimError::BadOption {
         field,
         expected,
@@ -214,29 +248,36 @@ pub fn simulate_rig(
             let t_camera_s = k as f64 / rate_hz + phase_s;
             let t_rig_s = clock.rig_time_s(t_camera_s).clamp(0.0, duration_s);
             let state = camera.mount.camera_state(&scenario.state_at(t_rig_s));
-            let point = target.points()[order[k.rem_euclid(target.len() as i64) as usize]];
-            let noise_px = Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
-            let p = state.point_in_cam_at(&point.point_in_obj_m, 0.0);
-            if let Some(face) = face_in_obj {
-                let normal = state.cam_r_obj * face;
-                if normal.dot(&p) < min_cos * p.norm() {
-                    continue;
-                }
-            }
-            let Some(raw) = camera
-                .camera
-                .raw_pixel_from_cam(&p)
-                .filter(|px| camera.camera.contains_raw_pixel(px))
-            else {
-                continue;
+            let read = if whole_frames {
+                0..target.len()
+            } else {
+                let i = order[k.rem_euclid(target.len() as i64) as usize];
+                i..i + 1
             };
-            let measured = raw + noise_px;
-            list.push(Measurement {
-                t_s: t_camera_s,
-                id: point.id,
-                u_px: measured.x,
-                v_px: measured.y,
-            });
+            for point in &target.points()[read] {
+                let noise_px = Vector2::new(noise.sample(&mut rng), noise.sample(&mut rng));
+                let p = state.point_in_cam_at(&point.point_in_obj_m, 0.0);
+                if let Some(face) = face_in_obj {
+                    let normal = state.cam_r_obj * face;
+                    if normal.dot(&p) < min_cos * p.norm() {
+                        continue;
+                    }
+                }
+                let Some(raw) = camera
+                    .camera
+                    .raw_pixel_from_cam(&p)
+                    .filter(|px| camera.camera.contains_raw_pixel(px))
+                else {
+                    continue;
+                };
+                let measured = raw + noise_px;
+                list.push(Measurement {
+                    t_s: t_camera_s,
+                    id: point.id,
+                    u_px: measured.x,
+                    v_px: measured.y,
+                });
+            }
         }
         measurements.push(list);
     }

@@ -819,12 +819,13 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     let report = tracker.report();
     eprintln!(
         "roitrack: {count} measurements of {} cameras -> {estimates} estimates in {seconds:.3} s ({:.2} us per \
-         measurement); fused {}, rejected by the gate {}, fused tracks started {}",
+         measurement); fused {}, rejected by the gate {}, fused tracks started {}, instants widened {}",
         rig.len(),
         1e6 * seconds / count.max(1) as f64,
         report.fused,
         report.gated,
-        report.starts
+        report.starts,
+        report.instants_widened
     );
     Ok(())
 }

@@ -160,26 +160,11 @@ impl<const N: usize> ErrorStateKalman<N> {
         };
         let x = fit_covariance * gradient;
         let pose = self.covariance.fixed_view::<6, 6>(0, 0).into_owned();
-        let nis = |alpha: f64| {
-            (pose * alpha + fit_covariance)
-                .cholesky()
-                .map(|c| x.dot(&c.solve(&x)))
+        let Some(alpha) = pose_matching_scale(&pose, &fit_covariance, &x, gate_chi2) else {
+            return 1.0;
         };
-        match nis(1.0) {
-            Some(v) if v.is_finite() && v > gate_chi2 => {}
-            _ => return 1.0,
-        }
-        // The normalised innovation falls as α grows: bisect in its logarithm for the expected 6.
-        let (mut low, mut high) = (1.0_f64, 1e8_f64);
-        for _ in 0..40 {
-            let mid = (low * high).sqrt();
-            match nis(mid) {
-                Some(v) if v > 6.0 => low = mid,
-                _ => high = mid,
-            }
-        }
-        self.covariance *= high;
-        high
+        self.covariance *= alpha;
+        alpha
     }
 
     /// Adds `scale` times `prior` (of the pose and the twist) and of the acceleration prior: a covariance reset.
@@ -586,4 +571,34 @@ impl Filter {
             _ => false,
         }
     }
+}
+
+/// Covariance matching of a pose innovation: when a fit of the pose alone moves the prediction by `x` (covariance
+/// `fit_covariance`) beyond `gate_chi2` of `xᵀ (P_pose + C)⁻¹ x`, a chi-square of 6 degrees of freedom if the
+/// prediction is right, the factor `α` on `P_pose` that makes it its expected 6; `None` within the gate.
+pub(crate) fn pose_matching_scale(
+    pose_covariance: &SMatrix<f64, 6, 6>,
+    fit_covariance: &SMatrix<f64, 6, 6>,
+    x: &Vector6<f64>,
+    gate_chi2: f64,
+) -> Option<f64> {
+    let nis = |alpha: f64| {
+        (pose_covariance * alpha + fit_covariance)
+            .cholesky()
+            .map(|c| x.dot(&c.solve(x)))
+    };
+    match nis(1.0) {
+        Some(v) if v.is_finite() && v > gate_chi2 => {}
+        _ => return None,
+    }
+    // The normalised innovation falls as α grows: bisect in its logarithm for the expected 6.
+    let (mut low, mut high) = (1.0_f64, 1e8_f64);
+    for _ in 0..40 {
+        let mid = (low * high).sqrt();
+        match nis(mid) {
+            Some(v) if v > 6.0 => low = mid,
+            _ => high = mid,
+        }
+    }
+    Some(high)
 }

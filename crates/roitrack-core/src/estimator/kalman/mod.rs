@@ -58,6 +58,7 @@ mod readout;
 mod tests;
 mod tuning;
 
+pub(crate) use filter::pose_matching_scale;
 use filter::*;
 use law::*;
 use motion_model::*;
