@@ -510,6 +510,16 @@ impl RigArgs {
     /// `base` on the camera and target given, moved, sped up and cut as asked, checked to keep the target in the
     /// image.
     pub fn scenario(&self, base: Scenario) -> Result<Scenario> {
+        self.scenario_within(base, |_| Ok(()))
+    }
+
+    /// [`Self::scenario`], with `limit` (a command's own bound on the scenario, such as the demo's longest run)
+    /// checked before the image margin: that check samples the whole motion, minutes for a day's run.
+    pub fn scenario_within(
+        &self,
+        base: Scenario,
+        limit: impl FnOnce(&Scenario) -> Result<()>,
+    ) -> Result<Scenario> {
         let mut scenario = base;
         if let Some(path) = &self.camera {
             let options = roitrack::formats::CameraFileOptions {
@@ -538,6 +548,7 @@ impl RigArgs {
         if let Some(duration) = self.duration_s {
             scenario = scenario.with_duration_s(positive("--duration-s", duration)?);
         }
+        limit(&scenario)?;
         let margin = scenario.min_image_margin_px();
         if margin.is_infinite() && margin < 0.0 {
             return Err(anyhow!(

@@ -100,17 +100,22 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         paced: args.paced,
         order: args.order.into(),
     };
-    let scenario = args
-        .rig
-        .scenario(roitrack::sim::Scenario::new(options.scenario, options.seed))?;
-    if scenario.duration_s > MAX_DEMO_DURATION_S {
-        anyhow::bail!(
-            "the demo's scenario lasts {:.0} s (--duration-s, --speed-scale): the demo holds its whole run in memory \
-             (about 7 MB per simulated second), so it runs at most {MAX_DEMO_DURATION_S} s; `roitrack simulate` \
-             streams longer runs to files for `roitrack track`",
-            scenario.duration_s
-        );
-    }
+    // The duration is checked before the scenario's image margin, which samples the whole motion (a day's run: two
+    // minutes before this refusal).
+    let scenario = args.rig.scenario_within(
+        roitrack::sim::Scenario::new(options.scenario, options.seed),
+        |scenario| {
+            if scenario.duration_s > MAX_DEMO_DURATION_S {
+                anyhow::bail!(
+                    "the demo's scenario lasts {:.0} s (--duration-s, --speed-scale): the demo holds its whole run in \
+                     memory (about 7 MB per simulated second), so it runs at most {MAX_DEMO_DURATION_S} s; \
+                     `roitrack simulate` streams longer runs to files for `roitrack track`",
+                    scenario.duration_s
+                );
+            }
+            Ok(())
+        },
+    )?;
     check_paths(args)?;
     let demo = Demo::with_scenario(options, scenario)?;
     write_run(&demo.run, &args.out)?;
