@@ -38,33 +38,45 @@ fn run_with(
     config: FrameTrackerConfig,
     count: usize,
 ) -> Run {
+    let [run] = run_each(frames, [(camera, config)], count);
+    run
+}
+
+/// One tracker per (camera, configuration), each fed the same first `count` frames: every frame is rendered once
+/// for all of them (rendering is most of these tests' time), the trackers taking it in turn.
+fn run_each<const N: usize>(
+    frames: &mut FrameSequence,
+    trackers: [(CameraModel, FrameTrackerConfig); N],
+    count: usize,
+) -> [Run; N] {
     let target = frames.scenario().target.clone();
-    let mut tracker = FrameTracker::new(camera, target, config).unwrap();
-    let mut frame = Frame::default();
-    let mut errors = Vec::new();
-    let mut methods = Vec::new();
-    let mut last_noise_px = f64::NAN;
+    let mut trackers =
+        trackers.map(|(camera, config)| FrameTracker::new(camera, target.clone(), config).unwrap());
     let count = count.min(frames.len());
+    let mut runs = std::array::from_fn(|_| Run {
+        errors: Vec::new(),
+        methods: Vec::new(),
+        frames: count,
+        last_noise_px: f64::NAN,
+    });
+    let mut frame = Frame::default();
     for k in 0..count {
         frames.render(k, &mut frame);
-        let outcome = tracker.process(&frame).unwrap();
-        methods.push(outcome.method);
-        if let Some(e) = outcome.estimate {
-            last_noise_px = e.noise_px;
-            let truth = frames.state_at(e.t_ref_s);
-            errors.push((
-                (e.state.cam_t_obj_m - truth.cam_t_obj_m).norm(),
-                (e.state.velocity_mps - truth.velocity_mps).norm(),
-                so3::angle_between(&e.state.cam_r_obj, &truth.cam_r_obj),
-            ));
+        for (tracker, run) in trackers.iter_mut().zip(&mut runs) {
+            let outcome = tracker.process(&frame).unwrap();
+            run.methods.push(outcome.method);
+            if let Some(e) = outcome.estimate {
+                run.last_noise_px = e.noise_px;
+                let truth = frames.state_at(e.t_ref_s);
+                run.errors.push((
+                    (e.state.cam_t_obj_m - truth.cam_t_obj_m).norm(),
+                    (e.state.velocity_mps - truth.velocity_mps).norm(),
+                    so3::angle_between(&e.state.cam_r_obj, &truth.cam_r_obj),
+                ));
+            }
         }
     }
-    Run {
-        errors,
-        methods,
-        frames: count,
-        last_noise_px,
-    }
+    runs
 }
 
 fn rms(values: impl Iterator<Item = f64>) -> f64 {
@@ -141,8 +153,17 @@ fn rolling_shutter_model_beats_the_global_model_on_rolling_frames() {
         line_delay_s: 30e-6,
     };
     let mut frames = sequence_of(ScenarioKind::Sweep, rolling, Polarity::Bright, 2);
-    let with_model = run(&mut frames, None, 90);
-    let without = run(&mut frames, Some(Readout::GlobalShutter), 90);
+    let camera = frames.camera().clone();
+    let mut global_camera = camera.clone();
+    global_camera.time.readout = Readout::GlobalShutter;
+    let [with_model, without] = run_each(
+        &mut frames,
+        [
+            (camera, FrameTrackerConfig::default()),
+            (global_camera, FrameTrackerConfig::default()),
+        ],
+        90,
+    );
     let mut global_frames = sequence_of(
         ScenarioKind::Sweep,
         Readout::GlobalShutter,
@@ -171,12 +192,6 @@ fn the_frame_default_follows_accelerations_that_a_constant_twist_misses() {
     };
     let mut frames = sequence_of(ScenarioKind::Sweep, rolling, Polarity::Bright, 3);
     let camera = frames.camera().clone();
-    let acceleration = run_with(
-        &mut frames,
-        camera.clone(),
-        FrameTrackerConfig::default(),
-        120,
-    );
     let velocity_config = FrameTrackerConfig {
         tracker: FrameTrackerConfig::frame_estimator(
             TrackerConfig::default(),
@@ -185,7 +200,14 @@ fn the_frame_default_follows_accelerations_that_a_constant_twist_misses() {
         ),
         ..FrameTrackerConfig::default()
     };
-    let velocity = run_with(&mut frames, camera, velocity_config, 120);
+    let [acceleration, velocity] = run_each(
+        &mut frames,
+        [
+            (camera.clone(), FrameTrackerConfig::default()),
+            (camera, velocity_config),
+        ],
+        120,
+    );
     let (pos_a, vel_a) = summary("constant acceleration (default)", &acceleration);
     let (pos_v, vel_v) = summary("constant velocity", &velocity);
     assert_eq!(acceleration.errors.len(), acceleration.frames);
@@ -453,16 +475,17 @@ fn the_noise_is_learnt_from_global_shutter_frames_and_held_for_rolling_ones() {
         let scenario = Scenario::new(ScenarioKind::Sweep, 2).with_target(four_dots());
         let mut frames = frames_of(scenario, readout, Polarity::Bright, 2);
         let camera = frames.camera().clone();
-        let learnt = run_with(
-            &mut frames,
-            camera.clone(),
-            FrameTrackerConfig::default(),
-            90,
-        );
         let mut held = FrameTrackerConfig::default();
         held.tracker =
             FrameTrackerConfig::frame_estimator(held.tracker, Some(Adaptation::None), None);
-        let held = run_with(&mut frames, camera, held, 90);
+        let [learnt, held] = run_each(
+            &mut frames,
+            [
+                (camera.clone(), FrameTrackerConfig::default()),
+                (camera, held),
+            ],
+            90,
+        );
         let (pos_learnt, _) = summary(&format!("{readout:?}, default"), &learnt);
         let (pos_held, _) = summary(&format!("{readout:?}, noise held at 0.1 px"), &held);
         eprintln!("noise at the end: {:.4} px", learnt.last_noise_px);
