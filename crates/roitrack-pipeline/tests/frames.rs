@@ -331,17 +331,27 @@ fn four_dots_moving_fast_at_30_hz_are_tracked_as_closely_as_frame_by_frame_and_m
     );
 }
 
+/// The sweep scenario of `seed` with the four dots, which [`four_dots_in_clutter`] films.
+fn clutter_scenario(seed: u64) -> Scenario {
+    Scenario::new(ScenarioKind::Sweep, seed).with_target(four_dots())
+}
+
 /// Four dots (bright on a dark board) of the sweep scenario of `seed`, at frame `k` of 30 Hz, before a cluttered
 /// background (bright, dark and grey shapes anywhere, a new layout every frame, some touching the board), with sensor
 /// noise of `noise_sigma` (of the full scale) and JPEG compression: what a user films with a hand-made target.
-fn four_dots_in_clutter(seed: u64, k: usize, noise_sigma: f64) -> (MotionState, Frame) {
-    let target = four_dots();
-    let scenario = Scenario::new(ScenarioKind::Sweep, seed).with_target(target.clone());
+/// `scenario` is [`clutter_scenario`] of `seed`, made once for all its frames.
+fn four_dots_in_clutter(
+    scenario: &Scenario,
+    seed: u64,
+    k: usize,
+    noise_sigma: f64,
+) -> (MotionState, Frame) {
     let t_s = k as f64 / 30.0;
     let truth = scenario.state_at(t_s);
-    let mut scene = PhotoScene::from_state(scenario.camera.clone(), target, &truth)
-        .with_shade(CircleShade::BrightOnDark)
-        .with_seed(100 * seed + k as u64);
+    let mut scene =
+        PhotoScene::from_state(scenario.camera.clone(), scenario.target.clone(), &truth)
+            .with_shade(CircleShade::BrightOnDark)
+            .with_seed(100 * seed + k as u64);
     scene.clutter = Clutter::busy(40);
     scene.noise_sigma = noise_sigma;
     scene.jpeg_quality = Some(90);
@@ -365,8 +375,9 @@ fn a_four_dot_target_in_clutter_is_tracked_on_every_frame_more_smoothly_than_fra
         )
         .unwrap();
         let (mut tracked, mut alone, mut truths) = (Vec::new(), Vec::new(), Vec::new());
+        let scenario = clutter_scenario(seed);
         for k in 0..count {
-            let (truth, frame) = four_dots_in_clutter(seed, k, 0.02);
+            let (truth, frame) = four_dots_in_clutter(&scenario, seed, k, 0.02);
             let outcome = tracker.process(&frame).unwrap();
             let estimate = outcome.estimate.unwrap_or_else(|| {
                 panic!("seed {seed}, frame {k}: no estimate ({:?})", outcome.method)
@@ -423,8 +434,9 @@ fn window_centres_of_noisy_compressed_dots_are_as_close_as_the_full_frame_detect
     .unwrap();
     let (mut windows, mut detected) = (Vec::new(), Vec::new());
     let mut bias = Vector2::zeros();
+    let scenario = clutter_scenario(4);
     for k in 0..60 {
-        let (truth, frame) = four_dots_in_clutter(4, k, 0.05);
+        let (truth, frame) = four_dots_in_clutter(&scenario, 4, k, 0.05);
         let outcome = tracker.process(&frame).unwrap();
         let true_px = |id: u32| {
             let i = target.index_of(id).unwrap();
