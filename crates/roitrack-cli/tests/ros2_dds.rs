@@ -730,20 +730,7 @@ fn the_node_takes_its_camera_from_a_latched_camera_info_and_names_a_missing_one(
     }
     let dir = tempfile::tempdir().unwrap();
     let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
-    let sim = dir.path().join("sim");
-    let simulated = Command::new(roitrack)
-        .args([
-            "simulate",
-            "--scenario",
-            "spin",
-            "--duration-s",
-            "0.5",
-            "--out",
-        ])
-        .arg(&sim)
-        .output()
-        .unwrap();
-    assert!(simulated.status.success());
+    let sim = simulate_spin(roitrack, dir.path());
     let file = |name: &str| dir.path().join(name);
     let (ok, log) = in_namespace(
         r#"
@@ -790,20 +777,7 @@ fn the_node_takes_its_options_from_a_parameters_file_and_the_command_line_overri
     }
     let dir = tempfile::tempdir().unwrap();
     let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
-    let sim = dir.path().join("sim");
-    let simulated = Command::new(roitrack)
-        .args([
-            "simulate",
-            "--scenario",
-            "spin",
-            "--duration-s",
-            "0.5",
-            "--out",
-        ])
-        .arg(&sim)
-        .output()
-        .unwrap();
-    assert!(simulated.status.success());
+    let sim = simulate_spin(roitrack, dir.path());
     let file = |name: &str| dir.path().join(name);
     // every: 3 and poses are overridden by the command line; the rest is the file's.
     let params = file("params.yaml");
@@ -895,4 +869,23 @@ fn a_wrong_parameters_file_is_refused_naming_the_file_the_key_and_the_line() {
         e.contains(&format!("--params-file {}: line ", params.display())) && e.contains("not YAML"),
         "{e}"
     );
+}
+
+/// Half a second of the `spin` scene simulated into `dir/sim`, which it returns.
+fn simulate_spin(roitrack: &Path, dir: &Path) -> PathBuf {
+    let sim = dir.join("sim");
+    let simulated = Command::new(roitrack)
+        .args([
+            "simulate",
+            "--scenario",
+            "spin",
+            "--duration-s",
+            "0.5",
+            "--out",
+        ])
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(simulated.status.success());
+    sim
 }
