@@ -80,18 +80,32 @@ fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
 fn ctrl_c_stops_the_run_and_writes_every_output() {
     let _turn = turn();
     let dir = tempfile::tempdir().unwrap();
-    let (mut live, [poses, twists, bag]) = live_fake(dir.path(), "60");
-    let child = live
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    std::thread::sleep(Duration::from_millis(2500));
-    interrupt(&child);
-    let start = Instant::now();
-    let stdout = succeeded(child.wait_with_output().unwrap());
-    assert!(start.elapsed() < Duration::from_secs(10));
-    assert!(stdout.contains("stopped: interrupted (Ctrl-C)"), "{stdout}");
+    // Aravis' fake camera on the loopback sometimes stalls for good after an incomplete first full frame (about 1
+    // run in 3 on a 2-core machine: "ROIs grabbed 1, lost 1, incomplete 1", nothing more in 2.5 s). That stall is
+    // tried once more, so that what this test checks (Ctrl-C stops the run and every output is written) is tested
+    // on a camera that delivers; two stalls in a row fail.
+    let mut attempt = 0;
+    let (stdout, poses, twists, bag) = loop {
+        attempt += 1;
+        let (mut live, [poses, twists, bag]) = live_fake(dir.path(), "60");
+        let child = live
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(Duration::from_millis(2500));
+        interrupt(&child);
+        let start = Instant::now();
+        let stdout = succeeded(child.wait_with_output().unwrap());
+        assert!(start.elapsed() < Duration::from_secs(10));
+        assert!(stdout.contains("stopped: interrupted (Ctrl-C)"), "{stdout}");
+        let stalled = stdout.contains("ROIs grabbed 1, lost (no image in time) 1, incomplete 1");
+        if stalled && attempt == 1 {
+            eprintln!("the fake camera stalled after its first full frame; once more:\n{stdout}");
+            continue;
+        }
+        break (stdout, poses, twists, bag);
+    };
     let rows = std::fs::read_to_string(&poses).unwrap().lines().count();
     assert!(rows > 10, "{rows} poses\n{stdout}");
     assert_eq!(
