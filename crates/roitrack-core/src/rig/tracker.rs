@@ -590,8 +590,12 @@ impl RigTracker {
         let mut fitted = f.state;
         let mut x = Vector6::zeros();
         let mut fit_covariance = Matrix6::zeros();
+        // The blobs' squared residuals at the last linearisation, for the estimate's residual RMS as blob-by-blob
+        // updates add theirs.
+        let mut sum_squares_px2 = 0.0;
         for _ in 0..POSE_FIT_ITERATIONS {
             let (mut information, mut gradient) = (Matrix6::zeros(), Vector6::zeros());
+            sum_squares_px2 = 0.0;
             for (point, ideal_px, t_s) in &points {
                 let Some(projected) = rig_projection(
                     &self.models[c],
@@ -605,8 +609,10 @@ impl RigTracker {
                     continue;
                 };
                 let j = projected.jacobian.fixed_view::<2, 6>(0, 0).into_owned();
+                let residual_px = ideal_px - projected.pixel;
+                sum_squares_px2 += residual_px.norm_squared();
                 information += j.transpose() * j / noise2;
-                gradient += j.transpose() * (ideal_px - projected.pixel) / noise2;
+                gradient += j.transpose() * residual_px / noise2;
             }
             let Some(covariance) = information.try_inverse() else {
                 return false;
@@ -662,6 +668,7 @@ impl RigTracker {
         f.p = symmetric;
         let taken = blobs.len();
         f.count += taken;
+        f.sum_squares_px2 += sum_squares_px2;
         f.gated_in_a_row = 0;
         f.newest_gated = false;
         self.pending.retain(|Reverse(p)| !same_instant(p));
