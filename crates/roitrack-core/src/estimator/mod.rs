@@ -724,6 +724,24 @@ pub trait Estimator: Send + std::fmt::Debug {
     /// The current state and its time (that of the newest measurement processed), once initialised.
     fn state(&self) -> Option<(f64, MotionState)>;
 
+    /// The current state predicted to `t_s`, once initialised, with its covariance (pose and twist, error-state
+    /// order v, w, dV, dW) when the estimator has one: the Kalman filter's own prediction, accelerations and process
+    /// noise included, which is where the next measurements are to be looked for. The default carries the state by
+    /// its twist, with no covariance.
+    ///
+    /// ```
+    /// use roitrack_core::estimator::{Estimator, Tracker, TrackerConfig};
+    /// use roitrack_core::{CameraModel, Target};
+    ///
+    /// let tracker = Tracker::new(CameraModel::canonical(), Target::grid4x4(), TrackerConfig::default()).unwrap();
+    /// // No track yet: nothing to predict.
+    /// assert!(tracker.predicted(0.1).is_none());
+    /// ```
+    fn predicted(&self, t_s: f64) -> Option<(MotionState, Option<Matrix12>)> {
+        self.state()
+            .map(|(t_ref_s, state)| (state.predicted(t_s - t_ref_s), None))
+    }
+
     /// The options the estimator runs with.
     fn config(&self) -> &TrackerConfig;
 
@@ -767,6 +785,12 @@ macro_rules! delegate_estimator {
             }
             fn state(&self) -> Option<(f64, MotionState)> {
                 self.0.state()
+            }
+            fn predicted(
+                &self,
+                t_s: f64,
+            ) -> Option<(MotionState, Option<$crate::estimator::Matrix12>)> {
+                self.0.predicted(t_s)
             }
             fn config(&self) -> &TrackerConfig {
                 self.0.config()

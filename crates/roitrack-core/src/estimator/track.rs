@@ -109,6 +109,11 @@ pub(crate) struct Step {
 pub(crate) trait Law: Clone + std::fmt::Debug + Send {
     /// A new track starts at `core.state` (time `core.t_ref_s`), with this covariance if the start gave one.
     fn begin_track(&mut self, core: &TrackCore, covariance: Option<Matrix12>);
+    /// The state of a running track predicted to `t_s` with its pose/twist covariance, when the law has one (a
+    /// filter's prediction: its accelerations and process noise included).
+    fn predicted(&self, _core: &TrackCore, _t_s: f64) -> Option<(MotionState, Matrix12)> {
+        None
+    }
     /// A measurement of a running track, already in the window.
     fn on_measurement(&mut self, _core: &mut TrackCore, _obs: &Observation) {}
     /// The measurements of one readout (a frame's blobs, in time order) of a running track, already in the window:
@@ -740,6 +745,19 @@ impl<L: Law> Track<L> {
     /// The current state (at the time of the newest measurement processed), once initialised.
     pub fn state(&self) -> Option<(f64, MotionState)> {
         (self.core.phase == Phase::Running).then_some((self.core.t_ref_s, self.core.state))
+    }
+
+    /// The current state predicted to `t_s`, once initialised: by the estimator's own motion model with its
+    /// covariance (pose and twist, error-state order) when it has one (the Kalman filter's accelerations and process
+    /// noise included), else carried by the twist with no covariance.
+    pub fn predicted(&self, t_s: f64) -> Option<(MotionState, Option<Matrix12>)> {
+        if self.core.phase != Phase::Running {
+            return None;
+        }
+        Some(match self.law.predicted(&self.core, t_s) {
+            Some((state, covariance)) => (state, Some(covariance)),
+            None => (self.core.state.predicted(t_s - self.core.t_ref_s), None),
+        })
     }
 
     pub fn config(&self) -> &TrackerConfig {

@@ -256,14 +256,24 @@ impl FrameTracker {
     pub fn process(&mut self, frame: &Frame) -> Result<FrameOutcome, FrameError> {
         self.check_frame(frame)?;
         self.report.frames += 1;
-        if let (Some(predictor), Some(acceleration)) =
-            (self.memory.predictor, self.memory.acceleration)
-        {
-            self.memory.predictor = Some(carried_with_acceleration(
-                predictor,
-                &acceleration,
-                frame.t_s,
-            ));
+        // The windows go where the running filter predicts the frame, with its uncertainty: its accelerations
+        // and the process noise of the frame interval included (carried by the last estimate's covariance alone, a
+        // fast random motion at 30 Hz was predicted at 4 px where it lay 43 px off, a whole grid spacing, and the
+        // windows measured each point's neighbour).
+        if let Some(predictor) = self.memory.predictor {
+            self.memory.predictor = Some(match self.tracker.predicted(frame.t_s) {
+                Some((state, covariance)) => Predictor {
+                    t_ref_s: frame.t_s,
+                    state,
+                    covariance: covariance.or(predictor.covariance),
+                },
+                None => match self.memory.acceleration {
+                    Some(acceleration) => {
+                        carried_with_acceleration(predictor, &acceleration, frame.t_s)
+                    }
+                    None => predictor,
+                },
+            });
         }
         let mut method = FrameMethod::NotFound;
         if let Some(predictor) = self.memory.predictor
@@ -383,6 +393,7 @@ impl FrameTracker {
                 covariance: e.covariance,
             });
             self.memory.acceleration = e.acceleration;
+            self.memory.noise_px = Some(e.noise_px);
         }
     }
 

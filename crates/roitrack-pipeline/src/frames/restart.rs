@@ -29,6 +29,8 @@ pub(super) struct TrackMemory {
     /// The newest pose to trust, and its time: a frame found whole (the static pose of its identified blobs) or an
     /// estimate vouched for. A new track takes its twist from it ([`FrameTracker::restart_state`]).
     pub(super) last_pose: Option<(f64, MotionState)>,
+    /// The centroid noise of the last estimate (px): the estimator's, learnt or given.
+    pub(super) noise_px: Option<f64>,
 }
 
 impl FrameTracker {

@@ -93,6 +93,14 @@ pub(super) struct KalmanLaw {
 }
 
 impl Law for KalmanLaw {
+    fn predicted(&self, core: &TrackCore, t_s: f64) -> Option<(MotionState, Matrix12)> {
+        Some(self.filter.predicted(
+            &core.state,
+            t_s - core.t_ref_s,
+            self.process_log_scale.map(f64::exp),
+        ))
+    }
+
     fn begin_track(&mut self, core: &TrackCore, covariance: Option<Matrix12>) {
         *self = Self {
             filter: Filter::new(
