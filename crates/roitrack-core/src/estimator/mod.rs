@@ -66,7 +66,10 @@ use thiserror::Error;
 
 use crate::{CameraModel, Measurement, MotionState, Target};
 pub use batch::BatchEstimator;
-pub use kalman::{KalmanEstimator, KalmanTuning, Matrix12, MotionModel, NoiseSample};
+pub use kalman::{
+    KNOWN_ACCELERATION_CAPACITY, KalmanEstimator, KalmanTuning, KnownAccelerationError, Matrix12,
+    MotionModel, NoiseSample,
+};
 pub use model_error::{MODEL_UNCERTAINTY, ModelEffect, ModelResidual, ModelUncertainty};
 pub use options::{
     Adaptation, EstimatorKind, MotionModelKind, OptionConflict, TrackerOptions, UnknownName,
@@ -750,6 +753,46 @@ pub trait Estimator: Send + std::fmt::Debug {
 
     /// Counts of what it has done.
     fn report(&self) -> EstimatorReport;
+
+    /// Tells the estimator the target's acceleration (camera frame, [`crate::Acceleration`]) from `t_s` on, until
+    /// the next one given: a known control input, such as the acceleration a controller commands of the robot that
+    /// carries the target. The Kalman filter predicts with it, on top of its own motion model (`x' = F x + B u`), so
+    /// that a commanded acceleration does not show as a lag of its velocity; its process noise then stands for the
+    /// difference between the input and the truth. Inputs come in time order (one at the same time replaces the
+    /// previous), may be given ahead of the measurements (a command acts when it acts, not when it is given), and
+    /// hold across tracks; an input whose time has passed applies from the filter's time on (what was predicted is
+    /// not predicted again). Only the Kalman filter takes one: the other estimators refuse it
+    /// ([`KnownAccelerationError::Unsupported`]); a refused input leaves the estimator as it was.
+    ///
+    /// ```
+    /// use nalgebra::Vector3;
+    /// use roitrack_core::estimator::{Estimator, KnownAccelerationError, Tracker, TrackerConfig};
+    /// use roitrack_core::{Acceleration, CameraModel, Target};
+    ///
+    /// let mut tracker = Tracker::new(CameraModel::canonical(), Target::grid4x4(), TrackerConfig::default()).unwrap();
+    /// // A controller commands 20 m/s² along the optical axis from t = 0.010 s, then stops accelerating at 0.012 s.
+    /// let push = Acceleration { linear_mps2: Vector3::new(0.0, 0.0, 20.0), angular_radps2: Vector3::zeros() };
+    /// tracker.set_known_acceleration(0.010, push).unwrap();
+    /// tracker.set_known_acceleration(0.012, Acceleration { linear_mps2: Vector3::zeros(), ..push }).unwrap();
+    /// // Out of order: refused.
+    /// assert!(matches!(
+    ///     tracker.set_known_acceleration(0.011, push),
+    ///     Err(KnownAccelerationError::OutOfOrder { .. })
+    /// ));
+    /// ```
+    fn set_known_acceleration(
+        &mut self,
+        _t_s: f64,
+        _acceleration: crate::Acceleration,
+    ) -> Result<(), KnownAccelerationError> {
+        Err(KnownAccelerationError::Unsupported {
+            estimator: self.config().estimator.name(),
+        })
+    }
+
+    /// Forgets every known acceleration given ([`Self::set_known_acceleration`]): the estimator predicts with its
+    /// own motion model alone again.
+    fn clear_known_acceleration(&mut self) {}
 }
 
 /// Implements [`Estimator`] for a newtype around an estimator (a [`track::Track`], or a boxed [`Estimator`]).
@@ -800,6 +843,16 @@ macro_rules! delegate_estimator {
             }
             fn report(&self) -> EstimatorReport {
                 self.0.report()
+            }
+            fn set_known_acceleration(
+                &mut self,
+                t_s: f64,
+                acceleration: $crate::Acceleration,
+            ) -> Result<(), $crate::estimator::KnownAccelerationError> {
+                self.0.set_known_acceleration(t_s, acceleration)
+            }
+            fn clear_known_acceleration(&mut self) {
+                self.0.clear_known_acceleration()
             }
         }
     };

@@ -145,6 +145,10 @@ pub(crate) trait Law: Clone + std::fmt::Debug + Send {
     }
     /// Adds the law's own counters to a report.
     fn add_to_report(&self, _report: &mut EstimatorReport) {}
+    /// The target's known acceleration its predictions use (a control input), if the law predicts with one.
+    fn known_acceleration(&mut self) -> Option<&mut super::kalman::KnownAcceleration> {
+        None
+    }
 }
 
 /// The state a [`Law`] works on, shared by every estimator.
@@ -740,6 +744,37 @@ impl<L: Law> Track<L> {
         self.core.window.clear();
         self.core.last_t_s = Some(t_s);
         self.begin_track(t_s, state, covariance);
+    }
+
+    /// Tells the law the target's acceleration from `t_s` on ([`super::Estimator::set_known_acceleration`]).
+    pub fn set_known_acceleration(
+        &mut self,
+        t_s: f64,
+        acceleration: crate::Acceleration,
+    ) -> Result<(), super::KnownAccelerationError> {
+        let estimator = self.core.config.estimator.name();
+        // No prediction starts before the running track's time, nor (a track yet to start) before the newest
+        // measurement: what is in force before either is forgotten.
+        let now_s = if self.core.phase == Phase::Running {
+            Some(self.core.t_ref_s)
+        } else {
+            self.core.last_t_s
+        };
+        let known = self
+            .law
+            .known_acceleration()
+            .ok_or(super::KnownAccelerationError::Unsupported { estimator })?;
+        if let Some(now_s) = now_s {
+            known.forget_before(now_s);
+        }
+        known.set(t_s, acceleration)
+    }
+
+    /// Forgets every known acceleration ([`super::Estimator::clear_known_acceleration`]).
+    pub fn clear_known_acceleration(&mut self) {
+        if let Some(known) = self.law.known_acceleration() {
+            known.clear();
+        }
     }
 
     /// The current state (at the time of the newest measurement processed), once initialised.

@@ -178,11 +178,50 @@ impl<const N: usize> ErrorStateKalman<N> {
 
     /// Moves the state `dt_s` ahead and grows the covariance, with the process densities scaled by `process_scale`.
     pub(super) fn predict(&mut self, state: &mut MotionState, dt_s: f64, process_scale: [f64; 2]) {
+        let acceleration = self.acceleration;
+        self.predict_with(state, dt_s, process_scale, &acceleration);
+    }
+
+    /// [`Self::predict`] from `t_s`, with the known acceleration `known` on top of the filter's own (a control
+    /// input, `x' = F x + B u`): the interval is cut where the known acceleration changes, and each piece predicted
+    /// with the sum ([`KnownAcceleration`]). Without any input given, exactly [`Self::predict`].
+    pub(super) fn predict_known(
+        &mut self,
+        state: &mut MotionState,
+        t_s: f64,
+        dt_s: f64,
+        process_scale: [f64; 2],
+        known: &KnownAcceleration,
+    ) {
+        if known.is_empty() {
+            return self.predict(state, dt_s, process_scale);
+        }
+        if dt_s == 0.0 {
+            return;
+        }
+        let own = self.acceleration;
+        known.for_each_piece(t_s, dt_s, |piece_s, u| {
+            self.predict_with(state, piece_s, process_scale, &known::sum(&own, u));
+        });
+        // The trend's weights follow the whole step, however it was cut.
+        self.last_dt_s = dt_s.abs();
+    }
+
+    /// [`Self::predict`] with the target's acceleration over `dt_s` taken as `acceleration` (the filter's own, plus
+    /// any known input). `F` depends on it through the rotation increment only (`Transition`): a linear input
+    /// leaves the covariance's propagation as it is.
+    fn predict_with(
+        &mut self,
+        state: &mut MotionState,
+        dt_s: f64,
+        process_scale: [f64; 2],
+        acceleration: &Acceleration,
+    ) {
         if dt_s == 0.0 {
             return;
         }
         self.last_dt_s = dt_s.abs();
-        let transition = Transition::new(state, &self.acceleration, dt_s);
+        let transition = Transition::new(state, acceleration, dt_s);
         // F P Fᵀ: F applied to every column, then Fᵀ from the right, by whole columns. F is sparse (a few 3 x 3
         // blocks beside the identity), so this is a fraction of a dense product's work, in place.
         for column in self.covariance.as_mut_slice().chunks_exact_mut(N) {
@@ -195,7 +234,7 @@ impl<const N: usize> ErrorStateKalman<N> {
         let Acceleration {
             linear_mps2,
             angular_radps2,
-        } = self.acceleration;
+        } = *acceleration;
         state.cam_r_obj = Rotation3::from_matrix_unchecked(transition.e) * state.cam_r_obj;
         state.cam_t_obj_m += state.velocity_mps * dt_s + linear_mps2 * transition.half_dt2;
         state.velocity_mps += linear_mps2 * dt_s;
@@ -506,8 +545,15 @@ impl Filter {
         with_filter!(self, f => f.match_pose_innovation(model, state, blobs, gate_chi2))
     }
 
-    pub(super) fn predict(&mut self, state: &mut MotionState, dt_s: f64, process_scale: [f64; 2]) {
-        with_filter!(self, f => f.predict(state, dt_s, process_scale))
+    pub(super) fn predict_known(
+        &mut self,
+        state: &mut MotionState,
+        t_s: f64,
+        dt_s: f64,
+        process_scale: [f64; 2],
+        known: &KnownAcceleration,
+    ) {
+        with_filter!(self, f => f.predict_known(state, t_s, dt_s, process_scale, known))
     }
 
     /// `state` and the pose/twist covariance predicted `dt_s` ahead as [`Self::predict`] would (accelerations and
@@ -564,10 +610,11 @@ impl Filter {
         readout: &mut [ReadoutMeasurement],
         noise: CentroidNoise,
         process_scale: [f64; 2],
+        known: Option<(f64, &KnownAcceleration)>,
     ) -> bool {
         macro_rules! refine_from {
             ($f:expr, $p:expr) => {
-                $f.refine(
+                $f.refine_known(
                     $p,
                     prior_state,
                     state,
@@ -576,6 +623,7 @@ impl Filter {
                     readout,
                     noise,
                     process_scale,
+                    known,
                 )
             };
         }

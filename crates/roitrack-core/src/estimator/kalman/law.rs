@@ -90,6 +90,9 @@ pub(super) struct KalmanLaw {
     /// Whether the frame being taken is weighed by the white part of the noise alone (see
     /// [`KalmanLaw::take_readout`]).
     pub(super) bias_apart: bool,
+    /// The target's acceleration known from outside (a control input), which every prediction adds to the
+    /// filter's own; kept across tracks (it is the target's, not the track's).
+    pub(super) known: KnownAcceleration,
 }
 
 impl Law for KalmanLaw {
@@ -156,6 +159,7 @@ impl Law for KalmanLaw {
                 point_noise.restart(core.target.len());
                 point_noise
             },
+            known: std::mem::take(&mut self.known),
             ..Self::new(*self.filter.tuning())
         };
         // A track initialised from a window fit holds the twist constant over the window, so its twist is the
@@ -177,6 +181,7 @@ impl Law for KalmanLaw {
     }
 
     fn on_measurement(&mut self, core: &mut TrackCore, obs: &Observation) {
+        self.known.forget_before(core.t_ref_s);
         let dt = self.predict_to(core, obs.t_s);
         self.take(core, obs, dt, true, None);
     }
@@ -185,6 +190,8 @@ impl Law for KalmanLaw {
     /// update from the prior at the readout's first time ([`ErrorStateKalman::refine`]); blobs it finds inside the
     /// gate after all no longer count as rejected.
     fn on_batch(&mut self, core: &mut TrackCore, batch: &[Observation]) {
+        // No prediction of this batch starts before the filter's time (a readout taken again starts from its first).
+        self.known.forget_before(core.t_ref_s);
         // Too few to refine (the streaming `track` pushes one measurement at a time): no copy of the filter.
         if batch.len() < MIN_READOUT_TO_REFINE {
             for obs in batch {
@@ -299,7 +306,14 @@ impl Law for KalmanLaw {
             iterations: core.step_measurements,
             status,
             covariance: Some(covariance),
-            acceleration: self.filter.acceleration(),
+            // The whole acceleration: the filter's own and the known input in force.
+            acceleration: self.filter.acceleration().map(|own| {
+                if self.known.is_empty() {
+                    own
+                } else {
+                    known::sum(&own, &self.known.at(t_new_s))
+                }
+            }),
         }
     }
 
@@ -347,6 +361,10 @@ impl Law for KalmanLaw {
     fn add_to_report(&self, report: &mut EstimatorReport) {
         report.gated = self.gated_total;
         report.covariance_resets = self.resets_total;
+    }
+
+    fn known_acceleration(&mut self) -> Option<&mut KnownAcceleration> {
+        Some(&mut self.known)
     }
 }
 
@@ -556,6 +574,7 @@ impl KalmanLaw {
                 &mut readout,
                 noise,
                 process_scale,
+                Some((first.t_s, &self.known)),
             );
             if refined {
                 self.forgive_recovered(&readout, gated_in_a_row, accepted_in_a_row);
@@ -594,14 +613,20 @@ impl KalmanLaw {
             readout: Vec::new(),
             judged_nis: Vec::new(),
             bias_apart: false,
+            known: KnownAcceleration::default(),
         }
     }
 
     /// Moves the filter to `t_s`; returns by how much (s).
     pub(super) fn predict_to(&mut self, core: &mut TrackCore, t_s: f64) -> f64 {
         let dt = t_s - core.t_ref_s;
-        self.filter
-            .predict(&mut core.state, dt, self.process_log_scale.map(f64::exp));
+        self.filter.predict_known(
+            &mut core.state,
+            core.t_ref_s,
+            dt,
+            self.process_log_scale.map(f64::exp),
+            &self.known,
+        );
         core.t_ref_s = t_s;
         dt
     }

@@ -50,6 +50,7 @@ use crate::{
 };
 
 mod filter;
+mod known;
 mod law;
 mod motion_model;
 mod noise;
@@ -60,6 +61,8 @@ mod tuning;
 
 pub(crate) use filter::pose_matching_scale;
 use filter::*;
+pub(crate) use known::KnownAcceleration;
+pub use known::{KNOWN_ACCELERATION_CAPACITY, KnownAccelerationError};
 use law::*;
 use motion_model::*;
 use noise::*;

@@ -33,6 +33,58 @@ pub(super) const REFINE_TOLERANCE: f64 = 1e-6;
 pub(super) type Refined<const N: usize> = (MotionState, Acceleration, SMatrix<f64, N, N>);
 
 impl<const N: usize> ErrorStateKalman<N> {
+    /// [`Self::refine`] with a known acceleration `known` (a control input, [`KnownAcceleration`], and the
+    /// readout's first time; without one, exactly [`Self::refine`]): the readout is fitted, and moved to its last
+    /// time, with the sum of the filter's acceleration and the input in force at its first time, held over its span:
+    /// a change of the input within one readout (a frame's few milliseconds) is not followed.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn refine_known(
+        &mut self,
+        prior: &Self,
+        prior_state: &MotionState,
+        state: &mut MotionState,
+        span_s: f64,
+        model: &SpatioTemporalModel,
+        readout: &mut [ReadoutMeasurement],
+        noise: CentroidNoise,
+        process_scale: [f64; 2],
+        known: Option<(f64, &KnownAcceleration)>,
+    ) -> bool {
+        let Some((first_s, known)) = known.filter(|(_, k)| !k.is_empty()) else {
+            return self.refine(
+                prior,
+                prior_state,
+                state,
+                span_s,
+                model,
+                readout,
+                noise,
+                process_scale,
+            );
+        };
+        // The filter and its prior as if their own acceleration were the sum; the input taken back out after.
+        let u = known.at(first_s);
+        let mut shifted = *self;
+        shifted.acceleration = known::sum(&self.acceleration, &u);
+        let mut shifted_prior = *prior;
+        shifted_prior.acceleration = known::sum(&prior.acceleration, &u);
+        if !shifted.refine(
+            &shifted_prior,
+            prior_state,
+            state,
+            span_s,
+            model,
+            readout,
+            noise,
+            process_scale,
+        ) {
+            return false;
+        }
+        *self = shifted;
+        self.acceleration = known::difference(&shifted.acceleration, &u);
+        true
+    }
+
     /// The iterated update of a readout (the blobs of a frame), from this filter after its sequential updates, whose
     /// state is `state`, `span_s` after the readout's first measurement; `prior` and `prior_state` are the filter
     /// before them, at that first time.
