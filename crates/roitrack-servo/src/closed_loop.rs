@@ -193,6 +193,13 @@ pub struct ServoConfig {
     /// image's own (read and shot noise, which leaves the centroids about 0.013 px RMS, eight times below the
     /// 0.1 px of the built-in scenes): 0 by default; 0.1 to servo with the built-in scenes' noise.
     pub extra_centroid_noise_px: f64,
+    /// Whether the controller tells the tracker the acceleration it commands (ROI camera; `ctc`, `ctc-pose` and
+    /// `kvs`): at each tick, the platform's acceleration that its own model gives for the forces it commands
+    /// ([`Controller::believed_acceleration`]), in the camera frame, from the instant those forces act (the tick
+    /// plus the actuation delay), which the Kalman filter adds to its prediction
+    /// (`roitrack_core::estimator::Estimator::set_known_acceleration`). On by default; off, the filter predicts
+    /// with its constant-velocity model alone and its velocity lags the commanded accelerations (docs/servo.md).
+    pub known_acceleration: bool,
     /// Seed of the camera's noise.
     pub seed: u64,
     /// Distance from the path (m) beyond which the run is stopped as unstable: 50 mm, ten times the largest error
@@ -242,6 +249,7 @@ impl ServoConfig {
             timing: None,
             tracker: servo_tracker_config(),
             extra_centroid_noise_px: 0.0,
+            known_acceleration: true,
             seed: 1,
             divergence_error_m: 0.05,
             saturation_window_s: 0.1,
@@ -589,6 +597,25 @@ impl CameraSide {
         }
     }
 
+    /// Tells the tracker the target's acceleration (camera frame) from `t_s` on, as the controller believes it
+    /// (ROI camera only: the frame tracker predicts with its own motion model).
+    fn tell_acceleration(
+        &mut self,
+        t_s: f64,
+        linear_mps2: &Vector3<f64>,
+    ) -> Result<(), ServoError> {
+        if let Self::Roi(side) = self {
+            let known = roitrack_core::Acceleration {
+                linear_mps2: *linear_mps2,
+                angular_radps2: Vector3::zeros(),
+            };
+            side.tracker
+                .set_known_acceleration(t_s, known)
+                .map_err(|e| ServoError::Tracker(e.to_string()))?;
+        }
+        Ok(())
+    }
+
     /// Exposes what is due by `t_now_s` (the robot's motion is known up to it): the ROI of the tick `t_tick_s`, or the
     /// frames whose exposure has ended. Returns the estimates made.
     fn expose(
@@ -803,7 +830,15 @@ pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
             ));
             break 'ticks;
         }
-        commands.push_back((t_act_s, clip(command)));
+        let command = clip(command);
+        commands.push_back((t_act_s, command));
+        if config.known_acceleration
+            && let Some(believed) = controller.believed_acceleration(&command)
+        {
+            // The robot frame has the camera's axes (docs/servo.md, "The robot"): the platform's acceleration is
+            // the target's in the camera frame as it is; the platform only translates.
+            camera.tell_acceleration(t_act_s, &believed)?;
+        }
         // 3. The robot to the next tick.
         let mut saturated = false;
         for j in 0..config.substeps {

@@ -21,7 +21,7 @@
 use nalgebra::Vector3;
 
 use crate::reference::ReferencePoint;
-use crate::robot::{Geometry, RobotParams, joint_friction};
+use crate::robot::{Geometry, RobotParams, acceleration, joint_friction};
 
 /// What the camera side knows of the platform: its position and velocity (robot frame) at `t_s`, the time the
 /// estimate refers to (for roitrack, the newest measurement's).
@@ -58,6 +58,32 @@ pub trait Controller {
     fn name(&self) -> &'static str;
     /// The actuator forces (N) to apply at `input.t_act_s`.
     fn command(&mut self, input: &ControlInput) -> Vector3<f64>;
+
+    /// The platform's acceleration (m/s², robot frame) that this controller's own model of the robot gives for the
+    /// joint forces `joint_force_n` (its newest command as it will act, clipped to the actuators' limit), at the
+    /// state it believed when it made that command; `None` before its first command. What the controller knows of
+    /// the acceleration it commands: its model (the masses and friction 20 % off in the loop), not the robot.
+    /// The closed loop tells the tracker (`roitrack_core::estimator::Estimator::set_known_acceleration`).
+    fn believed_acceleration(&self, _joint_force_n: &Vector3<f64>) -> Option<Vector3<f64>> {
+        None
+    }
+}
+
+/// The platform's acceleration (m/s²) that `model` gives for the joint forces `joint_force_n` at `position_m`
+/// (or, outside the workspace, at `fallback_m`) moving at `velocity_mps`: the model's forward dynamics
+/// ([`acceleration`]).
+fn model_acceleration(
+    model: &RobotParams,
+    position_m: &Vector3<f64>,
+    fallback_m: &Vector3<f64>,
+    velocity_mps: &Vector3<f64>,
+    joint_force_n: &Vector3<f64>,
+) -> Option<Vector3<f64>> {
+    let geometry = Geometry::at(model, position_m)
+        .or_else(|_| Geometry::at(model, fallback_m))
+        .ok()?;
+    let a = acceleration(model, &geometry, velocity_mps, joint_force_n);
+    a.iter().all(|x| x.is_finite()).then_some(a)
 }
 
 /// Proportional-derivative gains as a natural frequency and a damping ratio: `K_p = ω²`, `K_d = 2 ζ ω` (per unit
@@ -184,6 +210,9 @@ pub struct ComputedTorque {
     /// The last observation seen, and the velocity of the differences.
     previous: Option<Observation>,
     differenced_mps: Vector3<f64>,
+    /// The newest command's believed position and velocity, and the path's position then (where the model is
+    /// evaluated when the belief is outside the workspace).
+    believed: Option<(Vector3<f64>, Vector3<f64>, Vector3<f64>)>,
 }
 
 impl ComputedTorque {
@@ -202,6 +231,7 @@ impl ComputedTorque {
             velocity,
             previous: None,
             differenced_mps: Vector3::zeros(),
+            believed: None,
         }
     }
 
@@ -260,6 +290,7 @@ impl Controller for ComputedTorque {
         let geometry = Geometry::at(&self.model, &position)
             .or_else(|_| Geometry::at(&self.model, &reference.position_m))
             .expect("the reference path stays inside the workspace");
+        self.believed = Some((position, velocity, reference.position_m));
         let wanted = reference.acceleration_mps2
             + (reference.velocity_mps - velocity).component_mul(&self.gains.kd())
             + (reference.position_m - position).component_mul(&self.gains.kp());
@@ -272,6 +303,14 @@ impl Controller for ComputedTorque {
             .try_inverse()
             .map_or(Vector3::zeros(), |inverse| inverse * task_force);
         joint_force - joint_friction(&self.model, &geometry.joint_velocity(&velocity))
+    }
+
+    /// The model's forward dynamics at the believed state of the newest command: for forces that the actuators'
+    /// limit left as commanded, exactly the acceleration the law asked for (`a_ref + K_d (v_ref - v̂) + K_p (p_ref
+    /// - p̂)`), since the law inverts the same model.
+    fn believed_acceleration(&self, joint_force_n: &Vector3<f64>) -> Option<Vector3<f64>> {
+        let (position, velocity, reference) = self.believed?;
+        model_acceleration(&self.model, &position, &reference, &velocity, joint_force_n)
     }
 }
 
@@ -304,6 +343,9 @@ pub struct KinematicServo {
     model: RobotParams,
     gains: KinematicGains,
     integral_n: Vector3<f64>,
+    /// The newest command's position (the camera's), velocity (the encoders', through the model's Jacobian) and
+    /// the path's position then.
+    believed: Option<(Vector3<f64>, Vector3<f64>, Vector3<f64>)>,
 }
 
 impl KinematicServo {
@@ -313,6 +355,7 @@ impl KinematicServo {
             model,
             gains,
             integral_n: Vector3::zeros(),
+            believed: None,
         }
     }
 }
@@ -330,6 +373,14 @@ impl Controller for KinematicServo {
         let geometry = Geometry::at(&self.model, &position)
             .or_else(|_| Geometry::at(&self.model, &reference.position_m))
             .expect("the reference path stays inside the workspace");
+        // The platform's velocity as the drives' encoders and the model's Jacobian give it.
+        let encoder_velocity = geometry
+            .jacobian
+            .try_inverse()
+            .map_or(reference.velocity_mps, |inverse| {
+                inverse * input.drive_joint_velocity_mps
+            });
+        self.believed = Some((position, encoder_velocity, reference.position_m));
         let velocity_command =
             reference.velocity_mps + (reference.position_m - position) * self.gains.lambda_per_s;
         let joint_velocity_command = geometry.joint_velocity(&velocity_command);
@@ -361,5 +412,11 @@ impl Controller for KinematicServo {
             }
         }
         proportional + self.integral_n
+    }
+
+    /// The model's forward dynamics at the camera's position and the encoders' velocity.
+    fn believed_acceleration(&self, joint_force_n: &Vector3<f64>) -> Option<Vector3<f64>> {
+        let (position, velocity, reference) = self.believed?;
+        model_acceleration(&self.model, &position, &reference, &velocity, joint_force_n)
     }
 }

@@ -185,6 +185,8 @@ fn the_closed_loop_is_deterministic_for_a_seed() {
 
 /// Gains far beyond what the latency allows (the natural frequency 8 times the latency rule's: 2.8 rad of phase lost
 /// to the delay), and 3 times with 2 ms of extra latency (pose only: 2.3 rad), each make the loop unstable: the run stops, says why, and leaves nothing that is not finite.
+/// (Told the commanded acceleration, the tracker follows the first: the force limit then holds it in a limit cycle,
+/// stopped as such, where it used to run away.)
 #[test]
 fn an_unstable_loop_is_detected_and_stopped() {
     let mut too_fast = ServoConfig::new(ControllerKind::Ctc, CameraKind::Roi, 1.0);
@@ -201,10 +203,10 @@ fn an_unstable_loop_is_detected_and_stopped() {
             report.rms_error_mm,
             report.max_error_mm
         );
+        let reason = report.stop_reason.as_deref().unwrap();
         assert!(
-            report.stop_reason.as_deref().unwrap().contains("diverged"),
-            "{:?}",
-            report.stop_reason
+            reason.contains("diverged") || reason.contains("unstable"),
+            "{reason}"
         );
         assert!(
             report.samples.len() < (config.path.duration_s() * config.control_rate_hz) as usize

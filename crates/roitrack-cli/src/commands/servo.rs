@@ -90,6 +90,10 @@ pub struct ServoArgs {
     /// (about 0.013 px); 0.1: the built-in scenes' noise.
     #[arg(long, default_value_t = 0.0, value_parser = ranges::within(0.0..=2.0, " px", "2 px"))]
     pub centroid_noise_px: f64,
+    /// Do not tell the tracker the acceleration the controller commands (its model's, from the instant the force
+    /// acts): the Kalman filter then predicts with its constant-velocity model alone, as before (to compare).
+    #[arg(long)]
+    pub no_known_acceleration: bool,
     /// Seed of the camera's noise.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -121,6 +125,7 @@ pub fn run(args: &ServoArgs) -> Result<()> {
         config.gains_follow_latency = !args.fixed_gains;
         config.gain_scale = args.gain_scale;
         config.extra_centroid_noise_px = args.centroid_noise_px;
+        config.known_acceleration = !args.no_known_acceleration;
         config.seed = args.seed;
         let report =
             run_servo(&config).with_context(|| format!("servo run {}", controller.name()))?;
@@ -144,6 +149,7 @@ pub fn run(args: &ServoArgs) -> Result<()> {
                 "natural_frequency_radps": report.gains.natural_frequency_radps,
                 "median_feedback_age_ms": age_ms.is_finite().then_some(age_ms),
                 "saturated_fraction": report.saturated_fraction,
+                "known_acceleration": !args.no_known_acceleration,
                 "dir": dir.display().to_string(),
             });
             println!("{line}");
@@ -186,6 +192,7 @@ fn sweep(args: &ServoArgs, controllers: &[ControllerKind]) -> Result<()> {
         let mut config = ServoConfig::new(controller, args.camera.into(), args.speed_scale);
         config.seed = args.seed;
         config.extra_centroid_noise_px = args.centroid_noise_px;
+        config.known_acceleration = !args.no_known_acceleration;
         let points = sweep::stable_gain_sweep(&config, &sweep::EXTRA_LATENCIES_S, &search)
             .with_context(|| format!("gain sweep of {}", controller.name()))?;
         for point in &points {
