@@ -394,7 +394,7 @@ fn os_args(args: &[&str]) -> Vec<OsString> {
     args.iter().map(OsString::from).collect()
 }
 
-/// The value of `key=value` among `ffprobe -of default=nw=1` lines, unless absent or `N/A`.
+/// The value of `key=value` among `ffprobe -of default` lines, unless absent or `N/A`.
 fn value<'a>(text: &'a str, key: &str) -> Option<&'a str> {
     text.lines()
         .filter_map(|line| line.trim().split_once('='))
@@ -452,21 +452,58 @@ fn parse_stream_info(text: &str, messages: &str, video: &Path) -> Result<StreamI
     })
 }
 
-/// The deepest component of `pix_fmt` (bits) from `ffmpeg -pix_fmts`'s table
-/// (`FLAGS NAME NB_COMPONENTS BITS_PER_PIXEL BIT_DEPTHS`, e.g. `IO... yuv420p10le 3 15 10-10-10`).
-fn bit_depth_from_table(table: &str, pix_fmt: &str) -> Option<u32> {
-    table.lines().find_map(|line| {
-        let fields: Vec<&str> = line.split_whitespace().collect();
-        if fields.len() < 5 || fields[1] != pix_fmt {
-            return None;
+/// What `ffprobe -show_entries stream=... -show_pixel_formats -of default` prints, by section: the stream's
+/// `key=value` lines, and each pixel format's name with the depths (bits) of its components.
+#[derive(Debug, Default, PartialEq)]
+struct Probe {
+    /// The lines of the `[STREAM]` section (empty when the file has no video stream).
+    stream: String,
+    /// Each `[PIXEL_FORMAT]` section's name and its `[COMPONENT]` sections' `bit_depth`s, in the order printed.
+    pixel_formats: Vec<(String, Vec<u32>)>,
+}
+
+impl Probe {
+    fn parse(text: &str) -> Self {
+        let mut probe = Self::default();
+        // The top-level section being read, if any.
+        let mut section: Option<&str> = None;
+        for line in text.lines().map(str::trim) {
+            match (section, line) {
+                (None, "[STREAM]") => section = Some("STREAM"),
+                (None, "[PIXEL_FORMAT]") => {
+                    section = Some("PIXEL_FORMAT");
+                    probe.pixel_formats.push((String::new(), Vec::new()));
+                }
+                (Some("STREAM"), "[/STREAM]") | (Some("PIXEL_FORMAT"), "[/PIXEL_FORMAT]") => {
+                    section = None;
+                }
+                (Some("STREAM"), line) => {
+                    probe.stream.push_str(line);
+                    probe.stream.push('\n');
+                }
+                (Some(_), line) => {
+                    let Some((name, depths)) = probe.pixel_formats.last_mut() else {
+                        continue;
+                    };
+                    match line.split_once('=') {
+                        Some(("name", value)) => *name = value.to_string(),
+                        Some(("bit_depth", value)) => depths.extend(value.parse::<u32>().ok()),
+                        _ => {}
+                    }
+                }
+                (None, _) => {}
+            }
         }
-        fields[4]
-            .split('-')
-            .map(|d| d.parse::<u32>().ok())
-            .collect::<Option<Vec<u32>>>()?
-            .into_iter()
-            .max()
-    })
+        probe
+    }
+
+    /// The deepest component of `pix_fmt` (bits), if the table has it with components.
+    fn bit_depth(&self, pix_fmt: &str) -> Option<u32> {
+        self.pixel_formats
+            .iter()
+            .find(|(name, _)| name == pix_fmt)
+            .and_then(|(_, depths)| depths.iter().copied().max())
+    }
 }
 
 /// A video being decoded frame by frame.
@@ -499,23 +536,23 @@ impl VideoDecoder {
             "V:0",
             "-show_entries",
             "stream=width,height,pix_fmt,time_base,bits_per_raw_sample,nb_frames",
+            // And FFmpeg's table of pixel formats, for the depth of the stream's: one program started instead of
+            // two (`ffmpeg -pix_fmts` gave it before, for 0.06 s of CPU, mostly loading FFmpeg's libraries).
+            "-show_pixel_formats",
+            // Each section between its `[NAME]` and `[/NAME]` lines, to tell the stream's keys from the formats'.
             "-of",
-            "default=nw=1",
+            "default",
             "-i",
         ]);
         args.push(input_arg(video));
         let (text, messages) = run(&tools.ffprobe, &args, video)?;
-        let info = parse_stream_info(&text, &messages, video)?;
+        let probe = Probe::parse(&text);
+        let info = parse_stream_info(&probe.stream, &messages, video)?;
 
-        let source_bits = run(
-            &tools.ffmpeg,
-            &os_args(&["-hide_banner", "-pix_fmts"]),
-            video,
-        )
-        .ok()
-        .and_then(|(table, _)| bit_depth_from_table(&table, &info.pix_fmt))
-        .or(info.bits_per_raw_sample)
-        .unwrap_or(8);
+        let source_bits = probe
+            .bit_depth(&info.pix_fmt)
+            .or(info.bits_per_raw_sample)
+            .unwrap_or(8);
         let (bit_depth, out_pix_fmt) = if source_bits > 8 {
             (16, "gray16le")
         } else {
@@ -795,15 +832,33 @@ mod tests {
 
     #[test]
     fn bit_depth_comes_from_the_pixel_format_table() {
-        let table = "FLAGS NAME            NB_COMPONENTS BITS_PER_PIXEL BIT_DEPTHS\n-----\n\
-                     IO... yuv420p                3             12      8-8-8\n\
-                     IO... yuv420p10le            3             15      10-10-10\n\
-                     IO... gray16le               1             16      16\n";
-        assert_eq!(bit_depth_from_table(table, "yuv420p"), Some(8));
-        assert_eq!(bit_depth_from_table(table, "yuv420p10le"), Some(10));
-        assert_eq!(bit_depth_from_table(table, "gray16le"), Some(16));
-        assert_eq!(bit_depth_from_table(table, "yuv420p1"), None);
-        assert_eq!(bit_depth_from_table("garbage", "gray"), None);
+        // ffprobe 5.1's sections, shortened.
+        let text = "[PIXEL_FORMAT]\nname=yuv420p\nnb_components=3\nbits_per_pixel=12\nFLAGS:planar=1\n\
+                    [COMPONENT]\nindex=1\nbit_depth=8\n[/COMPONENT]\n[COMPONENT]\nindex=2\nbit_depth=8\n[/COMPONENT]\n\
+                    [/PIXEL_FORMAT]\n\
+                    [PIXEL_FORMAT]\nname=yuv420p10le\nnb_components=3\n[COMPONENT]\nindex=1\nbit_depth=10\n\
+                    [/COMPONENT]\n[/PIXEL_FORMAT]\n\
+                    [PIXEL_FORMAT]\nname=vaapi\nnb_components=0\nbits_per_pixel=0\n[/PIXEL_FORMAT]\n\
+                    [PIXEL_FORMAT]\nname=gray16le\nnb_components=1\n[COMPONENT]\nindex=1\nbit_depth=16\n\
+                    [/COMPONENT]\n[/PIXEL_FORMAT]\n\
+                    [STREAM]\nwidth=640\nheight=480\npix_fmt=yuv420p\ntime_base=1/15360\nnb_frames=300\n[/STREAM]\n";
+        let probe = Probe::parse(text);
+        assert_eq!(probe.bit_depth("yuv420p"), Some(8));
+        assert_eq!(probe.bit_depth("yuv420p10le"), Some(10));
+        assert_eq!(probe.bit_depth("gray16le"), Some(16));
+        assert_eq!(probe.bit_depth("yuv420p1"), None);
+        // A format without components (a hardware surface) has no depth.
+        assert_eq!(probe.bit_depth("vaapi"), None);
+        assert_eq!(
+            probe.stream,
+            "width=640\nheight=480\npix_fmt=yuv420p\ntime_base=1/15360\nnb_frames=300\n"
+        );
+        let info = parse_stream_info(&probe.stream, "", Path::new("v.mp4")).unwrap();
+        assert_eq!((info.width, info.pix_fmt.as_str()), (640, "yuv420p"));
+        // No stream section: no stream.
+        let probe = Probe::parse("garbage\nname=gray\nbit_depth=8\n");
+        assert_eq!(probe, Probe::default());
+        assert_eq!(probe.bit_depth("gray"), None);
     }
 
     #[test]
