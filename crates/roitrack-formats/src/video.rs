@@ -617,6 +617,11 @@ impl VideoDecoder {
             "-",
         ]));
         let (ffmpeg, pixels) = Process::spawn(&tools.ffmpeg, &args, video)?;
+        let bytes_per_value = if bit_depth > 8 { 2 } else { 1 };
+        enlarge_pipe(
+            &pixels,
+            info.width as usize * info.height as usize * bytes_per_value,
+        );
         Ok(Self {
             path: video.to_path_buf(),
             width: info.width,
@@ -779,6 +784,32 @@ fn count_packets(video: &Path, tools: &Tools) -> Option<usize> {
     args.push(input_arg(video));
     let (text, _) = run(&tools.ffprobe, &args, video).ok()?;
     value(&text, "nb_read_packets")?.parse().ok()
+}
+
+/// Linux's default pipe capacity.
+const DEFAULT_PIPE_BYTES: usize = 1 << 16;
+/// Pipes larger than this are not asked for: Linux's limit for a user (`/proc/sys/fs/pipe-max-size`) by default.
+const MAX_PIPE_BYTES: usize = 1 << 20;
+
+/// Asks for `pipe` to hold a frame of `frame_bytes` (at most [`MAX_PIPE_BYTES`]) instead of Linux's default 64 KiB
+/// (never less than that): a
+/// frame then goes through in one or a few writes, and ffmpeg no longer waits, spinning on the pipe's lock, while we
+/// read each 64 KiB (on a 300-frame 800 x 600 video ffmpeg's system time fell from 0.15-0.27 s to 0.09 s, about
+/// that of decoding to /dev/null). Nothing changes when the system refuses, or off Linux.
+fn enlarge_pipe(pipe: &ChildStdout, frame_bytes: usize) {
+    #[cfg(target_os = "linux")]
+    {
+        use std::os::fd::AsRawFd;
+        let Ok(size) = libc::c_int::try_from(frame_bytes.clamp(DEFAULT_PIPE_BYTES, MAX_PIPE_BYTES))
+        else {
+            return;
+        };
+        // SAFETY: F_SETPIPE_SZ on a pipe's open descriptor, which `pipe` owns for the call; it changes only the
+        // pipe's capacity, and its failure (-1) is ignored.
+        let _ = unsafe { libc::fcntl(pipe.as_raw_fd(), libc::F_SETPIPE_SZ, size) };
+    }
+    #[cfg(not(target_os = "linux"))]
+    let _ = (pipe, frame_bytes);
 }
 
 /// Reads until `buffer` is full or the input ends; returns the number of bytes read.
