@@ -336,17 +336,23 @@ pub fn measure_blob_near(
 
 /// The above-threshold pixel of a `w`-wide ROI nearest `near` (ROI coordinates), as an index; `None` if no pixel is
 /// above `threshold`.
+/// (The first of them in index order when several are as near.) Read row by row, without a division per pixel.
 fn nearest_above(pixels: &[u16], w: usize, threshold: u16, near: [f64; 2]) -> Option<usize> {
-    pixels
-        .iter()
-        .enumerate()
-        .filter(|&(_, &p)| p > threshold)
-        .map(|(k, _)| {
-            let (di, dj) = ((k % w) as f64 - near[0], (k / w) as f64 - near[1]);
-            (k, di * di + dj * dj)
-        })
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|(k, _)| k)
+    let mut nearest: Option<(usize, f64)> = None;
+    for (j, row) in pixels.chunks(w.max(1)).enumerate() {
+        let dj = j as f64 - near[1];
+        for (i, &p) in row.iter().enumerate() {
+            if p <= threshold {
+                continue;
+            }
+            let di = i as f64 - near[0];
+            let d2 = di * di + dj * dj;
+            if nearest.is_none_or(|(_, best)| d2.total_cmp(&best).is_lt()) {
+                nearest = Some((j * w + i, d2));
+            }
+        }
+    }
+    nearest.map(|(k, _)| k)
 }
 
 /// [`measure_blob`] with the given instructions; the component nearest `near` (ROI coordinates) when given, else the
