@@ -78,11 +78,13 @@ pub fn flatten_window(
     let mut peak = 0u16;
     let mut fill = |flat: fn(f64, f64, f64) -> f64| {
         for (j, out_row) in out.chunks_exact_mut(w).enumerate() {
-            let y = j as f64 - cy;
+            // The coordinates through `u32` (the window's size is one): one instruction, where a `usize`'s conversion
+            // takes several on x86_64; the same values.
+            let y = f64::from(j as u32) - cy;
             let start = (roi.y0 as usize + j) * frame_width + roi.x0 as usize;
             let row = &frame.pixels[start..start + w];
             for (i, (o, &v)) in out_row.iter_mut().zip(row).enumerate() {
-                let plane = a + b * (i as f64 - cx) + c * y;
+                let plane = a + b * (f64::from(i as u32) - cx) + c * y;
                 let value = flat(f64::from(v), plane, max_value) + offset;
                 *o = (value + 0.5).clamp(0.0, max_value) as u16;
                 peak = peak.max(*o);

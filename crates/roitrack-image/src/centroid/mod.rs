@@ -340,12 +340,13 @@ pub fn measure_blob_near(
 fn nearest_above(pixels: &[u16], w: usize, threshold: u16, near: [f64; 2]) -> Option<usize> {
     let mut nearest: Option<(usize, f64)> = None;
     for (j, row) in pixels.chunks(w.max(1)).enumerate() {
-        let dj = j as f64 - near[1];
+        // Through `u32` (a ROI is at most 64 px wide): one instruction where `usize` takes several; the same values.
+        let dj = f64::from(j as u32) - near[1];
         for (i, &p) in row.iter().enumerate() {
             if p <= threshold {
                 continue;
             }
-            let di = i as f64 - near[0];
+            let di = f64::from(i as u32) - near[0];
             let d2 = di * di + dj * dj;
             if nearest.is_none_or(|(_, best)| d2.total_cmp(&best).is_lt()) {
                 nearest = Some((j * w + i, d2));

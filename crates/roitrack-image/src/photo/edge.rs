@@ -11,13 +11,16 @@ use super::centre::Ellipse;
 
 /// The value at (u, v) by bilinear interpolation, (u, v) in the image (0 <= u <= width - 1, 0 <= v <= height - 1).
 fn sample_within(pixels: &[u16], width: usize, height: usize, u: f64, v: f64) -> f64 {
-    // Non-negative: truncation is the floor (and much cheaper than a call to it).
-    let (i, j) = (u as usize, v as usize);
+    // Non-negative: truncation is the floor (and much cheaper than a call to it). Through `i32` (an image is far
+    // narrower than 2^31 px): the conversions to and from `usize` take several instructions each on x86_64, those of
+    // `i32` one, and give the same integers.
+    let (ui, vj) = ((u as i32).max(0), (v as i32).max(0));
+    let (i, j) = (ui as usize, vj as usize);
     let (di, dj) = (
         usize::from(i + 1 < width),
         if j + 1 < height { width } else { 0 },
     );
-    let (fu, fv) = (u - i as f64, v - j as f64);
+    let (fu, fv) = (u - f64::from(ui), v - f64::from(vj));
     let k = j * width + i;
     let at = |k: usize| f64::from(pixels[k]);
     (1.0 - fv) * ((1.0 - fu) * at(k) + fu * at(k + di))
