@@ -556,20 +556,6 @@ impl Filter {
         with_filter!(self, f => f.predict_known(state, t_s, dt_s, process_scale, known))
     }
 
-    /// `state` and the pose/twist covariance predicted `dt_s` ahead as [`Self::predict`] would (accelerations and
-    /// process noise included), the filter left as it is.
-    pub(super) fn predicted(
-        &self,
-        state: &MotionState,
-        dt_s: f64,
-        process_scale: [f64; 2],
-    ) -> (MotionState, Matrix12) {
-        let mut filter = *self;
-        let mut state = *state;
-        filter.predict(&mut state, dt_s, process_scale);
-        (state, filter.pose_twist_covariance())
-    }
-
     pub(super) fn add_process_noise(&mut self, dt_s: f64, process_scale: [f64; 2]) {
         with_filter!(self, f => f.add_process_noise(dt_s, process_scale))
     }

@@ -97,11 +97,16 @@ pub(super) struct KalmanLaw {
 
 impl Law for KalmanLaw {
     fn predicted(&self, core: &TrackCore, t_s: f64) -> Option<(MotionState, Matrix12)> {
-        Some(self.filter.predicted(
-            &core.state,
+        // A copy of the filter predicted as `predict_to` would (the known accelerations included).
+        let (mut filter, mut state) = (self.filter, core.state);
+        filter.predict_known(
+            &mut state,
+            core.t_ref_s,
             t_s - core.t_ref_s,
             self.process_log_scale.map(f64::exp),
-        ))
+            &self.known,
+        );
+        Some((state, filter.pose_twist_covariance()))
     }
 
     fn begin_track(&mut self, core: &TrackCore, covariance: Option<Matrix12>) {
