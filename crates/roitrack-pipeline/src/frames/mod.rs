@@ -326,6 +326,17 @@ impl FrameTracker {
                 estimate = self.estimate_frame(method)?;
             }
         }
+        // A new track started from one rolling-shutter frame alone: its static pose read the target's motion over
+        // the readout as a change of pose, which one frame cannot tell apart (at 1.5 m/s, 9 mm off where the
+        // track started at rest), so its first estimate is not vouched for.
+        if method == FrameMethod::Restart
+            && self.camera.time.is_rolling()
+            && self.recent.track_frames == 0
+            && let Some(e) = estimate.as_mut()
+            && matches!(e.status, TrackStatus::Tracking | TrackStatus::Converging)
+        {
+            e.status = TrackStatus::Degenerate;
+        }
         self.record(frame, method, estimate.as_ref());
         Ok(FrameOutcome {
             estimate,
