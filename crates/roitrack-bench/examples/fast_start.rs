@@ -12,23 +12,13 @@ use roitrack_image::Frame;
 use roitrack_pipeline::frames::{FrameTracker, FrameTrackerConfig, track_frame_stream};
 use roitrack_sim::{FrameOptions, FrameSequence, Scenario};
 
-/// The instant at which `scenario` moves fastest, among those with a second of motion after them.
-fn fastest_instant_s(scenario: &Scenario) -> f64 {
-    let speed = |t_s: f64| scenario.state_at(t_s).velocity_mps.norm();
-    (0..)
-        .map(|k| f64::from(k) * 1e-3)
-        .take_while(|t_s| *t_s < scenario.duration_s - 1.0)
-        .max_by(|a, b| speed(*a).total_cmp(&speed(*b)))
-        .unwrap()
-}
-
 /// Per estimate: its position error (mm) and status.
 fn run(seed: u64, readout: Readout, rs_smoothing: bool) -> Vec<(f64, TrackStatus)> {
     let scenario = Scenario::random_with(seed, 1.5, 5.0, 4.0);
     let options = FrameOptions {
         readout,
         seed,
-        start_s: fastest_instant_s(&scenario),
+        start_s: scenario.fastest_instant_s(1.0),
         frame_count: Some(30),
         ..FrameOptions::default()
     };

@@ -240,16 +240,6 @@ fn a_target_faster_than_the_track_at_30_hz_is_found_whole_instead_of_estimated_f
     assert!(worst < 1e-3, "worst {worst} m");
 }
 
-/// The instant at which `scenario` moves fastest, among those with a second of motion after them.
-fn fastest_instant_s(scenario: &Scenario) -> f64 {
-    let speed = |t_s: f64| scenario.state_at(t_s).velocity_mps.norm();
-    (0..)
-        .map(|k| f64::from(k) * 1e-3)
-        .take_while(|t_s| *t_s < scenario.duration_s - 1.0)
-        .max_by(|a, b| speed(*a).total_cmp(&speed(*b)))
-        .unwrap()
-}
-
 #[test]
 fn a_fast_start_never_vouches_for_a_pose_a_grid_spacing_off() {
     // Random motions up to 1.5 m/s and 5 rad/s, 30 frames at 30 Hz from each one's fastest instant, with both
@@ -266,7 +256,7 @@ fn a_fast_start_never_vouches_for_a_pose_a_grid_spacing_off() {
             let options = FrameOptions {
                 readout,
                 seed,
-                start_s: fastest_instant_s(&scenario),
+                start_s: scenario.fastest_instant_s(1.0),
                 frame_count: Some(30),
                 ..FrameOptions::default()
             };

@@ -444,6 +444,26 @@ impl Scenario {
         state
     }
 
+    /// The instant (s, to the millisecond) at which the target moves fastest, among those followed by at least
+    /// `after_s` of the scenario: where a track started is hardest to start.
+    ///
+    /// ```
+    /// use roitrack_sim::Scenario;
+    ///
+    /// let fast = Scenario::random_with(1, 1.5, 5.0, 4.0);
+    /// let t_s = fast.fastest_instant_s(1.0);
+    /// assert!(t_s <= 3.0);
+    /// assert!(fast.state_at(t_s).velocity_mps.norm() > 1.45);
+    /// ```
+    pub fn fastest_instant_s(&self, after_s: f64) -> f64 {
+        let speed = |t_s: f64| self.state_at(t_s).velocity_mps.norm();
+        (0..)
+            .map(|k| f64::from(k) * 1e-3)
+            .take_while(|t_s| *t_s <= self.duration_s - after_s)
+            .max_by(|a, b| speed(*a).total_cmp(&speed(*b)))
+            .unwrap_or(0.0)
+    }
+
     /// The smallest margin (px) between any blob centre and the image border over the whole scenario, sampled at
     /// 1 kHz; negative if a blob leaves the image or goes behind the camera.
     pub fn min_image_margin_px(&self) -> f64 {
