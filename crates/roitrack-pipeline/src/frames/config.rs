@@ -33,9 +33,9 @@ pub struct FrameTrackerConfig {
     pub jerk_psd_given: bool,
     /// With a rolling shutter, [`track_frame_stream`] (offline sources) holds each estimate until the two frames
     /// after it are tracked and refits its pose with the twist of the poses around it
-    /// ([`crate::rs_smoothing::RollingSmoother`]): on `simulate --scenario sweep --speed-scale 2`, 0.043 mm off
-    /// with it, 0.179 mm without (0.0153 mm for global-shutter frames). Ignored with a global shutter (a pose read at one
-    /// instant does not depend on the twist) and by [`FrameTracker::process`] itself (live runs). Default: on.
+    /// ([`crate::rs_smoothing::RollingSmoother`]; docs/frames.md, "Rolling shutter: offline smoothing", has what
+    /// it gains). Ignored with a global shutter (a pose read at one instant does not depend on the twist) and by
+    /// [`FrameTracker::process`] itself (live runs). Default: on.
     pub rs_smoothing: bool,
 }
 
@@ -45,8 +45,8 @@ impl Default for FrameTrackerConfig {
             tracker: FrameTrackerConfig::frame_estimator(TrackerConfig::default(), None, None),
             detection: PhotoOptions::default(),
             // Three standard deviations: at frame rates the prediction's spread is many pixels (a target
-            // accelerating at 17 m/s² strays 9 mm from a constant-velocity prediction in 1/30 s), and a window must stay
-            // within the 64 px the centroid handles.
+            // accelerating at 17 m/s² strays 9 mm from a constant-velocity prediction in 1/30 s), and a window must
+            // stay within the 64 px the centroid handles.
             windows: SchedulerConfig {
                 sigma_margin: 3.0,
                 ..SchedulerConfig::default()
@@ -65,16 +65,13 @@ impl FrameTrackerConfig {
     /// - The Kalman filter's process model is constant acceleration (unless `motion` is constant velocity; the
     ///   densities of a `config` that already has it are kept). Between frames tens of milliseconds apart the twist
     ///   changes, and a rolling-shutter frame's blobs, read one row band after the other, pin its depth only through
-    ///   a twist that is right over the readout: on `roitrack frame-study`, constant acceleration took the
-    ///   rolling-shutter position error from 0.175 to 0.041 mm and the velocity error of global-shutter frames from
-    ///   19.2 to 3.3 mm/s.
+    ///   a twist that is right over the readout (docs/estimation.md, "Frame cameras", has the study that chose it).
     /// - The filter learns the centroid noise from global-shutter frames, each from the residual of its own blobs
     ///   with the pose alone fitted, and holds it for rolling-shutter frames ([`NoiseSample::Frames`] says why).
     /// - It keeps the process noise it is given (that adaptation follows the innovations from one measurement to
     ///   the next: within a global-shutter frame they share one instant, and the filter leaves it alone there
-    ///   whatever `adapt` says; on rolling-shutter frames at 30 Hz it chases the jitter between frames, and
-    ///   `roitrack frame-study` had 79 of 540 of them fall back to whole-frame searches, 0.208 mm off against
-    ///   0.175 mm, with constant velocity).
+    ///   whatever `adapt` says; on rolling-shutter frames at 30 Hz it chases the jitter between frames and sends
+    ///   frames to whole-frame searches).
     /// - Its twist covariance is never calibrated against the poses around each estimate (8 estimates either side
     ///   are half a second at 30 Hz).
     ///
