@@ -47,6 +47,7 @@
 use nalgebra::Vector2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use roitrack_core::rig::{CameraMount, ClockModel, RigCamera};
 use roitrack_core::time::{Readout, TimeModel, TimeModelError};
 use roitrack_core::{CameraModel, Measurement, MotionState, PoseSample, TwistSample};
 use roitrack_image::{Frame, Polarity, RenderScratch, RoiRenderer, SensorError, SensorModel};
@@ -212,7 +213,7 @@ pub enum FrameSequenceError {
         frame_count: usize,
         /// The first frame's time (s).
         start_s: f64,
-        /// The scenario's length (s).
+        /// The scenario's end (s; its length, or for a rig's camera its end on the camera's clock).
         duration_s: f64,
         /// A frame's readout, first row to last (s; 0 for a global shutter).
         readout_s: f64,
@@ -279,6 +280,8 @@ pub struct FrameTruth {
 #[derive(Debug, Clone)]
 pub struct FrameSequence {
     scenario: Scenario,
+    /// A rig's camera: where it is in the scenario's camera frame and its clock (None: the scenario's own camera).
+    view: Option<(CameraMount, ClockModel)>,
     options: FrameOptions,
     frame_count: usize,
     /// The blobs as the camera sees them (bright), or their coverage at 16 bits (dark).
@@ -312,14 +315,59 @@ impl FrameSequence {
     /// );
     /// ```
     pub fn new(scenario: &Scenario, options: &FrameOptions) -> Result<Self, FrameSequenceError> {
-        let (time, readout_s) = Self::check_timing(options, scenario.camera.height_px)?;
-        let frame_count = Self::frame_count(scenario, options, &time, readout_s)?;
+        Self::with_view(scenario, &scenario.camera, None, options)
+    }
+
+    /// The sequence of `options` that a rig's `camera` takes of `scenario`, whose camera frame and clock are the
+    /// rig's: the camera's calibration (its time model replaced as in [`Self::new`]), the target seen through its
+    /// mount, and every time of the sequence (`start_s`, the frames', the truth's) on the camera's own clock, frame
+    /// `k`'s rows exposed around the rig times `clock.rig_time_s(t_k + v * line_delay_s)`. By default the frames
+    /// are those whose rows are all exposed by the scenario's end on the rig's clock. [`Self::state_at`] and the
+    /// truth are the camera's view: `camera_T_object` on the camera's clock. A rig camera with the identity mount and
+    /// the rig's clock gives the frames of [`Self::new`].
+    ///
+    /// ```
+    /// use roitrack_core::rig::{CameraMount, ClockModel, RigCamera};
+    /// use roitrack_sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
+    ///
+    /// let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
+    /// let late = ClockModel { offset_s: 0.01, drift_ppm: 0.0 };
+    /// let camera = RigCamera::known("late", scenario.camera.clone(), CameraMount::IDENTITY, late);
+    /// let frames = FrameSequence::seen_by(&scenario, &camera, &FrameOptions::default()).unwrap();
+    /// // Its frame at 1 s of its clock is the scene at 1.01 s of the rig's.
+    /// assert_eq!(frames.state_at(1.0), scenario.state_at(1.01));
+    /// ```
+    pub fn seen_by(
+        scenario: &Scenario,
+        camera: &RigCamera,
+        options: &FrameOptions,
+    ) -> Result<Self, FrameSequenceError> {
+        Self::with_view(
+            scenario,
+            &camera.camera,
+            Some((camera.mount, camera.clock)),
+            options,
+        )
+    }
+
+    fn with_view(
+        scenario: &Scenario,
+        camera: &CameraModel,
+        view: Option<(CameraMount, ClockModel)>,
+        options: &FrameOptions,
+    ) -> Result<Self, FrameSequenceError> {
+        let (time, readout_s) = Self::check_timing(options, camera.height_px)?;
+        // The scenario's end on the camera's clock.
+        let end_s = view.map_or(scenario.duration_s, |(_, clock)| {
+            clock.camera_time_s(scenario.duration_s)
+        });
+        let frame_count = Self::frame_count(camera.height_px, end_s, options, &time, readout_s)?;
         let &FrameOptions {
             polarity, sensor, ..
         } = options;
         let camera = CameraModel {
             time,
-            ..scenario.camera.clone()
+            ..camera.clone()
         };
         sensor.validate()?;
         let (render_sensor, light) = match polarity {
@@ -329,6 +377,7 @@ impl FrameSequence {
         let renderer = RoiRenderer::new(camera, scenario.target.clone(), render_sensor)?;
         Ok(Self {
             scenario: scenario.clone(),
+            view,
             options: *options,
             frame_count,
             renderer,
@@ -394,7 +443,8 @@ impl FrameSequence {
     /// The number of frames: the given one, or every frame whose rows are all exposed by the scenario's end; at
     /// least 1 and at most `MAX_FRAMES`.
     fn frame_count(
-        scenario: &Scenario,
+        rows: u32,
+        end_s: f64,
         options: &FrameOptions,
         time: &TimeModel,
         readout_s: f64,
@@ -405,11 +455,10 @@ impl FrameSequence {
             frame_count,
             ..
         } = options;
-        let rows = scenario.camera.height_px;
         // The last row of a frame is at t_k + (rows - 1) * line_delay.
         let last_row_s = time.blob_time_s(0.0, f64::from(rows.saturating_sub(1)));
         let frame_count = frame_count.unwrap_or_else(|| {
-            let room_s = scenario.duration_s - start_s - last_row_s;
+            let room_s = end_s - start_s - last_row_s;
             if room_s < 0.0 {
                 0
             } else {
@@ -427,7 +476,7 @@ impl FrameSequence {
             return Err(FrameSequenceError::NoFrames {
                 frame_count,
                 start_s,
-                duration_s: scenario.duration_s,
+                duration_s: end_s,
                 readout_s,
             });
         }
@@ -539,7 +588,8 @@ impl FrameSequence {
         )
     }
 
-    /// The true state at `t_s` (the scenario's).
+    /// The true state at `t_s` (the scenario's; for [`Self::seen_by`], as the rig's camera sees it at `t_s` of its
+    /// clock).
     ///
     /// ```
     /// use roitrack_sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
@@ -549,7 +599,7 @@ impl FrameSequence {
     /// assert_eq!(frames.state_at(2.0), scenario.state_at(2.0));
     /// ```
     pub fn state_at(&self, t_s: f64) -> MotionState {
-        self.scenario.state_at(t_s)
+        view_state(&self.scenario, self.view.as_ref(), t_s)
     }
 
     /// Renders frame `k` into `frame` (resized to the camera and the sensor's bit depth; `frame.t_s` is the frame's
@@ -580,7 +630,8 @@ impl FrameSequence {
         let mut rng = ChaCha8Rng::seed_from_u64(self.options.seed ^ FRAME_SEED_SALT);
         rng.set_stream(k as u64);
         let scenario = &self.scenario;
-        let state_at = |t: f64| scenario.state_at(t);
+        let view = self.view.as_ref();
+        let state_at = |t: f64| view_state(scenario, view, t);
         match self.options.polarity {
             Polarity::Bright => {
                 self.renderer
@@ -633,10 +684,7 @@ impl FrameSequence {
         let time = camera.time;
         let mut blobs = Vec::with_capacity(self.scenario.target.len());
         for (index, point) in self.scenario.target.points().iter().enumerate() {
-            let centre_at = |t: f64| {
-                self.renderer
-                    .disk_image_centre_px(&self.scenario.state_at(t), index)
-            };
+            let centre_at = |t: f64| self.renderer.disk_image_centre_px(&self.state_at(t), index);
             let Some(mut centre) = centre_at(t_frame_s) else {
                 continue;
             };
@@ -738,13 +786,31 @@ impl FrameSequence {
             }
         });
         Ok(times.map(|t_s| {
-            let state = self.scenario.state_at(t_s);
+            let state = self.state_at(t_s);
             (
                 PoseSample::from_state(t_s, &state),
                 TwistSample::from_state(t_s, &state),
             )
         }))
     }
+}
+
+/// The state of `scenario` that its camera sees at `t_s`, or with `view` a rig's camera (its mount and clock) at
+/// `t_s` of its own clock: the twist as the camera's clock measures it.
+fn view_state(
+    scenario: &Scenario,
+    view: Option<&(CameraMount, ClockModel)>,
+    t_s: f64,
+) -> MotionState {
+    let Some((mount, clock)) = view else {
+        return scenario.state_at(t_s);
+    };
+    let mut state = mount.camera_state(&scenario.state_at(clock.rig_time_s(t_s)));
+    // d t_rig / d t_camera.
+    let rate = 1.0 / (1.0 + clock.drift_ppm * 1e-6);
+    state.velocity_mps *= rate;
+    state.angular_velocity_radps *= rate;
+    state
 }
 
 /// A noiseless sensor that writes a pixel's blurred blob coverage (0..1) as 0..65535, with the optics and sampling
@@ -793,6 +859,41 @@ fn light_at(u: f64, v: f64, w: f64, h: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_rig_camera_at_the_origin_on_the_rigs_clock_takes_the_scenarios_frames() {
+        let scenario = Scenario::new(crate::ScenarioKind::Orthoglide, 1);
+        let options = FrameOptions {
+            frame_count: Some(3),
+            ..FrameOptions::default()
+        };
+        let camera = RigCamera::known(
+            "only",
+            scenario.camera.clone(),
+            CameraMount::IDENTITY,
+            ClockModel::REFERENCE,
+        );
+        let mut own = FrameSequence::new(&scenario, &options).unwrap();
+        let mut rig = FrameSequence::seen_by(&scenario, &camera, &options).unwrap();
+        let (mut a, mut b) = (Frame::default(), Frame::default());
+        for k in 0..3 {
+            own.render(k, &mut a);
+            rig.render(k, &mut b);
+            assert_eq!(a, b);
+            assert_eq!(own.true_blob_centres(k), rig.true_blob_centres(k));
+        }
+        // Without a frame count, the frames of a late clock end earlier on its own clock.
+        let late = RigCamera {
+            clock: ClockModel {
+                offset_s: 0.1,
+                drift_ppm: 0.0,
+            },
+            ..camera
+        };
+        let all = FrameSequence::new(&scenario, &FrameOptions::default()).unwrap();
+        let late = FrameSequence::seen_by(&scenario, &late, &FrameOptions::default()).unwrap();
+        assert_eq!(late.len(), all.len() - 3);
+    }
 
     #[test]
     fn light_falls_by_half_across_the_image() {

@@ -296,3 +296,124 @@ fn sample_rig(
         truth_twists,
     })
 }
+
+/// The full frames every camera of a rig takes of its scene ([`FrameSequence::seen_by`]), each on its own clock, and
+/// the truth in the rig's frame on the rig's clock over every frame's exposure.
+///
+/// Every camera takes frame `k` at `start_s + k / fps_hz` of its own clock (so cameras whose clocks differ are not
+/// triggered together); by default each takes the frames whose rows are all exposed by the scenario's end on the
+/// rig's clock. The first camera's sensor noise is that of `options.seed`, the others' independent streams of it.
+///
+/// ```
+/// use roitrack_sim::multi_camera::{CameraRigScene, RigFrames};
+/// use roitrack_sim::{FrameOptions, Scenario, ScenarioKind};
+///
+/// let scene = CameraRigScene::random(Scenario::new(ScenarioKind::Random, 1), 2, 1);
+/// let options = FrameOptions { frame_count: Some(3), ..FrameOptions::default() };
+/// let rig = RigFrames::new(&scene, &options).unwrap();
+/// assert_eq!(rig.cameras().len(), 2);
+/// // Camera 1's frame 0 is at 0 s of its own clock: the rig's time of its clock offset.
+/// let (start, _) = rig.span_s();
+/// assert_eq!(start, scene.rig.cameras()[1].clock.offset_s.min(0.0));
+/// ```
+#[derive(Debug, Clone)]
+pub struct RigFrames {
+    scene: CameraRigScene,
+    cameras: Vec<crate::FrameSequence>,
+}
+
+/// Mixed into the seed of every camera but the first.
+const RIG_FRAME_SEED_SALT: u64 = 0x9e37_79b9_7f4a_7c15;
+
+impl RigFrames {
+    /// The frames of `options` of every camera of `scene` (see [`RigFrames`]); refuses what
+    /// [`FrameSequence::new`](crate::FrameSequence::new) refuses, for any camera.
+    pub fn new(
+        scene: &CameraRigScene,
+        options: &crate::FrameOptions,
+    ) -> Result<Self, crate::FrameSequenceError> {
+        let cameras = scene
+            .rig
+            .cameras()
+            .iter()
+            .enumerate()
+            .map(|(c, camera)| {
+                let seed = if c == 0 {
+                    options.seed
+                } else {
+                    options.seed ^ RIG_FRAME_SEED_SALT.wrapping_mul(c as u64)
+                };
+                let options = crate::FrameOptions { seed, ..*options };
+                crate::FrameSequence::seen_by(&scene.scenario, camera, &options)
+            })
+            .collect::<Result<_, _>>()?;
+        Ok(Self {
+            scene: scene.clone(),
+            cameras,
+        })
+    }
+
+    /// Every camera's frames, in the rig's order.
+    pub fn cameras(&self) -> &[crate::FrameSequence] {
+        &self.cameras
+    }
+
+    /// The scene.
+    pub fn scene(&self) -> &CameraRigScene {
+        &self.scene
+    }
+
+    /// The interval of the rig's clock (s) holding every blob time of every camera: from the earliest first frame to
+    /// the latest last row.
+    pub fn span_s(&self) -> (f64, f64) {
+        self.cameras
+            .iter()
+            .zip(self.scene.rig.cameras())
+            .map(|(frames, camera)| {
+                let (start, end) = frames.span_s();
+                (camera.clock.rig_time_s(start), camera.clock.rig_time_s(end))
+            })
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (s, e)| {
+                (a.min(s), b.max(e))
+            })
+    }
+
+    /// The true poses (`rig_T_object`) and twists (rig frame) on the rig's clock over [`Self::span_s`], at `rate_hz`
+    /// from the span's start and at its end, so that linear (slerp) interpolation gives the truth at any time of the
+    /// span; use [`DEFAULT_TRUTH_RATE_HZ`](crate::DEFAULT_TRUTH_RATE_HZ). One at a time, in constant memory. Refuses
+    /// a rate that is not finite and positive.
+    ///
+    /// ```
+    /// use roitrack_sim::multi_camera::{CameraRigScene, RigFrames};
+    /// use roitrack_sim::{FrameOptions, Scenario, ScenarioKind};
+    ///
+    /// let scene = CameraRigScene::random(Scenario::new(ScenarioKind::Random, 1), 3, 2);
+    /// let rig = RigFrames::new(&scene, &FrameOptions { frame_count: Some(4), ..FrameOptions::default() }).unwrap();
+    /// let truth: Vec<_> = rig.truth_iter(2000.0).unwrap().collect();
+    /// let (start, end) = rig.span_s();
+    /// assert_eq!((truth[0].0.t_s, truth.last().unwrap().0.t_s), (start, end));
+    /// ```
+    pub fn truth_iter(
+        &self,
+        rate_hz: f64,
+    ) -> Result<impl Iterator<Item = (PoseSample, TwistSample)> + '_, crate::FrameSequenceError>
+    {
+        if !(rate_hz.is_finite() && rate_hz > 0.0) {
+            return Err(crate::FrameSequenceError::TruthRate { rate_hz });
+        }
+        let (start_s, end_s) = self.span_s();
+        let regular = ((end_s - start_s) * rate_hz).floor() as usize;
+        let times = (0..=regular)
+            .map(move |i| start_s + i as f64 / rate_hz)
+            // The end itself is the last sample, never a near-duplicate of the grid's.
+            .filter(move |t| *t < end_s - 1e-9)
+            .chain(std::iter::once(end_s));
+        Ok(times.map(|t_s| {
+            let state = self.scene.scenario.state_at(t_s);
+            (
+                PoseSample::from_state(t_s, &state),
+                TwistSample::from_state(t_s, &state),
+            )
+        }))
+    }
+}
