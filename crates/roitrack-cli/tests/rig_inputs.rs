@@ -265,3 +265,198 @@ fn bad_rig_inputs_are_refused_naming_the_camera() {
     );
     assert!(!poses.exists() && !twists.exists());
 }
+
+/// The position RMSE (m) that `roitrack eval --truth DIR` reports for `poses` (its `position RMSE` row, in mm).
+fn eval_position_rmse_m(truth_dir: &Path, poses: &Path, twists: &Path) -> f64 {
+    let report = ok(&[
+        "eval",
+        "--truth",
+        p(truth_dir),
+        "--poses",
+        p(poses),
+        "--twists",
+        p(twists),
+    ]);
+    let row = report
+        .lines()
+        .find(|l| l.starts_with("position RMSE "))
+        .unwrap_or_else(|| panic!("no position RMSE in\n{report}"));
+    let fields: Vec<&str> = row.split_whitespace().collect();
+    assert_eq!(fields[3], "mm", "{row}");
+    fields[2].parse::<f64>().unwrap() * 1e-3
+}
+
+/// `simulate --frames --rig` of two cameras, one at the rig's origin on its clock, one 0.3 m aside turned 31 degrees
+/// towards the scene with a clock 12.3 ms late and 40 ppm fast: a folder of frames per camera on its own clock and
+/// the truth on the rig's; each camera alone follows the truth once carried through the rig file's mount and clock,
+/// and `track --rig` of both frames is, by `roitrack eval`, no worse than the worse camera alone by more than the
+/// sampling spread of an RMS error.
+#[test]
+fn simulate_frames_rig_writes_each_cameras_frames_on_its_clock_and_they_fuse() {
+    let tmp = tempfile::tempdir().unwrap();
+    // A calibration: the scenario's camera.
+    let cal = tmp.path().join("cal");
+    ok(&[
+        "simulate",
+        "--scenario",
+        "static",
+        "--duration-s",
+        "0.01",
+        "--out",
+        p(&cal),
+    ]);
+    // camera_R_rig is a turn of `yaw` about y; the right camera looks at (0, 0, 0.6) m from (0.3, 0, 0.1) m.
+    let yaw = 2.0 * 0.266_933_6_f64.atan2(0.963_714_9);
+    let (mount_t, offset_s, drift_ppm) = ([-0.308_697_5, 0.0, 0.068_599_4], 0.0123, 40.0);
+    let rig = tmp.path().join("rig.yaml");
+    std::fs::write(
+        &rig,
+        format!(
+            "cameras:\n  - name: left\n    calibration: cal/camera.yaml\n    camera_T_rig: [0, 0, 0, 0, 0, 0, 1]\n  \
+             - name: right\n    calibration: cal/camera.yaml\n    camera_T_rig: [{}, {}, {}, 0, 0.2669336, 0, \
+             0.9637149]\n    clock_offset_s: {offset_s}\n    clock_drift_ppm: {drift_ppm}\n",
+            mount_t[0], mount_t[1], mount_t[2]
+        ),
+    )
+    .unwrap();
+    let frames = 150;
+    let sim = tmp.path().join("sim");
+    ok(&[
+        "simulate",
+        "--frames",
+        "--rig",
+        p(&rig),
+        "--scenario",
+        "orthoglide",
+        "--speed-scale",
+        "0.5",
+        "--frame-count",
+        &frames.to_string(),
+        "--out",
+        p(&sim),
+    ]);
+    for file in [
+        "target.csv",
+        "gt_poses.tum",
+        "gt_twists.csv",
+        "rig.yaml",
+        "rig_truth.yaml",
+    ] {
+        assert!(sim.join(file).is_file(), "{file}");
+    }
+    for name in ["left", "right"] {
+        let dir = sim.join(name);
+        for file in ["camera.yaml", "target.csv", "timestamps.csv", "README.txt"] {
+            assert!(dir.join(file).is_file(), "{name}/{file}");
+        }
+        let pngs = std::fs::read_dir(dir.join("frames")).unwrap().count();
+        assert_eq!(pngs, frames, "{name}/frames");
+        // Frame k at k / 30 s of the camera's own clock.
+        let times = std::fs::read_to_string(dir.join("timestamps.csv")).unwrap();
+        let last = times.lines().last().unwrap();
+        let expected = format!("{},frame_{:05}.png", 149.0 / 30.0, frames - 1);
+        assert_eq!(last, expected);
+    }
+    let target = sim.join("target.csv");
+    let truth = sim.join("gt_poses.tum");
+
+    // Each camera alone. The left camera's frame and clock are the rig's.
+    let track_alone = |name: &str| {
+        let (poses, twists) = (
+            tmp.path().join(format!("{name}.tum")),
+            tmp.path().join(format!("{name}.csv")),
+        );
+        ok(&[
+            "track",
+            "--camera",
+            p(&sim.join(name).join("camera.yaml")),
+            "--target",
+            p(&target),
+            "--images",
+            p(&sim.join(name).join("frames")),
+            "--fps",
+            "30",
+            "--poses",
+            p(&poses),
+            "--twists",
+            p(&twists),
+        ]);
+        (poses, twists)
+    };
+    let (left_poses, left_twists) = track_alone("left");
+    let left_m = eval_position_rmse_m(&sim, &left_poses, &left_twists);
+    // The right camera's track carried into the rig's frame (x_rig = R^T (x_camera - t)) at the rig's time of each
+    // estimate, and, to show that its frames are on its own clock, at its camera time taken as the rig's.
+    let (right_poses, _) = track_alone("right");
+    let truth_rows = read_tum(&truth);
+    let (cos, sin) = (yaw.cos(), yaw.sin());
+    let carried_rmse_m = |with_clock: bool| {
+        let estimates = read_tum(&right_poses);
+        let mut sum = 0.0;
+        for (t, x) in &estimates {
+            let d = [x[0] - mount_t[0], x[1] - mount_t[1], x[2] - mount_t[2]];
+            let rig_x = [cos * d[0] - sin * d[2], d[1], sin * d[0] + cos * d[2]];
+            let t_rig = if with_clock {
+                offset_s + t / (1.0 + drift_ppm * 1e-6)
+            } else {
+                *t
+            };
+            // The truth is dense (0.5 ms): linear interpolation.
+            let k = truth_rows
+                .partition_point(|(tt, _)| *tt < t_rig)
+                .clamp(1, truth_rows.len() - 1);
+            let ((t0, a), (t1, b)) = (truth_rows[k - 1], truth_rows[k]);
+            let f = ((t_rig - t0) / (t1 - t0)).clamp(0.0, 1.0);
+            sum += (0..3)
+                .map(|i| (rig_x[i] - (a[i] + f * (b[i] - a[i]))).powi(2))
+                .sum::<f64>();
+        }
+        (sum / estimates.len() as f64).sqrt()
+    };
+    let (right_m, right_unclocked_m) = (carried_rmse_m(true), carried_rmse_m(false));
+    // 12.3 ms at up to 0.5 m/s is millimetres; the frames' own error is tens of micrometres.
+    assert!(
+        right_unclocked_m > 10.0 * right_m,
+        "right camera carried to the rig: {right_m:e} m with its clock, {right_unclocked_m:e} m without"
+    );
+
+    let (fused, fused_twists) = (tmp.path().join("fused.tum"), tmp.path().join("fused.csv"));
+    let (left, right) = (
+        format!("left={}", p(&sim.join("left/frames"))),
+        format!("right={}", p(&sim.join("right/frames"))),
+    );
+    ok(&[
+        "track",
+        "--rig",
+        p(&sim.join("rig.yaml")),
+        "--target",
+        p(&target),
+        "--images",
+        &left,
+        "--images",
+        &right,
+        "--fps",
+        "30",
+        "--poses",
+        p(&fused),
+        "--twists",
+        p(&fused_twists),
+    ]);
+    let count = read_tum(&fused).len();
+    assert!(
+        count > frames * 9 / 10,
+        "{count} fused estimates of {frames} frames per camera"
+    );
+    let fused_m = eval_position_rmse_m(&sim, &fused, &fused_twists);
+    // As above: the RMS error's relative spread over count / 5 independent errors, 4 of its standard deviations.
+    let worse = left_m.max(right_m);
+    let bound = worse * (1.0 + 4.0 / (2.0 * count as f64 / 5.0).sqrt());
+    eprintln!(
+        "position RMSE: left alone {left_m:e} m, right alone {right_m:e} m (clock ignored: {right_unclocked_m:e} m), \
+         fused {fused_m:e} m ({count} estimates), bound {bound:e} m"
+    );
+    assert!(
+        fused_m <= bound,
+        "fused position RMSE {fused_m:e} m > {bound:e} m (left alone {left_m:e} m, right alone {right_m:e} m)"
+    );
+}

@@ -13,7 +13,7 @@ use roitrack::core::time::Readout;
 use roitrack::formats::AtomicFile;
 use roitrack::image::{Frame, Polarity, ReflectionFault, SensorModel};
 use roitrack::nalgebra::Vector3;
-use roitrack::sim::multi_camera::{CameraRigScene, draw_clocks, simulate_rig};
+use roitrack::sim::multi_camera::{CameraRigScene, RigFrames, draw_clocks, simulate_rig};
 use roitrack::sim::{
     DEFAULT_TRUTH_RATE_HZ, Excursion, FrameOptions, FrameSequence, Jump, Occlusion, RoiBurst,
     RoiImageRenderer, Scenario, ScenarioKind, SimulatedRun, Simulation, SimulationOptions, TimeGap,
@@ -101,17 +101,20 @@ pub struct SimulateArgs {
     /// clock offsets and drifts (those it leaves out drawn within ±50 ms and ±100 ppm from --seed). Writes a folder
     /// per camera, NAME/measurements.csv and NAME/camera.yaml, and target.csv, gt_poses.tum and gt_twists.csv in
     /// the rig's frame on the rig's clock, rig.yaml (the rig as given, for `track --rig`) and rig_truth.yaml (every
-    /// clock). Default: one camera.
+    /// clock). With --frames: each camera's frames instead of its measurements, NAME/frames/frame_00000.png ...,
+    /// NAME/timestamps.csv on its own clock (frame k at k / --fps), NAME/camera.yaml, NAME/target.csv and
+    /// NAME/README.txt, the truth on the rig's clock over every frame's exposure. Default: one camera.
     #[arg(long = "rig", value_name = "RIG.yaml", conflicts_with_all = [
-        "frames", "rois", "reflections", "occlusions", "gaps", "bursts", "jump", "excursion", "drop_fraction",
+        "rois", "reflections", "occlusions", "gaps", "bursts", "jump", "excursion", "drop_fraction",
         "outlier_fraction", "order", "rig_cameras",
     ])]
     pub camera_rig: Option<PathBuf>,
     /// As --rig, with a rig of N cameras (2 to 8) drawn from --seed around the built-in scene: the first the
     /// scenario's camera, the others 30-50 degrees aside looking at the scene's centre, their clocks within ±50 ms and
-    /// ±100 ppm; rig.yaml then leaves their clocks out (to be learnt by `track --rig`). Default: one camera.
+    /// ±100 ppm; rig.yaml then leaves their clocks out (to be learnt by `track --rig`). Also with --frames. Default:
+    /// one camera.
     #[arg(long, value_name = "N", conflicts_with_all = [
-        "frames", "rois", "reflections", "occlusions", "gaps", "bursts", "jump", "excursion", "drop_fraction",
+        "rois", "reflections", "occlusions", "gaps", "bursts", "jump", "excursion", "drop_fraction",
         "outlier_fraction", "order",
     ], value_parser = ranges::count(2..=8, "cameras around one scene"))]
     pub rig_cameras: Option<usize>,
@@ -331,7 +334,11 @@ impl SimulateArgs {
 
 pub fn run(args: &SimulateArgs) -> Result<()> {
     if args.camera_rig.is_some() || args.rig_cameras.is_some() {
-        return run_rig(args);
+        return if args.frames {
+            run_rig_frames(args)
+        } else {
+            run_rig(args)
+        };
     }
     if args.frames {
         return run_frames(args);
@@ -518,6 +525,12 @@ impl SimulateArgs {
         );
         if let Some(n) = self.frame_count {
             command += &format!(" --frame-count {n}");
+        }
+        if let Some(n) = self.rig_cameras {
+            command += &format!(" --rig-cameras {n}");
+        }
+        if let Some(rig) = &self.camera_rig {
+            command += &format!(" --rig {}", rig.display());
         }
         command + &format!(" --out {}", self.out.display())
     }
@@ -812,8 +825,9 @@ fn rig_scene(args: &SimulateArgs, scenario: Scenario) -> Result<(CameraRigScene,
 pub const RIG_FILE: &str = "rig.yaml";
 pub const RIG_TRUTH_FILE: &str = "rig_truth.yaml";
 
-/// `simulate --rig` / `--rig-cameras`: a folder per camera, the truth in the rig's frame and clock, the rig files.
-fn run_rig(args: &SimulateArgs) -> Result<()> {
+/// The scene and the told rig of a rig run (`--rig` or `--rig-cameras`), once its outputs, the rig-level files and
+/// `camera_files` in each camera's folder, are checked not to overwrite its inputs.
+fn rig_setup(args: &SimulateArgs, camera_files: &[&str]) -> Result<(CameraRigScene, Rig)> {
     if args.rig.camera.is_some() {
         bail!("--rig gives the cameras: leave out --camera");
     }
@@ -821,7 +835,6 @@ fn run_rig(args: &SimulateArgs) -> Result<()> {
         .rig
         .scenario(Scenario::new(args.scenario.into(), args.seed))?;
     let (scene, told) = rig_scene(args, scenario)?;
-    let names: Vec<String> = scene.rig.cameras().iter().map(|c| c.name.clone()).collect();
     let mut files = vec![
         TARGET_FILE.to_string(),
         TRUTH_POSES_FILE.to_string(),
@@ -829,9 +842,10 @@ fn run_rig(args: &SimulateArgs) -> Result<()> {
         RIG_FILE.to_string(),
         RIG_TRUTH_FILE.to_string(),
     ];
-    for name in &names {
-        files.push(format!("{name}/{CAMERA_FILE}"));
-        files.push(format!("{name}/{MEASUREMENTS_FILE}"));
+    for camera in scene.rig.cameras() {
+        for file in camera_files {
+            files.push(format!("{}/{file}", camera.name));
+        }
     }
     let file_refs: Vec<&str> = files.iter().map(String::as_str).collect();
     args.rig.check_outputs(&args.out, &file_refs)?;
@@ -846,6 +860,24 @@ fn run_rig(args: &SimulateArgs) -> Result<()> {
             .collect();
         roitrack::formats::check_output_paths(&[("--rig", rig_path.as_path())], &outputs)?;
     }
+    Ok((scene, told))
+}
+
+/// `simulate --rig` / `--rig-cameras`: a folder per camera, the truth in the rig's frame and clock, the rig files.
+fn run_rig(args: &SimulateArgs) -> Result<()> {
+    let (scene, told) = rig_setup(
+        args,
+        &[
+            CAMERA_FILE,
+            MEASUREMENTS_FILE,
+            // A previous frames run's, removed.
+            TARGET_FILE,
+            TIMESTAMPS_FILE,
+            FRAMES_README_FILE,
+            FRAMES_DIR,
+        ],
+    )?;
+    let names: Vec<String> = scene.rig.cameras().iter().map(|c| c.name.clone()).collect();
     let run = simulate_rig(&scene, args.rate_hz, args.noise_px, args.seed)
         .context("simulation failed")?;
     roitrack::formats::create_output_dir(&args.out)?;
@@ -856,6 +888,7 @@ fn run_rig(args: &SimulateArgs) -> Result<()> {
     for (camera, measurements) in scene.rig.cameras().iter().zip(&run.measurements) {
         let dir = args.out.join(&camera.name);
         roitrack::formats::create_output_dir(&dir)?;
+        remove_other_runs_files(&dir, false, false)?;
         roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), &camera.camera)?;
         roitrack::formats::write_measurements_csv(dir.join(MEASUREMENTS_FILE), measurements)?;
         calibrations.push(format!("{}/{CAMERA_FILE}", camera.name));
@@ -876,4 +909,159 @@ fn run_rig(args: &SimulateArgs) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// `simulate --frames --rig` / `--rig-cameras`: a folder per camera of its frames on its own clock (as `--frames`
+/// writes them for one camera), the truth in the rig's frame on the rig's clock, the rig files.
+fn run_rig_frames(args: &SimulateArgs) -> Result<()> {
+    let (scene, told) = rig_setup(
+        args,
+        &[
+            CAMERA_FILE,
+            TARGET_FILE,
+            TIMESTAMPS_FILE,
+            FRAMES_README_FILE,
+            FRAMES_DIR,
+            // A previous measurement run's, removed.
+            MEASUREMENTS_FILE,
+            ROIS_FILE,
+        ],
+    )?;
+    let options = FrameOptions {
+        fps_hz: args.fps,
+        readout: args.readout()?,
+        exposure_s: args.exposure_s,
+        polarity: args.polarity.into(),
+        sensor: SensorModel::default(),
+        seed: args.seed,
+        start_s: 0.0,
+        frame_count: args.frame_count,
+    };
+    let rig_frames = RigFrames::new(&scene, &options).context("cannot simulate these frames")?;
+    let out = &args.out;
+    roitrack::formats::create_output_dir(out)?;
+    roitrack::formats::write_target_csv(out.join(TARGET_FILE), &scene.scenario.target)?;
+    // Dense, so that `roitrack eval` interpolates the truth at each fused estimate's own time; streamed.
+    let mut poses = roitrack::formats::PoseWriter::create(out.join(TRUTH_POSES_FILE))?;
+    let mut twists = roitrack::formats::TwistWriter::create(out.join(TRUTH_TWISTS_FILE))?;
+    for (pose, twist) in rig_frames
+        .truth_iter(DEFAULT_TRUTH_RATE_HZ)
+        .context("cannot sample the ground truth")?
+    {
+        poses.write(&pose)?;
+        twists.write(&twist)?;
+    }
+    poses.finish()?;
+    twists.finish()?;
+    let track = rig_track_command(args, &scene);
+    let mut calibrations = Vec::with_capacity(scene.rig.len());
+    let mut counts = Vec::with_capacity(scene.rig.len());
+    for (camera, sequence) in scene.rig.cameras().iter().zip(rig_frames.cameras()) {
+        let dir = out.join(&camera.name);
+        let frames_dir = dir.join(FRAMES_DIR);
+        roitrack::formats::create_output_dir(&frames_dir)?;
+        remove_other_runs_files(&dir, true, false)?;
+        remove_dead_frame_temporaries(&frames_dir);
+        remove_stale_frames(&frames_dir, sequence.len())?;
+        roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), sequence.camera())?;
+        roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scene.scenario.target)?;
+        render_frames(sequence, &frames_dir)?;
+        write_timestamps(sequence, &dir.join(TIMESTAMPS_FILE))?;
+        let readme = rig_camera_readme(args, &camera.name, sequence, &track);
+        let readme_path = dir.join(FRAMES_README_FILE);
+        let mut file = AtomicFile::create(&readme_path)?;
+        file.write_all(readme.as_bytes())
+            .with_context(|| format!("cannot write {}", readme_path.display()))?;
+        file.finish()?;
+        calibrations.push(format!("{}/{CAMERA_FILE}", camera.name));
+        counts.push(format!("{} {}", camera.name, sequence.len()));
+    }
+    roitrack::formats::write_rig_yaml(out.join(RIG_FILE), &told, &calibrations, None)?;
+    roitrack::formats::write_rig_yaml(out.join(RIG_TRUTH_FILE), &scene.rig, &calibrations, None)?;
+    eprintln!(
+        "roitrack: {} scenario seen by {} cameras: frames ({}; {} shutter, {} blobs) written to {}, each camera's on \
+         its own clock; track them with\n  {track}",
+        scene.scenario.kind.name(),
+        scene.rig.len(),
+        counts.join(", "),
+        args.shutter.name(),
+        Polarity::from(args.polarity).name(),
+        out.display(),
+    );
+    Ok(())
+}
+
+/// The `roitrack track --rig` command for the frames of every camera in `args.out`: frame k of each at k / --fps of
+/// its own clock, as its timestamps.csv says.
+fn rig_track_command(args: &SimulateArgs, scene: &CameraRigScene) -> String {
+    let path = |name: &str| args.out.join(name).display().to_string();
+    let images: Vec<String> = scene
+        .rig
+        .cameras()
+        .iter()
+        .map(|c| {
+            format!(
+                "--images {}={}",
+                c.name,
+                path(&format!("{}/{FRAMES_DIR}", c.name))
+            )
+        })
+        .collect();
+    format!(
+        "roitrack track --rig {} --target {} {} --fps {} {} --polarity {} --poses poses.tum --twists twists.csv",
+        path(RIG_FILE),
+        path(TARGET_FILE),
+        images.join(" "),
+        args.fps,
+        args.track_time_options(),
+        Polarity::from(args.polarity).name()
+    )
+}
+
+/// What one camera's folder of a rig of frames holds, and how to track and score the rig.
+fn rig_camera_readme(
+    args: &SimulateArgs,
+    name: &str,
+    sequence: &FrameSequence,
+    track: &str,
+) -> String {
+    let camera = sequence.camera();
+    let (start, end) = sequence.span_s();
+    format!(
+        "{README_START} the {scenario} scenario (seed {seed}) by camera '{name}' of a rig, made by\n\n    \
+         {command}\n\n\
+         {count} frames of {w} x {h} px at {fps} Hz of this camera's own clock ({shutter} shutter, {polarity} blobs, \
+         each row exposed for {e:e} s around its time), from {start:.6} s to {end:.6} s of that clock. ../{rig} gives \
+         the camera's pose in the rig and its clock as `track --rig` is told them, ../{truth} as simulated: \
+         t_rig = clock_offset_s + t_camera / (1 + clock_drift_ppm 1e-6).\n\n\
+         {camera_file:<16} the camera (ROS camera_info; no time model: tell `roitrack track` {options})\n\
+         {target_file:<16} the target (id,x,y,z,diameter in metres)\n\
+         {frames_dir:<16} frame_00000.png ...: grey PNGs, {bits} bits\n\
+         {timestamps:<16} t,file: each frame's time on this camera's clock (s: the mid-exposure time of its row 0, \
+         frame k at k / {fps})\n\n\
+         The truth (../{poses}, ../{twists}) is rig_T_object and its twist in the rig's frame on the rig's clock. \
+         Track every camera's frames and score them:\n\n    {track}\n    roitrack eval --truth {out} --poses \
+         poses.tum --twists twists.csv\n",
+        scenario = sequence.scenario().kind.name(),
+        seed = args.seed,
+        command = args.frames_command(),
+        count = sequence.len(),
+        w = camera.width_px,
+        h = camera.height_px,
+        fps = args.fps,
+        shutter = args.shutter.name(),
+        polarity = Polarity::from(args.polarity).name(),
+        e = args.exposure_s,
+        rig = RIG_FILE,
+        truth = RIG_TRUTH_FILE,
+        camera_file = CAMERA_FILE,
+        options = args.track_time_options(),
+        target_file = TARGET_FILE,
+        frames_dir = format!("{FRAMES_DIR}/"),
+        bits = sequence.options().sensor.bit_depth,
+        timestamps = TIMESTAMPS_FILE,
+        poses = TRUTH_POSES_FILE,
+        twists = TRUTH_TWISTS_FILE,
+        out = args.out.display(),
+    )
 }
