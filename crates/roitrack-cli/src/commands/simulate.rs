@@ -889,6 +889,8 @@ fn run_rig(args: &SimulateArgs) -> Result<()> {
         let dir = args.out.join(&camera.name);
         roitrack::formats::create_output_dir(&dir)?;
         remove_other_runs_files(&dir, false, false)?;
+        // A frames run's copy of the target (the rig's own is beside the folders).
+        roitrack::formats::remove_at_commit(&dir.join(TARGET_FILE))?;
         roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), &camera.camera)?;
         roitrack::formats::write_measurements_csv(dir.join(MEASUREMENTS_FILE), measurements)?;
         calibrations.push(format!("{}/{CAMERA_FILE}", camera.name));
