@@ -460,3 +460,80 @@ fn simulate_frames_rig_writes_each_cameras_frames_on_its_clock_and_they_fuse() {
         "fused position RMSE {fused_m:e} m > {bound:e} m (left alone {left_m:e} m, right alone {right_m:e} m)"
     );
 }
+
+/// A rig of frames written over a rig of measurements in the same folder, and back: each run leaves its own files
+/// only.
+#[test]
+fn rig_runs_of_frames_and_of_measurements_replace_each_other() {
+    let tmp = tempfile::tempdir().unwrap();
+    let out = tmp.path().join("rig");
+    let files = |dir: &Path| {
+        let mut list: Vec<String> = walk(dir)
+            .iter()
+            .map(|p| p.strip_prefix(dir).unwrap().display().to_string())
+            .collect();
+        list.sort();
+        list
+    };
+    let measurements = [
+        "simulate",
+        "--scenario",
+        "sweep",
+        "--duration-s",
+        "0.2",
+        "--rig-cameras",
+        "2",
+        "--out",
+        p(&out),
+    ];
+    ok(&measurements);
+    let of_measurements = files(&out);
+    assert!(of_measurements.contains(&"cam1/measurements.csv".to_string()));
+    ok(&[
+        "simulate",
+        "--frames",
+        "--frame-count",
+        "2",
+        "--scenario",
+        "sweep",
+        "--duration-s",
+        "0.2",
+        "--rig-cameras",
+        "2",
+        "--out",
+        p(&out),
+    ]);
+    let of_frames = files(&out);
+    for name in ["cam0", "cam1"] {
+        for file in [
+            "README.txt",
+            "camera.yaml",
+            "frames/frame_00000.png",
+            "frames/frame_00001.png",
+            "target.csv",
+            "timestamps.csv",
+        ] {
+            assert!(
+                of_frames.contains(&format!("{name}/{file}")),
+                "{of_frames:?}"
+            );
+        }
+        assert!(!of_frames.contains(&format!("{name}/measurements.csv")));
+    }
+    ok(&measurements);
+    assert_eq!(files(&out), of_measurements);
+}
+
+/// Every file under `dir`, recursively.
+fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
+    let mut files = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            files.extend(walk(&path));
+        } else {
+            files.push(path);
+        }
+    }
+    files
+}
