@@ -490,7 +490,7 @@ fn chunk_messages(
 }
 
 /// Decodes a `sensor_msgs/msg/Image` into `frame`; its stamp (s).
-fn decode_image(message: &[u8], frame: &mut Frame) -> Result<f64, String> {
+pub(crate) fn decode_image(message: &[u8], frame: &mut Frame) -> Result<f64, String> {
     let mut cdr = Cdr::new(message)?;
     let (t_s, _) = cdr.header()?;
     let height = cdr.u32()?;
@@ -550,7 +550,7 @@ fn decode_image(message: &[u8], frame: &mut Frame) -> Result<f64, String> {
 }
 
 /// A `sensor_msgs/msg/CompressedImage`: its stamp (s), format and the compressed bytes.
-fn compressed_image(message: &[u8]) -> Result<(f64, String, &[u8]), String> {
+pub(crate) fn compressed_image(message: &[u8]) -> Result<(f64, String, &[u8]), String> {
     let mut cdr = Cdr::new(message)?;
     let (t_s, _) = cdr.header()?;
     let format = cdr.string()?;

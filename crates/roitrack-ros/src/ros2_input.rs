@@ -8,7 +8,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use roitrack_core::{CameraModel, Measurement};
-use roitrack_formats::MeasurementChecks;
+use roitrack_formats::{FrameInfo, MeasurementChecks};
+use roitrack_image::Frame;
 use ros2_client::dds::rustdds::{
     self, DomainParticipantBuilder, QosPolicies, RepresentationIdentifier, TopicKind, no_key,
 };
@@ -19,7 +20,7 @@ use ros2_client::{
 
 use crate::measurement_reader::decode;
 use crate::msg::BLOB_MEASUREMENTS;
-use crate::reader::camera_from_info;
+use crate::reader::{IMAGE_TYPES, camera_from_info, compressed_image, decode_image};
 use crate::ros2::{Ros2Error, Ros2Options, check_interfaces, normalised_namespace};
 
 /// The type of a camera info.
@@ -32,7 +33,7 @@ const DEPTH: usize = 1000;
 const REASONS_KEPT: usize = 16;
 
 /// A message's serialised body as DDS delivered it, with its encoding.
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub(crate) struct RawMessage {
     encoding: RepresentationIdentifier,
     bytes: Vec<u8>,
@@ -90,7 +91,7 @@ impl<'de> no_key::Decode<'de, RawMessage> for RawAdapter {
 pub struct SubscriberReport {
     /// Messages taken.
     pub messages: u64,
-    /// Centroids handed on to the tracker.
+    /// Centroids (of an [`ImageSubscriber`]: frames) handed on to the tracker.
     pub measurements: u64,
     /// Messages left out whole because something in them was wrong.
     pub malformed: u64,
@@ -306,6 +307,18 @@ pub fn wait_for_camera_info(
     timeout: Duration,
     stop: &AtomicBool,
 ) -> Result<CameraModel, Ros2Error> {
+    wait_for_camera_info_with(options, topic, timeout, stop, || {})
+}
+
+/// [`wait_for_camera_info`], calling `while_waiting` at each look at the bus (an [`ImageSubscriber`] counts the
+/// images that come before the camera info there: [`ImageSubscriber::discard_waiting`]).
+pub fn wait_for_camera_info_with(
+    options: &Ros2Options,
+    topic: &str,
+    timeout: Duration,
+    stop: &AtomicBool,
+    mut while_waiting: impl FnMut(),
+) -> Result<CameraModel, Ros2Error> {
     check_interfaces(&options.interfaces)?;
     let full = format!("{}{topic}", normalised_namespace(&options.namespace));
     let name = Name::parse(&full).map_err(|e| Ros2Error::Namespace {
@@ -335,6 +348,7 @@ pub fn wait_for_camera_info(
                 }
             }
         }
+        while_waiting();
         std::thread::sleep(POLL);
     }
     Err(Ros2Error::Input(format!(
@@ -379,6 +393,222 @@ impl Iterator for MeasurementSubscriber {
             }
         }
     }
+}
+
+/// The images of a `sensor_msgs/msg/Image` (or `sensor_msgs/msg/CompressedImage`) topic on the ROS 2 DDS bus, one
+/// frame at a time ([`next_frame`](Self::next_frame)), each at its header stamp, for the frame tracker
+/// (`roitrack ros2-node --image-topic`).
+///
+/// Encodings `mono8`, `mono16` (either byte order) and `bgr8`, `rgb8` (made grey by BT.601 luma, as image files are);
+/// a compressed image in any format `track --images` reads (PNG, JPEG, ...). An image that cannot be tracked is left
+/// out, counted and its reason kept ([`report`](Self::report)), and the subscription goes on: another encoding, a
+/// step or data size that does not match its width and height, a size other than the camera's, a time not after the
+/// previous image's, or an image that came before any camera info ([`discard_waiting`](Self::discard_waiting)).
+/// Subscribed reliable (keep last 100) by default, as `image_transport` publishes, or best effort (a camera driver's
+/// sensor-data QoS).
+pub struct ImageSubscriber {
+    reader: no_key::SimpleDataReader<RawMessage, RawAdapter>,
+    // Kept alive with the reader.
+    _participant: rustdds::DomainParticipant,
+    topic: String,
+    compressed: bool,
+    expected_size: Option<(u32, u32)>,
+    last_t_s: Option<f64>,
+    report: SubscriberReport,
+    stop: Arc<AtomicBool>,
+    idle: Duration,
+    last_message: Option<Instant>,
+}
+
+impl std::fmt::Debug for ImageSubscriber {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ImageSubscriber")
+            .field("topic", &self.topic)
+            .field("report", &self.report)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The images kept until taken.
+const IMAGE_DEPTH: usize = 100;
+
+impl ImageSubscriber {
+    /// Subscribes to `topic` (in the namespace of `options`), of type `sensor_msgs/msg/CompressedImage` if
+    /// `compressed`, else `sensor_msgs/msg/Image`; reliable, or best effort if `best_effort`. Ends when `stop` is
+    /// raised or no image has come for `idle` after the first one.
+    pub fn start(
+        options: &Ros2Options,
+        topic: &str,
+        compressed: bool,
+        best_effort: bool,
+        stop: Arc<AtomicBool>,
+        idle: Duration,
+    ) -> Result<Self, Ros2Error> {
+        check_interfaces(&options.interfaces)?;
+        let full = format!("{}{topic}", normalised_namespace(&options.namespace));
+        let name = Name::parse(&full).map_err(|e| Ros2Error::Namespace {
+            namespace: full.clone(),
+            message: e.to_string(),
+        })?;
+        let qos =
+            QosProfile::subscription_default().history(History::KeepLast { depth: IMAGE_DEPTH });
+        let qos = if best_effort {
+            qos.reliability_best_effort()
+        } else {
+            qos.reliability_reliable(ros2_client::qos::WhenFull::Fail)
+        };
+        let type_name = if compressed {
+            IMAGE_TYPES[1]
+        } else {
+            IMAGE_TYPES[0]
+        };
+        let (participant, reader) = raw_reader(options, &name, type_name, &qos)?;
+        Ok(Self {
+            reader,
+            _participant: participant,
+            topic: full,
+            compressed,
+            expected_size: None,
+            last_t_s: None,
+            report: SubscriberReport::default(),
+            stop,
+            idle,
+            last_message: None,
+        })
+    }
+
+    /// The topic subscribed to (with its namespace).
+    pub fn topic(&self) -> &str {
+        &self.topic
+    }
+
+    /// What was received so far: `measurements` counts the frames handed on.
+    pub fn report(&self) -> &SubscriberReport {
+        &self.report
+    }
+
+    /// From now on, every image must be `width` x `height` px (the camera's).
+    pub fn expect_size(&mut self, width: u32, height: u32) {
+        self.expected_size = Some((width, height));
+    }
+
+    /// Takes every image waiting and leaves it out, counted and named: called while there is no camera yet.
+    pub fn discard_waiting(&mut self) {
+        while let Ok(Some(change)) = self.reader.try_take_one() {
+            drop(change);
+            // Not a message of the tracking: --idle-s counts from the first image tracked.
+            let index = self.report.messages;
+            self.report.messages += 1;
+            self.malformed(index, "an image before any camera info".to_string());
+        }
+    }
+
+    /// The next image that can be tracked, decoded into `frame` (its buffer reused, `t_s` its header stamp), and
+    /// which it is; blocks until one comes, `None` when `stop` is raised or no image came for `idle`.
+    pub fn next_frame(&mut self, frame: &mut Frame) -> Option<FrameInfo> {
+        loop {
+            if self.stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            match self.reader.try_take_one() {
+                Ok(Some(change)) => {
+                    self.last_message = Some(Instant::now());
+                    let index = self.report.messages;
+                    self.report.messages += 1;
+                    match self.decode(&change.into_value(), frame) {
+                        Ok(t_s) => {
+                            self.last_t_s = Some(t_s);
+                            self.report.measurements += 1;
+                            frame.t_s = t_s;
+                            return Some(FrameInfo {
+                                index: index as usize,
+                                name: format!("message {index} of {}", self.topic),
+                                t_s,
+                            });
+                        }
+                        Err(reason) => self.malformed(index, reason),
+                    }
+                }
+                Err(e) => {
+                    let index = self.report.messages;
+                    self.report.messages += 1;
+                    self.malformed(index, format!("not taken: {e}"));
+                }
+                Ok(None) => {
+                    if self.last_message.is_some_and(|t| t.elapsed() >= self.idle) {
+                        return None;
+                    }
+                    std::thread::sleep(POLL);
+                }
+            }
+        }
+    }
+
+    /// Decodes one image into `frame` and checks it; its stamp (s), or why it is left out.
+    fn decode(&self, message: &RawMessage, frame: &mut Frame) -> Result<f64, String> {
+        checked_image(
+            message,
+            self.compressed.then_some(self.topic.as_str()),
+            self.expected_size,
+            self.last_t_s,
+            frame,
+        )
+    }
+
+    /// Counts message `index` as malformed, keeping the reason if there is room.
+    fn malformed(&mut self, index: u64, reason: String) {
+        self.report.malformed += 1;
+        if self.report.reasons.len() < REASONS_KEPT {
+            self.report
+                .reasons
+                .push(format!("{} message {index}: {reason}", self.topic));
+        }
+    }
+}
+
+/// Decodes `message` (a `sensor_msgs/msg/Image`, or a `CompressedImage` of the topic `compressed`) into `frame` and
+/// checks it against the camera's size (`None`: no camera yet) and the previous image's stamp; its stamp (s), or why
+/// it is left out.
+fn checked_image(
+    message: &RawMessage,
+    compressed: Option<&str>,
+    expected_size: Option<(u32, u32)>,
+    last_t_s: Option<f64>,
+    frame: &mut Frame,
+) -> Result<f64, String> {
+    let mut bytes = Vec::with_capacity(4 + message.bytes.len());
+    bytes.extend_from_slice(&message.encoding.to_bytes());
+    bytes.extend_from_slice(&[0, 0]);
+    bytes.extend_from_slice(&message.bytes);
+    let t_s = match compressed {
+        Some(topic) => {
+            let (t_s, format, data) = compressed_image(&bytes)?;
+            let name = std::path::PathBuf::from(format!("{topic} ({format})"));
+            *frame = roitrack_formats::decode_frame(data, &name).map_err(|e| e.to_string())?;
+            t_s
+        }
+        None => decode_image(&bytes, frame)?,
+    };
+    let Some((width, height)) = expected_size else {
+        return Err("an image before any camera info".to_string());
+    };
+    if (frame.width, frame.height) != (width, height) {
+        return Err(format!(
+            "the image is {} x {} px, the camera info says {width} x {height} px",
+            frame.width, frame.height
+        ));
+    }
+    if !t_s.is_finite() {
+        return Err(format!("the stamp {t_s} s is not finite"));
+    }
+    if let Some(last) = last_t_s
+        && t_s <= last
+    {
+        return Err(format!(
+            "the stamp {t_s} s does not come after the previous image's ({last} s)"
+        ));
+    }
+    Ok(t_s)
 }
 
 #[cfg(test)]
@@ -448,6 +678,82 @@ mod tests {
             ),
         ] {
             let reason = checked_message(&checks, &message, &mut out).unwrap_err();
+            assert!(reason.contains(expected), "{reason}, not {expected}");
+        }
+    }
+
+    /// A `sensor_msgs/msg/Image` at 2.25 s, as DDS hands it over.
+    fn image(encoding: &str, width: u32, height: u32, step: u32, data: &[u8]) -> RawMessage {
+        let bytes = cdr::serialize::<_, _, cdr::CdrLe>(
+            &msg::Image {
+                header: msg::Header {
+                    stamp: msg::Time {
+                        sec: 2,
+                        nanosec: 250_000_000,
+                    },
+                    frame_id: "camera",
+                },
+                height,
+                width,
+                encoding,
+                is_bigendian: 0,
+                step,
+                data: msg::Bytes(data),
+            },
+            cdr::Infinite,
+        )
+        .unwrap();
+        RawMessage {
+            encoding: RepresentationIdentifier::CDR_LE,
+            bytes: bytes[4..].to_vec(),
+        }
+    }
+
+    #[test]
+    fn an_image_is_decoded_checked_and_a_bad_one_named() {
+        let mut frame = Frame::default();
+        let pixels: Vec<u8> = (0..12).collect();
+        let good = image("mono8", 4, 3, 4, &pixels);
+        let t_s = checked_image(&good, None, Some((4, 3)), Some(2.0), &mut frame).unwrap();
+        assert_eq!(
+            (t_s, frame.width, frame.height, frame.pixels[5]),
+            (2.25, 4, 3, 5)
+        );
+        let bad = [
+            (good.clone(), None, None, "an image before any camera info"),
+            (
+                good.clone(),
+                Some((5, 3)),
+                None,
+                "the image is 4 x 3 px, the camera info says 5 x 3 px",
+            ),
+            (
+                good.clone(),
+                Some((4, 3)),
+                Some(2.25),
+                "does not come after the previous image's",
+            ),
+            (
+                image("yuv422", 4, 3, 8, &pixels),
+                Some((4, 3)),
+                None,
+                "image encoding \"yuv422\" is not read",
+            ),
+            (
+                image("mono8", 4, 3, 3, &pixels),
+                Some((4, 3)),
+                None,
+                "with a step of 3",
+            ),
+            (
+                image("mono8", 4, 3, 4, &pixels[..8]),
+                Some((4, 3)),
+                None,
+                "8 bytes of data",
+            ),
+        ];
+        for (message, size, last, expected) in bad {
+            let reason = checked_image(&message, None, size, last, &mut frame).unwrap_err();
             assert!(reason.contains(expected), "{reason}, not {expected}");
         }
     }
