@@ -889,3 +889,163 @@ fn simulate_spin(roitrack: &Path, dir: &Path) -> PathBuf {
     assert!(simulated.status.success());
     sim
 }
+
+fn image_publisher_script() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/ros2_image_publisher.py")
+}
+
+/// `ros2-node --image-topic`: Cyclone DDS publishes the camera info, then the frames `simulate --frames` rendered as
+/// sensor_msgs/msg/Image (decoded from the PNGs in Python), with malformed images among them (one before the camera
+/// info, another encoding, another size, a step that does not match, data short); the node leaves those out, names
+/// them, and tracks the rest to the estimates of `track --images` on the same frames (1e-9), which it publishes.
+#[test]
+fn the_node_tracks_images_from_cyclone_dds_as_track_does_the_frames_and_names_malformed_ones() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
+    let sim = dir.path().join("sim");
+    // Half a second: 16 frames (the pure-Python PNG decoding takes about a second a frame).
+    let simulated = Command::new(roitrack)
+        .args([
+            "simulate",
+            "--scenario",
+            "orthoglide",
+            "--duration-s",
+            "0.5",
+            "--frames",
+            "--out",
+        ])
+        .arg(&sim)
+        .output()
+        .unwrap();
+    assert!(
+        simulated.status.success(),
+        "{}",
+        String::from_utf8_lossy(&simulated.stderr)
+    );
+    let file = |name: &str| dir.path().join(name);
+    // The frames' times as the node reads them from the stamps: rounded to the nanosecond, sec + 1e-9 nanosec.
+    let timestamps = std::fs::read_to_string(sim.join("timestamps.csv")).unwrap();
+    let mut rounded = String::from("t,file\n");
+    for line in timestamps.lines().skip(1) {
+        let (t, name) = line.split_once(',').unwrap();
+        let ns = (t.parse::<f64>().unwrap() * 1e9).round() as i64;
+        let (sec, nanosec) = (ns.div_euclid(1_000_000_000), ns.rem_euclid(1_000_000_000));
+        let t_s = sec as f64 + 1e-9 * nanosec as f64;
+        rounded.push_str(&format!("{t_s:?},{name}\n"));
+    }
+    std::fs::write(file("stamps.csv"), rounded).unwrap();
+    let tracked = Command::new(roitrack)
+        .args(["track", "--camera"])
+        .arg(sim.join("camera.yaml"))
+        .arg("--target")
+        .arg(sim.join("target.csv"))
+        .arg("--images")
+        .arg(sim.join("frames"))
+        .arg("--timestamps")
+        .arg(file("stamps.csv"))
+        .args(["--polarity", "bright", "--poses"])
+        .arg(file("track.tum"))
+        .arg("--twists")
+        .arg(file("track.csv"))
+        .output()
+        .unwrap();
+    assert!(
+        tracked.status.success(),
+        "{}",
+        String::from_utf8_lossy(&tracked.stderr)
+    );
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 10 --timeout-s 300 >/dev/null &
+subscriber=$!
+"$PYTHON" "$PUBLISHER" "$SIM/frames" "$SIM/timestamps.csv" "$SIM/camera.yaml" --malformed --wait-s 120 &
+publisher=$!
+"$ROITRACK" ros2-node --image-topic /roitrack/image --target "$SIM/target.csv" --polarity bright \
+    --camera-info-wait-s 120 --idle-s 5 --poses "$POSES" --twists "$TWISTS" || exit 91
+wait $publisher || exit 92
+wait $subscriber || exit 93
+"#,
+        &[
+            ("PYTHON", &python),
+            ("SUBSCRIBER", &subscriber_script()),
+            ("PUBLISHER", &image_publisher_script()),
+            ("RECEIVED", &file("received.jsonl")),
+            ("ROITRACK", roitrack),
+            ("SIM", &sim),
+            ("POSES", &file("node.tum")),
+            ("TWISTS", &file("node.csv")),
+        ],
+    );
+    assert!(ok, "{log}");
+    for reason in [
+        "/roitrack/image message 0: an image before any camera info",
+        "image encoding \"yuv422\" is not read",
+        "the image is 512 x 1024 px, the camera info says 1024 x 1024 px",
+        "with a step of 1023",
+        "bytes of data for 1024 x 1024 px mono8 with a step of 1024",
+        "5 malformed and left out",
+    ] {
+        assert!(log.contains(reason), "{reason}:\n{log}");
+    }
+    let (node, track) = (
+        roitrack::formats::read_tum(file("node.tum")).unwrap(),
+        roitrack::formats::read_tum(file("track.tum")).unwrap(),
+    );
+    assert!(track.len() >= 10, "{} estimates", track.len());
+    assert_eq!(node.len(), track.len());
+    MAX_DIFFERENCE.with(|max| max.set(0.0));
+    for (a, b) in node.iter().zip(&track) {
+        let (ta, tb) = (
+            a.cam_from_obj.translation.vector,
+            b.cam_from_obj.translation.vector,
+        );
+        let (qa, qb) = (a.cam_from_obj.rotation, b.cam_from_obj.rotation);
+        close(
+            "node against track --images",
+            &[a.t_s, ta.x, ta.y, ta.z, qa.i, qa.j, qa.k, qa.w],
+            &[b.t_s, tb.x, tb.y, tb.z, qb.i, qb.j, qb.k, qb.w],
+        );
+    }
+    let (node_twists, track_twists) = (
+        roitrack::formats::read_twists_csv(file("node.csv")).unwrap(),
+        roitrack::formats::read_twists_csv(file("track.csv")).unwrap(),
+    );
+    assert_eq!(node_twists.len(), track_twists.len());
+    for (a, b) in node_twists.iter().zip(&track_twists) {
+        let (va, vb) = (a.velocity_mps, b.velocity_mps);
+        let (wa, wb) = (a.angular_velocity_radps, b.angular_velocity_radps);
+        close(
+            "node's twist",
+            &[va.x, va.y, va.z, wa.x, wa.y, wa.z],
+            &[vb.x, vb.y, vb.z, wb.x, wb.y, wb.z],
+        );
+    }
+    // And the node published them all, each pose the file's.
+    let received = read_received(&file("received.jsonl"));
+    let poses: Vec<&Received> = received
+        .iter()
+        .filter(|m| m.topic == "/roitrack/pose")
+        .collect();
+    assert_eq!(poses.len(), track.len(), "poses the node published");
+    for (m, b) in poses.iter().zip(&track) {
+        let t = b.cam_from_obj.translation.vector;
+        close(
+            "published pose",
+            &[stamp_s(&m.msg["header"])]
+                .into_iter()
+                .chain(xyz(&m.msg["pose"]["pose"]["position"]))
+                .collect::<Vec<_>>(),
+            &[b.t_s, t.x, t.y, t.z],
+        );
+    }
+    eprintln!(
+        "ros2-node --image-topic: {} estimates of {} frames, equal to track --images; largest difference {:.1e}",
+        track.len(),
+        timestamps.lines().count() - 1,
+        MAX_DIFFERENCE.with(|max| max.get())
+    );
+}

@@ -548,37 +548,60 @@ fn split_camera_file(option: &str, text: &std::path::Path) -> Result<(String, Pa
 
 /// The frame tracker's options of `track --images`, from the command line (the same for every camera of a rig).
 fn frame_config(args: &TrackArgs) -> Result<roitrack::pipeline::FrameTrackerConfig> {
+    frame_config_of(
+        &args.estimator,
+        args.polarity,
+        args.distance_m.as_deref(),
+        args.no_rs_smoothing,
+    )
+}
+
+/// The frame tracker's options of `track --images` (and `ros2-node --image-topic`): the estimator's, --polarity,
+/// --distance-m, --no-rs-smoothing.
+pub(crate) fn frame_config_of(
+    estimator: &crate::args::EstimatorArgs,
+    polarity: PolarityArg,
+    distance_m: Option<&[f64]>,
+    no_rs_smoothing: bool,
+) -> Result<roitrack::pipeline::FrameTrackerConfig> {
     use roitrack::pipeline::{FrameTrackerConfig, PhotoOptions};
     Ok(FrameTrackerConfig {
         // Without --adapt or --motion-model, the frame tracker's own defaults: the noise learnt, the process noise as
         // given, constant acceleration.
         tracker: FrameTrackerConfig::frame_estimator(
-            args.estimator.config()?,
-            args.estimator.adaptation(),
-            args.estimator.named_motion_model(),
+            estimator.config()?,
+            estimator.adaptation(),
+            estimator.named_motion_model(),
         ),
         detection: PhotoOptions {
-            polarity: args.polarity.into(),
-            distance_range_m: distance_range(args.distance_m.as_deref())?,
+            polarity: polarity.into(),
+            distance_range_m: distance_range(distance_m)?,
             ..PhotoOptions::default()
         },
         // Densities given are the user's, kept whatever the shutter (even equal to the global-shutter defaults).
-        jerk_psd_given: args.estimator.jerk_psd.is_some()
-            || args.estimator.angular_jerk_psd.is_some(),
-        rs_smoothing: !args.no_rs_smoothing,
+        jerk_psd_given: estimator.jerk_psd.is_some() || estimator.angular_jerk_psd.is_some(),
+        rs_smoothing: !no_rs_smoothing,
         ..FrameTrackerConfig::default()
     })
 }
 
 /// The camera model `track --images` tracks frames with: `camera`, read as --shutter and --exposure-s say.
-fn frame_camera(
-    args: &TrackArgs,
+fn frame_camera(args: &TrackArgs, camera: roitrack::CameraModel) -> Result<roitrack::CameraModel> {
+    frame_camera_of(args.shutter, args.line_delay_s, args.exposure_s, camera)
+}
+
+/// `camera` with the time model of --shutter, --line-delay-s and --exposure-s (`track --images`, `ros2-node
+/// --image-topic`).
+pub(crate) fn frame_camera_of(
+    shutter: ShutterArg,
+    line_delay_s: Option<f64>,
+    exposure_s: f64,
     mut camera: roitrack::CameraModel,
 ) -> Result<roitrack::CameraModel> {
-    let readout = args.shutter.readout(args.line_delay_s)?;
+    let readout = shutter.readout(line_delay_s)?;
     camera.time = roitrack::core::time::TimeModel {
         readout,
-        exposure_s: args.exposure_s,
+        exposure_s,
     };
     camera
         .time
