@@ -757,4 +757,57 @@ mod tests {
             assert!(reason.contains(expected), "{reason}, not {expected}");
         }
     }
+
+    /// A `sensor_msgs/msg/CompressedImage`: a PNG of a frame, read as `track --images` reads files.
+    #[test]
+    fn a_compressed_image_is_decoded_and_a_bad_one_named() {
+        #[derive(serde::Serialize)]
+        struct CompressedImage<'a> {
+            header: msg::Header<'a>,
+            format: &'a str,
+            data: msg::Bytes<'a>,
+        }
+        let raw = |data: &[u8]| {
+            let bytes = cdr::serialize::<_, _, cdr::CdrLe>(
+                &CompressedImage {
+                    header: msg::Header {
+                        stamp: msg::Time { sec: 3, nanosec: 0 },
+                        frame_id: "camera",
+                    },
+                    format: "png",
+                    data: msg::Bytes(data),
+                },
+                cdr::Infinite,
+            )
+            .unwrap();
+            RawMessage {
+                encoding: RepresentationIdentifier::CDR_LE,
+                bytes: bytes[4..].to_vec(),
+            }
+        };
+        let mut frame = Frame::default();
+        frame.resize(5, 4, 8);
+        frame
+            .pixels
+            .iter_mut()
+            .enumerate()
+            .for_each(|(k, v)| *v = k as u16);
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("f.png");
+        roitrack_formats::write_frame_png(&path, &frame).unwrap();
+        let png = std::fs::read(&path).unwrap();
+        let mut decoded = Frame::default();
+        let t_s = checked_image(&raw(&png), Some("/c"), Some((5, 4)), None, &mut decoded).unwrap();
+        assert_eq!((t_s, decoded.width, decoded.height), (3.0, 5, 4));
+        assert_eq!(decoded.pixels, frame.pixels);
+        let reason = checked_image(
+            &raw(&png[..20]),
+            Some("/c"),
+            Some((5, 4)),
+            None,
+            &mut decoded,
+        )
+        .unwrap_err();
+        assert!(reason.contains("/c (png)"), "{reason}");
+    }
 }
