@@ -506,6 +506,20 @@ impl SimulateArgs {
         self.shutter.readout(self.line_delay_s)
     }
 
+    /// The frame camera's options (`--fps`, `--shutter`, `--exposure-s`, `--polarity`, `--seed`, `--frame-count`).
+    fn frame_options(&self) -> Result<FrameOptions> {
+        Ok(FrameOptions {
+            fps_hz: self.fps,
+            readout: self.readout()?,
+            exposure_s: self.exposure_s,
+            polarity: self.polarity.into(),
+            sensor: SensorModel::default(),
+            seed: self.seed,
+            start_s: 0.0,
+            frame_count: self.frame_count,
+        })
+    }
+
     /// The `roitrack simulate` command that makes these frames.
     fn frames_command(&self) -> String {
         let mut command = format!(
@@ -571,16 +585,7 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
         ],
     )?;
 
-    let options = FrameOptions {
-        fps_hz: args.fps,
-        readout: args.readout()?,
-        exposure_s: args.exposure_s,
-        polarity: args.polarity.into(),
-        sensor: SensorModel::default(),
-        seed: args.seed,
-        start_s: 0.0,
-        frame_count: args.frame_count,
-    };
+    let options = args.frame_options()?;
     let sequence =
         FrameSequence::new(&scenario, &options).context("cannot simulate these frames")?;
     let count = sequence.len();
@@ -929,16 +934,7 @@ fn run_rig_frames(args: &SimulateArgs) -> Result<()> {
             ROIS_FILE,
         ],
     )?;
-    let options = FrameOptions {
-        fps_hz: args.fps,
-        readout: args.readout()?,
-        exposure_s: args.exposure_s,
-        polarity: args.polarity.into(),
-        sensor: SensorModel::default(),
-        seed: args.seed,
-        start_s: 0.0,
-        frame_count: args.frame_count,
-    };
+    let options = args.frame_options()?;
     let rig_frames = RigFrames::new(&scene, &options).context("cannot simulate these frames")?;
     let out = &args.out;
     roitrack::formats::create_output_dir(out)?;
