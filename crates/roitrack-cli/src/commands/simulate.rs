@@ -599,19 +599,12 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
     roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scenario.target)?;
     render_frames(&sequence, &frames_dir)?;
     write_timestamps(&sequence, &dir.join(TIMESTAMPS_FILE))?;
-    // Dense, so that `roitrack eval` interpolates the truth at each estimate's own time (the mean time of its frame's
-    // blobs); written as it is sampled, so that the memory does not grow with the duration.
-    let mut poses = roitrack::formats::PoseWriter::create(dir.join(TRUTH_POSES_FILE))?;
-    let mut twists = roitrack::formats::TwistWriter::create(dir.join(TRUTH_TWISTS_FILE))?;
-    for (pose, twist) in sequence
-        .truth_iter(DEFAULT_TRUTH_RATE_HZ)
-        .context("cannot sample the ground truth")?
-    {
-        poses.write(&pose)?;
-        twists.write(&twist)?;
-    }
-    poses.finish()?;
-    twists.finish()?;
+    write_dense_truth(
+        dir,
+        sequence
+            .truth_iter(DEFAULT_TRUTH_RATE_HZ)
+            .context("cannot sample the ground truth")?,
+    )?;
     let track = track_command(args);
     let readme = frames_readme(args, &sequence, &track);
     let readme_path = dir.join(FRAMES_README_FILE);
@@ -939,18 +932,12 @@ fn run_rig_frames(args: &SimulateArgs) -> Result<()> {
     let out = &args.out;
     roitrack::formats::create_output_dir(out)?;
     roitrack::formats::write_target_csv(out.join(TARGET_FILE), &scene.scenario.target)?;
-    // Dense, so that `roitrack eval` interpolates the truth at each fused estimate's own time; streamed.
-    let mut poses = roitrack::formats::PoseWriter::create(out.join(TRUTH_POSES_FILE))?;
-    let mut twists = roitrack::formats::TwistWriter::create(out.join(TRUTH_TWISTS_FILE))?;
-    for (pose, twist) in rig_frames
-        .truth_iter(DEFAULT_TRUTH_RATE_HZ)
-        .context("cannot sample the ground truth")?
-    {
-        poses.write(&pose)?;
-        twists.write(&twist)?;
-    }
-    poses.finish()?;
-    twists.finish()?;
+    write_dense_truth(
+        out,
+        rig_frames
+            .truth_iter(DEFAULT_TRUTH_RATE_HZ)
+            .context("cannot sample the ground truth")?,
+    )?;
     let track = rig_track_command(args, &scene);
     let mut calibrations = Vec::with_capacity(scene.rig.len());
     let mut counts = Vec::with_capacity(scene.rig.len());
@@ -1062,4 +1049,22 @@ fn rig_camera_readme(
         twists = TRUTH_TWISTS_FILE,
         out = args.out.display(),
     )
+}
+
+/// Writes `truth` to `dir`'s gt_poses.tum and gt_twists.csv as it is sampled. Dense, so that `roitrack eval`
+/// interpolates the truth at each estimate's own time (a frame's estimate is at the mean time of its blobs); streamed,
+/// so that the memory does not grow with the duration.
+fn write_dense_truth(
+    dir: &Path,
+    truth: impl Iterator<Item = (roitrack::core::PoseSample, roitrack::core::TwistSample)>,
+) -> Result<()> {
+    let mut poses = roitrack::formats::PoseWriter::create(dir.join(TRUTH_POSES_FILE))?;
+    let mut twists = roitrack::formats::TwistWriter::create(dir.join(TRUTH_TWISTS_FILE))?;
+    for (pose, twist) in truth {
+        poses.write(&pose)?;
+        twists.write(&twist)?;
+    }
+    poses.finish()?;
+    twists.finish()?;
+    Ok(())
 }
