@@ -261,13 +261,15 @@ impl FrameTracker {
         // fast random motion at 30 Hz was predicted at 4 px where it lay 43 px off, a whole grid spacing, and the
         // windows measured each point's neighbour).
         if let Some(predictor) = self.memory.predictor {
+            // (An estimator without a covariance of its own prediction keeps the last estimate, carried as before:
+            // its covariance belongs to the estimate's time.)
             self.memory.predictor = Some(match self.tracker.predicted(frame.t_s) {
-                Some((state, covariance)) => Predictor {
+                Some((state, Some(covariance))) => Predictor {
                     t_ref_s: frame.t_s,
                     state,
-                    covariance: covariance.or(predictor.covariance),
+                    covariance: Some(covariance),
                 },
-                None => match self.memory.acceleration {
+                _ => match self.memory.acceleration {
                     Some(acceleration) => {
                         carried_with_acceleration(predictor, &acceleration, frame.t_s)
                     }
