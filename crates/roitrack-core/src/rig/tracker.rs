@@ -13,7 +13,7 @@ use crate::estimator::{
     ConfigError, Estimate, Estimator, EstimatorConfig, KalmanTuning, Matrix12, TrackError,
     TrackStatus, Tracker, TrackerConfig,
 };
-use crate::stats::chi2_upper_0_1_percent;
+use crate::stats::{chi2_upper_0_1_percent, chi2_upper_quantile};
 use crate::{Measurement, MotionState, SpatioTemporalModel, Target, Vector12};
 
 use super::RigMeasurement;
@@ -272,6 +272,10 @@ pub struct RigTracker {
     clocks: Vec<super::ClockModel>,
     /// Per camera: the newest vouched estimate of its own tracker (rig frame and clock).
     newest_single: Vec<Option<Estimate>>,
+    /// Each camera's own vouched estimates of the last [`CROSS_CHECK_SPAN_S`] behind the newest (rig frame and
+    /// time, at most [`CROSS_CHECK_CAPACITY`]): the fused estimates, which lag by the reorder buffer, are checked
+    /// against the one nearest in time.
+    recent_singles: Vec<VecDeque<Estimate>>,
     fused: Option<Fused>,
     /// Measurements waiting for the fused filter, by rig time ([`RigTrackerConfig::reorder_latency_s`]).
     pending: BinaryHeap<Reverse<Pending>>,
@@ -375,6 +379,7 @@ impl RigTracker {
             clock_states,
             clocks: rig.cameras().iter().map(|c| c.clock).collect(),
             newest_single: vec![None; n],
+            recent_singles: vec![VecDeque::new(); n],
             singles,
             rig,
             target,
@@ -694,12 +699,23 @@ impl RigTracker {
         let camera = &self.rig.cameras()[c];
         let rig_state = camera.mount.rig_state(&e.state);
         let covariance = e.covariance.map(|p| camera.mount.covariance_to_rig(&p));
-        self.newest_single[c] = Some(Estimate {
+        let rig_estimate = Estimate {
             t_ref_s: self.clocks[c].rig_time_s(e.t_ref_s),
             state: rig_state,
             covariance,
             ..*e
-        });
+        };
+        self.newest_single[c] = Some(rig_estimate);
+        let recent = &mut self.recent_singles[c];
+        let keep_s = self.config.reorder_latency_s + CROSS_CHECK_SPAN_S;
+        while recent.len() >= CROSS_CHECK_CAPACITY
+            || recent
+                .front()
+                .is_some_and(|old| rig_estimate.t_ref_s - old.t_ref_s > keep_s)
+        {
+            recent.pop_front();
+        }
+        recent.push_back(rig_estimate);
         if self.synced[c] && c != 0 {
             return Ok(());
         }
@@ -755,6 +771,8 @@ impl RigTracker {
         }
         self.clocks[c].offset_s = found.offset_s;
         self.synced[c] = true;
+        // Its own estimates so far were put on the rig's clock by the offset before this one.
+        self.recent_singles[c].clear();
         // Its waiting measurements move to their rig times: taken out of time order, each would carry the filter
         // back and forth by the offset, and its process noise with it.
         let clock = self.clocks[c];
@@ -793,6 +811,7 @@ impl RigTracker {
         }
         self.synced[c] = false;
         self.tracks[c].clear();
+        self.recent_singles[c].clear();
         self.camera_counts[c].resyncs += 1;
         if let Some(f) = &mut self.fused {
             for i in [offset, drift].into_iter().flatten() {
@@ -1065,12 +1084,66 @@ impl RigTracker {
         }
     }
 
+    /// Whether the fused track's position is refuted by the cameras' own tracks: every synced camera that has an
+    /// own estimate (`tracking`) within [`CROSS_CHECK_SPAN_S`] of it, that nearest in time carried to the fused
+    /// time by its twist, lies beyond the [`CROSS_CHECK_Z`] bound of the two positions' difference, and there is
+    /// at least one. Both estimate the same position, and the difference's covariance is at most the sum of theirs
+    /// (they share measurements, which only narrows it) plus the white acceleration's over the carry. A fused track
+    /// that went astray (a prediction frames behind a fast motion, a clock that carried it off) is then not vouched
+    /// for; one camera's own track gone astray (a track carried across an occlusion) refutes nothing while another
+    /// camera's agrees with the fused one.
+    fn contradicted_by_the_cameras(&self) -> bool {
+        let Some(f) = &self.fused else {
+            return false;
+        };
+        let bound = chi2_upper_quantile(3.0, CROSS_CHECK_Z);
+        let fused_position = f.p.fixed_view::<3, 3>(0, 0).into_owned();
+        let mut verdicts = (0..self.rig.len())
+            .filter(|&c| self.synced[c])
+            .filter_map(|c| {
+                // A camera's track once past converging: a new one may still be settling (its covariance small
+                // before its twist is).
+                self.recent_singles[c]
+                    .iter()
+                    .filter(|e| {
+                        e.status == TrackStatus::Tracking
+                            && (f.t_s - e.t_ref_s).abs() <= CROSS_CHECK_SPAN_S
+                    })
+                    .min_by(|a, b| {
+                        (a.t_ref_s - f.t_s)
+                            .abs()
+                            .total_cmp(&(b.t_ref_s - f.t_s).abs())
+                    })
+            })
+            .filter_map(|e| {
+                let p = e.covariance?;
+                let dt = f.t_s - e.t_ref_s;
+                // Position covariance carried by the constant twist over dt: P_pp + dt (P_pv + P_vp) + dt² P_vv,
+                // plus the white acceleration's dt³/3 per axis.
+                let pp = p.fixed_view::<3, 3>(0, 0).into_owned();
+                let pv = p.fixed_view::<3, 3>(0, 6).into_owned();
+                let vv = p.fixed_view::<3, 3>(6, 6).into_owned();
+                let white = self.tuning.linear_accel_psd * dt.abs().powi(3) / 3.0;
+                let carried = pp
+                    + (pv + pv.transpose()) * dt
+                    + vv * (dt * dt)
+                    + nalgebra::Matrix3::identity() * white;
+                let difference = f.state.cam_t_obj_m - e.state.predicted(dt).cam_t_obj_m;
+                let s_inv = (carried + fused_position).try_inverse()?;
+                Some((difference.transpose() * s_inv * difference)[0] > bound)
+            })
+            .peekable();
+        verdicts.peek().is_some() && verdicts.all(|refuted| refuted)
+    }
+
     /// An estimate when `every` fused measurements have come since the previous one.
     fn estimate_if_due(&mut self) -> Option<RigEstimate> {
-        let f = self.fused.as_mut()?;
+        let f = self.fused.as_ref()?;
         if self.since_estimate < self.config.tracker.every || f.t_s <= self.last_emitted_s {
             return None;
         }
+        let contradicted = self.contradicted_by_the_cameras();
+        let f = self.fused.as_mut()?;
         self.since_estimate = 0;
         let covariance: Matrix12 = Matrix12::from_fn(|i, j| f.p[(i, j)]);
         // Disputed as the single-camera filter's estimates are: a run of rejections, a newest one far beyond the gate,
@@ -1080,7 +1153,7 @@ impl RigTracker {
             || (f.newest_gated && f.newest_nis > DISPUTED_NIS)
             || 2 * f.gated_since_estimate >= f.count.max(2);
         f.gated_since_estimate = 0;
-        let status = if disputed {
+        let status = if disputed || contradicted {
             TrackStatus::Disputed
         } else if f.estimates < CONVERGING_ESTIMATES {
             TrackStatus::Converging
@@ -1117,6 +1190,17 @@ impl RigTracker {
         })
     }
 }
+
+/// How far (s, rig time) a camera's own vouched estimate may lie from a fused one to be compared with it.
+const CROSS_CHECK_SPAN_S: f64 = 0.05;
+
+/// The cross-check's bound, in standard deviations of one Gaussian error (a false alarm once in 3.5 million checks):
+/// every fused estimate is checked against every synced camera, thousands a second at kHz rates, and what the check
+/// is for, a fused track gone astray by millimetres to metres, lies far beyond it.
+const CROSS_CHECK_Z: f64 = 5.0;
+
+/// The most own estimates kept per camera for the cross-check (a bound on memory whatever the estimate rate).
+const CROSS_CHECK_CAPACITY: usize = 512;
 
 /// The broad prior of a track with no covariance: 1 cm, 0.1 rad, 1 m/s, 10 rad/s.
 fn broad_prior() -> Matrix12 {
