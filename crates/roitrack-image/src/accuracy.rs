@@ -46,9 +46,8 @@ pub struct CentroidAccuracy {
 /// random offset of up to ±3 px per axis; measures each with `opts` and compares with the TRUE projected centre
 /// (`camera.raw_pixel_from_cam` of the model point at mid-exposure). Deterministic for a `seed`.
 ///
-/// With the defaults the bias is the perspective offset of the disks' image centres from the projected centres
-/// (about -0.008 px on each axis near the bench pose, see [`RoiRenderer::disk_image_centre_px`]), not an error of the
-/// centroid.
+/// With the defaults the bias is the perspective offset of the disks' image centres from the projected centres (see
+/// [`RoiRenderer::disk_image_centre_px`]), not an error of the centroid; docs/image-side.md gives it with the spread.
 ///
 /// # Panics
 /// If `roi_size` is larger than [`crate::MAX_ROI_WIDTH`] (64).
@@ -120,7 +119,7 @@ pub struct ReflectionAccuracy {
 }
 
 /// A centroid moved by more than this by a spot counts in [`ReflectionAccuracy::reflected_moved`] (px): several
-/// times the clean centroid's noise (0.01 px per axis with the default sensor).
+/// times the clean centroid's noise with the default sensor (docs/image-side.md, "Blob centroids").
 pub const REFLECTION_MOVED_PX: f64 = 0.1;
 /// A centroid moved by more than this by a spot counts in [`ReflectionAccuracy::reflected_captured`] (px).
 pub const REFLECTION_CAPTURED_PX: f64 = 2.0;

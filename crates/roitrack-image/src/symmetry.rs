@@ -44,8 +44,8 @@
 //! The constants were fitted on 100,000 rendered clean blobs (the generator of `tests/clean_disks.rs`, another seed
 //! than its test: diameters 3 to 20 px, sub-pixel positions, blur 0 to 1.5 px, read and shot noise, 8 and 12 bits,
 //! clipped cores, ellipses of aspect up to 1.5, background gradients and curvature, brightness uneven by up to 2 % a
-//! radius): with the defaults, the largest trefoil any of them showed is 1/1.75 of its allowance, the largest coma
-//! half of its. Blobs of fewer than [`crate::SymmetryCheck::min_area_px`] pixels (30: about 5 px across) are not
+//! radius), with a margin over the largest skew any of them showed (docs/results.md, "Reflections in the ROIs: the
+//! symmetry check"). Blobs of fewer than [`crate::SymmetryCheck::min_area_px`] pixels (30: about 5 px across) are not
 //! tested: their sampling alone skews them as much as a merged spot.
 //!
 //! **A second look at what the moments flag.** The allowances fall with the blob's size; real blobs of 30 to 40 px
@@ -53,26 +53,23 @@
 //! pass over the component, run only for the blobs the moment test flags, tells these apart:
 //!
 //! - *A trefoil with no five-fold moment* (`trefoil_rejected_on_second_look`). A spot, a lump, adds `m d^k e^{ikθ}`
-//!   to every harmonic moment `M E[z^k]`, so its five-fold moment `E[z⁵]` is `(d / sigma)²` times its trefoil (about 1.4 to 6
-//!   times on rendered spots); a smooth three-fold wobble of the outline, which a print, a lens and a JPEG encoder
-//!   leave, has a trefoil and nearly no five-fold moment (0.04 to 0.74 times its trefoil on the 13 real circles the
-//!   trefoil alone rejected), and it does not move the centroid. Accepted when `|E[z⁵]|` is at most
-//!   [`crate::SymmetryCheck::five_fold_ratio`] times `|tau|` and `|tau|` at most
+//!   to every harmonic moment `M E[z^k]`, so its five-fold moment `E[z⁵]` is `(d / sigma)²` times its trefoil (4
+//!   times on the rim, more beyond it); a smooth three-fold wobble of the outline, which a print, a lens and a JPEG
+//!   encoder leave, has a trefoil and nearly no five-fold moment, and it does not move the centroid. Accepted when
+//!   `|E[z⁵]|` is at most [`crate::SymmetryCheck::five_fold_ratio`] times `|tau|` and `|tau|` at most
 //!   [`crate::SymmetryCheck::trefoil_ceiling`].
 //! - *A coma from uneven light on a flat top.* Glare on ink or a shadow's edge across a printed circle tilts its
 //!   plateau by a few percent a radius; the weights `value - threshold` follow the light and pull the centroid by
-//!   about `ramp * radius / 4` (0.12 to 0.63 px on the 3 real circles the coma rejected, against the centre of their
-//!   outlines), which the coma rightly flags. Capped at 70 % of the peak
+//!   about `ramp * radius / 4`, which the coma rightly flags. Capped at 70 % of the peak
 //!   ([`crate::SymmetryCheck::plateau_fraction`]), the weights of a flat top no longer see the light: the capped weights are tested again, against the uncapped blob's
 //!   allowances (stricter than the capped weights' own, whose edge looks sharper), and if they pass, their centroid
-//!   is the blob's (about 0.01 to 0.12 px from those outline centres). A merged spot still skews the capped weights
+//!   is the blob's, much nearer the centre of the outline. A merged spot still skews the capped weights
 //!   and is rejected. Binary centroids ([`crate::CentroidOptions::binary`]) are rejected as before.
 //!
-//! On the rendered spots of `tests/rendered.rs` the second look changes none of the outcomes that matter (11 of 2,000
-//! spots that move the centroid by more than 0.1 px pass, as without it; worst 0.14 px); on spots merged with 24 to
-//! 32 px blobs, half of them lit unevenly (`tests/clean_disks.rs`), 3 of 1,000 that move the centroid by more than
-//! 0.1 px pass, by at most 0.122 px (the check without it rejected 480 of these blobs clean, 866 spots pass without
-//! any check); on real blobs it takes the rejections from 16 of 1,244 to none (`realdata_rois` in roitrack-bench).
+//! The second look changes none of the outcomes that matter on the rendered spots of `tests/rendered.rs`, passes
+//! nearly none of the spots merged with large blobs of `tests/clean_disks.rs` that move the centroid by more than a
+//! tenth of a pixel, and accepts the real printed circles the moments alone rejected: measured in docs/results.md,
+//! "Reflections in the ROIs: the symmetry check".
 
 use crate::centroid::SymmetryCheck;
 use crate::centroid::moments::{ShapeSums, scalar_shape_sums, visit_shape_weights};

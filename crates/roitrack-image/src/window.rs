@@ -243,10 +243,10 @@ const MAX_BORDER_PX: usize = 4 * 64;
 /// pixel away from the blob, a highlight on a dark blob's border, stays in), the noise taken each time from the
 /// residuals on the background's side of the plane. A dense grid puts parts of the neighbouring circles on a window's
 /// border, often most of it, and partly covered pixels at their rims: a plane fitted through them tilts and sinks
-/// towards them, which gives the flattened blob a slant that moves its centroid. On the 7 photographs of a 24 x 28
-/// hexagonal grid of printed circles (gaps of a fifth of a circle's diameter), the plane through the whole border put
-/// the window centroids a median 0.59 px from the circles' outline centres and found 51 of the 2,337 circles in their
-/// windows; this one, a median 0.040 px and 652.
+/// towards them, which gives the flattened blob a slant that moves its centroid. On photographs of a dense hexagonal
+/// grid of printed circles this fit puts the window centroids an order of magnitude nearer the circles' outline
+/// centres than the plane through the whole border, and finds many more circles in their windows (measured in
+/// docs/frames.md, with its command).
 fn border_plane(
     w: usize,
     h: usize,

@@ -53,9 +53,10 @@ pub const MAX_ROI_WIDTH: u32 = 64;
 pub const MAX_ROI_HEIGHT: u32 = 64;
 
 /// With [`Threshold::Auto`], the threshold is the background plus this fraction of the peak's contrast. Low, so that
-/// the weighted centroid sees nearly the whole blurred edge (at 0.5, pixels entering and leaving the component as the
-/// blob moves sub-pixel lock the centroid by up to 0.04 px; at 0.15, 0.008 px), yet about 50 noise sigmas above the
-/// background for the default sensor (33 DN over a 0.6 DN noise).
+/// the weighted centroid sees nearly the whole blurred edge (a higher threshold lets the pixels entering and leaving
+/// the component as the blob moves sub-pixel lock the centroid to the grid: measured in docs/results.md, "Design
+/// measurements behind the code"), yet about 50 noise sigmas above the background for the default sensor (33 DN over
+/// a 0.6 DN noise).
 pub const AUTO_THRESHOLD_FRACTION: f64 = 0.15;
 
 /// With [`Threshold::Auto`], a blob is absent when its peak stands less than this many background standard deviations
@@ -88,9 +89,9 @@ pub struct CentroidOptions {
     /// `true` (the default, the more accurate): first-order moments weighted by `value - threshold` over the
     /// component's pixels. Measuring from the threshold rather than from the background makes the weights vanish
     /// where pixels enter or leave the component as the blob moves, so the centroid does not lock to the pixel grid
-    /// (noiseless 6 mm blob swept over sub-pixel positions: RMS error 0.004 px, against 0.014 px weighting by
-    /// `value - background` at the same threshold). `false`: the paper's binary first-order moments of the
-    /// thresholded pixels (RMS error 0.06-0.08 px: every pixel counts fully or not at all).
+    /// as it does weighting by `value - background`. `false`: the paper's binary first-order moments of the
+    /// thresholded pixels, an order of magnitude less precise (every pixel counts fully or not at all). Both measured
+    /// in docs/results.md, "Design measurements behind the code".
     pub intensity_weighted: bool,
     /// Smallest accepted component (pixels). Default 4.
     pub min_area_px: u32,
@@ -101,9 +102,9 @@ pub struct CentroidOptions {
     /// The background's noise (DN, one standard deviation) when the caller has measured it, as the frame tracker
     /// does on the windows it flattens; `None` (the default): bounded by half the range of the ROI's border pixels
     /// below the threshold. Sets the shape check's allowance for noise in the coma: a border that crosses a shadow's
-    /// edge or a neighbour's rim has a wide range, and with it the check passed blobs lit unevenly enough to move
-    /// their weighted centroids by up to 0.6 px (real printed circles); with the measured noise they are flagged and
-    /// measured from their capped weights (see [`SymmetryCheck`]). The trefoil's allowance keeps the border's range.
+    /// edge or a neighbour's rim has a wide range, and with it the check passed real printed circles lit unevenly
+    /// enough to move their weighted centroids by a large fraction of a pixel; with the measured noise they are flagged
+    /// and measured from their capped weights (see [`SymmetryCheck`]). The trefoil's allowance keeps the border's range.
     /// A value that is not finite or is negative counts as `None`.
     pub background_noise_dn: Option<f64>,
 }
@@ -120,30 +121,23 @@ pub struct CentroidOptions {
 ///
 /// A spot that moves the centroid by `delta` at `d` from it adds `(delta / sigma) (d / sigma)²` to the trefoil and
 /// `(delta / sigma) |(d / sigma)² - 4|` to the coma (`sigma` the blob's radius over 2): spots beyond the rim show in
-/// both, spots inside the blob mostly in the coma. On the ROIs of `tests/rendered.rs` (default sensor, a spot of 0.5 to
-/// 1.5 times the blob's peak 6 to 10 px from the ROI's centre in every ROI) it leaves 11 of 2,000 spots that move the
-/// centroid by more than 0.1 px (worst 0.14 px; without the check, 1,748, up to 0.69 px); on 100,000 rendered clean
-/// blobs (`tests/clean_disks.rs`: 3 to 20 px across, any sub-pixel position, blur 0 to 1.5 px, read and shot noise, 8
-/// and 12 bits, clipped cores, ellipses up to 1.5:1, background gradients, brightness uneven by up to 2 % a radius) it
-/// rejects none, its allowances at least 1.7 times the largest skew any showed. The allowances fall with the blob's
-/// size, and large real blobs go beyond them in two ways a spot does not explain; a second look, a float pass run only
-/// for the flagged blobs, tells them apart (see [`crate::symmetry`]): a trefoil with no matching five-fold moment is an
-/// outline that is not quite an ellipse, and accepted ([`SymmetryCheck::five_fold_ratio`]); a coma that goes once the
-/// weights are capped at 70 % of the peak is uneven light on a flat top, which pulled the weighted centroid (by `ramp *
-/// radius / 4`), and the capped weights' centroid is returned. On real blobs (the circles of 18 JPEG photographs of
-/// printed grids, 60 to 1,400 px each, inverted, in windows sized as the tracker sizes them and flattened as the frame
-/// tracker does; the example `realdata_rois` of roitrack-bench) it rejects none of 1,244 (without the second look, 16:
-/// 13 for their trefoil, 3 for their coma, whose weighted centroids were 0.12 to 0.63 px from the centres of their
-/// outlines, their capped ones about 0.01 to 0.12 px); on the spots above it changes nothing that matters (11 of 2,000
-/// spots that move the centroid by more than 0.1 px pass either way), and on spots merged with 24-32 px blobs, half of
-/// them lit unevenly (`tests/clean_disks.rs`), 3 of 1,000 that move the centroid by more than 0.1 px pass, by at most
-/// 0.122 px (without the second look, 480 of those blobs were rejected clean). Large flat-topped blobs lit unevenly by
-/// 4 to 8 % a radius (`tests/clean_disks.rs`) are all accepted, at an RMS error of 0.076 px where their weighted
-/// centroids were 0.244 px off. Where the caller has measured the background's noise
-/// ([`CentroidOptions::background_noise_dn`], as the frame tracker's flattened windows do), the coma is judged against
-/// it: on the real circles above the worst window centroid went from 0.616 to 0.155 px off its outline's centre. It
-/// adds about half to the centroid's time (24 x 24 ROI, on a 2-core AMD EPYC development VM: 0.19 µs against 0.13 µs
-/// without it, `roitrack bench`, 2026-11-27); the second look costs nothing on blobs it does not see.
+/// both, spots inside the blob mostly in the coma. The allowances are fitted so that no clean rendered blob
+/// (`tests/clean_disks.rs`: any size from 3 to 20 px, sub-pixel position, blur, noise, bit depth, clipping, ellipse
+/// and background gradient) is rejected, while nearly every merged spot that moves the centroid by more than a tenth
+/// of a pixel is (`tests/rendered.rs`).
+///
+/// The allowances fall with the blob's size, and large real blobs go beyond them in two ways a spot does not explain;
+/// a second look, a float pass run only for the flagged blobs, tells them apart (see [`crate::symmetry`]): a trefoil
+/// with no matching five-fold moment is an outline that is not quite an ellipse, and accepted
+/// ([`SymmetryCheck::five_fold_ratio`]); a coma that goes once the weights are capped at 70 % of the peak is uneven
+/// light on a flat top, which pulled the weighted centroid (by `ramp * radius / 4`), and the capped weights' centroid
+/// is returned. Where the caller has measured the background's noise ([`CentroidOptions::background_noise_dn`], as the
+/// frame tracker's flattened windows do), the coma is judged against it rather than against the border's range. The
+/// second look costs nothing on blobs it does not flag.
+///
+/// What it rejects and passes on rendered and real blobs (printed circles in photographs, the example
+/// `realdata_rois` of roitrack-bench), and what it costs: docs/results.md, "Reflections in the ROIs: the symmetry
+/// check".
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SymmetryCheck {
     /// The trefoil allowed for pixel sampling, times the blob's pixel count, for a blurred edge (1.5 px or wider;
@@ -154,9 +148,9 @@ pub struct SymmetryCheck {
     /// The skew allowed for noise, in standard deviations (from the border's noise). Default 24.
     pub noise_sigmas: f64,
     /// The trefoil allowed whatever the blob's size and noise, for outlines that are not perfect ellipses: a print, a
-    /// lens and a JPEG encoder leave a three-fold wobble of about 0.1 px on the outline of a 35 px dark circle
-    /// (a trefoil of about `8 * wobble / radius`, 0.044 measured), which the sampling and noise terms, falling with
-    /// the blob's size, no longer cover beyond about 500 px. Default 0.02.
+    /// lens and a JPEG encoder leave a three-fold wobble on the outline of a large dark circle (a trefoil of about
+    /// `8 * wobble / radius`; measured in docs/results.md, "Reflections in the ROIs: the symmetry check"), which the
+    /// sampling and noise terms, falling with the blob's size, no longer cover beyond about 500 px. Default 0.02.
     pub trefoil_floor: f64,
     /// A blob whose trefoil exceeds its allowance is still taken for a disk when its whitened five-fold moment
     /// `|E[z⁵]|` is at most this many times its trefoil (a spot's is 1.4 to 6 times; see [`crate::symmetry`]).
