@@ -38,14 +38,15 @@ fn log_median_variance(samples: u32) -> f64 {
 const MAX_REVISIT_S: f64 = 0.02;
 
 /// Points whose median has fewer samples keep a factor of 1 and do not count: a track's first innovations, while the
-/// filter converges, are neither white nor alike across points (on orthoglide at 0.1 px, factors of 0.55-1.40 in its
-/// first 40 ms).
+/// filter converges, are neither white nor alike across points (measured in docs/results.md, "Design measurements
+/// behind the code").
 const MIN_SAMPLES: u32 = 20;
 /// A second difference this many times the point's median (`|d|²`; a clean one exceeds 20 times the median once in
 /// a million) is an outlier's and left out, unless [`MAX_SKIPPED_IN_A_ROW`] were left out before it: then the
 /// point's noise itself has grown, and the median follows until a sample comes below again. Outliers on every point
-/// alike (10 % of them, 5-20 px) otherwise spread the points' shares by the chance of how many each point got: random
-/// went to 0.861 mm, against 0.854 mm with it or with one noise for all points.
+/// alike (10 % of them, 5-20 px) otherwise spread the points' shares by the chance of how many each point got, and
+/// the track is worse than with one noise for all points (measured in docs/results.md, "Design measurements behind
+/// the code").
 const OUTLIER_RATIO: f64 = 20.0;
 /// See [`OUTLIER_RATIO`]: an outlier spoils the three second differences it enters.
 const MAX_SKIPPED_IN_A_ROW: u8 = 8;

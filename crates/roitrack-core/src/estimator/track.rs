@@ -32,9 +32,10 @@ const ROBUST_SCALE_FLOOR_PX: f64 = 1.0;
 pub(crate) const MIN_FIT_REDUNDANCY: usize = 4;
 /// On a target of fewer than [`SMALL_TARGET_POINTS`] points, a default window ([`WindowMode::NewestPerPoint`]) of the
 /// window fits takes whole cycles up to this many measurements. One cycle of a 3 x 3 grid (18 equations for 12
-/// unknowns) leaves the state so loosely tied that the servo loops wandered 20 to 260 mm off with small residuals,
-/// vouched for; three cycles (27 measurements) kept the exact loop within 3.1 mm on the same runs. Targets of 12
-/// points or more keep the newest measurement of each point (the paper's window; 16 points give 32 equations).
+/// unknowns) leaves the state so loosely tied that the servo loops wandered far off with small residuals, vouched
+/// for; three cycles (27 measurements) kept the exact loop near the path (measured in docs/results.md, "Design
+/// measurements behind the code"). Targets of 12 points or more keep the newest measurement of each point (the
+/// paper's window; 16 points give 32 equations).
 pub(crate) const MIN_DEFAULT_WINDOW_MEASUREMENTS: usize = 24;
 /// See [`MIN_DEFAULT_WINDOW_MEASUREMENTS`].
 pub(crate) const SMALL_TARGET_POINTS: usize = 12;

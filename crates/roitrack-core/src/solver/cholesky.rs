@@ -2,10 +2,9 @@
 //!
 //! Why not nalgebra's `Cholesky`: its triangular solves are written for any storage and any dimension and index
 //! through generic views. The control step factors one 12 x 12 matrix and solves five times with it (the step and
-//! four inverse iterations of the conditioning figure); perf put 32 % of the step in nalgebra's
-//! `solve_lower_triangular` / `ad_solve_lower_triangular`. Measured in one loop on the bench window: a solve takes
-//! 76 ns here against 180 ns with nalgebra, the factorisation about 300 ns against 280 ns, so factor + 5 solves
-//! 0.7 µs against 1.2 µs. Results agree with nalgebra's to round-off (tested below).
+//! four inverse iterations of the conditioning figure), and a profile put a third of the step in nalgebra's
+//! triangular solves; these solves take less than half their time (measured in docs/results.md, "Design
+//! measurements behind the code"). Results agree with nalgebra's to round-off (tested below).
 
 use nalgebra::{SMatrix, SVector};
 

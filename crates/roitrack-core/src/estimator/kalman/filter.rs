@@ -80,8 +80,7 @@ impl CentroidNoise {
 /// The standard deviations of the accelerations at the start of a track (linear in m/s², angular in rad/s²), and
 /// the widening of a covariance reset (scaled as the pose's and twist's). Wider is not safer: a start knows the twist
 /// only to 1 m/s and 10 rad/s, and with 10 m/s² and 30 rad/s² the first rolling-shutter frames could trade twist
-/// for acceleration until the track was lost (`roitrack frame-study`, jerk densities 30 and 300: seed 1 at 3.1 mm
-/// against 0.041 mm with these).
+/// for acceleration until the track was lost (measured in docs/results.md, "Design measurements behind the code").
 pub(super) const ACCELERATION_PRIOR_SIGMAS: [f64; 2] = [3.0, 10.0];
 
 /// The prior variance of error-state entry `i` (12 to 17: the linear, then the angular acceleration).

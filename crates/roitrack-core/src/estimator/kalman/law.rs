@@ -899,8 +899,9 @@ impl KalmanLaw {
     /// than 4 blobs are left out, and so are the blobs the gate rejected, unless they are more than a quarter of
     /// their frame. Corrected for the gate's truncation as the windows are: the first blobs of a frame meet a gate
     /// widened by the prediction's spread, but the frame's later ones, once those have pinned the pose, one not much
-    /// wider than the noise (without the correction, four dots at 0.3 px learnt 0.297 px and tracked 7 % worse than
-    /// the filter told the noise; with it, 0.307 px and as well).
+    /// wider than the noise: without the correction the learnt noise is biased low and the filter tracks worse than
+    /// one told the true noise; with it, as well (measured in docs/results.md, "Design measurements behind the
+    /// code").
     ///
     /// The newest frame's residuals at that fit are also compared with those of the frame sampled before it
     /// ([`FrameResiduals`]), which samples the white part of the noise.

@@ -18,11 +18,10 @@ pub struct KalmanTuning {
     /// starting value.
     pub angular_accel_psd: f64,
     /// Innovations beyond this many standard deviations (Mahalanobis, 2 dof) are rejected as outliers. Default 3:
-    /// it rejects exp(-9/2) = 1.1 % of good measurements. Measured with `roitrack faults` (3 runs each): against 6,
-    /// it costs 0.9 % of position RMSE on clean measurements (0.2647 against 0.2623 mm on orthoglide), and with 10 %
-    /// of rendered ROIs carrying a reflection it keeps the error at 1.4-3.6x the clean image run instead of 1.9-21x
-    /// (a reflection merged with the blob biases its centroid by a fraction of a pixel, well inside 6 σ of the
-    /// prediction); 3.5 left up to 30x.
+    /// it rejects exp(-9/2) = 1.1 % of good measurements. Against 6, it costs little on clean measurements and keeps
+    /// the error far lower when reflections merge with blobs (a reflection biases the centroid by a fraction of a
+    /// pixel, well inside 6 σ of the prediction); 3.5 does worse (measured in docs/results.md, "Reflections in the
+    /// ROIs: the symmetry check").
     pub gate_sigma: f64,
     /// Huber threshold (standard deviations, Mahalanobis): a larger innovation gets its measurement noise inflated
     /// by `distance / huber_sigma` (the Huber weight), so a moderate outlier pulls less; `f64::INFINITY` turns it off.
@@ -117,8 +116,8 @@ pub(super) const DEFAULT_ANGULAR_JERK_PSD: f64 = 300.0;
 /// Measurements that come a frame at a time (the blobs of global-shutter frames, several at each time) are sampled
 /// frame by frame in either case: each frame's residual with its pose alone fitted and the twist held at the
 /// filter's, of redundancy `2 m - 6`. A frame alone cannot tell the twist, and a window spanning several frames, tens
-/// of milliseconds apart, takes the motion's change for noise: a 4-point target's window (24 measurements, 6 frames at
-/// 30 Hz) learnt 4.6 px instead of 0.3.
+/// of milliseconds apart, takes the motion's change for noise: a 4-point target's window learnt many times the true
+/// noise (measured in docs/results.md, "Design measurements behind the code").
 ///
 /// ```
 /// use roitrack_core::estimator::{KalmanTuning, NoiseSample};
@@ -138,9 +137,8 @@ pub enum NoiseSample {
     /// blobs are not simultaneous) leaves the noise as it is. Its own residual misses what matters there: its blobs
     /// also pin the twist, through the image's stretch over the readout, and an error of the twist over the readout
     /// bends the frame in ways the pose absorbs. Learnt from rolling-shutter frames that way, the noise came out near
-    /// the centroids' (0.01-0.02 px), and that helped on one simulated camera (1024 x 1024 px, 30 µs a row: position
-    /// 0.175 to 0.153 mm) but hurt on another (640 x 480 px, 60 µs a row, three seeds: 0.165-0.273 to 0.246-0.295
-    /// mm), whose best setting was 0.05 px.
+    /// the centroids' alone, which helped on one simulated camera but hurt on another (measured in docs/results.md,
+    /// "Design measurements behind the code").
     Frames,
 }
 
