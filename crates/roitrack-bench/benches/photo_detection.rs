@@ -17,7 +17,9 @@
 //!
 //! `cargo bench -p roitrack-bench --bench photo_detection` (about a minute); `PHOTO_BENCH_INTERLEAVED_ONLY=1` for the
 //! interleaved pairs alone, `PHOTO_BENCH_PAIRS=N` pairs a case (60; 0 for none, as when profiling one benchmark),
-//! `PHOTO_BENCH_DUMP=FILE` to append every detection's figures to `FILE` (to compare two builds).
+//! `PHOTO_BENCH_DUMP=FILE` to append every detection's figures to `FILE` (to compare two builds),
+//! `PHOTO_BENCH_CASES=random30,outdoor` for those cases alone (as when counting one case's instructions under
+//! `valgrind --tool=callgrind`).
 
 use std::time::Duration;
 
@@ -157,6 +159,10 @@ fn cases() -> Vec<Case> {
         frame: rendered.frame,
         points: 80,
     });
+    // The cases asked for, if any (all of them are rendered: each scene's seed makes it, not the order).
+    if let Ok(names) = std::env::var("PHOTO_BENCH_CASES") {
+        cases.retain(|case| names.split(',').any(|name| name == case.name));
+    }
     cases
 }
 
@@ -364,7 +370,30 @@ criterion_group! {
 }
 
 /// Criterion's benchmarks, then the interleaved ratios (`PHOTO_BENCH_INTERLEAVED_ONLY=1`: those alone).
+/// `PHOTO_BENCH_COUNT=dark` (or `auto`) instead runs each case's detection with that polarity
+/// `PHOTO_BENCH_RUNS` times (10) and nothing else, for an instruction count that the machine's load does not move:
+/// `PHOTO_BENCH_COUNT=dark PHOTO_BENCH_CASES=random30 valgrind --tool=callgrind
+/// target/release/deps/photo_detection-HASH --bench`, less the same with `PHOTO_BENCH_RUNS=0` (the rendering),
+/// divided by the runs. Every thread is counted (the detection's own threads too, which a `--toggle-collect` on
+/// `detect_target` would leave out): the CPU's work.
 fn main() {
+    if let Ok(polarity) = std::env::var("PHOTO_BENCH_COUNT") {
+        let options = match polarity.as_str() {
+            "dark" => dark(),
+            "auto" => PhotoOptions::default(),
+            other => panic!("PHOTO_BENCH_COUNT={other}: dark or auto"),
+        };
+        let runs: usize = std::env::var("PHOTO_BENCH_RUNS")
+            .ok()
+            .and_then(|r| r.parse().ok())
+            .unwrap_or(10);
+        for case in cases() {
+            for _ in 0..runs {
+                assert!(detect_target(&case.camera, &case.target, &case.frame, &options).is_ok());
+            }
+        }
+        return;
+    }
     if std::env::var_os("PHOTO_BENCH_INTERLEAVED_ONLY").is_none() {
         benches();
     }

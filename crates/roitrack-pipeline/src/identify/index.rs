@@ -217,6 +217,10 @@ impl PointIndex {
 /// How far beyond the points the distance field's grid goes (px).
 const FIELD_MARGIN_PX: f64 = 16.0;
 
+/// How far a distance stored in the field may be from the exact one (px): distances in f32, from offsets in f32, are
+/// within a few thousandths of a px of the exact ones for grids of thousands of px.
+const ROUNDING_MARGIN_PX: f64 = 0.01;
+
 /// The distance from the centre of each of a grid of fine cells to the nearest point (up to a cap): whether any point
 /// lies within a radius of a position, answered from one cell for most positions, for searches that test far more
 /// positions than there are points. Exact: where the cell cannot tell, the index is asked.
@@ -227,13 +231,21 @@ pub(crate) struct NearestDistance {
     /// The inverse of the cells' side (1/px).
     per_px: f64,
     cols: usize,
-    rows: usize,
-    /// Per cell (row-major), the distance (px) from its centre to the nearest point, at most `cap_px`.
-    distance_px: Vec<f32>,
-    cap_px: f64,
-    /// Half a cell's diagonal (px), plus a margin for the rounding of the stored distances: how far a position in
+    /// `cols` and the rows' count as floats: the bounds a position's cell coordinates are tested against (a conversion from
+    /// `usize` per test costs several instructions, and the test is made hundreds of thousands of times a search).
+    cols_f: f64,
+    rows_f: f64,
+    /// The cells' side (px).
+    cell_px: f64,
+    /// Half a cell's diagonal (px), plus the margin for the rounding of the stored distances: how far a position in
     /// a cell may be nearer to or farther from a point than the cell's centre.
     half_diagonal_px: f64,
+    /// Per cell (row-major), the distance (px) from its centre to the nearest point, at most `cap_px`.
+    distance_px: Vec<f32>,
+    /// Per cell, the index's point nearest its centre (`u32::MAX` where none is within the cap): where the distance
+    /// alone cannot tell, the likeliest point within a radius is tried before the index is searched.
+    nearest_point: Vec<u32>,
+    cap_px: f64,
     /// The bounding box of the points (px).
     lo: Vector2<f64>,
     hi: Vector2<f64>,
@@ -276,8 +288,9 @@ impl NearestDistance {
         let origin = lo.add_scalar(-margin);
         // Squared distances first, their roots once per cell at the end.
         let mut distance_px = vec![(cap * cap) as f32; cols * rows];
+        let mut nearest_point = vec![u32::MAX; cols * rows];
         let reach = (cap / cell).ceil() as isize + 1;
-        for p in &finite {
+        for (p, &point) in finite.iter().zip(&index.entries) {
             // The cell of the point, and those whose centres are within the cap.
             let (ci, cj) = (
                 ((p.x - origin.x) / cell) as isize,
@@ -291,9 +304,14 @@ impl NearestDistance {
             for j in (cj - reach).max(0)..=(cj + reach).min(rows as isize - 1) {
                 let dy = (origin.y + (j as f64 + 0.5) * cell - p.y) as f32;
                 let row = &mut distance_px[j as usize * cols..][i0 as usize..=i1 as usize];
-                for (k, stored) in row.iter_mut().enumerate() {
+                let nearest = &mut nearest_point[j as usize * cols..][i0 as usize..=i1 as usize];
+                for (k, (stored, nearest)) in row.iter_mut().zip(nearest).enumerate() {
                     let dx = x0 + k as f32 * cell as f32;
-                    *stored = stored.min(dx * dx + dy * dy);
+                    let d2 = dx * dx + dy * dy;
+                    if d2 < *stored {
+                        *stored = d2;
+                        *nearest = point;
+                    }
                 }
             }
         }
@@ -306,34 +324,47 @@ impl NearestDistance {
             origin,
             per_px: 1.0 / cell,
             cols,
-            rows,
+            cols_f: cols as f64,
+            rows_f: rows as f64,
+            cell_px: cell,
+            half_diagonal_px: 0.5 * std::f64::consts::SQRT_2 * cell + ROUNDING_MARGIN_PX,
             distance_px,
+            nearest_point,
             cap_px: cap_stored,
-            // Distances in f32, from offsets in f32, are within a few thousandths of a px of the exact ones for
-            // grids of thousands of px.
-            half_diagonal_px: 0.5 * std::f64::consts::SQRT_2 * cell + 0.01,
             lo,
             hi,
         }
     }
 
     /// How far from `p` the nearest point of the field is sure to be, if any lies within `radius`: `None` if none
-    /// does, else a radius at most `radius` (`radius` itself where the field cannot tell).
+    /// does, else a radius at most `radius` (`radius` itself where the field cannot tell), and the point nearest the
+    /// centre of `p`'s cell (if the field has one there), the likeliest within `radius`.
     #[inline]
-    fn reach(&self, p: &Vector2<f64>, radius: f64) -> Option<f64> {
+    fn reach(&self, p: &Vector2<f64>, radius: f64) -> Option<(f64, Option<usize>)> {
         let (x, y) = (
             (p.x - self.origin.x) * self.per_px,
             (p.y - self.origin.y) * self.per_px,
         );
         // Not finite, or outside the grid: the comparisons fail.
-        if x >= 0.0 && y >= 0.0 && x < self.cols as f64 && y < self.rows as f64 {
-            // Truncation is the floor of a non-negative value.
-            let d = f64::from(self.distance_px[y as usize * self.cols + x as usize]);
-            if d - self.half_diagonal_px > radius {
+        if x >= 0.0 && y >= 0.0 && x < self.cols_f && y < self.rows_f {
+            // Non-negative and below the grid's size (at most 2^20 cells): `u32`'s conversion is the floor, and
+            // costs an instruction where `usize`'s costs several.
+            let (i, j) = (x as u32, y as u32);
+            let cell = j as usize * self.cols + i as usize;
+            let d = f64::from(self.distance_px[cell]);
+            // How far `p` is from its cell's centre, which bounds how much nearer to or farther from any point it is
+            // than the centre; plus the margin for the stored distances' rounding.
+            let (dx, dy) = (x - f64::from(i) - 0.5, y - f64::from(j) - 0.5);
+            let off_centre_px = (dx * dx + dy * dy).sqrt() * self.cell_px + ROUNDING_MARGIN_PX;
+            if d - off_centre_px > radius {
                 return None;
             }
             if d < self.cap_px {
-                return Some(radius.min(d + self.half_diagonal_px));
+                let nearest = self.nearest_point[cell];
+                return Some((
+                    radius.min(d + off_centre_px),
+                    (nearest != u32::MAX).then_some(nearest as usize),
+                ));
             }
         } else if !(p.x.is_finite() && p.y.is_finite()) {
             return None;
@@ -344,16 +375,40 @@ impl NearestDistance {
                 return None;
             }
         }
-        Some(radius)
+        Some((radius, None))
     }
 
     /// Whether any point of `index` (the field's) lies within `radius` of `p`: as
-    /// [`PointIndex::any_within`] says, which is asked only where the field cannot tell.
+    /// [`PointIndex::any_within`] says, which is asked only where the field cannot tell (after the point nearest
+    /// the cell's centre, which is most often the one within `radius` when there is one).
     #[inline]
     pub fn any_within(&self, index: &PointIndex, p: &Vector2<f64>, radius: f64) -> bool {
+        // Most positions are told from their cell's distance and half its diagonal alone: far from the radius.
+        let (x, y) = (
+            (p.x - self.origin.x) * self.per_px,
+            (p.y - self.origin.y) * self.per_px,
+        );
+        if x >= 0.0 && y >= 0.0 && x < self.cols_f && y < self.rows_f {
+            // SAFETY: `x` and `y` are finite, non-negative and below the grid's columns and rows (at most 2^20
+            // cells), so they fit a `u32`, whose conversion then truncates: the floor. The checked conversion
+            // costs several instructions more, hundreds of thousands of times a search.
+            let (i, j) = unsafe { (x.to_int_unchecked::<u32>(), y.to_int_unchecked::<u32>()) };
+            let d = f64::from(self.distance_px[j as usize * self.cols + i as usize]);
+            if d - self.half_diagonal_px > radius {
+                return false;
+            }
+            if d + self.half_diagonal_px <= radius && d < self.cap_px {
+                return true;
+            }
+        }
         match self.reach(p, radius) {
             None => false,
-            Some(reach) if reach < radius => true,
+            Some((reach, _)) if reach < radius => true,
+            Some((_, Some(likeliest)))
+                if (index.points[likeliest] - p).norm_squared() <= radius * radius =>
+            {
+                true
+            }
             Some(_) => index.any_within(p, radius),
         }
     }
@@ -368,7 +423,7 @@ impl NearestDistance {
         radius: f64,
         mut accept: impl FnMut(usize) -> bool,
     ) -> Option<(usize, f64)> {
-        let reach = self.reach(p, radius)?;
+        let (reach, _) = self.reach(p, radius)?;
         if reach < radius
             && let Some(found) = index.nearest(p, reach, &mut accept)
         {

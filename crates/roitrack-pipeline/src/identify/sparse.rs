@@ -91,9 +91,18 @@ struct ModelTriple {
     /// The inverse of the matrix of the in-plane edges `p1 - p0`, `p2 - p0` (m): the affine map of a triple of blobs
     /// is `F` times this.
     inverse_edges: Matrix2<f64>,
-    /// The other points' offsets from `p0` in the plane (m) and their square norms (m²), nearest `p0` first.
+    /// The other points, nearest `p0` first: their coordinates in the triple's affine frame (the offset from `p0`
+    /// as `a (p1 - p0) + b (p2 - p0)`, so that a triple of blobs predicts the point at `b0 + a f1 + b f2` without
+    /// forming its map) and their offsets' square norms (m², which set their gates).
     others: Vec<(Vector2<f64>, f64)>,
 }
+
+/// How much wider than the extension's gate (px, and relatively) a prediction's first test is: the test predicts
+/// from the triple's affine frame where the extension predicts through the map, and the two round differently (by
+/// about 1e-10 px at most for frames of thousands of px). A test only refuses a triple the extension would refuse,
+/// so it must never find a blob missing that the extension finds within its gate.
+const FIRST_TEST_SLACK_PX: f64 = 1e-6;
+const FIRST_TEST_SLACK: f64 = 1e-9;
 
 /// Candidate correspondences (target point, blob), each the matches of one triple's affine predictions covering at
 /// least `min_matched` points.
@@ -167,7 +176,7 @@ pub(crate) fn triple_hypotheses_counted(
                         .filter(|&p| p != p0 && p != p1 && p != p2)
                         .map(|p| {
                             let offset = model.plane_m[p] - model.plane_m[p0];
-                            (offset, offset.norm_squared())
+                            (inverse_edges * offset, offset.norm_squared())
                         })
                         .collect();
                     others.sort_by(|a, b| a.1.total_cmp(&b.1));
@@ -238,10 +247,12 @@ pub(crate) fn triple_hypotheses_counted(
                         let bend = MAX_TILT_SIN * scale / model.focal_px;
                         let gate_of = |d2_m2: f64| base_gate_px + bend * d2_m2;
                         let mut misses = 0;
-                        let promising = triple.others.iter().all(|&(offset, d2_m2)| {
+                        let anchor = ideal[b0];
+                        let promising = triple.others.iter().all(|&(frame, d2_m2)| {
                             work.predictions += 1;
-                            let predicted = ideal[b0] + map * offset;
-                            let gate_px = gate_of(d2_m2);
+                            let predicted = anchor + f1 * frame.x + f2 * frame.y;
+                            let gate_px =
+                                gate_of(d2_m2) * (1.0 + FIRST_TEST_SLACK) + FIRST_TEST_SLACK_PX;
                             if !field.any_within(index, &predicted, gate_px) {
                                 misses += 1;
                             }
