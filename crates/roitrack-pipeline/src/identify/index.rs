@@ -9,6 +9,9 @@ pub(crate) struct PointIndex {
     cell: f64,
     cols: usize,
     rows: usize,
+    /// `cols` and `rows` as floats, the bounds of a query's cells (converted once, not at every query).
+    cols_f: f64,
+    rows_f: f64,
     /// Start of each cell's entries in `entries` (`cols * rows + 1` offsets).
     starts: Vec<u32>,
     entries: Vec<u32>,
@@ -42,6 +45,8 @@ impl PointIndex {
             cell,
             cols,
             rows,
+            cols_f: cols as f64,
+            rows_f: rows as f64,
             starts: vec![0; cols * rows + 1],
             entries: Vec::with_capacity(points.len()),
             points: points.to_vec(),
@@ -75,21 +80,17 @@ impl PointIndex {
             .then(|| j as usize * self.cols + i as usize)
     }
 
-    /// The cells (columns and rows, inclusive) that a disk of `radius` around `p` touches; `None` if it misses the
-    /// indexed area or is not finite.
+    /// The cells (columns and rows, as half-open ranges) that a disk of `radius` around `p` touches; `None` if it
+    /// misses the indexed area or is not finite.
+    #[inline]
     fn cells_around(
         &self,
         p: &Vector2<f64>,
         radius: f64,
-    ) -> Option<(
-        std::ops::RangeInclusive<usize>,
-        std::ops::RangeInclusive<usize>,
-    )> {
+    ) -> Option<(std::ops::Range<usize>, std::ops::Range<usize>)> {
         if !(p.x.is_finite() && p.y.is_finite() && radius.is_finite()) {
             return None;
         }
-        // Truncation is the floor of a non-negative value (and cheaper than `floor`, a library call here): the low
-        // ends are clamped at 0 first, the high ends refused below it.
         let (hi_i, hi_j) = (
             (p.x + radius - self.origin.x) / self.cell,
             (p.y + radius - self.origin.y) / self.cell,
@@ -97,11 +98,21 @@ impl PointIndex {
         if hi_i < 0.0 || hi_j < 0.0 {
             return None;
         }
-        let lo_i = ((p.x - radius - self.origin.x) / self.cell).max(0.0) as usize;
-        let lo_j = ((p.y - radius - self.origin.y) / self.cell).max(0.0) as usize;
-        let hi_i = (hi_i as usize).min(self.cols - 1);
-        let hi_j = (hi_j as usize).min(self.rows - 1);
-        (lo_i <= hi_i && lo_j <= hi_j).then_some((lo_i..=hi_i, lo_j..=hi_j))
+        // Each end clamped to the grid, then truncated (the floor of a non-negative value): the cells the
+        // saturating conversions to `usize` gave (a low end beyond the grid still refuses the disk), at a few
+        // instructions where each of those took a dozen, for a query made tens of thousands of times a search.
+        // The values are not NaN: the operands are finite and `cell` positive (an overflow is an infinity, which
+        // the clamp bounds).
+        let floor = |v: f64, top: f64| -> usize {
+            let v = v.clamp(0.0, top);
+            // SAFETY: `v` is in [0, 4096] (the grid has at most 4096 columns and rows), not NaN: it fits a `u32`.
+            unsafe { v.to_int_unchecked::<u32>() as usize }
+        };
+        let lo_i = floor((p.x - radius - self.origin.x) / self.cell, self.cols_f);
+        let lo_j = floor((p.y - radius - self.origin.y) / self.cell, self.rows_f);
+        let hi_i = floor(hi_i, self.cols_f - 1.0);
+        let hi_j = floor(hi_j, self.rows_f - 1.0);
+        (lo_i <= hi_i && lo_j <= hi_j).then_some((lo_i..hi_i + 1, lo_j..hi_j + 1))
     }
 
     /// Calls `f(index, distance)` for every point within `radius` of `p`.
@@ -112,8 +123,8 @@ impl PointIndex {
         for j in rows {
             // The entries of a row's cells are contiguous, in the order of the cells.
             let row = j * self.cols;
-            let entries = &self.entries[self.starts[row + cols.start()] as usize
-                ..self.starts[row + cols.end() + 1] as usize];
+            let entries = &self.entries
+                [self.starts[row + cols.start] as usize..self.starts[row + cols.end] as usize];
             for &e in entries {
                 let d = (self.points[e as usize] - p).norm();
                 if d <= radius {
@@ -131,8 +142,8 @@ impl PointIndex {
         let radius2 = radius * radius;
         for j in rows {
             let row = j * self.cols;
-            let entries = &self.entries[self.starts[row + cols.start()] as usize
-                ..self.starts[row + cols.end() + 1] as usize];
+            let entries = &self.entries
+                [self.starts[row + cols.start] as usize..self.starts[row + cols.end] as usize];
             if entries
                 .iter()
                 .any(|&e| (self.points[e as usize] - p).norm_squared() <= radius2)
@@ -231,8 +242,9 @@ pub(crate) struct NearestDistance {
     /// The inverse of the cells' side (1/px).
     per_px: f64,
     cols: usize,
-    /// `cols` and the rows' count as floats: the bounds a position's cell coordinates are tested against (a conversion from
-    /// `usize` per test costs several instructions, and the test is made hundreds of thousands of times a search).
+    /// `cols` and the rows' count as floats: the bounds a position's cell coordinates are tested against (a
+    /// conversion from `usize` per test costs several instructions, and the test is made hundreds of thousands of
+    /// times a search).
     cols_f: f64,
     rows_f: f64,
     /// The cells' side (px).
