@@ -257,6 +257,9 @@ pub(crate) struct NearestDistance {
     /// Per cell, the index's point nearest its centre (`u32::MAX` where none is within the cap): where the distance
     /// alone cannot tell, the likeliest point within a radius is tried before the index is searched.
     nearest_point: Vec<u32>,
+    /// Per cell, the distance (px) from its centre to the nearest point but that one (at most `cap_px`): where
+    /// `p` is nearer the cell's nearest point than any other can be, that point is the nearest to `p`.
+    second_px: Vec<f32>,
     cap_px: f64,
     /// The bounding box of the points (px).
     lo: Vector2<f64>,
@@ -301,6 +304,7 @@ impl NearestDistance {
         // Squared distances first, their roots once per cell at the end.
         let mut distance_px = vec![(cap * cap) as f32; cols * rows];
         let mut nearest_point = vec![u32::MAX; cols * rows];
+        let mut second_px = vec![(cap * cap) as f32; cols * rows];
         let reach = (cap / cell).ceil() as isize + 1;
         for (p, &point) in finite.iter().zip(&index.entries) {
             // The cell of the point, and those whose centres are within the cap.
@@ -317,17 +321,23 @@ impl NearestDistance {
                 let dy = (origin.y + (j as f64 + 0.5) * cell - p.y) as f32;
                 let row = &mut distance_px[j as usize * cols..][i0 as usize..=i1 as usize];
                 let nearest = &mut nearest_point[j as usize * cols..][i0 as usize..=i1 as usize];
-                for (k, (stored, nearest)) in row.iter_mut().zip(nearest).enumerate() {
+                let second = &mut second_px[j as usize * cols..][i0 as usize..=i1 as usize];
+                for (k, ((stored, nearest), second)) in
+                    row.iter_mut().zip(nearest).zip(second).enumerate()
+                {
                     let dx = x0 + k as f32 * cell as f32;
                     let d2 = dx * dx + dy * dy;
                     if d2 < *stored {
+                        *second = *stored;
                         *stored = d2;
                         *nearest = point;
+                    } else if d2 < *second {
+                        *second = d2;
                     }
                 }
             }
         }
-        for d in &mut distance_px {
+        for d in distance_px.iter_mut().chain(&mut second_px) {
             *d = d.sqrt();
         }
         // The cap as stored: a cell that holds it may be farther from every point.
@@ -342,6 +352,7 @@ impl NearestDistance {
             half_diagonal_px: 0.5 * std::f64::consts::SQRT_2 * cell + ROUNDING_MARGIN_PX,
             distance_px,
             nearest_point,
+            second_px,
             cap_px: cap_stored,
             lo,
             hi,
@@ -405,13 +416,35 @@ impl NearestDistance {
             // cells), so they fit a `u32`, whose conversion then truncates: the floor. The checked conversion
             // costs several instructions more, hundreds of thousands of times a search.
             let (i, j) = unsafe { (x.to_int_unchecked::<u32>(), y.to_int_unchecked::<u32>()) };
-            let d = f64::from(self.distance_px[j as usize * self.cols + i as usize]);
+            let cell = j as usize * self.cols + i as usize;
+            let d = f64::from(self.distance_px[cell]);
             if d - self.half_diagonal_px > radius {
                 return false;
             }
             if d + self.half_diagonal_px <= radius && d < self.cap_px {
                 return true;
             }
+            // Near the radius: the exact offset from the cell's centre, then the point nearest the centre (the
+            // likeliest within the radius), then whether any other can be (no nearer than the cell's second
+            // distance allows): most such positions are told without searching the index.
+            let (dx, dy) = (x - f64::from(i) - 0.5, y - f64::from(j) - 0.5);
+            let off_centre_px = (dx * dx + dy * dy).sqrt() * self.cell_px;
+            if d - off_centre_px - ROUNDING_MARGIN_PX > radius {
+                return false;
+            }
+            if d < self.cap_px {
+                let likeliest = self.nearest_point[cell] as usize;
+                if (index.points[likeliest] - p).norm_squared() <= radius * radius {
+                    return true;
+                }
+                // Twice the margin: the stored distance's rounding, and that of this bound's own arithmetic.
+                if f64::from(self.second_px[cell]) - off_centre_px - 2.0 * ROUNDING_MARGIN_PX
+                    > radius
+                {
+                    return false;
+                }
+            }
+            return index.any_within(p, radius);
         }
         match self.reach(p, radius) {
             None => false,
@@ -425,6 +458,35 @@ impl NearestDistance {
         }
     }
 
+    /// The point of `index` (the field's) nearest to `p` and its distance, as [`PointIndex::within`] measures it,
+    /// where the field can tell it without a search: the point nearest the centre of `p`'s cell, when `p` is nearer
+    /// to it than any other point can be (every other is at least the cell's second distance from the centre,
+    /// less `p`'s offset from it, less the stored distances' rounding). Strictly nearer: no other point ties it.
+    #[inline]
+    fn sure_nearest(&self, index: &PointIndex, p: &Vector2<f64>) -> Option<(usize, f64)> {
+        let (x, y) = (
+            (p.x - self.origin.x) * self.per_px,
+            (p.y - self.origin.y) * self.per_px,
+        );
+        if !(x >= 0.0 && y >= 0.0 && x < self.cols_f && y < self.rows_f) {
+            return None;
+        }
+        // SAFETY: as in `any_within`: finite, non-negative and within the grid's at most 2^20 cells.
+        let (i, j) = unsafe { (x.to_int_unchecked::<u32>(), y.to_int_unchecked::<u32>()) };
+        let cell = j as usize * self.cols + i as usize;
+        let nearest = self.nearest_point[cell];
+        if nearest == u32::MAX {
+            return None;
+        }
+        let d = (index.points[nearest as usize] - p).norm();
+        let (dx, dy) = (x - f64::from(i) - 0.5, y - f64::from(j) - 0.5);
+        let off_centre_px = (dx * dx + dy * dy).sqrt() * self.cell_px;
+        // Twice the margin: the stored distance's rounding, and that of this bound's own arithmetic.
+        let others_beyond_px =
+            f64::from(self.second_px[cell]) - off_centre_px - 2.0 * ROUNDING_MARGIN_PX;
+        (d < others_beyond_px).then_some((nearest as usize, d))
+    }
+
     /// [`PointIndex::nearest`] of `index` (the field's points), searched first within the field's [`Self::reach`]
     /// (the same point: the nearest accepted one is there if the nearest of all is accepted), then, if the point
     /// there is not accepted, within `radius`.
@@ -435,6 +497,12 @@ impl NearestDistance {
         radius: f64,
         mut accept: impl FnMut(usize) -> bool,
     ) -> Option<(usize, f64)> {
+        if let Some((nearest, d)) = self.sure_nearest(index, p)
+            && d <= radius
+            && accept(nearest)
+        {
+            return Some((nearest, d));
+        }
         let (reach, _) = self.reach(p, radius)?;
         if reach < radius
             && let Some(found) = index.nearest(p, reach, &mut accept)
