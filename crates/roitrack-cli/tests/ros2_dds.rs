@@ -676,7 +676,7 @@ wait $subscriber || exit 93
         "message 0: field u_px: 9 entries for 10 point ids",
         "centroid 0: unknown point id 9999",
         "field v_px[0]: NaN is not finite",
-        "3 malformed and left out",
+        "3 left out (left_out_malformed 2, left_out_invalid 1)",
     ] {
         assert!(log.contains(reason), "{reason}:\n{log}");
     }
@@ -718,6 +718,15 @@ wait $subscriber || exit 93
         .filter(|m| m.topic == "/roitrack/pose")
         .count();
     assert_eq!(poses, track.len(), "poses the node published");
+    let statuses: Vec<&Received> = received
+        .iter()
+        .filter(|m| m.topic == "/roitrack/status")
+        .collect();
+    check_left_out_in_status(
+        &statuses,
+        track.len(),
+        &[("left_out_malformed", 2), ("left_out_invalid", 1)],
+    );
 }
 
 /// Without --camera, the node takes the camera from the camera info Cyclone DDS publishes (latched), and tracks as
@@ -894,12 +903,23 @@ fn image_publisher_script() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/ros2_image_publisher.py")
 }
 
-/// `ros2-node --image-topic`: Cyclone DDS publishes the camera info, then the frames `simulate --frames` rendered as
-/// sensor_msgs/msg/Image (decoded from the PNGs in Python), with malformed images among them (one before the camera
-/// info, another encoding, another size, a step that does not match, data short); the node leaves those out, names
-/// them, and tracks the rest to the estimates of `track --images` on the same frames (1e-9), which it publishes.
-#[test]
-fn the_node_tracks_images_from_cyclone_dds_as_track_does_the_frames_and_names_malformed_ones() {
+/// How a simulated run's frames go through `ros2-node --image-topic`.
+struct ImageCase<'a> {
+    /// The camera's options, for `simulate`, `track` and the node (`--shutter rolling --line-delay-s D`).
+    shutter: &'a [&'a str],
+    /// The image publisher's options (`--malformed`, `--too-close K`).
+    publisher: &'a [&'a str],
+    /// What the node's log must say.
+    log: &'a [&'a str],
+    /// The counts of images left out the last status must carry (the others zero).
+    left_out: &'a [(&'a str, u64)],
+}
+
+/// Cyclone DDS publishes the camera info, then the frames `simulate --frames` rendered as sensor_msgs/msg/Image
+/// (decoded from the PNGs in Python), with the bad images of `case.publisher` among them; the node must say what it
+/// left out, track the rest to the estimates of `track --images` on the same frames (1e-9), publish every one, and
+/// count what it left out in its status, by reason.
+fn node_tracks_images_as_track_does(case: &ImageCase<'_>) {
     let Some(python) = python() else { return };
     if !namespaces_allowed() {
         return;
@@ -916,8 +936,9 @@ fn the_node_tracks_images_from_cyclone_dds_as_track_does_the_frames_and_names_ma
             "--duration-s",
             "0.5",
             "--frames",
-            "--out",
         ])
+        .args(case.shutter)
+        .arg("--out")
         .arg(&sim)
         .output()
         .unwrap();
@@ -947,7 +968,9 @@ fn the_node_tracks_images_from_cyclone_dds_as_track_does_the_frames_and_names_ma
         .arg(sim.join("frames"))
         .arg("--timestamps")
         .arg(file("stamps.csv"))
-        .args(["--polarity", "bright", "--poses"])
+        .args(["--polarity", "bright"])
+        .args(case.shutter)
+        .arg("--poses")
         .arg(file("track.tum"))
         .arg("--twists")
         .arg(file("track.csv"))
@@ -962,9 +985,9 @@ fn the_node_tracks_images_from_cyclone_dds_as_track_does_the_frames_and_names_ma
         r#"
 "$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 10 --timeout-s 300 >/dev/null &
 subscriber=$!
-"$PYTHON" "$PUBLISHER" "$SIM/frames" "$SIM/timestamps.csv" "$SIM/camera.yaml" --malformed --wait-s 120 &
+"$PYTHON" "$PUBLISHER" "$SIM/frames" "$SIM/timestamps.csv" "$SIM/camera.yaml" $PUBLISHER_OPTIONS --wait-s 120 &
 publisher=$!
-"$ROITRACK" ros2-node --image-topic /roitrack/image --target "$SIM/target.csv" --polarity bright \
+"$ROITRACK" ros2-node --image-topic /roitrack/image --target "$SIM/target.csv" --polarity bright $SHUTTER \
     --camera-info-wait-s 120 --idle-s 5 --poses "$POSES" --twists "$TWISTS" || exit 91
 wait $publisher || exit 92
 wait $subscriber || exit 93
@@ -973,6 +996,8 @@ wait $subscriber || exit 93
             ("PYTHON", &python),
             ("SUBSCRIBER", &subscriber_script()),
             ("PUBLISHER", &image_publisher_script()),
+            ("PUBLISHER_OPTIONS", Path::new(&case.publisher.join(" "))),
+            ("SHUTTER", Path::new(&case.shutter.join(" "))),
             ("RECEIVED", &file("received.jsonl")),
             ("ROITRACK", roitrack),
             ("SIM", &sim),
@@ -981,14 +1006,7 @@ wait $subscriber || exit 93
         ],
     );
     assert!(ok, "{log}");
-    for reason in [
-        "/roitrack/image message 0: an image before any camera info",
-        "image encoding \"yuv422\" is not read",
-        "the image is 512 x 1024 px, the camera info says 1024 x 1024 px",
-        "with a step of 1023",
-        "bytes of data for 1024 x 1024 px mono8 with a step of 1024",
-        "5 malformed and left out",
-    ] {
+    for reason in case.log {
         assert!(log.contains(reason), "{reason}:\n{log}");
     }
     let (node, track) = (
@@ -1026,10 +1044,9 @@ wait $subscriber || exit 93
     }
     // And the node published them all, each pose the file's.
     let received = read_received(&file("received.jsonl"));
-    let poses: Vec<&Received> = received
-        .iter()
-        .filter(|m| m.topic == "/roitrack/pose")
-        .collect();
+    let on =
+        |topic: &str| -> Vec<&Received> { received.iter().filter(|m| m.topic == topic).collect() };
+    let poses = on("/roitrack/pose");
     assert_eq!(poses.len(), track.len(), "poses the node published");
     for (m, b) in poses.iter().zip(&track) {
         let t = b.cam_from_obj.translation.vector;
@@ -1042,10 +1059,106 @@ wait $subscriber || exit 93
             &[b.t_s, t.x, t.y, t.z],
         );
     }
+    check_left_out_in_status(&on("/roitrack/status"), track.len(), case.left_out);
     eprintln!(
-        "ros2-node --image-topic: {} estimates of {} frames, equal to track --images; largest difference {:.1e}",
+        "ros2-node --image-topic {}: {} estimates of {} frames, equal to track --images; largest difference {:.1e}",
+        case.shutter.join(" "),
         track.len(),
         timestamps.lines().count() - 1,
         MAX_DIFFERENCE.with(|max| max.get())
     );
+}
+
+/// Every status received carries the node's input counts (`input_messages` and each `left_out_*` of
+/// `roitrack_ros::status_keys`), which never go down; the last one the counts of `left_out` (the others zero). The
+/// status is best effort, and a subscriber under load may miss some (not the last ones: the bad messages of the tests
+/// come before the last tenth of the run).
+fn check_left_out_in_status(statuses: &[&Received], estimates: usize, left_out: &[(&str, u64)]) {
+    assert!(
+        statuses.len() >= estimates * 9 / 10 && statuses.len() <= estimates,
+        "{} statuses received of {estimates}",
+        statuses.len()
+    );
+    let counts = |m: &Received| -> Vec<(String, u64)> {
+        let values = m.msg["status"][0]["values"].as_array().unwrap();
+        roitrack::ros::status_keys()
+            .map(|key| {
+                let value = values
+                    .iter()
+                    .find(|kv| kv["key"] == key)
+                    .unwrap_or_else(|| panic!("no {key} in the status: {values:?}"));
+                (
+                    key.to_string(),
+                    value["value"].as_str().unwrap().parse().unwrap(),
+                )
+            })
+            .collect()
+    };
+    let mut previous: Option<Vec<(String, u64)>> = None;
+    for m in statuses {
+        let now = counts(m);
+        if let Some(previous) = &previous {
+            for ((key, before), (_, after)) in previous.iter().zip(&now) {
+                assert!(after >= before, "{key} went from {before} to {after}");
+            }
+        }
+        previous = Some(now);
+    }
+    let last = previous.unwrap();
+    for (key, value) in &last {
+        if key == roitrack::ros::INPUT_MESSAGES_KEY {
+            let left: u64 = left_out.iter().map(|(_, n)| n).sum();
+            // Every message left out, and at least one tracked.
+            assert!(*value > left, "{key} {value}");
+            continue;
+        }
+        let expected = left_out
+            .iter()
+            .find(|(k, _)| k == key)
+            .map_or(0, |(_, n)| *n);
+        assert_eq!(*value, expected, "{key} in the last status: {last:?}");
+    }
+}
+
+/// `ros2-node --image-topic` on a global-shutter camera, with malformed images among the frames (one before the
+/// camera info, another encoding, another size, a step that does not match, data short): each left out, named in the
+/// log and counted by reason in the status; the rest tracked to the estimates of `track --images`.
+#[test]
+fn the_node_tracks_images_from_cyclone_dds_as_track_does_the_frames_and_names_malformed_ones() {
+    node_tracks_images_as_track_does(&ImageCase {
+        shutter: &[],
+        publisher: &["--malformed"],
+        log: &[
+            "/roitrack/image message 0: an image before any camera info",
+            "image encoding \"yuv422\" is not read",
+            "the image is 512 x 1024 px, the camera info says 1024 x 1024 px",
+            "with a step of 1023",
+            "bytes of data for 1024 x 1024 px mono8 with a step of 1024",
+            "5 left out (left_out_no_camera_info 1, left_out_encoding 1, left_out_size 1, left_out_malformed 2)",
+        ],
+        left_out: &[
+            ("left_out_no_camera_info", 1),
+            ("left_out_encoding", 1),
+            ("left_out_size", 1),
+            ("left_out_malformed", 2),
+        ],
+    });
+}
+
+/// `ros2-node --image-topic` on a rolling-shutter camera (30 us a row: 31 ms of readout), with a frame that starts
+/// 1 ms after the one before it, while that one's blobs were still being read: the frame tracker refuses it (which
+/// stopped the node before), so the node leaves it out, names and counts it, and tracks the other frames to the
+/// estimates of `track --images` on them.
+#[test]
+fn the_node_leaves_out_a_rolling_shutter_frame_too_close_to_the_one_before_and_goes_on() {
+    node_tracks_images_as_track_does(&ImageCase {
+        shutter: &["--shutter", "rolling", "--line-delay-s", "30e-6"],
+        publisher: &["--too-close", "5"],
+        log: &[
+            "/roitrack/image: the frame's time",
+            "a rolling shutter's readout must end before the next frame starts",
+            "1 left out (left_out_too_close 1)",
+        ],
+        left_out: &[("left_out_too_close", 1)],
+    });
 }

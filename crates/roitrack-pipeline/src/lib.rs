@@ -20,7 +20,7 @@ pub mod scheduler;
 
 pub use frames::{
     FrameError, FrameMethod, FrameOutcome, FrameStreamError, FrameTrackReport, FrameTracker,
-    FrameTrackerConfig, track_frame_stream,
+    FrameTrackerConfig, track_frame_stream, track_frame_stream_leaving_out,
 };
 pub use identify::{Identification, identify};
 pub use matching::{MatchError, TargetDetection, find_target, match_full_frame};

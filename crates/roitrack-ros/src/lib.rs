@@ -38,6 +38,7 @@
 
 mod background;
 pub mod convert;
+mod input_counts;
 #[cfg(feature = "live")]
 mod live;
 mod measurement_reader;
@@ -51,6 +52,7 @@ pub mod ros2_input;
 mod writer;
 
 pub use background::BackgroundBag;
+pub use input_counts::{INPUT_MESSAGES_KEY, InputCounts, LeftOut, status_keys};
 #[cfg(feature = "live")]
 pub use live::{DEFAULT_LIVE_ADDRESS, LIVE_SUBPROTOCOL, LiveError, LiveReport, LiveServer, Pacer};
 pub use measurement_reader::BagMeasurementSource;

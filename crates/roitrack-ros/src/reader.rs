@@ -386,7 +386,7 @@ impl BagFrameSource {
         let name = format!("message {index} of {topic}");
         let at = |e: String| self.messages.error(format!("{name}: {e}"));
         let t_s = if channel.type_name == IMAGE_TYPES[0] {
-            decode_image(&data, frame).map_err(at)?
+            decode_image(&data, frame).map_err(|e| at(e.to_string()))?
         } else {
             let (t_s, format, bytes) = compressed_image(&data).map_err(at)?;
             let pseudo_path =
@@ -490,7 +490,7 @@ fn chunk_messages(
 }
 
 /// Decodes a `sensor_msgs/msg/Image` into `frame`; its stamp (s).
-pub(crate) fn decode_image(message: &[u8], frame: &mut Frame) -> Result<f64, String> {
+pub(crate) fn decode_image(message: &[u8], frame: &mut Frame) -> Result<f64, ImageFault> {
     let mut cdr = Cdr::new(message)?;
     let (t_s, _) = cdr.header()?;
     let height = cdr.u32()?;
@@ -504,21 +504,22 @@ pub(crate) fn decode_image(message: &[u8], frame: &mut Frame) -> Result<f64, Str
         "mono16" => 2,
         "bgr8" | "rgb8" => 3,
         other => {
-            return Err(format!(
+            return Err(ImageFault::Encoding(format!(
                 "image encoding {other:?} is not read (expected {})",
                 IMAGE_ENCODINGS.join(", ")
-            ));
+            )));
         }
     };
     if width == 0 || height == 0 {
-        return Err(format!("empty image: {width} x {height} px"));
+        return Err(format!("empty image: {width} x {height} px").into());
     }
     let row_bytes = width as usize * channels;
     if step < row_bytes || data.len() < step * (height as usize - 1) + row_bytes {
         return Err(format!(
             "{} bytes of data for {width} x {height} px {encoding} with a step of {step}",
             data.len()
-        ));
+        )
+        .into());
     }
     let luma = |r: u8, g: u8, b: u8| -> u16 {
         (0.299 * f64::from(r) + 0.587 * f64::from(g) + 0.114 * f64::from(b)).round() as u16
@@ -547,6 +548,29 @@ pub(crate) fn decode_image(message: &[u8], frame: &mut Frame) -> Result<f64, Str
     frame.height = height;
     frame.bit_depth = if encoding == "mono16" { 16 } else { 8 };
     Ok(t_s)
+}
+
+/// Why an image message could not be decoded: an encoding not read, or anything else wrong with it.
+#[derive(Debug, Clone, PartialEq)]
+pub(crate) enum ImageFault {
+    /// An encoding [`decode_image`] does not read.
+    Encoding(String),
+    /// CDR cut short, an empty image, data that does not fit its step, width and height.
+    Malformed(String),
+}
+
+impl From<String> for ImageFault {
+    fn from(message: String) -> Self {
+        Self::Malformed(message)
+    }
+}
+
+impl std::fmt::Display for ImageFault {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Encoding(m) | Self::Malformed(m) => f.write_str(m),
+        }
+    }
 }
 
 /// A `sensor_msgs/msg/CompressedImage`: its stamp (s), format and the compressed bytes.
@@ -638,14 +662,21 @@ mod tests {
         decode_image(&image("bgr8", 1, 1, 3, &[0, 0, 255]), &mut frame).unwrap();
         assert_eq!(frame.pixels, [76]);
         let e = decode_image(&image("yuv422", 1, 1, 2, &[0, 0]), &mut frame).unwrap_err();
-        assert!(e.contains("\"yuv422\" is not read"), "{e}");
+        assert!(
+            matches!(&e, ImageFault::Encoding(m) if m.contains("\"yuv422\" is not read")),
+            "{e}"
+        );
         let e = decode_image(&image("mono8", 4, 4, 4, &[0; 15]), &mut frame).unwrap_err();
-        assert!(e.contains("15 bytes of data"), "{e}");
+        assert!(
+            matches!(&e, ImageFault::Malformed(m) if m.contains("15 bytes of data")),
+            "{e}"
+        );
         let mut truncated = image("mono8", 2, 2, 2, &[1, 2, 3, 4]);
         truncated.truncate(20);
         assert!(
             decode_image(&truncated, &mut frame)
                 .unwrap_err()
+                .to_string()
                 .contains("ends early")
         );
     }

@@ -18,6 +18,7 @@ use ros2_client::{
     qos::{Durability, History, Reliability, WhenFull},
 };
 
+use crate::input_counts::InputCounts;
 use crate::output::Output;
 use crate::{BagOptions, BagWriter, topics};
 
@@ -313,6 +314,27 @@ impl Ros2Publisher {
         bag_options: &BagOptions,
         camera: Option<CameraModel>,
     ) -> Result<Self, Ros2Error> {
+        Self::start_with(options, bag_options, camera, None)
+    }
+
+    /// [`start`](Self::start) for a node that takes its input from the bus: each status also carries `inputs`, the
+    /// messages it took and those it left out by reason ([`status_keys`](crate::status_keys)), as they stand when
+    /// the status is published.
+    pub fn start_counting_inputs(
+        options: &Ros2Options,
+        bag_options: &BagOptions,
+        camera: Option<CameraModel>,
+        inputs: Arc<InputCounts>,
+    ) -> Result<Self, Ros2Error> {
+        Self::start_with(options, bag_options, camera, Some(inputs))
+    }
+
+    fn start_with(
+        options: &Ros2Options,
+        bag_options: &BagOptions,
+        camera: Option<CameraModel>,
+        inputs: Option<Arc<InputCounts>>,
+    ) -> Result<Self, Ros2Error> {
         if options.domain_id > MAX_DOMAIN_ID {
             return Err(Ros2Error::Domain(options.domain_id));
         }
@@ -346,7 +368,7 @@ impl Ros2Publisher {
             std::thread::Builder::new()
                 .name("roitrack-ros2".into())
                 .spawn(move || {
-                    let (writer, context) = match open(
+                    let (mut writer, context) = match open(
                         &options,
                         node_name,
                         namespace.clone(),
@@ -361,6 +383,9 @@ impl Ros2Publisher {
                             return Ok(());
                         }
                     };
+                    if let Some(inputs) = inputs {
+                        writer.count_inputs(inputs);
+                    }
                     let subscribed =
                         wait_for_subscribers(&context, &namespace, options.wait_for_subscribers_s);
                     let _ = started_sender.send(Ok(subscribed));

@@ -18,9 +18,10 @@ use ros2_client::{
     qos::{Durability, History},
 };
 
+use crate::input_counts::{InputCounts, LeftOut};
 use crate::measurement_reader::decode;
 use crate::msg::BLOB_MEASUREMENTS;
-use crate::reader::{IMAGE_TYPES, camera_from_info, compressed_image, decode_image};
+use crate::reader::{IMAGE_TYPES, ImageFault, camera_from_info, compressed_image, decode_image};
 use crate::ros2::{Ros2Error, Ros2Options, check_interfaces, normalised_namespace};
 
 /// The type of a camera info.
@@ -29,14 +30,26 @@ const CAMERA_INFO: &str = "sensor_msgs/msg/CameraInfo";
 const POLL: Duration = Duration::from_micros(200);
 /// The messages kept until taken: a tracker behind by this many messages loses the oldest (counted by DDS, not here).
 const DEPTH: usize = 1000;
-/// The malformed messages whose reasons are kept (all are counted).
-const REASONS_KEPT: usize = 16;
+/// The messages left out whose reasons are kept (all are counted).
+pub const REASONS_KEPT: usize = 16;
 
 /// A message's serialised body as DDS delivered it, with its encoding.
 #[derive(Debug, Clone)]
 pub(crate) struct RawMessage {
     encoding: RepresentationIdentifier,
     bytes: Vec<u8>,
+}
+
+impl RawMessage {
+    /// The message as a bag holds it: the encapsulation header DDS took off (the representation, then two bytes of
+    /// options), then the body.
+    fn with_header(&self) -> Vec<u8> {
+        let mut bytes = Vec::with_capacity(4 + self.bytes.len());
+        bytes.extend_from_slice(&self.encoding.to_bytes());
+        bytes.extend_from_slice(&[0, 0]);
+        bytes.extend_from_slice(&self.bytes);
+        bytes
+    }
 }
 
 /// Takes every message as its bytes: roitrack decodes them itself, so that a malformed one is named and counted,
@@ -99,6 +112,69 @@ pub struct SubscriberReport {
     pub reasons: Vec<String>,
 }
 
+/// What a subscriber keeps of the messages it takes: its topic, its report, and the counts by reason it shares with
+/// the status ([`InputCounts`]).
+struct Intake {
+    topic: String,
+    report: SubscriberReport,
+    counts: Arc<InputCounts>,
+}
+
+impl Intake {
+    fn new(topic: String) -> Self {
+        Self {
+            topic,
+            report: SubscriberReport::default(),
+            counts: Arc::default(),
+        }
+    }
+
+    /// Counts a message taken; its index on the topic.
+    fn take(&mut self) -> u64 {
+        let index = self.report.messages;
+        self.report.messages += 1;
+        self.counts.taken();
+        index
+    }
+
+    /// Counts message `index` as left out for `why`, keeping the reason if there is room.
+    fn left_out(&mut self, index: u64, why: LeftOut, reason: String) {
+        self.report.malformed += 1;
+        self.counts.left_out(why);
+        if self.report.reasons.len() < REASONS_KEPT {
+            self.report
+                .reasons
+                .push(format!("{} message {index}: {reason}", self.topic));
+        }
+    }
+}
+
+/// A participant of the domain and interfaces of `options` and a reader of `topic` (in the namespace of `options`;
+/// the DDS topic `rt` and its name) of type `full_type` (`pkg/msg/Type`) that takes its messages as their bytes; and
+/// the topic's name with its namespace.
+fn subscribe(
+    options: &Ros2Options,
+    topic: &str,
+    full_type: &str,
+    qos: &QosProfile,
+) -> Result<
+    (
+        String,
+        rustdds::DomainParticipant,
+        no_key::SimpleDataReader<RawMessage, RawAdapter>,
+    ),
+    Ros2Error,
+> {
+    check_interfaces(&options.interfaces)?;
+    let full = format!("{}{topic}", normalised_namespace(&options.namespace));
+    let name = Name::parse(&full).map_err(|e| Ros2Error::Namespace {
+        namespace: full.clone(),
+        message: e.to_string(),
+    })?;
+    let (participant, reader) = raw_reader(options, &name, full_type, qos)?;
+    Ok((full, participant, reader))
+}
+
 /// The centroids of a `roitrack_msgs/msg/BlobMeasurements` topic on the ROS 2 DDS bus, as an iterator of
 /// [`Measurement`]s in the order they come (each at `header.stamp + dt_s`), blocking until the next one; it ends when
 /// `stop` is raised, or when no message has come for `idle` after the first one.
@@ -132,11 +208,10 @@ pub struct MeasurementSubscriber {
     reader: no_key::SimpleDataReader<RawMessage, RawAdapter>,
     // Kept alive with the reader.
     _participant: rustdds::DomainParticipant,
-    topic: String,
+    intake: Intake,
     checks: MeasurementChecks,
     pending: VecDeque<Measurement>,
     decoded: VecDeque<Measurement>,
-    report: SubscriberReport,
     stop: Arc<AtomicBool>,
     idle: Duration,
     last_message: Option<Instant>,
@@ -145,8 +220,8 @@ pub struct MeasurementSubscriber {
 impl std::fmt::Debug for MeasurementSubscriber {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("MeasurementSubscriber")
-            .field("topic", &self.topic)
-            .field("report", &self.report)
+            .field("topic", &self.intake.topic)
+            .field("report", &self.intake.report)
             .finish_non_exhaustive()
     }
 }
@@ -161,24 +236,17 @@ impl MeasurementSubscriber {
         stop: Arc<AtomicBool>,
         idle: Duration,
     ) -> Result<Self, Ros2Error> {
-        check_interfaces(&options.interfaces)?;
-        let full = format!("{}{topic}", normalised_namespace(&options.namespace));
-        let name = Name::parse(&full).map_err(|e| Ros2Error::Namespace {
-            namespace: full.clone(),
-            message: e.to_string(),
-        })?;
         let qos = QosProfile::subscription_default()
             .reliability_reliable(ros2_client::qos::WhenFull::Fail)
             .history(History::KeepLast { depth: DEPTH });
-        let (participant, reader) = raw_reader(options, &name, BLOB_MEASUREMENTS, &qos)?;
+        let (full, participant, reader) = subscribe(options, topic, BLOB_MEASUREMENTS, &qos)?;
         Ok(Self {
             reader,
             _participant: participant,
-            topic: full,
+            intake: Intake::new(full),
             checks,
             pending: Default::default(),
             decoded: Default::default(),
-            report: SubscriberReport::default(),
             stop,
             idle,
             last_message: None,
@@ -187,58 +255,50 @@ impl MeasurementSubscriber {
 
     /// The topic subscribed to (with its namespace).
     pub fn topic(&self) -> &str {
-        &self.topic
+        &self.intake.topic
     }
 
     /// What was received so far.
     pub fn report(&self) -> &SubscriberReport {
-        &self.report
+        &self.intake.report
+    }
+
+    /// The messages taken and those left out by reason, as they are counted (for the status:
+    /// [`Ros2Publisher::start_counting_inputs`](crate::ros2::Ros2Publisher::start_counting_inputs)).
+    pub fn counts(&self) -> Arc<InputCounts> {
+        Arc::clone(&self.intake.counts)
     }
 
     /// Decodes and checks one message whole; its centroids to `pending`, or the reason it is left out.
     fn take_message(&mut self, message: RawMessage) {
-        let index = self.report.messages;
-        self.report.messages += 1;
+        let index = self.intake.take();
         match checked_message(&self.checks, &message, &mut self.decoded) {
             Ok(checks) => {
                 self.checks = checks;
-                self.report.measurements += self.decoded.len() as u64;
+                self.intake.report.measurements += self.decoded.len() as u64;
                 self.pending.extend(self.decoded.drain(..));
             }
-            Err(reason) => self.malformed(index, reason),
-        }
-    }
-
-    /// Counts message `index` as malformed, keeping the reason if there is room.
-    fn malformed(&mut self, index: u64, reason: String) {
-        self.report.malformed += 1;
-        if self.report.reasons.len() < REASONS_KEPT {
-            self.report
-                .reasons
-                .push(format!("{} message {index}: {reason}", self.topic));
+            Err((why, reason)) => self.intake.left_out(index, why, reason),
         }
     }
 }
 
 /// Decodes `message` into `out` and checks it whole against `checks` (on a copy: a message that fails changes
-/// nothing of what later ones are checked against); the checks as they stand after it, or why it is left out.
+/// nothing of what later ones are checked against); the checks as they stand after it, or why it is left out: a
+/// message that does not decode is malformed, one whose centroids fail the checks invalid.
 fn checked_message(
     checks: &MeasurementChecks,
     message: &RawMessage,
     out: &mut VecDeque<Measurement>,
-) -> Result<MeasurementChecks, String> {
-    // The encapsulation header DDS took off: the representation, then two bytes of options.
-    let mut bytes = Vec::with_capacity(4 + message.bytes.len());
-    bytes.extend_from_slice(&message.encoding.to_bytes());
-    bytes.extend_from_slice(&[0, 0]);
-    bytes.extend_from_slice(&message.bytes);
+) -> Result<MeasurementChecks, (LeftOut, String)> {
     out.clear();
-    decode(&bytes, out).map_err(|(field, e)| format!("field {field}: {e}"))?;
+    decode(&message.with_header(), out)
+        .map_err(|(field, e)| (LeftOut::Malformed, format!("field {field}: {e}")))?;
     let mut checks = checks.clone();
     for (k, m) in out.iter().enumerate() {
         checks
             .check(m)
-            .map_err(|problem| format!("centroid {k}: {problem}"))?;
+            .map_err(|problem| (LeftOut::Invalid, format!("centroid {k}: {problem}")))?;
     }
     Ok(checks)
 }
@@ -319,30 +379,21 @@ pub fn wait_for_camera_info_with(
     stop: &AtomicBool,
     mut while_waiting: impl FnMut(),
 ) -> Result<CameraModel, Ros2Error> {
-    check_interfaces(&options.interfaces)?;
-    let full = format!("{}{topic}", normalised_namespace(&options.namespace));
-    let name = Name::parse(&full).map_err(|e| Ros2Error::Namespace {
-        namespace: full.clone(),
-        message: e.to_string(),
-    })?;
     let volatile = QosProfile::subscription_default();
     let latched = QosProfile::subscription_default()
         .reliability_reliable(ros2_client::qos::WhenFull::Fail)
         .durability(Durability::TransientLocal);
     let readers = [
-        raw_reader(options, &name, CAMERA_INFO, &volatile)?,
-        raw_reader(options, &name, CAMERA_INFO, &latched)?,
+        subscribe(options, topic, CAMERA_INFO, &volatile)?,
+        subscribe(options, topic, CAMERA_INFO, &latched)?,
     ];
+    let full = readers[0].0.clone();
     let start = Instant::now();
     let mut malformed = Vec::new();
     while start.elapsed() < timeout && !stop.load(Ordering::Relaxed) {
-        for (_, reader) in &readers {
+        for (_, _, reader) in &readers {
             while let Ok(Some(change)) = reader.try_take_one() {
-                let message = change.into_value();
-                let mut bytes = message.encoding.to_bytes().to_vec();
-                bytes.extend_from_slice(&[0, 0]);
-                bytes.extend_from_slice(&message.bytes);
-                match camera_from_info(&bytes) {
+                match camera_from_info(&change.into_value().with_header()) {
                     Ok(camera) => return Ok(camera),
                     Err(e) => malformed.push(e),
                 }
@@ -380,9 +431,9 @@ impl Iterator for MeasurementSubscriber {
                 }
                 Err(e) => {
                     // A sample DDS could not hand over (an encoding no adapter takes, ...): counted and named too.
-                    let index = self.report.messages;
-                    self.report.messages += 1;
-                    self.malformed(index, format!("not taken: {e}"));
+                    let index = self.intake.take();
+                    self.intake
+                        .left_out(index, LeftOut::Malformed, format!("not taken: {e}"));
                 }
                 Ok(None) => {
                     if self.last_message.is_some_and(|t| t.elapsed() >= self.idle) {
@@ -410,11 +461,10 @@ pub struct ImageSubscriber {
     reader: no_key::SimpleDataReader<RawMessage, RawAdapter>,
     // Kept alive with the reader.
     _participant: rustdds::DomainParticipant,
-    topic: String,
+    intake: Intake,
     compressed: bool,
     expected_size: Option<(u32, u32)>,
     last_t_s: Option<f64>,
-    report: SubscriberReport,
     stop: Arc<AtomicBool>,
     idle: Duration,
     last_message: Option<Instant>,
@@ -423,8 +473,8 @@ pub struct ImageSubscriber {
 impl std::fmt::Debug for ImageSubscriber {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ImageSubscriber")
-            .field("topic", &self.topic)
-            .field("report", &self.report)
+            .field("topic", &self.intake.topic)
+            .field("report", &self.intake.report)
             .finish_non_exhaustive()
     }
 }
@@ -444,12 +494,6 @@ impl ImageSubscriber {
         stop: Arc<AtomicBool>,
         idle: Duration,
     ) -> Result<Self, Ros2Error> {
-        check_interfaces(&options.interfaces)?;
-        let full = format!("{}{topic}", normalised_namespace(&options.namespace));
-        let name = Name::parse(&full).map_err(|e| Ros2Error::Namespace {
-            namespace: full.clone(),
-            message: e.to_string(),
-        })?;
         let qos =
             QosProfile::subscription_default().history(History::KeepLast { depth: IMAGE_DEPTH });
         let qos = if best_effort {
@@ -462,15 +506,14 @@ impl ImageSubscriber {
         } else {
             IMAGE_TYPES[0]
         };
-        let (participant, reader) = raw_reader(options, &name, type_name, &qos)?;
+        let (full, participant, reader) = subscribe(options, topic, type_name, &qos)?;
         Ok(Self {
             reader,
             _participant: participant,
-            topic: full,
+            intake: Intake::new(full),
             compressed,
             expected_size: None,
             last_t_s: None,
-            report: SubscriberReport::default(),
             stop,
             idle,
             last_message: None,
@@ -479,12 +522,19 @@ impl ImageSubscriber {
 
     /// The topic subscribed to (with its namespace).
     pub fn topic(&self) -> &str {
-        &self.topic
+        &self.intake.topic
     }
 
     /// What was received so far: `measurements` counts the frames handed on.
     pub fn report(&self) -> &SubscriberReport {
-        &self.report
+        &self.intake.report
+    }
+
+    /// The images taken and those left out by reason, as they are counted (for the status:
+    /// [`Ros2Publisher::start_counting_inputs`](crate::ros2::Ros2Publisher::start_counting_inputs); the frame
+    /// tracker's refusals are counted there too, as [`LeftOut::TooClose`]).
+    pub fn counts(&self) -> Arc<InputCounts> {
+        Arc::clone(&self.intake.counts)
     }
 
     /// From now on, every image must be `width` x `height` px (the camera's).
@@ -497,9 +547,12 @@ impl ImageSubscriber {
         while let Ok(Some(change)) = self.reader.try_take_one() {
             drop(change);
             // Not a message of the tracking: --idle-s counts from the first image tracked.
-            let index = self.report.messages;
-            self.report.messages += 1;
-            self.malformed(index, "an image before any camera info".to_string());
+            let index = self.intake.take();
+            self.intake.left_out(
+                index,
+                LeftOut::NoCameraInfo,
+                "an image before any camera info".to_string(),
+            );
         }
     }
 
@@ -513,26 +566,25 @@ impl ImageSubscriber {
             match self.reader.try_take_one() {
                 Ok(Some(change)) => {
                     self.last_message = Some(Instant::now());
-                    let index = self.report.messages;
-                    self.report.messages += 1;
+                    let index = self.intake.take();
                     match self.decode(&change.into_value(), frame) {
                         Ok(t_s) => {
                             self.last_t_s = Some(t_s);
-                            self.report.measurements += 1;
+                            self.intake.report.measurements += 1;
                             frame.t_s = t_s;
                             return Some(FrameInfo {
                                 index: index as usize,
-                                name: format!("message {index} of {}", self.topic),
+                                name: format!("message {index} of {}", self.intake.topic),
                                 t_s,
                             });
                         }
-                        Err(reason) => self.malformed(index, reason),
+                        Err((why, reason)) => self.intake.left_out(index, why, reason),
                     }
                 }
                 Err(e) => {
-                    let index = self.report.messages;
-                    self.report.messages += 1;
-                    self.malformed(index, format!("not taken: {e}"));
+                    let index = self.intake.take();
+                    self.intake
+                        .left_out(index, LeftOut::Malformed, format!("not taken: {e}"));
                 }
                 Ok(None) => {
                     if self.last_message.is_some_and(|t| t.elapsed() >= self.idle) {
@@ -545,67 +597,69 @@ impl ImageSubscriber {
     }
 
     /// Decodes one image into `frame` and checks it; its stamp (s), or why it is left out.
-    fn decode(&self, message: &RawMessage, frame: &mut Frame) -> Result<f64, String> {
+    fn decode(&self, message: &RawMessage, frame: &mut Frame) -> Result<f64, (LeftOut, String)> {
         checked_image(
             message,
-            self.compressed.then_some(self.topic.as_str()),
+            self.compressed.then_some(self.intake.topic.as_str()),
             self.expected_size,
             self.last_t_s,
             frame,
         )
     }
-
-    /// Counts message `index` as malformed, keeping the reason if there is room.
-    fn malformed(&mut self, index: u64, reason: String) {
-        self.report.malformed += 1;
-        if self.report.reasons.len() < REASONS_KEPT {
-            self.report
-                .reasons
-                .push(format!("{} message {index}: {reason}", self.topic));
-        }
-    }
 }
 
 /// Decodes `message` (a `sensor_msgs/msg/Image`, or a `CompressedImage` of the topic `compressed`) into `frame` and
 /// checks it against the camera's size (`None`: no camera yet) and the previous image's stamp; its stamp (s), or why
-/// it is left out.
+/// it is left out (a compressed image that does not decode is [`LeftOut::Malformed`]).
 fn checked_image(
     message: &RawMessage,
     compressed: Option<&str>,
     expected_size: Option<(u32, u32)>,
     last_t_s: Option<f64>,
     frame: &mut Frame,
-) -> Result<f64, String> {
-    let mut bytes = Vec::with_capacity(4 + message.bytes.len());
-    bytes.extend_from_slice(&message.encoding.to_bytes());
-    bytes.extend_from_slice(&[0, 0]);
-    bytes.extend_from_slice(&message.bytes);
+) -> Result<f64, (LeftOut, String)> {
+    let bytes = message.with_header();
     let t_s = match compressed {
         Some(topic) => {
-            let (t_s, format, data) = compressed_image(&bytes)?;
+            let (t_s, format, data) =
+                compressed_image(&bytes).map_err(|e| (LeftOut::Malformed, e))?;
             let name = std::path::PathBuf::from(format!("{topic} ({format})"));
-            *frame = roitrack_formats::decode_frame(data, &name).map_err(|e| e.to_string())?;
+            *frame = roitrack_formats::decode_frame(data, &name)
+                .map_err(|e| (LeftOut::Malformed, e.to_string()))?;
             t_s
         }
-        None => decode_image(&bytes, frame)?,
+        None => decode_image(&bytes, frame).map_err(|e| match e {
+            ImageFault::Encoding(m) => (LeftOut::Encoding, m),
+            ImageFault::Malformed(m) => (LeftOut::Malformed, m),
+        })?,
     };
     let Some((width, height)) = expected_size else {
-        return Err("an image before any camera info".to_string());
+        return Err((
+            LeftOut::NoCameraInfo,
+            "an image before any camera info".to_string(),
+        ));
     };
     if (frame.width, frame.height) != (width, height) {
-        return Err(format!(
-            "the image is {} x {} px, the camera info says {width} x {height} px",
-            frame.width, frame.height
+        return Err((
+            LeftOut::Size,
+            format!(
+                "the image is {} x {} px, the camera info says {width} x {height} px",
+                frame.width, frame.height
+            ),
         ));
     }
     if !t_s.is_finite() {
-        return Err(format!("the stamp {t_s} s is not finite"));
+        return Err((
+            LeftOut::StampOrder,
+            format!("the stamp {t_s} s is not finite"),
+        ));
     }
     if let Some(last) = last_t_s
         && t_s <= last
     {
-        return Err(format!(
-            "the stamp {t_s} s does not come after the previous image's ({last} s)"
+        return Err((
+            LeftOut::StampOrder,
+            format!("the stamp {t_s} s does not come after the previous image's ({last} s)"),
         ));
     }
     Ok(t_s)
@@ -653,21 +707,28 @@ mod tests {
         assert_eq!(out.len(), 2);
         assert_eq!((out[1].id, out[1].t_s, out[1].u_px), (2, 1.50025, 11.0));
         // The same message again goes back in time (a point measured twice at a time), on the checks after it.
-        let again = checked_message(&after, &message(&[10.0, 11.0]), &mut out).unwrap_err();
+        let (why, again) = checked_message(&after, &message(&[10.0, 11.0]), &mut out).unwrap_err();
         assert!(again.starts_with("centroid 0:"), "{again}");
-        for (message, expected) in [
-            (message(&[10.0]), "field u_px: 1 entries for 2 point ids"),
+        assert_eq!(why, LeftOut::Invalid);
+        for (message, expected, expected_why) in [
+            (
+                message(&[10.0]),
+                "field u_px: 1 entries for 2 point ids",
+                LeftOut::Malformed,
+            ),
             (
                 message(&[10.0, f64::NAN]),
                 "field u_px[1]: NaN is not finite",
+                LeftOut::Malformed,
             ),
-            (message(&[10.0, 900.0]), "centroid 1:"),
+            (message(&[10.0, 900.0]), "centroid 1:", LeftOut::Invalid),
             (
                 RawMessage {
                     encoding: RepresentationIdentifier::CDR_BE,
                     ..message(&[10.0, 11.0])
                 },
                 "big-endian CDR is not supported",
+                LeftOut::Malformed,
             ),
             (
                 RawMessage {
@@ -675,10 +736,12 @@ mod tests {
                     bytes: vec![0; 6],
                 },
                 "field header",
+                LeftOut::Malformed,
             ),
         ] {
-            let reason = checked_message(&checks, &message, &mut out).unwrap_err();
+            let (why, reason) = checked_message(&checks, &message, &mut out).unwrap_err();
             assert!(reason.contains(expected), "{reason}, not {expected}");
+            assert_eq!(why, expected_why, "{reason}");
         }
     }
 
@@ -720,41 +783,53 @@ mod tests {
             (2.25, 4, 3, 5)
         );
         let bad = [
-            (good.clone(), None, None, "an image before any camera info"),
+            (
+                good.clone(),
+                None,
+                None,
+                "an image before any camera info",
+                LeftOut::NoCameraInfo,
+            ),
             (
                 good.clone(),
                 Some((5, 3)),
                 None,
                 "the image is 4 x 3 px, the camera info says 5 x 3 px",
+                LeftOut::Size,
             ),
             (
                 good.clone(),
                 Some((4, 3)),
                 Some(2.25),
                 "does not come after the previous image's",
+                LeftOut::StampOrder,
             ),
             (
                 image("yuv422", 4, 3, 8, &pixels),
                 Some((4, 3)),
                 None,
                 "image encoding \"yuv422\" is not read",
+                LeftOut::Encoding,
             ),
             (
                 image("mono8", 4, 3, 3, &pixels),
                 Some((4, 3)),
                 None,
                 "with a step of 3",
+                LeftOut::Malformed,
             ),
             (
                 image("mono8", 4, 3, 4, &pixels[..8]),
                 Some((4, 3)),
                 None,
                 "8 bytes of data",
+                LeftOut::Malformed,
             ),
         ];
-        for (message, size, last, expected) in bad {
-            let reason = checked_image(&message, None, size, last, &mut frame).unwrap_err();
+        for (message, size, last, expected, expected_why) in bad {
+            let (why, reason) = checked_image(&message, None, size, last, &mut frame).unwrap_err();
             assert!(reason.contains(expected), "{reason}, not {expected}");
+            assert_eq!(why, expected_why, "{reason}");
         }
     }
 
@@ -800,7 +875,7 @@ mod tests {
         let t_s = checked_image(&raw(&png), Some("/c"), Some((5, 4)), None, &mut decoded).unwrap();
         assert_eq!((t_s, decoded.width, decoded.height), (3.0, 5, 4));
         assert_eq!(decoded.pixels, frame.pixels);
-        let reason = checked_image(
+        let (why, reason) = checked_image(
             &raw(&png[..20]),
             Some("/c"),
             Some((5, 4)),
@@ -809,5 +884,6 @@ mod tests {
         )
         .unwrap_err();
         assert!(reason.contains("/c (png)"), "{reason}");
+        assert_eq!(why, LeftOut::Malformed);
     }
 }

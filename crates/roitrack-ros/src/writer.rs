@@ -3,6 +3,7 @@
 use std::collections::BTreeMap;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 use roitrack_core::estimator::{Estimate, TrackStatus};
 use roitrack_core::{CameraModel, Measurement, MotionState, Target};
@@ -10,6 +11,7 @@ use roitrack_formats::{AtomicFile, FormatError};
 use roitrack_image::{Frame, RoiImage};
 
 use crate::convert;
+use crate::input_counts::{InputCounts, LeftOut};
 use crate::msg::{self, Header};
 use crate::output::{McapFile, Output};
 
@@ -137,6 +139,8 @@ pub struct BagWriter {
     messages: u64,
     /// Whether an estimate has been written.
     holds_estimates: bool,
+    /// A node's input counts, added to each status ([`count_inputs`](Self::count_inputs)).
+    inputs: Option<Arc<InputCounts>>,
 }
 
 impl std::fmt::Debug for BagWriter {
@@ -224,7 +228,14 @@ impl BagWriter {
             text: String::with_capacity(128),
             messages: 0,
             holds_estimates: false,
+            inputs: None,
         })
+    }
+
+    /// Adds a node's input counts to each status from now on: the messages it took and those it left out, by reason
+    /// ([`status_keys`](crate::status_keys)), as they stand when the status is written.
+    pub fn count_inputs(&mut self, counts: Arc<InputCounts>) {
+        self.inputs = Some(counts);
     }
 
     /// The bag's path.
@@ -385,11 +396,12 @@ impl BagWriter {
             },
         )?;
         let mut text = std::mem::take(&mut self.text);
-        let spans = status_values(estimate, &mut text);
+        let (spans, count) = status_values(estimate, self.inputs.as_deref(), &mut text);
         let values = spans.map(|(key, start, end)| msg::KeyValue {
             key,
             value: &text[start..end],
         });
+        let values = &values[..count];
         let status = msg::DiagnosticArray {
             header,
             status: msg::One(msg::DiagnosticStatus {
@@ -397,7 +409,7 @@ impl BagWriter {
                 name: "roitrack",
                 message: estimate.status.name(),
                 hardware_id: "",
-                values: msg::Seq(&values),
+                values: msg::Seq(values),
             }),
         };
         let written = self.put(self.status, topics::STATUS, ns, &status);
@@ -794,49 +806,51 @@ pub fn diagnostic_level(status: TrackStatus) -> u8 {
     }
 }
 
-/// The status values' text, written into one reused buffer: `(key, start, end)` of each value.
-fn status_values(estimate: &Estimate, text: &mut String) -> [(&'static str, usize, usize); 5] {
+/// The most values a status has: the estimate's five and a node's input counts.
+const STATUS_VALUES: usize = 5 + 1 + LeftOut::ALL.len();
+
+/// The status values' text, written into one reused buffer: `(key, start, end)` of each value, and how many there are
+/// (the estimate's five, then with `inputs` the keys of [`status_keys`](crate::status_keys)).
+fn status_values(
+    estimate: &Estimate,
+    inputs: Option<&InputCounts>,
+    text: &mut String,
+) -> ([(&'static str, usize, usize); STATUS_VALUES], usize) {
     use std::fmt::Write;
     text.clear();
-    let mut spans = [("", 0, 0); 5];
-    let mut put =
-        |k: usize, key: &'static str, text: &mut String, value: std::fmt::Arguments<'_>| {
-            let start = text.len();
-            let _ = text.write_fmt(value);
-            spans[k] = (key, start, text.len());
-        };
+    let mut spans = [("", 0, 0); STATUS_VALUES];
+    let mut count = 0;
+    let mut put = |key: &'static str, text: &mut String, value: std::fmt::Arguments<'_>| {
+        let start = text.len();
+        let _ = text.write_fmt(value);
+        spans[count] = (key, start, text.len());
+        count += 1;
+    };
+    put("status", text, format_args!("{}", estimate.status.name()));
     put(
-        0,
-        "status",
-        text,
-        format_args!("{}", estimate.status.name()),
-    );
-    put(
-        1,
         "residual_rms_px",
         text,
         format_args!("{}", estimate.residual_rms_px),
     );
     put(
-        2,
         "inverse_condition",
         text,
         format_args!("{}", estimate.inverse_condition),
     );
     put(
-        3,
         "measurements_used",
         text,
         format_args!("{}", estimate.measurements_used),
     );
-    put(
-        4,
-        "iterations",
-        text,
-        format_args!("{}", estimate.iterations),
-    );
-    spans
+    put("iterations", text, format_args!("{}", estimate.iterations));
+    if let Some(inputs) = inputs {
+        for (key, value) in crate::status_keys().zip(inputs.values()) {
+            put(key, text, format_args!("{value}"));
+        }
+    }
+    (spans, count)
 }
+
 /// The colour of the measured centroids in the annotations: green.
 pub const MEASURED_COLOR: msg::Color = msg::Color {
     r: 0.1,

@@ -6,7 +6,9 @@ with Eclipse Cyclone DDS: the input of `roitrack ros2-node --image-topic` in its
 
 With --malformed, bad images go out too, which the node must leave out, name, and go on: one before the camera info,
 then, before the first good frame, one of another encoding (`yuv422`), one of another size, one whose step does not
-match its width, and one whose data is short.
+match its width, and one whose data is short. With --too-close K, a copy of frame K goes out right after it, stamped
+1 ms later: on a rolling-shutter camera, a frame that starts before the previous frame's blobs were read, which the
+node must leave out, count, and go on.
 
 It waits (up to --wait-s) for a subscriber of the images, and after the camera info for the node's publisher of its
 estimates (--wait-for-publisher), publishes reliably at --rate-hz images a second, waits for
@@ -125,6 +127,8 @@ def main():
     parser.add_argument("--rate-hz", type=float, default=30.0)
     parser.add_argument("--wait-s", type=float, default=30.0)
     parser.add_argument("--malformed", action="store_true")
+    parser.add_argument("--too-close", type=int, metavar="K",
+                        help="after frame K, a copy of it stamped 1 ms later")
     parser.add_argument("--wait-for-publisher", default="rt/roitrack/pose",
                         help="the DDS topic of the node's estimates, whose publisher to wait for after the camera info")
     args = parser.parse_args()
@@ -177,7 +181,12 @@ def main():
                 return 1
             time.sleep(0.01)
     time.sleep(1.0)
-    messages = frames
+    messages = list(frames)
+    if args.too_close is not None:
+        k = args.too_close
+        f = frames[k]
+        copy = image(rows[k][0] + 1e-3, f.width, f.height, 16 if f.encoding == "mono16" else 8, f.data)
+        messages.insert(k + 1, copy)
     if args.malformed:
         w, h, t0 = first.width, first.height, rows[0][0] - 0.5
         bad = [
@@ -186,7 +195,7 @@ def main():
             image(t0, w, h, 8, first.data, step=w - 1),
             image(t0, w, h, 8, first.data[: w * (h - 1)]),
         ]
-        messages = bad + frames
+        messages = bad + messages
     start = time.monotonic()
     for k, m in enumerate(messages):
         due = start + k / args.rate_hz

@@ -14,9 +14,10 @@ use clap::Args;
 use roitrack::core::estimator::{Tracker, track};
 use roitrack::formats::{EstimateWriter, MeasurementChecks};
 use roitrack::ros::BagOptions;
+use roitrack_ros::LeftOut;
 use roitrack_ros::ros2::{Ros2Options, Ros2Publisher};
 use roitrack_ros::ros2_input::{
-    ImageSubscriber, MeasurementSubscriber, SubscriberReport, wait_for_camera_info_with,
+    ImageSubscriber, MeasurementSubscriber, REASONS_KEPT, wait_for_camera_info_with,
 };
 
 use crate::args::{EstimatorArgs, ShutterArg, TargetArgs};
@@ -29,8 +30,9 @@ use crate::ros2_args::Ros2BusArgs;
 /// (/roitrack/pose, /roitrack/twist, /roitrack/odometry, /tf, /roitrack/status, /roitrack/camera_info). Runs until
 /// Ctrl-C (or SIGTERM), or --idle-s without a message. Malformed messages (arrays of different lengths, non-finite
 /// values, ids not of the target, centroids off the image, times going back, big-endian CDR; images of another
-/// encoding or size, a step that does not match, an image before any camera info) are left out whole, counted and
-/// named; the node goes on.
+/// encoding or size, a step that does not match, an image before any camera info; a rolling-shutter frame that starts
+/// before the previous one's blobs were read) are left out whole, named in the log and counted by reason in each
+/// /roitrack/status (left_out_encoding, left_out_size, ...); the node goes on.
 #[derive(Debug, Args)]
 pub struct Ros2NodeArgs {
     /// Options from a ROS 2 parameters file (YAML, as `ros2 run --ros-args --params-file` reads): `roitrack:` (or
@@ -220,8 +222,14 @@ pub fn run(args: &Ros2NodeArgs) -> Result<()> {
         idle,
     )
     .map_err(|e| anyhow!("--measurement-topic {}: {e}", args.measurement_topic))?;
-    let mut publisher = Ros2Publisher::start(&options, &bag_options, Some(camera.clone()))
-        .map_err(|e| anyhow!("ros2-node: {e}"))?;
+    let counts = subscriber.counts();
+    let mut publisher = Ros2Publisher::start_counting_inputs(
+        &options,
+        &bag_options,
+        Some(camera.clone()),
+        Arc::clone(&counts),
+    )
+    .map_err(|e| anyhow!("ros2-node: {e}"))?;
     eprintln!(
         "roitrack: {} takes centroids from {} and publishes its estimates (Ctrl-C ends it)",
         publisher.description(),
@@ -240,23 +248,24 @@ pub fn run(args: &Ros2NodeArgs) -> Result<()> {
     let report = subscriber.report().clone();
     let published = publisher.finish()?;
     eprintln!(
-        "roitrack: {} messages ({} centroids) taken from {}, {} malformed and left out; {estimates} estimates, {} \
-         published, {} dropped",
+        "roitrack: {} messages ({} centroids) taken from {}, {} left out ({}); {estimates} estimates, {} published, \
+         {} dropped",
         report.messages,
         report.measurements,
         subscriber.topic(),
-        report.malformed,
+        counts.total_left_out(),
+        counts.summary(),
         published.published,
         published.dropped
     );
-    print_reasons(&report);
+    print_reasons(&report.reasons);
     tracked.map_err(|e| anyhow!("tracking: {e}"))?;
     finish(writer, &stop)
 }
 
-fn print_reasons(report: &SubscriberReport) {
-    for reason in &report.reasons {
-        eprintln!("roitrack: malformed: {reason}");
+fn print_reasons(reasons: &[String]) {
+    for reason in reasons {
+        eprintln!("roitrack: left out: {reason}");
     }
 }
 
@@ -285,7 +294,7 @@ fn run_images(
     mut writer: Option<EstimateWriter>,
     stop: &AtomicBool,
 ) -> Result<()> {
-    use roitrack::pipeline::{FrameStreamError, FrameTracker};
+    use roitrack::pipeline::{FrameError, FrameStreamError, FrameTracker};
 
     let camera = crate::commands::track::frame_camera_of(
         args.shutter,
@@ -300,8 +309,14 @@ fn run_images(
         args.no_rs_smoothing,
     )?;
     images.expect_size(camera.width_px, camera.height_px);
-    let mut publisher = Ros2Publisher::start(options, bag_options, Some(camera.clone()))
-        .map_err(|e| anyhow!("ros2-node: {e}"))?;
+    let counts = images.counts();
+    let mut publisher = Ros2Publisher::start_counting_inputs(
+        options,
+        bag_options,
+        Some(camera.clone()),
+        Arc::clone(&counts),
+    )
+    .map_err(|e| anyhow!("ros2-node: {e}"))?;
     eprintln!(
         "roitrack: {} takes images from {} and publishes its estimates (Ctrl-C ends it)",
         publisher.description(),
@@ -310,7 +325,11 @@ fn run_images(
     let mut tracker =
         FrameTracker::new(camera, target, config).context("invalid tracker options")?;
     let mut estimates = 0u64;
-    let result = roitrack::pipeline::track_frame_stream(
+    // Frames the tracker refuses for their time (a rolling shutter's frame that starts before the previous frame's
+    // last blob was read): left out, counted and named, and the node goes on. The subscriber has already left out
+    // those of another size or with a stamp that goes back, so anything else the tracker refuses stops the node.
+    let mut too_close = Vec::new();
+    let result = roitrack::pipeline::track_frame_stream_leaving_out(
         &mut tracker,
         |frame| {
             images
@@ -327,22 +346,34 @@ fn run_images(
             }
             Ok(())
         },
+        |info, error| {
+            if !matches!(error, FrameError::TimeOrder { .. }) {
+                return false;
+            }
+            counts.left_out(LeftOut::TooClose);
+            if too_close.len() < REASONS_KEPT {
+                too_close.push(format!("{}: {error}", info.name));
+            }
+            true
+        },
     );
     let report = images.report().clone();
     let published = publisher.finish()?;
     let frames = tracker.report();
     eprintln!(
-        "roitrack: {} images taken from {}, {} malformed and left out; {} frames tracked, target not found in {}; \
+        "roitrack: {} images taken from {}, {} left out ({}); {} frames tracked, target not found in {}; \
          {estimates} estimates, {} published, {} dropped",
         report.messages,
         images.topic(),
-        report.malformed,
+        counts.total_left_out(),
+        counts.summary(),
         frames.frames,
         frames.not_found,
         published.published,
         published.dropped
     );
-    print_reasons(&report);
+    print_reasons(&report.reasons);
+    print_reasons(&too_close);
     if let Err(e) = result {
         return Err(match e {
             FrameStreamError::Source(e) => match e {},

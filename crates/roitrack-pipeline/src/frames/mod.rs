@@ -43,7 +43,7 @@ pub use config::FrameTrackerConfig;
 pub use outcome::{FrameError, FrameMethod, FrameOutcome, FrameTrackReport};
 /// The window measurement, now in the image crate: re-exported where the frame tracker's callers found it.
 pub use roitrack_image::window::{FlatWindow, flatten_window, measure_flat_window};
-pub use stream::{FrameStreamError, track_frame_stream};
+pub use stream::{FrameStreamError, track_frame_stream, track_frame_stream_leaving_out};
 
 use nalgebra::Vector2;
 use roitrack_core::estimator::{

@@ -81,7 +81,60 @@ const FRAMES_IN_FLIGHT: usize = 4;
 pub fn track_frame_stream<I, S, K>(
     tracker: &mut FrameTracker,
     next_frame: impl FnMut(&mut Frame) -> Option<Result<I, S>> + Send,
+    sink: impl FnMut(&I, &FrameOutcome, &[Measurement]) -> Result<(), K>,
+) -> Result<FrameTrackReport, FrameStreamError<S, K, I>>
+where
+    I: Send,
+    S: Send,
+{
+    track_frame_stream_leaving_out(tracker, next_frame, sink, |_, _| false)
+}
+
+/// [`track_frame_stream`] for a live source, which must go on past a frame the tracker refuses: `leave_out` gets
+/// each refused frame's information and why it was refused ([`FrameTracker::process`] refuses a frame before it
+/// changes anything), and says whether to leave the frame out and go on (`true`) or stop with
+/// [`FrameStreamError::Frame`] (`false`). A frame left out reaches neither the tracker's state nor `sink`.
+///
+/// ```
+/// use roitrack_core::{CameraModel, Target};
+/// use roitrack_image::Frame;
+/// use roitrack_pipeline::frames::{FrameError, FrameTracker, FrameTrackerConfig, track_frame_stream_leaving_out};
+///
+/// // Black frames at 1, 3, 2 and 4 (x 1/30 s): the third goes back in time, is left out, and the stream goes on.
+/// let mut tracker =
+///     FrameTracker::new(CameraModel::canonical(), Target::grid4x4(), FrameTrackerConfig::default()).unwrap();
+/// let times = [1.0, 3.0, 2.0, 4.0];
+/// let mut k = 0;
+/// let next = move |frame: &mut Frame| {
+///     k += 1;
+///     (k <= times.len()).then(|| {
+///         frame.resize(1024, 1024, 8);
+///         frame.pixels.fill(0);
+///         frame.t_s = times[k - 1] / 30.0;
+///         Ok::<_, std::convert::Infallible>(k)
+///     })
+/// };
+/// let (mut seen, mut left_out) = (Vec::new(), Vec::new());
+/// let report = track_frame_stream_leaving_out(
+///     &mut tracker,
+///     next,
+///     |k, _, _| {
+///         seen.push(*k);
+///         Ok::<_, std::convert::Infallible>(())
+///     },
+///     |k, e| {
+///         left_out.push(*k);
+///         matches!(e, FrameError::TimeOrder { .. })
+///     },
+/// )
+/// .unwrap();
+/// assert_eq!((seen, left_out, report.frames), (vec![1, 2, 4], vec![3], 3));
+/// ```
+pub fn track_frame_stream_leaving_out<I, S, K>(
+    tracker: &mut FrameTracker,
+    next_frame: impl FnMut(&mut Frame) -> Option<Result<I, S>> + Send,
     mut sink: impl FnMut(&I, &FrameOutcome, &[Measurement]) -> Result<(), K>,
+    mut leave_out: impl FnMut(&I, &FrameError) -> bool,
 ) -> Result<FrameTrackReport, FrameStreamError<S, K, I>>
 where
     I: Send,
@@ -94,7 +147,7 @@ where
     }
     std::thread::scope(|scope| {
         let decoder = scope.spawn(move || decode_frames(next_frame, &empty_rx, &full_tx));
-        let result = track_decoded(tracker, &full_rx, &empty_tx, &mut sink);
+        let result = track_decoded(tracker, &full_rx, &empty_tx, &mut sink, &mut leave_out);
         // Unblocks a decoder waiting for a buffer or for room in the queue.
         drop(empty_tx);
         drop(full_rx);
@@ -137,6 +190,7 @@ fn track_decoded<I, S, K>(
     full_rx: &mpsc::Receiver<Result<(Frame, I), S>>,
     empty_tx: &mpsc::Sender<Frame>,
     sink: &mut impl FnMut(&I, &FrameOutcome, &[Measurement]) -> Result<(), K>,
+    leave_out: &mut impl FnMut(&I, &FrameError) -> bool,
 ) -> Result<(), FrameStreamError<S, K, I>> {
     let mut result = Ok(());
     // Offline, a rolling shutter's estimates come two frames late, refined (FrameTrackerConfig::rs_smoothing).
@@ -153,6 +207,10 @@ fn track_decoded<I, S, K>(
         };
         let outcome = match tracker.process(&frame) {
             Ok(outcome) => outcome,
+            Err(source) if leave_out(&info, &source) => {
+                let _ = empty_tx.send(frame);
+                continue;
+            }
             Err(source) => {
                 result = Err(FrameStreamError::Frame {
                     index,
