@@ -180,6 +180,16 @@ impl Output {
         }
     }
 
+    /// The messages of one estimate are all written: a DDS output sends them now, back to back (see
+    /// `DdsChannels::flush`); the others have written each as it came.
+    pub(crate) fn end_of_estimate(&mut self) -> McapResult<()> {
+        match self {
+            #[cfg(feature = "ros2")]
+            Self::Dds(dds) => dds.flush(),
+            _ => Ok(()),
+        }
+    }
+
     pub(crate) fn finish(&mut self) -> McapResult<()> {
         match self {
             Self::Mcap(file) => file.writer()?.finish().map(|_| ()),
@@ -191,7 +201,7 @@ impl Output {
                 Ok(())
             }
             #[cfg(feature = "ros2")]
-            Self::Dds(_) => Ok(()),
+            Self::Dds(dds) => dds.flush(),
         }
     }
 }

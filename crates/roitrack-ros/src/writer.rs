@@ -415,7 +415,9 @@ impl BagWriter {
         let written = self.put(self.status, topics::STATUS, ns, &status);
         self.text = text;
         self.status = written?;
-        Ok(())
+        self.writer
+            .end_of_estimate()
+            .map_err(|e| mcap_error(&self.path, "cannot publish the estimate", e))
     }
 
     /// Writes a frame to `/roitrack/image` (mono8 for 8-bit frames, else mono16, little endian) and its
