@@ -77,7 +77,7 @@ fn offered_qos_profiles(transient_local: bool) -> String {
     )
 }
 
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Copy)]
 struct Channel {
     id: u16,
     sequence: u32,
@@ -177,7 +177,9 @@ impl BagWriter {
     }
 
     /// A writer of the bag's messages to `writer` (the live server's channels, see `LiveServer`), `path` naming it in
-    /// errors.
+    /// errors. Every channel is created here, the camera info's included (on the DDS bus: its publisher, reliable and
+    /// transient local, `ros2::qos_of`), before any message: a message can only be written to a [`Channel`] that
+    /// `add_channel` gave.
     pub(crate) fn with_output(
         path: PathBuf,
         mut writer: Output,

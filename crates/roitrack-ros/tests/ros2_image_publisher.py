@@ -10,6 +10,11 @@ match its width, and one whose data is short. With --too-close K, a copy of fram
 1 ms later: on a rolling-shutter camera, a frame that starts before the previous frame's blobs were read, which the
 node must leave out, count, and go on.
 
+With --encoding, the frames go out in another form than their PNG's: `bgr8` (each grey value as three equal
+channels, which BT.601 luma turns back into the same grey), `mono16` (each 8-bit value v as 257 v, little-endian: the
+frames of the PNGs `roitrack` wrote at 16 bits in the test), or `png`: the PNG files themselves as
+`sensor_msgs/msg/CompressedImage` (format `png`, on the topic given, not decoded here).
+
 It waits (up to --wait-s) for a subscriber of the images, and after the camera info for the node's publisher of its
 estimates (--wait-for-publisher), publishes reliably at --rate-hz images a second, waits for
 every image to be acknowledged, and prints `published N images`.
@@ -18,6 +23,7 @@ every image to be acknowledged, and prints `published N images`.
 """
 
 import argparse
+import array
 import csv
 import dataclasses
 import os
@@ -37,6 +43,13 @@ from cyclonedds.util import duration
 
 from ros2_measurement_publisher import camera_info
 from ros2_subscriber import LATCHED, CameraInfo, Header, Time, ros_type
+
+
+@dataclasses.dataclass
+class CompressedImage(IdlStruct, typename=ros_type("sensor_msgs", "CompressedImage")):
+    header: Header
+    format: str
+    data: sequence[uint8]
 
 
 @dataclasses.dataclass
@@ -129,21 +142,45 @@ def main():
     parser.add_argument("--malformed", action="store_true")
     parser.add_argument("--too-close", type=int, metavar="K",
                         help="after frame K, a copy of it stamped 1 ms later")
+    parser.add_argument("--encoding", choices=["bgr8", "mono16", "png"],
+                        help="publish the frames in this form (default: mono8 or mono16 as their PNG)")
     parser.add_argument("--wait-for-publisher", default="rt/roitrack/pose",
                         help="the DDS topic of the node's estimates, whose publisher to wait for after the camera info")
     args = parser.parse_args()
 
     with open(args.timestamps) as f:
         rows = [(float(r[0]), r[1]) for r in csv.reader(f) if r and r[0][0].isdigit()]
+    if args.encoding == "png" and (args.malformed or args.too_close is not None):
+        parser.error("--encoding png goes without --malformed and --too-close")
     frames = []
     for t_s, name in rows:
-        width, height, depth, pixels = read_png(os.path.join(args.frames, name))
-        frames.append(image(t_s, width, height, depth, pixels))
+        path = os.path.join(args.frames, name)
+        if args.encoding == "png":
+            frames.append(CompressedImage(header=stamp(t_s), format="png", data=open(path, "rb").read()))
+            continue
+        width, height, depth, pixels = read_png(path)
+        if args.encoding == "bgr8" and depth == 8:
+            bgr = bytearray(3 * len(pixels))
+            for c in range(3):
+                bgr[c::3] = pixels
+            frames.append(image(t_s, width, height, 8, bytes(bgr), encoding="bgr8", step=3 * width))
+        elif args.encoding == "mono16" and depth == 8:
+            wide = array.array("H", (257 * v for v in pixels))
+            if sys.byteorder != "little":
+                wide.byteswap()
+            m = image(t_s, width, height, 16, wide.tobytes())
+            m.is_bigendian = 0
+            frames.append(m)
+        elif args.encoding is None:
+            frames.append(image(t_s, width, height, depth, pixels))
+        else:
+            parser.error(f"--encoding {args.encoding}: {name} is a {depth}-bit PNG")
     print(f"decoded {len(frames)} frames", file=sys.stderr, flush=True)
 
     participant = DomainParticipant(args.domain)
     qos = Qos(Policy.Reliability.Reliable(duration(seconds=10)), Policy.Durability.Volatile, Policy.History.KeepAll)
-    topic = Topic(participant, "rt" + args.topic, Image, qos=qos)
+    message_type = CompressedImage if args.encoding == "png" else Image
+    topic = Topic(participant, "rt" + args.topic, message_type, qos=qos)
     writer = DataWriter(participant, topic, qos=qos)
     start = time.monotonic()
     while not writer.get_matched_subscriptions():

@@ -8,7 +8,8 @@ estimates and the status, reliable for /tf, reliable and transient local for the
 message and writes one JSON object a line to --out: the topic, the time it was taken (ns, wall clock), the DDS
 source timestamp (ns, the publisher's wall clock at the write) and the message's fields. It prints `ready` once its
 readers exist, and ends when --count estimates (pose messages) have come, when no message has come for --idle-s
-after the first, or after --timeout-s.
+after the first estimate (a camera info latched by another node, which comes long before, does not start the
+count), or after --timeout-s.
 
     python ros2_subscriber.py --domain 0 --out received.jsonl [--namespace /robot1] [--count N]
 """
@@ -243,7 +244,7 @@ def main():
         now = time.monotonic()
         if args.count and estimates >= args.count:
             break
-        if last is not None and now - last > args.idle_s:
+        if estimates and now - last > args.idle_s:
             break
         if now - start > args.timeout_s:
             break
