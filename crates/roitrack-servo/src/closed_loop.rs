@@ -305,7 +305,7 @@ impl ServoConfig {
         }
     }
 
-    fn check(&self) -> Result<(), ServoError> {
+    pub(crate) fn check(&self) -> Result<(), ServoError> {
         let positive = |field: &'static str, value: f64| {
             if value.is_finite() && value > 0.0 {
                 Ok(())
@@ -685,24 +685,15 @@ impl CameraSide {
     }
 }
 
-/// Runs one closed loop (see the [module docs](self)).
-///
-/// ```
-/// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig, run_servo};
-/// // The floor: computed torque on the true state, the orthoglide path at 1 m/s.
-/// let report = run_servo(&ServoConfig::new(ControllerKind::TrueState, CameraKind::Truth, 1.0)).unwrap();
-/// assert!(report.stable);
-/// assert!(report.rms_error_mm < 0.5, "{}", report.rms_error_mm);
-/// ```
-pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
-    config.check()?;
-    let path = &config.path;
+/// The gains (for `kvs`: λ as the natural frequency) and the controller of `config`, made from its feedback age as
+/// [`run_servo`] makes them.
+pub(crate) fn build_controller(config: &ServoConfig) -> (Gains, Box<dyn Controller + Send>) {
     let robot = config.robot;
     let model = robot
         .with_mass_factor(config.model_mass_factor)
         .with_friction_factor(config.model_friction_factor);
     let age = config.feedback_age_s();
-    let (gains, mut controller): (Gains, Box<dyn Controller>) = match config.controller {
+    match config.controller {
         ControllerKind::Kvs => {
             let mut kinematic = KinematicGains::for_latency(age);
             if let Some(g) = config.gains {
@@ -734,7 +725,26 @@ pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
                 Box::new(ComputedTorque::new(kind.name(), model, gains, velocity)),
             )
         }
-    };
+    }
+}
+
+/// Runs one closed loop (see the [module docs](self)).
+///
+/// ```
+/// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig, run_servo};
+/// // The floor: computed torque on the true state, the orthoglide path at 1 m/s.
+/// let report = run_servo(&ServoConfig::new(ControllerKind::TrueState, CameraKind::Truth, 1.0)).unwrap();
+/// assert!(report.stable);
+/// assert!(report.rms_error_mm < 0.5, "{}", report.rms_error_mm);
+/// ```
+pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
+    config.check()?;
+    let path = &config.path;
+    let robot = config.robot;
+    let model = robot
+        .with_mass_factor(config.model_mass_factor)
+        .with_friction_factor(config.model_friction_factor);
+    let (gains, mut controller) = build_controller(config);
     let truth_fed = config.controller == ControllerKind::TrueState;
     let actuation_delay_s = if truth_fed {
         0.0

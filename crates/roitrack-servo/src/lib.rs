@@ -12,12 +12,15 @@
 //!   ([`run_servo`]), deterministic for a seed, with divergence detected and reported.
 //! - [`output`]: a run's files (reference and achieved poses in TUM, the estimates, the per-tick log) and figures.
 //! - [`handle`]: the newest estimate for a user's control thread, read without locks or allocation.
+//! - [`live`]: the closed loop in real time: the controller on its own thread on the wall clock, fed by the live
+//!   two-thread loop through the handle, the camera rendering the simulated robot where it is ([`live::run_live_servo`]).
 //! - [`sweep`]: the largest stable gain against latency, per scheme.
 #![deny(missing_docs)]
 
 pub mod closed_loop;
 pub mod control;
 pub mod handle;
+pub mod live;
 pub mod reference;
 pub mod robot;
 pub mod sweep;

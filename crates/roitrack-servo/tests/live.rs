@@ -1,0 +1,68 @@
+//! The closed loop in real time on the project's simulated ROI camera (real clock, real threads, the live loop's
+//! queues and the estimate handle): stable to the path's end, and its tracking error bounded by the simulated-time
+//! run of the same configuration. Latency is printed, not asserted: this machine is shared and noisy.
+
+use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
+use roitrack_servo::live::{
+    LiveOptions, LoopClockCamera, RobotScene, roi_camera_model, run_live_servo, servo_target,
+};
+use roitrack_servo::{CameraKind, CameraTiming, ControllerKind, ServoConfig, run_servo};
+
+/// The live run's RMS error may be at most this times the simulated-time run's: the target is 1.5x (docs/servo.md);
+/// the test leaves room for a loaded machine, whose late ROI slots age the feedback beyond what the gains assume.
+const RMS_BOUND_FACTOR: f64 = 2.0;
+
+#[test]
+fn the_real_time_loop_tracks_like_the_simulated_time_one() {
+    let mut config = ServoConfig::new(ControllerKind::Ctc, CameraKind::Roi, 1.0);
+    // The live loop's tracker runs on the loop's estimation thread, which the controller cannot tell its commands.
+    config.known_acceleration = false;
+    // 2 kHz: what the loop holds on two shared cores (docs/servo.md, "The real-time loop").
+    let rate_hz = 2000.0;
+    config.control_rate_hz = rate_hz;
+    config.timing = Some(CameraTiming {
+        rate_hz,
+        ..CameraKind::Roi.timing()
+    });
+    let simulated = run_servo(&config).unwrap();
+    assert!(simulated.stable);
+
+    let scene = RobotScene::new(&config.path);
+    let renderer = RoiRenderer::new(
+        roi_camera_model(&config),
+        servo_target(),
+        SensorModel::default(),
+    )
+    .unwrap();
+    let truth = {
+        let scene = scene.clone();
+        move |t: f64| scene.camera_state_at_loop_s(t)
+    };
+    let mut camera = LoopClockCamera::new(SimulatedCamera::new(renderer, truth, 1), scene.clone());
+    let live = run_live_servo(&mut camera, &scene, &config, &LiveOptions::default()).unwrap();
+    let (p50, p99) = live.actuation_latency_quantiles_us();
+    eprintln!(
+        "simulated time {:.4} mm RMS; real time {:.4} mm RMS ({:.4} max), stable {}; exposure to actuation p50/p99 \
+         {p50:.0}/{p99:.0} us; {} ticks, {} missed; {} late ROI slots; start {:.2} s; real-time priority {}",
+        simulated.rms_error_mm,
+        live.servo.rms_error_mm,
+        live.servo.max_error_mm,
+        live.servo.stable,
+        live.ticks,
+        live.missed_ticks,
+        live.loop_report.late,
+        live.start_delay_s,
+        live.realtime_priority
+    );
+    assert!(live.servo.stable, "{:?}", live.servo.stop_reason);
+    // To the path's end, one sample a tick.
+    let last = live.servo.samples.last().unwrap();
+    assert!(last.t_s >= config.path.duration_s(), "{}", last.t_s);
+    assert!(!live.exposure_to_actuation_us.is_empty());
+    let bound_mm = RMS_BOUND_FACTOR * simulated.rms_error_mm;
+    assert!(
+        live.servo.rms_error_mm <= bound_mm,
+        "{:.4} mm RMS in real time, over {bound_mm:.4} ({RMS_BOUND_FACTOR} x the simulated-time run's)",
+        live.servo.rms_error_mm
+    );
+}
