@@ -28,6 +28,11 @@ pub struct LoopConfig {
     pub rate_hz: f64,
     /// Wait for each trigger time on the wall clock (a real camera's trigger); otherwise run as fast as possible.
     pub paced: bool,
+    /// Paced only: a camera side that finds itself past a slot's period skips to the slot of now (the skipped
+    /// slots counted in [`LoopReport::skipped`]) instead of reading the slots it missed one after the other with
+    /// ROIs of the past; for a loop feeding a controller, where an old ROI is worth less than a fresh one. Default:
+    /// false (every slot read).
+    pub skip_late_slots: bool,
     /// Number of ROI slots to run.
     pub roi_slots: usize,
     /// Trigger time of slot 0 (s): the origin of the trigger times the camera is given, and so of the ROIs' and
@@ -96,6 +101,7 @@ impl Default for LoopConfig {
         Self {
             rate_hz: 4000.0,
             paced: false,
+            skip_late_slots: false,
             roi_slots: 4000,
             t_start_s: 0.0,
             full_frame_slots: 4,
@@ -127,6 +133,8 @@ pub struct LoopReport {
     pub dropped: usize,
     /// Paced mode: triggers the camera side reached more than one period late.
     pub late: usize,
+    /// With [`LoopConfig::skip_late_slots`]: slots skipped because the camera side reached them late.
+    pub skipped: usize,
     /// Full-frame (re-)initialisations that found the target and restarted the track.
     pub initialisations: usize,
     /// Full frames in which the target was not found ([`find_target`] failed): the loop reads another full frame next.
@@ -376,6 +384,7 @@ impl LoopReport {
             rejections: camera_side.rejections,
             dropped: camera_side.dropped,
             late: camera_side.late,
+            skipped: camera_side.skipped,
             initialisations: camera_side.initialisations,
             failed_initialisations: camera_side.failed_initialisations,
             refused: estimation_side.refused,
@@ -530,13 +539,23 @@ impl<'a, C: RoiCamera> Acquisition<'a, C> {
         let period = Duration::from_secs_f64(1.0 / self.config.rate_hz);
         let mut slot = 0usize;
         while slot < self.config.roi_slots {
-            let t_s = self.config.t_start_s + slot as f64 / self.config.rate_hz;
             if let Some(progress) = progress
                 && slot.is_multiple_of(256)
             {
                 progress.store(slot, Ordering::Relaxed);
             }
             self.wait_for_slot(start, slot, period);
+            if self.config.paced && self.config.skip_late_slots {
+                let now_slot = (start.elapsed().as_secs_f64() * self.config.rate_hz) as usize;
+                if now_slot > slot {
+                    self.counters.skipped += now_slot - slot;
+                    slot = now_slot;
+                    if slot >= self.config.roi_slots {
+                        break;
+                    }
+                }
+            }
+            let t_s = self.config.t_start_s + slot as f64 / self.config.rate_hz;
             while let Ok(p) = self.predictor_rx.pop() {
                 // Estimates from before the last re-initialisation describe the old track.
                 if p.t_ref_s >= self.restart_t_s {
@@ -724,6 +743,7 @@ struct Counters {
     rejections: RejectionCounts,
     dropped: usize,
     late: usize,
+    skipped: usize,
     initialisations: usize,
     failed_initialisations: usize,
     camera_errors: usize,

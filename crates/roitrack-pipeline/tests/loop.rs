@@ -241,3 +241,65 @@ fn invalid_loop_options_and_wrong_frames_are_refused() {
     );
     assert!(report.estimates.is_empty());
 }
+
+/// A camera that takes 1 ms per ROI: slower than a 4 kHz slot.
+struct Slow<C> {
+    inner: C,
+}
+
+impl<C: roitrack_image::RoiCamera> roitrack_image::RoiCamera for Slow<C> {
+    fn grab_roi(
+        &mut self,
+        trigger: &roitrack_image::RoiTrigger,
+        image: &mut roitrack_image::RoiImage,
+    ) -> Result<(), roitrack_image::GrabError> {
+        std::thread::sleep(std::time::Duration::from_millis(1));
+        self.inner.grab_roi(trigger, image)
+    }
+
+    fn grab_full_frame(
+        &mut self,
+        t_s: f64,
+        frame: &mut roitrack_image::Frame,
+    ) -> Result<(), roitrack_image::GrabError> {
+        self.inner.grab_full_frame(t_s, frame)
+    }
+}
+
+#[test]
+fn a_paced_loop_that_skips_late_slots_reads_fewer_rois_all_of_the_present() {
+    // A target at rest: wherever the skipping lands, the blobs are where the last estimate put them.
+    let scenario = Scenario::new(ScenarioKind::Static, 3);
+    let renderer = RoiRenderer::new(
+        scenario.camera.clone(),
+        scenario.target.clone(),
+        SensorModel::default(),
+    )
+    .unwrap();
+    let truth = {
+        let s = scenario.clone();
+        move |t: f64| s.state_at(t)
+    };
+    let mut camera = Slow {
+        inner: SimulatedCamera::new(renderer, truth, 3),
+    };
+    // 1 s at 4 kHz: a camera at 1 ms a ROI cannot hold it.
+    let config = LoopConfig {
+        roi_slots: 4000,
+        paced: true,
+        skip_late_slots: true,
+        ..Default::default()
+    };
+    let report = run_loop(
+        &mut camera,
+        &scenario.camera,
+        &scenario.target,
+        TrackerConfig::default(),
+        &config,
+    )
+    .unwrap();
+    // At most one ROI a millisecond over the second: the rest skipped, counted.
+    assert!(report.rois <= 1010, "{} ROIs", report.rois);
+    assert!(report.skipped >= 2500, "{} skipped", report.skipped);
+    assert!(report.estimates.len() >= 5, "{report:?}");
+}
