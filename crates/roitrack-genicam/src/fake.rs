@@ -18,6 +18,7 @@ use aravis::GvFakeCamera;
 use aravis::glib::translate::ToGlibPtr;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
+use roitrack_core::{CameraModel, MotionState, Target};
 use roitrack_image::{RenderScratch, Roi, RoiRenderer, SensorModel};
 use roitrack_sim::Scenario;
 
@@ -98,10 +99,13 @@ pub const FAKE_MAX_FRAME_RATE_HZ: f64 = 1000.0;
 /// ```
 pub const FAKE_DEVICE_CLOCK_START_S: f64 = 1000.0;
 
+/// The target's motion a fake camera renders: its state (camera frame) at each scene time.
+type Truth = Box<dyn Fn(f64) -> MotionState + Send + Sync>;
+
 /// What the fake camera's thread renders from.
 struct Scene {
     renderer: RoiRenderer,
-    scenario: Scenario,
+    truth: Truth,
     clock: Arc<SceneClock>,
     /// Noise generator, rendering scratch and a pixel buffer, used by the fake camera's thread only.
     state: Mutex<(ChaCha8Rng, RenderScratch, Vec<u16>)>,
@@ -189,7 +193,7 @@ unsafe extern "C" fn fill_scene(
     };
     let (rng, scratch, out) = &mut *state;
     out.resize(n, 0);
-    let truth = |t: f64| scene.scenario.state_at(t);
+    let truth = |t: f64| (scene.truth)(t);
     scene
         .renderer
         .render_readout(&truth, &roi, t_s, rng, scratch, out);
@@ -244,11 +248,42 @@ impl FakeGigeCamera {
         sensor: SensorModel,
         seed: u64,
     ) -> Result<Self, GenicamError> {
-        let renderer = RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), sensor)
+        let motion = scenario.clone();
+        Self::start_rendering(
+            &scenario.camera,
+            &scenario.target,
+            move |t_s| motion.state_at(t_s),
+            sensor,
+            seed,
+        )
+    }
+
+    /// Starts the fake camera on 127.0.0.1 rendering `target` seen by `camera` at the state `truth` gives for each
+    /// buffer's scene time (the time the host set, [`SceneClock`]): a motion computed as the run goes, such as a
+    /// simulated robot's (`roitrack servo --live --fake`). `truth` is called on the fake camera's thread, a few
+    /// times per buffer (the exposure's motion blur): it must be quick and must not block. Otherwise as
+    /// [`Self::start`].
+    ///
+    /// ```no_run
+    /// use roitrack_core::{CameraModel, MotionState, Target};
+    /// use roitrack_genicam::FakeGigeCamera;
+    /// let still = MotionState::at_rest(Default::default(), [0.0, 0.0, 0.6].into());
+    /// let fake = FakeGigeCamera::start_rendering(&CameraModel::canonical(), &Target::grid4x4(), move |_t| still,
+    ///     Default::default(), 1).unwrap();
+    /// assert_eq!(fake.address(), "127.0.0.1");
+    /// ```
+    pub fn start_rendering(
+        camera: &CameraModel,
+        target: &Target,
+        truth: impl Fn(f64) -> MotionState + Send + Sync + 'static,
+        sensor: SensorModel,
+        seed: u64,
+    ) -> Result<Self, GenicamError> {
+        let renderer = RoiRenderer::new(camera.clone(), target.clone(), sensor)
             .map_err(|e| GenicamError::Fake(e.to_string()))?;
         let scene = Arc::new(Scene {
             renderer,
-            scenario: scenario.clone(),
+            truth: Box::new(truth),
             clock: Arc::new(SceneClock::default()),
             state: Mutex::new((
                 ChaCha8Rng::seed_from_u64(seed),
