@@ -194,28 +194,35 @@ impl RobotScene {
         if head == 0 {
             return RobotState::default();
         }
-        let oldest = head.saturating_sub(TRACE_SLOTS as u64 - 1);
-        let mut later: Option<(f64, RobotState)> = None;
-        let mut k = head - 1;
-        loop {
-            let Some((t_k, s_k)) = self.step(k) else {
-                // Overwritten while searching: what was found is the best there is.
-                return later.map_or_else(RobotState::default, |(_, s)| s);
+        let newest = head - 1;
+        let Some((t_new, s_new)) = self.step(newest) else {
+            return RobotState::default();
+        };
+        if t_new <= t_s {
+            return RobotState {
+                position_m: s_new.position_m + s_new.velocity_mps * (t_s - t_new),
+                velocity_mps: s_new.velocity_mps,
             };
-            if t_k <= t_s {
-                return match later {
-                    None => RobotState {
-                        position_m: s_k.position_m + s_k.velocity_mps * (t_s - t_k),
-                        velocity_mps: s_k.velocity_mps,
-                    },
-                    Some((t_b, s_b)) => hermite(t_k, &s_k, t_b, &s_b, t_s),
-                };
+        }
+        // Bisection on the steps kept (their times increase): `lo` at or before `t_s` (or the oldest readable),
+        // `hi` after it. A step overwritten while searching counts as too old.
+        let (mut lo, mut hi) = (head.saturating_sub(TRACE_SLOTS as u64 - 1), newest);
+        let mut later = (t_new, s_new);
+        while hi - lo > 1 {
+            let mid = lo + (hi - lo) / 2;
+            match self.step(mid) {
+                Some((t_mid, s_mid)) if t_mid > t_s => {
+                    hi = mid;
+                    later = (t_mid, s_mid);
+                }
+                _ => lo = mid,
             }
-            if k == oldest {
-                return s_k;
-            }
-            later = Some((t_k, s_k));
-            k -= 1;
+        }
+        match self.step(lo) {
+            Some((t_lo, s_lo)) if t_lo <= t_s => hermite(t_lo, &s_lo, later.0, &later.1, t_s),
+            // Older than every step kept: the oldest there is.
+            Some((_, s_lo)) => s_lo,
+            None => later.1,
         }
     }
 
@@ -352,6 +359,11 @@ pub fn servo_target() -> Target {
 pub struct LiveOptions {
     /// Every ROI this square size (px): a camera whose window is fixed (Aravis', 32); `None`: the scheduler's sizes.
     pub window_px: Option<u32>,
+    /// The wall time a full frame (the start, a re-initialisation) is given (s): the paced loop skips this many
+    /// seconds of ROI slots after one ([`LoopConfig::full_frame_slots`]) instead of catching up on them with ROIs
+    /// of the past. Default 0.25 s: Aravis' fake camera renders and sends its 1024 x 1024 frame in about that on
+    /// two shared cores.
+    pub full_frame_s: f64,
     /// The longest wait for the first estimate (s, wall clock) before the run is given up.
     pub start_timeout_s: f64,
     /// The path starts with the first estimate at most this old (s, from its newest ROI's mid-exposure to the
@@ -367,6 +379,7 @@ impl Default for LiveOptions {
     fn default() -> Self {
         Self {
             window_px: None,
+            full_frame_s: 0.25,
             start_timeout_s: 5.0,
             start_max_age_s: 0.01,
             realtime_priority: Some(50),
@@ -387,6 +400,9 @@ pub struct LiveServoReport {
     pub exposure_to_actuation_us: Vec<f64>,
     /// The same to the instant the command was issued (µs): without the drive's delay.
     pub exposure_to_command_us: Vec<f64>,
+    /// Per estimate published once the path has started: from its newest ROI's mid-exposure to its publication on
+    /// the estimation thread (µs), the live loop's part of the latency (the rest is the wait for the next control tick and the drive's delay).
+    pub exposure_to_estimate_us: Vec<f64>,
     /// Control ticks run.
     pub ticks: usize,
     /// Control ticks of the path whose deadline passed before the control thread woke (the drive held its last
@@ -406,6 +422,11 @@ impl LiveServoReport {
     /// Median and 99th percentile (nearest rank) of [`Self::exposure_to_actuation_us`]; NaN without any.
     pub fn actuation_latency_quantiles_us(&self) -> (f64, f64) {
         quantiles(&self.exposure_to_actuation_us)
+    }
+
+    /// Median and 99th percentile of [`Self::exposure_to_estimate_us`]; NaN without any.
+    pub fn estimate_latency_quantiles_us(&self) -> (f64, f64) {
+        quantiles(&self.exposure_to_estimate_us)
     }
 
     /// Median and 99th percentile of [`Self::exposure_to_command_us`]; NaN without any.
@@ -477,6 +498,7 @@ pub fn run_live_servo<C: RoiCamera>(
     for (field, value) in [
         ("start_timeout_s", options.start_timeout_s),
         ("start_max_age_s", options.start_max_age_s),
+        ("full_frame_s", options.full_frame_s),
     ] {
         if !(value.is_finite() && value > 0.0) {
             return Err(ServoError::Invalid { field, value });
@@ -488,9 +510,12 @@ pub fn run_live_servo<C: RoiCamera>(
     let mut loop_config = LoopConfig {
         rate_hz,
         paced: true,
+        // A slot the camera side reaches late is skipped: a ROI of the past is worth less to the controller.
+        skip_late_slots: true,
         // The path, the start's allowance and a second: the control thread ends the run before.
         roi_slots: ((config.path.duration_s() + options.start_timeout_s + 1.0) * rate_hz).ceil()
             as usize,
+        full_frame_slots: ((options.full_frame_s * rate_hz).ceil() as usize).max(1),
         ..LoopConfig::default()
     };
     if let Some(side) = options.window_px {
@@ -503,13 +528,21 @@ pub fn run_live_servo<C: RoiCamera>(
     })?;
     let (mut publisher, reader) = estimate_channel();
     let published = AtomicU64::new(0);
+    let mut to_estimate_us =
+        Vec::with_capacity(loop_config.roi_slots / config.tracker.every.max(1) + 64);
     let loop_done = AtomicBool::new(false);
+    // Set by the control thread when the path starts: the estimation thread's latencies are kept from then on.
+    let path_started = AtomicBool::new(false);
     let stop = camera.stop_flag();
     let wall = Instant::now();
 
     let (loop_result, control) = std::thread::scope(|threads| {
         let control = threads.spawn(|| {
-            let side = control_thread(config, options, scene, &reader, &loop_done, wall);
+            let flags = ControlFlags {
+                loop_done: &loop_done,
+                path_started: &path_started,
+            };
+            let side = control_thread(config, options, scene, &reader, flags, wall);
             // The path is done (or the run stopped): the loop's next grab ends it.
             stop.store(true, Ordering::Release);
             side
@@ -518,6 +551,10 @@ pub fn run_live_servo<C: RoiCamera>(
             if e.status.is_vouched_for() && e.state.is_finite() {
                 publisher.publish(e);
                 published.fetch_add(1, Ordering::Relaxed);
+                if path_started.load(Ordering::Acquire) {
+                    let age_us = (scene.robot_time_s() - scene.loop_to_robot_s(e.t_ref_s)) * 1e6;
+                    to_estimate_us.push_within_capacity_or_skip(age_us);
+                }
             }
         };
         let result = run_loop_with_sink(
@@ -534,13 +571,9 @@ pub fn run_live_servo<C: RoiCamera>(
     });
     let loop_report = loop_result.map_err(|e| ServoError::Tracker(e.to_string()))?;
     let control = control.map_err(|_| ServoError::Tracker("the control thread panicked".into()))?;
-    Ok(report(
-        config,
-        scene,
-        loop_report,
-        control,
-        published.into_inner(),
-    ))
+    let mut report = report(config, scene, loop_report, control, published.into_inner());
+    report.exposure_to_estimate_us = to_estimate_us;
+    Ok(report)
 }
 
 fn report(
@@ -594,6 +627,7 @@ fn report(
         loop_report,
         exposure_to_actuation_us: control.to_actuation_us,
         exposure_to_command_us: control.to_command_us,
+        exposure_to_estimate_us: Vec::new(),
         ticks: control.ticks,
         missed_ticks: control.missed,
         missed_before_start: control.missed_before_start,
@@ -626,6 +660,14 @@ fn request_realtime_priority(priority: i32) -> bool {
     }
 }
 
+/// What the control thread and the loop tell each other.
+struct ControlFlags<'a> {
+    /// Set when the live loop has ended.
+    loop_done: &'a AtomicBool,
+    /// Set by the control thread when the path starts.
+    path_started: &'a AtomicBool,
+}
+
 /// The control thread: ticks on the robot's clock until the path's end, the loop's end, a divergence or the start's
 /// timeout. Everything it keeps is sized before its first tick: no allocation, no lock.
 fn control_thread(
@@ -633,9 +675,13 @@ fn control_thread(
     options: &LiveOptions,
     scene: &RobotScene,
     reader: &crate::handle::EstimateReader,
-    loop_done: &AtomicBool,
+    flags: ControlFlags<'_>,
     wall: Instant,
 ) -> ControlSide {
+    let ControlFlags {
+        loop_done,
+        path_started,
+    } = flags;
     let robot = config.robot;
     let path = &config.path;
     let (_, mut controller) = build_controller(config);
@@ -734,6 +780,7 @@ fn control_thread(
                 side.start_delay_s = wall.elapsed().as_secs_f64();
                 side.path_start_robot_s = Some(now_s);
                 path_start = Some(now_s);
+                path_started.store(true, Ordering::Release);
             }
             let Some(start) = path_start else {
                 hold_home(scene, &mut t_robot_s, next_tick_s + tick_s);

@@ -12,6 +12,7 @@ pub mod plot;
 #[cfg(feature = "ros2")]
 pub mod ros2_node;
 pub mod servo;
+pub mod servo_live;
 pub mod simulate;
 pub mod target;
 pub mod track;

@@ -101,12 +101,31 @@ pub struct ServoArgs {
     /// instead of the table.
     #[arg(long)]
     pub json: bool,
+    /// Run the closed loop in real time: the controller on its own thread on the wall clock, fed by the live
+    /// two-thread loop through the estimate handle, the camera rendering the simulated robot where it is now; beside
+    /// the simulated-time run of the same configuration. Needs --fake or --sim-camera; prints the tracking errors,
+    /// the latency from exposure to actuation (median, p99) and the deadlines missed.
+    #[arg(long)]
+    pub live: bool,
+    /// With --live: the camera is Aravis' fake GigE camera on 127.0.0.1 (feature genicam).
+    #[arg(long, requires = "live")]
+    pub fake: bool,
+    /// With --live: the camera is the project's simulated ROI camera, on the live loop's acquisition thread.
+    #[arg(long, requires = "live", conflicts_with = "fake")]
+    pub sim_camera: bool,
+    /// With --live: ROIs and control ticks per second, from 500 to 4000 (a rate the machine cannot hold is run and
+    /// its missed deadlines and late ROI slots reported).
+    #[arg(long, default_value_t = 2000.0, requires = "live", value_parser = ranges::within(500.0..=4000.0, " Hz", "4 kHz"))]
+    pub rate_hz: f64,
     /// Output folder (created if missing); one folder per run inside.
     #[arg(long)]
     pub out: PathBuf,
 }
 
 pub fn run(args: &ServoArgs) -> Result<()> {
+    if args.live {
+        return super::servo_live::run(args);
+    }
     let controllers: Vec<ControllerKind> = match args.controller {
         Some(c) => vec![c.into()],
         None => ControllerKind::ALL.to_vec(),

@@ -1,0 +1,293 @@
+//! `roitrack servo --live`: the closed loop in real time (docs/servo.md, "The real-time loop"), through Aravis' fake
+//! GigE camera (`--fake`, feature `genicam`) or the project's simulated ROI camera (`--sim-camera`), beside the
+//! simulated-time run of the same configuration; this file only builds the camera, calls the library and prints.
+
+use anyhow::{Context, Result, bail};
+use roitrack::image::{RoiRenderer, SensorModel, SimulatedCamera};
+use roitrack::servo::live::{
+    LiveOptions, LiveServoReport, LoopClockCamera, RobotScene, roi_camera_model, run_live_servo,
+    servo_target,
+};
+use roitrack::servo::{CameraKind, CameraTiming, ControllerKind, ServoConfig, run_servo};
+
+use super::servo::ServoArgs;
+
+/// The camera a real-time run renders the robot through.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LiveCamera {
+    /// Aravis' fake GigE camera on 127.0.0.1 (feature `genicam`).
+    AravisFake,
+    /// The project's simulated ROI camera, on the acquisition thread.
+    Simulated,
+}
+
+impl LiveCamera {
+    fn name(self) -> &'static str {
+        match self {
+            Self::AravisFake => "live-aravis-fake",
+            Self::Simulated => "live-sim-camera",
+        }
+    }
+}
+
+/// The configuration of both runs: the chosen controller (ctc by default) through the ROI camera at `--rate-hz`
+/// ROIs and control ticks per second, the tracker not told the commanded acceleration (the live loop's tracker is
+/// on its estimation thread, out of the controller's reach).
+fn config(args: &ServoArgs) -> Result<ServoConfig> {
+    let controller: ControllerKind = args.controller.map_or(ControllerKind::Ctc, Into::into);
+    if controller == ControllerKind::TrueState {
+        bail!("--live runs a camera-fed controller: ctc, ctc-pose or kvs, not true-state");
+    }
+    if args.camera != super::servo::CameraArg::Roi {
+        bail!("--live runs the ROI camera: --camera roi");
+    }
+    if args.sweep_gains {
+        bail!("--live runs one closed loop: --sweep-gains is for the simulated-time runs");
+    }
+    let mut config = ServoConfig::new(controller, CameraKind::Roi, args.speed_scale);
+    config.extra_latency_s = args.extra_latency_s;
+    config.gains_follow_latency = !args.fixed_gains;
+    config.gain_scale = args.gain_scale;
+    config.extra_centroid_noise_px = 0.0;
+    config.known_acceleration = false;
+    config.seed = args.seed;
+    config.control_rate_hz = args.rate_hz;
+    config.timing = Some(CameraTiming {
+        rate_hz: args.rate_hz,
+        ..CameraKind::Roi.timing()
+    });
+    if args.extra_latency_s > 0.0 || args.centroid_noise_px > 0.0 {
+        bail!(
+            "--live measures its own latency and noise: no --extra-latency-s or --centroid-noise-px"
+        );
+    }
+    Ok(config)
+}
+
+pub fn run(args: &ServoArgs) -> Result<()> {
+    let camera = match (args.fake, args.sim_camera) {
+        (true, false) => LiveCamera::AravisFake,
+        (false, true) => LiveCamera::Simulated,
+        _ => bail!(
+            "--live needs its camera: --fake (Aravis' fake GigE camera, feature genicam) or --sim-camera (the \
+             project's simulated ROI camera)"
+        ),
+    };
+    let config = config(args)?;
+    roitrack::formats::create_output_dir(&args.out)?;
+    let simulated = run_servo(&config).context("the simulated-time run")?;
+    let scene = RobotScene::new(&config.path);
+    let (live, camera_line) = match camera {
+        LiveCamera::Simulated => (run_simulated(&config, &scene)?, None),
+        LiveCamera::AravisFake => {
+            let (report, line) = run_aravis(&config, &scene)?;
+            (report, Some(line))
+        }
+    };
+    let name = config.controller.name();
+    let sim_dir = args.out.join(format!("{name}-roi-simulated-time"));
+    let live_dir = args.out.join(format!("{name}-{}", camera.name()));
+    roitrack::servo::output::write_run(&simulated, &sim_dir)?;
+    roitrack::servo::output::write_run(&live.servo, &live_dir)?;
+    let figures =
+        roitrack::servo::output::render_figures(&[simulated.clone(), live.servo.clone()])?;
+    crate::commands::plot::write_figure_files(&args.out, &figures)?;
+    print(
+        args,
+        camera,
+        &config,
+        &simulated,
+        &live,
+        camera_line.as_deref(),
+        &live_dir,
+    );
+    Ok(())
+}
+
+fn run_simulated(config: &ServoConfig, scene: &RobotScene) -> Result<LiveServoReport> {
+    let renderer = RoiRenderer::new(
+        roi_camera_model(config),
+        servo_target(),
+        SensorModel::default(),
+    )?;
+    let truth = {
+        let scene = scene.clone();
+        move |t: f64| scene.camera_state_at_loop_s(t)
+    };
+    let mut camera = LoopClockCamera::new(
+        SimulatedCamera::new(renderer, truth, config.seed),
+        scene.clone(),
+    );
+    Ok(run_live_servo(
+        &mut camera,
+        scene,
+        config,
+        &LiveOptions::default(),
+    )?)
+}
+
+#[cfg(feature = "genicam")]
+fn run_aravis(config: &ServoConfig, scene: &RobotScene) -> Result<(LiveServoReport, String)> {
+    use roitrack_genicam::{FakeGigeCamera, GenicamCamera, GenicamOptions};
+    let model = roi_camera_model(config);
+    let truth = {
+        let scene = scene.clone();
+        move |t: f64| scene.camera_state_at_loop_s(t)
+    };
+    let fake = FakeGigeCamera::start_rendering(
+        &model,
+        &servo_target(),
+        truth,
+        SensorModel::default(),
+        config.seed,
+    )?;
+    let options = GenicamOptions {
+        address: fake.address().to_string(),
+        expected_serial: Some(fake.serial().to_string()),
+        ..GenicamOptions::default()
+    };
+    let genicam = GenicamCamera::open(&options, (model.width_px, model.height_px))?
+        .with_scene_clock(fake.clock());
+    let (w, h) = genicam.window();
+    let mut camera = LoopClockCamera::new(genicam, scene.clone());
+    let live_options = LiveOptions {
+        window_px: Some(w.min(h)),
+        // The fake camera renders its 1024 x 1024 frame and sends it in packets: up to a second or more on two
+        // shared cores; and a lost frame is retried after this long.
+        full_frame_s: 1.0,
+        start_timeout_s: 10.0,
+        ..LiveOptions::default()
+    };
+    let report = run_live_servo(&mut camera, scene, config, &live_options);
+    let stats = camera.inner().stats();
+    let description = camera.inner().description().to_string();
+    drop(camera);
+    fake.stop();
+    let grab = roitrack::core::stats::sorted(&stats.grab_us);
+    let line = format!(
+        "{description}: {} ROIs grabbed, {} lost, {} incomplete, {} stale; grab (move, trigger, buffer) p50/p99 \
+         {:.0}/{:.0} us",
+        stats.rois,
+        stats.lost,
+        stats.incomplete,
+        stats.stale,
+        roitrack::core::stats::quantile(&grab, 0.5),
+        roitrack::core::stats::quantile(&grab, 0.99),
+    );
+    Ok((report?, line))
+}
+
+#[cfg(not(feature = "genicam"))]
+fn run_aravis(_config: &ServoConfig, _scene: &RobotScene) -> Result<(LiveServoReport, String)> {
+    bail!(
+        "--live --fake runs Aravis' fake GigE camera: build with `--features genicam` (Debian's libaravis-dev), or \
+         use --sim-camera (the project's simulated ROI camera)"
+    )
+}
+
+fn print(
+    args: &ServoArgs,
+    camera: LiveCamera,
+    config: &ServoConfig,
+    simulated: &roitrack::servo::ServoReport,
+    live: &LiveServoReport,
+    camera_line: Option<&str>,
+    live_dir: &std::path::Path,
+) {
+    let (act_p50, act_p99) = live.actuation_latency_quantiles_us();
+    let (cmd_p50, cmd_p99) = live.command_latency_quantiles_us();
+    let (est_p50, est_p99) = live.estimate_latency_quantiles_us();
+    let ratio = live.servo.rms_error_mm / simulated.rms_error_mm;
+    let loop_report = &live.loop_report;
+    if args.json {
+        let finite = |x: f64| x.is_finite().then_some(x);
+        let line = serde_json::json!({
+            "controller": config.controller.name(),
+            "camera": camera.name(),
+            "rate_hz": config.control_rate_hz,
+            "speed_scale": args.speed_scale,
+            "rms_error_mm": finite(live.servo.rms_error_mm),
+            "max_error_mm": live.servo.max_error_mm,
+            "stable": live.servo.stable,
+            "stop_reason": live.servo.stop_reason,
+            "simulated_time_rms_error_mm": simulated.rms_error_mm,
+            "simulated_time_stable": simulated.stable,
+            "rms_ratio_to_simulated_time": finite(ratio),
+            "exposure_to_actuation_us_p50": finite(act_p50),
+            "exposure_to_actuation_us_p99": finite(act_p99),
+            "exposure_to_command_us_p50": finite(cmd_p50),
+            "exposure_to_command_us_p99": finite(cmd_p99),
+            "exposure_to_estimate_us_p50": finite(est_p50),
+            "exposure_to_estimate_us_p99": finite(est_p99),
+            "actuation_delay_us": config.actuation_delay_s * 1e6,
+            "control_ticks": live.ticks,
+            "missed_ticks": live.missed_ticks,
+            "missed_ticks_before_start": live.missed_before_start,
+            "late_roi_slots": loop_report.late,
+            "skipped_roi_slots": loop_report.skipped,
+            "rois": loop_report.rois,
+            "rois_per_s": loop_report.rois_per_s(),
+            "estimates_published": live.published,
+            "start_delay_s": finite(live.start_delay_s),
+            "realtime_priority": live.realtime_priority,
+            "natural_frequency_radps": live.servo.gains.natural_frequency_radps,
+            "dir": live_dir.display().to_string(),
+        });
+        println!("{line}");
+        return;
+    }
+    println!(
+        "closed loop in real time: {} through {} at {:.0} Hz (ROIs and control ticks), {} path at {} x 1 m/s",
+        config.controller.name(),
+        match camera {
+            LiveCamera::AravisFake => "Aravis' fake GigE camera (127.0.0.1)",
+            LiveCamera::Simulated =>
+                "the project's simulated ROI camera (real clock, real threads)",
+        },
+        config.control_rate_hz,
+        config.path.name(),
+        args.speed_scale
+    );
+    println!(
+        "tracking error: real time {:.4} mm RMS ({:.4} max, stable {}); simulated time {:.4} mm RMS ({:.4} max, \
+         stable {}); ratio {:.2}",
+        live.servo.rms_error_mm,
+        live.servo.max_error_mm,
+        live.servo.stable,
+        simulated.rms_error_mm,
+        simulated.max_error_mm,
+        simulated.stable,
+        ratio
+    );
+    if let Some(reason) = &live.servo.stop_reason {
+        println!("    stopped: {reason}");
+    }
+    println!(
+        "latency p50/p99 from the ROI's mid-exposure: to the estimate {est_p50:.0}/{est_p99:.0} us, to the command \
+         {cmd_p50:.0}/{cmd_p99:.0} us, to the actuation (the drive's {:.0} us delay added) {act_p50:.0}/{act_p99:.0} us",
+        config.actuation_delay_s * 1e6
+    );
+    println!(
+        "control thread: {} ticks, {} deadlines missed ({} before the path's start), real-time priority {}; live \
+         loop: {} ROIs ({:.0} ROIs/s), {} slots reached more than a period late, {} skipped, {} estimates published; \
+         path started {:.2} s after the loop",
+        live.ticks,
+        live.missed_ticks,
+        live.missed_before_start,
+        if live.realtime_priority {
+            "SCHED_FIFO"
+        } else {
+            "refused (ordinary thread)"
+        },
+        loop_report.rois,
+        loop_report.rois_per_s(),
+        loop_report.late,
+        loop_report.skipped,
+        live.published,
+        live.start_delay_s
+    );
+    if let Some(line) = camera_line {
+        println!("{line}");
+    }
+    println!("runs written to {}", args.out.display());
+}
