@@ -73,6 +73,10 @@ pub fn run(args: &ServoArgs) -> Result<()> {
              project's simulated ROI camera)"
         ),
     };
+    if camera == LiveCamera::AravisFake && !cfg!(feature = "genicam") {
+        // Said before the simulated-time run, not after.
+        run_aravis_unavailable()?;
+    }
     let config = config(args)?;
     roitrack::formats::create_output_dir(&args.out)?;
     let simulated = run_servo(&config).context("the simulated-time run")?;
@@ -179,6 +183,14 @@ fn run_aravis(config: &ServoConfig, scene: &RobotScene) -> Result<(LiveServoRepo
 
 #[cfg(not(feature = "genicam"))]
 fn run_aravis(_config: &ServoConfig, _scene: &RobotScene) -> Result<(LiveServoReport, String)> {
+    run_aravis_unavailable().map(|()| unreachable!("refused above"))
+}
+
+/// Refuses `--live --fake` in a build without the feature `genicam`, saying how to get it.
+fn run_aravis_unavailable() -> Result<()> {
+    if cfg!(feature = "genicam") {
+        return Ok(());
+    }
     bail!(
         "--live --fake runs Aravis' fake GigE camera: build with `--features genicam` (Debian's libaravis-dev), or \
          use --sim-camera (the project's simulated ROI camera)"
