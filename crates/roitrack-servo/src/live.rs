@@ -3,7 +3,8 @@
 //! ([`crate::handle`]), while a camera renders the simulated robot where it is now ([`run_live_servo`]).
 //!
 //! Three threads (four with Aravis' fake camera, five with its stream thread):
-//! - the **control thread** ticks on the wall clock at [`ServoConfig::control_rate_hz`]: it reads the newest
+//! - the **control thread** ticks on the wall clock at [`ServoConfig::control_rate_hz`] (or
+//!   [`LiveOptions::control_rate_hz`], faster than the ROIs): it reads the newest
 //!   estimate ([`crate::handle::EstimateReader::read`]: no lock, no allocation), computes the command (the same
 //!   [`Controller`] as [`crate::run_servo`]), and integrates the simulated robot to the next tick (RK4, the forces
 //!   acting after the actuation delay), publishing each integration step into a [`RobotScene`]. A tick woken more
@@ -373,6 +374,10 @@ pub struct LiveOptions {
     /// `CAP_SYS_NICE`; otherwise it runs as an ordinary thread, which [`LiveServoReport::realtime_priority`] says).
     /// It sleeps between ticks, so it takes a core only for its ticks. Default: 50.
     pub realtime_priority: Option<i32>,
+    /// The control thread's rate (Hz) when it should tick faster than the ROIs ([`ServoConfig::control_rate_hz`],
+    /// one ROI slot a tick, as in simulated time): a command then follows each estimate sooner. The gains do not
+    /// change (they follow the estimates' age). Default: none (the configuration's).
+    pub control_rate_hz: Option<f64>,
 }
 
 impl Default for LiveOptions {
@@ -383,6 +388,7 @@ impl Default for LiveOptions {
             start_timeout_s: 5.0,
             start_max_age_s: 0.01,
             realtime_priority: Some(50),
+            control_rate_hz: None,
         }
     }
 }
@@ -496,6 +502,10 @@ pub fn run_live_servo<C: RoiCamera>(
         });
     }
     for (field, value) in [
+        (
+            "control_rate_hz",
+            options.control_rate_hz.unwrap_or(config.control_rate_hz),
+        ),
         ("start_timeout_s", options.start_timeout_s),
         ("start_max_age_s", options.start_max_age_s),
         ("full_frame_s", options.full_frame_s),
@@ -506,6 +516,7 @@ pub fn run_live_servo<C: RoiCamera>(
     }
     let camera_model = roi_camera_model(config);
     let target = servo_target();
+    // One ROI slot per control tick of the configuration (as `run_servo`); the control thread may tick faster.
     let rate_hz = config.control_rate_hz;
     let mut loop_config = LoopConfig {
         rate_hz,
@@ -688,7 +699,8 @@ fn control_thread(
     let model = robot
         .with_mass_factor(config.model_mass_factor)
         .with_friction_factor(config.model_friction_factor);
-    let tick_s = 1.0 / config.control_rate_hz;
+    let control_rate_hz = options.control_rate_hz.unwrap_or(config.control_rate_hz);
+    let tick_s = 1.0 / control_rate_hz;
     let step_s = tick_s / config.substeps as f64;
     let path_ticks = (path.duration_s() / tick_s).round() as usize;
     let expected_estimates = path_ticks / config.tracker.every.max(1) + 256;
@@ -715,8 +727,7 @@ fn control_thread(
     let mut force = hold;
     // Commands waiting for their actuation instant (robot clock); a few at most.
     let mut commands: VecDeque<(f64, Vector3<f64>)> = VecDeque::with_capacity(256);
-    let window_ticks =
-        ((config.saturation_window_s * config.control_rate_hz).round() as usize).max(1);
+    let window_ticks = ((config.saturation_window_s * control_rate_hz).round() as usize).max(1);
     let mut recent_saturation: VecDeque<bool> = VecDeque::with_capacity(window_ticks + 1);
     let mut recent_saturated = 0usize;
     let mut state = RobotState::default();

@@ -117,6 +117,10 @@ pub struct ServoArgs {
     /// its missed deadlines and late ROI slots reported).
     #[arg(long, default_value_t = 2000.0, requires = "live", value_parser = ranges::within(500.0..=4000.0, " Hz", "4 kHz"))]
     pub rate_hz: f64,
+    /// With --live: the control thread's rate (Hz), from --rate-hz to 4000, when it should tick faster than the
+    /// ROIs (a command then follows each estimate sooner); default: --rate-hz.
+    #[arg(long, requires = "live", value_parser = ranges::within(500.0..=4000.0, " Hz", "4 kHz"))]
+    pub control_rate_hz: Option<f64>,
     /// Output folder (created if missing); one folder per run inside.
     #[arg(long)]
     pub out: PathBuf,

@@ -78,13 +78,20 @@ pub fn run(args: &ServoArgs) -> Result<()> {
         run_aravis_unavailable()?;
     }
     let config = config(args)?;
+    if args.control_rate_hz.is_some_and(|hz| hz < args.rate_hz) {
+        bail!("--control-rate-hz must be at least --rate-hz (one ROI slot a control tick at most)");
+    }
+    let live_options = LiveOptions {
+        control_rate_hz: args.control_rate_hz,
+        ..LiveOptions::default()
+    };
     roitrack::formats::create_output_dir(&args.out)?;
     let simulated = run_servo(&config).context("the simulated-time run")?;
     let scene = RobotScene::new(&config.path);
     let (live, camera_line) = match camera {
-        LiveCamera::Simulated => (run_simulated(&config, &scene)?, None),
+        LiveCamera::Simulated => (run_simulated(&config, &scene, &live_options)?, None),
         LiveCamera::AravisFake => {
-            let (report, line) = run_aravis(&config, &scene)?;
+            let (report, line) = run_aravis(&config, &scene, &live_options)?;
             (report, Some(line))
         }
     };
@@ -108,7 +115,11 @@ pub fn run(args: &ServoArgs) -> Result<()> {
     Ok(())
 }
 
-fn run_simulated(config: &ServoConfig, scene: &RobotScene) -> Result<LiveServoReport> {
+fn run_simulated(
+    config: &ServoConfig,
+    scene: &RobotScene,
+    options: &LiveOptions,
+) -> Result<LiveServoReport> {
     let renderer = RoiRenderer::new(
         roi_camera_model(config),
         servo_target(),
@@ -122,16 +133,15 @@ fn run_simulated(config: &ServoConfig, scene: &RobotScene) -> Result<LiveServoRe
         SimulatedCamera::new(renderer, truth, config.seed),
         scene.clone(),
     );
-    Ok(run_live_servo(
-        &mut camera,
-        scene,
-        config,
-        &LiveOptions::default(),
-    )?)
+    Ok(run_live_servo(&mut camera, scene, config, options)?)
 }
 
 #[cfg(feature = "genicam")]
-fn run_aravis(config: &ServoConfig, scene: &RobotScene) -> Result<(LiveServoReport, String)> {
+fn run_aravis(
+    config: &ServoConfig,
+    scene: &RobotScene,
+    live: &LiveOptions,
+) -> Result<(LiveServoReport, String)> {
     use roitrack_genicam::{FakeGigeCamera, GenicamCamera, GenicamOptions};
     let model = roi_camera_model(config);
     let truth = {
@@ -160,7 +170,7 @@ fn run_aravis(config: &ServoConfig, scene: &RobotScene) -> Result<(LiveServoRepo
         // shared cores; and a lost frame is retried after this long.
         full_frame_s: 1.0,
         start_timeout_s: 10.0,
-        ..LiveOptions::default()
+        ..*live
     };
     let report = run_live_servo(&mut camera, scene, config, &live_options);
     let stats = camera.inner().stats();
@@ -182,7 +192,11 @@ fn run_aravis(config: &ServoConfig, scene: &RobotScene) -> Result<(LiveServoRepo
 }
 
 #[cfg(not(feature = "genicam"))]
-fn run_aravis(_config: &ServoConfig, _scene: &RobotScene) -> Result<(LiveServoReport, String)> {
+fn run_aravis(
+    _config: &ServoConfig,
+    _scene: &RobotScene,
+    _options: &LiveOptions,
+) -> Result<(LiveServoReport, String)> {
     run_aravis_unavailable().map(|()| unreachable!("refused above"))
 }
 
@@ -217,6 +231,7 @@ fn print(
             "controller": config.controller.name(),
             "camera": camera.name(),
             "rate_hz": config.control_rate_hz,
+            "control_rate_hz": args.control_rate_hz.unwrap_or(config.control_rate_hz),
             "speed_scale": args.speed_scale,
             "rms_error_mm": finite(live.servo.rms_error_mm),
             "max_error_mm": live.servo.max_error_mm,
@@ -249,7 +264,7 @@ fn print(
         return;
     }
     println!(
-        "closed loop in real time: {} through {} at {:.0} Hz (ROIs and control ticks), {} path at {} x 1 m/s",
+        "closed loop in real time: {} through {} at {:.0} ROIs/s and {:.0} control ticks/s, {} path at {} x 1 m/s",
         config.controller.name(),
         match camera {
             LiveCamera::AravisFake => "Aravis' fake GigE camera (127.0.0.1)",
@@ -257,6 +272,7 @@ fn print(
                 "the project's simulated ROI camera (real clock, real threads)",
         },
         config.control_rate_hz,
+        args.control_rate_hz.unwrap_or(config.control_rate_hz),
         config.path.name(),
         args.speed_scale
     );
