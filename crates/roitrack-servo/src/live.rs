@@ -189,7 +189,14 @@ impl RobotScene {
 
     /// The robot's state at robot time `t_s`: between two written steps, cubic Hermite (positions and velocities);
     /// after the newest, the newest moved on at its velocity; before the oldest kept, the oldest. At rest at home
-    /// before the first step.
+    /// before the first step. Lock-free: a bisection over the steps kept, each read under its sequence number.
+    ///
+    /// ```
+    /// use roitrack_servo::live::RobotScene;
+    /// use roitrack_servo::reference::ReferencePath;
+    /// let scene = RobotScene::new(&ReferencePath::orthoglide(1.0));
+    /// assert_eq!(scene.state_at(0.5).position_m, nalgebra::Vector3::zeros());
+    /// ```
     pub fn state_at(&self, t_s: f64) -> RobotState {
         let head = self.shared.head.load(Ordering::Acquire);
         if head == 0 {
@@ -394,7 +401,18 @@ impl Default for LiveOptions {
 }
 
 /// What a real-time run did: the closed loop's report (its samples, estimates and times on the path's clock, which
-/// starts when the controller reads the first estimate), the live loop's, and the control thread's timing.
+/// starts when the controller reads the first on-time estimate), the live loop's, and the control thread's timing.
+///
+/// ```no_run
+/// # use roitrack_servo::live::LiveServoReport;
+/// # fn show(report: &LiveServoReport) {
+/// let (p50_us, p99_us) = report.actuation_latency_quantiles_us();
+/// println!(
+///     "{:.3} mm RMS, stable {}, exposure to actuation {p50_us:.0}/{p99_us:.0} us, {} of {} deadlines missed",
+///     report.servo.rms_error_mm, report.servo.stable, report.missed_ticks, report.ticks
+/// );
+/// # }
+/// ```
 #[derive(Debug, Clone)]
 pub struct LiveServoReport {
     /// The closed loop, as [`crate::run_servo`] reports it (its files are written the same way).
