@@ -425,7 +425,8 @@ pub struct LiveServoReport {
     /// The same to the instant the command was issued (µs): without the drive's delay.
     pub exposure_to_command_us: Vec<f64>,
     /// Per estimate published once the path has started: from its newest ROI's mid-exposure to its publication on
-    /// the estimation thread (µs), the live loop's part of the latency (the rest is the wait for the next control tick and the drive's delay).
+    /// the estimation thread (µs), the live loop's part of the latency (the rest is the wait for the next control
+    /// tick and the drive's delay).
     pub exposure_to_estimate_us: Vec<f64>,
     /// Control ticks run.
     pub ticks: usize,
@@ -494,7 +495,9 @@ struct ControlSide {
 ///
 /// ```no_run
 /// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
-/// use roitrack_servo::live::{LiveOptions, LoopClockCamera, RobotScene, roi_camera_model, run_live_servo, servo_target};
+/// use roitrack_servo::live::{
+///     LiveOptions, LoopClockCamera, RobotScene, roi_camera_model, run_live_servo, servo_target,
+/// };
 /// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig};
 ///
 /// let config = ServoConfig::new(ControllerKind::Ctc, CameraKind::Roi, 1.0);
@@ -504,7 +507,7 @@ struct ControlSide {
 /// let mut camera = LoopClockCamera::new(SimulatedCamera::new(renderer, truth, 1), scene.clone());
 /// let report = run_live_servo(&mut camera, &scene, &config, &LiveOptions::default()).unwrap();
 /// let (p50, p99) = report.actuation_latency_quantiles_us();
-/// println!("{:.3} mm RMS, latency {p50:.0}/{p99:.0} us, {} missed ticks", report.servo.rms_error_mm, report.missed_ticks);
+/// println!("{:.3} mm RMS, latency {p50:.0}/{p99:.0} us", report.servo.rms_error_mm);
 /// ```
 pub fn run_live_servo<C: RoiCamera>(
     camera: &mut LoopClockCamera<C>,
