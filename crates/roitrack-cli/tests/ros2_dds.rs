@@ -140,6 +140,43 @@ fn close(what: &str, got: &[f64], want: &[f64]) {
     }
 }
 
+/// Pose after pose of `got` [`close`] to `want`'s (time, position, quaternion), as far as the shorter goes.
+fn close_poses(
+    what: &str,
+    got: &[roitrack::core::PoseSample],
+    want: &[roitrack::core::PoseSample],
+) {
+    for (a, b) in got.iter().zip(want) {
+        let (ta, tb) = (
+            a.cam_from_obj.translation.vector,
+            b.cam_from_obj.translation.vector,
+        );
+        let (qa, qb) = (a.cam_from_obj.rotation, b.cam_from_obj.rotation);
+        close(
+            what,
+            &[a.t_s, ta.x, ta.y, ta.z, qa.i, qa.j, qa.k, qa.w],
+            &[b.t_s, tb.x, tb.y, tb.z, qb.i, qb.j, qb.k, qb.w],
+        );
+    }
+}
+
+/// Twist after twist of `got` [`close`] to `want`'s (linear, then angular velocity), as far as the shorter goes.
+fn close_twists(
+    what: &str,
+    got: &[roitrack::core::TwistSample],
+    want: &[roitrack::core::TwistSample],
+) {
+    for (a, b) in got.iter().zip(want) {
+        let (va, vb) = (a.velocity_mps, b.velocity_mps);
+        let (wa, wb) = (a.angular_velocity_radps, b.angular_velocity_radps);
+        close(
+            what,
+            &[va.x, va.y, va.z, wa.x, wa.y, wa.z],
+            &[vb.x, vb.y, vb.z, wb.x, wb.y, wb.z],
+        );
+    }
+}
+
 /// Checks the messages received against a run's files: on every estimate topic one message per row of the poses,
 /// in order, each equal to its rows (1e-9); the status against the diagnostics, if given; the camera info once (the
 /// camera file's, if given). Returns the number of estimates.
@@ -686,31 +723,12 @@ wait $subscriber || exit 93
     );
     assert!(track.len() >= 390, "{} estimates", track.len());
     assert_eq!(node.len(), track.len());
-    for (a, b) in node.iter().zip(&track) {
-        let (ta, tb) = (
-            a.cam_from_obj.translation.vector,
-            b.cam_from_obj.translation.vector,
-        );
-        let (qa, qb) = (a.cam_from_obj.rotation, b.cam_from_obj.rotation);
-        close(
-            "node against track",
-            &[a.t_s, ta.x, ta.y, ta.z, qa.i, qa.j, qa.k, qa.w],
-            &[b.t_s, tb.x, tb.y, tb.z, qb.i, qb.j, qb.k, qb.w],
-        );
-    }
+    close_poses("node against track", &node, &track);
     let (node, track) = (
         roitrack::formats::read_twists_csv(file("node.csv")).unwrap(),
         roitrack::formats::read_twists_csv(file("track.csv")).unwrap(),
     );
-    for (a, b) in node.iter().zip(&track) {
-        let (va, vb) = (a.velocity_mps, b.velocity_mps);
-        let (wa, wb) = (a.angular_velocity_radps, b.angular_velocity_radps);
-        close(
-            "node's twist",
-            &[va.x, va.y, va.z, wa.x, wa.y, wa.z],
-            &[vb.x, vb.y, vb.z, wb.x, wb.y, wb.z],
-        );
-    }
+    close_twists("node's twist", &node, &track);
     // And the node published them all.
     let received = read_received(&file("received.jsonl"));
     let poses = received
@@ -1042,32 +1060,13 @@ wait $subscriber || exit 93
         "estimates of the node and of track:\n{log}"
     );
     MAX_DIFFERENCE.with(|max| max.set(0.0));
-    for (a, b) in node.iter().zip(&track) {
-        let (ta, tb) = (
-            a.cam_from_obj.translation.vector,
-            b.cam_from_obj.translation.vector,
-        );
-        let (qa, qb) = (a.cam_from_obj.rotation, b.cam_from_obj.rotation);
-        close(
-            "node against track --images",
-            &[a.t_s, ta.x, ta.y, ta.z, qa.i, qa.j, qa.k, qa.w],
-            &[b.t_s, tb.x, tb.y, tb.z, qb.i, qb.j, qb.k, qb.w],
-        );
-    }
+    close_poses("node against track --images", &node, &track);
     let (node_twists, track_twists) = (
         roitrack::formats::read_twists_csv(file("node.csv")).unwrap(),
         roitrack::formats::read_twists_csv(file("track.csv")).unwrap(),
     );
     assert_eq!(node_twists.len(), track_twists.len());
-    for (a, b) in node_twists.iter().zip(&track_twists) {
-        let (va, vb) = (a.velocity_mps, b.velocity_mps);
-        let (wa, wb) = (a.angular_velocity_radps, b.angular_velocity_radps);
-        close(
-            "node's twist",
-            &[va.x, va.y, va.z, wa.x, wa.y, wa.z],
-            &[vb.x, vb.y, vb.z, wb.x, wb.y, wb.z],
-        );
-    }
+    close_twists("node's twist", &node_twists, &track_twists);
     // And the node published them all, each pose the file's.
     let received = read_received(&file("received.jsonl"));
     let on =
