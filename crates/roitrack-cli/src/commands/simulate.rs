@@ -893,13 +893,7 @@ fn run_rig(args: &SimulateArgs) -> Result<()> {
         roitrack::formats::write_measurements_csv(dir.join(MEASUREMENTS_FILE), measurements)?;
         calibrations.push(format!("{}/{CAMERA_FILE}", camera.name));
     }
-    roitrack::formats::write_rig_yaml(args.out.join(RIG_FILE), &told, &calibrations, None)?;
-    roitrack::formats::write_rig_yaml(
-        args.out.join(RIG_TRUTH_FILE),
-        &scene.rig,
-        &calibrations,
-        None,
-    )?;
+    write_rig_files(&args.out, &told, &scene.rig, &calibrations)?;
     let count: usize = run.measurements.iter().map(Vec::len).sum();
     eprintln!(
         "roitrack: {} scenario seen by {} cameras: {count} measurements over {:.3} s written to {}",
@@ -908,6 +902,14 @@ fn run_rig(args: &SimulateArgs) -> Result<()> {
         scene.scenario.duration_s,
         args.out.display()
     );
+    Ok(())
+}
+
+/// The two rig files of a simulated rig in `out`: `rig.yaml` as the tracker is told it (`told`: the clocks it must
+/// learn left out) and `rig_truth.yaml` with every camera's true clock, both naming each camera's `calibrations`.
+fn write_rig_files(out: &Path, told: &Rig, truth: &Rig, calibrations: &[String]) -> Result<()> {
+    roitrack::formats::write_rig_yaml(out.join(RIG_FILE), told, calibrations, None)?;
+    roitrack::formats::write_rig_yaml(out.join(RIG_TRUTH_FILE), truth, calibrations, None)?;
     Ok(())
 }
 
@@ -961,8 +963,7 @@ fn run_rig_frames(args: &SimulateArgs) -> Result<()> {
         calibrations.push(format!("{}/{CAMERA_FILE}", camera.name));
         counts.push(format!("{} {}", camera.name, sequence.len()));
     }
-    roitrack::formats::write_rig_yaml(out.join(RIG_FILE), &told, &calibrations, None)?;
-    roitrack::formats::write_rig_yaml(out.join(RIG_TRUTH_FILE), &scene.rig, &calibrations, None)?;
+    write_rig_files(out, &told, &scene.rig, &calibrations)?;
     eprintln!(
         "roitrack: {} scenario seen by {} cameras: frames ({}; {} shutter, {} blobs) written to {}, each camera's on \
          its own clock; track them with\n  {track}",
