@@ -272,8 +272,8 @@ pub struct RigTracker {
     clocks: Vec<super::ClockModel>,
     /// Per camera: the newest vouched estimate of its own tracker (rig frame and clock).
     newest_single: Vec<Option<Estimate>>,
-    /// Each camera's own vouched estimates of the last [`CROSS_CHECK_SPAN_S`] behind the newest (rig frame and
-    /// time, at most [`CROSS_CHECK_CAPACITY`]): the fused estimates, which lag by the reorder buffer, are checked
+    /// Each camera's own `tracking` estimates of the last [`CROSS_CHECK_SPAN_S`] behind the newest (rig frame and
+    /// time, in time order, at most [`CROSS_CHECK_CAPACITY`]): the fused estimates, which lag by the reorder buffer, are checked
     /// against the one nearest in time.
     recent_singles: Vec<VecDeque<Estimate>>,
     fused: Option<Fused>,
@@ -715,7 +715,11 @@ impl RigTracker {
         {
             recent.pop_front();
         }
-        recent.push_back(rig_estimate);
+        // A camera's track once past converging: a new one may still be settling (its covariance small before its
+        // twist is).
+        if rig_estimate.status == TrackStatus::Tracking {
+            recent.push_back(rig_estimate);
+        }
         if self.synced[c] && c != 0 {
             return Ok(());
         }
@@ -1101,14 +1105,15 @@ impl RigTracker {
         let mut verdicts = (0..self.rig.len())
             .filter(|&c| self.synced[c])
             .filter_map(|c| {
-                // A camera's track once past converging: a new one may still be settling (its covariance small
-                // before its twist is).
-                self.recent_singles[c]
-                    .iter()
-                    .filter(|e| {
-                        e.status == TrackStatus::Tracking
-                            && (f.t_s - e.t_ref_s).abs() <= CROSS_CHECK_SPAN_S
-                    })
+                // In time order: the nearest is one of the two around the fused time (a search, not a scan: this
+                // runs at every fused estimate).
+                let recent = &self.recent_singles[c];
+                let after = recent.partition_point(|e| e.t_ref_s < f.t_s);
+                [after.checked_sub(1), Some(after)]
+                    .into_iter()
+                    .flatten()
+                    .filter_map(|i| recent.get(i))
+                    .filter(|e| (f.t_s - e.t_ref_s).abs() <= CROSS_CHECK_SPAN_S)
                     .min_by(|a, b| {
                         (a.t_ref_s - f.t_s)
                             .abs()
