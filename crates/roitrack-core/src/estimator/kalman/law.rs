@@ -54,6 +54,9 @@ pub(super) struct KalmanLaw {
     pub(super) resets_total: usize,
     /// The squared Mahalanobis distance of the newest measurement's innovation.
     pub(super) newest_nis: f64,
+    /// Whether a measurement taken alone since the last estimate moved the prediction by more than a lost residual
+    /// (see [`KalmanLaw::on_measurement`]).
+    pub(super) jumped_since_estimate: bool,
     /// The learnt centroid noise (when `tuning.adapt_noise`).
     pub(super) noise: NoiseEstimate,
     /// On frames, the white part of the learnt noise, from the change of the blobs' residuals from one frame to the
@@ -188,7 +191,20 @@ impl Law for KalmanLaw {
     fn on_measurement(&mut self, core: &mut TrackCore, obs: &Observation) {
         self.known.forget_before(core.t_ref_s);
         let dt = self.predict_to(core, obs.t_s);
-        self.take(core, obs, dt, true, None);
+        let outcome = self.take(core, obs, dt, true, None);
+        // A measurement accepted this far from its prediction was let through by a covariance grown so wide (a
+        // target back after half a second out of view: 654 px off, inside a 735 px sigma) that the prediction no
+        // longer told where the target was. The one or two measurements after it move the state a long way on a
+        // linearisation that holds over pixels, not hundreds of them: a 4 x 4 grid came back 394 mm off, marked
+        // tracking, because the measurements before the gap still made the median innovation of the cycle. Such a
+        // state is disputed until a whole window of measurements newer than the jump agrees with it. (A frame's
+        // blobs are judged together in `on_batch`: its first blob is often pixels off on fast motion, and the rest
+        // pin the pose.)
+        if let UpdateOutcome::Accepted { norm_px, .. } = outcome
+            && norm_px > core.config.lost_residual_px
+        {
+            self.jumped_since_estimate = true;
+        }
     }
 
     /// Each blob of the readout in turn, then, if at least [`MIN_READOUT_TO_REFINE`] were accepted, their iterated
@@ -343,7 +359,8 @@ impl Law for KalmanLaw {
             .gated_runs
             .iter()
             .any(|&(run, at)| run >= DISPUTED_AFTER_POINT_REFUSED_IN_A_ROW && recent(at));
-        self.gated_in_a_row >= DISPUTED_AFTER_GATED_IN_A_ROW
+        self.jumped_since_estimate
+            || self.gated_in_a_row >= DISPUTED_AFTER_GATED_IN_A_ROW
             || (self.gated_in_a_row > 0 && self.newest_nis > DISPUTED_NIS)
             || 2 * self.gated_since_estimate >= core.step_measurements.max(2)
             || (persistent && holding_points < HOLDING_POINTS)
@@ -351,6 +368,7 @@ impl Law for KalmanLaw {
 
     fn after_estimate(&mut self) {
         self.gated_since_estimate = 0;
+        self.jumped_since_estimate = false;
         self.innovations.clear();
     }
 
@@ -604,6 +622,7 @@ impl KalmanLaw {
             gated_total: 0,
             resets_total: 0,
             newest_nis: 0.0,
+            jumped_since_estimate: false,
             noise: NoiseEstimate::new(1.0, 0.0),
             white_noise: NoiseEstimate::new(1.0, 0.0),
             frame_residuals: FrameResiduals::default(),
