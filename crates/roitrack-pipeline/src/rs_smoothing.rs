@@ -23,8 +23,8 @@ use crate::frames::FrameOutcome;
 /// Frames on either side of the one refitted: a 5-point stencil, whose error (of order the fifth derivative times
 /// T⁴) is far below the centroid noise at 30 Hz, where a ±1 frame difference leaves jerk·T²/6.
 const REACH: usize = 2;
-/// Passes over the held frames per new frame: the neighbours' poses move with their own refits (three passes took the
-/// prototype's refits to within 1e-3 mm of their fixed point).
+/// Passes over the held frames per new frame: the neighbours' poses move with their own refits, and three passes bring
+/// the refits close enough to their fixed point (measured in docs/results.md, "Design measurements behind the code").
 const PASSES: usize = 3;
 /// Gauss-Newton steps per refit, from the last refit (or the filter's pose): the pose moves by tenths of a millimetre.
 const REFIT_ITERATIONS: usize = 4;

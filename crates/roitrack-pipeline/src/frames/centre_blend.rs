@@ -21,18 +21,17 @@ const CENTRE_BLEND_MEMORY_FRAMES: f64 = 20.0;
 const CENTRE_BLEND_EVERY_FRAMES: usize = 5;
 
 /// How the centre of a blob measured in its window is made of two: the window's threshold-weighted moments and the
-/// centre of the blob's outline ([`outline_centre`], the full-frame detector's). Neither is better everywhere. On
-/// sharp blobs under sensor noise and JPEG compression the outline's points average the noise over the whole edge,
-/// while the moments move with the pixels near their threshold (four dots in clutter: 0.029 against 0.042 px from the
-/// true centres); on the soft blobs of `roitrack simulate --frames`, the moments are the better (four dots 1.5 m
-/// away: a position jitter of 0.34 mm with the moments, 0.48 mm with the outlines). Their errors are far from equal,
-/// so their weighted mean beats both: each is weighted by the inverse of its mean squared residual in static poses
-/// fitted to each frame's centres of that kind, in an exponential average with a memory of
-/// [`CENTRE_BLEND_MEMORY_FRAMES`] compared frames. Both kinds are fitted on the same blobs at the same poses, so what
-/// differs is mostly the centres' own noise (the two come from the same pixels, and their errors are not independent:
-/// the weights are those of independent errors, which is what the measurements above bear out, not an optimum).
-/// With the mean: 0.029 px on the clutter's frames (as the detector), and on the simulated sequences a jitter of 0.28
-/// instead of 0.31 mm (four dots 1.5 m away), 0.041 instead of 0.048 mm (0.5 m away).
+/// centre of the blob's outline ([`outline_centre`], the full-frame detector's). Neither is better everywhere. On sharp
+/// blobs under sensor noise and JPEG compression the outline's points average the noise over the whole edge, while the
+/// moments move with the pixels near their threshold, and the outline is the closer to the true centre; on the soft
+/// blobs of `roitrack simulate --frames`, the moments are the better. Their errors are far from equal, so their
+/// weighted mean beats both: each is weighted by the inverse of its mean squared residual in static poses fitted to
+/// each frame's centres of that kind, in an exponential average with a memory of [`CENTRE_BLEND_MEMORY_FRAMES`]
+/// compared frames. Both kinds are fitted on the same blobs at the same poses, so what differs is mostly the centres'
+/// own noise (the two come from the same pixels, and their errors are not independent: the weights are those of
+/// independent errors, which is what the measurements bear out, not an optimum). With the mean, the clutter's frames
+/// are measured as closely as by the detector and the simulated sequences jitter less than with either kind alone
+/// (measured in docs/frames.md, step 1, and docs/results.md, "Design measurements behind the code").
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub(super) struct CentreBlend {
     /// The averaged mean squared residuals (px²): by the moments, by the outlines.

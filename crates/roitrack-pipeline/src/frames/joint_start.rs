@@ -1,12 +1,13 @@
 //! A rolling-shutter track started from its first frames fitted together: pose and twist under one constant twist,
 //! every blob of the frames at its own row's time.
 //!
-//! Why: a rolling-shutter frame's blobs are read over the rows the target spans (4 ms for 130 rows at 30 µs), and
-//! the static pose of one frame takes them as simultaneous: the target's motion over the readout is read as a
-//! change of the pose (at 1.3 m/s, 8.6 mm of depth on frames from a renderer outside the project). A track started
-//! there, at rest or with the twist of two such poses, predicts the next frames tens of millimetres off; their
-//! estimates are disputed and every new track starts the same way while the target stays fast. One frame does not
-//! show the twist; two or three consecutive frames do, and their blobs fitted with it give the pose too.
+//! Why: a rolling-shutter frame's blobs are read over the rows the target spans (4 ms for 130 rows at 30 µs), and the
+//! static pose of one frame takes them as simultaneous: the target's motion over the readout is read as a change of the
+//! pose, millimetres of depth at the speeds of the renderer outside the project (docs/results.md, "Rolling shutter from
+//! a renderer outside the project"). A track started there, at rest or with the twist of two such poses, predicts the
+//! next frames tens of millimetres off; their estimates are disputed and every new track starts the same way while the
+//! target stays fast. One frame does not show the twist; two or three consecutive frames do, and their blobs fitted
+//! with it give the pose too.
 
 use std::collections::VecDeque;
 

@@ -198,11 +198,11 @@ impl FrameTracker {
     /// `config` for the camera's readout: with a rolling shutter, the frame default's jerk densities
     /// ([`MotionModel::constant_acceleration`]) become the rolling-shutter ones
     /// ([`MotionModel::constant_acceleration_for_rolling_shutter`]); densities a user chose (`jerk_psd_given`) stay,
-    /// also when they equal the frame default's. On
-    /// `simulate --frames --fps 30 --shutter rolling` (16 points, seed 1) the global-shutter densities left orthoglide's
-    /// steps of acceleration (16.7 m/s², switched at once) 4.3 mm off in depth and the random scenario 0.38 mm
-    /// (0.30 and 1.8 mm with constant velocity); the rolling-shutter ones leave 0.135 and 0.238 mm, and
-    /// `roitrack frame-study`'s rolling-shutter figures move from 0.037-0.050 to 0.038-0.043 mm.
+    /// also when they equal the frame default's. A rolling-shutter frame's blobs, read over milliseconds, show the
+    /// motion within the frame, so the filter can follow faster changes of acceleration there without taking a frame's
+    /// noise for motion; with the global-shutter densities, sudden steps of acceleration left such tracks millimetres
+    /// off in depth (measured in docs/estimation.md, "Frame cameras", and docs/results.md, "Design measurements behind
+    /// the code").
     fn for_readout(
         mut config: TrackerConfig,
         camera: &CameraModel,
@@ -445,9 +445,10 @@ impl FrameTracker {
         estimate
     }
 
-    /// The RMS distance (px) between the frame's blobs and where `estimate` puts their points at their own times:
-    /// what tells an estimate that agrees with its frame from one the filter could not pull there (a covariance reset
-    /// left it re-converging 20 mm off, on orthoglide's 16 points at 30 Hz); infinite if a point does not project.
+    /// The RMS distance (px) between the frame's blobs and where `estimate` puts their points at their own times: what
+    /// tells an estimate that agrees with its frame from one the filter could not pull there (a covariance reset left
+    /// it re-converging far off: docs/results.md, "Design measurements behind the code"); infinite if a point does not
+    /// project.
     fn frame_residual_rms_px(&self, estimate: &Estimate) -> f64 {
         let mut sum_px2 = 0.0;
         for m in &self.measurements {

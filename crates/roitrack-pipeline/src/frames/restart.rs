@@ -38,7 +38,8 @@ impl FrameTracker {
     /// nearest the last trusted pose carried on by its twist to `t_s`, and which twin it is (`None`: the detection's
     /// own). Identification labels a symmetric grid one fixed way; a track that has turned the grid past half its
     /// symmetry follows another labelling, and a new track on the detection's would turn the pose by the symmetry's
-    /// angle and write the twist of that turn (a half turn of an 8 x 10 grid: 7 m/s and 78 rad/s).
+    /// angle and write the twist of that turn, tens of m/s and rad/s (measured in docs/results.md, "Design measurements
+    /// behind the code").
     pub(super) fn nearest_twin(
         &self,
         t_s: f64,
@@ -87,13 +88,13 @@ impl FrameTracker {
         Ok(())
     }
 
-    /// The state and covariance a new track starts from at `t_s`, given the static pose `found` there: with the
-    /// twist that carried the last trusted pose ([`TrackMemory::last_pose`]) to it, if that is at most
+    /// The state and covariance a new track starts from at `t_s`, given the static pose `found` there: with the twist
+    /// that carried the last trusted pose ([`TrackMemory::last_pose`]) to it, if that is at most
     /// [`RESTART_TWIST_MAX_GAP_S`] old, else at rest with a broad twist prior. A frame shows the pose, not the motion:
     /// at rest, a target that moves 50 mm between frames (1.5 m/s at 30 Hz) is far from the next frame's windows and
-    /// from the blobs they would be matched with, and every frame would start a new track at rest again (the random
-    /// scenario's 16 points at 30 Hz: 65 new tracks in 121 frames, 21 mm RMSE against 0.03 mm for the poses found
-    /// frame by frame).
+    /// from the blobs they would be matched with, and every frame would start a new track at rest again, far less
+    /// accurate than the poses found frame by frame (measured in docs/results.md, "Design measurements behind the
+    /// code").
     pub(super) fn restart_state(&self, t_s: f64, found: MotionState) -> (MotionState, Matrix12) {
         // (For a rolling shutter, `t_s` is the mean time of the blobs the pose was found from.)
         let mut covariance = full_frame_covariance();

@@ -24,13 +24,13 @@ pub(super) struct WholeFrameSearch {
 }
 
 impl FrameTracker {
-    /// Searches the whole frame; fills `self.measurements` and says whether the track goes on, restarts, or the
-    /// target was not found, with the target's static pose when it was identified. The target identified whole comes
-    /// first: blobs matched to the running track's predictions are only as right as those predictions, and a grid
-    /// that moved by one spacing more than predicted matches its neighbours (orthoglide's 16 points at 30 Hz: an
-    /// estimate 20 mm off that agreed with its blobs). Identified blobs continue a running track (whose estimate
-    /// [`Self::process`] then checks against the frame); matching is for frames where the target cannot be
-    /// identified whole (part of it hidden or out of the image).
+    /// Searches the whole frame; fills `self.measurements` and says whether the track goes on, restarts, or the target
+    /// was not found, with the target's static pose when it was identified. The target identified whole comes first:
+    /// blobs matched to the running track's predictions are only as right as those predictions, and a grid that moved
+    /// by one spacing more than predicted matches its neighbours, giving an estimate that agrees with its blobs yet is
+    /// far off (docs/frames.md, step 2). Identified blobs continue a running track (whose estimate [`Self::process`]
+    /// then checks against the frame); matching is for frames where the target cannot be identified whole (part of it
+    /// hidden or out of the image).
     pub(super) fn search_whole_frame(
         &mut self,
         frame: &Frame,

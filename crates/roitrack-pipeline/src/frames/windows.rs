@@ -196,12 +196,12 @@ impl FrameTracker {
 
     /// How far the centre of point `i`'s image, read at `t_s`, lies from the image of its disk's centre (px, to be
     /// taken away from the measured centre): a disk seen at an angle is imaged as an ellipse whose centre is not the
-    /// image of the disk's centre (perspective draws its near half larger), by hundredths of a pixel that move with
-    /// the pose. Taken away as the full-frame identification does, with the pose `predictor` predicts (the
-    /// displacement changes far less than it is with the pose that moves it); zero for a point without a diameter
-    /// or a target that is not planar. Without it, the windows' centres of four 12-14 mm dots 0.5 m away lay 0.05 px
-    /// from the images of their centres, 0.035 px of it a bias, against 0.015 px for the full-frame detection's; on
-    /// `roitrack frame-study` the global-shutter position RMSE fell from 0.0152 to 0.0137 mm with it.
+    /// image of the disk's centre (perspective draws its near half larger), by hundredths of a pixel that move with the
+    /// pose. Taken away as the full-frame identification does, with the pose `predictor` predicts (the displacement
+    /// changes far less than it is with the pose that moves it); zero for a point without a diameter or a target that
+    /// is not planar. Without it, the windows' centres carry a bias the full-frame detection's do not, and the frame
+    /// study's global-shutter error is larger (measured in docs/frames.md, step 1, and docs/results.md, "Design
+    /// measurements behind the code").
     pub(super) fn disk_centre_shift_px(
         &self,
         predictor: &Predictor,

@@ -54,8 +54,8 @@ use lattice::{TargetLattice, grow, placements};
 use sparse::{PlanarModel, triple_hypotheses};
 use spatial::quadruple_hypotheses;
 
-/// The centroid noise (px per coordinate) a hypothesis is judged against: that of real photographs' centres (0.1 to
-/// 0.35 px).
+/// The centroid noise (px per coordinate) a hypothesis is judged against: that of real photographs' centres, near
+/// the top of their spread (measured in docs/results.md, "Design measurements behind the code").
 const IDENTIFY_NOISE_PX: f64 = 0.3;
 
 /// A grid of at most this many points is also searched as a sparse layout (by triples) when its lattice growth
@@ -946,10 +946,10 @@ fn identify_search(
     Ok(Some(finish(&verifier, chosen, ambiguous, work.hypotheses)))
 }
 
-/// [`f_equal_dof_upper_quantile`] at [`RIVAL_CONFIDENCE`], kept per degrees of freedom on the thread: it sums a
-/// density over 8,192 cells (about 0.1 ms, more than a small target's whole identification once its hypotheses
-/// are made), and a photograph's or a video's identifications ask it again and again for the same few counts of
-/// points. The same value as computed afresh: the function is deterministic.
+/// [`f_equal_dof_upper_quantile`] at [`RIVAL_CONFIDENCE`], kept per degrees of freedom on the thread: it sums a density
+/// over 8,192 cells (longer than a small target's whole identification once its hypotheses are made; measured in
+/// docs/results.md, "Design measurements behind the code"), and a photograph's or a video's identifications ask it
+/// again and again for the same few counts of points. The same value as computed afresh: the function is deterministic.
 fn rival_quantile(dof: f64) -> f64 {
     thread_local! {
         static KEPT: std::cell::RefCell<Vec<(u64, f64)>> = const { std::cell::RefCell::new(Vec::new()) };
