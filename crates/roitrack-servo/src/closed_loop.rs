@@ -190,8 +190,8 @@ pub struct ServoConfig {
     /// The tracker's configuration (ROI camera; the frame tracker's is made from it).
     pub tracker: TrackerConfig,
     /// Gaussian noise added to each ROI centroid (px, standard deviation per image axis), on top of the rendered
-    /// image's own (read and shot noise, which leaves the centroids about 0.013 px RMS, eight times below the
-    /// 0.1 px of the built-in scenes): 0 by default; 0.1 to servo with the built-in scenes' noise.
+    /// image's own (read and shot noise, which leaves the centroids several times below the 0.1 px of the built-in
+    /// scenes: docs/servo.md): 0 by default; 0.1 to servo with the built-in scenes' noise.
     pub extra_centroid_noise_px: f64,
     /// Whether the controller tells the tracker the acceleration it commands (ROI camera; `ctc`, `ctc-pose` and
     /// `kvs`): at each tick, the platform's acceleration that its own model gives for the forces it commands
@@ -202,9 +202,9 @@ pub struct ServoConfig {
     pub known_acceleration: bool,
     /// Seed of the camera's noise.
     pub seed: u64,
-    /// Distance from the path (m) beyond which the run is stopped as unstable: 50 mm, ten times the largest error
-    /// of any run that ends (under 5 mm even at 30 Hz) and still inside the image (the path keeps the blobs about
-    /// 90 mm from its border at 0.6 m).
+    /// Distance from the path (m) beyond which the run is stopped as unstable: 50 mm, beyond the largest error of any
+    /// run that ends, even at 30 Hz (docs/results.md, "Design measurements behind the code"), and still inside the
+    /// image (the path keeps the blobs about 90 mm from its border at 0.6 m).
     pub divergence_error_m: f64,
     /// A run whose actuators are at their force limit more than half of any window this long (s) is stopped as
     /// unstable: 0.1 s. An unstable loop does not always run away: the force limit can hold it in a limit cycle a

@@ -19,9 +19,9 @@ use nalgebra::{Rotation3, Vector3};
 use roitrack_core::MotionState;
 use roitrack_core::estimator::{Estimate, Matrix12};
 
-/// Words of a snapshot: t_ref, R (9), t (3), V (3), W (3), a flag, the covariance (144, column-major). The whole
-/// matrix rather than its upper triangle: the reader then copies it in one slice instead of mirroring 78 entries,
-/// which measured about a fifth of a read (`cargo bench -p roitrack-servo --bench handle`).
+/// Words of a snapshot: t_ref, R (9), t (3), V (3), W (3), a flag, the covariance (144, column-major). The whole matrix
+/// rather than its upper triangle: the reader then copies it in one slice instead of mirroring 78 entries, a sizeable
+/// part of a read (measured in docs/results.md, "Design measurements behind the code").
 const WORDS: usize = 1 + 9 + 3 + 3 + 3 + 1 + 144;
 /// Where the covariance starts.
 const COVARIANCE_AT: usize = 20;

@@ -63,7 +63,8 @@ pub struct RobotParams {
 
 impl RobotParams {
     /// An Orthoglide-sized robot: 0.31 m legs (the prototype's), masses of a light machine of that size, friction of
-    /// preloaded linear guides, 400 N actuators (the path at 2 m/s asks for about 250 N).
+    /// preloaded linear guides, 400 N actuators (above what the path at 2 m/s asks for: docs/results.md, "Design
+    /// measurements behind the code").
     pub fn orthoglide() -> Self {
         Self {
             leg_length_m: 0.31,
