@@ -1,9 +1,9 @@
 //! A GenICam camera (GigE Vision or USB3 Vision, through Aravis) as a [`RoiCamera`].
 //!
-//! Changing a GenICam camera's `Width`/`Height` needs acquisition stopped and restarted (about 100 ms on Aravis' fake
-//! camera), but `OffsetX`/`OffsetY` can move between two frames: the camera reads a window of fixed size
-//! ([`GenicamOptions::roi_size_px`]) and moves it onto each ROI the scheduler asks for. The full frame of an
-//! initialisation is the one place where the size changes.
+//! Changing a GenICam camera's `Width`/`Height` needs acquisition stopped and restarted (far longer than a frame:
+//! docs/cameras.md, "The ROI: a window moved between frames"), but `OffsetX`/`OffsetY` can move between two frames: the
+//! camera reads a window of fixed size ([`GenicamOptions::roi_size_px`]) and moves it onto each ROI the scheduler asks
+//! for. The full frame of an initialisation is the one place where the size changes.
 
 use std::net::{IpAddr, Ipv4Addr, SocketAddrV4, UdpSocket};
 use std::sync::Arc;

@@ -35,9 +35,9 @@ const IN_FLIGHT: usize = 1024;
 /// estimate (each hand-over wakes it, so that an estimate is published at once).
 const IDLE_SLEEP: Duration = Duration::from_millis(20);
 /// The history depth of the estimate topics' writers. ROS 2's sensor-data profile keeps 5, but RustDDS sends from a
-/// thread of its own, out of the writer's history: with 5, a burst of estimates (or that thread held up 12 ms) lost
-/// samples before they were sent (a third of the first 70 estimates of a paced demo). History is not a QoS that
-/// subscribers are matched on: each keeps its own depth.
+/// thread of its own, out of the writer's history: with 5, a burst of estimates (or that thread held up for a few
+/// milliseconds) lost samples before they were sent (measured in docs/results.md, "Design measurements behind the
+/// code"). History is not a QoS that subscribers are matched on: each keeps its own depth.
 const ESTIMATE_DEPTH: usize = 100;
 /// The depth of `/tf`'s QoS, tf2's own broadcaster's: reliable, volatile, keep last 100.
 const TF_DEPTH: usize = 100;
@@ -495,15 +495,14 @@ impl Drop for Ros2Publisher {
     }
 }
 
-/// Puts the calling thread (and the threads it starts from now on) under Linux's `SCHED_BATCH` policy: a thread
-/// woken under it never preempts the thread that woke it. Each hand-over wakes the publishing thread, which wakes
-/// RustDDS's; under the default policy the woken thread often took the tracking thread's core at once, and the
-/// tracking waited for five messages to be serialised and sent (a hand-over's p99 of 600 us, and the tracking's busy
-/// time per estimate two and a half times that of the blocks without publishing, `examples/ros2_cost.rs` under load).
-/// Under `SCHED_BATCH` they run on a free core, or when the tracking thread sleeps. Their weight is left as it is: a
-/// nice value of 10 as well lowered the tracking's cost further at 4 kHz under load (+59 % rather than +150 %), but
-/// RustDDS then fell behind and lost 0.7-1.4 % of the estimates, uncounted. Where the policy cannot be set (not
-/// Linux), nothing changes.
+/// Puts the calling thread (and the threads it starts from now on) under Linux's `SCHED_BATCH` policy: a thread woken
+/// under it never preempts the thread that woke it. Each hand-over wakes the publishing thread, which wakes RustDDS's;
+/// under the default policy the woken thread often took the tracking thread's core at once, and the tracking waited for
+/// five messages to be serialised and sent, which multiplied its busy time per estimate under load. Under `SCHED_BATCH`
+/// they run on a free core, or when the tracking thread sleeps. Their weight is left as it is: a nice value of 10 as
+/// well lowered the tracking's cost further under load, but RustDDS then fell behind and lost estimates, uncounted.
+/// Both measured with `examples/ros2_cost.rs` (docs/ros2.md, "Cost to the tracking, measured in one run"). Where the
+/// policy cannot be set (not Linux), nothing changes.
 fn yield_to_the_tracker() {
     #[cfg(target_os = "linux")]
     {

@@ -52,7 +52,7 @@ pub struct BagOptions {
     /// The target's frame: the child frame of `/tf` and of the odometry (default `target`).
     pub child_frame_id: String,
     /// Chunk compression: none (the default, as `ros2 bag record`'s: a bag is then written faster than roitrack
-    /// tracks), zstd (about 2.3 times smaller, 13-17 µs an estimate on one core) or lz4.
+    /// tracks), zstd (a few times smaller, but slower than the tracker: docs/ros2.md, "Cost") or lz4.
     pub compression: Option<mcap::Compression>,
 }
 
