@@ -231,10 +231,10 @@ fn correlation(a: &[f64], b: &[f64]) -> f64 {
 /// estimates' median period over ± `max_offset_s` (at most half of either trajectory's duration), then refined by a
 /// parabola through the peak.
 ///
-/// The estimates' first 10 speeds are left out when there are at least 100: a
-/// tracker's first poses converge from its initial fit, and their jumps (0.4 m/s on a still target) are large
-/// against the noise. Which of them a shift keeps inside the truth's span changed the correlation enough to move the
-/// peak by five periods (25 against 37 ms on the built-in scene).
+/// The estimates' first 10 speeds are left out when there are at least 100: a tracker's first poses converge from its
+/// initial fit, and their jumps are large against the noise. Which of them a shift keeps inside the truth's span
+/// changed the correlation enough to move the peak by several periods (measured in docs/results.md, "Design
+/// measurements behind the code").
 ///
 /// ```
 /// use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};

@@ -792,10 +792,9 @@ const DEFAULT_PIPE_BYTES: usize = 1 << 16;
 const MAX_PIPE_BYTES: usize = 1 << 20;
 
 /// Asks for `pipe` to hold a frame of `frame_bytes` (at most [`MAX_PIPE_BYTES`]) instead of Linux's default 64 KiB
-/// (never less than that): a
-/// frame then goes through in one or a few writes, and ffmpeg no longer waits, spinning on the pipe's lock, while we
-/// read each 64 KiB (on a 300-frame 800 x 600 video ffmpeg's system time fell from 0.15-0.27 s to 0.09 s, about
-/// that of decoding to /dev/null). Nothing changes when the system refuses, or off Linux.
+/// (never less than that): a frame then goes through in one or a few writes, and ffmpeg no longer waits, spinning on
+/// the pipe's lock, while we read each 64 KiB, which took its system time down to about that of decoding to /dev/null
+/// (measured in docs/results.md, "Whole-frame detection speed"). Nothing changes when the system refuses, or off Linux.
 fn enlarge_pipe(pipe: &ChildStdout, frame_bytes: usize) {
     #[cfg(target_os = "linux")]
     {

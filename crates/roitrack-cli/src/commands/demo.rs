@@ -47,8 +47,9 @@ pub struct DemoArgs {
     pub ros2: crate::ros2_args::Ros2Args,
 }
 
-/// The longest scenario the demo runs (s): it holds the run, its six trackings and their figures in memory, about
-/// 7 MB per simulated second (orthoglide: 166 MB peak for 20 s), so at most about 0.9 GB.
+/// The longest scenario the demo runs (s): it holds the run, its six trackings and their figures in memory, which grow
+/// with the simulated time (measured in docs/results.md, "Design measurements behind the code"), so that it stays under
+/// about a gigabyte.
 const MAX_DEMO_DURATION_S: f64 = 120.0;
 
 /// The files a demo writes into its folder: the simulated run, each estimator's estimates, the figures.
