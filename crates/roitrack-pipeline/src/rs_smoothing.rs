@@ -18,7 +18,7 @@ use roitrack_core::estimator::{
 use roitrack_core::stats::chi2_upper_0_1_percent;
 use roitrack_core::{CameraModel, Measurement, SpatioTemporalModel, Target};
 
-use crate::frames::FrameOutcome;
+use crate::frames::{FrameOutcome, observation_of};
 
 /// Frames on either side of the one refitted: a 5-point stencil, whose error (of order the fifth derivative times
 /// T⁴) is far below the centroid noise at 30 Hz, where a ±1 frame difference leaves jerk·T²/6.
@@ -114,16 +114,7 @@ impl<I> RollingSmoother<I> {
     fn held(&self, info: I, outcome: FrameOutcome, measurements: &[Measurement]) -> Held<I> {
         let observations: Vec<Observation> = measurements
             .iter()
-            .filter_map(|m| {
-                Some(Observation {
-                    t_s: m.t_s,
-                    point_index: self.target.index_of(m.id)?,
-                    ideal_px: self
-                        .camera
-                        .undistort_pixel(&nalgebra::Vector2::new(m.u_px, m.v_px))
-                        .ok()?,
-                })
-            })
+            .filter_map(|m| observation_of(&self.target, &self.camera, m))
             .collect();
         // Only estimates the filter vouches for are refitted or lent to a neighbour's stencil, and a track's first
         // estimate when it is flagged degenerate: a static pose of a rolling frame (one frame does not show the

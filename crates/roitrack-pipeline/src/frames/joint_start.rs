@@ -11,14 +11,13 @@
 
 use std::collections::VecDeque;
 
-use nalgebra::Vector2;
 use roitrack_core::estimator::{Emit, Estimator, Observation, WindowProblem};
 use roitrack_core::solver::{SolverOptions, solve};
 use roitrack_core::stats::chi2_upper_0_1_percent;
 use roitrack_core::{Measurement, MotionState, SpatioTemporalModel};
 
 use super::restart::{RESTART_TWIST_MAX_GAP_S, RESTART_TWIST_SIGMAS};
-use super::{FrameError, FrameTracker, RESTART_RESIDUAL_PX};
+use super::{FrameError, FrameTracker, RESTART_RESIDUAL_PX, observation_of};
 use crate::realtime::full_frame_covariance;
 
 /// Frames a rolling-shutter track's start is fitted from (the newest included): three frames pin the twist over two
@@ -175,16 +174,7 @@ impl FrameTracker {
             .skip(first)
             .flat_map(|(_, ms)| ms.iter())
             .chain(self.measurements.iter())
-            .filter_map(|m| {
-                Some(Observation {
-                    t_s: m.t_s,
-                    point_index: self.target.index_of(m.id)?,
-                    ideal_px: self
-                        .camera
-                        .undistort_pixel(&Vector2::new(m.u_px, m.v_px))
-                        .ok()?,
-                })
-            })
+            .filter_map(|m| observation_of(&self.target, &self.camera, m))
             .collect();
         // Twelve unknowns: at least as many blobs as a frame's fit takes (4) per frame.
         if observations.len() < 4 * (kept + 1) {

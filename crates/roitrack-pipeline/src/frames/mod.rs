@@ -47,8 +47,8 @@ pub use stream::{FrameStreamError, track_frame_stream, track_frame_stream_leavin
 
 use nalgebra::Vector2;
 use roitrack_core::estimator::{
-    ConfigError, Emit, Estimate, Estimator, EstimatorConfig, MotionModel, TrackStatus, Tracker,
-    TrackerConfig,
+    ConfigError, Emit, Estimate, Estimator, EstimatorConfig, MotionModel, Observation, TrackStatus,
+    Tracker, TrackerConfig,
 };
 use roitrack_core::{CameraModel, Measurement, Target};
 use roitrack_image::{Frame, PhotoScratch, Polarity};
@@ -477,6 +477,21 @@ impl FrameTracker {
             .push_batch(&self.measurements, Emit::EachBatch)?
             .map(|e| self.at_measurements_mean_time(e)))
     }
+}
+
+/// The observation of measurement `m`: its point's index in `target` and its centroid undistorted by `camera`;
+/// `None` for an id `target` does not have or a centroid that does not undistort (the joint start's and the
+/// smoother's fits leave such blobs out).
+pub(crate) fn observation_of(
+    target: &Target,
+    camera: &CameraModel,
+    m: &Measurement,
+) -> Option<Observation> {
+    Some(Observation {
+        t_s: m.t_s,
+        point_index: target.index_of(m.id)?,
+        ideal_px: camera.undistort_pixel(&Vector2::new(m.u_px, m.v_px)).ok()?,
+    })
 }
 
 #[cfg(test)]
