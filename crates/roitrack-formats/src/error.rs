@@ -98,6 +98,17 @@ impl fmt::Display for FormatError {
 
 impl std::error::Error for FormatError {}
 
+/// A reader's next item from `next` (`Ok(None)`: the end), setting `done` at the end or at an error, so that the
+/// reader gives nothing more after either.
+pub(crate) fn ending_at_end_or_error<T>(
+    done: &mut bool,
+    next: Result<Option<T>, FormatError>,
+) -> Option<Result<T, FormatError>> {
+    let next = next.transpose();
+    *done = !matches!(next, Some(Ok(_)));
+    next
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -322,17 +322,8 @@ impl FrameSource {
         if self.done {
             return None;
         }
-        match self.read_next(frame) {
-            Ok(Some(info)) => Some(Ok(info)),
-            Ok(None) => {
-                self.done = true;
-                None
-            }
-            Err(e) => {
-                self.done = true;
-                Some(Err(e))
-            }
-        }
+        let next = self.read_next(frame);
+        crate::error::ending_at_end_or_error(&mut self.done, next)
     }
 
     fn read_next(&mut self, frame: &mut Frame) -> Result<Option<FrameInfo>, FormatError> {

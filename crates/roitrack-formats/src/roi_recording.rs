@@ -200,18 +200,8 @@ impl<R: Read> Iterator for RoiRecordingReader<R> {
         if self.done {
             return None;
         }
-        let result = self.read_record();
-        match result {
-            Ok(Some(r)) => Some(Ok(r)),
-            Ok(None) => {
-                self.done = true;
-                None
-            }
-            Err(e) => {
-                self.done = true;
-                Some(Err(e))
-            }
-        }
+        let next = self.read_record();
+        crate::error::ending_at_end_or_error(&mut self.done, next)
     }
 }
 
