@@ -102,6 +102,21 @@ pub fn acknowledge() {
     RECEIVED.store(0, Ordering::SeqCst);
 }
 
+/// A flag raised by the first signal (Ctrl-C, SIGTERM, SIGHUP), for a command that looks at a flag rather than calls
+/// [`check`]: a live run's camera, the ROS 2 node's look at the bus. A second signal ends the process at once.
+#[cfg(any(feature = "genicam", feature = "ros2"))]
+pub fn stop_flag() -> std::sync::Arc<AtomicBool> {
+    let stop = std::sync::Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    std::thread::spawn(move || {
+        while received().is_none() {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        flag.store(true, Ordering::SeqCst);
+    });
+    stop
+}
+
 /// The first signal received, if any.
 pub fn received() -> Option<i32> {
     match RECEIVED.load(Ordering::SeqCst) {

@@ -2,9 +2,6 @@
 //! Aravis, or on Aravis' fake GigE camera rendering a scenario (see `roitrack_genicam`, docs/cameras.md).
 
 use std::path::PathBuf;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
@@ -150,20 +147,6 @@ pub fn cameras(args: &CamerasArgs) -> Result<()> {
     Ok(())
 }
 
-/// The stop flag the camera reads, raised by the first signal (Ctrl-C, SIGTERM, SIGHUP: `crate::signals`): for a live
-/// run the usual way to end, which writes every output. A second signal ends the process at once.
-fn stop_flag() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    std::thread::spawn(move || {
-        while crate::signals::received().is_none() {
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        flag.store(true, Ordering::SeqCst);
-    });
-    stop
-}
-
 /// Refuses, before anything is read or written, outputs (poses, twists, the bag and its partial name, the truth's
 /// files) that are the camera or target file (also through links) or each other.
 fn check_paths(args: &LiveArgs) -> Result<()> {
@@ -272,7 +255,8 @@ pub fn run(args: &LiveArgs) -> Result<()> {
             ros2_failed = ros2.estimate(e).err();
         }
     };
-    let stop = stop_flag();
+    // The stop flag the camera reads: for a live run the usual way to end, which writes every output.
+    let stop = crate::signals::stop_flag();
     let report = if args.fake {
         let options = LiveOptions {
             camera,
@@ -367,7 +351,7 @@ pub fn bench_fake_camera(duration_s: f64) -> Result<super::lab::bench::FakeCamer
         &scenario,
         &options,
         1,
-        Arc::new(AtomicBool::new(false)),
+        std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false)),
         |_| {},
         &mut |_| {},
     )?;

@@ -121,19 +121,6 @@ pub struct Ros2NodeArgs {
     pub estimator: EstimatorArgs,
 }
 
-/// Raised by the first signal: the node ends at its next look at the bus and writes its outputs.
-fn stop_flag() -> Arc<AtomicBool> {
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    std::thread::spawn(move || {
-        while crate::signals::received().is_none() {
-            std::thread::sleep(Duration::from_millis(10));
-        }
-        flag.store(true, Ordering::SeqCst);
-    });
-    stop
-}
-
 pub fn run(args: &Ros2NodeArgs) -> Result<()> {
     let target = args.target.read()?;
     let config = args.estimator.config()?;
@@ -152,7 +139,8 @@ pub fn run(args: &Ros2NodeArgs) -> Result<()> {
         )?;
     }
     let options: Ros2Options = args.bus.options()?;
-    let stop = stop_flag();
+    // The node ends at its next look at the bus and writes its outputs.
+    let stop = crate::signals::stop_flag();
     let idle = args.idle_s.map_or(Duration::MAX, Duration::from_secs_f64);
     // The images are subscribed to before the camera info is waited for, so that those that come first are counted.
     let mut images = match &args.image_topic {
