@@ -82,8 +82,8 @@ pub use rolling_refit::{
 pub use static_baseline::StaticEstimator;
 pub use static_pose::{
     AMBIGUITY_CHI2, InitError, MAX_STATIC_POSES, MODEL_SPREAD_SIGMAS, PixelNoise, PoseFit,
-    StaticPoses, is_rival, refine_static_pose, relabelling_is_rival, solve_static_pose,
-    static_model_residual,
+    StaticPoses, best_static_pose, is_rival, refine_static_pose, relabelling_is_rival,
+    solve_static_pose, static_model_residual,
 };
 pub use vvs::{VvsEstimator, VvsSettings};
 pub use window::WindowMode;

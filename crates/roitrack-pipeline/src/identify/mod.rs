@@ -43,10 +43,11 @@ pub(crate) mod spatial;
 
 use nalgebra::{Vector2, Vector3};
 use roitrack_core::estimator::{
-    Observation, relabelling_is_rival, solve_static_pose, static_model_residual,
+    Observation, best_static_pose, relabelling_is_rival, static_model_residual,
 };
 use roitrack_core::stats::f_equal_dof_upper_quantile;
 use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+use std::collections::HashMap;
 
 use crate::matching::{DetectedBlob, MatchError};
 use index::PointIndex;
@@ -63,6 +64,11 @@ const IDENTIFY_NOISE_PX: f64 = 0.3;
 /// disk in the middle of a 2 x 2 plate) misleads the growth. The triple search costs about the square of the
 /// points, so larger grids rely on their growth, which their many neighbours make robust.
 const SMALL_LATTICE_POINTS: usize = 16;
+
+/// A target of at most this many points has every search verified, even after an accepted labelling of all its
+/// points (see `identify_search`): a few points are matched by a few blobs of clutter too (a 2 x 2 plate's four dots
+/// against three of them and a large disk), and their searches are cheap.
+const ALWAYS_SEARCHED_POINTS: usize = 6;
 
 /// The model error a hypothesis's residual is allowed (and a rival's advantage over the best), in standard
 /// deviations of [`MODEL_UNCERTAINTY`]: the bounds users' camera and target files stay within.
@@ -154,6 +160,7 @@ impl Verified {
 }
 
 /// A hypothesis's static pose and how well it fits.
+#[derive(Clone, Copy)]
 struct Fitted {
     state: MotionState,
     /// RMS reprojection residual (px per coordinate).
@@ -161,6 +168,9 @@ struct Fitted {
     /// The pose sees the target from its back (+z of the object frame).
     from_back: bool,
 }
+
+/// A labelling: (point, blob) pairs in the points' order.
+type Labelling = Vec<(usize, usize)>;
 
 /// Everything the verification needs, computed once.
 struct Verifier<'a> {
@@ -176,6 +186,8 @@ struct Verifier<'a> {
     centre_m: Vector3<f64>,
     /// Residual bounds computed ([`Work::bounds`]).
     bounds: std::cell::Cell<usize>,
+    /// The static pose of every labelling verified so far, by its sorted pairs ([`Self::pose_of`]).
+    poses: std::cell::RefCell<HashMap<Labelling, Option<Fitted>>>,
 }
 
 impl Verifier<'_> {
@@ -204,9 +216,7 @@ impl Verifier<'_> {
                 ideal_px: *c,
             })
             .collect();
-        let fit = *solve_static_pose(&self.model, self.target, &obs, IDENTIFY_NOISE_PX)
-            .ok()?
-            .best();
+        let fit = best_static_pose(&self.model, self.target, &obs, IDENTIFY_NOISE_PX).ok()?;
         let state = fit.state;
         if state.cam_t_obj_m.z <= 0.0 || !state.cam_t_obj_m.iter().all(|x| x.is_finite()) {
             return None;
@@ -243,12 +253,25 @@ impl Verifier<'_> {
             })
     }
 
+    /// The static pose of the labelling `sorted` (pairs in order) on the blobs' centres, solved once per labelling: a
+    /// small target's search verifies every hypothesis, and most of them, grown by projection and matching, end in
+    /// one of a few labellings (a 4 x 4 grid: about 5,000 hypotheses, each solving the pose of its whole labelling
+    /// again from every start).
+    fn pose_of(&self, sorted: &[(usize, usize)]) -> Option<Fitted> {
+        if let Some(fitted) = self.poses.borrow().get(sorted) {
+            return *fitted;
+        }
+        let centres: Vec<Vector2<f64>> = sorted.iter().map(|&(_, b)| self.ideal[b]).collect();
+        let fitted = self.pose(sorted, &centres);
+        self.poses.borrow_mut().insert(sorted.to_vec(), fitted);
+        fitted
+    }
+
     /// Verifies a hypothesis: pose, then every point projected, matched, the pose solved again.
     fn verify(&self, pairs: &[(usize, usize)]) -> Option<Verified> {
         let mut current: Vec<(usize, usize)> = pairs.to_vec();
         current.sort_unstable();
-        let centres: Vec<Vector2<f64>> = current.iter().map(|&(_, b)| self.ideal[b]).collect();
-        let mut fitted = self.pose(&current, &centres)?;
+        let mut fitted = self.pose_of(&current)?;
         let mut result = None;
         for _ in 0..2 {
             let verified = self.project_and_match(&fitted.state)?;
@@ -256,9 +279,7 @@ impl Verifier<'_> {
             let settled = verified.pairs == current;
             if !settled {
                 current.clone_from(&verified.pairs);
-                let centres: Vec<Vector2<f64>> =
-                    current.iter().map(|&(_, b)| self.ideal[b]).collect();
-                fitted = self.pose(&current, &centres)?;
+                fitted = self.pose_of(&current)?;
             }
             result = Some(Verified {
                 state: fitted.state,
@@ -788,6 +809,7 @@ fn identify_search(
         front_normal: planar.as_ref().map(|(_, front)| *front),
         centre_m: facts.centre_m,
         bounds: std::cell::Cell::new(0),
+        poses: Default::default(),
     };
     let lattice = facts.lattice.clone();
     let diameters: Vec<Option<f64>> = points.iter().map(|p| p.diameter_m).collect();
@@ -836,9 +858,17 @@ fn identify_search(
         }
         work.hypotheses += group.len();
         verified.extend(group.iter().filter_map(|pairs| verifier.verify(pairs)));
-        // A small target's every search is verified (they are cheap): a rival found by another search than the
-        // best's must be seen to be compared.
-        if n > SMALL_LATTICE_POINTS && verified.iter().any(|v| v.accepted(&verifier, min_matched)) {
+        // A small target's every search is verified: a rival found by another search than the best's must be seen to
+        // be compared (a stray blob can mislead a lattice grown from a few neighbours). Except once an accepted
+        // labelling explains every point of a target of more than `ALWAYS_SEARCHED_POINTS`: a rival must then
+        // explain them all too, n blobs in the target's layout, which the lattice's placements (the twins among them)
+        // have already laid; the triple search would verify thousands of partial labellings of a regular grid (a 4 x 4
+        // grid seen whole: about 4,200) that cannot rival it.
+        let accepted = |v: &Verified| v.accepted(&verifier, min_matched);
+        let complete = |v: &Verified| v.pairs.len() == n && v.missing == 0 && accepted(v);
+        if n > SMALL_LATTICE_POINTS && verified.iter().any(accepted)
+            || n > ALWAYS_SEARCHED_POINTS && verified.iter().any(complete)
+        {
             break;
         }
     }

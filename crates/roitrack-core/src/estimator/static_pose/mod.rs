@@ -433,7 +433,64 @@ pub fn solve_static_pose(
     obs: &[Observation],
     noise: impl Into<PixelNoise>,
 ) -> Result<StaticPoses, InitError> {
-    let noise = noise.into();
+    search_static_pose(model, target, obs, noise.into(), Search::Whole)
+}
+
+/// The best static pose of [`solve_static_pose`]'s search, without its rivals: for a caller that ranks many
+/// labellings by their fits (identification verifies thousands on a small regular grid) and needs of each only its
+/// best pose. Observations of more than [`FEW_POINTS_BEST_ONLY`] points are searched as many points are (triples until
+/// one fits the noise, and each minimum's mirror twin), not by every triple of them; no rival's model effect is
+/// computed.
+///
+/// ```
+/// use nalgebra::{Rotation3, Vector3};
+/// use roitrack_core::estimator::{Observation, best_static_pose};
+/// use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+///
+/// let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+/// let target = Target::grid4x4();
+/// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.5, -0.3, 2.0), Vector3::new(-0.02, 0.01, 0.7));
+/// let obs: Vec<Observation> = [0, 3, 5, 6, 9, 12]
+///     .into_iter()
+///     .map(|i| Observation {
+///         t_s: 0.0,
+///         point_index: i,
+///         ideal_px: model.project(&truth, &target.points()[i].point_in_obj_m, 0.0).unwrap(),
+///     })
+///     .collect();
+/// let fit = best_static_pose(&model, &target, &obs, 0.1).unwrap();
+/// assert!((fit.state.cam_t_obj_m - truth.cam_t_obj_m).norm() < 1e-9);
+/// ```
+pub fn best_static_pose(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    obs: &[Observation],
+    noise: impl Into<PixelNoise>,
+) -> Result<PoseFit, InitError> {
+    search_static_pose(model, target, obs, noise.into(), Search::BestOnly)
+        .map(|poses| *poses.best())
+}
+
+/// How much of the static pose [`search_static_pose`] finds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Search {
+    /// Every pose that rivals the best ([`solve_static_pose`]).
+    Whole,
+    /// The best alone ([`best_static_pose`]).
+    BestOnly,
+}
+
+/// Observations of at most this many points are tried with every triple of them by [`best_static_pose`] (four
+/// triples).
+const FEW_POINTS_BEST_ONLY: usize = 4;
+
+fn search_static_pose(
+    model: &SpatioTemporalModel,
+    target: &Target,
+    obs: &[Observation],
+    noise: PixelNoise,
+    search: Search,
+) -> Result<StaticPoses, InitError> {
     let noise_px = noise.px();
     let too_few = || InitError::TooFewPoints {
         required: 3,
@@ -511,7 +568,10 @@ pub fn solve_static_pose(
         let noise_cost = noise_normalised.powi(2) * depth2;
         // A few points constrain the pose weakly: a view of them can hold minima that neither one triple nor a
         // mirror tilt reaches, so all their triples are tried (at most 20, for 6 points).
-        let few = n <= FEW_POINTS;
+        let few = match search {
+            Search::Whole => n <= FEW_POINTS,
+            Search::BestOnly => n <= FEW_POINTS_BEST_ONLY,
+        };
         if !few && best.1 <= noise_cost * (dof + 6.0 * (2.0 * dof).sqrt() + 10.0) {
             break;
         }
@@ -579,6 +639,13 @@ pub fn solve_static_pose(
             reason: "no pose puts the points in front of the camera",
         });
     };
+    if search == Search::BestOnly {
+        return Ok(StaticPoses {
+            fits: [best_fit; MAX_STATIC_POSES],
+            len: 1,
+            runner_up: None,
+        });
+    }
     // The rivals: minima whose cost is within the ambiguity bound of the best, against the larger of the given noise
     // and what the best's residual says of it, model error included. A few points leave few degrees of freedom and a
     // residual that often shows far less than the noise: the variance is its upper 95 % confidence bound, not its
@@ -907,6 +974,56 @@ mod tests {
             .collect();
         let target = Target::new(points).unwrap();
         assert_recovers(&target, &MotionState::bench());
+    }
+
+    /// [`best_static_pose`] finds [`solve_static_pose`]'s best on random views of random subsets of a 4 x 4 grid, with
+    /// noise: the same pose beyond [`FEW_POINTS`] points (the same search), and within [`FEW_POINTS`] a pose whose cost
+    /// exceeds the best's by less than what the noise makes of a rival ([`AMBIGUITY_CHI2`] times its variance).
+    #[test]
+    fn best_static_pose_is_the_whole_searchs_best() {
+        use rand::{Rng, SeedableRng, seq::SliceRandom};
+        let model = SpatioTemporalModel::new(CameraModel::canonical().intrinsics);
+        let target = Target::grid4x4();
+        let noise_px = 0.1;
+        for seed in 0..200u64 {
+            let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+            let truth = MotionState::at_rest(
+                Rotation3::from_euler_angles(
+                    rng.random_range(-0.9..0.9),
+                    rng.random_range(-0.9..0.9),
+                    rng.random_range(-3.1..3.1),
+                ),
+                Vector3::new(
+                    rng.random_range(-0.05..0.05),
+                    rng.random_range(-0.05..0.05),
+                    rng.random_range(0.3..1.5),
+                ),
+            );
+            let mut obs = observe(&model, &target, &truth);
+            obs.shuffle(&mut rng);
+            obs.truncate(rng.random_range(4..=16));
+            for o in &mut obs {
+                o.ideal_px += Vector2::new(
+                    noise_px * rng.random_range(-1.7..1.7),
+                    noise_px * rng.random_range(-1.7..1.7),
+                );
+            }
+            let whole = *solve_static_pose(&model, &target, &obs, noise_px)
+                .unwrap()
+                .best();
+            let best = best_static_pose(&model, &target, &obs, noise_px).unwrap();
+            if obs.len() > FEW_POINTS {
+                assert_eq!(best.state, whole.state, "seed {seed}");
+            } else {
+                let excess_px2 = best.cost_px2 - whole.cost_px2;
+                assert!(
+                    excess_px2 < AMBIGUITY_CHI2 * noise_px * noise_px,
+                    "seed {seed}, {} points: {} px² above the best",
+                    obs.len(),
+                    excess_px2
+                );
+            }
+        }
     }
 
     #[test]
