@@ -1,6 +1,8 @@
 //! The real-time loop: an acquisition thread (trigger, grab, centroid: the camera side) and an estimation thread
 //! (the tracker), joined by a lock-free single-producer single-consumer queue of measurements; the estimates flow
-//! back through a second queue as [`Predictor`]s that place the next ROIs.
+//! back through a second queue as [`Predictor`]s that place the next ROIs. A control thread that drives the target
+//! may tell the tracker the accelerations it commands through a third queue ([`known_acceleration_channel`],
+//! [`run_loop_with_hooks`]).
 //!
 //! The camera side can be paced to a ROI rate (the paper: 4 kHz, one trigger every 250 µs) or free-running. Nothing
 //! allocates in the steady state: buffers and queues are sized when the loop starts. Dropped measurements (queue
@@ -11,7 +13,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use roitrack_core::estimator::{Estimate, Estimator, Matrix12, Tracker, TrackerConfig};
-use roitrack_core::{CameraModel, Measurement, MotionState, Target};
+use roitrack_core::{Acceleration, CameraModel, Measurement, MotionState, Target};
 use roitrack_image::{
     CentroidOptions, Frame, GrabError, RejectionCounts, RoiCamera, RoiImage, RoiTrigger,
     measure_roi,
@@ -141,6 +143,11 @@ pub struct LoopReport {
     pub failed_initialisations: usize,
     /// Measurements the tracker refused (none expected).
     pub refused: usize,
+    /// Known accelerations the tracker was told ([`LoopHooks::known_acceleration`]).
+    pub known_accelerations: usize,
+    /// Known accelerations the tracker refused: out of time order, not finite, too many ahead of the measurements, or
+    /// an estimator that takes none ([`roitrack_core::estimator::KnownAccelerationError`]).
+    pub refused_known_accelerations: usize,
     /// Grabs that failed but may be retried (timeouts, dropped buffers).
     pub camera_errors: usize,
     /// The camera's end, if it ended the run before its last slot (disconnected, end of a recording).
@@ -327,6 +334,228 @@ pub fn run_loop_with_sink<C: RoiCamera>(
     progress: Option<&std::sync::atomic::AtomicUsize>,
     on_estimate: &mut (dyn FnMut(&Estimate) + Send),
 ) -> Result<LoopReport, PipelineError> {
+    let hooks = LoopHooks {
+        progress,
+        on_estimate,
+        known_acceleration: None,
+    };
+    run_loop_with_hooks(camera, camera_model, target, tracker_config, config, hooks)
+}
+
+/// A known acceleration of the target (camera frame) from `t_s` on, on the loop's clock (the ROIs' and the
+/// measurements' times): what a controller commands, handed to the loop's tracker through a
+/// [`known_acceleration_channel`].
+///
+/// ```
+/// use nalgebra::Vector3;
+/// use roitrack_core::Acceleration;
+/// use roitrack_pipeline::realtime::TimedAcceleration;
+///
+/// // 20 m/s² along the optical axis from 10 ms on.
+/// let linear_mps2 = Vector3::new(0.0, 0.0, 20.0);
+/// let input = TimedAcceleration { t_s: 0.010, acceleration: Acceleration { linear_mps2, angular_radps2: Vector3::zeros() } };
+/// assert_eq!(input.acceleration.linear_mps2.z, 20.0);
+/// ```
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TimedAcceleration {
+    /// From when it holds (s, the loop's clock): the instant the commanded force acts.
+    pub t_s: f64,
+    /// The target's acceleration (camera frame); it holds until the next input's time.
+    pub acceleration: Acceleration,
+}
+
+/// The smallest ring a [`known_acceleration_channel`] is given, whatever its caller asks.
+const MIN_KNOWN_ACCELERATION_SLOTS: usize = 2;
+
+/// A lock-free, allocation-free single-producer single-consumer channel of known accelerations, from a control thread
+/// (the [`KnownAccelerationSender`]) to the loop's estimation thread (the [`KnownAccelerationReceiver`] given to
+/// [`run_loop_with_hooks`]), which tells its tracker each input
+/// ([`Estimator::set_known_acceleration`](roitrack_core::estimator::Estimator::set_known_acceleration)) before the
+/// measurements it pushes next. The ring holds `capacity` inputs (at least 2), allocated here and never again.
+///
+/// When the ring is full (the estimation thread held back longer than `capacity` inputs take to come), the newest input
+/// is what matters: the sender keeps the newest one it could not queue, replacing any older one it was keeping (counted
+/// in [`KnownAccelerationSender::superseded`]), and queues it first when room frees. An input replaced so is lost: the
+/// input before it holds over its interval, as if the command had not changed then; the inputs already queued are
+/// kept, in order (the tracker takes inputs in time order only).
+///
+/// ```
+/// use nalgebra::Vector3;
+/// use roitrack_core::Acceleration;
+/// use roitrack_pipeline::realtime::known_acceleration_channel;
+///
+/// let (mut sender, mut receiver) = known_acceleration_channel(2);
+/// let push = |z| Acceleration { linear_mps2: Vector3::new(0.0, 0.0, z), angular_radps2: Vector3::zeros() };
+/// for (k, z) in [1.0, 2.0, 3.0, 4.0].into_iter().enumerate() {
+///     sender.send(k as f64 * 1e-3, push(z));
+/// }
+/// // The ring held the first two; of the two that found it full, the newest is kept, the other superseded.
+/// assert_eq!(sender.superseded(), 1);
+/// let queued: Vec<f64> = std::iter::from_fn(|| receiver.pop()).map(|i| i.acceleration.linear_mps2.z).collect();
+/// assert_eq!(queued, [1.0, 2.0]);
+/// sender.flush();
+/// assert_eq!(receiver.pop().unwrap().acceleration.linear_mps2.z, 4.0);
+/// assert!(receiver.pop().is_none());
+/// ```
+pub fn known_acceleration_channel(
+    capacity: usize,
+) -> (KnownAccelerationSender, KnownAccelerationReceiver) {
+    let (tx, rx) = rtrb::RingBuffer::new(capacity.max(MIN_KNOWN_ACCELERATION_SLOTS));
+    (
+        KnownAccelerationSender {
+            tx,
+            held: None,
+            superseded: 0,
+        },
+        KnownAccelerationReceiver { rx },
+    )
+}
+
+/// The control thread's end of a [`known_acceleration_channel`]: never blocks, never allocates.
+///
+/// ```
+/// use nalgebra::Vector3;
+/// use roitrack_core::Acceleration;
+/// use roitrack_pipeline::realtime::known_acceleration_channel;
+///
+/// let (mut sender, _receiver) = known_acceleration_channel(64);
+/// sender.send(0.001, Acceleration { linear_mps2: Vector3::x(), angular_radps2: Vector3::zeros() });
+/// assert_eq!((sender.superseded(), sender.holds_back()), (0, false));
+/// ```
+pub struct KnownAccelerationSender {
+    tx: rtrb::Producer<TimedAcceleration>,
+    /// The newest input the ring had no room for: queued before any later one.
+    held: Option<TimedAcceleration>,
+    superseded: usize,
+}
+
+impl KnownAccelerationSender {
+    /// Hands the target's `acceleration` (camera frame) from `t_s` (the loop's clock) on to the estimation thread.
+    /// Inputs go in time order (the tracker refuses one older than the newest it has, and counts it in
+    /// [`LoopReport::refused_known_accelerations`]); a full ring keeps the newest (see [`known_acceleration_channel`]).
+    pub fn send(&mut self, t_s: f64, acceleration: Acceleration) {
+        self.flush();
+        let input = TimedAcceleration { t_s, acceleration };
+        if self.held.is_some() {
+            // Still no room: this input replaces the one kept back, which no later input can now precede.
+            self.superseded += 1;
+            self.held = Some(input);
+            return;
+        }
+        if let Err(rtrb::PushError::Full(input)) = self.tx.push(input) {
+            self.held = Some(input);
+        }
+    }
+
+    /// Queues the input kept back for want of room, if there is room now: a sender with nothing new to say calls it
+    /// so that its last input is not left waiting for the next.
+    pub fn flush(&mut self) {
+        if let Some(input) = self.held
+            && self.tx.push(input).is_ok()
+        {
+            self.held = None;
+        }
+    }
+
+    /// Inputs lost because the ring was full and a newer input replaced them.
+    pub fn superseded(&self) -> usize {
+        self.superseded
+    }
+
+    /// Whether an input waits for room in the ring ([`Self::flush`]).
+    pub fn holds_back(&self) -> bool {
+        self.held.is_some()
+    }
+}
+
+/// The estimation thread's end of a [`known_acceleration_channel`], given to [`run_loop_with_hooks`].
+///
+/// ```
+/// use nalgebra::Vector3;
+/// use roitrack_core::Acceleration;
+/// use roitrack_pipeline::realtime::known_acceleration_channel;
+///
+/// let (mut sender, mut receiver) = known_acceleration_channel(8);
+/// assert!(receiver.pop().is_none());
+/// sender.send(0.5, Acceleration { linear_mps2: Vector3::x(), angular_radps2: Vector3::zeros() });
+/// assert_eq!(receiver.pop().unwrap().t_s, 0.5);
+/// ```
+pub struct KnownAccelerationReceiver {
+    rx: rtrb::Consumer<TimedAcceleration>,
+}
+
+impl KnownAccelerationReceiver {
+    /// The oldest input queued, if any.
+    pub fn pop(&mut self) -> Option<TimedAcceleration> {
+        self.rx.pop().ok()
+    }
+}
+
+/// What a run hands to and takes from the loop besides the camera: the progress count, the estimates as they are
+/// made, and the known accelerations the tracker is told ([`run_loop_with_hooks`]).
+///
+/// ```
+/// use roitrack_pipeline::realtime::{LoopHooks, known_acceleration_channel};
+///
+/// let (_sender, mut receiver) = known_acceleration_channel(256);
+/// let mut count = 0;
+/// let mut on_estimate = |_: &roitrack_core::estimator::Estimate| count += 1;
+/// let hooks = LoopHooks { progress: None, on_estimate: &mut on_estimate, known_acceleration: Some(&mut receiver) };
+/// assert!(hooks.known_acceleration.is_some());
+/// ```
+pub struct LoopHooks<'a> {
+    /// Set to the number of ROI slots done, every 256 slots (a progress display).
+    pub progress: Option<&'a std::sync::atomic::AtomicUsize>,
+    /// Each estimate as it is made, on the estimation thread: it must not block, or it holds the loop back.
+    pub on_estimate: &'a mut (dyn FnMut(&Estimate) + Send),
+    /// Known accelerations of the target from a control thread: the estimation thread tells its tracker every input
+    /// queued before each measurement it pushes (and while it waits for one), so that a command's acceleration is in
+    /// the prediction of the measurements that follow it. `None`: the tracker predicts with its own model alone.
+    pub known_acceleration: Option<&'a mut KnownAccelerationReceiver>,
+}
+
+/// [`run_loop_with_sink`], its tracker also told the known accelerations a control thread sends
+/// ([`LoopHooks::known_acceleration`]): before each measurement it pushes, the estimation thread gives the tracker
+/// every input queued ([`Estimator::set_known_acceleration`]), which the Kalman filter adds to its prediction from
+/// each input's time on. Inputs may come ahead of the measurements (a command acts when it acts); one whose time the
+/// tracker has passed applies from the tracker's time on. Counted in [`LoopReport::known_accelerations`] and
+/// [`LoopReport::refused_known_accelerations`].
+///
+/// ```
+/// use nalgebra::Vector3;
+/// use roitrack_core::Acceleration;
+/// use roitrack_core::estimator::TrackerConfig;
+/// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
+/// use roitrack_pipeline::realtime::{LoopHooks, known_acceleration_channel, run_loop_with_hooks};
+/// use roitrack_pipeline::LoopConfig;
+/// use roitrack_sim::{Scenario, ScenarioKind};
+///
+/// let scenario = Scenario::new(ScenarioKind::Static, 1);
+/// let renderer =
+///     RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
+/// let mut camera = SimulatedCamera::new(renderer, { let s = scenario.clone(); move |t: f64| s.state_at(t) }, 1);
+/// let (mut sender, mut receiver) = known_acceleration_channel(16);
+/// // The target is at rest: its known acceleration is zero (here given once, ahead of the run).
+/// sender.send(0.0, Acceleration { linear_mps2: Vector3::zeros(), angular_radps2: Vector3::zeros() });
+/// let hooks = LoopHooks { progress: None, on_estimate: &mut |_| {}, known_acceleration: Some(&mut receiver) };
+/// let config = LoopConfig { roi_slots: 600, ..LoopConfig::default() };
+/// let report = run_loop_with_hooks(&mut camera, &scenario.camera, &scenario.target, TrackerConfig::default(),
+///     &config, hooks).unwrap();
+/// assert_eq!((report.known_accelerations, report.refused_known_accelerations), (1, 0));
+/// ```
+pub fn run_loop_with_hooks<C: RoiCamera>(
+    camera: &mut C,
+    camera_model: &CameraModel,
+    target: &Target,
+    tracker_config: TrackerConfig,
+    config: &LoopConfig,
+    hooks: LoopHooks<'_>,
+) -> Result<LoopReport, PipelineError> {
+    let LoopHooks {
+        progress,
+        on_estimate,
+        known_acceleration,
+    } = hooks;
     config.validate()?;
     camera_model.time.validate()?;
     let mut tracker = Tracker::new(camera_model.clone(), target.clone(), tracker_config)?;
@@ -343,6 +572,7 @@ pub fn run_loop_with_sink<C: RoiCamera>(
                 measurements: &mut measurement_rx,
                 predictors: &mut predictor_tx,
                 camera_done: &camera_done,
+                known_acceleration,
             };
             run_estimation(
                 &mut tracker,
@@ -388,6 +618,8 @@ impl LoopReport {
             initialisations: camera_side.initialisations,
             failed_initialisations: camera_side.failed_initialisations,
             refused: estimation_side.refused,
+            known_accelerations: estimation_side.known_accelerations,
+            refused_known_accelerations: estimation_side.refused_known_accelerations,
             camera_errors: camera_side.camera_errors,
             stopped_by: camera_side.stopped_by,
             wall_s,
@@ -401,6 +633,7 @@ struct EstimationQueues<'a> {
     measurements: &'a mut rtrb::Consumer<Event>,
     predictors: &'a mut rtrb::Producer<Predictor>,
     camera_done: &'a AtomicBool,
+    known_acceleration: Option<&'a mut KnownAccelerationReceiver>,
 }
 
 /// What the estimation thread hands back when the camera side is done and the queue is empty.
@@ -408,6 +641,8 @@ struct EstimationSide {
     estimates: Vec<Estimate>,
     latencies_us: Vec<f64>,
     refused: usize,
+    known_accelerations: usize,
+    refused_known_accelerations: usize,
     measured: Vec<Measurement>,
 }
 
@@ -429,9 +664,26 @@ fn run_estimation(
     } else {
         0
     });
+    let EstimationQueues {
+        measurements,
+        predictors,
+        camera_done,
+        mut known_acceleration,
+    } = queues;
+    let (mut told, mut refused_known) = (0usize, 0usize);
     let mut spins = 0u32;
     loop {
-        match queues.measurements.pop() {
+        // Every known acceleration sent so far, before the next measurement: the control thread sent it before the
+        // camera side queued what follows, so its input is in the prediction of the measurements after it.
+        if let Some(receiver) = known_acceleration.as_deref_mut() {
+            while let Some(input) = receiver.pop() {
+                match tracker.set_known_acceleration(input.t_s, input.acceleration) {
+                    Ok(()) => told += 1,
+                    Err(_) => refused_known += 1,
+                }
+            }
+        }
+        match measurements.pop() {
             Ok(Event::Measurement { m, grabbed }) => {
                 spins = 0;
                 if config.keep_measurements && measured.len() < measured.capacity() {
@@ -446,7 +698,7 @@ fn run_estimation(
                         }
                         // If the camera side has not taken the previous ones, this one is skipped: it will get the
                         // next.
-                        let _ = queues.predictors.push(Predictor {
+                        let _ = predictors.push(Predictor {
                             t_ref_s: e.t_ref_s,
                             state: e.state,
                             covariance: e.covariance,
@@ -460,7 +712,7 @@ fn run_estimation(
                 tracker.start_from(t_s, state, Some(full_frame_covariance()));
             }
             Err(_) => {
-                if queues.camera_done.load(Ordering::Acquire) && queues.measurements.is_empty() {
+                if camera_done.load(Ordering::Acquire) && measurements.is_empty() {
                     break;
                 }
                 backoff(&mut spins);
@@ -471,6 +723,8 @@ fn run_estimation(
         estimates,
         latencies_us,
         refused,
+        known_accelerations: told,
+        refused_known_accelerations: refused_known,
         measured,
     }
 }
