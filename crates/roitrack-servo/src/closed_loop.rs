@@ -198,7 +198,9 @@ pub struct ServoConfig {
     /// ([`Controller::believed_acceleration`]), in the camera frame, from the instant those forces act (the tick
     /// plus the actuation delay), which the Kalman filter adds to its prediction
     /// (`roitrack_core::estimator::Estimator::set_known_acceleration`). On by default; off, the filter predicts
-    /// with its constant-velocity model alone and its velocity lags the commanded accelerations (docs/servo.md).
+    /// with its constant-velocity model alone and its velocity lags the commanded accelerations (docs/servo.md). The
+    /// real-time loop ([`crate::live::run_live_servo`]) does the same through the live loop's queue of known
+    /// accelerations to its estimation thread.
     pub known_acceleration: bool,
     /// Seed of the camera's noise.
     pub seed: u64,

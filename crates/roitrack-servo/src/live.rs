@@ -1,5 +1,5 @@
 //! The closed loop in real time: the controller on its own thread at the control rate, on the wall clock, fed by
-//! roitrack's live two-thread loop ([`roitrack_pipeline::run_loop_with_sink`]) through the estimate handle
+//! roitrack's live two-thread loop ([`roitrack_pipeline::realtime::run_loop_with_hooks`]) through the estimate handle
 //! ([`crate::handle`]), while a camera renders the simulated robot where it is now ([`run_live_servo`]).
 //!
 //! Three threads (four with Aravis' fake camera, five with its stream thread):
@@ -12,7 +12,10 @@
 //! - the **acquisition thread** (the caller's) runs the live loop's camera side, paced at one ROI per control tick:
 //!   each ROI is rendered from the robot's state at its exposure, read from the [`RobotScene`] (lock-free, the
 //!   robot's recent steps interpolated);
-//! - the **estimation thread** (the loop's) runs the tracker and publishes each estimate it vouches for.
+//! - the **estimation thread** (the loop's) runs the tracker and publishes each estimate it vouches for. With
+//!   [`ServoConfig::known_acceleration`] (the default, as in simulated time) the control thread tells it the
+//!   acceleration each command asks of the controller's model, from the instant the command acts, through the live
+//!   loop's lock-free queue of known accelerations ([`roitrack_pipeline::realtime::known_acceleration_channel`]).
 //!
 //! Clocks: the robot's clock starts with the [`RobotScene`]; the loop's clock (the ROIs' and estimates' times) starts
 //! with the loop. A [`LoopClockCamera`] wrapped around the camera learns the offset between them at each grab (the
@@ -31,11 +34,15 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering, fence};
 use std::time::{Duration, Instant};
 
 use nalgebra::Vector3;
+use roitrack_core::Acceleration;
 use roitrack_core::estimator::Estimate;
 use roitrack_core::time::{Readout, TimeModel};
 use roitrack_core::{CameraModel, MotionState, Target};
 use roitrack_image::{Frame, GrabError, RoiCamera, RoiImage, RoiTrigger};
-use roitrack_pipeline::{LoopConfig, LoopReport, run_loop_with_sink};
+use roitrack_pipeline::realtime::{
+    KnownAccelerationSender, LoopHooks, known_acceleration_channel, run_loop_with_hooks,
+};
+use roitrack_pipeline::{LoopConfig, LoopReport};
 
 use crate::closed_loop::{ServoError, ServoReport, ServoSample, build_controller};
 use crate::control::{ControlInput, Observation};
@@ -46,6 +53,10 @@ use crate::{CameraKind, ServoConfig};
 
 /// Robot steps kept for the camera to render from: 1024 integration steps (64 ms at 4 kHz and 4 steps a tick).
 const TRACE_SLOTS: usize = 1024;
+/// Known accelerations the control thread may have sent ahead of the estimation thread: 1024 commands (a quarter
+/// of a second at 4 kHz), far more than the estimation thread lags by unless it is descheduled; a full queue keeps the
+/// newest (counted in [`LiveServoReport::superseded_known_accelerations`]).
+const KNOWN_ACCELERATION_SLOTS: usize = 1024;
 /// Words per step: time, position (3), velocity (3).
 const TRACE_WORDS: usize = 7;
 
@@ -441,6 +452,12 @@ pub struct LiveServoReport {
     pub published: usize,
     /// Whether the control thread ran under the real-time priority asked for ([`LiveOptions::realtime_priority`]).
     pub realtime_priority: bool,
+    /// Known accelerations the control thread sent to the live loop's tracker ([`ServoConfig::known_acceleration`]);
+    /// how many the tracker took and refused is in [`LoopReport::known_accelerations`] and
+    /// [`LoopReport::refused_known_accelerations`].
+    pub sent_known_accelerations: usize,
+    /// Known accelerations lost because the queue to the estimation thread was full and a newer one replaced them.
+    pub superseded_known_accelerations: usize,
 }
 
 impl LiveServoReport {
@@ -482,6 +499,8 @@ struct ControlSide {
     path_start_robot_s: Option<f64>,
     start_delay_s: f64,
     realtime_priority: bool,
+    sent_known_accelerations: usize,
+    superseded_known_accelerations: usize,
 }
 
 /// Runs the closed loop in real time (see the [module docs](self)): the controller of `config` on its own thread,
@@ -559,6 +578,7 @@ pub fn run_live_servo<C: RoiCamera>(
         value: f64::from(options.window_px.unwrap_or(0)),
     })?;
     let (mut publisher, reader) = estimate_channel();
+    let (mut known_tx, mut known_rx) = known_acceleration_channel(KNOWN_ACCELERATION_SLOTS);
     let published = AtomicU64::new(0);
     let mut to_estimate_us =
         Vec::with_capacity(loop_config.roi_slots / config.tracker.every.max(1) + 64);
@@ -573,6 +593,7 @@ pub fn run_live_servo<C: RoiCamera>(
             let flags = ControlFlags {
                 loop_done: &loop_done,
                 path_started: &path_started,
+                known_acceleration: config.known_acceleration.then_some(&mut known_tx),
             };
             let side = control_thread(config, options, scene, &reader, flags, wall);
             // The path is done (or the run stopped): the loop's next grab ends it.
@@ -589,14 +610,18 @@ pub fn run_live_servo<C: RoiCamera>(
                 }
             }
         };
-        let result = run_loop_with_sink(
+        let hooks = LoopHooks {
+            progress: None,
+            on_estimate: &mut sink,
+            known_acceleration: config.known_acceleration.then_some(&mut known_rx),
+        };
+        let result = run_loop_with_hooks(
             camera,
             &camera_model,
             &target,
             config.tracker,
             &loop_config,
-            None,
-            &mut sink,
+            hooks,
         );
         loop_done.store(true, Ordering::Release);
         (result, control.join())
@@ -666,6 +691,8 @@ fn report(
         start_delay_s: control.start_delay_s,
         published: published as usize,
         realtime_priority: control.realtime_priority,
+        sent_known_accelerations: control.sent_known_accelerations,
+        superseded_known_accelerations: control.superseded_known_accelerations,
     }
 }
 
@@ -698,6 +725,9 @@ struct ControlFlags<'a> {
     loop_done: &'a AtomicBool,
     /// Set by the control thread when the path starts.
     path_started: &'a AtomicBool,
+    /// Where the control thread sends the acceleration each command asks of its model
+    /// ([`ServoConfig::known_acceleration`]); `None`: the tracker is not told.
+    known_acceleration: Option<&'a mut KnownAccelerationSender>,
 }
 
 /// The control thread: ticks on the robot's clock until the path's end, the loop's end, a divergence or the start's
@@ -713,6 +743,7 @@ fn control_thread(
     let ControlFlags {
         loop_done,
         path_started,
+        mut known_acceleration,
     } = flags;
     let robot = config.robot;
     let path = &config.path;
@@ -738,6 +769,8 @@ fn control_thread(
         path_start_robot_s: None,
         start_delay_s: f64::NAN,
         realtime_priority: false,
+        sent_known_accelerations: 0,
+        superseded_known_accelerations: 0,
     };
     let (_, home_cam) = path.home_in_camera();
     let limit = robot.force_limit_n;
@@ -869,8 +902,23 @@ fn control_thread(
             ));
             break;
         }
+        let command = clip(command);
         if commands.len() < commands.capacity() {
-            commands.push_back((after_s + config.actuation_delay_s, clip(command)));
+            commands.push_back((after_s + config.actuation_delay_s, command));
+        }
+        // What the command asks of the controller's model, from the instant it acts, told to the tracker on the
+        // loop's clock (as `run_servo` does in simulated time: the robot frame has the camera's axes).
+        if let Some(sender) = known_acceleration.as_deref_mut()
+            && let Some(believed_mps2) = controller.believed_acceleration(&command)
+            && let Some(offset_s) = scene.loop_offset_s()
+        {
+            let acceleration = Acceleration {
+                linear_mps2: believed_mps2,
+                angular_radps2: Vector3::zeros(),
+            };
+            sender.send(after_s + config.actuation_delay_s - offset_s, acceleration);
+            side.sent_known_accelerations += 1;
+            side.superseded_known_accelerations = sender.superseded();
         }
         // The robot to the next tick.
         let saturated_before = force.amax() >= limit;

@@ -18,9 +18,9 @@ const MAX_SKIPPED_FRACTION: f64 = 0.4;
 
 #[test]
 fn the_real_time_loop_tracks_like_the_simulated_time_one() {
+    // Both runs tell the tracker the commanded acceleration (the default; in real time through the live loop's
+    // queue of known accelerations, `tests/live_known_acceleration.rs`).
     let mut config = ServoConfig::new(ControllerKind::Ctc, CameraKind::Roi, 1.0);
-    // The live loop's tracker runs on the loop's estimation thread, which the controller cannot tell its commands.
-    config.known_acceleration = false;
     // 1 kHz: what the loop holds on two cores shared with other jobs (docs/servo.md, "The real-time loop").
     let rate_hz = 1000.0;
     config.control_rate_hz = rate_hz;

@@ -31,8 +31,8 @@ impl LiveCamera {
 }
 
 /// The configuration of both runs: the chosen controller (ctc by default) through the ROI camera at `--rate-hz`
-/// ROIs and control ticks per second, the tracker not told the commanded acceleration (the live loop's tracker is
-/// on its estimation thread, out of the controller's reach).
+/// ROIs and control ticks per second, the tracker told the commanded acceleration unless `--no-known-acceleration`
+/// (in real time through the live loop's queue of known accelerations to its estimation thread).
 fn config(args: &ServoArgs) -> Result<ServoConfig> {
     let controller: ControllerKind = args.controller.map_or(ControllerKind::Ctc, Into::into);
     if controller == ControllerKind::TrueState {
@@ -49,7 +49,7 @@ fn config(args: &ServoArgs) -> Result<ServoConfig> {
     config.gains_follow_latency = !args.fixed_gains;
     config.gain_scale = args.gain_scale;
     config.extra_centroid_noise_px = 0.0;
-    config.known_acceleration = false;
+    config.known_acceleration = !args.no_known_acceleration;
     config.seed = args.seed;
     config.control_rate_hz = args.rate_hz;
     config.timing = Some(CameraTiming {
@@ -255,6 +255,11 @@ fn print(
             "rois": loop_report.rois,
             "rois_per_s": loop_report.rois_per_s(),
             "estimates_published": live.published,
+            "known_acceleration": config.known_acceleration,
+            "known_accelerations_sent": live.sent_known_accelerations,
+            "known_accelerations_told": loop_report.known_accelerations,
+            "known_accelerations_refused": loop_report.refused_known_accelerations,
+            "known_accelerations_superseded": live.superseded_known_accelerations,
             "start_delay_s": finite(live.start_delay_s),
             "realtime_priority": live.realtime_priority,
             "natural_frequency_radps": live.servo.gains.natural_frequency_radps,
@@ -314,6 +319,18 @@ fn print(
         live.published,
         live.start_delay_s
     );
+    if config.known_acceleration {
+        println!(
+            "known acceleration: {} commands' accelerations sent to the live tracker, {} told, {} refused, {} \
+             superseded (queue full)",
+            live.sent_known_accelerations,
+            loop_report.known_accelerations,
+            loop_report.refused_known_accelerations,
+            live.superseded_known_accelerations
+        );
+    } else {
+        println!("known acceleration: off (--no-known-acceleration)");
+    }
     if let Some(line) = camera_line {
         println!("{line}");
     }
