@@ -22,10 +22,10 @@ const ACCELERATING_FRACTION: f64 = 0.25;
 const CALM_FRACTION: f64 = 0.05;
 
 /// Told, the velocity error in the accelerations may be at most this times that of the calm phases: the same noise,
-/// give or take the sampling of a few dozen estimates (told, the runs measured 0.77-1.21 x; not told, 1.9-2.5 x).
+/// give or take the sampling of a few dozen estimates (told, the runs measured 0.79-1.21 x; not told, 1.9-2.5 x).
 const CALM_RATIO: f64 = 1.5;
 
-/// Not told, the velocity error in the accelerations is at least this times the told run's (measured: 1.9-2.2 x).
+/// Not told, the velocity error in the accelerations is at least this times the told run's (measured: 1.9-2.3 x).
 const LAG_RATIO: f64 = 1.4;
 
 fn live_run(known_acceleration: bool) -> LiveServoReport {

@@ -253,6 +253,7 @@ fn print(
             "late_roi_slots": loop_report.late,
             "skipped_roi_slots": loop_report.skipped,
             "rois": loop_report.rois,
+            "initialisations": loop_report.initialisations,
             "rois_per_s": loop_report.rois_per_s(),
             "estimates_published": live.published,
             "known_acceleration": config.known_acceleration,
