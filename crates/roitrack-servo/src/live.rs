@@ -903,12 +903,15 @@ fn control_thread(
             break;
         }
         let command = clip(command);
-        if commands.len() < commands.capacity() {
+        let queued = commands.len() < commands.capacity();
+        if queued {
             commands.push_back((after_s + config.actuation_delay_s, command));
         }
         // What the command asks of the controller's model, from the instant it acts, told to the tracker on the
-        // loop's clock (as `run_servo` does in simulated time: the robot frame has the camera's axes).
-        if let Some(sender) = known_acceleration.as_deref_mut()
+        // loop's clock (as `run_servo` does in simulated time: the robot frame has the camera's axes). A command the
+        // drive never gets (its queue full) is not told either.
+        if queued
+            && let Some(sender) = known_acceleration.as_deref_mut()
             && let Some(believed_mps2) = controller.believed_acceleration(&command)
             && let Some(offset_s) = scene.loop_offset_s()
         {
