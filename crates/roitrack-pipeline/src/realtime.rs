@@ -364,7 +364,8 @@ pub struct TimedAcceleration {
     pub acceleration: Acceleration,
 }
 
-/// The smallest ring a [`known_acceleration_channel`] is given, whatever its caller asks.
+/// The smallest ring a [`known_acceleration_channel`] is given, whatever its caller asks: a ring of none would queue
+/// nothing, and with two one input can wait for the estimation thread while the next is queued behind it.
 const MIN_KNOWN_ACCELERATION_SLOTS: usize = 2;
 
 /// A lock-free, allocation-free single-producer single-consumer channel of known accelerations, from a control thread
