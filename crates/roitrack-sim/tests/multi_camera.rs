@@ -427,6 +427,134 @@ fn a_clock_beyond_the_search_is_refused_naming_the_camera() {
     }
 }
 
+/// The rig tracker tuned as `track --images` tunes it for frames (the process noise held, the noise learnt from the
+/// frames, the cameras' own trackers on a constant acceleration).
+fn frame_rig_config() -> RigTrackerConfig {
+    use roitrack_core::estimator::{EstimatorConfig, MotionModel, NoiseSample};
+    let mut tracker_config = TrackerConfig::default();
+    let EstimatorConfig::Kalman(tuning) = &mut tracker_config.estimator else {
+        unreachable!()
+    };
+    tuning.adapt_motion = false;
+    tuning.calibrate_twist_covariance = false;
+    tuning.noise_sample = NoiseSample::Frames;
+    tuning.motion_model = MotionModel::constant_acceleration();
+    RigTrackerConfig {
+        tracker: tracker_config,
+        ..RigTrackerConfig::default()
+    }
+}
+
+/// The largest position (m) and rotation (rad) error of the estimates vouched for.
+fn worst_vouched(scene: &CameraRigScene, estimates: &[&RigEstimate]) -> (f64, f64) {
+    estimates
+        .iter()
+        .filter(|e| e.estimate.status.is_vouched_for())
+        .map(|e| {
+            let truth = scene.scenario.state_at(e.estimate.t_ref_s);
+            (
+                (e.estimate.state.cam_t_obj_m - truth.cam_t_obj_m).norm(),
+                roitrack_core::so3::log(&(e.estimate.state.cam_r_obj * truth.cam_r_obj.inverse()))
+                    .norm(),
+            )
+        })
+        .fold((0.0, 0.0), |(m, r), (em, er)| {
+            (f64::max(m, em), f64::max(r, er))
+        })
+}
+
+/// 30 Hz global-shutter cameras of the random scene triggered together, seeds 1-4, every clock but the first to be
+/// learnt: per seed, the
+/// estimates after the first second, and the largest position (m) and rotation (rad) error of those vouched for.
+fn frames_with_clocks_to_learn() -> Vec<(u64, usize, f64, f64)> {
+    use roitrack_sim::multi_camera::simulate_rig_frames;
+    let fps = 30.0;
+    [(1, 3), (2, 3), (3, 2), (4, 3)]
+        .into_iter()
+        .map(|(seed, cameras)| {
+            let scene =
+                CameraRigScene::random(Scenario::new(ScenarioKind::Random, seed), cameras, seed);
+            let mut run = simulate_rig_frames(&scene, fps, 0.05, seed).unwrap();
+            // Cameras triggered together, as a user's frames read at --fps are: frame k of every camera at the
+            // first camera's time of its frame k, on each camera's own clock (the clocks to learn then differ by the
+            // phases too).
+            let first_frames: Vec<f64> = run.measurements[0]
+                .iter()
+                .map(|m| m.t_s)
+                .fold(Vec::new(), |mut times, t| {
+                    if times.last() != Some(&t) {
+                        times.push(t);
+                    }
+                    times
+                });
+            for list in run.measurements.iter_mut().skip(1) {
+                let start_s = list[0].t_s;
+                list.retain_mut(|m| {
+                    let k = ((m.t_s - start_s) * fps).round() as usize;
+                    first_frames.get(k).map(|&t| m.t_s = t).is_some()
+                });
+            }
+            let mut tracker = RigTracker::new(
+                unknown_clocks(&scene.rig),
+                roitrack_core::Target::grid4x4(),
+                frame_rig_config(),
+            )
+            .unwrap();
+            let mut estimates = Vec::new();
+            for m in merged(&run) {
+                estimates.extend(tracker.push(&m).unwrap());
+            }
+            estimates.extend(tracker.finish());
+            let after_start: Vec<&RigEstimate> = estimates
+                .iter()
+                .filter(|e| e.estimate.t_ref_s >= 1.0)
+                .collect();
+            let (worst_m, worst_rad) = worst_vouched(&scene, &after_start);
+            let frames = ((scene.scenario.duration_s - 1.0) * fps) as usize;
+            println!(
+                "seed {seed}, {cameras} cameras: {} estimates after 1 s ({frames} frames of the first camera), {} \
+                 vouched for, worst {:.3} mm, {:.3} deg; clocks synced {:?}",
+                after_start.len(),
+                after_start.iter().filter(|e| e.estimate.status.is_vouched_for()).count(),
+                worst_m * 1e3,
+                worst_rad.to_degrees(),
+                tracker.clocks().iter().map(|c| c.synced).collect::<Vec<_>>()
+            );
+            (seed, after_start.len() * 100 / frames.max(1), worst_m, worst_rad)
+        })
+        .collect()
+}
+
+/// The first camera's frames are estimated on (at least 95 % of them after the first second) whether or not the
+/// other clocks are found. (The frames of all cameras fall at one time on clocks still unknown, and every frame of
+/// the first camera ended at another camera's blob, which is not fused: no estimate came from the first camera.)
+#[test]
+fn frames_with_clocks_to_learn_are_estimated_on() {
+    for (seed, percent, _, _) in frames_with_clocks_to_learn() {
+        assert!(
+            percent >= 95,
+            "seed {seed}: estimates on {percent} % of the frames"
+        );
+    }
+}
+
+/// No estimate 10 mm or 5 degrees off vouched for. Not met on seed 2 (17.6 mm): an offset learnt milliseconds off
+/// (the fused filter does not move it from the frames) carries the fused track 5-18 mm off while the camera with
+/// that clock agrees with it and the first camera's own track, restarted on most frames, has no estimate vouched for
+/// near it to refute it.
+#[test]
+#[ignore = "known failure (seed 2), docs/results.md, \"Several asynchronous cameras\""]
+fn frames_with_clocks_to_learn_vouch_for_no_wrong_pose() {
+    for (seed, _, worst_m, worst_rad) in frames_with_clocks_to_learn() {
+        assert!(
+            worst_m < 0.01 && worst_rad < 5f64.to_radians(),
+            "seed {seed}: a vouched estimate {:.1} mm, {:.2} deg off",
+            worst_m * 1e3,
+            worst_rad.to_degrees()
+        );
+    }
+}
+
 /// Global-shutter cameras at 30 Hz on the random scene (up to 1.5 m/s and 4 rad/s: a constant-twist prediction is
 /// millimetres off in one frame): the fused track follows every frame, where, taking each frame's blobs one by one
 /// against such a prediction, its gate rejected them until the track was lost. Every camera's mount and clock known,
@@ -434,7 +562,6 @@ fn a_clock_beyond_the_search_is_refused_naming_the_camera() {
 /// held, the noise learnt from the frames).
 #[test]
 fn global_shutter_frames_of_a_fast_target_are_tracked_on_every_frame() {
-    use roitrack_core::estimator::{EstimatorConfig, MotionModel, NoiseSample};
     use roitrack_core::so3;
     use roitrack_sim::multi_camera::simulate_rig_frames;
     let fps = 30.0;
@@ -442,21 +569,10 @@ fn global_shutter_frames_of_a_fast_target_are_tracked_on_every_frame() {
         let scene =
             CameraRigScene::random(Scenario::new(ScenarioKind::Random, seed), cameras, seed);
         let run = simulate_rig_frames(&scene, fps, 0.05, seed).unwrap();
-        let mut tracker_config = TrackerConfig::default();
-        let EstimatorConfig::Kalman(tuning) = &mut tracker_config.estimator else {
-            unreachable!()
-        };
-        tuning.adapt_motion = false;
-        tuning.calibrate_twist_covariance = false;
-        tuning.noise_sample = NoiseSample::Frames;
-        tuning.motion_model = MotionModel::constant_acceleration();
         let mut tracker = RigTracker::new(
             scene.rig.clone(),
             roitrack_core::Target::grid4x4(),
-            RigTrackerConfig {
-                tracker: tracker_config,
-                ..RigTrackerConfig::default()
-            },
+            frame_rig_config(),
         )
         .unwrap();
         let mut estimates = Vec::new();

@@ -41,7 +41,7 @@ pub use calibrate::{
     CameraCalibration, RigCalibration, RigCalibrationConfig, RigCalibrationError, RigCalibrator,
 };
 pub use projection::{RigProjection, rig_projection};
-pub use sync::{OffsetSearch, search_offset_s};
+pub use sync::{OffsetSearch, offset_chi2, search_offset_s};
 pub use tracker::{
     CameraCounts, ClockEstimate, RigError, RigEstimate, RigTracker, RigTrackerConfig,
     RigTrackerReport,

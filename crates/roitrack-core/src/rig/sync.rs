@@ -1,7 +1,7 @@
 //! The coarse search of a camera's clock offset: the shift that best lays its own track of the target (in the rig
 //! frame) over the reference camera's. The filter then refines the offset, and learns the drift, from the centroids.
 
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 /// What [`search_offset_s`] found.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -118,4 +118,72 @@ pub fn search_offset_s(
         worst_rms_m: worst.sqrt(),
         at_edge,
     })
+}
+
+/// How closely an offset lays a camera's track over the reference's against what their own errors allow: the sum over
+/// the camera's samples that the reference spans of the squared distance to the reference interpolated at the
+/// shifted time, each over its variance (both samples' stated variances, and the linear interpolation's error, which
+/// the reference's own curvature bounds), with its degrees of freedom (3 a sample, less the offset fitted). Samples
+/// are (time, position in the rig frame, its covariance, m²); the camera's times on its own clock scaled by
+/// `scale` (its drift as known), the reference's on the rig's. `None` if no sample overlaps.
+///
+/// ```
+/// use nalgebra::{Matrix3, Vector3};
+/// use roitrack_core::rig::offset_chi2;
+///
+/// let track = |t: f64| Vector3::new((3.0 * t).sin() * 0.05, (2.0 * t).cos() * 0.03, 0.6);
+/// let c = Matrix3::identity() * 1e-8;
+/// let reference: Vec<_> = (0..100).map(|k| { let t = k as f64 * 0.01; (t, track(t), c) }).collect();
+/// let camera: Vec<_> = (0..50).map(|k| { let t = 0.2 + k as f64 * 0.01; (t, track(t + 0.0173), c) }).collect();
+/// let (right, dof) = offset_chi2(&reference, &camera, 0.0173, 1.0).unwrap();
+/// let (wrong, _) = offset_chi2(&reference, &camera, 0.0100, 1.0).unwrap();
+/// assert!(right < dof && wrong > 100.0 * dof, "{right} {wrong} {dof}");
+/// ```
+pub fn offset_chi2(
+    reference: &[(f64, Vector3<f64>, Matrix3<f64>)],
+    camera: &[(f64, Vector3<f64>, Matrix3<f64>)],
+    offset_s: f64,
+    scale: f64,
+) -> Option<(f64, f64)> {
+    let (mut chi2, mut n) = (0.0, 0usize);
+    for &(t, p, covariance_m2) in camera {
+        let t_ref = t * scale + offset_s;
+        let i = reference.partition_point(|(tr, _, _)| *tr <= t_ref);
+        if i == 0 || i >= reference.len() {
+            continue;
+        }
+        let ((t0, p0, v0), (t1, p1, v1)) = (reference[i - 1], reference[i]);
+        if t1 <= t0 {
+            continue;
+        }
+        let w = (t_ref - t0) / (t1 - t0);
+        let q = p0 + (p1 - p0) * w;
+        // The linear interpolation is off by at most a (t1 - t0)² / 8 for an acceleration a, which the second
+        // difference of the reference's neighbouring samples gives.
+        let curvature_m = [
+            i.checked_sub(2).map(|k| (k, k + 1, k + 2)),
+            (i + 1 < reference.len()).then_some((i - 1, i, i + 1)),
+        ]
+        .into_iter()
+        .flatten()
+        .filter(|&(a, b, c)| reference[a].0 < reference[b].0 && reference[b].0 < reference[c].0)
+        .map(|(a, b, c)| {
+            let ((ta, pa, _), (tb, pb, _), (tc, pc, _)) =
+                (reference[a], reference[b], reference[c]);
+            let acceleration = ((pc - pb) / (tc - tb) - (pb - pa) / (tb - ta)) * (2.0 / (tc - ta));
+            acceleration.norm() * (t1 - t0).powi(2) / 8.0
+        })
+        .fold(0.0, f64::max);
+        let covariance = covariance_m2
+            + v0 * (1.0 - w).powi(2)
+            + v1 * (w * w)
+            + Matrix3::identity() * (curvature_m * curvature_m);
+        let Some(information) = covariance.try_inverse() else {
+            continue;
+        };
+        let d = p - q;
+        chi2 += d.dot(&(information * d));
+        n += 1;
+    }
+    (n > 0).then(|| (chi2, (3 * n) as f64 - 1.0))
 }
