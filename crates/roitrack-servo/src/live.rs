@@ -6,9 +6,10 @@
 //! - the **control thread** ticks on the wall clock at [`ServoConfig::control_rate_hz`] (or
 //!   [`LiveOptions::control_rate_hz`], faster than the ROIs): it reads the newest
 //!   estimate ([`crate::handle::EstimateReader::read`]: no lock, no allocation), computes the command (the same
-//!   [`Controller`] as [`crate::run_servo`]), and integrates the simulated robot to the next tick (RK4, the forces
-//!   acting after the actuation delay), publishing each integration step into a [`RobotScene`]. A tick woken more
-//!   than a period late is a deadline miss: the drive holds its last command over the ticks missed (counted);
+//!   [`Controller`](crate::control::Controller) as [`crate::run_servo`]), and integrates the simulated robot to the
+//!   next tick (RK4, the forces acting after the actuation delay), publishing each integration step into a
+//!   [`RobotScene`]. A tick woken more than a period late is a deadline miss: the drive holds its last command over
+//!   the ticks missed (counted);
 //! - the **acquisition thread** (the caller's) runs the live loop's camera side, paced at one ROI per control tick:
 //!   each ROI is rendered from the robot's state at its exposure, read from the [`RobotScene`] (lock-free, the
 //!   robot's recent steps interpolated);
