@@ -370,8 +370,7 @@ const MIN_KNOWN_ACCELERATION_SLOTS: usize = 2;
 
 /// A lock-free, allocation-free single-producer single-consumer channel of known accelerations, from a control thread
 /// (the [`KnownAccelerationSender`]) to the loop's estimation thread (the [`KnownAccelerationReceiver`] given to
-/// [`run_loop_with_hooks`]), which tells its tracker each input
-/// ([`Estimator::set_known_acceleration`](roitrack_core::estimator::Estimator::set_known_acceleration)) before the
+/// [`run_loop_with_hooks`]), which tells its tracker each input ([`Estimator::set_known_acceleration`]) before the
 /// measurements it pushes next. The ring holds `capacity` inputs (at least 2), allocated here and never again.
 ///
 /// When the ring is full (the estimation thread held back longer than `capacity` inputs take to come), the newest input

@@ -297,8 +297,9 @@ fn sample_rig(
     })
 }
 
-/// The full frames every camera of a rig takes of its scene ([`FrameSequence::seen_by`]), each on its own clock, and
-/// the truth in the rig's frame on the rig's clock over every frame's exposure.
+/// The full frames every camera of a rig takes of its scene
+/// ([`FrameSequence::seen_by`](crate::frames::FrameSequence::seen_by)), each on its own clock, and the truth in the
+/// rig's frame on the rig's clock over every frame's exposure.
 ///
 /// Every camera takes frame `k` at `start_s + k / fps_hz` of its own clock (so cameras whose clocks differ are not
 /// triggered together); by default each takes the frames whose rows are all exposed by the scenario's end on the

@@ -4,7 +4,7 @@
 use super::*;
 use thiserror::Error;
 
-/// The most entries a [`KnownAcceleration`] holds ahead of the filter: a controller at 4 kHz whose commands act a
+/// The most entries a `KnownAcceleration` holds ahead of the filter: a controller at 4 kHz whose commands act a
 /// few ticks after they are given keeps a handful; a caller that gives commands and no measurements is told
 /// ([`KnownAccelerationError::TooMany`]) instead of growing the schedule without bound.
 pub const KNOWN_ACCELERATION_CAPACITY: usize = 4096;

@@ -438,9 +438,8 @@ pub fn solve_static_pose(
 
 /// The best static pose of [`solve_static_pose`]'s search, without its rivals: for a caller that ranks many
 /// labellings by their fits (identification verifies thousands on a small regular grid) and needs of each only its
-/// best pose. Observations of more than [`FEW_POINTS_BEST_ONLY`] points are searched as many points are (triples until
-/// one fits the noise, and each minimum's mirror twin), not by every triple of them; no rival's model effect is
-/// computed.
+/// best pose. Observations of more than 4 points are searched as many points are (triples until one fits the noise,
+/// and each minimum's mirror twin), not by every triple of them; no rival's model effect is computed.
 ///
 /// ```
 /// use nalgebra::{Rotation3, Vector3};
