@@ -49,6 +49,16 @@ fn merged(run: &RigRun) -> Vec<RigMeasurement> {
     all
 }
 
+/// Every measurement of `run` pushed to `tracker`, merged by the cameras' own clocks, and the estimates to the end.
+fn push_all(tracker: &mut RigTracker, run: &RigRun) -> Vec<RigEstimate> {
+    let mut estimates = Vec::new();
+    for m in merged(run) {
+        estimates.extend(tracker.push(&m).unwrap());
+    }
+    estimates.extend(tracker.finish());
+    estimates
+}
+
 /// The fused estimates and the final clocks.
 fn track_rig(rig: Rig, run: &RigRun) -> (Vec<RigEstimate>, Vec<ClockEstimate>) {
     let mut tracker = RigTracker::new(
@@ -57,11 +67,7 @@ fn track_rig(rig: Rig, run: &RigRun) -> (Vec<RigEstimate>, Vec<ClockEstimate>) {
         RigTrackerConfig::default(),
     )
     .unwrap();
-    let mut estimates = Vec::new();
-    for m in merged(run) {
-        estimates.extend(tracker.push(&m).unwrap());
-    }
-    estimates.extend(tracker.finish());
+    let estimates = push_all(&mut tracker, run);
     let clocks = tracker.clocks();
     (estimates, clocks)
 }
@@ -305,11 +311,7 @@ fn a_target_hidden_from_all_but_one_camera_is_tracked_on() {
             RigTrackerConfig::default(),
         )
         .unwrap();
-        let mut estimates = Vec::new();
-        for m in merged(&run) {
-            estimates.extend(tracker.push(&m).unwrap());
-        }
-        estimates.extend(tracker.finish());
+        let estimates = push_all(&mut tracker, &run);
         let report = tracker.report();
         let not_vouched: Vec<(f64, &str)> = estimates
             .iter()
@@ -500,11 +502,7 @@ fn frames_with_clocks_to_learn() -> Vec<(u64, usize, f64, f64)> {
                 frame_rig_config(),
             )
             .unwrap();
-            let mut estimates = Vec::new();
-            for m in merged(&run) {
-                estimates.extend(tracker.push(&m).unwrap());
-            }
-            estimates.extend(tracker.finish());
+            let estimates = push_all(&mut tracker, &run);
             let after_start: Vec<&RigEstimate> = estimates
                 .iter()
                 .filter(|e| e.estimate.t_ref_s >= 1.0)
@@ -575,11 +573,7 @@ fn global_shutter_frames_of_a_fast_target_are_tracked_on_every_frame() {
             frame_rig_config(),
         )
         .unwrap();
-        let mut estimates = Vec::new();
-        for m in merged(&run) {
-            estimates.extend(tracker.push(&m).unwrap());
-        }
-        estimates.extend(tracker.finish());
+        let estimates = push_all(&mut tracker, &run);
         let report = tracker.report();
         let after_start: Vec<&RigEstimate> = estimates
             .iter()
