@@ -121,9 +121,9 @@ pub fn search_offset_s(
 }
 
 /// How closely an offset lays a camera's track over the reference's against what their own errors allow: the sum over
-/// the camera's samples that the reference spans of the squared distance to the reference interpolated at the
-/// shifted time, each over its variance (both samples' stated variances, and the linear interpolation's error, which
-/// the reference's own curvature bounds), with its degrees of freedom (3 a sample, less the offset fitted). Samples
+/// the camera's samples that the reference spans of the distance to the reference interpolated at the shifted time,
+/// squared in the metric of its covariance (both samples' stated covariances, and the linear interpolation's error,
+/// which the reference's own curvature bounds), with its degrees of freedom (3 a sample, less the offset fitted). Samples
 /// are (time, position in the rig frame, its covariance, m²); the camera's times on its own clock scaled by
 /// `scale` (its drift as known), the reference's on the rig's. `None` if no sample overlaps.
 ///
