@@ -964,9 +964,8 @@ impl<L: Law> Track<L> {
         let bad = !residuals.median_px.is_finite()
             || residuals.median_px > core.config.lost_residual_px
             || !core.state.is_finite();
-        // A state that does not explain its measurements is not vouched for even once, before the run of such
-        // estimates that declares the track lost: a 4 x 4 grid back after 0.5 s out of view came back 394 mm off at a
-        // residual of 147 px, the gate wide from the long prediction, and was marked tracking.
+        // A state that does not explain its measurements (their median residual beyond the lost residual) is not
+        // vouched for even once, before the run of such estimates that declares the track lost.
         let disputed_now = bad || self.law.is_disputed(core, &residuals);
         let disputed = disputed_now
             || core
