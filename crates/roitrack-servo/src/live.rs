@@ -39,7 +39,9 @@ use roitrack_core::Acceleration;
 use roitrack_core::estimator::Estimate;
 use roitrack_core::time::{Readout, TimeModel};
 use roitrack_core::{CameraModel, MotionState, Target};
-use roitrack_image::{Frame, GrabError, RoiCamera, RoiImage, RoiTrigger};
+use roitrack_image::{
+    Frame, GrabError, RoiCamera, RoiImage, RoiRenderer, RoiTrigger, SensorModel, SimulatedCamera,
+};
 use roitrack_pipeline::realtime::{
     KnownAccelerationSender, LoopHooks, known_acceleration_channel, run_loop_with_hooks,
 };
@@ -502,6 +504,39 @@ struct ControlSide {
     realtime_priority: bool,
     sent_known_accelerations: usize,
     superseded_known_accelerations: usize,
+}
+
+/// Runs the closed loop in real time ([`run_live_servo`]) through the project's simulated ROI camera: the servo's
+/// camera and target ([`roi_camera_model`], [`servo_target`]), a default sensor and `config.seed`, rendering the
+/// robot where a fresh [`RobotScene`] of `config`'s path has it at each grab.
+///
+/// ```no_run
+/// use roitrack_servo::live::{LiveOptions, run_live_servo_simulated};
+/// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig};
+///
+/// let config = ServoConfig::new(ControllerKind::Ctc, CameraKind::Roi, 1.0);
+/// let report = run_live_servo_simulated(&config, &LiveOptions::default()).unwrap();
+/// println!("{:.3} mm RMS", report.servo.rms_error_mm);
+/// ```
+pub fn run_live_servo_simulated(
+    config: &ServoConfig,
+    options: &LiveOptions,
+) -> Result<LiveServoReport, ServoError> {
+    let scene = RobotScene::new(&config.path);
+    let renderer = RoiRenderer::new(
+        roi_camera_model(config),
+        servo_target(),
+        SensorModel::default(),
+    )?;
+    let truth = {
+        let scene = scene.clone();
+        move |t: f64| scene.camera_state_at_loop_s(t)
+    };
+    let mut camera = LoopClockCamera::new(
+        SimulatedCamera::new(renderer, truth, config.seed),
+        scene.clone(),
+    );
+    run_live_servo(&mut camera, &scene, config, options)
 }
 
 /// Runs the closed loop in real time (see the [module docs](self)): the controller of `config` on its own thread,

@@ -2,10 +2,7 @@
 //! queues and the estimate handle): stable to the path's end, and its tracking error bounded by the simulated-time
 //! run of the same configuration. Latency is printed, not asserted: this machine is shared and noisy.
 
-use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
-use roitrack_servo::live::{
-    LiveOptions, LoopClockCamera, RobotScene, roi_camera_model, run_live_servo, servo_target,
-};
+use roitrack_servo::live::{LiveOptions, run_live_servo_simulated};
 use roitrack_servo::{CameraKind, CameraTiming, ControllerKind, ServoConfig, run_servo};
 
 /// The live run's RMS error may be at most this times the simulated-time run's: the target is 1.5x (docs/servo.md);
@@ -31,19 +28,7 @@ fn the_real_time_loop_tracks_like_the_simulated_time_one() {
     let simulated = run_servo(&config).unwrap();
     assert!(simulated.stable);
 
-    let scene = RobotScene::new(&config.path);
-    let renderer = RoiRenderer::new(
-        roi_camera_model(&config),
-        servo_target(),
-        SensorModel::default(),
-    )
-    .unwrap();
-    let truth = {
-        let scene = scene.clone();
-        move |t: f64| scene.camera_state_at_loop_s(t)
-    };
-    let mut camera = LoopClockCamera::new(SimulatedCamera::new(renderer, truth, 1), scene.clone());
-    let live = run_live_servo(&mut camera, &scene, &config, &LiveOptions::default()).unwrap();
+    let live = run_live_servo_simulated(&config, &LiveOptions::default()).unwrap();
     let (p50, p99) = live.actuation_latency_quantiles_us();
     eprintln!(
         "simulated time {:.4} mm RMS; real time {:.4} mm RMS ({:.4} max), stable {}; exposure to actuation p50/p99 \

@@ -5,11 +5,7 @@
 //! the wall clock.
 
 use nalgebra::Vector3;
-use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
-use roitrack_servo::live::{
-    LiveOptions, LiveServoReport, LoopClockCamera, RobotScene, roi_camera_model, run_live_servo,
-    servo_target,
-};
+use roitrack_servo::live::{LiveOptions, LiveServoReport, run_live_servo_simulated};
 use roitrack_servo::{CameraKind, CameraTiming, ControllerKind, ServoConfig};
 
 /// A run that skipped more than this fraction of its ROI slots did not get the machine it needs (as `tests/live.rs`).
@@ -38,19 +34,7 @@ fn live_run(known_acceleration: bool) -> LiveServoReport {
         rate_hz,
         ..CameraKind::Roi.timing()
     });
-    let scene = RobotScene::new(&config.path);
-    let renderer = RoiRenderer::new(
-        roi_camera_model(&config),
-        servo_target(),
-        SensorModel::default(),
-    )
-    .unwrap();
-    let truth = {
-        let scene = scene.clone();
-        move |t: f64| scene.camera_state_at_loop_s(t)
-    };
-    let mut camera = LoopClockCamera::new(SimulatedCamera::new(renderer, truth, 1), scene.clone());
-    run_live_servo(&mut camera, &scene, &config, &LiveOptions::default()).unwrap()
+    run_live_servo_simulated(&config, &LiveOptions::default()).unwrap()
 }
 
 /// The estimates' velocity error against the robot's true velocity (the control ticks' samples, linearly

@@ -3,11 +3,7 @@
 //! simulated-time run of the same configuration; this file only builds the camera, calls the library and prints.
 
 use anyhow::{Context, Result, bail};
-use roitrack::image::{RoiRenderer, SensorModel, SimulatedCamera};
-use roitrack::servo::live::{
-    LiveOptions, LiveServoReport, LoopClockCamera, RobotScene, roi_camera_model, run_live_servo,
-    servo_target,
-};
+use roitrack::servo::live::{LiveOptions, LiveServoReport, run_live_servo_simulated};
 use roitrack::servo::{CameraKind, CameraTiming, ControllerKind, ServoConfig, run_servo};
 
 use super::servo::ServoArgs;
@@ -87,11 +83,10 @@ pub fn run(args: &ServoArgs) -> Result<()> {
     };
     roitrack::formats::create_output_dir(&args.out)?;
     let simulated = run_servo(&config).context("the simulated-time run")?;
-    let scene = RobotScene::new(&config.path);
     let (live, camera_line) = match camera {
-        LiveCamera::Simulated => (run_simulated(&config, &scene, &live_options)?, None),
+        LiveCamera::Simulated => (run_live_servo_simulated(&config, &live_options)?, None),
         LiveCamera::AravisFake => {
-            let (report, line) = run_aravis(&config, &scene, &live_options)?;
+            let (report, line) = run_aravis(&config, &live_options)?;
             (report, Some(line))
         }
     };
@@ -115,34 +110,14 @@ pub fn run(args: &ServoArgs) -> Result<()> {
     Ok(())
 }
 
-fn run_simulated(
-    config: &ServoConfig,
-    scene: &RobotScene,
-    options: &LiveOptions,
-) -> Result<LiveServoReport> {
-    let renderer = RoiRenderer::new(
-        roi_camera_model(config),
-        servo_target(),
-        SensorModel::default(),
-    )?;
-    let truth = {
-        let scene = scene.clone();
-        move |t: f64| scene.camera_state_at_loop_s(t)
-    };
-    let mut camera = LoopClockCamera::new(
-        SimulatedCamera::new(renderer, truth, config.seed),
-        scene.clone(),
-    );
-    Ok(run_live_servo(&mut camera, scene, config, options)?)
-}
-
 #[cfg(feature = "genicam")]
-fn run_aravis(
-    config: &ServoConfig,
-    scene: &RobotScene,
-    live: &LiveOptions,
-) -> Result<(LiveServoReport, String)> {
+fn run_aravis(config: &ServoConfig, live: &LiveOptions) -> Result<(LiveServoReport, String)> {
+    use roitrack::image::SensorModel;
+    use roitrack::servo::live::{
+        LoopClockCamera, RobotScene, roi_camera_model, run_live_servo, servo_target,
+    };
     use roitrack_genicam::{FakeGigeCamera, GenicamCamera, GenicamOptions};
+    let scene = &RobotScene::new(&config.path);
     let model = roi_camera_model(config);
     let truth = {
         let scene = scene.clone();
@@ -192,11 +167,7 @@ fn run_aravis(
 }
 
 #[cfg(not(feature = "genicam"))]
-fn run_aravis(
-    _config: &ServoConfig,
-    _scene: &RobotScene,
-    _options: &LiveOptions,
-) -> Result<(LiveServoReport, String)> {
+fn run_aravis(_config: &ServoConfig, _options: &LiveOptions) -> Result<(LiveServoReport, String)> {
     run_aravis_unavailable().map(|()| unreachable!("refused above"))
 }
 
