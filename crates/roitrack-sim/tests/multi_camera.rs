@@ -72,15 +72,20 @@ fn track_rig(rig: Rig, run: &RigRun) -> (Vec<RigEstimate>, Vec<ClockEstimate>) {
     (estimates, clocks)
 }
 
-/// One camera alone: its estimates in the rig's frame and on the rig's clock (the true clock).
-fn track_single(scene: &CameraRigScene, run: &RigRun, c: usize) -> Vec<(f64, MotionState)> {
-    let camera = &scene.rig.cameras()[c];
-    let mut tracker = Tracker::new(
+/// A camera's own single-camera tracker of the grid, default settings.
+fn own_tracker(camera: &RigCamera) -> Tracker {
+    Tracker::new(
         camera.camera.clone(),
         roitrack_core::Target::grid4x4(),
         TrackerConfig::default(),
     )
-    .unwrap();
+    .unwrap()
+}
+
+/// One camera alone: its estimates in the rig's frame and on the rig's clock (the true clock).
+fn track_single(scene: &CameraRigScene, run: &RigRun, c: usize) -> Vec<(f64, MotionState)> {
+    let camera = &scene.rig.cameras()[c];
+    let mut tracker = own_tracker(camera);
     run.measurements[c]
         .iter()
         .filter_map(|m: &Measurement| tracker.push(m).unwrap())
@@ -370,12 +375,7 @@ fn a_camera_back_from_a_gap_vouches_for_no_far_estimate() {
         }
         for c in 0..scene.rig.len() {
             let camera = &scene.rig.cameras()[c];
-            let mut tracker = Tracker::new(
-                camera.camera.clone(),
-                roitrack_core::Target::grid4x4(),
-                TrackerConfig::default(),
-            )
-            .unwrap();
+            let mut tracker = own_tracker(camera);
             let (mut far, mut back) = (Vec::new(), false);
             for m in &run.measurements[c] {
                 let Some(e) = tracker.push(m).unwrap() else {
