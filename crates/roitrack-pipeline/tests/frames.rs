@@ -222,22 +222,48 @@ fn the_frame_default_follows_accelerations_that_a_constant_twist_misses() {
 }
 
 #[test]
-fn a_target_faster_than_the_track_at_30_hz_is_found_whole_instead_of_estimated_far_off() {
-    // The random scenario (up to 1.5 m/s and 4 rad/s) at 30 Hz: the twist changes by up to 2 rad/s between frames.
-    // Frames the track cannot follow are found whole and start a new track with the twist between the two last
-    // poses found; before, those tracks started at rest and every estimate in between was far off (21 mm RMSE).
-    let mut frames = sequence_of(
-        ScenarioKind::Random,
-        Readout::GlobalShutter,
-        Polarity::Bright,
-        1,
-    );
-    let run = run(&mut frames, None, 90);
-    let (pos, _) = summary("random at 30 Hz", &run);
-    assert_eq!(run.errors.len(), run.frames);
-    assert!(pos < 0.2e-3, "{pos} m");
-    let worst = run.errors[5..].iter().map(|e| e.0).fold(0.0, f64::max);
-    assert!(worst < 1e-3, "worst {worst} m");
+fn a_target_faster_than_the_process_noise_at_30_hz_keeps_its_track() {
+    // The random scenario (up to 1.5 m/s and 4 rad/s) at 30 Hz: the twist changes by up to 2 rad/s between frames,
+    // and a new track's second frame lies tens of millimetres from its prediction, inside its broad covariance.
+    // Taken blob by blob, each linearised where the blobs before it had moved the state, the frame's last blobs
+    // fell beyond their gate, the covariance was widened and 98 of 120 frames started a new track, whose twist
+    // is the difference of two poses a frame apart: 200 mm/s RMS off. A frame's blobs are now each judged against
+    // the prediction before the frame. The track must keep going and its velocity beat the difference of the true
+    // poses a frame apart (what new tracks on every frame give at best).
+    for seed in 1..=3 {
+        let mut frames = sequence_of(
+            ScenarioKind::Random,
+            Readout::GlobalShutter,
+            Polarity::Bright,
+            seed,
+        );
+        let count = 60;
+        let run = run(&mut frames, None, count);
+        let (pos, vel) = summary(&format!("random at 30 Hz, seed {seed}"), &run);
+        assert_eq!(run.errors.len(), run.frames);
+        let new_tracks = run
+            .methods
+            .iter()
+            .filter(|m| **m == FrameMethod::Restart)
+            .count();
+        assert!(
+            new_tracks <= count / 10,
+            "seed {seed}: {new_tracks} new tracks"
+        );
+        assert!(pos < 0.2e-3, "seed {seed}: {pos} m");
+        let worst = run.errors[5..].iter().map(|e| e.0).fold(0.0, f64::max);
+        assert!(worst < 1e-3, "seed {seed}: worst {worst} m");
+        let dt_s = 1.0 / 30.0;
+        let differenced = rms((5..count).map(|k| {
+            let t_s = k as f64 * dt_s;
+            let (now, before) = (frames.state_at(t_s), frames.state_at(t_s - dt_s));
+            ((now.cam_t_obj_m - before.cam_t_obj_m) / dt_s - now.velocity_mps).norm()
+        }));
+        assert!(
+            vel < differenced,
+            "seed {seed}: velocity {vel} m/s RMS off, the true poses' difference {differenced}"
+        );
+    }
 }
 
 #[test]

@@ -228,18 +228,19 @@ impl Law for KalmanLaw {
         // error, not the filter's, and widening the covariance there restarted a 24 x 28 grid seen through a
         // nominal camera file whenever a row of circles entered the view. Within one instant, what says the filter
         // is off is the share of its blobs rejected (below), not their order.
+        // So on small targets too: a frame that shows a pose has its blobs judged together, each against the
+        // prediction before the frame (see `take_readout`), and a run of them beyond the gate widens nothing.
         let one_instant = batch.iter().all(|obs| obs.t_s == first.t_s);
-        // (On small targets every point matters, and a run there is still the filter's: kept for them.)
-        let ordered_by_points = one_instant && batch.len() >= ORDERED_BY_POINTS_MIN_BLOBS;
-        self.in_one_instant = ordered_by_points;
+        let pose_points = if core.target.is_planar() { 4 } else { 6 };
+        let shows_pose = one_instant && distinct_points(batch, pose_points);
+        self.in_one_instant = shows_pose;
         let mut used = self.take_readout(core, batch, dt);
         // Half or more of the blobs of one instant rejected: a filter that no longer predicts the target (a turn
         // faster than its process noise allows between frames), or half the blobs outliers. The readout is taken
         // again from the prior widened at once to the broad one, as the escalating resets would after several frames
         // of rejections, so that its blobs, which pin the pose, set it; and that is kept if it explains more of them
         // (within the gate of their noise) than the first pass did, which it does not when they were outliers.
-        let pose_points = if core.target.is_planar() { 4 } else { 6 };
-        if one_instant && 2 * used <= batch.len() && distinct_points(batch, pose_points) {
+        if shows_pose && 2 * used <= batch.len() {
             let first_pass = (self.counters(core), self.innovations.clone());
             let explained_first = explained(self.filter.tuning(), core, batch);
             self.restore(core, before);
@@ -249,23 +250,13 @@ impl Law for KalmanLaw {
             let used_again = self.take_readout(core, batch, dt);
             if explained(self.filter.tuning(), core, batch) > explained_first {
                 used = used_again;
-                // What judges the track (lost, or following its measurements) is then how well the new state
-                // explains the readout, not the blobs' innovations against the prediction it overruled: those stay
-                // pixels off however right the state is, and three such estimates in a row dropped the track. The
-                // residuals are scaled up by the pose's six fitted parameters (four dots: 8 equations, 2 redundant),
-                // so that a frame the pose cannot explain still shows.
-                let n = 2.0 * batch.len() as f64;
-                let unbiased = (n / (n - 6.0)).sqrt();
-                self.innovations.rewind(before.innovations);
-                for residual_px in residuals_px(core, batch) {
-                    self.innovations.add(residual_px * unbiased);
-                }
+                self.judge_by_residuals(core, batch, before.innovations);
             } else {
                 self.restore(core, first_pass.0);
                 self.innovations = first_pass.1;
             }
         }
-        if ordered_by_points {
+        if self.in_one_instant {
             self.in_one_instant = false;
             // Most of the instant's blobs explained: the rejected ones are outliers or the model's error, in no
             // order; no run of them carries over to dispute the estimate or widen the filter.
@@ -396,11 +387,6 @@ impl Law for KalmanLaw {
 /// along which the state can slide while one point disagrees.
 pub(super) const HOLDING_POINTS: usize = 6;
 
-/// The fewest blobs of one instant whose runs of rejections are taken for the model's error rather than the
-/// filter's (see [`KalmanLaw::on_batch`]): four times [`HOLDING_POINTS`], so that a run leaves enough to hold the
-/// state. (On 4 and 16 points, the runs' rule is what restarts a track the target outran.)
-pub(super) const ORDERED_BY_POINTS_MIN_BLOBS: usize = 4 * HOLDING_POINTS;
-
 /// Whether every observation of `window` has one time (and there is one).
 /// The gate of a frame's pose innovation ([`Filter::match_pose_innovation`]): the 99.9 % quantile of a chi-square
 /// of 6 degrees of freedom, so that a filter whose covariance is right widens it on one frame in a thousand.
@@ -465,6 +451,20 @@ pub(super) struct LawCounters {
 }
 
 impl KalmanLaw {
+    /// After a readout was taken again from a widened covariance, what judges the track (lost, or following its
+    /// measurements) is how well the new state explains the readout, not the blobs' innovations against the
+    /// prediction it overruled: those stay pixels off however right the state is, and three such estimates in a row
+    /// dropped the track. The innovations since `mark` are replaced by the residuals, scaled up by the pose's six
+    /// fitted parameters (four dots: 8 equations, 2 redundant), so that a frame the pose cannot explain still shows.
+    fn judge_by_residuals(&mut self, core: &TrackCore, batch: &[Observation], mark: TallyMark) {
+        let n = 2.0 * batch.len() as f64;
+        let unbiased = (n / (n - 6.0)).sqrt();
+        self.innovations.rewind(mark);
+        for residual_px in residuals_px(core, batch) {
+            self.innovations.add(residual_px * unbiased);
+        }
+    }
+
     pub(super) fn counters(&self, core: &TrackCore) -> LawCounters {
         LawCounters {
             filter: self.filter,
@@ -524,7 +524,13 @@ impl KalmanLaw {
         readout.clear();
         let mut judged = std::mem::take(&mut self.judged_nis);
         judged.clear();
-        if self.split_noise(core.noise_px).bias_px > 0.0 && is_one_instant(batch) {
+        let bias = self.split_noise(core.noise_px).bias_px > 0.0;
+        // The blobs of a frame judged together (`in_one_instant`, see `on_batch`) are each judged against the
+        // prediction before the frame, not against the state its blobs before them moved: after a new track's broad
+        // start a frame 28 mm from the prediction, well inside its covariance, moved the state blob by blob along
+        // linearisations tens of pixels off, until the next blobs lay beyond their gate, the covariance was reset and
+        // the track started again on every frame.
+        if (bias || self.in_one_instant) && is_one_instant(batch) {
             judged.extend(batch.iter().map(|obs| {
                 let p = &core.target.points()[obs.point_index].point_in_obj_m;
                 let noise = self.split_noise(self.point_noise_px(core, obs.point_index));
@@ -532,7 +538,7 @@ impl KalmanLaw {
                     .prediction_nis(&core.model, &core.state, p, &obs.ideal_px, noise)
             }));
             let gate2 = self.filter.tuning().gate_sigma.powi(2);
-            self.bias_apart = judged.iter().all(|nis| nis.is_some_and(|nis| nis <= gate2));
+            self.bias_apart = bias && judged.iter().all(|nis| nis.is_some_and(|nis| nis <= gate2));
             if self.bias_apart {
                 let blobs = batch.iter().map(|obs| {
                     let white_px = self
