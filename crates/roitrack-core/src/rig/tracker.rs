@@ -10,7 +10,7 @@ use thiserror::Error;
 use super::{Rig, offset_chi2, rig_projection, search_offset_s};
 use crate::estimator::kalman::pose_matching_scale;
 use crate::estimator::{
-    ConfigError, Estimate, Estimator, EstimatorConfig, KalmanTuning, Matrix12, TrackError,
+    ConfigError, Emit, Estimate, Estimator, EstimatorConfig, KalmanTuning, Matrix12, TrackError,
     TrackStatus, Tracker, TrackerConfig,
 };
 use crate::stats::{chi2_upper_0_1_percent, chi2_upper_quantile};
@@ -260,6 +260,18 @@ pub struct RigTracker {
     tuning: KalmanTuning,
     models: Vec<SpatioTemporalModel>,
     singles: Vec<Tracker>,
+    /// One camera's newest measurements that share one time (a global-shutter frame's blobs), held for its own
+    /// tracker until a measurement of another time or camera comes, and given to it together
+    /// ([`Tracker::push_batch`]): blob after blob, each linearised where the blobs before it had moved the state, a
+    /// 30 Hz frame camera's own track was disputed on nearly every frame of a fast target and vouched for nothing.
+    held: Vec<Measurement>,
+    /// The camera of [`Self::held`].
+    held_camera: usize,
+    /// Per camera: the time of its newest measurement, and whether two of its measurements have shared a time (a
+    /// frame camera, whose instants are held; a camera whose measurements each have their own time, ROIs, gives
+    /// each to its tracker as it comes).
+    newest_t_s: Vec<f64>,
+    reads_instants: Vec<bool>,
     /// Per camera: the newest centroid noise its own tracker learnt (px).
     noise_px: Vec<f64>,
     /// Per camera: whether its clock offset is known or found.
@@ -388,6 +400,10 @@ impl RigTracker {
             newest_single: vec![None; n],
             recent_singles: vec![VecDeque::new(); n],
             singles,
+            held: Vec::new(),
+            held_camera: 0,
+            newest_t_s: vec![f64::NAN; n],
+            reads_instants: vec![false; n],
             rig,
             target,
             config,
@@ -473,11 +489,11 @@ impl RigTracker {
                 cameras: self.rig.len(),
             });
         }
-        let single = self.singles[c]
-            .push(&m.measurement)
-            .map_err(|source| self.measurement_error(c, source))?;
-        self.report.measurements += 1;
         if self.is_single() {
+            let single = self.singles[c]
+                .push(&m.measurement)
+                .map_err(|source| self.measurement_error(c, source))?;
+            self.report.measurements += 1;
             return Ok(single
                 .map(|estimate| {
                     self.report.estimates += 1;
@@ -489,26 +505,88 @@ impl RigTracker {
                 .into_iter()
                 .collect());
         }
-        if let Some(e) = single
-            && e.status.is_vouched_for()
+        if self
+            .held
+            .first()
+            .is_some_and(|h| self.held_camera != c || h.t_s != m.measurement.t_s)
         {
-            self.take_single(c, &e)?;
+            self.give_held()?;
         }
-        let t_rig_s = self.clocks[c].rig_time_s(m.measurement.t_s);
+        if !self.reads_instants[c] && self.newest_t_s[c] == m.measurement.t_s {
+            self.reads_instants[c] = true;
+        }
+        if !self.reads_instants[c] {
+            let single = self.singles[c]
+                .push(&m.measurement)
+                .map_err(|source| self.measurement_error(c, source))?;
+            self.newest_t_s[c] = m.measurement.t_s;
+            if let Some(e) = single
+                && e.status.is_vouched_for()
+            {
+                self.take_single(c, &e)?;
+            }
+            return Ok(self.queue_for_fusion(c, m.measurement));
+        }
+        // Refused now, naming it, if the camera's tracker would refuse it after the measurements held before it.
+        let refused = match self.held.last() {
+            Some(last) => self.singles[c]
+                .first_refused(&[*last, m.measurement])
+                .filter(|&(offset, _)| offset == 1),
+            None => self.singles[c].first_refused(&[m.measurement]),
+        };
+        if let Some((_, source)) = refused {
+            return Err(self.measurement_error(c, source));
+        }
+        self.held.push(m.measurement);
+        self.held_camera = c;
+        self.newest_t_s[c] = m.measurement.t_s;
+        Ok(self.queue_for_fusion(c, m.measurement))
+    }
+
+    /// Counts a measurement its camera's tracker took and queues it for the fused filter; returns the estimates that
+    /// became due.
+    fn queue_for_fusion(&mut self, c: usize, measurement: Measurement) -> Vec<RigEstimate> {
+        self.report.measurements += 1;
+        let t_rig_s = self.clocks[c].rig_time_s(measurement.t_s);
         self.newest_rig_s = self.newest_rig_s.max(t_rig_s);
         self.arrivals += 1;
         self.pending.push(Reverse(Pending {
             t_rig_s,
             arrival: self.arrivals,
             camera: c,
-            measurement: m.measurement,
+            measurement,
         }));
-        Ok(self.release(self.newest_rig_s - self.config.reorder_latency_s))
+        self.release(self.newest_rig_s - self.config.reorder_latency_s)
     }
 
     /// Fuses every measurement still waiting in the reorder buffer (at the end of the streams), with their estimates.
     pub fn finish(&mut self) -> Vec<RigEstimate> {
+        // (The held measurements' only possible error is an offset search that failed on the streams' last instant,
+        // which has nothing left to be fused with.)
+        let _ = self.give_held();
         self.release(f64::INFINITY)
+    }
+
+    /// The held measurements of one instant to their camera's own tracker, and its estimate to the rig.
+    fn give_held(&mut self) -> Result<(), RigError> {
+        if self.held.is_empty() {
+            return Ok(());
+        }
+        let c = self.held_camera;
+        let held = std::mem::take(&mut self.held);
+        // (Checked as they came: the tracker takes them all.)
+        let single = match held.as_slice() {
+            [one] => self.singles[c].push(one),
+            batch => self.singles[c].push_batch(batch, Emit::Every),
+        };
+        self.held = held;
+        self.held.clear();
+        if let Some(e) = single.map_err(|source| self.measurement_error(c, source))?
+            && e.status.is_vouched_for()
+        {
+            self.take_single(c, &e)?;
+        }
+        Ok(())
     }
 
     /// Fuses the waiting measurements up to the rig time `until_s`, in the order of their rig times.
