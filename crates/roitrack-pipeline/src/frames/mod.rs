@@ -407,6 +407,7 @@ impl FrameTracker {
             });
             self.memory.acceleration = e.acceleration;
             self.memory.noise_px = Some(e.noise_px);
+            self.memory.tracking = e.status == TrackStatus::Tracking;
         }
     }
 

@@ -31,6 +31,9 @@ pub(super) struct TrackMemory {
     pub(super) last_pose: Option<(f64, MotionState)>,
     /// The centroid noise of the last estimate (px): the estimator's, learnt or given.
     pub(super) noise_px: Option<f64>,
+    /// Whether the last estimate was `tracking`: its covariance, from which the windows are sized, has been borne out
+    /// by the frames (a new track's states a twist differenced from two poses, and may be far too sure of it).
+    pub(super) tracking: bool,
 }
 
 impl FrameTracker {
