@@ -224,17 +224,14 @@ impl FrameTracker {
         else {
             return false;
         };
-        let predicted: Vec<Vector2<f64>> = self
-            .windows
-            .requests
-            .iter()
-            .flatten()
-            .map(|r| r.predicted_px)
-            .collect();
-        predicted.iter().enumerate().any(|(i, a)| {
-            predicted[i + 1..]
-                .iter()
-                .any(|b| (a - b).norm() < 2.0 * reach_px)
+        let requests = &self.windows.requests;
+        requests.iter().enumerate().any(|(i, a)| {
+            a.is_some_and(|a| {
+                requests[i + 1..]
+                    .iter()
+                    .flatten()
+                    .any(|b| (a.predicted_px - b.predicted_px).norm() < 2.0 * reach_px)
+            })
         })
     }
 
