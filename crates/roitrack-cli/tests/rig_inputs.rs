@@ -537,3 +537,113 @@ fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
     }
     files
 }
+
+/// Each camera of a rig of frames timed by its own `--timestamps NAME=FILE` (the simulator's, on that camera's
+/// clock): the same estimates, byte for byte, as with `--fps`; a timestamps file of an unknown camera, of a camera
+/// given twice or of a camera whose input is not frames is refused naming the camera.
+#[test]
+fn a_rig_of_frames_takes_each_cameras_timestamps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = tmp.path().join("sim");
+    ok(&[
+        "simulate",
+        "--frames",
+        "--scenario",
+        "sweep",
+        "--rig-cameras",
+        "2",
+        "--frame-count",
+        "12",
+        "--out",
+        p(&sim),
+    ]);
+    let file = |name: &str| p(&sim.join(name)).to_string();
+    let (rig, target) = (file("rig.yaml"), file("target.csv"));
+    let images = [
+        format!("cam0={}", file("cam0/frames")),
+        format!("cam1={}", file("cam1/frames")),
+    ];
+    let times = [
+        format!("cam0={}", file("cam0/timestamps.csv")),
+        format!("cam1={}", file("cam1/timestamps.csv")),
+    ];
+    let outputs = |stem: &str| {
+        [
+            tmp.path().join(format!("{stem}.tum")),
+            tmp.path().join(format!("{stem}.csv")),
+        ]
+    };
+    let args = |timing: &[&str], out: &[std::path::PathBuf; 2]| {
+        let mut args = vec![
+            "track".to_string(),
+            "--rig".into(),
+            rig.clone(),
+            "--target".into(),
+            target.clone(),
+            "--images".into(),
+            images[0].clone(),
+            "--images".into(),
+            images[1].clone(),
+            "--polarity".into(),
+            "bright".into(),
+        ];
+        args.extend(timing.iter().map(|s| s.to_string()));
+        args.extend([
+            "--poses".into(),
+            p(&out[0]).into(),
+            "--twists".into(),
+            p(&out[1]).into(),
+        ]);
+        args
+    };
+    let (by_fps, by_files) = (outputs("fps"), outputs("files"));
+    ok(&strs(&args(&["--fps", "30"], &by_fps)));
+    ok(&strs(&args(
+        &["--timestamps", &times[0], "--timestamps", &times[1]],
+        &by_files,
+    )));
+    for (a, b) in by_fps.iter().zip(&by_files) {
+        let (a, b) = (std::fs::read(a).unwrap(), std::fs::read(b).unwrap());
+        assert!(!a.is_empty());
+        assert!(
+            a == b,
+            "the rig's output with --timestamps differs from --fps"
+        );
+    }
+    let refused = |timing: &[&str]| fails(&strs(&args(timing, &outputs("bad"))));
+    let unknown = refused(&["--timestamps", &times[0], "--timestamps", "left=t.csv"]);
+    assert!(
+        unknown.contains("no camera 'left'") && unknown.contains("cam0, cam1"),
+        "{unknown}"
+    );
+    let twice = refused(&["--timestamps", &times[0], "--timestamps", &times[0]]);
+    assert!(twice.contains("camera 'cam0' is given twice"), "{twice}");
+    let unnamed = refused(&["--timestamps", &file("cam0/timestamps.csv")]);
+    assert!(unnamed.contains("NAME=FILE"), "{unnamed}");
+    let measurements = format!("cam1={}", file("cam1/measurements.csv"));
+    let not_frames = fails(&[
+        "track",
+        "--rig",
+        &rig,
+        "--target",
+        &target,
+        "--images",
+        &images[0],
+        "--measurements",
+        &measurements,
+        "--timestamps",
+        &times[1],
+        "--poses",
+        p(&tmp.path().join("bad.tum")),
+        "--twists",
+        p(&tmp.path().join("bad.csv")),
+    ]);
+    assert!(
+        not_frames.contains("camera 'cam1' has no --images"),
+        "{not_frames}"
+    );
+}
+
+fn strs(v: &[String]) -> Vec<&str> {
+    v.iter().map(String::as_str).collect()
+}

@@ -64,20 +64,21 @@ pub struct TrackArgs {
     /// mkv, avi, mov, webm; decoded by Debian's `ffmpeg`). One estimate per frame where the target is found.
     /// Also a ROS 2 bag (a .mcap file or a rosbag2 folder; `--mcap-in BAG`) with --image-topic. With --rig, one
     /// NAME=SOURCE per camera (repeated; not a bag), each on its own camera's clock, every camera with the options
-    /// below (--fps, --shutter, --polarity...; --timestamps is refused: give each camera's frames their times by
-    /// --fps, or a video's own). Default: none.
+    /// below (--fps, --shutter, --polarity...), and its frames' times by --timestamps NAME=FILE.csv, --fps or a
+    /// video's own. Default: none.
     #[arg(long, value_name = "SOURCE | NAME=SOURCE", visible_alias = "mcap-in")]
     pub images: Vec<PathBuf>,
     /// With --images: the frames' times, a CSV file with a header, a column `t` (s: the mid-exposure time of the
     /// frame's row 0) and one row per frame in order; an optional column `file` must match each frame's file name.
-    /// Default: none (then --fps, or a video's own timestamps).
+    /// With --rig, one NAME=FILE.csv per camera of --images (repeated), on that camera's own clock. Default: none
+    /// (then --fps, or a video's own timestamps).
     #[arg(
         long,
-        value_name = "FILE.csv",
+        value_name = "FILE.csv | NAME=FILE.csv",
         requires = "images",
         conflicts_with = "fps"
     )]
-    pub timestamps: Option<PathBuf>,
+    pub timestamps: Vec<PathBuf>,
     /// With --images: frame k is at k / F seconds. Without --timestamps or --fps, only a video's own timestamps are
     /// used; an image sequence without either is refused (roitrack never guesses frame times). Default: none.
     #[arg(long, value_name = "F", requires = "images", value_parser = ranges::within(roitrack::formats::MIN_FRAME_RATE_HZ..=roitrack::formats::MAX_FRAME_RATE_HZ, " Hz", "a frame every 1,000 s to beyond the fastest cameras"))]
@@ -173,7 +174,14 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         );
     }
     check_paths(args)?;
-    if args.time_units.is_some() && args.measurements.is_empty() && args.timestamps.is_none() {
+    if args.timestamps.len() > 1 {
+        bail!(
+            "--timestamps is given {} times: one file of frame times for --images (one NAME=FILE per camera is for a \
+             rig, --rig)",
+            args.timestamps.len()
+        );
+    }
+    if args.time_units.is_some() && args.measurements.is_empty() && args.timestamps.is_empty() {
         bail!(
             "--time-units is the unit of the times of --measurements or --timestamps, and neither is given"
         );
@@ -192,7 +200,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     if args.line_delay_s.is_some() {
         bail!("--line-delay-s is for --images with --shutter rolling");
     }
-    if args.timestamps.is_some() || args.fps.is_some() || args.distance_m.is_some() {
+    if !args.timestamps.is_empty() || args.fps.is_some() || args.distance_m.is_some() {
         bail!(
             "--timestamps, --fps and --distance-m are for frames, not for replayed measurements (--measurement-topic)"
         );
@@ -345,7 +353,7 @@ fn run_frames(
     let camera = frame_camera(args, camera)?;
     let config = frame_config(args)?;
     let timing = roitrack::formats::FrameTiming {
-        timestamps: args.timestamps.clone(),
+        timestamps: args.timestamps.first().cloned(),
         fps: args.fps,
         time_units: args.time_units.map(Into::into),
     };
@@ -483,7 +491,10 @@ fn run_frames(
 /// Refuses, before anything is read or written, outputs (the files, the bag and its partial name) that are inputs
 /// (also through symbolic and hard links) or each other, and `-` for more than one output.
 fn check_paths(args: &TrackArgs) -> Result<()> {
-    let first_measurements = args.measurements.first().cloned();
+    let (first_measurements, first_timestamps) = (
+        args.measurements.first().cloned(),
+        args.timestamps.first().cloned(),
+    );
     let (first_rois, first_images) = (args.rois.first().cloned(), args.images.first().cloned());
     let mut inputs = vec![("--target", args.target.target.as_path())];
     if let Some(camera) = args.camera.camera_path() {
@@ -493,7 +504,7 @@ fn check_paths(args: &TrackArgs) -> Result<()> {
         ("--measurements", &first_measurements),
         ("--rois", &first_rois),
         ("--images", &first_images),
-        ("--timestamps", &args.timestamps),
+        ("--timestamps", &first_timestamps),
     ] {
         if let Some(path) = path {
             inputs.push((name, path.as_path()));
@@ -618,6 +629,7 @@ fn rig_inputs(
     rig: &roitrack::core::rig::Rig,
 ) -> Result<Vec<Option<roitrack::camera_input::CameraInput>>> {
     use roitrack::camera_input::CameraInput;
+    let timestamps = rig_timestamps(args, rig_path, rig)?;
     let mut inputs: Vec<Option<CameraInput>> = vec![None; rig.len()];
     let given = [
         ("--measurements", &args.measurements),
@@ -659,16 +671,56 @@ fn rig_inputs(
                 _ => CameraInput::Images {
                     source: path,
                     timing: roitrack::formats::FrameTiming {
-                        timestamps: None,
+                        timestamps: timestamps[c].clone(),
                         fps: args.fps,
-                        time_units: None,
+                        time_units: args.time_units.map(Into::into),
                     },
                     config: Box::new(frame_config(args)?),
                 },
             });
         }
     }
+    if let Some((name, path)) = timestamps.iter().enumerate().find_map(|(c, path)| {
+        let path = path.as_ref()?;
+        let frames = matches!(inputs[c], Some(CameraInput::Images { .. }));
+        (!frames).then_some((&rig.cameras()[c].name, path))
+    }) {
+        bail!(
+            "--timestamps {name}={}: camera '{name}' has no --images {name}=..., whose frames' times it would give",
+            path.display()
+        );
+    }
     Ok(inputs)
+}
+
+/// Each camera's --timestamps NAME=FILE of a rig run, by camera: each name a camera of the rig, given once.
+fn rig_timestamps(
+    args: &TrackArgs,
+    rig_path: &std::path::Path,
+    rig: &roitrack::core::rig::Rig,
+) -> Result<Vec<Option<PathBuf>>> {
+    let mut timestamps: Vec<Option<PathBuf>> = vec![None; rig.len()];
+    for value in &args.timestamps {
+        let (name, path) = split_camera_file("--timestamps", value)?;
+        let Some(c) = rig.index_of(&name) else {
+            let names: Vec<&str> = rig.cameras().iter().map(|c| c.name.as_str()).collect();
+            bail!(
+                "--timestamps {name}={}: {} has no camera '{name}' (its cameras: {})",
+                path.display(),
+                rig_path.display(),
+                names.join(", ")
+            );
+        };
+        if let Some(before) = &timestamps[c] {
+            bail!(
+                "--timestamps {name}={}: camera '{name}' is given twice (also --timestamps {name}={})",
+                path.display(),
+                before.display()
+            );
+        }
+        timestamps[c] = Some(path);
+    }
+    Ok(timestamps)
 }
 
 /// `track --rig`: every camera's input turned into measurements (frames through the camera's own frame tracker) and
@@ -691,12 +743,6 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     let file = roitrack::formats::read_rig_yaml(rig_path, &Default::default())?;
     let rig = &file.rig;
     let target = args.target.read()?;
-    if args.timestamps.is_some() {
-        bail!(
-            "--timestamps is one file of frame times, and a rig's cameras each have their own: with --rig, give the \
-             frames' times by --fps, or use videos (their own timestamps)"
-        );
-    }
     // Each NAME=...: a camera of the rig, once.
     let inputs = rig_inputs(args, rig_path, rig)?;
     if inputs[0].is_none() {
