@@ -567,6 +567,50 @@ fn every_estimate_of_a_paced_track_of_rois_and_of_frames_reaches_cyclone_dds() {
     assert!(estimates >= 25, "{estimates} estimates of 30 frames");
 }
 
+/// `servo --ros2 --paced`: the closed loop's estimates (ROI camera, computed-torque law) reach the Cyclone DDS
+/// subscriber on every topic, none lost, each equal to the run's own files.
+#[test]
+fn every_estimate_of_a_paced_servo_run_reaches_cyclone_dds_equal_to_its_files() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    MAX_DIFFERENCE.with(|max| max.set(0.0));
+    let dir = tempfile::tempdir().unwrap();
+    let (received, out) = (dir.path().join("received.jsonl"), dir.path().join("servo"));
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
+subscriber=$!
+"$ROITRACK" servo --controller ctc --camera roi --ros2 --ros2-wait-s 30 --paced --out "$OUT" || exit 91
+wait $subscriber || exit 92
+"#,
+        &[
+            ("PYTHON", &python),
+            ("SUBSCRIBER", &subscriber_script()),
+            ("RECEIVED", &received),
+            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
+            ("OUT", &out),
+        ],
+    );
+    assert!(ok, "{log}");
+    assert!(log.contains(" 0 dropped"), "{log}");
+    let run = out.join("ctc-roi");
+    let estimates = check_against_files(
+        &read_received(&received),
+        &run.join("estimates.tum"),
+        &run.join("estimates_twists.csv"),
+        Some(&run.join("estimates_diagnostics.csv")),
+        None,
+    );
+    eprintln!(
+        "servo: {estimates} estimates received by Cyclone DDS on every topic, none lost; largest difference from \
+         the files {:.1e}",
+        MAX_DIFFERENCE.with(|max| max.get())
+    );
+    assert!(estimates >= 1000, "{estimates} estimates of the servo run");
+}
+
 #[test]
 fn a_node_with_no_interface_up_or_an_address_no_interface_has_is_refused_at_start() {
     if !namespaces_allowed() {

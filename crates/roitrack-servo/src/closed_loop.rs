@@ -265,6 +265,30 @@ impl ServoConfig {
         self.timing.unwrap_or_else(|| self.camera.timing())
     }
 
+    /// The model of the camera the loop sees the robot through (the built-in calibration, its readout and
+    /// [`Self::camera_timing`]'s exposure); `None` for the true state, which no camera sees.
+    ///
+    /// ```
+    /// use roitrack_core::time::Readout;
+    /// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig};
+    /// let config = ServoConfig::new(ControllerKind::Ctc, CameraKind::Frames30, 1.0);
+    /// assert_eq!(config.camera_model().unwrap().time.readout, Readout::GlobalShutter);
+    /// assert!(ServoConfig::new(ControllerKind::TrueState, CameraKind::Truth, 1.0).camera_model().is_none());
+    /// ```
+    pub fn camera_model(&self) -> Option<CameraModel> {
+        let readout = match self.camera {
+            CameraKind::Truth => return None,
+            CameraKind::Roi => Readout::SequentialRois,
+            CameraKind::Frames120 | CameraKind::Frames30 => Readout::GlobalShutter,
+        };
+        let mut camera = CameraModel::canonical();
+        camera.time = TimeModel {
+            readout,
+            exposure_s: self.camera_timing().exposure_s,
+        };
+        Some(camera)
+    }
+
     /// How old, on average, the feedback is when the command it made acts (s), as the gains are tuned for it: the
     /// camera's latency, the actuation delay and half the interval between estimates (an estimate every 10 ROIs, or
     /// one per frame), plus the extra latency when [`Self::gains_follow_latency`]; for the `true-state` floor only
@@ -529,14 +553,12 @@ impl CameraSide {
         let timing = config.camera_timing();
         let (rotation, home) = config.path.home_in_camera();
         let rng = ChaCha8Rng::seed_from_u64(config.seed);
+        let Some(camera) = config.camera_model() else {
+            return Ok(Self::Truth);
+        };
         match config.camera {
             CameraKind::Truth => Ok(Self::Truth),
             CameraKind::Roi => {
-                let mut camera = CameraModel::canonical();
-                camera.time = TimeModel {
-                    readout: Readout::SequentialRois,
-                    exposure_s: timing.exposure_s,
-                };
                 let renderer =
                     RoiRenderer::new(camera.clone(), target.clone(), SensorModel::default())?;
                 let scheduler = RoiScheduler::new(
@@ -572,11 +594,6 @@ impl CameraSide {
                 })))
             }
             CameraKind::Frames120 | CameraKind::Frames30 => {
-                let mut camera = CameraModel::canonical();
-                camera.time = TimeModel {
-                    readout: Readout::GlobalShutter,
-                    exposure_s: timing.exposure_s,
-                };
                 let renderer =
                     RoiRenderer::new(camera.clone(), target.clone(), SensorModel::default())?;
                 let frame_config = FrameTrackerConfig {

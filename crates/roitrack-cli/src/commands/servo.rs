@@ -124,6 +124,13 @@ pub struct ServoArgs {
     /// Output folder (created if missing); one folder per run inside.
     #[arg(long)]
     pub out: PathBuf,
+    /// --ros2: the run's estimates on the ROS 2 DDS bus, as `track --ros2` publishes them (one run: give
+    /// --controller; not with --live yet).
+    #[command(flatten)]
+    pub ros2: crate::ros2_args::Ros2Args,
+    /// --paced: the estimates published at the run's own speed (simulated time runs faster than the wall clock).
+    #[command(flatten)]
+    pub pace: crate::ros::PaceArgs,
 }
 
 pub fn run(args: &ServoArgs) -> Result<()> {
@@ -134,7 +141,21 @@ pub fn run(args: &ServoArgs) -> Result<()> {
         Some(c) => vec![c.into()],
         None => ControllerKind::ALL.to_vec(),
     };
+    if args.ros2.ros2 && !matches!(controllers.as_slice(), [c] if *c != ControllerKind::TrueState) {
+        anyhow::bail!(
+            "--ros2 publishes one run's estimates: give --controller ctc, ctc-pose or kvs (true-state estimates \
+             nothing)"
+        );
+    }
     roitrack::formats::create_output_dir(&args.out)?;
+    // Started before the run (--ros2 has one controller, which a camera sees): a node that cannot start is an error
+    // before anything is computed or printed.
+    let mut ros2 = match ServoConfig::new(controllers[0], args.camera.into(), args.speed_scale)
+        .camera_model()
+    {
+        Some(camera) if args.ros2.ros2 => Some(args.ros2.start(&camera, &Default::default())?),
+        _ => None,
+    };
     let mut reports = Vec::new();
     if !args.json {
         println!(
@@ -152,6 +173,16 @@ pub fn run(args: &ServoArgs) -> Result<()> {
         config.seed = args.seed;
         let report =
             run_servo(&config).with_context(|| format!("servo run {}", controller.name()))?;
+        if let Some(mut ros2) = ros2.take() {
+            let mut pacer = args.pace.pacer();
+            for e in &report.estimates {
+                if let Some(pacer) = &mut pacer {
+                    pacer.wait_until(e.t_ref_s);
+                }
+                ros2.estimate(e)?;
+            }
+            ros2.finish()?;
+        }
         let dir = args.out.join(format!(
             "{}-{}",
             report.controller.name(),

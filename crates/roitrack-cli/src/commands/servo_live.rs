@@ -61,6 +61,12 @@ fn config(args: &ServoArgs) -> Result<ServoConfig> {
 }
 
 pub fn run(args: &ServoArgs) -> Result<()> {
+    if args.ros2.ros2 || args.pace.paced.is_some() {
+        bail!(
+            "--ros2 and --paced publish a simulated-time run (servo without --live); the real-time loop does not \
+             publish yet"
+        );
+    }
     let camera = match (args.fake, args.sim_camera) {
         (true, false) => LiveCamera::AravisFake,
         (false, true) => LiveCamera::Simulated,
