@@ -95,6 +95,18 @@ fn live_error(message: String) -> mcap::McapError {
 }
 
 impl Output {
+    /// Hands an MCAP file over to its path ([`McapFile::close`]); a live server's or a ROS 2 node's channels have
+    /// nothing to close.
+    pub(crate) fn close(&mut self) -> Result<(), FormatError> {
+        match self {
+            Self::Mcap(file) => file.close(),
+            #[cfg(feature = "live")]
+            Self::Live(_) => Ok(()),
+            #[cfg(feature = "ros2")]
+            Self::Dds(_) => Ok(()),
+        }
+    }
+
     pub(crate) fn add_schema(
         &mut self,
         name: &str,

@@ -703,9 +703,7 @@ impl BagWriter {
         self.writer
             .finish()
             .map_err(|e| mcap_error(&self.path, "cannot complete the bag", e))?;
-        if let Output::Mcap(file) = &mut self.writer {
-            file.close()?;
-        }
+        self.writer.close()?;
         Ok(self.messages)
     }
 }
