@@ -392,23 +392,12 @@ fn every_estimate_of_a_paced_demo_reaches_cyclone_dds_equal_to_the_files() {
     }
     let dir = tempfile::tempdir().unwrap();
     let (received, out) = (dir.path().join("received.jsonl"), dir.path().join("demo"));
-    let (ok, log) = in_namespace(
-        r#"
-"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
-subscriber=$!
-"$ROITRACK" demo --ros2 --ros2-wait-s 30 --paced --duration-s 1 --out "$OUT" >/dev/null || exit 91
-wait $subscriber || exit 92
-"#,
-        &[
-            ("PYTHON", &python),
-            ("SUBSCRIBER", &subscriber_script()),
-            ("RECEIVED", &received),
-            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
-            ("OUT", &out),
-        ],
+    beside_cyclone_dds(
+        &python,
+        &received,
+        &out,
+        "demo --ros2 --ros2-wait-s 30 --paced --duration-s 1",
     );
-    assert!(ok, "{log}");
-    assert!(log.contains("0 dropped"), "{log}");
     let messages = read_received(&received);
     let poses = check_against_files(
         &messages,
@@ -442,6 +431,30 @@ wait $subscriber || exit 92
         quantiles(Some("/roitrack/pose")),
         quantiles(None)
     );
+}
+
+/// Runs `roitrack COMMAND --out OUT` (COMMAND split at its spaces) beside the Cyclone DDS subscriber, which writes
+/// what it receives to `received`, in a network namespace of its own; asserts that both succeeded and that the
+/// publisher dropped nothing.
+fn beside_cyclone_dds(python: &Path, received: &Path, out: &Path, command: &str) {
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
+subscriber=$!
+"$ROITRACK" $COMMAND --out "$OUT" >/dev/null || exit 91
+wait $subscriber || exit 92
+"#,
+        &[
+            ("PYTHON", python),
+            ("SUBSCRIBER", &subscriber_script()),
+            ("RECEIVED", received),
+            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
+            ("OUT", out),
+            ("COMMAND", Path::new(command)),
+        ],
+    );
+    assert!(ok, "{log}");
+    assert!(log.contains(" 0 dropped"), "{log}");
 }
 
 /// `roitrack simulate --scenario SCENARIO --duration-s 1 --out DIR` plus `extra`: the run's folder.
@@ -578,23 +591,12 @@ fn every_estimate_of_a_paced_servo_run_reaches_cyclone_dds_equal_to_its_files() 
     MAX_DIFFERENCE.with(|max| max.set(0.0));
     let dir = tempfile::tempdir().unwrap();
     let (received, out) = (dir.path().join("received.jsonl"), dir.path().join("servo"));
-    let (ok, log) = in_namespace(
-        r#"
-"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
-subscriber=$!
-"$ROITRACK" servo --controller ctc --camera roi --ros2 --ros2-wait-s 30 --paced --out "$OUT" || exit 91
-wait $subscriber || exit 92
-"#,
-        &[
-            ("PYTHON", &python),
-            ("SUBSCRIBER", &subscriber_script()),
-            ("RECEIVED", &received),
-            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
-            ("OUT", &out),
-        ],
+    beside_cyclone_dds(
+        &python,
+        &received,
+        &out,
+        "servo --controller ctc --camera roi --ros2 --ros2-wait-s 30 --paced",
     );
-    assert!(ok, "{log}");
-    assert!(log.contains(" 0 dropped"), "{log}");
     let run = out.join("ctc-roi");
     let estimates = check_against_files(
         &read_received(&received),
