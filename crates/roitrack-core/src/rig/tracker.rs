@@ -527,14 +527,9 @@ impl RigTracker {
             }
             return Ok(self.queue_for_fusion(c, m.measurement));
         }
-        // Refused now, naming it, if the camera's tracker would refuse it after the measurements held before it.
-        let refused = match self.held.last() {
-            Some(last) => self.singles[c]
-                .first_refused(&[*last, m.measurement])
-                .filter(|&(offset, _)| offset == 1),
-            None => self.singles[c].first_refused(&[m.measurement]),
-        };
-        if let Some((_, source)) = refused {
+        // Refused now, naming it, if the camera's tracker would refuse it (the measurements held before it share its
+        // time, which its tracker's newest does not pass).
+        if let Some((_, source)) = self.singles[c].first_refused(&[m.measurement]) {
             return Err(self.measurement_error(c, source));
         }
         self.held.push(m.measurement);
