@@ -141,6 +141,9 @@ pub fn run(args: &ServoArgs) -> Result<()> {
         Some(c) => vec![c.into()],
         None => ControllerKind::ALL.to_vec(),
     };
+    if args.pace.paced.is_some() && !args.ros2.ros2 {
+        anyhow::bail!("--paced paces what --ros2 publishes, and --ros2 is not given");
+    }
     if args.ros2.ros2 && !matches!(controllers.as_slice(), [c] if *c != ControllerKind::TrueState) {
         anyhow::bail!(
             "--ros2 publishes one run's estimates: give --controller ctc, ctc-pose or kvs (true-state estimates \
