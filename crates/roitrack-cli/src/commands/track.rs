@@ -545,6 +545,27 @@ struct CameraStream {
 }
 
 /// `--measurements NAME=FILE` (or `--rois`, `--images`) as (name, file); refused without the `=`.
+/// `option NAME=FILE` of a rig run: the index of the rig's camera NAME, the name and the file; an error naming the
+/// rig's cameras if it has no such camera.
+fn rig_camera(
+    option: &str,
+    value: &std::path::Path,
+    rig_path: &std::path::Path,
+    rig: &roitrack::core::rig::Rig,
+) -> Result<(usize, String, PathBuf)> {
+    let (name, path) = split_camera_file(option, value)?;
+    let Some(c) = rig.index_of(&name) else {
+        let names: Vec<&str> = rig.cameras().iter().map(|c| c.name.as_str()).collect();
+        bail!(
+            "{option} {name}={}: {} has no camera '{name}' (its cameras: {})",
+            path.display(),
+            rig_path.display(),
+            names.join(", ")
+        );
+    };
+    Ok((c, name, path))
+}
+
 fn split_camera_file(option: &str, text: &std::path::Path) -> Result<(String, PathBuf)> {
     let text = text.to_string_lossy();
     match text.split_once('=') {
@@ -638,16 +659,7 @@ fn rig_inputs(
     ];
     for (option, values) in given {
         for value in values {
-            let (name, path) = split_camera_file(option, value)?;
-            let Some(c) = rig.index_of(&name) else {
-                let names: Vec<&str> = rig.cameras().iter().map(|c| c.name.as_str()).collect();
-                bail!(
-                    "{option} {name}={}: {} has no camera '{name}' (its cameras: {})",
-                    path.display(),
-                    rig_path.display(),
-                    names.join(", ")
-                );
-            };
+            let (c, name, path) = rig_camera(option, value, rig_path, rig)?;
             if let Some(before) = &inputs[c] {
                 bail!(
                     "{option} {name}={}: camera '{name}' is given twice (also {} {name}={}): one input per camera",
@@ -701,16 +713,7 @@ fn rig_timestamps(
 ) -> Result<Vec<Option<PathBuf>>> {
     let mut timestamps: Vec<Option<PathBuf>> = vec![None; rig.len()];
     for value in &args.timestamps {
-        let (name, path) = split_camera_file("--timestamps", value)?;
-        let Some(c) = rig.index_of(&name) else {
-            let names: Vec<&str> = rig.cameras().iter().map(|c| c.name.as_str()).collect();
-            bail!(
-                "--timestamps {name}={}: {} has no camera '{name}' (its cameras: {})",
-                path.display(),
-                rig_path.display(),
-                names.join(", ")
-            );
-        };
+        let (c, name, path) = rig_camera("--timestamps", value, rig_path, rig)?;
         if let Some(before) = &timestamps[c] {
             bail!(
                 "--timestamps {name}={}: camera '{name}' is given twice (also --timestamps {name}={})",
