@@ -170,11 +170,10 @@ impl FrameTracker {
             PolarityChoice::Bright => Some(Polarity::Bright),
             PolarityChoice::Dark => Some(Polarity::Dark),
         };
-        let max_side = windows.max_size_px as usize;
         let blob_options = config.detection.blob_options(&camera, &target);
         let points = target.len();
         Ok(Self {
-            windows: Windows::new(scheduler, points, max_side),
+            windows: Windows::new(scheduler, points),
             search: WholeFrameSearch {
                 blob_options,
                 scratch: PhotoScratch::default(),

@@ -4,9 +4,12 @@
 use nalgebra::{Vector2, Vector3};
 use roitrack_core::Acceleration;
 use roitrack_core::estimator::Observation;
+use std::cell::RefCell;
+
+use rayon::prelude::*;
 use roitrack_image::photo::OutlineScratch;
 use roitrack_image::window::{flatten_window, measure_flat_window, window_outline_centre};
-use roitrack_image::{BlobRejection, Frame, Polarity};
+use roitrack_image::{BlobRejection, CentroidOptions, Frame, Polarity};
 
 use super::FrameTracker;
 use super::centre_blend::CentreBlend;
@@ -22,9 +25,8 @@ pub(super) struct Windows {
     /// The windows' predicted centres by their column, to find those near a blob; `None` when a prediction is not
     /// finite (every window is then compared).
     pub(super) by_column: Option<Vec<(f64, usize)>>,
-    /// The flattened window being measured.
-    pub(super) pixels: Vec<u16>,
-    pub(super) outline: OutlineScratch,
+    /// What each point's window gave (`None` for a point without a window).
+    pub(super) outcomes: Vec<Option<WindowOutcome>>,
     /// The frame's window centres of both kinds, their weights, and the static fits' observations.
     pub(super) centres: Vec<WindowCentres>,
     pub(super) blend: CentreBlend,
@@ -32,19 +34,76 @@ pub(super) struct Windows {
 }
 
 impl Windows {
-    /// The window path of a target of `points` points, its windows at most `max_side` px wide.
-    pub(super) fn new(scheduler: RoiScheduler, points: usize, max_side: usize) -> Self {
+    /// The window path of a target of `points` points.
+    pub(super) fn new(scheduler: RoiScheduler, points: usize) -> Self {
         Self {
             scheduler,
             requests: Vec::with_capacity(points),
             by_column: Some(Vec::with_capacity(points)),
-            pixels: Vec::with_capacity(max_side * max_side),
-            outline: OutlineScratch::default(),
+            outcomes: Vec::with_capacity(points),
             centres: Vec::with_capacity(points),
             blend: CentreBlend::default(),
             fit_observations: Vec::with_capacity(points),
         }
     }
+}
+
+/// Windows measured one after the other on a thread before another takes the next ones: a window is a few
+/// microseconds of work, a hand-over between threads about one.
+const WINDOWS_PER_TASK_MIN: usize = 8;
+
+/// What one point's window gave, measured apart from the other windows.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum WindowOutcome {
+    /// A blob, nearest to this point's prediction: its centre by the moments and by its outline (raw px, before the
+    /// disk's perspective shift).
+    Found {
+        moments_px: Vector2<f64>,
+        outline_px: Vector2<f64>,
+    },
+    /// The blob nearest the prediction is nearer another point's.
+    Neighbour,
+    /// No blob, or one the centroid refused.
+    Rejected(BlobRejection),
+}
+
+thread_local! {
+    /// The flattened window and the outline's rays of the window a thread is measuring (kept between frames: no
+    /// allocation once every thread has measured its largest window).
+    static WINDOW_SCRATCH: RefCell<(Vec<u16>, OutlineScratch)> = RefCell::new(Default::default());
+}
+
+/// Measures point `i`'s blob in its window `request` of `frame`: the blob nearest its prediction, by the moments of
+/// the flattened window and by its outline. Reads nothing but its arguments, so that the windows of a frame can be
+/// measured on several threads.
+fn measure_window(
+    frame: &Frame,
+    request: &RoiRequest,
+    polarity: Polarity,
+    centroid: &CentroidOptions,
+    requests: &[Option<RoiRequest>],
+    by_column: Option<&[(f64, usize)]>,
+    i: usize,
+) -> WindowOutcome {
+    WINDOW_SCRATCH.with_borrow_mut(|(pixels, outline)| {
+        let roi = request.roi;
+        let flat = flatten_window(frame, &roi, polarity, pixels);
+        // The blob nearest the prediction, not the brightest: a window sized for an uncertain prediction holds
+        // whole neighbours of a dense target, of the same contrast, and the rims of others at its edge (on a
+        // 24 x 28 hexagonal grid, the brightest blob was a neighbour's in up to 60 of 230 windows a frame, and
+        // the frames went to whole-frame searches; 45 of 60 frames in windows, 58 now).
+        let near_px = Some([request.predicted_px.x, request.predicted_px.y]);
+        match measure_flat_window(pixels, &roi, &flat, centroid, near_px) {
+            Ok(c) if !is_nearest_request(requests, by_column, i, c.u_px, c.v_px) => {
+                WindowOutcome::Neighbour
+            }
+            Ok(c) => WindowOutcome::Found {
+                moments_px: Vector2::new(c.u_px, c.v_px),
+                outline_px: window_outline_centre(pixels, &roi, &c, outline),
+            },
+            Err(r) => WindowOutcome::Rejected(r),
+        }
+    })
 }
 
 /// The centres of one blob measured in its window (raw px, corrected for perspective), by the window's moments and
@@ -118,60 +177,48 @@ impl FrameTracker {
             return 0;
         }
         sort_by_column(&self.windows.requests, &mut self.windows.by_column);
+        // Each window is measured apart from the others, on as many threads as rayon has: a dense grid's hundreds of
+        // windows are most of a frame's work, and the frames of a video wait for them. What the windows tell the
+        // scheduler and the report is then taken in the points' order, as one thread would.
+        let (requests, by_column) = (&self.windows.requests, self.windows.by_column.as_deref());
+        let centroid = &self.config.centroid;
+        requests
+            .par_iter()
+            .enumerate()
+            .with_min_len(WINDOWS_PER_TASK_MIN)
+            .map(|(i, request)| {
+                request
+                    .map(|r| measure_window(frame, &r, polarity, centroid, requests, by_column, i))
+            })
+            .collect_into_vec(&mut self.windows.outcomes);
         let mut cut = 0;
-        for i in 0..self.windows.requests.len() {
-            let Some(request) = self.windows.requests[i] else {
+        for i in 0..self.windows.outcomes.len() {
+            let Some(outcome) = self.windows.outcomes[i] else {
                 continue;
             };
-            let roi = request.roi;
-            let flat = flatten_window(frame, &roi, polarity, &mut self.windows.pixels);
-            // The blob nearest the prediction, not the brightest: a window sized for an uncertain prediction holds
-            // whole neighbours of a dense target, of the same contrast, and the rims of others at its edge (on a
-            // 24 x 28 hexagonal grid, the brightest blob was a neighbour's in up to 60 of 230 windows a frame, and
-            // the frames went to whole-frame searches; 45 of 60 frames in windows, 58 now).
-            let near_px = Some([request.predicted_px.x, request.predicted_px.y]);
-            let measured = measure_flat_window(
-                &self.windows.pixels,
-                &roi,
-                &flat,
-                &self.config.centroid,
-                near_px,
-            );
-            match measured {
+            match outcome {
                 // The blob nearest the prediction is some other point's (the point's own was occluded, or the
                 // prediction missed it by half the distance to a neighbour): never measured twice, never swapped.
-                Ok(c)
-                    if !is_nearest_request(
-                        &self.windows.requests,
-                        self.windows.by_column.as_deref(),
-                        i,
-                        c.u_px,
-                        c.v_px,
-                    ) =>
-                {
+                WindowOutcome::Neighbour => {
                     self.windows.scheduler.report(i, false);
                     self.report.neighbour_blobs += 1;
                     cut += 1;
                 }
-                Ok(c) => {
+                WindowOutcome::Found {
+                    moments_px,
+                    outline_px,
+                } => {
                     self.windows.scheduler.report(i, true);
-                    let t_s = time.blob_time_s(frame.t_s, c.v_px);
-                    let moments = Vector2::new(c.u_px, c.v_px);
-                    let outline = window_outline_centre(
-                        &self.windows.pixels,
-                        &roi,
-                        &c,
-                        &mut self.windows.outline,
-                    );
+                    let t_s = time.blob_time_s(frame.t_s, moments_px.y);
                     let shift = self.disk_centre_shift_px(predictor, i, t_s);
                     self.windows.centres.push(WindowCentres {
                         point_index: i,
                         t_s,
-                        moments_px: moments - shift,
-                        outline_px: outline - shift,
+                        moments_px: moments_px - shift,
+                        outline_px: outline_px - shift,
                     });
                 }
-                Err(r) => {
+                WindowOutcome::Rejected(r) => {
                     self.windows.scheduler.report(i, false);
                     self.report.window_rejections.count(&r);
                     if r == BlobRejection::TouchesBorder {
