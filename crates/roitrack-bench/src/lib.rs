@@ -42,6 +42,7 @@
 pub mod frame_bench;
 pub mod loop_bench;
 pub mod pnp;
+pub mod rig_bench;
 pub mod soak;
 pub mod track_bench;
 

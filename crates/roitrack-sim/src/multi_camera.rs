@@ -25,7 +25,7 @@ use nalgebra::{Rotation3, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera};
+use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera, RigMeasurement};
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::{Measurement, PoseSample, TwistSample};
 
@@ -95,13 +95,43 @@ impl CameraRigScene {
         let rig = Rig::new(list).expect("drawn cameras have unique names and finite poses");
         Self { scenario, rig }
     }
+
+    /// The rig as a user tells the tracker of it who knows every camera's calibration and mount but no clock beyond
+    /// the first camera's (the rig's own): every other camera's offset and drift left to be learnt.
+    ///
+    /// ```
+    /// use roitrack_sim::multi_camera::CameraRigScene;
+    /// use roitrack_sim::{Scenario, ScenarioKind};
+    ///
+    /// let scene = CameraRigScene::random(Scenario::new(ScenarioKind::Random, 1), 3, 1);
+    /// let told = scene.rig_with_clocks_unknown();
+    /// assert!(told.cameras()[0].offset_known && told.cameras()[0].drift_known);
+    /// assert!(told.cameras()[1..].iter().all(|c| !c.offset_known && !c.drift_known && c.clock.offset_s == 0.0));
+    /// ```
+    pub fn rig_with_clocks_unknown(&self) -> Rig {
+        let cameras = self.rig.cameras().iter().enumerate().map(|(c, camera)| {
+            let known = c == 0;
+            RigCamera {
+                clock: if known {
+                    camera.clock
+                } else {
+                    ClockModel::default()
+                },
+                offset_known: known,
+                drift_known: known,
+                ..camera.clone()
+            }
+        });
+        Rig::new(cameras.collect())
+            .expect("the scene's own cameras, their clocks reset, stay valid")
+    }
 }
 
 /// The rig with every clock offset and drift it leaves unknown drawn from `seed` (offsets within ±50 ms, drifts
 /// within ±100 ppm) and every clock then known: the truth of a simulation of a rig file.
 ///
 /// ```
-/// use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera};
+/// use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera, RigMeasurement};
 /// use roitrack_core::CameraModel;
 /// use roitrack_sim::multi_camera::draw_clocks;
 ///
@@ -147,6 +177,38 @@ pub struct RigRun {
     pub truth_poses: Vec<PoseSample>,
     /// The true twists at the same times as [`Self::truth_poses`], rig frame.
     pub truth_twists: Vec<TwistSample>,
+}
+
+impl RigRun {
+    /// Every camera's centroids in one stream, in the order of their times on their own clocks: what a user who does
+    /// not know the offsets can merge them by (the rig tracker's reorder buffer takes what comes out of order on the
+    /// rig's clock).
+    ///
+    /// ```
+    /// use roitrack_sim::multi_camera::{CameraRigScene, simulate_rig};
+    /// use roitrack_sim::{Scenario, ScenarioKind};
+    ///
+    /// let scene = CameraRigScene::random(Scenario::new(ScenarioKind::Random, 1).with_duration_s(0.2), 2, 1);
+    /// let run = simulate_rig(&scene, 4000.0, 0.1, 1).unwrap();
+    /// let merged = run.merged_by_own_clocks();
+    /// assert_eq!(merged.len(), run.measurements.iter().map(Vec::len).sum::<usize>());
+    /// assert!(merged.windows(2).all(|w| w[0].measurement.t_s <= w[1].measurement.t_s));
+    /// ```
+    pub fn merged_by_own_clocks(&self) -> Vec<RigMeasurement> {
+        let mut all: Vec<RigMeasurement> = self
+            .measurements
+            .iter()
+            .enumerate()
+            .flat_map(|(camera, list)| {
+                list.iter().map(move |m| RigMeasurement {
+                    camera,
+                    measurement: *m,
+                })
+            })
+            .collect();
+        all.sort_by(|a, b| a.measurement.t_s.total_cmp(&b.measurement.t_s));
+        all
+    }
 }
 
 /// The most ROIs a simulated rig may take, all cameras together.

@@ -4,55 +4,16 @@
 use nalgebra::Vector3;
 use roitrack_core::estimator::{Estimator, TrackStatus, Tracker, TrackerConfig};
 use roitrack_core::rig::{
-    ClockEstimate, Rig, RigCamera, RigEstimate, RigMeasurement, RigTracker, RigTrackerConfig,
+    ClockEstimate, Rig, RigCamera, RigEstimate, RigTracker, RigTrackerConfig,
 };
 use roitrack_core::{Measurement, MotionState};
 use roitrack_sim::multi_camera::{CameraRigScene, RigRun, simulate_rig};
 use roitrack_sim::{Scenario, ScenarioKind};
 
-/// The rig as the tracker is told it: every mount known, every clock but the first unknown.
-fn unknown_clocks(truth: &Rig) -> Rig {
-    Rig::new(
-        truth
-            .cameras()
-            .iter()
-            .enumerate()
-            .map(|(c, camera)| RigCamera {
-                clock: if c == 0 {
-                    camera.clock
-                } else {
-                    Default::default()
-                },
-                offset_known: c == 0,
-                drift_known: c == 0,
-                ..camera.clone()
-            })
-            .collect(),
-    )
-    .unwrap()
-}
-
-/// Every camera's measurements merged by their own clocks' times (what a user without the offsets can do).
-fn merged(run: &RigRun) -> Vec<RigMeasurement> {
-    let mut all: Vec<RigMeasurement> = run
-        .measurements
-        .iter()
-        .enumerate()
-        .flat_map(|(camera, list)| {
-            list.iter().map(move |m| RigMeasurement {
-                camera,
-                measurement: *m,
-            })
-        })
-        .collect();
-    all.sort_by(|a, b| a.measurement.t_s.total_cmp(&b.measurement.t_s));
-    all
-}
-
 /// Every measurement of `run` pushed to `tracker`, merged by the cameras' own clocks, and the estimates to the end.
 fn push_all(tracker: &mut RigTracker, run: &RigRun) -> Vec<RigEstimate> {
     let mut estimates = Vec::new();
-    for m in merged(run) {
+    for m in run.merged_by_own_clocks() {
         estimates.extend(tracker.push(&m).unwrap());
     }
     estimates.extend(tracker.finish());
@@ -141,7 +102,7 @@ fn run_case(seed: u64, cameras: usize, known: bool, duration_s: f64) -> Case {
     let told = if known {
         scene.rig.clone()
     } else {
-        unknown_clocks(&scene.rig)
+        scene.rig_with_clocks_unknown()
     };
     let (fused, clocks) = track_rig(told, &run);
     let fused: Vec<(f64, MotionState)> = fused
@@ -311,7 +272,7 @@ fn a_target_hidden_from_all_but_one_camera_is_tracked_on() {
             }
         }
         let mut tracker = RigTracker::new(
-            unknown_clocks(&scene.rig),
+            scene.rig_with_clocks_unknown(),
             roitrack_core::Target::grid4x4(),
             RigTrackerConfig::default(),
         )
@@ -411,12 +372,13 @@ fn a_clock_beyond_the_search_is_refused_naming_the_camera() {
         scene.rig = Rig::new(cameras).unwrap();
         let run = simulate_rig(&scene, 4000.0, 0.1, seed).unwrap();
         let mut tracker = RigTracker::new(
-            unknown_clocks(&scene.rig),
+            scene.rig_with_clocks_unknown(),
             roitrack_core::Target::grid4x4(),
             RigTrackerConfig::default(),
         )
         .unwrap();
-        let error = merged(&run)
+        let error = run
+            .merged_by_own_clocks()
             .iter()
             .find_map(|m| tracker.push(m).err())
             .map(|e| e.to_string());
@@ -497,7 +459,7 @@ fn frames_with_clocks_to_learn() -> Vec<(u64, usize, f64, f64)> {
                 });
             }
             let mut tracker = RigTracker::new(
-                unknown_clocks(&scene.rig),
+                scene.rig_with_clocks_unknown(),
                 roitrack_core::Target::grid4x4(),
                 frame_rig_config(),
             )

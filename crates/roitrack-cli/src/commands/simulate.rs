@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, ValueEnum};
 use roitrack::core::RoiOrder;
-use roitrack::core::rig::{Rig, RigCamera};
+use roitrack::core::rig::Rig;
 use roitrack::core::time::Readout;
 use roitrack::formats::AtomicFile;
 use roitrack::image::{Frame, Polarity, ReflectionFault, SensorModel};
@@ -782,20 +782,7 @@ fn frames_readme(args: &SimulateArgs, sequence: &FrameSequence, track: &str) -> 
 fn rig_scene(args: &SimulateArgs, scenario: Scenario) -> Result<(CameraRigScene, Rig)> {
     if let Some(n) = args.rig_cameras {
         let scene = CameraRigScene::random(scenario, n, args.seed);
-        let told = Rig::new(
-            scene
-                .rig
-                .cameras()
-                .iter()
-                .enumerate()
-                .map(|(c, camera)| RigCamera {
-                    clock: Default::default(),
-                    offset_known: c == 0,
-                    drift_known: c == 0,
-                    ..camera.clone()
-                })
-                .collect(),
-        )?;
+        let told = scene.rig_with_clocks_unknown();
         return Ok((scene, told));
     }
     let path = args.camera_rig.as_deref().expect("--rig or --rig-cameras");

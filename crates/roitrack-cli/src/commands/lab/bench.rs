@@ -45,6 +45,9 @@
 //! - `track_library_meas_per_s`: measurements/s of the library's `track` over the orthoglide scenario's 19,655
 //!   simulated measurements in memory (default Kalman filter, an estimate every 10, every estimate collected; best of
 //!   `--repeats`): the call the Python package's `roitrack.track` makes ([`roitrack::bench::track_bench`]);
+//! - `rig4_meas_per_s`, `rig4_running_meas_per_s`: measurements/s fused on one thread from a rig of 4 ROI cameras at
+//!   4 kHz each (the random scenario, seed 2, 4 s, 62,330 measurements in memory; every clock but the first to be
+//!   learnt), over the whole run and after its first second (best of `--repeats`; [`roitrack::bench::rig_bench`]);
 //! - `fake_camera_rois`, `fake_camera_rois_per_s`, `fake_camera_latency_us_p50`, `fake_camera_latency_us_p99`,
 //!   `fake_camera_grab_us_p50`, `fake_camera_grab_us_p99`, `fake_camera_moved_fraction`: with `--fake-camera S`
 //!   (binary built with the feature `genicam`), the loop through Aravis' fake GigE camera on 127.0.0.1 for S s of the
@@ -58,6 +61,7 @@ use std::time::Duration;
 use anyhow::Result;
 use clap::Args;
 use roitrack::bench::loop_bench::{LoopBench, LoopFigures, PACED_HZ};
+use roitrack::bench::rig_bench::RigBench;
 use roitrack::bench::track_bench::TrackLibraryBench;
 use roitrack::bench::{HotPaths, Item, Timing, time_all, time_item};
 
@@ -143,6 +147,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     // Latency without queueing: the camera paced at 20 kHz (5x the paper), below the loop's capacity.
     let paced = bench.measure(10, Some(PACED_HZ), args.repeats)?;
     let track_library = TrackLibraryBench::orthoglide()?.measure(args.repeats);
+    let rig = RigBench::four_cameras()?.measure(args.repeats);
     #[cfg(feature = "genicam")]
     let fake_camera = args
         .fake_camera
@@ -191,6 +196,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             "track_library_meas_per_s",
             json_number(track_library.meas_per_s, 0),
         );
+        field("rig4_meas_per_s", json_number(rig.meas_per_s, 0));
+        field(
+            "rig4_running_meas_per_s",
+            json_number(rig.running_meas_per_s, 0),
+        );
         let fake = |f: fn(&FakeCameraFigures) -> f64, decimals| {
             fake_camera
                 .as_ref()
@@ -228,6 +238,11 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         println!(
             "\nlibrary track(), orthoglide, {} measurements in memory, Kalman, every 10: {:.0} measurements/s",
             track_library.measurements, track_library.meas_per_s
+        );
+        println!(
+            "rig of 4 ROI cameras, random scenario, {} measurements in memory, clocks to learn: {:.0} measurements/s \
+             fused on one thread ({:.0}/s after the first second)",
+            rig.measurements, rig.meas_per_s, rig.running_meas_per_s
         );
         if let Some(c) = &fake_camera {
             println!(
