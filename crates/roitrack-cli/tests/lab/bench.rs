@@ -19,6 +19,8 @@ fn bench_prints_the_loop_figures_as_json() {
         "kalman_update_us_p99",
         "estimate_handle_read_ns_median",
         "estimate_handle_read_ns_p99",
+        "rig4_meas_per_s",
+        "rig4_running_meas_per_s",
     ] {
         assert!(f(&m, key) > 0.0, "{key} in {m}");
     }
