@@ -5,7 +5,7 @@
 use roitrack_core::estimator::TrackerConfig;
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::stats::{quantile, sorted};
-use roitrack_image::{ReplayCamera, RoiRenderer, SensorModel};
+use roitrack_image::ReplayCamera;
 use roitrack_pipeline::{LoopConfig, LoopReport, PipelineError, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};
 
@@ -52,11 +52,7 @@ impl LoopBench {
     /// exposed at slot k + 1 (slot 0 is the full frame).
     pub fn new(rois: usize) -> Result<Self, roitrack_image::SensorError> {
         let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
-        let renderer = RoiRenderer::new(
-            scenario.camera.clone(),
-            scenario.target.clone(),
-            SensorModel::default(),
-        )?;
+        let renderer = scenario.roi_renderer()?;
         let truth = |t: f64| scenario.state_at(t);
         // Replayed at the rate of each run (4 kHz free-running, 20 kHz paced): the ROIs are stamped with the slots'
         // times, as a live camera triggered at that rate would stamp them.

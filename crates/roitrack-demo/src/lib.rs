@@ -19,8 +19,8 @@ use roitrack_core::estimator::{
 };
 use roitrack_image::camera::ObservedCamera;
 use roitrack_image::{
-    CentroidAccuracy, CentroidOptions, RoiImage, RoiRenderer, SensorModel, SimulatedCamera,
-    centroid_accuracy, measure_roi,
+    CentroidAccuracy, CentroidOptions, RoiImage, RoiRenderer, SimulatedCamera, centroid_accuracy,
+    measure_roi,
 };
 use roitrack_pipeline::{LoopConfig, LoopReport, ScheduleOrder, run_loop_with_sink};
 use roitrack_plot::{TrackSeries, TruthSeries};
@@ -352,11 +352,7 @@ pub fn image_side(
     rois: usize,
     seed: u64,
 ) -> Result<(RoiRenderer, CentroidAccuracy), DemoError> {
-    let renderer = RoiRenderer::new(
-        scenario.camera.clone(),
-        scenario.target.clone(),
-        SensorModel::default(),
-    )?;
+    let renderer = scenario.roi_renderer()?;
     let accuracy = centroid_accuracy(
         &renderer,
         &CentroidOptions::default(),

@@ -242,15 +242,11 @@ fn backoff(spins: &mut u32) {
 ///
 /// ```
 /// use roitrack_core::estimator::TrackerConfig;
-/// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
 /// use roitrack_pipeline::{LoopConfig, run_loop};
 /// use roitrack_sim::{Scenario, ScenarioKind};
 ///
 /// let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
-/// let renderer =
-///     RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
-/// let truth = { let s = scenario.clone(); move |t: f64| s.state_at(t) };
-/// let mut camera = SimulatedCamera::new(renderer, truth, 1);
+/// let mut camera = scenario.simulated_camera(1).unwrap();
 /// let config = LoopConfig { roi_slots: 800, ..LoopConfig::default() };
 /// let report =
 ///     run_loop(&mut camera, &scenario.camera, &scenario.target, TrackerConfig::default(), &config).unwrap();
@@ -272,14 +268,11 @@ pub fn run_loop<C: RoiCamera>(
 /// ```
 /// use std::sync::atomic::{AtomicUsize, Ordering};
 /// use roitrack_core::estimator::TrackerConfig;
-/// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
 /// use roitrack_pipeline::{LoopConfig, run_loop_with_progress};
 /// use roitrack_sim::{Scenario, ScenarioKind};
 ///
 /// let scenario = Scenario::new(ScenarioKind::Static, 1);
-/// let renderer =
-///     RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
-/// let mut camera = SimulatedCamera::new(renderer, move |t: f64| scenario.state_at(t), 1);
+/// let mut camera = scenario.simulated_camera(1).unwrap();
 /// let config = LoopConfig { roi_slots: 600, ..LoopConfig::default() };
 /// let done = AtomicUsize::new(0);
 /// let model = roitrack_core::CameraModel::canonical();
@@ -311,14 +304,11 @@ pub fn run_loop_with_progress<C: RoiCamera>(
 ///
 /// ```
 /// use roitrack_core::estimator::TrackerConfig;
-/// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
 /// use roitrack_pipeline::{LoopConfig, run_loop_with_sink};
 /// use roitrack_sim::{Scenario, ScenarioKind};
 ///
 /// let scenario = Scenario::new(ScenarioKind::Static, 1);
-/// let renderer =
-///     RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
-/// let mut camera = SimulatedCamera::new(renderer, { let s = scenario.clone(); move |t: f64| s.state_at(t) }, 1);
+/// let mut camera = scenario.simulated_camera(1).unwrap();
 /// let config = LoopConfig { roi_slots: 600, ..LoopConfig::default() };
 /// let mut seen = 0;
 /// let report = run_loop_with_sink(&mut camera, &scenario.camera, &scenario.target, TrackerConfig::default(),
@@ -525,15 +515,12 @@ pub struct LoopHooks<'a> {
 /// use nalgebra::Vector3;
 /// use roitrack_core::Acceleration;
 /// use roitrack_core::estimator::TrackerConfig;
-/// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
 /// use roitrack_pipeline::realtime::{LoopHooks, known_acceleration_channel, run_loop_with_hooks};
 /// use roitrack_pipeline::LoopConfig;
 /// use roitrack_sim::{Scenario, ScenarioKind};
 ///
 /// let scenario = Scenario::new(ScenarioKind::Static, 1);
-/// let renderer =
-///     RoiRenderer::new(scenario.camera.clone(), scenario.target.clone(), SensorModel::default()).unwrap();
-/// let mut camera = SimulatedCamera::new(renderer, { let s = scenario.clone(); move |t: f64| s.state_at(t) }, 1);
+/// let mut camera = scenario.simulated_camera(1).unwrap();
 /// let (mut sender, mut receiver) = known_acceleration_channel(16);
 /// // The target is at rest: its known acceleration is zero (here given once, ahead of the run).
 /// sender.send(0.0, Acceleration { linear_mps2: Vector3::zeros(), angular_radps2: Vector3::zeros() });
@@ -1008,7 +995,6 @@ struct Counters {
 mod tests {
     use super::*;
     use nalgebra::Vector3;
-    use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
     use roitrack_sim::{Scenario, ScenarioKind};
 
     /// Spacing of the known accelerations given (s): a controller's tick.
@@ -1053,17 +1039,7 @@ mod tests {
     /// show them) or not.
     fn run(told: bool) -> (Accelerating, LoopReport) {
         let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
-        let renderer = RoiRenderer::new(
-            scenario.camera.clone(),
-            scenario.target.clone(),
-            SensorModel::default(),
-        )
-        .unwrap();
-        let truth = {
-            let s = scenario.clone();
-            move |t: f64| s.state_at(t)
-        };
-        let mut camera = SimulatedCamera::new(renderer, truth, 1);
+        let mut camera = scenario.simulated_camera(1).unwrap();
         let config = LoopConfig {
             roi_slots: 4000,
             t_start_s: 0.3,

@@ -12,12 +12,7 @@ fn initialises_from_a_rendered_full_frame() {
         (ScenarioKind::Spin, 0.5),
     ] {
         let scenario = Scenario::new(kind, 1);
-        let renderer = RoiRenderer::new(
-            scenario.camera.clone(),
-            scenario.target.clone(),
-            SensorModel::default(),
-        )
-        .unwrap();
+        let renderer = scenario.roi_renderer().unwrap();
         let mut rng = <rand_chacha::ChaCha8Rng as rand::SeedableRng>::seed_from_u64(3);
         let start = std::time::Instant::now();
         let mut frame = roitrack_image::Frame::default();

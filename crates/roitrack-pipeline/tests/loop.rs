@@ -2,40 +2,18 @@
 
 use roitrack_core::estimator::{TrackStatus, TrackerConfig};
 use roitrack_image::SimulatedCamera;
-use roitrack_image::{RoiRenderer, SensorModel};
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};
 
-/// The orthoglide scenario (seed 1) and a renderer of its camera and target with the default sensor.
-fn orthoglide_with_renderer() -> (Scenario, RoiRenderer) {
-    let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
-    let renderer = RoiRenderer::new(
-        scenario.camera.clone(),
-        scenario.target.clone(),
-        SensorModel::default(),
-    )
-    .unwrap();
-    (scenario, renderer)
-}
-
-/// The orthoglide scenario and a simulated camera rendering its true motion (noise seeded by `seed`).
-fn orthoglide_camera(
-    seed: u64,
-) -> (
-    Scenario,
-    SimulatedCamera<impl Fn(f64) -> roitrack_core::MotionState + Send>,
-) {
-    let (scenario, renderer) = orthoglide_with_renderer();
-    let truth = {
-        let s = scenario.clone();
-        move |t: f64| s.state_at(t)
-    };
-    (scenario, SimulatedCamera::new(renderer, truth, seed))
+/// The orthoglide scenario (seed 1).
+fn orthoglide() -> Scenario {
+    Scenario::new(ScenarioKind::Orthoglide, 1)
 }
 
 #[test]
 fn tracks_orthoglide_from_rendered_rois() {
-    let (scenario, mut camera) = orthoglide_camera(7);
+    let scenario = orthoglide();
+    let mut camera = scenario.simulated_camera(7).unwrap();
     // 0.3 s from the start of the first line (0.25 s): the target is at rest, then accelerates.
     let config = LoopConfig {
         roi_slots: 2400,
@@ -73,7 +51,8 @@ fn reflections_add_a_spot_that_moves_the_centroid_and_nothing_else() {
     use roitrack_image::{
         CentroidOptions, ReflectionFault, Roi, RoiCamera, RoiImage, RoiTrigger, measure_blob,
     };
-    let (scenario, renderer) = orthoglide_with_renderer();
+    let scenario = orthoglide();
+    let renderer = scenario.roi_renderer().unwrap();
     let state = scenario.state_at(0.1);
     let p = scenario.target.points()[5].point_in_obj_m;
     let px = scenario
@@ -163,7 +142,8 @@ impl<C: roitrack_image::RoiCamera> roitrack_image::RoiCamera for Flaky<C> {
 
 #[test]
 fn a_failing_camera_is_survived_and_its_end_keeps_the_estimates() {
-    let (scenario, inner) = orthoglide_camera(5);
+    let scenario = orthoglide();
+    let inner = scenario.simulated_camera(5).unwrap();
     let mut camera = Flaky {
         inner,
         grabs: 0,
@@ -202,7 +182,8 @@ fn a_failing_camera_is_survived_and_its_end_keeps_the_estimates() {
 
 #[test]
 fn invalid_loop_options_and_wrong_frames_are_refused() {
-    let (scenario, mut camera) = orthoglide_camera(5);
+    let scenario = orthoglide();
+    let mut camera = scenario.simulated_camera(5).unwrap();
     let bad = LoopConfig {
         rate_hz: 0.0,
         ..Default::default()
@@ -270,18 +251,8 @@ impl<C: roitrack_image::RoiCamera> roitrack_image::RoiCamera for Slow<C> {
 fn a_paced_loop_that_skips_late_slots_reads_fewer_rois_all_of_the_present() {
     // A target at rest: wherever the skipping lands, the blobs are where the last estimate put them.
     let scenario = Scenario::new(ScenarioKind::Static, 3);
-    let renderer = RoiRenderer::new(
-        scenario.camera.clone(),
-        scenario.target.clone(),
-        SensorModel::default(),
-    )
-    .unwrap();
-    let truth = {
-        let s = scenario.clone();
-        move |t: f64| s.state_at(t)
-    };
     let mut camera = Slow {
-        inner: SimulatedCamera::new(renderer, truth, 3),
+        inner: scenario.simulated_camera(3).unwrap(),
     };
     // 3 s at 4 kHz (the full frame that starts it can take a second on a loaded machine): a camera at 1 ms a ROI
     // cannot hold it.

@@ -5,7 +5,6 @@
 use roitrack_core::estimator::{EstimatorConfig, TrackerConfig, VvsSettings};
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_image::ReplayCamera;
-use roitrack_image::{RoiRenderer, SensorModel};
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};
 use roitrack_testkit::alloc::{CountingAllocator, allocations_in_all_threads as allocations};
@@ -16,12 +15,7 @@ static GLOBAL: CountingAllocator = CountingAllocator;
 #[test]
 fn steady_state_loop_does_not_allocate() {
     let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
-    let renderer = RoiRenderer::new(
-        scenario.camera.clone(),
-        scenario.target.clone(),
-        SensorModel::default(),
-    )
-    .unwrap();
+    let renderer = scenario.roi_renderer().unwrap();
     let truth = |t: f64| scenario.state_at(t);
     let order = bit_reversed_indices(16);
     let n = 3000;

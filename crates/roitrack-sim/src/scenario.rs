@@ -9,6 +9,7 @@ use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target, so3};
+use roitrack_image::{RoiRenderer, SensorError, SensorModel, SimulatedCamera};
 
 /// The scenarios the simulator offers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -423,6 +424,40 @@ impl Scenario {
             "Scenario::with_duration_s: the duration must be finite and positive, got {duration_s}"
         );
         Self { duration_s, ..self }
+    }
+
+    /// A renderer of the scenario's camera and target with the default sensor ([`SensorModel::default`]): what its
+    /// simulated ROI camera ([`Self::simulated_camera`]) draws. Refuses a camera whose time model is invalid.
+    pub fn roi_renderer(&self) -> Result<RoiRenderer, SensorError> {
+        RoiRenderer::new(
+            self.camera.clone(),
+            self.target.clone(),
+            SensorModel::default(),
+        )
+    }
+
+    /// The scenario's simulated ROI camera: the target rendered by [`Self::roi_renderer`] at the scenario's true
+    /// motion, at the time of each ROI's exposure, its noise drawn from `seed`.
+    ///
+    /// ```
+    /// use roitrack_image::{Frame, RoiCamera};
+    /// use roitrack_sim::{Scenario, ScenarioKind};
+    ///
+    /// let mut camera = Scenario::new(ScenarioKind::Orthoglide, 1).simulated_camera(7).unwrap();
+    /// let mut frame = Frame::default();
+    /// camera.grab_full_frame(0.3, &mut frame).unwrap();
+    /// assert_eq!((frame.width, frame.height), (1024, 1024));
+    /// ```
+    pub fn simulated_camera(
+        &self,
+        seed: u64,
+    ) -> Result<SimulatedCamera<impl Fn(f64) -> MotionState + Send + 'static>, SensorError> {
+        let scenario = self.clone();
+        Ok(SimulatedCamera::new(
+            self.roi_renderer()?,
+            move |t_s| scenario.state_at(t_s),
+            seed,
+        ))
     }
 
     /// True pose and instantaneous twist at time `t_s`.
