@@ -449,6 +449,9 @@ pub struct LiveServoReport {
     pub missed_ticks: usize,
     /// The same before the path started (the robot held at home by its brakes).
     pub missed_before_start: usize,
+    /// The most control ticks of the path missed in a row (the longest the drive held one command beyond its tick):
+    /// a loop whose delay margin is a few milliseconds is open for that long.
+    pub longest_missed_run: usize,
     /// Wall time from the start to the first estimate read by the controller (s): the live loop's full-frame start.
     pub start_delay_s: f64,
     /// Estimates published to the control thread (vouched for and finite).
@@ -497,6 +500,7 @@ struct ControlSide {
     ticks: usize,
     missed: usize,
     missed_before_start: usize,
+    longest_missed_run: usize,
     saturated_ticks: usize,
     stop_reason: Option<String>,
     path_start_robot_s: Option<f64>,
@@ -724,6 +728,7 @@ fn report(
         ticks: control.ticks,
         missed_ticks: control.missed,
         missed_before_start: control.missed_before_start,
+        longest_missed_run: control.longest_missed_run,
         start_delay_s: control.start_delay_s,
         published: published as usize,
         realtime_priority: control.realtime_priority,
@@ -800,6 +805,7 @@ fn control_thread(
         ticks: 0,
         missed: 0,
         missed_before_start: 0,
+        longest_missed_run: 0,
         saturated_ticks: 0,
         stop_reason: None,
         path_start_robot_s: None,
@@ -855,6 +861,7 @@ fn control_thread(
         if behind > 0 {
             if path_start.is_some() {
                 side.missed += behind;
+                side.longest_missed_run = side.longest_missed_run.max(behind);
             } else {
                 side.missed_before_start += behind;
             }

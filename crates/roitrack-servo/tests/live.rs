@@ -13,6 +13,11 @@ const RMS_BOUND_FACTOR: f64 = 2.0;
 /// skipped 8-27 %, under a load of 9-12 on two cores; one that skipped 60 % diverged).
 const MAX_SKIPPED_FRACTION: f64 = 0.4;
 
+/// The delay at which a critically damped loop of natural frequency ω goes unstable is `0.6475 / ω` (docs/servo.md,
+/// "Gains and how to tune them"): a control thread held up that long in one stretch ran the loop open for longer
+/// than any gain rule allows for, whatever it did next.
+const DELAY_LIMIT_RAD: f64 = 0.6475;
+
 #[test]
 fn the_real_time_loop_tracks_like_the_simulated_time_one() {
     // Both runs tell the tracker the commanded acceleration (the default; in real time through the live loop's
@@ -32,13 +37,15 @@ fn the_real_time_loop_tracks_like_the_simulated_time_one() {
     let (p50, p99) = live.actuation_latency_quantiles_us();
     eprintln!(
         "simulated time {:.4} mm RMS; real time {:.4} mm RMS ({:.4} max), stable {}; exposure to actuation p50/p99 \
-         {p50:.0}/{p99:.0} us; {} ticks, {} missed; {} late ROI slots, {} skipped; start {:.2} s; real-time priority {}",
+         {p50:.0}/{p99:.0} us; {} ticks, {} missed (at most {} in a row); {} late ROI slots, {} skipped; start {:.2} s; \
+         real-time priority {}",
         simulated.rms_error_mm,
         live.servo.rms_error_mm,
         live.servo.max_error_mm,
         live.servo.stable,
         live.ticks,
         live.missed_ticks,
+        live.longest_missed_run,
         live.loop_report.late,
         live.loop_report.skipped,
         live.start_delay_s,
@@ -52,6 +59,18 @@ fn the_real_time_loop_tracks_like_the_simulated_time_one() {
         eprintln!(
             "NOT CHECKED: the machine did not hold {rate_hz} Hz ({} of {offered} ROI slots skipped)",
             live.loop_report.skipped
+        );
+        return;
+    }
+    let held_s = live.longest_missed_run as f64 / rate_hz;
+    let limit_s = DELAY_LIMIT_RAD / live.servo.gains.natural_frequency_radps;
+    if held_s > limit_s {
+        eprintln!(
+            "NOT CHECKED: the control thread missed {} ticks in a row ({:.1} ms, beyond the loop's delay limit of \
+             {:.1} ms)",
+            live.longest_missed_run,
+            held_s * 1e3,
+            limit_s * 1e3
         );
         return;
     }

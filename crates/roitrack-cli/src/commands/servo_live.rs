@@ -227,6 +227,7 @@ fn print(
             "control_ticks": live.ticks,
             "missed_ticks": live.missed_ticks,
             "missed_ticks_before_start": live.missed_before_start,
+            "longest_missed_run_ticks": live.longest_missed_run,
             "late_roi_slots": loop_report.late,
             "skipped_roi_slots": loop_report.skipped,
             "rois": loop_report.rois,
