@@ -115,6 +115,11 @@ pub(crate) struct Labeller<S> {
     /// Per run that is its component's root, the component's index in `totals`.
     slot: Vec<u32>,
     totals: Vec<S>,
+    /// Per component (by its first run's order), its pixels and whether it touches the image's border: what decides
+    /// whether its sums are wanted at all ([`Self::components_above_previous_admitted`]).
+    extents: Vec<(u64, bool)>,
+    /// Per component, its index in `totals`, or `u32::MAX` if it is not summed.
+    summed: Vec<u32>,
     mask: Vec<u64>,
     /// Per row, a bit per 64-pixel word of the mask that had a pixel above the last threshold (64 words a `u64`).
     active: Vec<u64>,
@@ -213,6 +218,8 @@ impl<S> Default for Labeller<S> {
             parent: Vec::new(),
             slot: Vec::new(),
             totals: Vec::new(),
+            extents: Vec::new(),
+            summed: Vec::new(),
             mask: Vec::new(),
             active: Vec::new(),
         }
@@ -230,28 +237,42 @@ impl<S: RunSums> Labeller<S> {
         threshold: u16,
         keep: impl FnMut(&S),
     ) {
-        self.label(pixels, width, height, threshold, false, keep);
+        self.label(
+            pixels,
+            width,
+            height,
+            threshold,
+            false,
+            None::<fn(u64) -> bool>,
+            keep,
+        );
     }
 
-    /// [`Self::components`] at a threshold at least the one of the previous call on the same image: the pixels above
-    /// it are among those above the previous one, so only the 64-pixel words that held some are read again.
-    pub fn components_above_previous(
+    /// [`Self::components`] at a threshold at least the one of the previous call on the same image (the pixels above
+    /// it are among those above the previous one, so only the 64-pixel words that held some are read again), for the
+    /// components that do not touch the image's border and whose pixel count `admit` accepts: the others are neither
+    /// summed nor passed to `keep`. A user that refuses them anyway (the photo detector's shape filters) is spared
+    /// their sums, a good part of a run's labelling, for the specks of noise below its smallest area and the sheets of
+    /// paper or sky above its largest.
+    pub fn components_above_previous_admitted(
         &mut self,
         pixels: &[u16],
         width: usize,
         height: usize,
         threshold: u16,
+        admit: impl Fn(u64) -> bool,
         keep: impl FnMut(&S),
     ) {
-        self.label(pixels, width, height, threshold, true, keep);
+        self.label(pixels, width, height, threshold, true, Some(admit), keep);
     }
 
-    /// Makes the next [`Self::components_above_previous`] read every pixel (call it before the first level of an
+    /// Makes the next [`Self::components_above_previous_admitted`] read every pixel (call it before the first level of an
     /// image).
     pub fn forget_levels(&mut self) {
         self.active.clear();
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn label(
         &mut self,
         pixels: &[u16],
@@ -259,6 +280,7 @@ impl<S: RunSums> Labeller<S> {
         height: usize,
         threshold: u16,
         nested: bool,
+        admit: Option<impl Fn(u64) -> bool>,
         mut keep: impl FnMut(&S),
     ) {
         self.runs.clear();
@@ -319,6 +341,13 @@ impl<S: RunSums> Labeller<S> {
         self.totals.clear();
         self.slot.clear();
         self.slot.resize(self.runs.len(), 0);
+        if let Some(admit) = admit {
+            self.sum_admitted(pixels, width, height, admit);
+            for c in &self.totals {
+                keep(c);
+            }
+            return;
+        }
         for r in 0..self.runs.len() {
             let Run { start, end, row } = self.runs[r];
             let (start, end, j) = (start as usize, end as usize + 1, row as usize);
@@ -343,6 +372,70 @@ impl<S: RunSums> Labeller<S> {
         }
         for c in &self.totals {
             keep(c);
+        }
+    }
+
+    /// The sums of the components (of `self.runs`, joined by `self.parent`) that do not touch the border and whose
+    /// pixel count `admit` accepts, into `self.totals` in the order of their first pixel: a first pass counts each
+    /// component's pixels and notes whether it touches the border (a few instructions a run), the second sums the
+    /// runs of the admitted ones alone.
+    fn sum_admitted(
+        &mut self,
+        pixels: &[u16],
+        width: usize,
+        height: usize,
+        admit: impl Fn(u64) -> bool,
+    ) {
+        self.extents.clear();
+        for r in 0..self.runs.len() {
+            let Run { start, end, row } = self.runs[r];
+            let pixels_in_run = u64::from(end - start + 1);
+            let border =
+                row == 0 || row as usize + 1 == height || start == 0 || end as usize + 1 == width;
+            // The parent comes before the run, so its slot is already its root's.
+            let parent = self.parent[r] as usize;
+            if parent == r {
+                self.slot[r] = self.extents.len() as u32;
+                self.extents.push((pixels_in_run, border));
+            } else {
+                let slot = self.slot[parent];
+                self.slot[r] = slot;
+                let extent = &mut self.extents[slot as usize];
+                extent.0 += pixels_in_run;
+                extent.1 |= border;
+            }
+        }
+        self.summed.clear();
+        let mut admitted = 0u32;
+        self.summed.extend(self.extents.iter().map(|&(n, border)| {
+            if !border && admit(n) {
+                admitted += 1;
+                admitted - 1
+            } else {
+                u32::MAX
+            }
+        }));
+        for r in 0..self.runs.len() {
+            let into = self.summed[self.slot[r] as usize];
+            if into == u32::MAX {
+                continue;
+            }
+            let Run { start, end, row } = self.runs[r];
+            let (start, end, j) = (start as usize, end as usize + 1, row as usize);
+            let part = S::of_run(
+                &pixels[j * width..(j + 1) * width],
+                start,
+                end,
+                j,
+                width,
+                height,
+            );
+            // A component's first run comes before its others: it starts the component's sums.
+            if into as usize == self.totals.len() {
+                self.totals.push(part);
+            } else {
+                self.totals[into as usize].add(&part);
+            }
         }
     }
 }
@@ -419,6 +512,79 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The components of rising thresholds, admitted by size and away from the border, are those labelled afresh at
+    /// each threshold and filtered the same way, with the same sums, in the same order.
+    #[test]
+    fn admitted_components_are_the_filtered_components() {
+        let (w, h) = (150usize, 70usize);
+        let mut state = 7u64;
+        // Blotches of every size (a smoothed random field), and noise: specks, blobs, sheets touching the border.
+        let mut field = vec![0f64; w * h];
+        for _ in 0..60 {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            let (cx, cy, r) = (
+                (state >> 11) % w as u64,
+                (state >> 27) % h as u64,
+                1 + (state >> 43) % 9,
+            );
+            for j in 0..h {
+                for i in 0..w {
+                    let d2 = (i as f64 - cx as f64).powi(2) + (j as f64 - cy as f64).powi(2);
+                    field[j * w + i] += 600.0 * (-d2 / (r * r) as f64).exp();
+                }
+            }
+        }
+        let img: Vec<u16> = field
+            .iter()
+            .map(|&v| {
+                state = state
+                    .wrapping_mul(6_364_136_223_846_793_005)
+                    .wrapping_add(1_442_695_040_888_963_407);
+                (v + ((state >> 33) % 100) as f64).min(65_535.0) as u16
+            })
+            .collect();
+        let figures = |c: &Component| {
+            (
+                c.n,
+                c.sum_i,
+                c.sum_j,
+                c.sum_ii,
+                c.sum_jj,
+                c.sum_ij,
+                c.runs,
+                c.row_min,
+                c.row_max,
+                c.touches_border,
+            )
+        };
+        let admit = |n: u64| (7..=2_000).contains(&n);
+        let mut nested = Labeller::<Component>::default();
+        nested.forget_levels();
+        let (mut compared, mut refused) = (0, 0);
+        for threshold in [60u16, 100, 150, 250, 400, 550] {
+            let mut expected = Vec::new();
+            Labeller::<Component>::default().components(&img, w, h, threshold, |c| {
+                if !c.touches_border && admit(c.n) {
+                    expected.push(figures(c));
+                } else {
+                    refused += 1;
+                }
+            });
+            let mut found = Vec::new();
+            nested.components_above_previous_admitted(&img, w, h, threshold, admit, |c| {
+                found.push(figures(c))
+            });
+            assert_eq!(found, expected, "threshold {threshold}");
+            compared += found.len();
+        }
+        assert!(
+            compared > 20 && refused > 20,
+            "{compared} components compared, {refused} refused"
+        );
     }
 
     #[test]

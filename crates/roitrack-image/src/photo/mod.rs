@@ -379,13 +379,24 @@ impl<'a> PhotoBlobCandidates<'a> {
                 .iter()
                 .map(|&k| {
                     let mut found = Vec::new();
-                    worker
-                        .labeller
-                        .components_above_previous(image, w, h, thresholds[k], |c| {
+                    // The shape filters refuse a component on the border or of too few or too many pixels
+                    // whatever its shape: such components are not summed.
+                    let admit = |pixels: u64| {
+                        let n = pixels as f64;
+                        !(n < options.min_area_px || n > max_area)
+                    };
+                    worker.labeller.components_above_previous_admitted(
+                        image,
+                        w,
+                        h,
+                        thresholds[k],
+                        admit,
+                        |c| {
                             if passes_shape(c, options, max_area) {
                                 found.push(*c);
                             }
-                        });
+                        },
+                    );
                     found
                 })
                 .collect()
