@@ -133,23 +133,32 @@ fn row_mask(row: &[u16], threshold: u16, mask: &mut [u64]) {
 }
 
 /// [`row_mask`] for the words `w` whose bit `w % 64` of `active[w / 64]` is set (the others are cleared), and clears
-/// that bit where the word has no pixel above the threshold.
+/// that bit where the word has no pixel above the threshold. Only the active words are visited (their bits taken a
+/// set bit at a time): past the first levels, most of a row's words are not, and the loop's own bookkeeping cost as
+/// much as the comparisons.
 fn row_mask_within(row: &[u16], threshold: u16, mask: &mut [u64], active: &mut [u64]) {
-    for (w, (word, chunk)) in mask.iter_mut().zip(row.chunks(64)).enumerate() {
-        let bit = 1u64 << (w % 64);
-        if active[w / 64] & bit == 0 {
-            *word = 0;
-            continue;
-        }
-        *word = match <&[u16; 64]>::try_from(chunk) {
-            Ok(full) => mask_of_64(full, threshold),
-            Err(_) => chunk
-                .iter()
-                .enumerate()
-                .fold(0, |bits, (b, &p)| bits | (u64::from(p > threshold) << b)),
-        };
-        if *word == 0 {
-            active[w / 64] &= !bit;
+    mask.fill(0);
+    for (a, flags) in active.iter_mut().enumerate() {
+        let mut todo = *flags;
+        while todo != 0 {
+            let b = todo.trailing_zeros() as usize;
+            todo &= todo - 1;
+            let w = 64 * a + b;
+            let Some(word) = mask.get_mut(w) else {
+                // Bits past the row's last word (set when the flags are reset) stand for nothing.
+                break;
+            };
+            let chunk = &row[64 * w..row.len().min(64 * w + 64)];
+            *word = match <&[u16; 64]>::try_from(chunk) {
+                Ok(full) => mask_of_64(full, threshold),
+                Err(_) => chunk
+                    .iter()
+                    .enumerate()
+                    .fold(0, |bits, (b, &p)| bits | (u64::from(p > threshold) << b)),
+            };
+            if *word == 0 {
+                *flags &= !(1u64 << b);
+            }
         }
     }
 }
