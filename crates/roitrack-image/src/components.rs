@@ -313,26 +313,31 @@ impl<S: RunSums> Labeller<S> {
                 continue;
             }
             row_mask_within(row, threshold, &mut self.mask, active);
-            let (runs, parent) = (&mut self.runs, &mut self.parent);
+            let runs = &mut self.runs;
             for_each_run(&self.mask, width, |start, end| {
-                parent.push(runs.len() as u32);
                 runs.push(Run {
                     start: start as u32,
                     end: end as u32,
                     row: j as u32,
                 });
             });
+            // Each new run its own set.
+            self.parent.extend(row_start as u32..self.runs.len() as u32);
             // Join with the runs of the row above that overlap or touch diagonally. A set's root is its smallest run
-            // (the larger root is linked under the smaller), so every run's parent comes before it.
-            let mut p = previous_row.start;
-            for r in row_start..self.runs.len() {
-                let run = self.runs[r];
-                while p < previous_row.end && self.runs[p].end + 1 < run.start {
+            // (the larger root is linked under the smaller), so every run's parent comes before it. (The rows' runs
+            // as slices: the bounds are checked once, not at each step of the scans.)
+            let (before, current) = self.runs.split_at(row_start);
+            let above = &before[previous_row.clone()];
+            let mut p = 0;
+            for (r, run) in (row_start..).zip(current) {
+                while p < above.len() && above[p].end + 1 < run.start {
                     p += 1;
                 }
-                let mut q = p;
                 let mut root = r as u32;
-                while q < previous_row.end && self.runs[q].start <= run.end + 1 {
+                for (q, other_run) in (previous_row.start + p..).zip(&above[p..]) {
+                    if other_run.start > run.end + 1 {
+                        break;
+                    }
                     let other = find(&mut self.parent, q as u32);
                     if other < root {
                         self.parent[root as usize] = other;
@@ -340,7 +345,6 @@ impl<S: RunSums> Labeller<S> {
                     } else if root < other {
                         self.parent[other as usize] = root;
                     }
-                    q += 1;
                 }
             }
             previous_row = row_start..self.runs.len();
