@@ -261,6 +261,9 @@ pub(crate) struct NearestDistance {
     /// `p` is nearer the cell's nearest point than any other can be, that point is the nearest to `p`.
     second_px: Vec<f32>,
     cap_px: f64,
+    /// How far every point is sure to be from a position outside the grid (px): the grid reaches a margin beyond
+    /// the points' bounding box, less the rounding of a position's cells.
+    outside_px: f64,
     /// The bounding box of the points (px).
     lo: Vector2<f64>,
     hi: Vector2<f64>,
@@ -354,6 +357,7 @@ impl NearestDistance {
             nearest_point,
             second_px,
             cap_px: cap_stored,
+            outside_px: margin - ROUNDING_MARGIN_PX,
             lo,
             hi,
         }
@@ -401,21 +405,58 @@ impl NearestDistance {
         Some((radius, None))
     }
 
+    /// `p` (px) in the field's cell coordinates (cells from the grid's corner), as [`Self::any_within_cells`] takes
+    /// positions: a caller that tests many positions an affine map predicts can map them to cells directly.
+    #[inline]
+    pub fn cells_of(&self, p: &Vector2<f64>) -> Vector2<f64> {
+        (p - self.origin) * self.per_px
+    }
+
+    /// Cells per px: a displacement (px) times this is the displacement in cells.
+    #[inline]
+    pub fn cells_per_px(&self) -> f64 {
+        self.per_px
+    }
+
     /// Whether any point of `index` (the field's) lies within `radius` of `p`: as
     /// [`PointIndex::any_within`] says, which is asked only where the field cannot tell (after the point nearest
-    /// the cell's centre, which is most often the one within `radius` when there is one).
-    #[inline]
+    /// the cell's centre, which is most often the one within `radius` when there is one). (The search asks from
+    /// cells, [`Self::any_within_cells`]; the tests, from positions.)
+    #[cfg(test)]
     pub fn any_within(&self, index: &PointIndex, p: &Vector2<f64>, radius: f64) -> bool {
+        self.any_within_at(index, &self.cells_of(p), || *p, radius)
+    }
+
+    /// [`Self::any_within`] at the position whose cell coordinates are `c` ([`Self::cells_of`]): `origin + c × cell`
+    /// (px), to the rounding of that product (about 1e-13 px for grids of thousands of px), which the caller allows
+    /// for. A test from cells spares the conversion of each position to cells.
+    #[inline]
+    pub fn any_within_cells(&self, index: &PointIndex, c: &Vector2<f64>, radius: f64) -> bool {
+        self.any_within_at(index, c, || self.origin + c * self.cell_px, radius)
+    }
+
+    /// [`Self::any_within`] at the position `p()`, whose cell coordinates are `c`: the position is formed only
+    /// where the field cannot tell from the cell alone.
+    #[inline]
+    fn any_within_at(
+        &self,
+        index: &PointIndex,
+        c: &Vector2<f64>,
+        p: impl Fn() -> Vector2<f64>,
+        radius: f64,
+    ) -> bool {
         // Most positions are told from their cell's distance and half its diagonal alone: far from the radius.
-        let (x, y) = (
-            (p.x - self.origin.x) * self.per_px,
-            (p.y - self.origin.y) * self.per_px,
-        );
+        let (x, y) = (c.x, c.y);
         if x >= 0.0 && y >= 0.0 && x < self.cols_f && y < self.rows_f {
             // SAFETY: `x` and `y` are finite, non-negative and below the grid's columns and rows (at most 2^20
-            // cells), so they fit a `u32`, whose conversion then truncates: the floor. The checked conversion
-            // costs several instructions more, hundreds of thousands of times a search.
-            let (i, j) = unsafe { (x.to_int_unchecked::<u32>(), y.to_int_unchecked::<u32>()) };
+            // cells), so they fit an `i32`, whose conversion then truncates: the floor, in one instruction. The
+            // checked conversion costs several more, and so does `u32`'s, hundreds of thousands of times a search.
+            let (i, j) = unsafe {
+                (
+                    x.to_int_unchecked::<i32>() as u32,
+                    y.to_int_unchecked::<i32>() as u32,
+                )
+            };
             let cell = j as usize * self.cols + i as usize;
             let d = f64::from(self.distance_px[cell]);
             if d - self.half_diagonal_px > radius {
@@ -432,6 +473,7 @@ impl NearestDistance {
             if d - off_centre_px - ROUNDING_MARGIN_PX > radius {
                 return false;
             }
+            let p = p();
             if d < self.cap_px {
                 let likeliest = self.nearest_point[cell] as usize;
                 if (index.points[likeliest] - p).norm_squared() <= radius * radius {
@@ -444,9 +486,14 @@ impl NearestDistance {
                     return false;
                 }
             }
-            return index.any_within(p, radius);
+            return index.any_within(&p, radius);
         }
-        match self.reach(p, radius) {
+        // Outside the grid (or not finite): most such positions are farther from every point than the radius.
+        if radius < self.outside_px {
+            return false;
+        }
+        let p = p();
+        match self.reach(&p, radius) {
             None => false,
             Some((reach, _)) if reach < radius => true,
             Some((_, Some(likeliest)))
@@ -454,7 +501,7 @@ impl NearestDistance {
             {
                 true
             }
-            Some(_) => index.any_within(p, radius),
+            Some(_) => index.any_within(&p, radius),
         }
     }
 
@@ -691,6 +738,14 @@ mod tests {
                     field.any_within(&index, &q, radius),
                     brute,
                     "{q:?} {radius}"
+                );
+                // From cell coordinates: the answer at the position they stand for.
+                let cells = field.cells_of(&q) + Vector2::new(0.37, -0.21);
+                let at = field.origin + cells * field.cell_px;
+                assert_eq!(
+                    field.any_within_cells(&index, &cells, radius),
+                    points.iter().any(|p| (p - at).norm() <= radius),
+                    "{at:?} {radius}"
                 );
                 // The nearest point accepted, every other one refused.
                 for parity in [0, 1] {

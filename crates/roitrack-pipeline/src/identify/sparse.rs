@@ -98,9 +98,10 @@ struct ModelTriple {
 }
 
 /// How much wider than the extension's gate (px, and relatively) a prediction's first test is: the test predicts
-/// from the triple's affine frame where the extension predicts through the map, and the two round differently (by
-/// about 1e-10 px at most for frames of thousands of px). A test only refuses a triple the extension would refuse,
-/// so it must never find a blob missing that the extension finds within its gate.
+/// from the triple's affine frame, in the distance field's cells, where the extension predicts through the map, in
+/// px, and the two round differently (by about 1e-10 px at most for frames of thousands of px), as does the test's
+/// gate, its terms widened each. A test only refuses a triple the extension would refuse, so it must never find a
+/// blob missing that the extension finds within its gate.
 const FIRST_TEST_SLACK_PX: f64 = 1e-6;
 const FIRST_TEST_SLACK: f64 = 1e-9;
 
@@ -224,6 +225,10 @@ pub(crate) fn triple_hypotheses_counted(
                         continue;
                     }
                     let image_edges = Matrix2::from_columns(&[f1, f2]);
+                    // The first tests' predictions in the distance field's cells (see `FIRST_TEST_SLACK`).
+                    let anchor_cells = field.cells_of(&ideal[b0]);
+                    let (f1_cells, f2_cells) =
+                        (f1 * field.cells_per_px(), f2 * field.cells_per_px());
                     for triple in &triples {
                         let [p0, p1, p2] = triple.p;
                         let map = image_edges * triple.inverse_edges;
@@ -247,13 +252,17 @@ pub(crate) fn triple_hypotheses_counted(
                         let bend = MAX_TILT_SIN * scale / model.focal_px;
                         let gate_of = |d2_m2: f64| base_gate_px + bend * d2_m2;
                         let mut misses = 0;
-                        let anchor = ideal[b0];
+                        // `gate_of` widened by the slack, its two terms each.
+                        let (test_base_px, test_bend) = (
+                            base_gate_px * (1.0 + FIRST_TEST_SLACK) + FIRST_TEST_SLACK_PX,
+                            bend * (1.0 + FIRST_TEST_SLACK),
+                        );
                         let promising = triple.others.iter().all(|&(frame, d2_m2)| {
                             work.predictions += 1;
-                            let predicted = anchor + f1 * frame.x + f2 * frame.y;
-                            let gate_px =
-                                gate_of(d2_m2) * (1.0 + FIRST_TEST_SLACK) + FIRST_TEST_SLACK_PX;
-                            if !field.any_within(index, &predicted, gate_px) {
+                            let predicted_cells =
+                                anchor_cells + f1_cells * frame.x + f2_cells * frame.y;
+                            let gate_px = test_base_px + test_bend * d2_m2;
+                            if !field.any_within_cells(index, &predicted_cells, gate_px) {
                                 misses += 1;
                             }
                             misses <= allowed_misses
