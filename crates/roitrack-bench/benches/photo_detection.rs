@@ -7,6 +7,8 @@
 //! - `hex336_640` and `hex336_800`: a 24 x 28 hexagonal grid of 336 circles (12 mm apart, 10 mm across, as the
 //!   printed boards of `roitrack target grid --hexagonal`) under harsh light, 640 x 480 and 800 x 600;
 //! - `random30`: 30 dots placed at random on a plate (no lattice), harsh light and 120 clutter items;
+//!   `random30_hidden`: the same photograph, the target with a 31st dot that the photograph does not show (a dot
+//!   hidden: no labelling explains every point);
 //! - `outdoor`: the 8 x 10 grid of dark circles among bright specular glints (foliage, water, chrome) where the
 //!   image's local contrast points to bright blobs: `auto` guesses the wrong polarity first.
 //!
@@ -84,6 +86,31 @@ fn random_dots() -> Target {
     Target::new(points).unwrap()
 }
 
+/// `dots` and one more dot of theirs, at random on their plate as far from the others as they are from each other:
+/// printed on the target, hidden in the photograph.
+fn with_a_dot_not_seen(dots: &Target) -> Target {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(31);
+    let mut points = dots.points().to_vec();
+    loop {
+        let p = Vector3::new(
+            rng.random_range(0.0..0.16),
+            rng.random_range(0.0..0.12),
+            0.0,
+        );
+        if points
+            .iter()
+            .all(|q| (q.point_in_obj_m - p).norm() >= 0.018)
+        {
+            points.push(TargetPoint {
+                id: points.len() as u32,
+                point_in_obj_m: p,
+                diameter_m: Some(0.008),
+            });
+            return Target::new(points).unwrap();
+        }
+    }
+}
+
 /// One benched photograph: the frame, its camera and target, and the fewest points `detect_target` must identify.
 struct Case {
     name: &'static str,
@@ -139,11 +166,15 @@ fn cases() -> Vec<Case> {
         count: 120,
         ..scene.clutter
     };
+    let random30_frame = render_photo(&scene).unwrap().frame;
+    // The same photograph identified with a 31st dot in the target that is not on the plate: to the search, a marker
+    // with one dot hidden, which no labelling of every point explains (`random30_hidden`, after the others).
+    let hidden = with_a_dot_not_seen(&dots);
     cases.push(Case {
         name: "random30",
         camera: camera640.clone(),
         target: dots,
-        frame: render_photo(&scene).unwrap().frame,
+        frame: random30_frame.clone(),
         points: 30,
     });
 
@@ -154,10 +185,17 @@ fn cases() -> Vec<Case> {
     add_glints(&mut rendered, 400, 5);
     cases.push(Case {
         name: "outdoor",
-        camera: camera640,
+        camera: camera640.clone(),
         target: grid80,
         frame: rendered.frame,
         points: 80,
+    });
+    cases.push(Case {
+        name: "random30_hidden",
+        camera: camera640,
+        target: hidden,
+        frame: random30_frame,
+        points: 30,
     });
     // The cases asked for, if any (all of them are rendered: each scene's seed makes it, not the order).
     if let Ok(names) = std::env::var("PHOTO_BENCH_CASES") {
