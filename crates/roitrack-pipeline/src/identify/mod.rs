@@ -1018,12 +1018,15 @@ fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> HypothesisGroups<'static
 }
 
 /// The hypotheses of a search by seeds (triples, quadruples) that covers at least `fewest` points each
-/// (`make(fewest)`), grouped by size ([`by_size`]), made in two tiers for a target of more than
-/// [`SMALL_LATTICE_POINTS`]: first only those that match a whole view's worth of points (as many as acceptance
-/// allows missing: 85 %), then, if none of these is accepted, the rest. Each seed's extension gives up as soon as
-/// too many points miss for its tier, so a wrong seed among clutter costs a few predictions instead of nearly one
-/// per target point; the hypotheses and their order are those of one search down to `min_matched`, since a larger
-/// target's search stops at the first group that gives an accepted fit, the largest first.
+/// (`make(fewest)`), grouped by size ([`by_size`]), made in three tiers for a target of more than
+/// [`SMALL_LATTICE_POINTS`]: first only those that match every point, then, if none of these is accepted, those that
+/// match a whole view's worth of points (as many as acceptance allows missing: 85 %), then the rest. Each seed's
+/// extension gives up as soon as too many points miss for its tier, so a wrong seed among clutter costs a few
+/// predictions instead of nearly one per target point (for the first tier, one miss refuses it); the hypotheses and
+/// their order are those of one search down to `min_matched`, since a larger target's search stops at the first group
+/// that gives an accepted fit, the largest first. A labelling of every point, accepted, is thus never searched
+/// beyond: any rival that could beat or tie it must explain every point too, and every such hypothesis is in the
+/// first tier (an extension that matches every point misses none, whatever its tier allows).
 fn in_tiers<'a>(
     n: usize,
     min_matched: usize,
@@ -1033,14 +1036,22 @@ fn in_tiers<'a>(
     if n <= SMALL_LATTICE_POINTS || whole_view <= min_matched {
         return by_size(make(min_matched));
     }
-    let first = by_size(make(whole_view));
+    let make = std::rc::Rc::new(make);
+    let complete = by_size(make(n));
+    let make_whole = std::rc::Rc::clone(&make);
+    let whole = std::iter::once_with(move || {
+        let mut whole = make_whole(whole_view);
+        whole.retain(|h| h.len() < n);
+        by_size(whole)
+    })
+    .flatten();
     let rest = std::iter::once_with(move || {
         let mut rest = make(min_matched);
         rest.retain(|h| h.len() < whole_view);
         by_size(rest)
     })
     .flatten();
-    Box::new(first.chain(rest))
+    Box::new(complete.chain(whole).chain(rest))
 }
 
 /// The diameter (m) a point's disk has, from the target file's `diameter_m` and the matched blobs' common area scale
