@@ -582,8 +582,8 @@ impl Hypotheses {
 
     /// Extends the seed correspondences `pairs` to every other of the `n` target points whose `predicted` position
     /// has an unused blob within `gate` (the nearest: found sooner with the `field` of the index's points), and keeps
-    /// the result if it covers at least `min_matched` points and is new.
-    /// Gives up as soon as too many points miss.
+    /// the result if it covers at least `min_matched` points and is new. Gives up as soon as too many points miss.
+    /// Whether the result covers `min_matched` points (new or not).
     #[allow(clippy::too_many_arguments)]
     pub fn extend_and_keep(
         &mut self,
@@ -594,7 +594,7 @@ impl Hypotheses {
         gate: impl Fn(usize) -> f64,
         min_matched: usize,
         predicted: impl Fn(usize) -> Vector2<f64>,
-    ) {
+    ) -> bool {
         let seeds = pairs.len();
         let mut misses = 0;
         let used = &mut self.used;
@@ -629,12 +629,14 @@ impl Hypotheses {
         for &(_, b) in &pairs {
             used[b] = false;
         }
-        if complete && pairs.len() >= min_matched {
+        let covered = complete && pairs.len() >= min_matched;
+        if covered {
             pairs.sort_unstable();
             if self.seen.insert(pairs.clone()) {
                 self.list.push(pairs);
             }
         }
+        covered
     }
 }
 

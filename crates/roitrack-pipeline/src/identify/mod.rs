@@ -52,7 +52,7 @@ use std::collections::HashMap;
 use crate::matching::{DetectedBlob, MatchError};
 use index::PointIndex;
 use lattice::{TargetLattice, grow, placements};
-use sparse::{PlanarModel, triple_hypotheses};
+use sparse::{PlanarModel, TripleSearch};
 use spatial::quadruple_hypotheses;
 
 /// The centroid noise (px per coordinate) a hypothesis is judged against: that of real photographs' centres, near
@@ -822,9 +822,9 @@ fn identify_search(
             diameters_m: diameters_ref,
             focal_px: camera.intrinsics.fx_px.max(camera.intrinsics.fy_px),
         };
-        in_tiers(n, min_matched, move |fewest| {
-            triple_hypotheses(&model, ideal_ref, areas_ref, index_ref, fewest)
-        })
+        // One search, resumed tier after tier for fewer points.
+        let mut search = TripleSearch::new(model, ideal_ref, areas_ref, index_ref);
+        in_tiers(n, min_matched, move |fewest| search.hypotheses(fewest))
     };
     let hypothesis_groups: HypothesisGroups = match (planar, lattice) {
         (Some(_), Some(lattice)) => {
@@ -1018,7 +1018,8 @@ fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> HypothesisGroups<'static
 }
 
 /// The hypotheses of a search by seeds (triples, quadruples) that covers at least `fewest` points each
-/// (`make(fewest)`), grouped by size ([`by_size`]), made in three tiers for a target of more than
+/// (`make(fewest)`, asked for fewer points each time: what it made for more points before may be left out),
+/// grouped by size ([`by_size`]), made in three tiers for a target of more than
 /// [`SMALL_LATTICE_POINTS`]: first only those that match every point, then, if none of these is accepted, those that
 /// match a whole view's worth of points (as many as acceptance allows missing: 85 %), then the rest. Each seed's
 /// extension gives up as soon as too many points miss for its tier, so a wrong seed among clutter costs a few
@@ -1030,23 +1031,23 @@ fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> HypothesisGroups<'static
 fn in_tiers<'a>(
     n: usize,
     min_matched: usize,
-    make: impl Fn(usize) -> Vec<Vec<(usize, usize)>> + 'a,
+    mut make: impl FnMut(usize) -> Vec<Vec<(usize, usize)>> + 'a,
 ) -> HypothesisGroups<'a> {
     let whole_view = whole_view_points(n);
     if n <= SMALL_LATTICE_POINTS || whole_view <= min_matched {
         return by_size(make(min_matched));
     }
-    let make = std::rc::Rc::new(make);
     let complete = by_size(make(n));
+    let make = std::rc::Rc::new(std::cell::RefCell::new(make));
     let make_whole = std::rc::Rc::clone(&make);
     let whole = std::iter::once_with(move || {
-        let mut whole = make_whole(whole_view);
+        let mut whole = (make_whole.borrow_mut())(whole_view);
         whole.retain(|h| h.len() < n);
         by_size(whole)
     })
     .flatten();
     let rest = std::iter::once_with(move || {
-        let mut rest = make(min_matched);
+        let mut rest = (make.borrow_mut())(min_matched);
         rest.retain(|h| h.len() < whole_view);
         by_size(rest)
     })

@@ -113,16 +113,8 @@ const FIRST_TEST_SLACK_PX: f64 = 1e-6;
 const FIRST_TEST_SLACK: f64 = 1e-9;
 
 /// Candidate correspondences (target point, blob), each the matches of one triple's affine predictions covering at
-/// least `min_matched` points.
-///
-/// The work is in the wrong triples: each seed blob and two of its neighbours against each triple of neighbouring
-/// target points, tens of thousands for a few dozen points and blobs. Two things keep it small without changing the
-/// hypotheses made. A triple of correspondences is tried once, not once per order of its two neighbours (swapping
-/// both the points and the blobs is the same map). And before a triple's extension (which takes the nearest unused
-/// blob of every prediction, in the points' order), its predictions are tested for any blob at all within their
-/// gates, nearest the anchor first: a prediction with no blob is a miss in the extension too, and once more miss
-/// than `min_matched` allows the triple is refused; the nearest predictions have the smallest gates, so a wrong
-/// triple misses from its first tests on.
+/// least `min_matched` points: one search ([`TripleSearch`]).
+#[cfg(test)]
 pub(crate) fn triple_hypotheses(
     model: &PlanarModel,
     ideal: &[Vector2<f64>],
@@ -133,7 +125,7 @@ pub(crate) fn triple_hypotheses(
     triple_hypotheses_counted(model, ideal, areas_px, index, min_matched).0
 }
 
-/// The work of [`triple_hypotheses`].
+/// The work of a [`TripleSearch`].
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct TripleWork {
     /// Triples of correspondences (seed blobs on target points) whose sizes agree: each had its predictions tested.
@@ -144,7 +136,16 @@ pub(crate) struct TripleWork {
     pub extended: usize,
 }
 
+impl TripleWork {
+    fn add(&mut self, other: &TripleWork) {
+        self.triples += other.triples;
+        self.predictions += other.predictions;
+        self.extended += other.extended;
+    }
+}
+
 /// [`triple_hypotheses`] and its work.
+#[cfg(test)]
 pub(crate) fn triple_hypotheses_counted(
     model: &PlanarModel,
     ideal: &[Vector2<f64>],
@@ -152,64 +153,199 @@ pub(crate) fn triple_hypotheses_counted(
     index: &PointIndex,
     min_matched: usize,
 ) -> (Vec<Vec<(usize, usize)>>, TripleWork) {
-    let n = model.plane_m.len();
-    // The smallest target spacing, for the prediction gate.
-    let mut spacing_m = f64::INFINITY;
-    for (k, p) in model.plane_m.iter().enumerate() {
-        for q in &model.plane_m[k + 1..] {
-            spacing_m = spacing_m.min((p - q).norm());
+    let model = PlanarModel {
+        plane_m: model.plane_m,
+        diameters_m: model.diameters_m,
+        focal_px: model.focal_px,
+    };
+    let mut search = TripleSearch::new(model, ideal, areas_px, index);
+    let hypotheses = search.hypotheses(min_matched);
+    (hypotheses, search.work)
+}
+
+/// A triple of correspondences (seed blobs `b` on the points of model triple `triple`) whose sizes agree, as far as
+/// the search has taken it: its first tests made up to `next` (of the model triple's others), `misses` of them
+/// missed; the tests' gates (px: a base and a factor of the square distance from the anchor, m²).
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    b: [u32; 3],
+    triple: u32,
+    next: u32,
+    misses: u32,
+    test_base_px: f64,
+    test_bend: f64,
+}
+
+/// Hypotheses for a planar target that is not a lattice: candidate correspondences (target point, blob), each the
+/// matches of one triple's affine predictions, made in tiers of decreasing fewest points ([`Self::hypotheses`]).
+///
+/// The work is in the wrong triples: each seed blob and two of its neighbours against each triple of neighbouring
+/// target points, tens of thousands for a few dozen points and blobs. Three things keep it small without changing the
+/// hypotheses made. A triple of correspondences is tried once, not once per order of its two neighbours (swapping
+/// both the points and the blobs is the same map). Before a triple's extension (which takes the nearest unused
+/// blob of every prediction, in the points' order), its predictions are tested for any blob at all within their
+/// gates, nearest the anchor first: a prediction with no blob is a miss in the extension too, and once more miss
+/// than the fewest points allow the triple is refused; the nearest predictions have the smallest gates, so a wrong
+/// triple misses from its first tests on. And a search for fewer points resumes the one for more where it stopped:
+/// a refused triple's tests from its last miss, a triple whose extension failed from its extension, a triple whose
+/// extension was kept not at all (its extension for fewer points is the same, and the caller has it).
+pub(crate) struct TripleSearch<'a> {
+    model: PlanarModel<'a>,
+    ideal: &'a [Vector2<f64>],
+    areas_px: &'a [f64],
+    index: &'a PointIndex,
+    /// The smallest target spacing (m), for the prediction gate.
+    spacing_m: f64,
+    triples: Vec<ModelTriple>,
+    field: NearestDistance,
+    /// The seeds, in one or two parts (each searched on its own thread).
+    parts: Vec<std::ops::Range<usize>>,
+    /// Per part, the triples a search for fewer points may still have to take further, in the order they were
+    /// first met; `None` before the first search.
+    pending: Option<Vec<Vec<Pending>>>,
+    /// The work so far.
+    pub work: TripleWork,
+}
+
+impl<'a> TripleSearch<'a> {
+    /// The search for `model` among the blobs `ideal` (undistorted px) of areas `areas_px` (px²), indexed by
+    /// `index`.
+    pub fn new(
+        model: PlanarModel<'a>,
+        ideal: &'a [Vector2<f64>],
+        areas_px: &'a [f64],
+        index: &'a PointIndex,
+    ) -> Self {
+        let n = model.plane_m.len();
+        let mut spacing_m = f64::INFINITY;
+        for (k, p) in model.plane_m.iter().enumerate() {
+            for q in &model.plane_m[k + 1..] {
+                spacing_m = spacing_m.min((p - q).norm());
+            }
+        }
+        let model_k = (n - 1).min(4);
+        // Each unordered pair of neighbours once (see above).
+        let triples: Vec<ModelTriple> = anchors(&model)
+            .into_iter()
+            .flat_map(|p0| {
+                let near = nearest_points(model.plane_m, p0, model_k);
+                let mut t = Vec::new();
+                for (k, &p1) in near.iter().enumerate() {
+                    for &p2 in &near[k + 1..] {
+                        let (e1, e2) = (
+                            model.plane_m[p1] - model.plane_m[p0],
+                            model.plane_m[p2] - model.plane_m[p0],
+                        );
+                        let cross = e1.x * e2.y - e1.y * e2.x;
+                        if cross.abs() <= 0.1 * e1.norm() * e2.norm() {
+                            continue;
+                        }
+                        let Some(inverse_edges) = Matrix2::from_columns(&[e1, e2]).try_inverse()
+                        else {
+                            continue;
+                        };
+                        let mut others: Vec<(Vector2<f64>, f64)> = (0..n)
+                            .filter(|&p| p != p0 && p != p1 && p != p2)
+                            .map(|p| {
+                                let offset = model.plane_m[p] - model.plane_m[p0];
+                                (inverse_edges * offset, offset.norm_squared())
+                            })
+                            .collect();
+                        others.sort_by(|a, b| a.1.total_cmp(&b.1));
+                        t.push(ModelTriple {
+                            p: [p0, p1, p2],
+                            inverse_edges,
+                            others,
+                        });
+                    }
+                }
+                t
+            })
+            .collect();
+        // Cells of a fraction of the smallest gates: fine enough to answer most tests from one cell, coarse enough
+        // for the field to stay in the cache. Only the time depends on it.
+        let field = NearestDistance::new(index, FIELD_CELL_PX, FIELD_CAP_PX);
+        // Seeds among the first blobs only (detectors list the strongest first): the search grows with the square of
+        // the seeds' neighbourhoods, and a cluttered frame of thousands of blobs must not take seconds. A large
+        // search is split between two threads, the seeds' first half and their second.
+        let seeds = ideal.len().min(MAX_SEED_BLOBS);
+        let parts = if seeds * triples.len() < MIN_SEED_TRIPLES_FOR_TWO_THREADS {
+            std::iter::once(0..seeds).collect()
+        } else {
+            vec![0..seeds / 2, seeds / 2..seeds]
+        };
+        Self {
+            model,
+            ideal,
+            areas_px,
+            index,
+            spacing_m,
+            triples,
+            field,
+            parts,
+            pending: None,
+            work: TripleWork::default(),
         }
     }
-    let model_k = (n - 1).min(4);
-    // Each unordered pair of neighbours once (see above).
-    let triples: Vec<ModelTriple> = anchors(model)
-        .into_iter()
-        .flat_map(|p0| {
-            let near = nearest_points(model.plane_m, p0, model_k);
-            let mut t = Vec::new();
-            for (k, &p1) in near.iter().enumerate() {
-                for &p2 in &near[k + 1..] {
-                    let (e1, e2) = (
-                        model.plane_m[p1] - model.plane_m[p0],
-                        model.plane_m[p2] - model.plane_m[p0],
-                    );
-                    let cross = e1.x * e2.y - e1.y * e2.x;
-                    if cross.abs() <= 0.1 * e1.norm() * e2.norm() {
-                        continue;
-                    }
-                    let Some(inverse_edges) = Matrix2::from_columns(&[e1, e2]).try_inverse() else {
-                        continue;
-                    };
-                    let mut others: Vec<(Vector2<f64>, f64)> = (0..n)
-                        .filter(|&p| p != p0 && p != p1 && p != p2)
-                        .map(|p| {
-                            let offset = model.plane_m[p] - model.plane_m[p0];
-                            (inverse_edges * offset, offset.norm_squared())
-                        })
-                        .collect();
-                    others.sort_by(|a, b| a.1.total_cmp(&b.1));
-                    t.push(ModelTriple {
-                        p: [p0, p1, p2],
-                        inverse_edges,
-                        others,
-                    });
-                }
+
+    /// The hypotheses that cover at least `min_matched` points (in the order one search for them would make them),
+    /// less those the calls before (each for more points) made: call it with decreasing `min_matched`.
+    pub fn hypotheses(&mut self, min_matched: usize) -> Vec<Vec<(usize, usize)>> {
+        let pending = self.pending.take();
+        let this = &*self;
+        // Each part on its own thread (the first here); the second's hypotheses follow the first's, those already
+        // made left out: the list is the one thread's.
+        let run = |part: usize, pending: Option<Vec<Pending>>| match pending {
+            None => this.first_search(this.parts[part].clone(), min_matched),
+            Some(pending) => this.resume(pending, min_matched),
+        };
+        let mut pending: Vec<Option<Vec<Pending>>> = match pending {
+            None => vec![None; self.parts.len()],
+            Some(kept) => kept.into_iter().map(Some).collect(),
+        };
+        let results = if pending.len() == 1 {
+            vec![run(0, pending.pop().flatten())]
+        } else {
+            let second_pending = pending.pop().flatten();
+            let first_pending = pending.pop().flatten();
+            std::thread::scope(|scope| {
+                let second = scope.spawn(|| run(1, second_pending));
+                let first = run(0, first_pending);
+                vec![
+                    first,
+                    second
+                        .join()
+                        .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
+                ]
+            })
+        };
+        let mut merged: Option<Hypotheses> = None;
+        let mut kept = Vec::new();
+        for (hypotheses, work, part_pending) in results {
+            self.work.add(&work);
+            kept.push(part_pending);
+            match &mut merged {
+                None => merged = Some(hypotheses),
+                Some(first) => first.append(hypotheses),
             }
-            t
-        })
-        .collect();
-    // Misses an extension may have and still keep its hypothesis.
-    let allowed_misses = n.saturating_sub(min_matched);
-    // Cells of a fraction of the smallest gates: fine enough to answer most tests from one cell, coarse enough for
-    // the field to stay in the cache. Only the time depends on it.
-    let field = NearestDistance::new(index, FIELD_CELL_PX, FIELD_CAP_PX);
-    // Any distance: a sparse target's blobs may be far apart; the nearest twelve are enough.
-    let image_radius = 1e6;
-    // Seeds among the first blobs only (detectors list the strongest first): the search grows with the square of
-    // the seeds' neighbourhoods, and a cluttered frame of thousands of blobs must not take seconds.
-    let search = |seeds: std::ops::Range<usize>| {
+        }
+        self.pending = Some(kept);
+        merged.map_or_else(Vec::new, |h| h.list)
+    }
+
+    /// The first search, over the seeds `seeds`: its hypotheses, its work and the triples a search for fewer points
+    /// may take further.
+    fn first_search(
+        &self,
+        seeds: std::ops::Range<usize>,
+        min_matched: usize,
+    ) -> (Hypotheses, TripleWork, Vec<Pending>) {
+        let (model, ideal, areas_px, index) = (&self.model, self.ideal, self.areas_px, self.index);
         let mut hypotheses = Hypotheses::default();
         let mut work = TripleWork::default();
+        let mut pending = Vec::new();
+        // Any distance: a sparse target's blobs may be far apart; the nearest twelve are enough.
+        let image_radius = 1e6;
         for b0 in seeds {
             if !ideal[b0].x.is_finite() {
                 continue;
@@ -232,11 +368,8 @@ pub(crate) fn triple_hypotheses_counted(
                         continue;
                     }
                     let image_edges = Matrix2::from_columns(&[f1, f2]);
-                    // The first tests' predictions in the distance field's cells (see `FIRST_TEST_SLACK`).
-                    let anchor_cells = field.cells_of(&ideal[b0]);
-                    let (f1_cells, f2_cells) =
-                        (f1 * field.cells_per_px(), f2 * field.cells_per_px());
-                    for triple in &triples {
+                    let cells = self.cells_of(b0, f1, f2);
+                    for (t, triple) in self.triples.iter().enumerate() {
                         let [p0, p1, p2] = triple.p;
                         let map = image_edges * triple.inverse_edges;
                         let scale = map.determinant().abs();
@@ -251,76 +384,132 @@ pub(crate) fn triple_hypotheses_counted(
                             continue;
                         }
                         work.triples += 1;
-                        // A third of the smallest spacing, plus what perspective adds to the affine prediction at a
-                        // point `d` from the anchor: the plane's depth changes across `d` by `d sin(tilt)`, of a depth
-                        // `f / sqrt(scale)`, which moves the point by that fraction of its `d sqrt(scale)` px offset
-                        // (a tilt up to 60 degrees).
-                        let base_gate_px = 0.3 * spacing_m * scale.sqrt();
-                        let bend = MAX_TILT_SIN * scale / model.focal_px;
-                        let gate_of = |d2_m2: f64| base_gate_px + bend * d2_m2;
-                        let mut misses = 0;
-                        // `gate_of` widened by the slack, its two terms each.
-                        let (test_base_px, test_bend) = (
-                            base_gate_px * (1.0 + FIRST_TEST_SLACK) + FIRST_TEST_SLACK_PX,
-                            bend * (1.0 + FIRST_TEST_SLACK),
-                        );
-                        let promising = triple.others.iter().all(|&(frame, d2_m2)| {
-                            work.predictions += 1;
-                            let predicted_cells =
-                                anchor_cells + f1_cells * frame.x + f2_cells * frame.y;
-                            let gate_px = test_base_px + test_bend * d2_m2;
-                            if !field.any_within_cells(index, &predicted_cells, gate_px) {
-                                misses += 1;
-                            }
-                            misses <= allowed_misses
-                        });
-                        if !promising {
-                            continue;
-                        }
-                        work.extended += 1;
-                        let gate = |p: usize| {
-                            gate_of((model.plane_m[p] - model.plane_m[p0]).norm_squared())
+                        let (base_gate_px, bend) = self.gate_terms(scale);
+                        // The gate widened by the slack, its two terms each.
+                        let state = Pending {
+                            b: [b0 as u32, b1 as u32, b2 as u32],
+                            triple: t as u32,
+                            next: 0,
+                            misses: 0,
+                            test_base_px: base_gate_px * (1.0 + FIRST_TEST_SLACK)
+                                + FIRST_TEST_SLACK_PX,
+                            test_bend: bend * (1.0 + FIRST_TEST_SLACK),
                         };
-                        hypotheses.extend_and_keep(
-                            index,
-                            Some(&field),
-                            vec![(p0, b0), (p1, b1), (p2, b2)],
-                            n,
-                            gate,
+                        if let Some(state) = self.take_further(
+                            state,
+                            &cells,
                             min_matched,
-                            |p| ideal[b0] + map * (model.plane_m[p] - model.plane_m[p0]),
-                        );
+                            &mut hypotheses,
+                            &mut work,
+                        ) {
+                            pending.push(state);
+                        }
                     }
                 }
             }
         }
-        (hypotheses, work)
-    };
-    let seeds = ideal.len().min(MAX_SEED_BLOBS);
-    // A large search is split between two threads, the seeds' first half here and the second beside; the second's
-    // hypotheses follow the first's, those already made left out: the list is the one thread's.
-    if seeds * triples.len() < MIN_SEED_TRIPLES_FOR_TWO_THREADS {
-        let (hypotheses, work) = search(0..seeds);
-        return (hypotheses.list, work);
+        (hypotheses, work, pending)
     }
-    let half = seeds / 2;
-    let ((mut first, first_work), (second, second_work)) = std::thread::scope(|scope| {
-        let second = scope.spawn(|| search(half..seeds));
-        let first = search(0..half);
+
+    /// A search for fewer points resumed from the triples `pending` of a part's search for more.
+    fn resume(
+        &self,
+        pending: Vec<Pending>,
+        min_matched: usize,
+    ) -> (Hypotheses, TripleWork, Vec<Pending>) {
+        let mut hypotheses = Hypotheses::default();
+        let mut work = TripleWork::default();
+        let ideal = self.ideal;
+        let kept = pending
+            .into_iter()
+            .filter_map(|state| {
+                let [b0, b1, b2] = state.b.map(|b| b as usize);
+                let cells = self.cells_of(b0, ideal[b1] - ideal[b0], ideal[b2] - ideal[b0]);
+                self.take_further(state, &cells, min_matched, &mut hypotheses, &mut work)
+            })
+            .collect();
+        (hypotheses, work, kept)
+    }
+
+    /// A third of the smallest spacing, plus what perspective adds to the affine prediction at a point `d` from the
+    /// anchor: the plane's depth changes across `d` by `d sin(tilt)`, of a depth `f / sqrt(scale)`, which moves the
+    /// point by that fraction of its `d sqrt(scale)` px offset (a tilt up to 60 degrees). The gate (px) of a point
+    /// `d` (m) from the anchor is `base + bend d²` for a map of area scale `scale` (px² per m²).
+    fn gate_terms(&self, scale: f64) -> (f64, f64) {
         (
-            first,
-            second
-                .join()
-                .unwrap_or_else(|panic| std::panic::resume_unwind(panic)),
+            0.3 * self.spacing_m * scale.sqrt(),
+            MAX_TILT_SIN * scale / self.model.focal_px,
         )
-    });
-    first.append(second);
-    let work = TripleWork {
-        triples: first_work.triples + second_work.triples,
-        predictions: first_work.predictions + second_work.predictions,
-        extended: first_work.extended + second_work.extended,
-    };
-    (first.list, work)
+    }
+
+    /// The first tests' predictions from seed `b0` and image edges `f1`, `f2` (px) in the distance field's cells (see
+    /// `FIRST_TEST_SLACK`): the anchor and the edges.
+    fn cells_of(&self, b0: usize, f1: Vector2<f64>, f2: Vector2<f64>) -> [Vector2<f64>; 3] {
+        let per_px = self.field.cells_per_px();
+        [
+            self.field.cells_of(&self.ideal[b0]),
+            f1 * per_px,
+            f2 * per_px,
+        ]
+    }
+
+    /// Takes the triple `state` (its seeds in cells: `cells`, [`Self::cells_of`]) as far as a search for `min_matched`
+    /// points does: its first tests resumed (until
+    /// more miss than `min_matched` allows), then its extension, whose hypothesis `hypotheses` keeps if it covers
+    /// `min_matched` points. The state to resume from for fewer points: `None` once the extension was kept (or the
+    /// triple can give nothing more).
+    #[inline]
+    fn take_further(
+        &self,
+        mut state: Pending,
+        &[anchor_cells, f1_cells, f2_cells]: &[Vector2<f64>; 3],
+        min_matched: usize,
+        hypotheses: &mut Hypotheses,
+        work: &mut TripleWork,
+    ) -> Option<Pending> {
+        let (model, ideal, index, field) = (&self.model, self.ideal, self.index, &self.field);
+        let n = model.plane_m.len();
+        // Misses an extension may have and still keep its hypothesis.
+        let allowed_misses = n.saturating_sub(min_matched);
+        let triple = &self.triples[state.triple as usize];
+        let [b0, b1, b2] = state.b.map(|b| b as usize);
+        let (test_base_px, test_bend) = (state.test_base_px, state.test_bend);
+        let mut misses = state.misses as usize;
+        let mut next = state.next as usize;
+        for &(frame, d2_m2) in &triple.others[next..] {
+            next += 1;
+            work.predictions += 1;
+            let predicted_cells = anchor_cells + f1_cells * frame.x + f2_cells * frame.y;
+            let gate_px = test_base_px + test_bend * d2_m2;
+            if !field.any_within_cells(index, &predicted_cells, gate_px) {
+                misses += 1;
+                if misses > allowed_misses {
+                    break;
+                }
+            }
+        }
+        (state.next, state.misses) = (next as u32, misses as u32);
+        if misses > allowed_misses {
+            return Some(state);
+        }
+        work.extended += 1;
+        let [p0, p1, p2] = triple.p;
+        let (f1, f2) = (ideal[b1] - ideal[b0], ideal[b2] - ideal[b0]);
+        let map = Matrix2::from_columns(&[f1, f2]) * triple.inverse_edges;
+        let (base_gate_px, bend) = self.gate_terms(map.determinant().abs());
+        let gate =
+            |p: usize| base_gate_px + bend * (model.plane_m[p] - model.plane_m[p0]).norm_squared();
+        let kept = hypotheses.extend_and_keep(
+            index,
+            Some(field),
+            vec![(p0, b0), (p1, b1), (p2, b2)],
+            n,
+            gate,
+            min_matched,
+            |p| ideal[b0] + map * (model.plane_m[p] - model.plane_m[p0]),
+        );
+        (!kept).then_some(state)
+    }
 }
 
 #[cfg(test)]
@@ -483,6 +672,25 @@ mod tests {
                     );
                 }
             }
+            // One search resumed for fewer points tier after tier (every point, a whole view, 6) makes at each
+            // tier what a search of its own for that many points makes and the tiers before did not, in its order.
+            let resumed_model = PlanarModel {
+                plane_m: &plane_m,
+                diameters_m: &diameters_m,
+                focal_px: 620.0,
+            };
+            let mut resumed = TripleSearch::new(resumed_model, &ideal, &areas_px, &index);
+            let mut above = n + 1;
+            let mut made_in_all = 0;
+            for fewest in [n, super::super::whole_view_points(n), 6] {
+                let made = resumed.hypotheses(fewest);
+                let mut expected = triple_hypotheses(&model, &ideal, &areas_px, &index, fewest);
+                expected.retain(|h| h.len() < above);
+                assert_eq!(made, expected, "case {case}, {fewest} points");
+                made_in_all += made.len();
+                above = fewest;
+            }
+            assert!(made_in_all > 0, "case {case}");
         }
     }
 }
