@@ -115,10 +115,10 @@ pub(crate) struct Labeller<S> {
     /// Per run that is its component's root, the component's index in `totals`.
     slot: Vec<u32>,
     totals: Vec<S>,
-    /// Per component (by its first run's order), its pixels and whether it touches the image's border: what decides
-    /// whether its sums are wanted at all ([`Self::components_above_previous_admitted`]).
+    /// Per component (by its first run's order), its pixels so far and whether it is refused (it touches the image's
+    /// border or has too many pixels): what decides whether its sums are wanted ([`Self::sum_admitted`]).
     extents: Vec<(u64, bool)>,
-    /// Per component, its index in `totals`, or `u32::MAX` if it is not summed.
+    /// Per component, its index in `totals`, or `u32::MAX` if it is not kept.
     summed: Vec<u32>,
     mask: Vec<u64>,
     /// Per row, a bit per 64-pixel word of the mask that had a pixel above the last threshold (64 words a `u64`).
@@ -246,33 +246,26 @@ impl<S: RunSums> Labeller<S> {
         threshold: u16,
         keep: impl FnMut(&S),
     ) {
-        self.label(
-            pixels,
-            width,
-            height,
-            threshold,
-            false,
-            None::<fn(u64) -> bool>,
-            keep,
-        );
+        self.label(pixels, width, height, threshold, false, None, keep);
     }
 
     /// [`Self::components`] at a threshold at least the one of the previous call on the same image (the pixels above
     /// it are among those above the previous one, so only the 64-pixel words that held some are read again), for the
-    /// components that do not touch the image's border and whose pixel count `admit` accepts: the others are neither
-    /// summed nor passed to `keep`. A user that refuses them anyway (the photo detector's shape filters) is spared
-    /// their sums, a good part of a run's labelling, for the specks of noise below its smallest area and the sheets of
-    /// paper or sky above its largest.
+    /// components that do not touch the image's border and whose pixel count is in `admitted`: the others are not
+    /// passed to `keep`, and a component's runs are no longer summed once it touches the border or has too many
+    /// pixels. A user that refuses such components anyway (the photo detector's shape filters) is spared most of
+    /// their sums, a good part of a run's labelling, for the sheets of paper or sky that reach the border or exceed
+    /// its largest area.
     pub fn components_above_previous_admitted(
         &mut self,
         pixels: &[u16],
         width: usize,
         height: usize,
         threshold: u16,
-        admit: impl Fn(u64) -> bool,
+        admitted: std::ops::RangeInclusive<u64>,
         keep: impl FnMut(&S),
     ) {
-        self.label(pixels, width, height, threshold, true, Some(admit), keep);
+        self.label(pixels, width, height, threshold, true, Some(admitted), keep);
     }
 
     /// Makes the next [`Self::components_above_previous_admitted`] read every pixel (call it before the first level of an
@@ -289,7 +282,7 @@ impl<S: RunSums> Labeller<S> {
         height: usize,
         threshold: u16,
         nested: bool,
-        admit: Option<impl Fn(u64) -> bool>,
+        admitted: Option<std::ops::RangeInclusive<u64>>,
         mut keep: impl FnMut(&S),
     ) {
         self.runs.clear();
@@ -354,10 +347,12 @@ impl<S: RunSums> Labeller<S> {
         self.totals.clear();
         self.slot.clear();
         self.slot.resize(self.runs.len(), 0);
-        if let Some(admit) = admit {
-            self.sum_admitted(pixels, width, height, admit);
-            for c in &self.totals {
-                keep(c);
+        if let Some(admitted) = admitted {
+            self.sum_admitted(pixels, width, height, &admitted);
+            for &into in &self.summed {
+                if into != u32::MAX {
+                    keep(&self.totals[into as usize]);
+                }
             }
             return;
         }
@@ -389,51 +384,46 @@ impl<S: RunSums> Labeller<S> {
     }
 
     /// The sums of the components (of `self.runs`, joined by `self.parent`) that do not touch the border and whose
-    /// pixel count `admit` accepts, into `self.totals` in the order of their first pixel: a first pass counts each
-    /// component's pixels and notes whether it touches the border (a few instructions a run), the second sums the
-    /// runs of the admitted ones alone.
+    /// pixel count is in `admitted`, into `self.totals`, and those components' indices there (in the order of their
+    /// first pixel) into `self.summed`. One pass in run order: each component's pixels are counted as its runs come,
+    /// and once it touches the border or has more pixels than `admitted` allows, its later runs are not summed (it
+    /// is refused whatever they add); too few pixels are known only at the end.
     fn sum_admitted(
         &mut self,
         pixels: &[u16],
         width: usize,
         height: usize,
-        admit: impl Fn(u64) -> bool,
+        admitted: &std::ops::RangeInclusive<u64>,
     ) {
         self.extents.clear();
+        self.summed.clear();
+        let most = *admitted.end();
         for r in 0..self.runs.len() {
             let Run { start, end, row } = self.runs[r];
-            let pixels_in_run = u64::from(end - start + 1);
-            let border =
-                row == 0 || row as usize + 1 == height || start == 0 || end as usize + 1 == width;
             // The parent comes before the run, so its slot is already its root's.
             let parent = self.parent[r] as usize;
-            if parent == r {
-                self.slot[r] = self.extents.len() as u32;
-                self.extents.push((pixels_in_run, border));
+            let slot = if parent == r {
+                self.extents.push((0, false));
+                self.summed.push(u32::MAX);
+                self.extents.len() - 1
             } else {
-                let slot = self.slot[parent];
-                self.slot[r] = slot;
-                let extent = &mut self.extents[slot as usize];
-                extent.0 += pixels_in_run;
-                extent.1 |= border;
-            }
-        }
-        self.summed.clear();
-        let mut admitted = 0u32;
-        self.summed.extend(self.extents.iter().map(|&(n, border)| {
-            if !border && admit(n) {
-                admitted += 1;
-                admitted - 1
-            } else {
-                u32::MAX
-            }
-        }));
-        for r in 0..self.runs.len() {
-            let into = self.summed[self.slot[r] as usize];
-            if into == u32::MAX {
+                self.slot[parent] as usize
+            };
+            self.slot[r] = slot as u32;
+            let extent = &mut self.extents[slot];
+            if extent.1 {
                 continue;
             }
-            let Run { start, end, row } = self.runs[r];
+            extent.0 += u64::from(end - start + 1);
+            if extent.0 > most
+                || row == 0
+                || row as usize + 1 == height
+                || start == 0
+                || end as usize + 1 == width
+            {
+                extent.1 = true;
+                continue;
+            }
             let (start, end, j) = (start as usize, end as usize + 1, row as usize);
             let part = S::of_run(
                 &pixels[j * width..(j + 1) * width],
@@ -443,11 +433,19 @@ impl<S: RunSums> Labeller<S> {
                 width,
                 height,
             );
-            // A component's first run comes before its others: it starts the component's sums.
-            if into as usize == self.totals.len() {
+            // A component's first run comes before its others (and is refused first): it starts the sums.
+            let into = &mut self.summed[slot];
+            if *into == u32::MAX {
+                *into = self.totals.len() as u32;
                 self.totals.push(part);
             } else {
-                self.totals[into as usize].add(&part);
+                self.totals[*into as usize].add(&part);
+            }
+        }
+        // The components kept: not refused, and with enough pixels.
+        for (into, &(n, refused)) in self.summed.iter_mut().zip(&self.extents) {
+            if refused || !admitted.contains(&n) {
+                *into = u32::MAX;
             }
         }
     }
@@ -574,23 +572,28 @@ mod tests {
                 c.touches_border,
             )
         };
-        let admit = |n: u64| (7..=2_000).contains(&n);
+        let admitted = 7..=2_000u64;
         let mut nested = Labeller::<Component>::default();
         nested.forget_levels();
         let (mut compared, mut refused) = (0, 0);
         for threshold in [60u16, 100, 150, 250, 400, 550] {
             let mut expected = Vec::new();
             Labeller::<Component>::default().components(&img, w, h, threshold, |c| {
-                if !c.touches_border && admit(c.n) {
+                if !c.touches_border && admitted.contains(&c.n) {
                     expected.push(figures(c));
                 } else {
                     refused += 1;
                 }
             });
             let mut found = Vec::new();
-            nested.components_above_previous_admitted(&img, w, h, threshold, admit, |c| {
-                found.push(figures(c))
-            });
+            nested.components_above_previous_admitted(
+                &img,
+                w,
+                h,
+                threshold,
+                admitted.clone(),
+                |c| found.push(figures(c)),
+            );
             assert_eq!(found, expected, "threshold {threshold}");
             compared += found.len();
         }

@@ -381,16 +381,12 @@ impl<'a> PhotoBlobCandidates<'a> {
                     let mut found = Vec::new();
                     // The shape filters refuse a component on the border or of too few or too many pixels
                     // whatever its shape: such components are not summed.
-                    let admit = |pixels: u64| {
-                        let n = pixels as f64;
-                        !(n < options.min_area_px || n > max_area)
-                    };
                     worker.labeller.components_above_previous_admitted(
                         image,
                         w,
                         h,
                         thresholds[k],
-                        admit,
+                        pixels_admitted(options.min_area_px, max_area),
                         |c| {
                             if passes_shape(c, options, max_area) {
                                 found.push(*c);
@@ -765,6 +761,27 @@ pub fn outline_centre(
     .map(|(centre, _)| centre)
 }
 
+/// The pixel counts `n` that [`passes_shape`]'s area test admits, `!(n < min_area_px || n > max_area)` (`n` as
+/// `f64`, exact below 2^53), as a range of counts: from the smallest count not below `min_area_px` to the largest not
+/// above `max_area` (a NaN bound refuses nothing; a negative largest area, everything).
+fn pixels_admitted(min_area_px: f64, max_area: f64) -> std::ops::RangeInclusive<u64> {
+    let fewest = if min_area_px > 0.0 {
+        min_area_px.ceil() as u64
+    } else {
+        0
+    };
+    if max_area < 0.0 {
+        // Empty: every count refused.
+        return std::ops::RangeInclusive::new(1, 0);
+    }
+    let most = if max_area.is_nan() {
+        u64::MAX
+    } else {
+        max_area.floor() as u64
+    };
+    fewest..=most
+}
+
 fn passes_shape(c: &Component, options: &PhotoBlobOptions, max_area: f64) -> bool {
     let n = c.n as f64;
     if c.touches_border || n < options.min_area_px || n > max_area {
@@ -880,6 +897,36 @@ fn add_to_group(groups: &mut Vec<Group>, grid: &mut CellGrid, c: &Component) {
 
 #[cfg(test)]
 mod tests {
+    /// The admitted counts are those the area test admits, for whole, fractional, zero, negative and NaN bounds.
+    #[test]
+    fn pixels_admitted_are_those_the_area_test_admits() {
+        let bounds = [
+            0.0,
+            1.0,
+            6.5,
+            7.0,
+            7.2,
+            40.0,
+            40.9,
+            -3.0,
+            f64::NAN,
+            f64::INFINITY,
+        ];
+        for &min_area_px in &bounds {
+            for &max_area in &bounds {
+                let admitted = super::pixels_admitted(min_area_px, max_area);
+                for n in 0..60u64 {
+                    let x = n as f64;
+                    assert_eq!(
+                        admitted.contains(&n),
+                        !(x < min_area_px || x > max_area),
+                        "{n} in {min_area_px}..={max_area}"
+                    );
+                }
+            }
+        }
+    }
+
     use super::*;
 
     /// A `w` x `h` 8-bit scene: a background brightening to the right and down, dark and bright disks of 2 to 9 px
