@@ -824,7 +824,9 @@ fn identify_search(
         };
         // One search, resumed tier after tier for fewer points.
         let mut search = TripleSearch::new(model, ideal_ref, areas_ref, index_ref);
-        in_tiers(n, min_matched, move |fewest| search.hypotheses(fewest))
+        in_tiers(n, min_matched, true, move |fewest| {
+            search.hypotheses(fewest)
+        })
     };
     let hypothesis_groups: HypothesisGroups = match (planar, lattice) {
         (Some(_), Some(lattice)) => {
@@ -838,7 +840,7 @@ fn identify_search(
         }
         (None, _) => {
             let spread: Vec<Vector3<f64>> = points.iter().map(|p| p.point_in_obj_m).collect();
-            in_tiers(n, min_matched, move |fewest| {
+            in_tiers(n, min_matched, false, move |fewest| {
                 quadruple_hypotheses(&spread, ideal_ref, areas_ref, index_ref, fewest)
             })
         }
@@ -1019,40 +1021,47 @@ fn by_size(mut hypotheses: Vec<Vec<(usize, usize)>>) -> HypothesisGroups<'static
 
 /// The hypotheses of a search by seeds (triples, quadruples) that covers at least `fewest` points each
 /// (`make(fewest)`, asked for fewer points each time: what it made for more points before may be left out),
-/// grouped by size ([`by_size`]), made in three tiers for a target of more than
-/// [`SMALL_LATTICE_POINTS`]: first only those that match every point, then, if none of these is accepted, those that
-/// match a whole view's worth of points (as many as acceptance allows missing: 85 %), then the rest. Each seed's
-/// extension gives up as soon as too many points miss for its tier, so a wrong seed among clutter costs a few
-/// predictions instead of nearly one per target point (for the first tier, one miss refuses it); the hypotheses and
-/// their order are those of one search down to `min_matched`, since a larger target's search stops at the first group
-/// that gives an accepted fit, the largest first. A labelling of every point, accepted, is thus never searched
-/// beyond: any rival that could beat or tie it must explain every point too, and every such hypothesis is in the
-/// first tier (an extension that matches every point misses none, whatever its tier allows).
+/// grouped by size ([`by_size`]), made in tiers for a target of more than [`SMALL_LATTICE_POINTS`]: with
+/// `complete_first`, first only those that match every point; then, if none of these is accepted, those that match a
+/// whole view's worth of points (as many as acceptance allows missing: 85 %); then the rest. Each seed's extension
+/// gives up as soon as too many points miss for its tier, so a wrong seed among clutter costs a few predictions instead
+/// of nearly one per target point (for the complete tier, one miss refuses it); the hypotheses and their order are
+/// those of one search down to `min_matched`, since a larger target's search stops at the first group that gives an
+/// accepted fit, the largest first. A labelling of every point, accepted, is thus never searched beyond: any rival
+/// that could beat or tie it must explain every point too, and every such hypothesis is in the complete tier (an
+/// extension that matches every point misses none, whatever its tier allows). The complete tier pays when a view has
+/// a point hidden; the triple search resumes its work for the next tier ([`TripleSearch`]), the quadruple search,
+/// whose cost of a view with a point hidden has not been measured, does not ask for it.
 fn in_tiers<'a>(
     n: usize,
     min_matched: usize,
-    mut make: impl FnMut(usize) -> Vec<Vec<(usize, usize)>> + 'a,
+    complete_first: bool,
+    make: impl FnMut(usize) -> Vec<Vec<(usize, usize)>> + 'a,
 ) -> HypothesisGroups<'a> {
     let whole_view = whole_view_points(n);
-    if n <= SMALL_LATTICE_POINTS || whole_view <= min_matched {
-        return by_size(make(min_matched));
-    }
-    let complete = by_size(make(n));
     let make = std::rc::Rc::new(std::cell::RefCell::new(make));
-    let make_whole = std::rc::Rc::clone(&make);
-    let whole = std::iter::once_with(move || {
-        let mut whole = (make_whole.borrow_mut())(whole_view);
-        whole.retain(|h| h.len() < n);
-        by_size(whole)
-    })
-    .flatten();
-    let rest = std::iter::once_with(move || {
-        let mut rest = (make.borrow_mut())(min_matched);
-        rest.retain(|h| h.len() < whole_view);
-        by_size(rest)
-    })
-    .flatten();
-    Box::new(complete.chain(whole).chain(rest))
+    // The hypotheses of at least `fewest` points and fewer than `above`, grouped, made when the search reaches them.
+    let tier = |fewest: usize, above: usize| {
+        let make = std::rc::Rc::clone(&make);
+        std::iter::once_with(move || {
+            let mut made = (make.borrow_mut())(fewest);
+            made.retain(|h| h.len() < above);
+            by_size(made)
+        })
+        .flatten()
+    };
+    if n <= SMALL_LATTICE_POINTS || whole_view <= min_matched {
+        return Box::new(tier(min_matched, n + 1));
+    }
+    if complete_first {
+        Box::new(
+            tier(n, n + 1)
+                .chain(tier(whole_view, n))
+                .chain(tier(min_matched, whole_view)),
+        )
+    } else {
+        Box::new(tier(whole_view, n + 1).chain(tier(min_matched, whole_view)))
+    }
 }
 
 /// The diameter (m) a point's disk has, from the target file's `diameter_m` and the matched blobs' common area scale
