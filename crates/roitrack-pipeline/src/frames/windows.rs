@@ -1,12 +1,12 @@
 //! The window path: each target point's blob predicted from the last estimate at the time its row is read, and
 //! measured in a window there ([`roitrack_image::window`]), the ROI path of the paper.
 
-use nalgebra::{Vector2, Vector3};
-use roitrack_core::Acceleration;
-use roitrack_core::estimator::Observation;
 use std::cell::RefCell;
 
+use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
+use roitrack_core::Acceleration;
+use roitrack_core::estimator::Observation;
 use roitrack_image::photo::OutlineScratch;
 use roitrack_image::window::{flatten_window, measure_flat_window, window_outline_centre};
 use roitrack_image::{BlobRejection, CentroidOptions, Frame, Polarity};
