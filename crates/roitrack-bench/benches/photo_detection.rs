@@ -62,35 +62,8 @@ fn grid(rows: u32, cols: u32, spacing_m: f64, diameter_m: f64, layout: GridLayou
     .unwrap()
 }
 
-/// 30 dots of 8 mm at random on a 16 x 12 cm plate, none nearer another than 18 mm (a random-dot marker).
-fn random_dots() -> Target {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(30);
-    let mut points: Vec<TargetPoint> = Vec::new();
-    while points.len() < 30 {
-        let p = Vector3::new(
-            rng.random_range(0.0..0.16),
-            rng.random_range(0.0..0.12),
-            0.0,
-        );
-        if points
-            .iter()
-            .all(|q| (q.point_in_obj_m - p).norm() >= 0.018)
-        {
-            points.push(TargetPoint {
-                id: points.len() as u32,
-                point_in_obj_m: p,
-                diameter_m: Some(0.008),
-            });
-        }
-    }
-    Target::new(points).unwrap()
-}
-
-/// `dots` and one more dot of theirs, at random on their plate as far from the others as they are from each other:
-/// printed on the target, hidden in the photograph.
-fn with_a_dot_not_seen(dots: &Target) -> Target {
-    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(31);
-    let mut points = dots.points().to_vec();
+/// Adds to `points` a dot of 8 mm at random on a 16 x 12 cm plate, none nearer another than 18 mm.
+fn add_random_dot(rng: &mut rand_chacha::ChaCha8Rng, points: &mut Vec<TargetPoint>) {
     loop {
         let p = Vector3::new(
             rng.random_range(0.0..0.16),
@@ -106,9 +79,28 @@ fn with_a_dot_not_seen(dots: &Target) -> Target {
                 point_in_obj_m: p,
                 diameter_m: Some(0.008),
             });
-            return Target::new(points).unwrap();
+            return;
         }
     }
+}
+
+/// 30 dots of 8 mm at random on a 16 x 12 cm plate, none nearer another than 18 mm (a random-dot marker).
+fn random_dots() -> Target {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(30);
+    let mut points: Vec<TargetPoint> = Vec::new();
+    while points.len() < 30 {
+        add_random_dot(&mut rng, &mut points);
+    }
+    Target::new(points).unwrap()
+}
+
+/// `dots` and one more dot of theirs, at random on their plate as far from the others as they are from each other:
+/// printed on the target, hidden in the photograph.
+fn with_a_dot_not_seen(dots: &Target) -> Target {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(31);
+    let mut points = dots.points().to_vec();
+    add_random_dot(&mut rng, &mut points);
+    Target::new(points).unwrap()
 }
 
 /// One benched photograph: the frame, its camera and target, and the fewest points `detect_target` must identify.
