@@ -131,7 +131,7 @@ impl CameraRigScene {
 /// within ±100 ppm) and every clock then known: the truth of a simulation of a rig file.
 ///
 /// ```
-/// use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera, RigMeasurement};
+/// use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera};
 /// use roitrack_core::CameraModel;
 /// use roitrack_sim::multi_camera::draw_clocks;
 ///
