@@ -2,9 +2,9 @@
 //! 4 kHz, 0.1 px, every clock but the first unknown: `roitrack simulate --scenario random --rig-cameras N`), every
 //! measurement pushed to one [`RigTracker`] in the order of the cameras' own clocks, as `track --rig` does once it
 //! has read its files. The rate counts every measurement of every camera on one thread; it is given over the whole
-//! run and over the running part alone (from [`RUNNING_AFTER_S`] of the first camera's clock on, once every camera's
-//! own track has started and its clock has been found), since the start's search for a pose and for the clocks is
-//! paid once per track (`roitrack lab bench --json`: `rig4_meas_per_s`, `rig4_running_meas_per_s`).
+//! run and over the running part alone (the measurements from [`RUNNING_AFTER_S`] on, by the cameras' own clocks:
+//! every camera's own track has started and its clock has been found by then), since the start's search for a pose
+//! and for the clocks is paid once per track (`roitrack lab bench --json`: `rig4_meas_per_s`, `rig4_running_meas_per_s`).
 //!
 //! ```
 //! use roitrack_bench::rig_bench::RigBench;
@@ -26,7 +26,7 @@ use roitrack_sim::{Scenario, ScenarioKind, SimError};
 pub const ROI_RATE_HZ: f64 = 4000.0;
 /// The centroids' noise (px per axis).
 pub const NOISE_PX: f64 = 0.1;
-/// Where the running part starts, on the first camera's clock (s).
+/// Where the running part starts, on each camera's own clock (s).
 pub const RUNNING_AFTER_S: f64 = 1.0;
 
 /// A simulated rig's measurements, held in memory and merged, and the rig the tracker is told.
