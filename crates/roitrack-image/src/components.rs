@@ -98,6 +98,26 @@ struct Run {
     row: u32,
 }
 
+impl Run {
+    /// Its sums, in `pixels` of a `width` x `height` image.
+    #[inline]
+    fn sums<S: RunSums>(&self, pixels: &[u16], width: usize, height: usize) -> S {
+        let (start, end, j) = (
+            self.start as usize,
+            self.end as usize + 1,
+            self.row as usize,
+        );
+        S::of_run(
+            &pixels[j * width..(j + 1) * width],
+            start,
+            end,
+            j,
+            width,
+            height,
+        )
+    }
+}
+
 fn find(parent: &mut [u32], mut x: u32) -> u32 {
     while parent[x as usize] != x {
         let grand = parent[parent[x as usize] as usize];
@@ -357,16 +377,7 @@ impl<S: RunSums> Labeller<S> {
             return;
         }
         for r in 0..self.runs.len() {
-            let Run { start, end, row } = self.runs[r];
-            let (start, end, j) = (start as usize, end as usize + 1, row as usize);
-            let part = S::of_run(
-                &pixels[j * width..(j + 1) * width],
-                start,
-                end,
-                j,
-                width,
-                height,
-            );
+            let part: S = self.runs[r].sums(pixels, width, height);
             // The parent comes before the run, so its slot is already its root's.
             let parent = self.parent[r] as usize;
             if parent == r {
@@ -424,15 +435,7 @@ impl<S: RunSums> Labeller<S> {
                 extent.1 = true;
                 continue;
             }
-            let (start, end, j) = (start as usize, end as usize + 1, row as usize);
-            let part = S::of_run(
-                &pixels[j * width..(j + 1) * width],
-                start,
-                end,
-                j,
-                width,
-                height,
-            );
+            let part: S = self.runs[r].sums(pixels, width, height);
             // A component's first run comes before its others (and is refused first): it starts the sums.
             let into = &mut self.summed[slot];
             if *into == u32::MAX {
