@@ -27,8 +27,8 @@ use std::time::{Duration, Instant};
 
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use roitrack_bench::cpu_time_of;
-use roitrack_core::estimator::{Estimate, Tracker, TrackerConfig, track};
 use roitrack_core::{CameraModel, Measurement, Target};
+use roitrack_estimators::{Estimate, Tracker, TrackerConfig, track};
 use roitrack_image::{CentroidOptions, RoiImage, SensorModel};
 use roitrack_pipeline::offline::{RoiEvent, track_rois_with};
 use roitrack_ros::{BackgroundBag, BagOptions, BagWriter};

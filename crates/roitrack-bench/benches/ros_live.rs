@@ -22,8 +22,8 @@ use std::time::{Duration, Instant};
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use roitrack_bench::cpu_time_of;
-use roitrack_core::estimator::{Estimate, Tracker, TrackerConfig, track};
 use roitrack_core::{CameraModel, Measurement, Target};
+use roitrack_estimators::{Estimate, Tracker, TrackerConfig, track};
 use roitrack_ros::{BagOptions, LIVE_SUBPROTOCOL, LiveServer};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 use tungstenite::Message;

@@ -6,8 +6,8 @@
 //!
 //! `cargo run --release -p roitrack-bench --example fast_start [SEEDS]` (default 4 seeds).
 
-use roitrack_core::estimator::TrackStatus;
 use roitrack_core::time::Readout;
+use roitrack_estimators::TrackStatus;
 use roitrack_image::Frame;
 use roitrack_pipeline::frames::{FrameTracker, FrameTrackerConfig, track_frame_stream};
 use roitrack_sim::{FrameOptions, FrameSequence, Scenario};

@@ -27,7 +27,7 @@
 //! - `gauss_newton_solve`: Levenberg-Marquardt (Gauss-Newton with damping) of the 12 parameters to convergence on 32
 //!   measurements from the same perturbed state ([`SolverOptions::levenberg_marquardt`]);
 //! - `static_pose`: the static pose from scratch, 16 points, no prior: closed form then Gauss-Newton to convergence,
-//!   i.e. to the accuracy of a converged 6-dof VVS ([`estimator::solve_static_pose`]);
+//!   i.e. to the accuracy of a converged 6-dof VVS ([`roitrack_estimators::solve_static_pose`]);
 //! - `centroid_24`: the blob centroid of a 24 x 24 8-bit ROI around a 6 mm blob, rendered once by the simulator with
 //!   the default sensor ([`measure_blob`], default options, so with the symmetry check);
 //! - `centroid_24_moments`: the same without the symmetry check (the first-order moments alone);
@@ -53,14 +53,14 @@ use nalgebra::{Vector2, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use roitrack_core::estimator::{
-    self, Estimate, Estimator, InitError, KalmanEstimator, KalmanTuning, MotionModel, Observation,
-    StaticPoses, TrackError, TrackerConfig, WindowProblem,
-};
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::solver::{self, NormalEquations, Solution, SolverOptions};
 use roitrack_core::{
     CameraModel, Measurement, MotionState, SpatioTemporalModel, Target, Vector12, so3,
+};
+use roitrack_estimators::{
+    Estimate, Estimator, InitError, KalmanEstimator, KalmanTuning, MotionModel, Observation,
+    StaticPoses, TrackError, TrackerConfig, WindowProblem,
 };
 use roitrack_image::{
     BlobRejection, Centroid, CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel,
@@ -302,7 +302,7 @@ pub const KALMAN_WARM_UP_MEASUREMENTS: usize = 160;
 ///
 /// ```
 /// use roitrack_bench::{KalmanStream, SEED, scene};
-/// use roitrack_core::estimator::Estimator;
+/// use roitrack_estimators::Estimator;
 ///
 /// let mut stream = KalmanStream::new(&scene(), SEED, usize::MAX);
 /// // Initialised and warmed up: every push is one predict and update, no estimate due.
@@ -335,7 +335,7 @@ impl KalmanStream {
     ///
     /// ```
     /// use roitrack_bench::{KalmanStream, SEED, scene};
-    /// use roitrack_core::estimator::{KalmanTuning, MotionModel};
+    /// use roitrack_estimators::{KalmanTuning, MotionModel};
     ///
     /// let tuning = KalmanTuning { motion_model: MotionModel::constant_acceleration(), ..KalmanTuning::default() };
     /// let mut stream = KalmanStream::with_tuning(&scene(), SEED, usize::MAX, tuning);
@@ -528,7 +528,7 @@ impl HotPaths {
     /// The static pose from scratch (16 points, no prior), refined to convergence.
     #[inline(never)]
     pub fn static_pose(&self) -> Result<StaticPoses, InitError> {
-        estimator::solve_static_pose(
+        roitrack_estimators::solve_static_pose(
             black_box(&self.scene.model),
             black_box(&self.scene.target),
             black_box(&self.static_observations),
@@ -829,7 +829,7 @@ mod tests {
         assert!(!poses.is_ambiguous());
         let fit = poses.best();
         assert!(fit.converged);
-        let vvs = estimator::refine_static_pose(
+        let vvs = roitrack_estimators::refine_static_pose(
             &hot.scene.model,
             &hot.scene.target,
             &hot.static_observations,

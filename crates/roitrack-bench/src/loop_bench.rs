@@ -2,9 +2,9 @@
 //! that rendering does not count), ROI throughput with an estimate every 10 ROIs and at every ROI, and the
 //! ROI-to-estimate latency with the camera paced at 20 kHz.
 
-use roitrack_core::estimator::TrackerConfig;
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::stats::{quantile, sorted};
+use roitrack_estimators::TrackerConfig;
 use roitrack_image::ReplayCamera;
 use roitrack_pipeline::{LoopConfig, LoopReport, PipelineError, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};

@@ -38,11 +38,11 @@ use std::path::Path;
 use std::time::Instant;
 
 use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
-use roitrack_core::estimator::{Observation, PoseFit, solve_static_pose};
 use roitrack_core::stats::{mean, median, quantile, rms, sorted};
 use roitrack_core::{
     MotionState, PinholeIntrinsics, SpatioTemporalModel, Target, TargetPoint, so3,
 };
+use roitrack_estimators::{Observation, PoseFit, solve_static_pose};
 use serde_json::{Map, Value, json};
 use thiserror::Error;
 
@@ -310,7 +310,7 @@ fn validate(file: ProblemFile, path: &str) -> Result<PnpProblem, PnpError> {
         .collect::<Result<Vec<_>, _>>()?;
     let noise_px = file
         .noise_px
-        .unwrap_or(roitrack_core::estimator::TrackerConfig::default().noise_px);
+        .unwrap_or(roitrack_estimators::TrackerConfig::default().noise_px);
     if !(noise_px.is_finite() && noise_px > 0.0) {
         return Err(PnpError::new(format!(
             "{} must be a positive number, got {noise_px}",
@@ -555,7 +555,7 @@ impl PnpReport {
             })
             .collect();
         let report = json!({
-            "solver": "roitrack_core::estimator::solve_static_pose",
+            "solver": "roitrack_estimators::solve_static_pose",
             "problem": problem_name,
             "instances": self.solved.len(),
             "points": self.points,
@@ -716,7 +716,7 @@ pub struct SuiteSolve {
     pub family: String,
     /// Every pose returned, best first (empty when the solver refused the problem).
     pub poses: Vec<PoseFit>,
-    /// Whether the solver said the poses cannot be told apart ([`roitrack_core::estimator::StaticPoses::is_ambiguous`]).
+    /// Whether the solver said the poses cannot be told apart ([`roitrack_estimators::StaticPoses::is_ambiguous`]).
     pub ambiguous: bool,
     /// The solver's error, if it found no pose.
     pub error: Option<String>,
@@ -836,7 +836,7 @@ impl SuiteReport {
             })
             .collect();
         let report = json!({
-            "solver": "roitrack_core::estimator::solve_static_pose",
+            "solver": "roitrack_estimators::solve_static_pose",
             "suite": suite_name,
             "repeats": self.repeats,
             "problems": problems,
@@ -999,7 +999,7 @@ mod tests {
         let problem = PnpProblem::from_json(&problem_json(16)).unwrap();
         assert_eq!(
             problem.noise_px,
-            roitrack_core::estimator::TrackerConfig::default().noise_px
+            roitrack_estimators::TrackerConfig::default().noise_px
         );
     }
 

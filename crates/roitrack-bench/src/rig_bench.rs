@@ -18,7 +18,7 @@ use std::hint::black_box;
 use std::time::{Duration, Instant};
 
 use roitrack_core::Target;
-use roitrack_core::rig::{Rig, RigMeasurement, RigTracker, RigTrackerConfig};
+use roitrack_estimators::rig::{Rig, RigMeasurement, RigTracker, RigTrackerConfig};
 use roitrack_sim::multi_camera::{CameraRigScene, simulate_rig};
 use roitrack_sim::{Scenario, ScenarioKind, SimError};
 

@@ -9,10 +9,10 @@ use nalgebra::Vector2;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use roitrack_core::Measurement;
-use roitrack_core::estimator::{
+use roitrack_core::roi_order::bit_reversed_indices;
+use roitrack_estimators::{
     ConfigError, Estimator, TrackError, TrackStatus, Tracker, TrackerConfig,
 };
-use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_sim::{Scenario, ScenarioKind};
 use thiserror::Error;
 

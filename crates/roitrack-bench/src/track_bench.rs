@@ -15,8 +15,8 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use roitrack_core::estimator::{Estimate, Tracker, TrackerConfig, track};
 use roitrack_core::{CameraModel, Measurement, Target};
+use roitrack_estimators::{Estimate, Tracker, TrackerConfig, track};
 use roitrack_sim::{Scenario, ScenarioKind, SimError, SimulationOptions, simulate};
 
 /// The scenario's seed.

@@ -4,7 +4,7 @@
 //! do not count.
 
 use roitrack_bench::{KalmanStream, SEED, scene};
-use roitrack_core::estimator::{Estimator, KalmanTuning, MotionModel};
+use roitrack_estimators::{Estimator, KalmanTuning, MotionModel};
 use roitrack_testkit::alloc::{CountingAllocator, allocations_on_this_thread as allocations};
 
 #[global_allocator]

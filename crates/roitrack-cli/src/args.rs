@@ -8,7 +8,7 @@ use std::sync::OnceLock;
 use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser, ValueParser};
 use clap::{Arg, ArgAction, ArgMatches, Args, Command, ValueEnum};
 use roitrack::TrackerConfig;
-use roitrack::core::estimator::{self as estimator, TrackerOptions};
+use roitrack::estimators::{self as estimator, TrackerOptions};
 use roitrack::pipeline::ScheduleOrder;
 use roitrack::sim::{Scenario, ScenarioKind};
 
@@ -53,7 +53,7 @@ impl From<ScheduleOrderArg> for ScheduleOrder {
 }
 
 /// The tracker's options (`--estimator`, `--every`, ...), shared by `track` and the commands that run the tracker:
-/// one argument per entry of the library's table [`roitrack::core::tracker_options!`], whose docs are the help, whose
+/// one argument per entry of the library's table [`roitrack::estimators::tracker_options!`], whose docs are the help, whose
 /// defaults are [`TrackerOptions::DEFAULT`] and whose checks name the value parsers of [`checks`]. Reads as the
 /// [`TrackerOptions`] it holds.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -84,7 +84,7 @@ impl EstimatorArgs {
 /// The value parsers the table's checks name: each refuses, as the command line is read, a value outside its range.
 mod checks {
     pub use crate::ranges::{count, positive_up_to, within};
-    use roitrack::core::estimator;
+    use roitrack::estimators as estimator;
 
     /// `--window`: 0 (the newest measurement of each point) or 4 to [`estimator::MAX_WINDOW`] measurements.
     pub fn window() -> fn(&str) -> Result<usize, String> {
@@ -190,7 +190,7 @@ macro_rules! estimator_arguments {
     };
 }
 
-roitrack::core::tracker_options!(estimator_arguments);
+roitrack::estimators::tracker_options!(estimator_arguments);
 
 /// The texts of an argument, made once.
 struct Labels {

@@ -1,4 +1,4 @@
-//! The tracker's options are defined once, in the library's table (`roitrack::core::tracker_options!`): every entry
+//! The tracker's options are defined once, in the library's table (`roitrack::estimators::tracker_options!`): every entry
 //! is an option of `roitrack track` with the entry's help and default, and no other option reads as a tracker
 //! option. (The Python side is checked by crates/roitrack-python/tests/test_options.py.)
 
@@ -52,7 +52,7 @@ fn help_of(help: &str, option: &str) -> Option<String> {
 
 #[test]
 fn every_option_of_the_table_is_an_option_of_track_with_its_help_and_default() {
-    let table = roitrack::core::tracker_options!(entries);
+    let table = roitrack::estimators::tracker_options!(entries);
     assert!(table.len() >= 14, "the table lists the tracker's options");
     let help = ok(&["track", "--help"]);
     for entry in &table {
@@ -95,7 +95,7 @@ fn every_option_of_the_table_is_an_option_of_track_with_its_help_and_default() {
 
 #[test]
 fn named_options_take_the_library_names_and_numbers_their_range() {
-    let table = roitrack::core::tracker_options!(entries);
+    let table = roitrack::estimators::tracker_options!(entries);
     for entry in &table {
         let option = format!("--{}", entry.name.replace('_', "-"));
         let refused = fails(&["track", &option, "not-a-value"]);

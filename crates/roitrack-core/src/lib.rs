@@ -13,9 +13,9 @@
 //! - [`time`]: the time model, when each blob was taken (sequential ROIs, global or rolling shutter) and for how long;
 //! - [`projection`]: the spatio-temporal projection model and its exact and paper (eqs. 17-24) Jacobians;
 //! - [`solver`]: the one nonlinear least-squares solver (Levenberg-Marquardt, and the paper's servo law);
-//! - [`estimator`]: the estimators behind one trait ([`estimator::Estimator`]): Kalman (default), the paper's VVS
-//!   loop, the batch and static baselines, with their shared initialisation and degeneracy gate;
-//! - [`rig`]: several cameras with their poses and clocks, and the one estimate their measurements give together.
+//!
+//! The estimators built on this model (Kalman, the paper's VVS loop, the baselines, the rig of several cameras) are
+//! the crate `roitrack-estimators`.
 //!
 //! Conventions (docs/model.md): camera frame x right, y down, z forward. The state holds `cam_r_obj` (c_R_o),
 //! `cam_t_obj_m` (c_t_o), the velocity of the object origin `velocity_mps` and the angular velocity
@@ -25,9 +25,7 @@
 #![deny(missing_docs)]
 
 pub mod camera;
-pub mod estimator;
 pub mod projection;
-pub mod rig;
 pub mod roi_order;
 pub mod samples;
 pub mod so3;
@@ -35,6 +33,8 @@ pub mod solver;
 pub mod state;
 pub mod stats;
 pub mod target;
+#[cfg(any(test, feature = "test-support"))]
+pub mod test_support;
 pub mod time;
 
 pub use camera::{

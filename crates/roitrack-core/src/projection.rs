@@ -150,7 +150,7 @@ mod tests {
             |rng, spread| {
                 let point = points[rng.random_range(0..points.len())];
                 (
-                    crate::state::tests::drawn(rng, spread),
+                    crate::test_support::drawn_state(rng, spread),
                     point,
                     rng.random_range(-0.008..0.0),
                 )

@@ -225,27 +225,8 @@ impl Acceleration {
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
-
-    /// A state `spread` from rest at 0.6 m on the axis (1: rotations up to 0.6 rad, 2 m/s, 30 rad/s).
-    pub(crate) fn drawn(rng: &mut rand_chacha::ChaCha8Rng, spread: f64) -> MotionState {
-        use rand::Rng;
-        let mut v3 = |m: f64| {
-            spread
-                * Vector3::new(
-                    rng.random_range(-m..m),
-                    rng.random_range(-m..m),
-                    rng.random_range(-m..m),
-                )
-        };
-        MotionState {
-            cam_r_obj: Rotation3::new(v3(0.6)),
-            cam_t_obj_m: Vector3::new(0.0, 0.0, 0.6) + v3(0.05),
-            velocity_mps: v3(2.0),
-            angular_velocity_radps: v3(30.0),
-        }
-    }
 
     #[test]
     fn the_transition_jacobian_matches_central_differences() {
@@ -253,7 +234,7 @@ pub(crate) mod tests {
             roitrack_testkit::check_jacobian(
                 &format!("transition_jacobian({dt_s})"),
                 MotionState::at_rest(Rotation3::identity(), Vector3::new(0.0, 0.0, 0.6)),
-                drawn,
+                crate::test_support::drawn_state,
                 &Vector12::repeat(1.0),
                 |s, delta| {
                     MotionState::difference(&s.predicted(dt_s), &s.corrected(delta).predicted(dt_s))

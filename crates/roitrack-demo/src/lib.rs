@@ -14,7 +14,7 @@ use std::sync::atomic::AtomicUsize;
 
 use roitrack_core::JacobianKind;
 use roitrack_core::Measurement;
-use roitrack_core::estimator::{
+use roitrack_estimators::{
     Estimate, EstimatorConfig, KalmanTuning, TrackStatus, TrackerConfig, VvsSettings,
 };
 use roitrack_image::camera::ObservedCamera;
@@ -433,7 +433,7 @@ pub enum DemoError {
     Sensor(#[from] roitrack_image::SensorError),
     /// The estimator refused the run.
     #[error("tracking failed: {0}")]
-    Tracking(#[from] roitrack_core::estimator::TrackAllError),
+    Tracking(#[from] roitrack_estimators::TrackAllError),
     /// The real-time loop failed.
     #[error("the real-time loop failed: {0}")]
     Loop(#[from] roitrack_pipeline::PipelineError),

@@ -2,7 +2,7 @@
 
 use std::time::Instant;
 
-use roitrack_core::estimator::{Estimate, StatusCounts, TrackStatus, TrackerConfig, track_all};
+use roitrack_estimators::{Estimate, StatusCounts, TrackStatus, TrackerConfig, track_all};
 use roitrack_eval::{EstimateErrors, EvalOptions, Metrics, estimate_errors_of};
 use roitrack_sim::SimulatedRun;
 
@@ -38,7 +38,7 @@ impl Scored {
 /// Tracks a simulated run's measurements with `config` and scores the estimates against its truth.
 ///
 /// ```
-/// use roitrack_core::estimator::TrackerConfig;
+/// use roitrack_estimators::TrackerConfig;
 /// use roitrack_demo::scoring::track_and_score;
 /// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 ///

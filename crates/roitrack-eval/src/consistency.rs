@@ -6,13 +6,13 @@
 //! NEES of a 3 x 3 block `b` (position: rows 0..3, velocity: rows 6..9) is `δ_bᵀ P_b⁻¹ δ_b`. If the errors are
 //! zero-mean Gaussian with covariance `P`, each block's NEES is chi-square with 3 degrees of freedom: it averages 3,
 //! and 99 % of the estimates lie below [`CHI2_3DOF_99`]. A mean well above 3 means an over-confident covariance, well
-//! below 3 a timid one. Only estimates that are vouched for ([`roitrack_core::estimator::TrackStatus::is_vouched_for`]) and carry a covariance
+//! below 3 a timid one. Only estimates that are vouched for ([`roitrack_estimators::TrackStatus::is_vouched_for`]) and carry a covariance
 //! are counted.
 //!
 //! ```
 //! use nalgebra::Vector3;
 //! use roitrack_core::{MotionState, Vector12};
-//! use roitrack_core::estimator::{Estimate, Matrix12, TrackStatus};
+//! use roitrack_estimators::{Estimate, Matrix12, TrackStatus};
 //! use roitrack_eval::{CHI2_3DOF_99, Consistency, nees};
 //!
 //! let truth = MotionState::at_rest(Default::default(), Vector3::new(0.0, 0.0, 0.6));
@@ -42,8 +42,8 @@
 //! ```
 
 use nalgebra::{Matrix3, Vector3};
-use roitrack_core::estimator::{Estimate, Matrix12};
 use roitrack_core::{MotionState, PoseSample, TwistSample};
+use roitrack_estimators::{Estimate, Matrix12};
 use serde::Serialize;
 
 use crate::{EvalError, EvalOptions, align, check_increasing, check_twist_times};
@@ -80,7 +80,7 @@ pub struct BlockNees {
 /// ```
 /// use nalgebra::Vector3;
 /// use roitrack_core::MotionState;
-/// use roitrack_core::estimator::{Estimate, Matrix12, TrackStatus};
+/// use roitrack_estimators::{Estimate, Matrix12, TrackStatus};
 /// use roitrack_eval::nees;
 ///
 /// let truth = MotionState::at_rest(Default::default(), Vector3::new(0.0, 0.0, 0.6));
@@ -173,7 +173,7 @@ impl Consistency {
     /// ```
     /// use nalgebra::Vector3;
     /// use roitrack_core::MotionState;
-    /// use roitrack_core::estimator::{Estimate, Matrix12, TrackStatus};
+    /// use roitrack_estimators::{Estimate, Matrix12, TrackStatus};
     /// use roitrack_eval::Consistency;
     ///
     /// let truth = MotionState::at_rest(Default::default(), Vector3::new(0.0, 0.0, 0.6));
@@ -292,7 +292,7 @@ impl Consistency {
 /// be at the poses' times, and every estimate lie inside its span.
 ///
 /// ```
-/// use roitrack_core::estimator::{TrackerConfig, track_all};
+/// use roitrack_estimators::{TrackerConfig, track_all};
 /// use roitrack_eval::{EvalOptions, consistency_of};
 /// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 ///
@@ -378,7 +378,7 @@ mod tests {
     use rand_chacha::ChaCha8Rng;
     use rand_distr::{Distribution, StandardNormal};
     use roitrack_core::Vector12;
-    use roitrack_core::estimator::TrackStatus;
+    use roitrack_estimators::TrackStatus;
 
     /// A random symmetric positive definite covariance with standard deviations of a few mm, mrad, mm/s, mrad/s and
     /// correlations between every component.

@@ -26,8 +26,8 @@ mod metrics;
 pub mod trajectory;
 
 use nalgebra::Vector3;
-use roitrack_core::estimator::Estimate;
 use roitrack_core::{PoseSample, TwistSample, so3};
+use roitrack_estimators::Estimate;
 
 pub use consistency::{BlockNees, CHI2_3DOF_99, Consistency, consistency_of, nees};
 pub use error::EvalError;
@@ -479,7 +479,7 @@ pub fn evaluate(
 /// [`estimate_errors`] of a tracker's estimates (their poses and twists).
 ///
 /// ```
-/// use roitrack_core::estimator::{TrackerConfig, track_all};
+/// use roitrack_estimators::{TrackerConfig, track_all};
 /// use roitrack_eval::{EvalOptions, estimate_errors_of};
 /// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 ///
@@ -502,7 +502,7 @@ pub fn estimate_errors_of(
 /// [`evaluate`] of a tracker's estimates (their poses and twists) against the truth's poses and twists.
 ///
 /// ```
-/// use roitrack_core::estimator::{TrackerConfig, track_all};
+/// use roitrack_estimators::{TrackerConfig, track_all};
 /// use roitrack_eval::{EvalOptions, evaluate_estimates};
 /// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 ///
@@ -523,7 +523,7 @@ pub fn evaluate_estimates(
 /// The poses and twists of estimates, as written to files.
 ///
 /// ```
-/// use roitrack_core::estimator::{Estimate, TrackStatus};
+/// use roitrack_estimators::{Estimate, TrackStatus};
 /// use roitrack_core::MotionState;
 /// use roitrack_eval::samples_of;
 /// let e = Estimate {

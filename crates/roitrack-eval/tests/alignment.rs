@@ -3,8 +3,8 @@
 //! the figures of the untouched run; the relative pose error does not see the frame at all.
 
 use nalgebra::{Isometry3, Rotation3, Translation3, UnitQuaternion, Vector3};
-use roitrack_core::estimator::{TrackerConfig, track_all};
 use roitrack_core::{PoseSample, TwistSample};
+use roitrack_estimators::{TrackerConfig, track_all};
 use roitrack_eval::{
     Alignment, EvalError, EvalOptions, Metrics, SimilarityTransform, TimeOffset, evaluate,
     samples_of,

@@ -55,10 +55,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 use nalgebra::Vector3;
-use roitrack_core::estimator::{
-    EstimatorConfig, KalmanTuning, StatusCounts, TrackerConfig, track_all,
-};
 use roitrack_core::{CameraModel, MotionState, PinholeIntrinsics, PlumbBob, Target, TargetPoint};
+use roitrack_estimators::{EstimatorConfig, KalmanTuning, StatusCounts, TrackerConfig, track_all};
 use roitrack_eval::{Consistency, EvalOptions, PooledErrors, consistency_of};
 use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simulate};
 use serde::Serialize;
@@ -804,7 +802,7 @@ impl Grid {
 /// [`TrackerConfig`] at their defaults.
 ///
 /// ```
-/// use roitrack_core::estimator::EstimatorConfig;
+/// use roitrack_estimators::EstimatorConfig;
 /// use roitrack_experiments::adaptive::HandTuning;
 ///
 /// let tuning = HandTuning { noise_factor: 1.4, noise_px: 0.14, linear_accel_psd: 10.0, angular_accel_psd: 100.0 };
@@ -871,7 +869,7 @@ pub struct RunSummary {
     pub lost: usize,
     /// NEES of position and velocity of the vouched estimates with a covariance.
     pub consistency: Consistency,
-    /// The mean of [`Estimate::noise_px`](roitrack_core::estimator::Estimate::noise_px) over the vouched estimates:
+    /// The mean of [`Estimate::noise_px`](roitrack_estimators::Estimate::noise_px) over the vouched estimates:
     /// the noise the filter worked with (px).
     pub mean_noise_px: f64,
 }

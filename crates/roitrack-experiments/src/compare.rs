@@ -2,9 +2,7 @@
 //! scored against the ground truth: the accuracy tables of `docs/results.md`.
 
 use roitrack_core::JacobianKind;
-use roitrack_core::estimator::{
-    EstimatorConfig, KalmanTuning, TrackStatus, TrackerConfig, VvsSettings,
-};
+use roitrack_estimators::{EstimatorConfig, KalmanTuning, TrackStatus, TrackerConfig, VvsSettings};
 use roitrack_eval::Metrics;
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 

@@ -13,7 +13,7 @@
 //! ```
 
 use nalgebra::Vector3;
-use roitrack_core::estimator::{Estimate, TrackStatus, TrackerConfig};
+use roitrack_estimators::{Estimate, TrackStatus, TrackerConfig};
 use roitrack_image::{ReflectionFault, SimulatedCamera};
 use roitrack_pipeline::{LoopConfig, run_loop_with_progress};
 use roitrack_sim::{

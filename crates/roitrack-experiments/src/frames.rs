@@ -31,9 +31,9 @@ use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
-use roitrack_core::estimator::{ConfigError, Estimate, TrackStatus};
 use roitrack_core::time::Readout;
 use roitrack_core::{PoseSample, TwistSample};
+use roitrack_estimators::{ConfigError, Estimate, TrackStatus};
 use roitrack_eval::{EvalError, EvalOptions, Metrics, PooledErrors, evaluate};
 use roitrack_image::{Frame, Polarity};
 use roitrack_pipeline::frames::{FrameError, FrameTracker, FrameTrackerConfig};

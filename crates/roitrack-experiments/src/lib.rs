@@ -13,7 +13,7 @@
 //!   each tracked with the right time model and the wrong one, and the frame-camera targets checked.
 //!
 //! Each tracks simulated runs and scores them against their truth with [`roitrack_demo::scoring`]; every metric comes
-//! from [`roitrack_eval`], every estimator from [`roitrack_core::estimator`].
+//! from [`roitrack_eval`], every estimator from [`roitrack_estimators`].
 //!
 //! ```
 //! use roitrack_experiments::compare::{compare, table};

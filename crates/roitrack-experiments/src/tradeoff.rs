@@ -2,7 +2,7 @@
 //! noise, on one scenario: what a smoother velocity costs in delay.
 
 use roitrack_core::JacobianKind;
-use roitrack_core::estimator::{EstimatorConfig, KalmanTuning, TrackerConfig, VvsSettings};
+use roitrack_estimators::{EstimatorConfig, KalmanTuning, TrackerConfig, VvsSettings};
 use roitrack_eval::Metrics;
 use roitrack_plot::{Chart, Series, Style};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};

@@ -2,11 +2,11 @@
 //! runs against their ground truth.
 
 use nalgebra::Vector3;
-use roitrack_core::estimator::{
-    Emit, Estimate, Estimator, EstimatorConfig, KalmanTuning, TrackStatus, Tracker, TrackerConfig,
-};
 use roitrack_core::{Measurement, MotionState, Target, TargetPoint};
 use roitrack_demo::scoring::{Scored, track_and_score};
+use roitrack_estimators::{
+    Emit, Estimate, Estimator, EstimatorConfig, KalmanTuning, TrackStatus, Tracker, TrackerConfig,
+};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 
 fn scored(kind: ScenarioKind, noise_px: f64, config: TrackerConfig) -> (Scenario, Scored) {

@@ -12,7 +12,7 @@
 //! accurate, but where they are wrong they must say so.
 
 use roitrack_core::JacobianKind;
-use roitrack_core::estimator::{EstimatorConfig, TrackerConfig, VvsSettings, track_all};
+use roitrack_estimators::{EstimatorConfig, TrackerConfig, VvsSettings, track_all};
 use roitrack_experiments::adaptive::cases;
 use roitrack_experiments::compare::lineup;
 use roitrack_sim::{SimulationOptions, simulate};

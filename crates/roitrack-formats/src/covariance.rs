@@ -28,7 +28,7 @@
 use std::fmt;
 use std::path::Path;
 
-use roitrack_core::estimator::{Estimate, Matrix12};
+use roitrack_estimators::{Estimate, Matrix12};
 
 use crate::FormatError;
 use crate::row_writer::RowWriter;
@@ -81,7 +81,7 @@ pub fn covariance_header() -> String {
 /// symmetric matrix's entries exactly).
 ///
 /// ```
-/// use roitrack_core::estimator::Matrix12;
+/// use roitrack_estimators::Matrix12;
 /// use roitrack_formats::{covariance_from_upper_triangle, covariance_upper_triangle};
 /// let c = Matrix12::from_fn(|i, j| 1.0 / (1 + i + j) as f64);
 /// let entries = covariance_upper_triangle(&c);
@@ -140,7 +140,7 @@ impl fmt::Display for Row<'_> {
 /// [`EstimateWriter::with_covariance`](crate::EstimateWriter::with_covariance).
 ///
 /// ```
-/// use roitrack_core::estimator::Matrix12;
+/// use roitrack_estimators::Matrix12;
 /// use roitrack_formats::CovarianceWriter;
 ///
 /// # fn main() -> Result<(), roitrack_formats::FormatError> {

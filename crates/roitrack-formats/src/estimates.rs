@@ -16,8 +16,8 @@
 use std::io::Write;
 use std::path::Path;
 
-use roitrack_core::estimator::Estimate;
 use roitrack_core::{PoseSample, TwistSample};
+use roitrack_estimators::Estimate;
 
 use crate::{AtomicFile, CovarianceWriter, FormatError, PoseWriter, TwistWriter};
 
@@ -30,7 +30,7 @@ pub const DIAGNOSTICS_HEADER: &str = "t,status,residual_rms_px,inverse_condition
 /// run leaves the previous files as they were.
 ///
 /// ```
-/// use roitrack_core::estimator::{Estimate, TrackStatus};
+/// use roitrack_estimators::{Estimate, TrackStatus};
 /// use roitrack_core::MotionState;
 /// use roitrack_formats::EstimateWriter;
 ///

@@ -23,7 +23,9 @@ use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use nalgebra::{Quaternion, Translation3, UnitQuaternion, Vector3};
-use roitrack_core::rig::{CameraMount, ClockEstimate, ClockModel, Rig, RigCalibration, RigCamera};
+use roitrack_estimators::rig::{
+    CameraMount, ClockEstimate, ClockModel, Rig, RigCalibration, RigCamera,
+};
 use serde::Deserialize;
 
 use crate::limits::{check_yaml_depth, read_text_file};
@@ -237,13 +239,13 @@ pub fn parse_rig_yaml(
             }
         }
         if let Some(d) = c.clock_drift_ppm
-            && d.abs() > roitrack_core::rig::MAX_DRIFT_PPM
+            && d.abs() > roitrack_estimators::rig::MAX_DRIFT_PPM
         {
             return Err(error(
                 "clock_drift_ppm",
                 format!(
                     "{d} ppm is beyond ±{} ppm: check the unit (parts per million)",
-                    roitrack_core::rig::MAX_DRIFT_PPM
+                    roitrack_estimators::rig::MAX_DRIFT_PPM
                 ),
             ));
         }
@@ -312,11 +314,11 @@ fn number(v: f64) -> String {
 }
 
 /// The rig as rig-file text, each camera's calibration written as `calibrations[i]`; with `clocks` (a
-/// [`roitrack_core::rig::RigTracker`]'s), each camera's learnt offset and drift and their standard deviations
+/// [`roitrack_estimators::rig::RigTracker`]'s), each camera's learnt offset and drift and their standard deviations
 /// (`clock_offset_sigma_s`, `clock_drift_sigma_ppm`; 0 for a clock that was known), else its clock if known.
 ///
 /// ```
-/// use roitrack_core::rig::Rig;
+/// use roitrack_estimators::rig::Rig;
 /// use roitrack_core::CameraModel;
 /// use roitrack_formats::rig_yaml_string;
 ///
@@ -331,13 +333,13 @@ pub fn rig_yaml_string(
     rig_text(rig, calibrations, clocks, None)
 }
 
-/// A rig found by calibration ([`roitrack_core::rig::RigCalibrator`]) as rig-file text: every camera's pose and
+/// A rig found by calibration ([`roitrack_estimators::rig::RigCalibrator`]) as rig-file text: every camera's pose and
 /// clock, with their standard deviations (`camera_T_rig_sigma_m`, `camera_T_rig_sigma_deg` about the camera's axes,
 /// `clock_offset_sigma_s`, `clock_drift_sigma_ppm`; 0 for what was known), each camera's calibration written as
 /// `calibrations[i]`.
 ///
 /// ```
-/// use roitrack_core::rig::{CameraCalibration, CameraMount, ClockModel, Rig, RigCalibration};
+/// use roitrack_estimators::rig::{CameraCalibration, CameraMount, ClockModel, Rig, RigCalibration};
 /// use roitrack_core::CameraModel;
 /// use roitrack_formats::calibrated_rig_yaml_string;
 ///

@@ -6,7 +6,7 @@ use std::io::Read;
 use std::path::Path;
 
 use csv::StringRecord;
-use roitrack_core::estimator::{Matrix12, TrackStatus};
+use roitrack_estimators::{Matrix12, TrackStatus};
 
 use crate::FormatError;
 use crate::covariance::{COVARIANCE_ENTRIES, covariance_from_upper_triangle, covariance_header};
@@ -71,7 +71,7 @@ fn count(row: &Row, i: usize) -> Result<u32, FormatError> {
 /// let text = "t,status,residual_rms_px,inverse_condition,measurements_used,iterations,sigma_x_m,sigma_y_m,\
 ///     sigma_z_m,sigma_vx_mps,sigma_vy_mps,sigma_vz_mps\n0.5,tracking,0.1,0.2,16,1,1e-4,1e-4,3e-4,NaN,NaN,NaN\n";
 /// let rows = roitrack_formats::parse_diagnostics_csv(text.as_bytes(), "d.csv").unwrap();
-/// assert_eq!(rows[0].status, roitrack_core::estimator::TrackStatus::Tracking);
+/// assert_eq!(rows[0].status, roitrack_estimators::TrackStatus::Tracking);
 /// assert!(rows[0].sigma_velocity_mps[0].is_nan());
 /// let bad = text.replace("tracking", "fine");
 /// let err = roitrack_formats::parse_diagnostics_csv(bad.as_bytes(), "d.csv").unwrap_err().to_string();

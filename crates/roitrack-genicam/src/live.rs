@@ -3,8 +3,8 @@
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 
-use roitrack_core::estimator::TrackerConfig;
 use roitrack_core::{CameraModel, PoseSample, Target, TwistSample};
+use roitrack_estimators::TrackerConfig;
 use roitrack_image::SensorModel;
 use roitrack_pipeline::{LoopConfig, LoopReport, run_loop_with_sink};
 use roitrack_sim::Scenario;
@@ -219,7 +219,7 @@ pub fn run_live(
     target: &Target,
     options: &LiveOptions,
     paced: bool,
-    on_estimate: &mut (dyn FnMut(&roitrack_core::estimator::Estimate) + Send),
+    on_estimate: &mut (dyn FnMut(&roitrack_estimators::Estimate) + Send),
 ) -> Result<LiveReport, GenicamError> {
     let (w, h) = camera.window();
     let side = w.min(h);
@@ -268,7 +268,7 @@ pub fn run_fake(
     seed: u64,
     stop: Arc<AtomicBool>,
     on_start: impl FnOnce(Arc<FakeGigeCamera>),
-    on_estimate: &mut (dyn FnMut(&roitrack_core::estimator::Estimate) + Send),
+    on_estimate: &mut (dyn FnMut(&roitrack_estimators::Estimate) + Send),
 ) -> Result<LiveReport, GenicamError> {
     let fake = Arc::new(FakeGigeCamera::start(
         scenario,
@@ -366,7 +366,7 @@ pub fn run_device(
     target: &Target,
     options: &LiveOptions,
     stop: Arc<AtomicBool>,
-    on_estimate: &mut (dyn FnMut(&roitrack_core::estimator::Estimate) + Send),
+    on_estimate: &mut (dyn FnMut(&roitrack_estimators::Estimate) + Send),
 ) -> Result<LiveReport, GenicamError> {
     let full_size = (camera_model.width_px, camera_model.height_px);
     let mut camera = GenicamCamera::open(&options.camera, full_size)?.with_stop_flag(stop);

@@ -9,8 +9,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
-use roitrack_core::estimator::Estimate;
 use roitrack_demo::{Demo, DemoOptions, lineup};
+use roitrack_estimators::Estimate;
 use roitrack_genicam::{
     FAKE_DEVICE_CLOCK_START_S, FakeGigeCamera, GenicamCamera, GenicamError, GenicamOptions,
     LiveOptions, LiveReport, PixelFormatChoice, TriggerChoice, run_fake,

@@ -3,7 +3,7 @@
 
 use roitrack_core::Measurement;
 use roitrack_core::TimeModel;
-use roitrack_core::estimator::{Estimate, Estimator, EstimatorReport, StreamError, TrackError};
+use roitrack_estimators::{Estimate, Estimator, EstimatorReport, StreamError, TrackError};
 use roitrack_image::{BlobRejection, CentroidOptions, RejectionCounts, RoiImage, measure_roi};
 
 /// What [`track_rois`] did.
@@ -24,7 +24,7 @@ pub struct RoiTrackReport {
 ///
 /// ```
 /// use roitrack_core::TimeModel;
-/// use roitrack_core::estimator::{Tracker, TrackerConfig};
+/// use roitrack_estimators::{Tracker, TrackerConfig};
 /// use roitrack_core::{CameraModel, Target};
 /// use roitrack_image::{CentroidOptions, Roi, RoiImage};
 /// use roitrack_pipeline::offline::track_rois;
@@ -76,7 +76,7 @@ pub enum RoiEvent<'a> {
 ///
 /// ```
 /// use roitrack_core::TimeModel;
-/// use roitrack_core::estimator::{Tracker, TrackerConfig};
+/// use roitrack_estimators::{Tracker, TrackerConfig};
 /// use roitrack_core::{CameraModel, Target};
 /// use roitrack_image::{CentroidOptions, Roi, RoiImage};
 /// use roitrack_pipeline::offline::{RoiEvent, track_rois_with};

@@ -12,8 +12,8 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
-use roitrack_core::estimator::{Estimate, Estimator, Matrix12, Tracker, TrackerConfig};
 use roitrack_core::{Acceleration, CameraModel, Measurement, MotionState, Target};
+use roitrack_estimators::{Estimate, Estimator, Matrix12, Tracker, TrackerConfig};
 use roitrack_image::{
     CentroidOptions, Frame, GrabError, RejectionCounts, RoiCamera, RoiImage, RoiTrigger,
     measure_roi,
@@ -146,7 +146,7 @@ pub struct LoopReport {
     /// Known accelerations the tracker was told ([`LoopHooks::known_acceleration`]).
     pub known_accelerations: usize,
     /// Known accelerations the tracker refused: out of time order, not finite, too many ahead of the measurements, or
-    /// an estimator that takes none ([`roitrack_core::estimator::KnownAccelerationError`]).
+    /// an estimator that takes none ([`roitrack_estimators::KnownAccelerationError`]).
     pub refused_known_accelerations: usize,
     /// Grabs that failed but may be retried (timeouts, dropped buffers).
     pub camera_errors: usize,
@@ -183,7 +183,7 @@ impl LoopReport {
 pub enum PipelineError {
     /// The tracker's options are refused ([`Tracker::new`]).
     #[error("invalid tracker options: {0}")]
-    Config(#[from] roitrack_core::estimator::ConfigError),
+    Config(#[from] roitrack_estimators::ConfigError),
     /// A loop option is out of its range ([`LoopConfig::validate`]).
     #[error("invalid loop option: {field} must be {expected}, got {value}")]
     LoopConfig {
@@ -241,7 +241,7 @@ fn backoff(spins: &mut u32) {
 /// run.
 ///
 /// ```
-/// use roitrack_core::estimator::TrackerConfig;
+/// use roitrack_estimators::TrackerConfig;
 /// use roitrack_pipeline::{LoopConfig, run_loop};
 /// use roitrack_sim::{Scenario, ScenarioKind};
 ///
@@ -267,7 +267,7 @@ pub fn run_loop<C: RoiCamera>(
 ///
 /// ```
 /// use std::sync::atomic::{AtomicUsize, Ordering};
-/// use roitrack_core::estimator::TrackerConfig;
+/// use roitrack_estimators::TrackerConfig;
 /// use roitrack_pipeline::{LoopConfig, run_loop_with_progress};
 /// use roitrack_sim::{Scenario, ScenarioKind};
 ///
@@ -303,7 +303,7 @@ pub fn run_loop_with_progress<C: RoiCamera>(
 /// (a live view, for one): it must not block, or it holds the loop back.
 ///
 /// ```
-/// use roitrack_core::estimator::TrackerConfig;
+/// use roitrack_estimators::TrackerConfig;
 /// use roitrack_pipeline::{LoopConfig, run_loop_with_sink};
 /// use roitrack_sim::{Scenario, ScenarioKind};
 ///
@@ -489,7 +489,7 @@ impl KnownAccelerationReceiver {
 ///
 /// let (_sender, mut receiver) = known_acceleration_channel(256);
 /// let mut count = 0;
-/// let mut on_estimate = |_: &roitrack_core::estimator::Estimate| count += 1;
+/// let mut on_estimate = |_: &roitrack_estimators::Estimate| count += 1;
 /// let hooks = LoopHooks { progress: None, on_estimate: &mut on_estimate, known_acceleration: Some(&mut receiver) };
 /// assert!(hooks.known_acceleration.is_some());
 /// ```
@@ -514,7 +514,7 @@ pub struct LoopHooks<'a> {
 /// ```
 /// use nalgebra::Vector3;
 /// use roitrack_core::Acceleration;
-/// use roitrack_core::estimator::TrackerConfig;
+/// use roitrack_estimators::TrackerConfig;
 /// use roitrack_pipeline::realtime::{LoopHooks, known_acceleration_channel, run_loop_with_hooks};
 /// use roitrack_pipeline::LoopConfig;
 /// use roitrack_sim::{Scenario, ScenarioKind};

@@ -1,6 +1,6 @@
 //! Offline rolling-shutter smoothing: each frame's estimate is held until the two frames after it are tracked, and its
 //! pose is fitted again from its own blobs at their row times with the twist of a central difference of the poses of
-//! the frames around it ([`roitrack_core::estimator::rolling_refit`]).
+//! the frames around it ([`roitrack_estimators::rolling_refit`]).
 //!
 //! Why: a rolling-shutter frame's blobs are read milliseconds apart, and the depth of its pose follows the twist
 //! assumed over the readout; the causal filter's twist lags by the angular acceleration and jerk, which left the
@@ -11,12 +11,12 @@
 use std::collections::VecDeque;
 
 use nalgebra::Matrix6;
-use roitrack_core::estimator::{
+use roitrack_core::stats::chi2_upper_0_1_percent;
+use roitrack_core::{CameraModel, Measurement, SpatioTemporalModel, Target};
+use roitrack_estimators::{
     Estimate, Matrix12, Observation, TimedPose, TrackStatus, pose_residuals, refit_pose,
     stencil_motion, stencil_motion_at_start,
 };
-use roitrack_core::stats::chi2_upper_0_1_percent;
-use roitrack_core::{CameraModel, Measurement, SpatioTemporalModel, Target};
 
 use crate::frames::{FrameOutcome, observation_of};
 

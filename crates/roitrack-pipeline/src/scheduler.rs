@@ -7,9 +7,9 @@
 //! `[min_size_px, max_size_px]` and to the sensor.
 
 use nalgebra::{Matrix2, SMatrix, Vector2};
-use roitrack_core::estimator::Matrix12;
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::{CameraModel, JacobianKind, MotionState, SpatioTemporalModel, Target};
+use roitrack_estimators::Matrix12;
 use roitrack_image::Roi;
 
 /// What the estimation side tells the camera side: the latest estimate, from which ROIs are placed.
@@ -134,7 +134,7 @@ pub struct RoiScheduler {
 
 impl RoiScheduler {
     /// A scheduler for `camera` and `target`; `noise_px` is the centroid noise the estimator assumes (that of its
-    /// [`roitrack_core::estimator::TrackerConfig`]), which the active order weighs the prediction's spread against.
+    /// [`roitrack_estimators::TrackerConfig`]), which the active order weighs the prediction's spread against.
     pub fn new(
         camera: CameraModel,
         target: Target,

@@ -5,10 +5,10 @@ mod common;
 
 use nalgebra::{Vector2, Vector3};
 use rand::SeedableRng;
-use roitrack_core::estimator::{Adaptation, MotionModelKind, TrackStatus, TrackerConfig};
 use roitrack_core::target::{CircleGrid, GridLayout, TargetAmbiguity};
 use roitrack_core::time::Readout;
 use roitrack_core::{CameraModel, MotionState, Target, TargetPoint, so3};
+use roitrack_estimators::{Adaptation, MotionModelKind, TrackStatus, TrackerConfig};
 use roitrack_image::{Frame, Polarity};
 use roitrack_pipeline::frames::{FrameMethod, FrameTracker, FrameTrackerConfig};
 use roitrack_pipeline::photo::{PhotoOptions, detect_target};

@@ -1,6 +1,6 @@
 //! The loop end to end on rendered ROIs: it initialises from a full frame, tracks, drops nothing.
 
-use roitrack_core::estimator::{TrackStatus, TrackerConfig};
+use roitrack_estimators::{TrackStatus, TrackerConfig};
 use roitrack_image::SimulatedCamera;
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};

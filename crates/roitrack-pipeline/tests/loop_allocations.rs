@@ -2,8 +2,8 @@
 //! loop (replayed, pre-rendered ROIs, both threads), after a first run, make exactly the same number of heap
 //! allocations, all of them set-up (threads, queues, buffers sized up front, the full-frame initialisation).
 
-use roitrack_core::estimator::{EstimatorConfig, TrackerConfig, VvsSettings};
 use roitrack_core::roi_order::bit_reversed_indices;
+use roitrack_estimators::{EstimatorConfig, TrackerConfig, VvsSettings};
 use roitrack_image::ReplayCamera;
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind};

@@ -2,8 +2,8 @@
 //! simulator's fast sweep: rolling-shutter frames are to be tracked about as closely as global-shutter frames of the
 //! same motion.
 
-use roitrack_core::estimator::TrackStatus;
 use roitrack_core::time::Readout;
+use roitrack_estimators::TrackStatus;
 use roitrack_image::{Frame, Polarity};
 use roitrack_pipeline::frames::{FrameTracker, FrameTrackerConfig, track_frame_stream};
 use roitrack_sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};

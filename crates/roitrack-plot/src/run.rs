@@ -17,8 +17,8 @@ use std::path::{Path, PathBuf};
 use plotters::coord::Shift;
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
-use roitrack_core::estimator::TrackStatus;
 use roitrack_core::{PoseSample, TwistSample, so3};
+use roitrack_estimators::TrackStatus;
 use roitrack_eval::EstimateErrors;
 
 use crate::{FONT, PlotError, register_font};
@@ -77,7 +77,7 @@ fn rotation_vector_deg(p: &PoseSample) -> [f64; 3] {
 /// `dir` (created if needed) and returns their paths.
 ///
 /// ```
-/// use roitrack_core::estimator::{TrackerConfig, track_all};
+/// use roitrack_estimators::{TrackerConfig, track_all};
 /// use roitrack_eval::{EvalOptions, estimate_errors_of, samples_of};
 /// use roitrack_plot::run::{RunFigureInputs, write_run_figures};
 /// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};

@@ -21,7 +21,7 @@ use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyTypeError, PyValueError
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use roitrack::core::camera::PinholeIntrinsics;
-use roitrack::core::estimator::{TrackerOptions, UnknownName};
+use roitrack::estimators::{TrackerOptions, UnknownName};
 use roitrack::formats::FormatError;
 use roitrack::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use roitrack::pipeline::{PhotoError, PhotoOptions, PolarityChoice};
@@ -517,7 +517,7 @@ struct Tracker {
 }
 
 /// `Tracker(camera, target, ...)` and `track(camera, target, measurements, ...)` with one keyword argument per entry of
-/// the library's table of tracker options ([`roitrack::core::tracker_options!`]), its default the table's, and
+/// the library's table of tracker options ([`roitrack::estimators::tracker_options!`]), its default the table's, and
 /// `_tracker_options()`, the table as the tests compare it with the signatures and the stubs.
 macro_rules! tracker_api {
     ($($(#[doc = $doc:literal])* $name:ident : $shape:ident $ty:ty = $default:tt $(, $check:ident ($($arg:expr),*))?;)*) => {
@@ -598,7 +598,7 @@ macro_rules! tracker_api {
     };
 }
 
-roitrack::core::tracker_options!(tracker_api);
+roitrack::estimators::tracker_options!(tracker_api);
 
 /// Estimates as arrays, filled as they come (no per-estimate Python object).
 struct EstimateColumns {

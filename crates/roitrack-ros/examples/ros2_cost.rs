@@ -22,7 +22,7 @@
 use std::cell::Cell;
 use std::time::{Duration, Instant};
 
-use roitrack_core::estimator::{Tracker, TrackerConfig, track};
+use roitrack_estimators::{Tracker, TrackerConfig, track};
 use roitrack_ros::BagOptions;
 use roitrack_ros::ros2::{Ros2Options, Ros2Publisher};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};

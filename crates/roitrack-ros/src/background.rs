@@ -7,8 +7,8 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use roitrack_core::estimator::Estimate;
 use roitrack_core::{Measurement, MotionState, Target};
+use roitrack_estimators::Estimate;
 use roitrack_formats::FormatError;
 use roitrack_image::{Frame, RoiImage};
 
@@ -47,7 +47,7 @@ enum Item {
 ///
 /// ```
 /// use roitrack_ros::{BackgroundBag, BagOptions, BagWriter};
-/// use roitrack_core::estimator::{Estimate, TrackStatus};
+/// use roitrack_estimators::{Estimate, TrackStatus};
 /// use roitrack_core::{CameraModel, MotionState};
 ///
 /// let dir = tempfile::tempdir().unwrap();
@@ -290,8 +290,8 @@ fn run(
 
 #[cfg(test)]
 mod tests {
-    use roitrack_core::estimator::TrackStatus;
     use roitrack_core::{CameraModel, MotionState};
+    use roitrack_estimators::TrackStatus;
     use roitrack_image::Roi;
 
     use super::*;

@@ -4,7 +4,7 @@
 use nalgebra::{Matrix3, SMatrix, UnitQuaternion, Vector3};
 use roitrack_core::MotionState;
 use roitrack_core::camera::Distortion;
-use roitrack_core::estimator::Matrix12;
+use roitrack_estimators::Matrix12;
 
 use crate::msg::{Pose, Quaternion, Time, Vector3 as RosVector3};
 

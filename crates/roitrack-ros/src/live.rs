@@ -9,8 +9,8 @@ use std::sync::mpsc::{Receiver, SyncSender, TrySendError, sync_channel};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use roitrack_core::estimator::Estimate;
 use roitrack_core::{CameraModel, Measurement, MotionState, Target};
+use roitrack_estimators::Estimate;
 use roitrack_formats::FormatError;
 use roitrack_image::Frame;
 

@@ -10,7 +10,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use roitrack_core::CameraModel;
-use roitrack_core::estimator::Estimate;
+use roitrack_estimators::Estimate;
 use roitrack_formats::FormatError;
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::{

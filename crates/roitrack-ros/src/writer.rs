@@ -5,8 +5,8 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
-use roitrack_core::estimator::{Estimate, TrackStatus};
 use roitrack_core::{CameraModel, Measurement, MotionState, Target};
+use roitrack_estimators::{Estimate, TrackStatus};
 use roitrack_formats::{AtomicFile, FormatError};
 use roitrack_image::{Frame, RoiImage};
 
@@ -100,7 +100,7 @@ struct Channel {
 ///
 /// ```
 /// use roitrack_ros::{BagOptions, BagWriter};
-/// use roitrack_core::estimator::{Estimate, TrackStatus};
+/// use roitrack_estimators::{Estimate, TrackStatus};
 /// use roitrack_core::{CameraModel, MotionState};
 ///
 /// let dir = tempfile::tempdir().unwrap();

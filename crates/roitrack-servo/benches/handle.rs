@@ -2,7 +2,7 @@
 //! covariance (`predicted_to`), with no publisher running and with one publishing as fast as it can.
 
 use criterion::{Criterion, criterion_group, criterion_main};
-use roitrack_core::estimator::Estimate;
+use roitrack_estimators::Estimate;
 use roitrack_servo::handle::estimate_channel;
 
 fn bench(c: &mut Criterion) {

@@ -10,7 +10,7 @@
 //! 4. the camera exposes: the ROI camera one ROI centred where roitrack's scheduler predicts the blob
 //!    ([`roitrack_pipeline::RoiScheduler`]), rendered from the robot's motion over its exposure
 //!    ([`roitrack_image::RoiRenderer`]), centroided ([`roitrack_image::measure_roi`]) and pushed to the tracker
-//!    ([`roitrack_core::estimator::Tracker`]); a frame camera a whole global-shutter frame when one is due, tracked by
+//!    ([`roitrack_estimators::Tracker`]); a frame camera a whole global-shutter frame when one is due, tracked by
 //!    [`roitrack_pipeline::FrameTracker`]. An estimate is available `exposure / 2 + readout + processing + extra
 //!    latency` after the time it refers to.
 //!
@@ -23,9 +23,9 @@ use std::collections::VecDeque;
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use roitrack_core::estimator::{Estimate, Estimator, TrackError, Tracker, TrackerConfig};
 use roitrack_core::time::{Readout, TimeModel};
 use roitrack_core::{CameraModel, MotionState, Target};
+use roitrack_estimators::{Estimate, Estimator, TrackError, Tracker, TrackerConfig};
 use roitrack_image::{
     CentroidOptions, Frame, RenderScratch, RoiImage, RoiRenderer, SensorError, SensorModel,
     measure_roi,
@@ -197,7 +197,7 @@ pub struct ServoConfig {
     /// `kvs`): at each tick, the platform's acceleration that its own model gives for the forces it commands
     /// ([`Controller::believed_acceleration`]), in the camera frame, from the instant those forces act (the tick
     /// plus the actuation delay), which the Kalman filter adds to its prediction
-    /// (`roitrack_core::estimator::Estimator::set_known_acceleration`). On by default; off, the filter predicts
+    /// (`roitrack_estimators::Estimator::set_known_acceleration`). On by default; off, the filter predicts
     /// with its constant-velocity model alone and its velocity lags the commanded accelerations (docs/servo.md). The
     /// real-time loop ([`crate::live::run_live_servo`]) does the same through the live loop's queue of known
     /// accelerations to its estimation thread.
@@ -391,7 +391,7 @@ impl ServoConfig {
 /// outside its gate: the estimates are disputed and the loop diverges (docs/servo.md, "The tracker in the loop").
 ///
 /// ```
-/// use roitrack_core::estimator::EstimatorConfig;
+/// use roitrack_estimators::EstimatorConfig;
 /// let EstimatorConfig::Kalman(tuning) = roitrack_servo::closed_loop::servo_tracker_config().estimator else {
 ///     unreachable!()
 /// };
@@ -399,7 +399,7 @@ impl ServoConfig {
 /// ```
 pub fn servo_tracker_config() -> TrackerConfig {
     let mut config = TrackerConfig::default();
-    if let roitrack_core::estimator::EstimatorConfig::Kalman(tuning) = &mut config.estimator {
+    if let roitrack_estimators::EstimatorConfig::Kalman(tuning) = &mut config.estimator {
         tuning.adapt_motion = false;
     }
     config

@@ -63,7 +63,7 @@ pub trait Controller {
     /// joint forces `joint_force_n` (its newest command as it will act, clipped to the actuators' limit), at the
     /// state it believed when it made that command; `None` before its first command. What the controller knows of
     /// the acceleration it commands: its model (the masses and friction 20 % off in the loop), not the robot.
-    /// The closed loop tells the tracker (`roitrack_core::estimator::Estimator::set_known_acceleration`).
+    /// The closed loop tells the tracker (`roitrack_estimators::Estimator::set_known_acceleration`).
     fn believed_acceleration(&self, _joint_force_n: &Vector3<f64>) -> Option<Vector3<f64>> {
         None
     }

@@ -17,7 +17,7 @@ use std::sync::atomic::{AtomicU64, Ordering, fence};
 
 use nalgebra::{Rotation3, Vector3};
 use roitrack_core::MotionState;
-use roitrack_core::estimator::{Estimate, Matrix12};
+use roitrack_estimators::{Estimate, Matrix12};
 
 /// Words of a snapshot: t_ref, R (9), t (3), V (3), W (3), a flag, the covariance (144, column-major). The whole matrix
 /// rather than its upper triangle: the reader then copies it in one slice instead of mirroring 78 entries, a sizeable
@@ -73,7 +73,7 @@ impl EstimateSnapshot {
 /// A publisher and a reader of the same slot, empty until the first publication.
 ///
 /// ```
-/// use roitrack_core::estimator::{Estimate, TrackStatus};
+/// use roitrack_estimators::{Estimate, TrackStatus};
 /// use roitrack_core::MotionState;
 /// use roitrack_servo::handle::estimate_channel;
 ///

@@ -36,9 +36,9 @@ use std::time::{Duration, Instant};
 
 use nalgebra::Vector3;
 use roitrack_core::Acceleration;
-use roitrack_core::estimator::Estimate;
 use roitrack_core::time::{Readout, TimeModel};
 use roitrack_core::{CameraModel, MotionState, Target};
+use roitrack_estimators::Estimate;
 use roitrack_image::{
     Frame, GrabError, RoiCamera, RoiImage, RoiRenderer, RoiTrigger, SensorModel, SimulatedCamera,
 };

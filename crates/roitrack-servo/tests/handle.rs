@@ -4,7 +4,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 
 use nalgebra::Vector3;
 use roitrack_core::MotionState;
-use roitrack_core::estimator::{Estimate, Matrix12, TrackStatus};
+use roitrack_estimators::{Estimate, Matrix12, TrackStatus};
 use roitrack_servo::handle::estimate_channel;
 use roitrack_testkit::alloc::{CountingAllocator, allocations_on_this_thread};
 

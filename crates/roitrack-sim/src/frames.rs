@@ -47,9 +47,9 @@
 use nalgebra::Vector2;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
-use roitrack_core::rig::{CameraMount, ClockModel, RigCamera};
 use roitrack_core::time::{Readout, TimeModel, TimeModelError};
 use roitrack_core::{CameraModel, Measurement, MotionState, PoseSample, TwistSample};
+use roitrack_estimators::rig::{CameraMount, ClockModel, RigCamera};
 use roitrack_image::{Frame, Polarity, RenderScratch, RoiRenderer, SensorError, SensorModel};
 use thiserror::Error;
 
@@ -327,7 +327,7 @@ impl FrameSequence {
     /// the rig's clock gives the frames of [`Self::new`].
     ///
     /// ```
-    /// use roitrack_core::rig::{CameraMount, ClockModel, RigCamera};
+    /// use roitrack_estimators::rig::{CameraMount, ClockModel, RigCamera};
     /// use roitrack_sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
     ///
     /// let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);

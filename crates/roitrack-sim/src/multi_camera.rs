@@ -25,9 +25,9 @@ use nalgebra::{Rotation3, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera, RigMeasurement};
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::{Measurement, PoseSample, TwistSample};
+use roitrack_estimators::rig::{CameraMount, ClockModel, Rig, RigCamera, RigMeasurement};
 
 use crate::{Scenario, SimError};
 
@@ -131,7 +131,7 @@ impl CameraRigScene {
 /// within ±100 ppm) and every clock then known: the truth of a simulation of a rig file.
 ///
 /// ```
-/// use roitrack_core::rig::{CameraMount, ClockModel, Rig, RigCamera};
+/// use roitrack_estimators::rig::{CameraMount, ClockModel, Rig, RigCamera};
 /// use roitrack_core::CameraModel;
 /// use roitrack_sim::multi_camera::draw_clocks;
 ///

@@ -2,11 +2,11 @@
 //! camera's pose in the rig and its clock left out but the first camera's, the calibrator finds them from the cameras'
 //! measurements alone; the errors are compared with the targets and with the standard deviations it states.
 
-use roitrack_core::rig::{
+use roitrack_core::so3;
+use roitrack_estimators::rig::{
     CameraMount, ClockModel, Rig, RigCalibrationConfig, RigCalibrationError, RigCalibrator,
     RigCamera, RigMeasurement,
 };
-use roitrack_core::so3;
 use roitrack_sim::multi_camera::{CameraRigScene, simulate_rig};
 use roitrack_sim::{Scenario, ScenarioKind};
 

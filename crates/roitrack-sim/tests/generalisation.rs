@@ -23,12 +23,12 @@ use nalgebra::{Matrix6, Rotation3, SMatrix, Vector2, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
-use roitrack_core::estimator::{
+use roitrack_core::roi_order::bit_reversed_indices;
+use roitrack_core::{Measurement, MotionState, SpatioTemporalModel, so3};
+use roitrack_estimators::{
     AMBIGUITY_CHI2, Estimator, MODEL_SPREAD_SIGMAS, MODEL_UNCERTAINTY, Observation, TrackStatus,
     Tracker, TrackerConfig, refine_static_pose, solve_static_pose,
 };
-use roitrack_core::roi_order::bit_reversed_indices;
-use roitrack_core::{Measurement, MotionState, SpatioTemporalModel, so3};
 use roitrack_sim::rigs::{Rig, RigFamily};
 
 /// Rigs per family: 8 families, 512 rigs a run.

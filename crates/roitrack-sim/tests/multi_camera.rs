@@ -2,11 +2,11 @@
 //! the built-in scene, each camera's clock offset and drift unknown to it.
 
 use nalgebra::Vector3;
-use roitrack_core::estimator::{Estimator, TrackStatus, Tracker, TrackerConfig};
-use roitrack_core::rig::{
+use roitrack_core::{Measurement, MotionState};
+use roitrack_estimators::rig::{
     ClockEstimate, Rig, RigCamera, RigEstimate, RigTracker, RigTrackerConfig,
 };
-use roitrack_core::{Measurement, MotionState};
+use roitrack_estimators::{Estimator, TrackStatus, Tracker, TrackerConfig};
 use roitrack_sim::multi_camera::{CameraRigScene, RigRun, simulate_rig};
 use roitrack_sim::{Scenario, ScenarioKind};
 
@@ -425,7 +425,7 @@ fn a_clock_beyond_the_search_is_refused_naming_the_camera() {
 /// The rig tracker tuned as `track --images` tunes it for frames (the process noise held, the noise learnt from the
 /// frames, the cameras' own trackers on a constant acceleration).
 fn frame_rig_config() -> RigTrackerConfig {
-    use roitrack_core::estimator::{EstimatorConfig, MotionModel, NoiseSample};
+    use roitrack_estimators::{EstimatorConfig, MotionModel, NoiseSample};
     let mut tracker_config = TrackerConfig::default();
     let EstimatorConfig::Kalman(tuning) = &mut tracker_config.estimator else {
         unreachable!()

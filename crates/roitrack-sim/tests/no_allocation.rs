@@ -2,7 +2,7 @@
 //! estimates without touching the heap (counted through a counting global allocator).
 
 use roitrack_core::JacobianKind;
-use roitrack_core::estimator::{Estimator, EstimatorConfig, Tracker, TrackerConfig, VvsSettings};
+use roitrack_estimators::{Estimator, EstimatorConfig, Tracker, TrackerConfig, VvsSettings};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 use roitrack_testkit::alloc::{CountingAllocator, allocations_in_all_threads as allocations};
 

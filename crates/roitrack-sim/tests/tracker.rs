@@ -2,11 +2,11 @@
 //! motion, the degeneracy gate, and initialisation of a target already moving.
 
 use nalgebra::{Rotation3, Vector3};
-use roitrack_core::estimator::{
+use roitrack_core::{CameraModel, JacobianKind, Measurement, MotionState, RoiOrder, Target, so3};
+use roitrack_estimators::{
     Emit, Estimate, Estimator, EstimatorConfig, TrackError, TrackStatus, Tracker, TrackerConfig,
     VvsSettings, track_all,
 };
-use roitrack_core::{CameraModel, JacobianKind, Measurement, MotionState, RoiOrder, Target, so3};
 use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};
 
 fn configs() -> Vec<(&'static str, TrackerConfig)> {
@@ -330,14 +330,14 @@ fn a_refused_measurement_of_a_readout_is_named_by_its_place_in_the_stream() {
             TrackerConfig::default(),
         )
         .unwrap();
-        let error = roitrack_core::estimator::track(
+        let error = roitrack_estimators::track(
             &mut tracker,
             stream.iter().map(|m| Ok::<_, std::convert::Infallible>(*m)),
             |_| Ok::<_, std::convert::Infallible>(()),
         )
         .unwrap_err();
         // (The source and the sink cannot fail: refused is the only error.)
-        let roitrack_core::estimator::StreamError::Refused { index, source } = error;
+        let roitrack_estimators::StreamError::Refused { index, source } = error;
         (tracker, index, source)
     };
     let (tracker, index, source) = refused(&stream);
@@ -459,7 +459,7 @@ fn frames_of_simultaneous_measurements_give_one_estimate_each_and_exact_states()
             let mut tracker =
                 Tracker::new(CameraModel::canonical(), Target::grid4x4(), config).unwrap();
             let mut times = Vec::new();
-            roitrack_core::estimator::track(
+            roitrack_estimators::track(
                 &mut tracker,
                 flat.iter().map(|m| Ok::<_, std::convert::Infallible>(*m)),
                 |e| {
@@ -520,10 +520,10 @@ fn window_fits_do_not_vouch_for_windows_without_redundancy() {
     ] {
         let config = TrackerConfig {
             estimator,
-            window: roitrack_core::estimator::WindowMode::Last(6),
+            window: roitrack_estimators::WindowMode::Last(6),
             ..TrackerConfig::default()
         };
-        let (estimates, _) = roitrack_core::estimator::track_all(
+        let (estimates, _) = roitrack_estimators::track_all(
             &simulated.camera,
             &simulated.target,
             config,
@@ -579,7 +579,7 @@ fn window_fits_do_not_vouch_for_wandering_states_on_a_3x3_grid() {
                 estimator,
                 ..TrackerConfig::default()
             };
-            let (estimates, _) = roitrack_core::estimator::track_all(
+            let (estimates, _) = roitrack_estimators::track_all(
                 &simulated.camera,
                 &simulated.target,
                 config,

@@ -1,7 +1,7 @@
 //! One camera's input of any kind turned into its stream of measurements, in time order, on the camera's own clock:
 //! a measurements file, a ROI recording (each ROI centroided) or frames (an image folder, a numbered pattern, a glob
 //! or a video, measured by the camera's own [`FrameTracker`]). A rig's cameras each give one such stream, and
-//! [`crate::core::rig::merge_streams`] merges them for the [`crate::core::rig::RigTracker`].
+//! [`crate::estimators::rig::merge_streams`] merges them for the [`crate::estimators::rig::RigTracker`].
 //!
 //! ```
 //! use roitrack::camera_input::{CameraInput, open_camera_input};
@@ -17,8 +17,8 @@ use std::collections::VecDeque;
 use std::fmt;
 use std::path::PathBuf;
 
-use roitrack_core::estimator::ConfigError;
 use roitrack_core::{CameraModel, Measurement, Target, TimeModel};
+use roitrack_estimators::ConfigError;
 use roitrack_formats::{
     FormatError, FrameSource, FrameTiming, MeasurementReader, RoiRecordingReader, TimeUnit,
     TimedMeasurements, open_input,

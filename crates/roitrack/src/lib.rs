@@ -75,7 +75,8 @@
 //!
 //! | module | crate | what |
 //! | --- | --- | --- |
-//! | [`core`] | `roitrack-core` | camera models, SO(3), the target, the time model, the spatio-temporal projection and its Jacobians, the solver, the estimators (no I/O, no threads) |
+//! | [`core`] | `roitrack-core` | camera models, SO(3), the target, the time model, the spatio-temporal projection and its Jacobians, the solver (no I/O, no threads) |
+//! | [`estimators`] | `roitrack-estimators` | the estimators (Kalman, VVS, batch, static), the tracker options, the rig of several cameras (no I/O, no threads) |
 //! | [`image`] | `roitrack-image` | ROIs and frames, the camera trait, the simulated and replay cameras, centroids, blob detection, the renderer |
 //! | [`pipeline`] | `roitrack-pipeline` | finding the target in a full frame or a photograph (`detect_target`), the ROI scheduler, the two-thread real-time loop, offline ROI tracking |
 //! | [`sim`] | `roitrack-sim` | scenario motions with ground truth, the measurement simulator, rendered ROI recordings, synthetic photographs |
@@ -99,6 +100,7 @@ pub use nalgebra;
 pub use roitrack_core as core;
 #[cfg(feature = "demo")]
 pub use roitrack_demo as demo;
+pub use roitrack_estimators as estimators;
 pub use roitrack_eval as eval;
 pub use roitrack_formats as formats;
 pub use roitrack_image as image;
@@ -113,13 +115,13 @@ pub use roitrack_sim as sim;
 #[cfg(feature = "lab")]
 pub use {roitrack_bench as bench, roitrack_experiments as experiments};
 
-pub use roitrack_core::estimator::{
-    ConfigError, Estimate, Estimator, EstimatorConfig, EstimatorReport, KalmanTuning, StreamError,
-    TrackError, TrackStatus, Tracker, TrackerConfig, VvsSettings, WindowMode, track, track_all,
-};
 pub use roitrack_core::{
     CameraModel, Measurement, MotionState, PoseSample, Readout, Target, TargetPoint, TimeModel,
     TwistSample,
+};
+pub use roitrack_estimators::{
+    ConfigError, Estimate, Estimator, EstimatorConfig, EstimatorReport, KalmanTuning, StreamError,
+    TrackError, TrackStatus, Tracker, TrackerConfig, VvsSettings, WindowMode, track, track_all,
 };
 pub use roitrack_image::{Frame, RoiCamera, RoiImage};
 

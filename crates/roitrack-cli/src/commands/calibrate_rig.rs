@@ -1,12 +1,12 @@
 //! `roitrack calibrate-rig`: every camera's pose in the rig and its clock, found from a recording of the moving
-//! target seen by at least two cameras at a time (`roitrack_core::rig::RigCalibrator`).
+//! target seen by at least two cameras at a time (`roitrack_estimators::rig::RigCalibrator`).
 
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use roitrack::core::rig::{RigCalibrationConfig, RigCalibrator, RigMeasurement};
+use roitrack::estimators::rig::{RigCalibrationConfig, RigCalibrator, RigMeasurement};
 use roitrack::formats::{MeasurementReader, TimedMeasurements, check_output_paths, open_input};
 
 use crate::args::{EstimatorArgs, TargetArgs, TimeUnitArg};

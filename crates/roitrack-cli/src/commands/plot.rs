@@ -142,10 +142,9 @@ pub fn run(args: &PlotArgs) -> Result<()> {
         (Some(rows), _) => Some(
             rows.iter()
                 .map(|r| {
-                    r.covariance.as_ref().map_or(
-                        [f64::NAN; 12],
-                        roitrack::core::estimator::standard_deviations,
-                    )
+                    r.covariance
+                        .as_ref()
+                        .map_or([f64::NAN; 12], roitrack::estimators::standard_deviations)
                 })
                 .collect(),
         ),

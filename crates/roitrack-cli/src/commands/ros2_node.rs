@@ -11,7 +11,7 @@ use std::time::Duration;
 
 use anyhow::{Context, Result, anyhow};
 use clap::Args;
-use roitrack::core::estimator::{Tracker, track};
+use roitrack::estimators::{Tracker, track};
 use roitrack::formats::{EstimateWriter, MeasurementChecks};
 use roitrack::ros::BagOptions;
 use roitrack_ros::LeftOut;

@@ -8,8 +8,8 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 use anyhow::{Context, Result, anyhow, bail};
 use clap::{Args, ValueEnum};
 use roitrack::core::RoiOrder;
-use roitrack::core::rig::Rig;
 use roitrack::core::time::Readout;
+use roitrack::estimators::rig::Rig;
 use roitrack::formats::AtomicFile;
 use roitrack::image::{Frame, Polarity, ReflectionFault, SensorModel};
 use roitrack::nalgebra::Vector3;
@@ -122,7 +122,7 @@ pub struct SimulateArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Centroid noise standard deviation per axis (px), at most 100.
-    #[arg(long, default_value_t = 0.1, value_parser = ranges::within(0.0..=roitrack::core::estimator::MAX_NOISE_PX, " px", "more than a ROI's half-width is no centroid"))]
+    #[arg(long, default_value_t = 0.1, value_parser = ranges::within(0.0..=roitrack::estimators::MAX_NOISE_PX, " px", "more than a ROI's half-width is no centroid"))]
     pub noise_px: f64,
     /// ROI rate (Hz), at most a million.
     #[arg(long, default_value_t = 4000.0, value_parser = ranges::positive_up_to(roitrack::sim::MAX_ROI_RATE_HZ, " Hz", "beyond any ROI camera"))]

@@ -551,7 +551,7 @@ fn rig_camera(
     option: &str,
     value: &std::path::Path,
     rig_path: &std::path::Path,
-    rig: &roitrack::core::rig::Rig,
+    rig: &roitrack::estimators::rig::Rig,
 ) -> Result<(usize, String, PathBuf)> {
     let (name, path) = split_camera_file(option, value)?;
     let Some(c) = rig.index_of(&name) else {
@@ -647,7 +647,7 @@ pub(crate) fn frame_camera_of(
 fn rig_inputs(
     args: &TrackArgs,
     rig_path: &std::path::Path,
-    rig: &roitrack::core::rig::Rig,
+    rig: &roitrack::estimators::rig::Rig,
 ) -> Result<Vec<Option<roitrack::camera_input::CameraInput>>> {
     use roitrack::camera_input::CameraInput;
     let timestamps = rig_timestamps(args, rig_path, rig)?;
@@ -709,7 +709,7 @@ fn rig_inputs(
 fn rig_timestamps(
     args: &TrackArgs,
     rig_path: &std::path::Path,
-    rig: &roitrack::core::rig::Rig,
+    rig: &roitrack::estimators::rig::Rig,
 ) -> Result<Vec<Option<PathBuf>>> {
     let mut timestamps: Vec<Option<PathBuf>> = vec![None; rig.len()];
     for value in &args.timestamps {
@@ -780,7 +780,7 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         .iter()
         .flatten()
         .any(|i| matches!(i, roitrack::camera_input::CameraInput::Images { .. }));
-    let config = roitrack::core::rig::RigTrackerConfig {
+    let config = roitrack::estimators::rig::RigTrackerConfig {
         tracker: if any_frames {
             frame_config(args)?.tracker
         } else {
@@ -789,9 +789,9 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         ..Default::default()
     };
     // A pose left out of the rig file is the file's fault, not the options'.
-    let mut tracker =
-        roitrack::core::rig::RigTracker::new(rig.clone(), target, config).map_err(|e| match e {
-            roitrack::core::rig::RigError::MountUnknown { .. } => {
+    let mut tracker = roitrack::estimators::rig::RigTracker::new(rig.clone(), target, config)
+        .map_err(|e| match e {
+            roitrack::estimators::rig::RigError::MountUnknown { .. } => {
                 anyhow::anyhow!("{}: {e}", rig_path.display())
             }
             e => anyhow::Error::new(e),
@@ -825,11 +825,11 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         }
     } else {
         // Merged by the rig file's clocks, or by the camera's own when the file leaves them out.
-        let clocks: Vec<roitrack::core::rig::ClockModel> =
+        let clocks: Vec<roitrack::estimators::rig::ClockModel> =
             rig.cameras().iter().map(|c| c.clock).collect();
         let labels: Vec<String> = streams.iter().map(|s| s.label.clone()).collect();
         let streams_cameras: Vec<usize> = streams.iter().map(|s| s.camera).collect();
-        let merged = roitrack::core::rig::merge_streams(
+        let merged = roitrack::estimators::rig::merge_streams(
             streams.into_iter().map(|s| (s.camera, s.reader)).collect(),
             &clocks,
         );

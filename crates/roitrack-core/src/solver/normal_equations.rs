@@ -30,6 +30,9 @@ use super::cholesky::FixedCholesky;
 /// assert_eq!(ne.count(), 1);
 /// assert_eq!(ne.cost_px2(), 10.0);
 /// assert!((ne.residual_rms_px() - 5f64.sqrt()).abs() < 1e-15);
+/// // The Gauss-Newton step to the mean, 2, and the conditioning of a single parameter, 1.
+/// let (step, inverse_condition) = ne.solve_with_conditioning().unwrap();
+/// assert!((step[0] - 2.0).abs() < 1e-12 && (inverse_condition - 1.0).abs() < 1e-9);
 /// ```
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NormalEquations<const N: usize> {
@@ -126,14 +129,14 @@ impl<const N: usize> NormalEquations<N> {
         })
     }
 
-    /// The step (as [`Self::solve`]) and an estimate of the reciprocal condition number (as
+    /// The undamped Gauss-Newton step and an estimate of the reciprocal condition number (as
     /// [`Self::inverse_condition`]) from one Cholesky factorisation: λmax by power iteration, λmin by inverse
     /// iteration on the factor, a few iterations each (Rayleigh quotients: λmin is over-estimated by a few percent at
     /// most when the two smallest eigenvalues are close, and converges fast when the window is near-degenerate, which
     /// is what the gate must catch). Measured against the eigenvalue figure ([`Self::inverse_condition`]) on 16-point
     /// windows of orthoglide and random: 0.4 % on the bench window, at most 33 % above it (an over-estimate, as a
     /// Rayleigh quotient is); exactly singular windows give 0. `None` (singular) when the factorisation fails.
-    pub(crate) fn solve_with_conditioning(&self) -> Option<(SVector<f64, N>, f64)> {
+    pub fn solve_with_conditioning(&self) -> Option<(SVector<f64, N>, f64)> {
         let s = self.column_scale();
         let scaled = self.scaled_jtj();
         let cholesky = FixedCholesky::factor(&scaled)?;

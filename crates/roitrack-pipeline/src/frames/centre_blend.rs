@@ -1,8 +1,8 @@
 //! The centre of a blob measured in its window, made of two: its moments and its outline, weighted by how well each
 //! kind fits static poses of the frames ([`CentreBlend`]).
 
-use roitrack_core::estimator::{Observation, refine_static_pose};
 use roitrack_core::{Measurement, SpatioTemporalModel};
+use roitrack_estimators::{Observation, refine_static_pose};
 
 use super::FrameTracker;
 use crate::scheduler::Predictor;

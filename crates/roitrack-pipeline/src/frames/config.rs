@@ -1,6 +1,6 @@
 //! The frame tracker's settings, and the estimator's tuning made for frames.
 
-use roitrack_core::estimator::{
+use roitrack_estimators::{
     Adaptation, EstimatorConfig, MotionModel, MotionModelKind, NoiseSample, TrackerConfig,
 };
 use roitrack_image::CentroidOptions;
@@ -76,7 +76,7 @@ impl FrameTrackerConfig {
     ///   are half a second at 30 Hz).
     ///
     /// ```
-    /// use roitrack_core::estimator::{
+    /// use roitrack_estimators::{
     ///     Adaptation, EstimatorConfig, MotionModel, MotionModelKind, NoiseSample, TrackerConfig,
     /// };
     /// use roitrack_pipeline::frames::FrameTrackerConfig;

@@ -11,10 +11,10 @@
 
 use std::collections::VecDeque;
 
-use roitrack_core::estimator::{Emit, Estimator, Observation, WindowProblem};
 use roitrack_core::solver::{SolverOptions, solve};
 use roitrack_core::stats::chi2_upper_0_1_percent;
 use roitrack_core::{Measurement, MotionState, SpatioTemporalModel};
+use roitrack_estimators::{Emit, Estimator, Observation, WindowProblem};
 
 use super::restart::{RESTART_TWIST_MAX_GAP_S, RESTART_TWIST_SIGMAS};
 use super::{FrameError, FrameTracker, RESTART_RESIDUAL_PX, observation_of};

@@ -46,11 +46,11 @@ pub use roitrack_image::window::{FlatWindow, flatten_window, measure_flat_window
 pub use stream::{FrameStreamError, track_frame_stream, track_frame_stream_leaving_out};
 
 use nalgebra::Vector2;
-use roitrack_core::estimator::{
+use roitrack_core::{CameraModel, Measurement, Target};
+use roitrack_estimators::{
     ConfigError, Emit, Estimate, Estimator, EstimatorConfig, MotionModel, Observation, TrackStatus,
     Tracker, TrackerConfig,
 };
-use roitrack_core::{CameraModel, Measurement, Target};
 use roitrack_image::{Frame, PhotoScratch, Polarity};
 
 use crate::photo::PolarityChoice;
@@ -516,7 +516,7 @@ mod tests {
         // `--jerk-psd 100 --angular-jerk-psd 300`: the global-shutter defaults' values, chosen by the user.
         let given = FrameTrackerConfig::frame_estimator(
             TrackerConfig {
-                estimator: EstimatorConfig::Kalman(roitrack_core::estimator::KalmanTuning {
+                estimator: EstimatorConfig::Kalman(roitrack_estimators::KalmanTuning {
                     motion_model: MotionModel::constant_acceleration_with(Some(100.0), Some(300.0)),
                     ..Default::default()
                 }),

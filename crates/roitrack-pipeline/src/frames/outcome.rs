@@ -1,7 +1,7 @@
 //! What the frame tracker gives: each frame's outcome and how it was measured, the tally of a run, and why a frame
 //! could not be processed.
 
-use roitrack_core::estimator::{Estimate, EstimatorReport, TrackError};
+use roitrack_estimators::{Estimate, EstimatorReport, TrackError};
 use roitrack_image::{Polarity, RejectionCounts};
 use thiserror::Error;
 

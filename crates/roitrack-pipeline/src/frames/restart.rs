@@ -1,10 +1,10 @@
 //! A new track from a frame found whole: its pose the frame's static pose, its twist and its labelling of a
 //! symmetric target the ones that carry the last trusted pose to it.
 
-use roitrack_core::estimator::Estimator;
-use roitrack_core::estimator::Matrix12;
 use roitrack_core::target::{Symmetry, TargetAmbiguity};
 use roitrack_core::{Acceleration, MotionState, Target};
+use roitrack_estimators::Estimator;
+use roitrack_estimators::Matrix12;
 
 use super::{FrameError, FrameTracker};
 use crate::realtime::full_frame_covariance;

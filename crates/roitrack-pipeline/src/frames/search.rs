@@ -2,9 +2,9 @@
 //! when it cannot be identified, the frame's blobs matched to the running track's predicted points.
 
 use nalgebra::Vector2;
-use roitrack_core::estimator::Estimator;
 use roitrack_core::target::Symmetry;
 use roitrack_core::{Measurement, MotionState};
+use roitrack_estimators::Estimator;
 use roitrack_image::{Frame, PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs};
 
 use super::{FrameError, FrameMethod, FrameTracker};

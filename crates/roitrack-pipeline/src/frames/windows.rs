@@ -6,7 +6,7 @@ use std::cell::RefCell;
 use nalgebra::{Vector2, Vector3};
 use rayon::prelude::*;
 use roitrack_core::Acceleration;
-use roitrack_core::estimator::Observation;
+use roitrack_estimators::Observation;
 use roitrack_image::photo::OutlineScratch;
 use roitrack_image::window::{flatten_window, measure_flat_window, window_outline_centre};
 use roitrack_image::{BlobRejection, CentroidOptions, Frame, Polarity};

@@ -13,7 +13,7 @@
 //! have a blob there (within a quarter of the projected spacing); the correspondences grow to all such blobs and the
 //! pose is solved again. The files are nominal: a camera file a few percent off, diameters drawn to spec or missing.
 //! So a hypothesis is accepted when its residual is what the centroid noise and a model at the bounds users' files
-//! stay within explain ([`ModelResidual::bound_px2`](roitrack_core::estimator::ModelResidual::bound_px2)), nearly every point it predicts in view is found, and the
+//! stay within explain ([`ModelResidual::bound_px2`](roitrack_estimators::ModelResidual::bound_px2)), nearly every point it predicts in view is found, and the
 //! blobs' sizes agree with the diameters up to one common scale (a nominal diameter off by up to 2x). The best
 //! accepted hypothesis wins; another one as good with a different labelling is either the target's own symmetry (a
 //! rigid motion of the target onto itself, such as a half turn of a grid without a marked point): then the labelling
@@ -42,11 +42,11 @@ pub(crate) mod sparse;
 pub(crate) mod spatial;
 
 use nalgebra::{Vector2, Vector3};
-use roitrack_core::estimator::{
-    Observation, best_static_pose, relabelling_is_rival, static_model_residual,
-};
 use roitrack_core::stats::f_equal_dof_upper_quantile;
 use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
+use roitrack_estimators::{
+    Observation, best_static_pose, relabelling_is_rival, static_model_residual,
+};
 use std::collections::HashMap;
 
 use crate::matching::{DetectedBlob, MatchError};
@@ -73,7 +73,7 @@ const ALWAYS_SEARCHED_POINTS: usize = 6;
 /// The model error a hypothesis's residual is allowed (and a rival's advantage over the best), in standard
 /// deviations of [`MODEL_UNCERTAINTY`]: the bounds users' camera and target files stay within.
 ///
-/// [`MODEL_UNCERTAINTY`]: roitrack_core::estimator::MODEL_UNCERTAINTY
+/// [`MODEL_UNCERTAINTY`]: roitrack_estimators::MODEL_UNCERTAINTY
 const MODEL_BOUND_SIGMAS: f64 = 2.0;
 
 /// How sure the residuals must make the best labelling against a rival on as many points for the rival to be

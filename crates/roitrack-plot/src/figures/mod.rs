@@ -25,8 +25,8 @@ use std::path::{Path, PathBuf};
 
 use plotters::coord::Shift;
 use plotters::prelude::*;
-use roitrack_core::estimator::Estimate;
 use roitrack_core::stats;
+use roitrack_estimators::Estimate;
 use roitrack_eval::{EstimateErrors, Metrics};
 
 use crate::{PlotError, register_font};
@@ -70,7 +70,7 @@ impl TrackSeries {
     /// estimates (as [`roitrack_eval::estimate_errors_of`] and [`EstimateErrors::metrics`] give them).
     ///
     /// ```
-    /// use roitrack_core::estimator::{TrackerConfig, track_all};
+    /// use roitrack_estimators::{TrackerConfig, track_all};
     /// use roitrack_eval::{EvalOptions, estimate_errors_of};
     /// use roitrack_plot::{TrackSeries, TruthSeries, write_figures};
     /// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, simulate};

@@ -266,7 +266,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
 /// what a user's control thread pays per read.
 fn estimate_handle_read(budget: Duration) -> Timing {
     let (mut publisher, reader) = roitrack::servo::handle::estimate_channel();
-    publisher.publish(&roitrack::core::estimator::Estimate::bench());
+    publisher.publish(&roitrack::estimators::Estimate::bench());
     time_item(|| reader.read(), budget)
 }
 

@@ -27,7 +27,7 @@ pub struct CompareArgs {
     #[arg(long, default_value_t = 1, conflicts_with = "sweep")]
     pub seed: u64,
     /// Centroid noise (px, per axis).
-    #[arg(long, default_value_t = 0.1, conflicts_with = "sweep", value_parser = crate::ranges::within(0.0..=roitrack::core::estimator::MAX_NOISE_PX, " px", "more than a ROI's half-width is no centroid"))]
+    #[arg(long, default_value_t = 0.1, conflicts_with = "sweep", value_parser = crate::ranges::within(0.0..=roitrack::estimators::MAX_NOISE_PX, " px", "more than a ROI's half-width is no centroid"))]
     pub noise_px: f64,
     /// The scenario on your own rig (not with --sweep, whose cases are fixed).
     #[command(flatten)]
