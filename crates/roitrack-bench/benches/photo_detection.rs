@@ -31,8 +31,8 @@ use rand::{Rng, SeedableRng};
 use roitrack_core::camera::{PinholeIntrinsics, PlumbBob};
 use roitrack_core::target::{CircleGrid, GridLayout};
 use roitrack_core::{CameraModel, Target, TargetPoint};
+use roitrack_detect::photo::{PhotoOptions, PolarityChoice, detect_target};
 use roitrack_image::{Frame, PhotoScratch, Polarity, detect_photo_blobs};
-use roitrack_pipeline::photo::{PhotoOptions, PolarityChoice, detect_target};
 use roitrack_sim::glints::add_glints;
 use roitrack_sim::photo::{Clutter, PhotoScene, render_photo};
 

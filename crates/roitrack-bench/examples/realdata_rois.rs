@@ -18,9 +18,9 @@
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
+use roitrack_detect::photo::{PhotoDetection, PhotoOptions, detect_target};
 use roitrack_image::{BlobRejection, CentroidOptions, Frame, Roi};
 use roitrack_pipeline::frames::{FlatWindow, flatten_window, measure_flat_window};
-use roitrack_pipeline::photo::{PhotoDetection, PhotoOptions, detect_target};
 use roitrack_pipeline::scheduler::SchedulerConfig;
 
 #[derive(Debug, Default)]

@@ -15,9 +15,9 @@
 use std::process::ExitCode;
 
 use roitrack_core::time::{Readout, TimeModel};
+use roitrack_detect::photo::PolarityChoice;
 use roitrack_image::Frame;
 use roitrack_pipeline::frames::{FrameTracker, FrameTrackerConfig};
-use roitrack_pipeline::photo::PolarityChoice;
 
 fn main() -> ExitCode {
     let args: Vec<String> = std::env::args().skip(1).collect();

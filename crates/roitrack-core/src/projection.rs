@@ -2,7 +2,76 @@
 
 use nalgebra::{Matrix2x3, Matrix3, Vector2, Vector3};
 
-use crate::{Matrix2x12, MotionState, PinholeIntrinsics, so3};
+use crate::{CameraModel, Matrix2x12, MotionState, PinholeIntrinsics, so3};
+
+/// The centre of a disk's image minus the image of its centre (raw px): the area centroid of the projected outline
+/// (distortion included) against the projected centre. `None` if the disk is not wholly in front of the camera.
+/// A disk's image is not centred on its centre's image once the disk is tilted to the line of sight (perspective)
+/// or the lens distorts it; blob centres are corrected by this before they are compared with projected centres.
+///
+/// ```
+/// use nalgebra::Vector3;
+/// use roitrack_core::projection::disk_centre_displacement_px;
+/// use roitrack_core::{CameraModel, MotionState};
+///
+/// let camera = CameraModel::canonical();
+/// let state = MotionState::at_rest(Default::default(), Vector3::new(0.0, 0.0, 0.6));
+/// // A 10 mm disk facing the camera on its axis: its image is centred on its centre's image.
+/// let on_axis = disk_centre_displacement_px(&camera, &state, &Vector3::zeros(), &Vector3::z(), 0.01).unwrap();
+/// assert!(on_axis.norm() < 1e-3);
+/// // The same disk 0.2 m to the side: its image's centre lies outward of its centre's image.
+/// let side = Vector3::new(0.2, 0.0, 0.0);
+/// let off_axis = disk_centre_displacement_px(&camera, &state, &side, &Vector3::z(), 0.01).unwrap();
+/// assert!(off_axis.x.abs() > on_axis.x.abs());
+/// ```
+pub fn disk_centre_displacement_px(
+    camera: &CameraModel,
+    state: &MotionState,
+    centre_in_obj_m: &Vector3<f64>,
+    normal_in_obj: &Vector3<f64>,
+    diameter_m: f64,
+) -> Option<Vector2<f64>> {
+    // 32 vertices: the polygon's centroid is the outline's to well under a thousandth of a pixel.
+    const SAMPLES: usize = 32;
+    let axis_u = normal_in_obj
+        .cross(&Vector3::x())
+        .try_normalize(1e-9)
+        .or_else(|| normal_in_obj.cross(&Vector3::y()).try_normalize(1e-9))?;
+    let axis_v = normal_in_obj.cross(&axis_u);
+    let r = 0.5 * diameter_m;
+    // The outline in the camera frame: the centre plus the rotated axes' combinations (no rotation per vertex).
+    let centre_in_cam = state.point_in_cam_at(centre_in_obj_m, 0.0);
+    let (axis_u, axis_v) = (
+        state.cam_r_obj * (r * axis_u),
+        state.cam_r_obj * (r * axis_v),
+    );
+    let mut outline = [Vector2::zeros(); SAMPLES];
+    // The unit circle by rotation, one sine and cosine in all.
+    let (step_sin, step_cos) = (std::f64::consts::TAU / SAMPLES as f64).sin_cos();
+    let (mut cos, mut sin) = (1.0f64, 0.0f64);
+    for o in outline.iter_mut() {
+        let p = centre_in_cam + cos * axis_u + sin * axis_v;
+        (cos, sin) = (
+            cos * step_cos - sin * step_sin,
+            sin * step_cos + cos * step_sin,
+        );
+        *o = camera.raw_pixel_from_cam(&p)?;
+    }
+    let centre = camera.raw_pixel_from_cam(&centre_in_cam)?;
+    // Area centroid of the polygon (shoelace), relative to the centre for precision.
+    let (mut area2, mut cx, mut cy) = (0.0, 0.0, 0.0);
+    for k in 0..SAMPLES {
+        let (a, b) = (outline[k] - centre, outline[(k + 1) % SAMPLES] - centre);
+        let cross = a.x * b.y - b.x * a.y;
+        area2 += cross;
+        cx += (a.x + b.x) * cross;
+        cy += (a.y + b.y) * cross;
+    }
+    if area2.abs() < 1e-12 {
+        return None;
+    }
+    Some(Vector2::new(cx, cy) / (3.0 * area2))
+}
 
 /// Which interaction matrix to build.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

@@ -1,6 +1,6 @@
 //! Image files in, [`Frame`]s out: PNG, JPEG, PGM/PPM (PNM, PAM) and TIFF, 8 or 16 bits, grey or colour.
 //!
-//! A full frame is what `roitrack_pipeline::find_target` looks for the target in. Colour is turned into grey with the
+//! A full frame is what `roitrack_detect::find_target` looks for the target in. Colour is turned into grey with the
 //! luma weights of ITU-R BT.601 (those of OpenCV's `cvtColor(..., COLOR_RGB2GRAY)`): `Y = 0.299 R + 0.587 G +
 //! 0.114 B`, rounded to the nearest integer. An alpha channel is dropped (not composited). 16-bit files keep their
 //! 16 bits (`bit_depth` 16); everything else is 8 bits.

@@ -20,8 +20,8 @@ use roitrack_image::{
 };
 use thiserror::Error;
 
-use crate::matching::{MatchError, find_target};
 use crate::scheduler::{Predictor, RoiScheduler, SchedulerConfig};
+use roitrack_detect::matching::{MatchError, find_target};
 
 /// Options of the loop.
 #[derive(Debug, Clone, Copy, PartialEq)]

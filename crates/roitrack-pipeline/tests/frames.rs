@@ -1,17 +1,15 @@
 //! The frame tracker on simulated image sequences with ground truth: global and rolling shutters, bright and dark
 //! blobs, fast motion, losses and bad frames.
 
-mod common;
-
 use nalgebra::{Vector2, Vector3};
 use rand::SeedableRng;
 use roitrack_core::target::{CircleGrid, GridLayout, TargetAmbiguity};
 use roitrack_core::time::Readout;
 use roitrack_core::{CameraModel, MotionState, Target, TargetPoint, so3};
+use roitrack_detect::photo::{PhotoOptions, detect_target};
 use roitrack_estimators::{Adaptation, MotionModelKind, TrackStatus, TrackerConfig};
 use roitrack_image::{Frame, Polarity};
 use roitrack_pipeline::frames::{FrameMethod, FrameTracker, FrameTrackerConfig};
-use roitrack_pipeline::photo::{PhotoOptions, detect_target};
 use roitrack_sim::photo::{CircleShade, Clutter, PhotoScene, render_photo};
 use roitrack_sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
 
@@ -978,7 +976,7 @@ fn a_dense_hexagonal_grid_is_measured_in_its_windows() {
     // brightest, a neighbour in up to 60 of 230 windows), 45 of 60 frames were measured in windows. Seen by the
     // built-in camera and by a 640 x 480 camera (blobs 7 px across, 14 px apart).
     let target = hexagonal_grid();
-    let vga = common::camera(640, 480, 600.0, (320.0, 240.0), -0.05);
+    let vga = roitrack_sim::user_cameras::camera(640, 480, 600.0, (320.0, 240.0), -0.05);
     for (name, camera) in [
         ("built-in camera", CameraModel::canonical()),
         ("640 x 480", vga),
@@ -1013,10 +1011,13 @@ fn a_dense_grid_seen_through_a_nominal_camera_file_is_tracked_as_well_as_detecte
     // then three new tracks). Tracked, the poses are within 1.2 times the error of those found frame by frame, every
     // estimate after the first two vouched for, and all frames but 6 of 60 in windows.
     let target = hexagonal_grid();
-    let camera = common::camera(640, 480, 600.0, (320.0, 240.0), -0.05);
+    let camera = roitrack_sim::user_cameras::camera(640, 480, 600.0, (320.0, 240.0), -0.05);
     let mut jitters = (0.0, 0.0);
     for seed in [7, 8, 9, 10, 11, 12] {
-        let file = common::nominal(&camera, &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed));
+        let file = roitrack_sim::user_cameras::nominal(
+            &camera,
+            &mut rand_chacha::ChaCha8Rng::seed_from_u64(seed),
+        );
         let scenario = Scenario::new(ScenarioKind::Sweep, seed)
             .with_camera(camera.clone())
             .with_target(target.clone());

@@ -7,18 +7,16 @@
 //! The tracker must be no worse than detecting each frame alone (`detect_target`) against that reference, smoother,
 //! and must not dispute and restart on footage whose only fault is the model's error.
 
-mod common;
-
-use common::{camera, nominal};
 use nalgebra::{Rotation3, Vector2, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{MotionState, SpatioTemporalModel, Target, TargetPoint};
+use roitrack_detect::photo::{PhotoOptions, detect_target};
 use roitrack_estimators::{Observation, solve_static_pose};
 use roitrack_image::Frame;
 use roitrack_pipeline::frames::{FrameTracker, FrameTrackerConfig};
-use roitrack_pipeline::photo::{PhotoOptions, detect_target};
 use roitrack_sim::photo::{CircleShade, Clutter, PhotoScene, render_photo};
+use roitrack_sim::user_cameras::{camera, nominal};
 
 const FPS_HZ: f64 = 30.0;
 const FRAMES: usize = 150;

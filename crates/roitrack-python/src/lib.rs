@@ -21,10 +21,10 @@ use pyo3::exceptions::{PyFileNotFoundError, PyOSError, PyTypeError, PyValueError
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use roitrack::core::camera::PinholeIntrinsics;
+use roitrack::detect::{PhotoError, PhotoOptions, PolarityChoice};
 use roitrack::estimators::{TrackerOptions, UnknownName};
 use roitrack::formats::FormatError;
 use roitrack::nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
-use roitrack::pipeline::{PhotoError, PhotoOptions, PolarityChoice};
 use roitrack::sim::{Scenario, ScenarioKind, SimulationOptions};
 use roitrack::{
     CameraModel, Estimate as RustEstimate, Estimator, Frame, Measurement, PoseSample, Target,
@@ -813,7 +813,7 @@ fn detect<'py>(
         ..PhotoOptions::default()
     };
     let (camera, target) = (&camera.inner, &target.inner);
-    let outcome = py.detach(|| roitrack::pipeline::detect_target(camera, target, &frame, &options));
+    let outcome = py.detach(|| roitrack::detect::detect_target(camera, target, &frame, &options));
     let dict = PyDict::new(py);
     match outcome {
         Ok(found) => {

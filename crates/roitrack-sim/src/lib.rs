@@ -9,7 +9,8 @@
 //! or dark ones on an unevenly lit background, with dense ground truth and each blob's true centre at its row time
 //! ([`frames`]); and several ROI cameras around one scenario, each on its own clock, with the truth in the rig's frame
 //! ([`multi_camera`]). A scenario's motion can be seen by any camera and carry any target
-//! ([`Scenario::with_camera`], [`Scenario::with_target`]).
+//! ([`Scenario::with_camera`], [`Scenario::with_target`]); the cameras of users' footage and the nominal files users
+//! have for them are in [`user_cameras`].
 #![deny(missing_docs)]
 
 pub mod frames;
@@ -20,6 +21,7 @@ pub mod photo;
 pub mod rigs;
 pub mod rois;
 pub mod scenario;
+pub mod user_cameras;
 
 pub use frames::{
     DARK_BLOB_CONTRAST, DEFAULT_TRUTH_RATE_HZ, FrameOptions, FrameSequence, FrameSequenceError,

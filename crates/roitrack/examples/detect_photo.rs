@@ -10,8 +10,8 @@
 //! the truth. With arguments it reads your camera file, target file and photograph.
 
 use roitrack::core::target::{CircleGrid, GridLayout};
+use roitrack::detect::{PhotoOptions, detect_target};
 use roitrack::nalgebra::{Rotation3, Vector3};
-use roitrack::pipeline::{PhotoOptions, detect_target};
 use roitrack::sim::photo::{PhotoScene, render_photo};
 use roitrack::{CameraModel, Target};
 

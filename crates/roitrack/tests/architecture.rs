@@ -23,8 +23,17 @@ const ALLOWED: &[(&str, &[&str])] = &[
         &["roitrack-core", "roitrack-estimators", "roitrack-eval"],
     ),
     (
-        "roitrack-pipeline",
+        "roitrack-detect",
         &["roitrack-core", "roitrack-estimators", "roitrack-image"],
+    ),
+    (
+        "roitrack-pipeline",
+        &[
+            "roitrack-core",
+            "roitrack-estimators",
+            "roitrack-image",
+            "roitrack-detect",
+        ],
     ),
     (
         "roitrack-demo",
@@ -91,6 +100,7 @@ const ALLOWED: &[(&str, &[&str])] = &[
             "roitrack-sim",
             "roitrack-eval",
             "roitrack-formats",
+            "roitrack-detect",
             "roitrack-pipeline",
             "roitrack-plot",
             "roitrack-demo",

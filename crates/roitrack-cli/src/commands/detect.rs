@@ -1,4 +1,4 @@
-//! `roitrack detect`: find, identify and measure the target in photographs (see [`roitrack::pipeline::photo`]).
+//! `roitrack detect`: find, identify and measure the target in photographs (see [`roitrack::detect::photo`]).
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -6,8 +6,8 @@ use std::time::Instant;
 
 use anyhow::{Result, bail};
 use clap::{Args, ValueEnum};
+use roitrack::detect::{PhotoDetection, PhotoError, PhotoOptions, PolarityChoice, detect_target};
 use roitrack::formats::{MarkKind, OverlayMark};
-use roitrack::pipeline::{PhotoDetection, PhotoError, PhotoOptions, PolarityChoice, detect_target};
 use roitrack::{CameraModel, Target};
 use serde_json::json;
 

@@ -596,7 +596,8 @@ pub(crate) fn frame_config_of(
     distance_m: Option<&[f64]>,
     no_rs_smoothing: bool,
 ) -> Result<roitrack::pipeline::FrameTrackerConfig> {
-    use roitrack::pipeline::{FrameTrackerConfig, PhotoOptions};
+    use roitrack::detect::PhotoOptions;
+    use roitrack::pipeline::FrameTrackerConfig;
     Ok(FrameTrackerConfig {
         // Without --adapt or --motion-model, the frame tracker's own defaults: the noise learnt, the process noise as
         // given, constant acceleration.

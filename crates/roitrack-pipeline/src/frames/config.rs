@@ -5,8 +5,8 @@ use roitrack_estimators::{
 };
 use roitrack_image::CentroidOptions;
 
-use crate::photo::PhotoOptions;
 use crate::scheduler::SchedulerConfig;
+use roitrack_detect::photo::PhotoOptions;
 
 #[cfg(doc)]
 use super::{FrameTracker, track_frame_stream};

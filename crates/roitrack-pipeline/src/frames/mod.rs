@@ -53,15 +53,15 @@ use roitrack_estimators::{
 };
 use roitrack_image::{Frame, PhotoScratch, Polarity};
 
-use crate::photo::PolarityChoice;
 use crate::scheduler::{Predictor, RoiScheduler};
 use joint_start::RecentFrames;
 use restart::{TrackMemory, symmetric_twins};
+use roitrack_detect::photo::PolarityChoice;
 use search::WholeFrameSearch;
 use windows::{Windows, carried_with_acceleration};
 
 #[cfg(doc)]
-use crate::photo::detect_target;
+use roitrack_detect::photo::detect_target;
 #[cfg(doc)]
 use roitrack_image::measure_blob;
 

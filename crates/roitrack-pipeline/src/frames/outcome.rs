@@ -8,7 +8,7 @@ use thiserror::Error;
 #[cfg(doc)]
 use super::FrameTracker;
 #[cfg(doc)]
-use crate::photo::PolarityChoice;
+use roitrack_detect::photo::PolarityChoice;
 
 /// How a frame was measured.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

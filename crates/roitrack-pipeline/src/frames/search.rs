@@ -8,8 +8,8 @@ use roitrack_estimators::Estimator;
 use roitrack_image::{Frame, PhotoBlobOptions, PhotoScratch, Polarity, detect_photo_blobs};
 
 use super::{FrameError, FrameMethod, FrameTracker};
-use crate::photo::{PolarityChoice, detect_target};
 use crate::scheduler::Predictor;
+use roitrack_detect::photo::{PolarityChoice, detect_target};
 
 /// The whole-frame search's settings and buffers, the polarity it decided, and the target's symmetric twins.
 #[derive(Debug)]

@@ -13,8 +13,8 @@ use roitrack_image::{BlobRejection, CentroidOptions, Frame, Polarity};
 
 use super::FrameTracker;
 use super::centre_blend::CentreBlend;
-use crate::identify::disk_centre_displacement_px;
 use crate::scheduler::{Predictor, RoiRequest, RoiScheduler};
+use roitrack_core::projection::disk_centre_displacement_px;
 
 /// The window path's state: the scheduler that sizes each window, and the buffers a frame's windows reuse.
 #[derive(Debug)]

@@ -7,9 +7,9 @@
 use nalgebra::{Rotation3, Vector3};
 use roitrack_core::target::{CircleGrid, GridLayout};
 use roitrack_core::{CameraModel, Target};
+use roitrack_detect::detect_target;
+use roitrack_detect::photo::{PhotoOptions, PolarityChoice, likely_polarity};
 use roitrack_image::Polarity;
-use roitrack_pipeline::detect_target;
-use roitrack_pipeline::photo::{PhotoOptions, PolarityChoice, likely_polarity};
 use roitrack_sim::glints::add_glints;
 use roitrack_sim::photo::{PhotoScene, render_photo};
 

@@ -32,7 +32,7 @@ impl From<&roitrack_image::Centroid> for DetectedBlob {
 ///
 /// ```
 /// use roitrack_core::{CameraModel, Target};
-/// use roitrack_pipeline::matching::{DetectedBlob, MatchError, match_full_frame};
+/// use roitrack_detect::matching::{DetectedBlob, MatchError, match_full_frame};
 ///
 /// // Three blobs cannot show a 16-point target: identification takes 6 at least.
 /// let blobs = [DetectedBlob { u_px: 500.0, v_px: 500.0, area_px: 30.0 }; 3];
@@ -140,7 +140,7 @@ pub struct TargetDetection {
 /// use rand_chacha::ChaCha8Rng;
 /// use roitrack_core::{CameraModel, MotionState, Target};
 /// use roitrack_image::{CentroidOptions, Frame, RenderScratch, RoiRenderer, SensorModel};
-/// use roitrack_pipeline::find_target;
+/// use roitrack_detect::find_target;
 /// use nalgebra::{Rotation3, Vector3};
 ///
 /// let (camera, target) = (CameraModel::canonical(), Target::grid4x4());

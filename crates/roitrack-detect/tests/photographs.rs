@@ -11,9 +11,9 @@ use std::time::Instant;
 use nalgebra::{Rotation3, Vector2, Vector3};
 use roitrack_core::target::{CircleGrid, GridLayout};
 use roitrack_core::{CameraModel, Target, TargetPoint, so3};
+use roitrack_detect::detect_target;
+use roitrack_detect::photo::{PhotoDetection, PhotoError, PhotoOptions, PolarityChoice};
 use roitrack_image::{Frame, Polarity};
-use roitrack_pipeline::detect_target;
-use roitrack_pipeline::photo::{PhotoDetection, PhotoError, PhotoOptions, PolarityChoice};
 use roitrack_sim::photo::{
     Background, CircleShade, Clutter, Illumination, PhotoScene, RenderedPhoto, Shadow, render_photo,
 };
@@ -1161,7 +1161,7 @@ fn a_shadow_edge_across_a_circle_leaves_its_centre_in_place() {
 /// them off it are tried.
 #[test]
 fn stray_blobs_on_the_lattice_beyond_the_target_do_not_hide_it() {
-    use roitrack_pipeline::matching::DetectedBlob;
+    use roitrack_detect::matching::DetectedBlob;
     let camera = CameraModel::canonical();
     let target = Target::grid4x4();
     let state =
@@ -1185,11 +1185,11 @@ fn stray_blobs_on_the_lattice_beyond_the_target_do_not_hide_it() {
             blob(f64::from(id % 4), f64::from(id / 4), d)
         })
         .collect();
-    assert!(roitrack_pipeline::identify(&camera, &target, &blobs).is_ok());
+    assert!(roitrack_detect::identify(&camera, &target, &blobs).is_ok());
     // Two strays in row -1, above columns 2 and 3.
     blobs.push(blob(2.0, -1.0, 0.006));
     blobs.push(blob(3.0, -1.0, 0.006));
-    let found = roitrack_pipeline::identify(&camera, &target, &blobs)
+    let found = roitrack_detect::identify(&camera, &target, &blobs)
         .unwrap_or_else(|e| panic!("with two strays: {e}"));
     assert_eq!(found.pairs.len(), 16);
     assert!(!found.ambiguous);

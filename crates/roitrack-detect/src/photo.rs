@@ -45,7 +45,7 @@ impl PhotoOptions {
     ///
     /// ```
     /// use roitrack_core::{CameraModel, Target};
-    /// use roitrack_pipeline::photo::PhotoOptions;
+    /// use roitrack_detect::photo::PhotoOptions;
     /// let options = PhotoOptions { distance_range_m: Some((0.15, 3.0)), ..PhotoOptions::default() };
     /// // 6 and 9 mm circles at 0.15-3 m through a 1500 px lens: 3 to 90 px across, as drawn.
     /// let blobs = options.blob_options(&CameraModel::canonical(), &Target::grid4x4());
@@ -136,7 +136,7 @@ impl PhotoDetection {
 /// ```
 /// use roitrack_core::{CameraModel, Target};
 /// use roitrack_image::Frame;
-/// use roitrack_pipeline::photo::{PhotoError, PhotoOptions, detect_target};
+/// use roitrack_detect::photo::{PhotoError, PhotoOptions, detect_target};
 ///
 /// let mut frame = Frame::default();
 /// frame.resize(640, 480, 8);
@@ -228,7 +228,7 @@ fn detected(blobs: &[PhotoBlob]) -> Vec<DetectedBlob> {
 /// use nalgebra::{Rotation3, Vector3};
 /// use roitrack_core::{CameraModel, MotionState, Target};
 /// use roitrack_image::{Frame, RenderScratch, RoiRenderer, SensorModel, Polarity};
-/// use roitrack_pipeline::photo::{PhotoOptions, detect_target};
+/// use roitrack_detect::photo::{PhotoOptions, detect_target};
 /// use rand::SeedableRng;
 ///
 /// // A rendered frame of bright blobs; `Auto` finds them bright.

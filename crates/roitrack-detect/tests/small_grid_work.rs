@@ -8,8 +8,8 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::target::{CircleGrid, GridLayout};
 use roitrack_core::{CameraModel, MotionState, SpatioTemporalModel, Target};
-use roitrack_pipeline::detect_target;
-use roitrack_pipeline::photo::PhotoOptions;
+use roitrack_detect::detect_target;
+use roitrack_detect::photo::PhotoOptions;
 use roitrack_sim::photo::{PhotoScene, render_photo};
 
 /// At most this many hypotheses for a small grid seen whole: the placements of a grown lattice on the target (8 for

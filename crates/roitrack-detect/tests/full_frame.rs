@@ -1,7 +1,7 @@
 //! Initialisation from a rendered full frame: detect, match, pose.
 
+use roitrack_detect::matching::{DetectedBlob, match_full_frame};
 use roitrack_image::{CentroidOptions, RoiRenderer, SensorModel, detect_blobs};
-use roitrack_pipeline::matching::{DetectedBlob, match_full_frame};
 use roitrack_sim::{Scenario, ScenarioKind};
 
 #[test]
@@ -50,8 +50,8 @@ fn initialises_from_a_rendered_full_frame() {
 #[test]
 fn rolling_shutter_blobs_are_where_the_target_was_when_their_row_was_read() {
     use roitrack_core::{MotionState, Readout, TimeModel};
+    use roitrack_detect::find_target;
     use roitrack_image::{Frame, RenderScratch};
-    use roitrack_pipeline::find_target;
 
     let line_delay_s = 20e-6;
     let scenario = Scenario::new(ScenarioKind::Static, 1);

@@ -594,57 +594,6 @@ fn related_by_symmetry(target: &Target, from: &Verified, to: &Verified) -> bool 
     })
 }
 
-/// The centre of a disk's image minus the image of its centre (raw px): the area centroid of the projected outline
-/// (distortion included) against the projected centre. `None` if the disk is not wholly in front of the camera.
-pub(crate) fn disk_centre_displacement_px(
-    camera: &CameraModel,
-    state: &MotionState,
-    centre_in_obj_m: &Vector3<f64>,
-    normal_in_obj: &Vector3<f64>,
-    diameter_m: f64,
-) -> Option<Vector2<f64>> {
-    // 32 vertices: the polygon's centroid is the outline's to well under a thousandth of a pixel.
-    const SAMPLES: usize = 32;
-    let axis_u = normal_in_obj
-        .cross(&Vector3::x())
-        .try_normalize(1e-9)
-        .or_else(|| normal_in_obj.cross(&Vector3::y()).try_normalize(1e-9))?;
-    let axis_v = normal_in_obj.cross(&axis_u);
-    let r = 0.5 * diameter_m;
-    // The outline in the camera frame: the centre plus the rotated axes' combinations (no rotation per vertex).
-    let centre_in_cam = state.point_in_cam_at(centre_in_obj_m, 0.0);
-    let (axis_u, axis_v) = (
-        state.cam_r_obj * (r * axis_u),
-        state.cam_r_obj * (r * axis_v),
-    );
-    let mut outline = [Vector2::zeros(); SAMPLES];
-    // The unit circle by rotation, one sine and cosine in all.
-    let (step_sin, step_cos) = (std::f64::consts::TAU / SAMPLES as f64).sin_cos();
-    let (mut cos, mut sin) = (1.0f64, 0.0f64);
-    for o in outline.iter_mut() {
-        let p = centre_in_cam + cos * axis_u + sin * axis_v;
-        (cos, sin) = (
-            cos * step_cos - sin * step_sin,
-            sin * step_cos + cos * step_sin,
-        );
-        *o = camera.raw_pixel_from_cam(&p)?;
-    }
-    let centre = camera.raw_pixel_from_cam(&centre_in_cam)?;
-    // Area centroid of the polygon (shoelace), relative to the centre for precision.
-    let (mut area2, mut cx, mut cy) = (0.0, 0.0, 0.0);
-    for k in 0..SAMPLES {
-        let (a, b) = (outline[k] - centre, outline[(k + 1) % SAMPLES] - centre);
-        let cross = a.x * b.y - b.x * a.y;
-        area2 += cross;
-        cx += (a.x + b.x) * cross;
-        cy += (a.y + b.y) * cross;
-    }
-    if area2.abs() < 1e-12 {
-        return None;
-    }
-    Some(Vector2::new(cx, cy) / (3.0 * area2))
-}
-
 /// Identifies the target among `blobs` (raw pixel centres and areas) with no prior; see the module's documentation.
 /// List the strongest blobs first: for targets that are not grids only the first [`MAX_SEED_BLOBS`] (200) seed the
 /// search (every blob can be matched).
@@ -652,8 +601,8 @@ pub(crate) fn disk_centre_displacement_px(
 /// ```
 /// use nalgebra::{Rotation3, Vector3};
 /// use roitrack_core::{CameraModel, MotionState, Target};
-/// use roitrack_pipeline::identify::identify;
-/// use roitrack_pipeline::matching::DetectedBlob;
+/// use roitrack_detect::identify::identify;
+/// use roitrack_detect::matching::DetectedBlob;
 ///
 /// let (camera, target) = (CameraModel::canonical(), Target::grid4x4());
 /// let truth = MotionState::at_rest(Rotation3::from_euler_angles(0.3, -0.2, 2.5), Vector3::new(0.01, 0.0, 0.6));
@@ -1105,7 +1054,7 @@ fn finish(
                     .diameter_m
                     .map(|d| diameter_seen_m(d, chosen.area_scale))
                     .and_then(|d| {
-                        disk_centre_displacement_px(
+                        roitrack_core::projection::disk_centre_displacement_px(
                             camera,
                             &state,
                             &point.point_in_obj_m,

@@ -9,16 +9,14 @@
 //! file's error allows; given the distance range it is found as well. Without diameters nothing identifies a dot
 //! but its place: a cluttered view may then be refused, never answered wrong.
 
-mod common;
-
-use common::random_photo_camera;
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, Target, TargetPoint};
-use roitrack_pipeline::detect_target;
-use roitrack_pipeline::photo::{PhotoDetection, PhotoOptions};
+use roitrack_detect::detect_target;
+use roitrack_detect::photo::{PhotoDetection, PhotoOptions};
 use roitrack_sim::photo::{CircleShade, Clutter, PhotoScene, RenderedPhoto, render_photo};
+use roitrack_sim::user_cameras::random_photo_camera;
 
 /// Id of the large disk drawn in the middle of a plate (not in the target file).
 const DISK_ID: u32 = 999;

@@ -7,16 +7,14 @@
 //! photographs that show every dot whole, never wrong, and never flagged ambiguous when the key dot decided. The same
 //! grids without a key dot stay ambiguous (flagged) or right: relative sizes never invent a decision.
 
-mod common;
-
-use common::random_photo_camera;
 use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{Target, TargetPoint};
-use roitrack_pipeline::detect_target;
-use roitrack_pipeline::photo::PhotoOptions;
+use roitrack_detect::detect_target;
+use roitrack_detect::photo::PhotoOptions;
 use roitrack_sim::photo::{CircleShade, Clutter, PhotoScene, render_photo};
+use roitrack_sim::user_cameras::random_photo_camera;
 
 /// A `rows` x `cols` grid `spacing_m` apart, each dot `diameter_m` across but point 0's, `key_factor` times that.
 fn grid(rows: usize, cols: usize, spacing_m: f64, diameter_m: f64, key_factor: f64) -> Target {
