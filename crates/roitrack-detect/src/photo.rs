@@ -359,8 +359,12 @@ fn detect_target_with(
                 // few hundred glints cost as much to label and measure as identifying the target), and only the
                 // first in that order labelled in full and measured unless it fails.
                 let guess_candidates = find_rough(guess, scratch);
+                // Promises are compared with the whole view's size and with each other only: each is grown no
+                // further than the comparison needs (the right polarity's lattice, grown in full, was most of
+                // its cost).
                 let guess_promise =
-                    lattice_promise(camera, target, &rough(&guess_candidates)).unwrap_or(0);
+                    lattice_promise(camera, target, &rough(&guess_candidates), whole_view)
+                        .unwrap_or(0);
                 let (first, second) = if guess_promise >= whole_view {
                     (guess_candidates, None)
                 } else if guess_promise == 0 {
@@ -371,8 +375,14 @@ fn detect_target_with(
                     )
                 } else {
                     let other_candidates = guess_candidates.other_polarity_rough(scratch);
-                    let other_promise =
-                        lattice_promise(camera, target, &rough(&other_candidates)).unwrap_or(0);
+                    // Only whether it exceeds the guess's matters.
+                    let other_promise = lattice_promise(
+                        camera,
+                        target,
+                        &rough(&other_candidates),
+                        guess_promise + 1,
+                    )
+                    .unwrap_or(0);
                     if other_promise > guess_promise {
                         (other_candidates, Some(guess_candidates))
                     } else {

@@ -193,7 +193,10 @@ impl NodeMap {
 }
 
 /// Grows an image lattice from `seed` with first steps towards blobs `first` and `second` (positions `ideal`, areas
-/// `areas`). Blobs marked in `taken` are not used.
+/// `areas`). Blobs marked in `taken` are not used. The growth stops once it holds `max_nodes` nodes (it holds the
+/// three it starts from whatever `max_nodes`): they are then the first `max_nodes` nodes of the whole growth, which
+/// adds them in the same order, so a caller asking only whether a lattice reaches that size is spared the rest.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn grow(
     ideal: &[Vector2<f64>],
     areas: &[f64],
@@ -202,6 +205,7 @@ pub(crate) fn grow(
     seed: usize,
     first: usize,
     second: usize,
+    max_nodes: usize,
 ) -> GrownLattice {
     // About 200 look-ups a grown node (the 5 x 5 support of each of its 8 neighbours): a dense table of the nodes'
     // box, not a hash map.
@@ -214,7 +218,10 @@ pub(crate) fn grow(
     }
     let mut queue: VecDeque<(i32, i32)> = nodes.iter().map(|&(m, n, _)| (m, n)).collect();
     let mut support: Vec<(f64, f64, Vector2<f64>)> = Vec::with_capacity(25);
-    while let Some((m, n)) = queue.pop_front() {
+    'growth: while nodes.len() < max_nodes {
+        let Some((m, n)) = queue.pop_front() else {
+            break;
+        };
         let Some(from) = at.get(m, n) else {
             continue;
         };
@@ -254,6 +261,9 @@ pub(crate) fn grow(
                 at.insert((tm, tn), b);
                 nodes.push((tm, tn, b));
                 queue.push_back((tm, tn));
+                if nodes.len() >= max_nodes {
+                    break 'growth;
+                }
             }
         }
     }
@@ -412,7 +422,16 @@ mod tests {
         ideal.push(Vector2::new(100.0 + 21.0 * 8.0, 80.0 - 4.0 * 8.0));
         let areas = vec![50.0; ideal.len()];
         let index = PointIndex::new(&ideal, 20.0);
-        let grown = grow(&ideal, &areas, &index, &vec![false; ideal.len()], 0, 1, 7);
+        let grown = grow(
+            &ideal,
+            &areas,
+            &index,
+            &vec![false; ideal.len()],
+            0,
+            1,
+            7,
+            usize::MAX,
+        );
         assert_eq!(grown.nodes.len(), grid_blobs);
         assert!(grown.nodes.iter().all(|&(_, _, b)| b < grid_blobs));
         let target: Vec<Vector2<f64>> = (0..35)

@@ -702,10 +702,16 @@ pub(crate) fn on_lattice(target: &Target) -> bool {
 /// quadruples) cost about as much as its whole search. A caller choosing between sets of blobs (the polarities of
 /// a photograph) ranks them by it before it measures their centres precisely: rough centres, a few tenths of a pixel
 /// off, grow the same lattices.
+///
+/// The promise is given up to `cap` (the smaller of the two): a caller that only compares it with a threshold (the
+/// size of a whole view, another polarity's promise) needs no more, and the growth stops at a lattice that large
+/// (the largest grows to its last node otherwise: a target's whole lattice, where the ranking needed a fifth of it).
+/// The lattices grown before are the same either way, so the capped promise is the full one's, capped.
 pub(crate) fn lattice_promise(
     camera: &CameraModel,
     target: &Target,
     blobs: &[DetectedBlob],
+    cap: usize,
 ) -> Option<usize> {
     if !on_lattice(target) {
         return None;
@@ -717,9 +723,16 @@ pub(crate) fn lattice_promise(
     // The largest grown lattice's nodes, as many as the target has at most: an upper bound of the points its
     // placements put on blobs (computing those costs as much again as the growth, for a ranking that the growth
     // alone decides: a polarity's chance lattices are small).
-    // A lattice of as many nodes as the target has points cannot be beaten: the growth stops there.
-    let grown = grown_lattices(&ideal, &areas_px, &index, target.len());
-    Some(grown.first().map_or(0, |g| g.nodes.len().min(target.len())))
+    // A lattice of as many nodes as the target has points cannot be beaten, nor one of `cap` nodes exceed the
+    // answer: the growth stops at the fewer (and at 4 at the least, the smallest lattice counted, which the cap
+    // below then lowers).
+    let enough = cap.clamp(4, target.len());
+    let grown = grown_lattices(&ideal, &areas_px, &index, enough);
+    Some(
+        grown
+            .first()
+            .map_or(0, |g| g.nodes.len().min(target.len()).min(cap)),
+    )
 }
 
 /// The search of [`identify_if_promising`]: `Ok(None)` when it stopped for too small a promise.
@@ -1107,8 +1120,8 @@ fn lattice_hypotheses(
 }
 
 /// The lattices grown among the blobs (at most 3, of 4 nodes or more), the largest first: growth from a few seeds,
-/// each blob in one grown lattice at most; no seed is grown after a lattice of `enough` nodes (the largest is then
-/// one of at least `enough`).
+/// each blob in one grown lattice at most; a growth stops at `enough` nodes and no seed is grown after it (the
+/// largest is then that one, of `enough` nodes; before it, every growth is the whole growth).
 fn grown_lattices(
     ideal: &[Vector2<f64>],
     areas_px: &[f64],
@@ -1161,7 +1174,9 @@ fn grown_lattices(
         if covered[first] || covered[second] {
             continue;
         }
-        let grown = grow(ideal, areas_px, index, &covered, seed, first, second);
+        let grown = grow(
+            ideal, areas_px, index, &covered, seed, first, second, enough,
+        );
         for &(_, _, b) in &grown.nodes {
             covered[b] = true;
         }
