@@ -1311,6 +1311,60 @@ mod tests {
 
     /// A hexagonal grid's search verifies its lattice's placements (the grid's half turn, mirrors and shifts by a
     /// row, about 20), but asks the residual bound (which costs as much as a pose) of only the few that rank best.
+    /// A capped promise is the full promise, capped: growths stopped at the cap change nothing below it. On a
+    /// grid seen whole among clutter, a third of its blobs, and random clutter alone (a chance lattice).
+    #[test]
+    fn capped_promise_is_the_full_promise_capped() {
+        use roitrack_core::target::{CircleGrid, GridLayout};
+        let camera = CameraModel::canonical();
+        let target = Target::circle_grid(&CircleGrid {
+            rows: 8,
+            cols: 10,
+            spacing_m: 0.025,
+            diameter_m: 0.015,
+            layout: GridLayout::Square,
+        })
+        .unwrap();
+        let truth = MotionState::at_rest(
+            Rotation3::from_euler_angles(0.3, -0.2, 0.4),
+            Vector3::new(-0.1, -0.08, 0.6),
+        );
+        let whole = blobs_of(&camera, &target, &truth, 40);
+        let part: Vec<DetectedBlob> = whole.iter().copied().step_by(3).collect();
+        let mut state = 5u64;
+        let mut uniform = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let clutter: Vec<DetectedBlob> = (0..300)
+            .map(|_| DetectedBlob {
+                u_px: 1000.0 * uniform(),
+                v_px: 1000.0 * uniform(),
+                area_px: 40.0 + 20.0 * uniform(),
+            })
+            .collect();
+        let mut promises = Vec::new();
+        for blobs in [&whole, &part, &clutter] {
+            let full = lattice_promise(&camera, &target, blobs, usize::MAX).unwrap();
+            for cap in [0, 1, 3, 4, 5, 6, 9, 17, 40, 79, 80, 81, 1000] {
+                assert_eq!(
+                    lattice_promise(&camera, &target, blobs, cap).unwrap(),
+                    full.min(cap),
+                    "cap {cap}"
+                );
+            }
+            promises.push(full);
+        }
+        // Caps below, at and above each promise were tried.
+        assert_eq!(promises[0], 80, "{promises:?}");
+        assert!(
+            promises[1..].iter().all(|p| (6..79).contains(p)),
+            "{promises:?}"
+        );
+    }
+
     #[test]
     fn residual_bounds_are_computed_for_the_best_ranked_hypotheses_only() {
         use roitrack_core::target::{CircleGrid, GridLayout};
