@@ -315,10 +315,13 @@ impl<'a> PhotoBlobCandidates<'a> {
     fn groups(&self) -> Vec<Group> {
         let mut groups: Vec<Group> = Vec::new();
         let mut grid = CellGrid::new(self.width, self.height);
+        // A blob is seen once a level at most, mostly: its members' room taken at once, not grown (and moved) level
+        // after level.
+        let labelled = self.found.iter().flatten().count();
         // In the order of the levels, as if one thread had found them all.
         for found in self.found.iter().flatten() {
             for c in found {
-                add_to_group(&mut groups, &mut grid, c);
+                add_to_group(&mut groups, &mut grid, c, labelled);
             }
         }
         let min_levels = if self.is_complete() {
@@ -856,8 +859,9 @@ impl CellGrid {
     }
 }
 
-/// Adds a component to the group whose centre is within half the smaller radius of its own, or starts a group.
-fn add_to_group(groups: &mut Vec<Group>, grid: &mut CellGrid, c: &Component) {
+/// Adds a component to the group whose centre is within half the smaller radius of its own, or starts a group (with
+/// room for `members` components).
+fn add_to_group(groups: &mut Vec<Group>, grid: &mut CellGrid, c: &Component, members: usize) {
     let (u, v) = c.centre();
     let radius = (c.n as f64 / std::f64::consts::PI).sqrt();
     let reach = (0.5 * radius / CELL_PX).ceil() as usize;
@@ -885,11 +889,13 @@ fn add_to_group(groups: &mut Vec<Group>, grid: &mut CellGrid, c: &Component) {
         }
         None => {
             grid.push(cj * grid.cols + ci, groups.len() as u32);
+            let mut first = Vec::with_capacity(members);
+            first.push(*c);
             groups.push(Group {
                 u_px: u,
                 v_px: v,
                 radius_px: radius,
-                members: vec![*c],
+                members: first,
             });
         }
     }
