@@ -217,7 +217,6 @@ pub(crate) fn grow(
         used[b] = true;
     }
     let mut queue: VecDeque<(i32, i32)> = nodes.iter().map(|&(m, n, _)| (m, n)).collect();
-    let mut support: Vec<(f64, f64, Vector2<f64>)> = Vec::with_capacity(25);
     'growth: while nodes.len() < max_nodes {
         let Some((m, n)) = queue.pop_front() else {
             break;
@@ -240,15 +239,15 @@ pub(crate) fn grow(
                 continue;
             }
             // A local affine map from the labelled blobs around the target node.
-            support.clear();
+            let mut support = AffineSums::default();
             for sm in tm - 2..=tm + 2 {
                 for sn in tn - 2..=tn + 2 {
                     if let Some(b) = at.get(sm, sn) {
-                        support.push((f64::from(sm - tm), f64::from(sn - tn), ideal[b]));
+                        support.add(sm - tm, sn - tn, ideal[b]);
                     }
                 }
             }
-            let Some((predicted, step)) = affine_prediction(&support) else {
+            let Some((predicted, step)) = support.prediction() else {
                 continue;
             };
             let gate = 0.3 * step;
@@ -270,31 +269,65 @@ pub(crate) fn grow(
     GrownLattice { nodes }
 }
 
-/// The position at the origin of an affine map (lattice offset -> image) fitted to `support`, and the map's shorter
-/// step; `None` without three non-collinear supports.
-fn affine_prediction(support: &[(f64, f64, Vector2<f64>)]) -> Option<(Vector2<f64>, f64)> {
-    if support.len() < 3 {
-        return None;
+/// The normal equations of the least squares of an affine map `x = c + A (m, n)` (lattice offset -> image) through
+/// supports at offsets `(m, n)` of at most 2 from a node, summed as the supports come: what the products of the
+/// design rows `(1, m, n)` with themselves and with `x` add up to, at a fraction of the cost of forming each
+/// product as a matrix (most of a growth's time). The offsets' sums (the normal matrix) are small integers, exact
+/// in any order; the sums of `x` are added in the supports' order, each term exact (`x` times 0, ±1 or ±2), so both
+/// are bit for bit those of the matrix products.
+#[derive(Debug, Clone, Copy, Default)]
+struct AffineSums {
+    count: i32,
+    /// Σm, Σn, Σm², Σmn, Σn².
+    m: i32,
+    n: i32,
+    mm: i32,
+    mn: i32,
+    nn: i32,
+    /// Σx, Σm x, Σn x (image coordinates u, v).
+    x: [[f64; 2]; 3],
+}
+
+impl AffineSums {
+    fn add(&mut self, m: i32, n: i32, x: Vector2<f64>) {
+        self.count += 1;
+        self.m += m;
+        self.n += n;
+        self.mm += m * m;
+        self.mn += m * n;
+        self.nn += n * n;
+        let (fm, fn_) = (f64::from(m), f64::from(n));
+        self.x[0][0] += x.x;
+        self.x[0][1] += x.y;
+        self.x[1][0] += fm * x.x;
+        self.x[1][1] += fm * x.y;
+        self.x[2][0] += fn_ * x.x;
+        self.x[2][1] += fn_ * x.y;
     }
-    // Least squares of x = c + A (m, n): normal equations in (1, m, n).
-    let mut ata = nalgebra::Matrix3::<f64>::zeros();
-    let mut atx = nalgebra::Matrix3x2::<f64>::zeros();
-    for &(m, n, x) in support {
-        let a = nalgebra::Vector3::new(1.0, m, n);
-        ata += a * a.transpose();
-        atx += a * x.transpose();
+
+    /// The position at the origin of the fitted map, and the map's shorter step; `None` without three
+    /// non-collinear supports.
+    fn prediction(&self) -> Option<(Vector2<f64>, f64)> {
+        if self.count < 3 {
+            return None;
+        }
+        let [count, m, n, mm, mn, nn] =
+            [self.count, self.m, self.n, self.mm, self.mn, self.nn].map(f64::from);
+        let ata = nalgebra::Matrix3::new(count, m, n, m, mm, mn, n, mn, nn);
+        let [[x0, y0], [x1, y1], [x2, y2]] = self.x;
+        let atx = nalgebra::Matrix3x2::new(x0, y0, x1, y1, x2, y2);
+        let decomposition = ata.cholesky()?;
+        // Collinear supports make the normal matrix nearly singular.
+        let diagonal_min = decomposition.l().diagonal().min();
+        if diagonal_min < 0.3 {
+            return None;
+        }
+        let solution = decomposition.solve(&atx);
+        let c = Vector2::new(solution[(0, 0)], solution[(0, 1)]);
+        let a1 = Vector2::new(solution[(1, 0)], solution[(1, 1)]);
+        let a2 = Vector2::new(solution[(2, 0)], solution[(2, 1)]);
+        Some((c, a1.norm().min(a2.norm())))
     }
-    let decomposition = ata.cholesky()?;
-    // Collinear supports make the normal matrix nearly singular.
-    let diagonal_min = decomposition.l().diagonal().min();
-    if diagonal_min < 0.3 {
-        return None;
-    }
-    let solution = decomposition.solve(&atx);
-    let c = Vector2::new(solution[(0, 0)], solution[(0, 1)]);
-    let a1 = Vector2::new(solution[(1, 0)], solution[(1, 1)]);
-    let a2 = Vector2::new(solution[(2, 0)], solution[(2, 1)]);
-    Some((c, a1.norm().min(a2.norm())))
 }
 
 /// Integer 2 x 2 maps with entries in -1..=1 and determinant ±1.
@@ -364,6 +397,78 @@ pub(crate) fn placements(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The fit the growth used before [`AffineSums`]: the normal equations summed as matrix products.
+    fn fit_by_products(support: &[(i32, i32, Vector2<f64>)]) -> Option<(Vector2<f64>, f64)> {
+        if support.len() < 3 {
+            return None;
+        }
+        let mut ata = nalgebra::Matrix3::<f64>::zeros();
+        let mut atx = nalgebra::Matrix3x2::<f64>::zeros();
+        for &(m, n, x) in support {
+            let a = nalgebra::Vector3::new(1.0, f64::from(m), f64::from(n));
+            ata += a * a.transpose();
+            atx += a * x.transpose();
+        }
+        let decomposition = ata.cholesky()?;
+        if decomposition.l().diagonal().min() < 0.3 {
+            return None;
+        }
+        let solution = decomposition.solve(&atx);
+        let c = Vector2::new(solution[(0, 0)], solution[(0, 1)]);
+        let a1 = Vector2::new(solution[(1, 0)], solution[(1, 1)]);
+        let a2 = Vector2::new(solution[(2, 0)], solution[(2, 1)]);
+        Some((c, a1.norm().min(a2.norm())))
+    }
+
+    /// The sums give the matrix products' fit bit for bit: random subsets of the 5 x 5 offsets (collinear and
+    /// too small ones included) at random positions, negative and fractional.
+    #[test]
+    fn affine_sums_fit_as_the_matrix_products_did() {
+        let mut state = 3u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            state >> 11
+        };
+        let (mut fitted, mut refused) = (0, 0);
+        for _ in 0..5000 {
+            let keep = next();
+            // From every offset kept to about one in five.
+            let sparse = 1 + next() % 5;
+            let mut support = Vec::new();
+            let mut sums = AffineSums::default();
+            for sm in -2..=2 {
+                for sn in -2..=2 {
+                    if keep >> (5 * (sm + 2) + sn + 2) & 1 == 1 && next() % sparse == 0 {
+                        let x = Vector2::new(
+                            (next() % 200_000) as f64 / 97.0 - 900.0,
+                            (next() % 200_000) as f64 / 89.0 - 700.0,
+                        );
+                        support.push((sm, sn, x));
+                        sums.add(sm, sn, x);
+                    }
+                }
+            }
+            let expected = fit_by_products(&support);
+            let found = sums.prediction();
+            match (expected, found) {
+                (Some((c, step)), Some((c2, step2))) => {
+                    assert_eq!(c.x.to_bits(), c2.x.to_bits());
+                    assert_eq!(c.y.to_bits(), c2.y.to_bits());
+                    assert_eq!(step.to_bits(), step2.to_bits());
+                    fitted += 1;
+                }
+                (None, None) => refused += 1,
+                other => panic!("{support:?}: {other:?}"),
+            }
+        }
+        assert!(
+            fitted > 1000 && refused > 100,
+            "{fitted} fitted, {refused} refused"
+        );
+    }
 
     fn hexagonal(rows: i32, cols: i32, s: f64) -> Vec<Vector2<f64>> {
         let mut p = Vec::new();
