@@ -197,22 +197,24 @@ impl PointIndex {
         let mut reach = (2.0 * self.cell).max(even).min(radius);
         loop {
             found.clear();
-            let mut seen = 0;
             self.within(&self.points[i], reach, |j, d| {
-                if j == i {
+                if j == i || found.len() == k && d >= found[k - 1].1 {
                     return;
                 }
-                seen += 1;
-                if found.len() == k && d >= found[k - 1].1 {
-                    return;
-                }
-                let at = found.partition_point(|&(_, e)| e <= d);
                 if found.len() == k {
                     found.pop();
                 }
-                found.insert(at, (j, d));
+                // Moved down from the end past the farther ones only: after those as near, where a stable sort puts
+                // it (a few steps for a few neighbours, where a search and an insertion cost a call to move memory).
+                found.push((j, d));
+                let mut at = found.len() - 1;
+                while at > 0 && found[at - 1].1 > d {
+                    found.swap(at - 1, at);
+                    at -= 1;
+                }
             });
-            if reach >= radius || seen >= k || reach > self.extent() {
+            // Fewer than k only when the disk held fewer than k others.
+            if reach >= radius || found.len() >= k || reach > self.extent() {
                 break;
             }
             reach = (2.0 * reach).min(radius);
