@@ -149,6 +149,21 @@ struct NodeMap {
 }
 
 impl NodeMap {
+    /// Calls `f(n, blob)` for the nodes `(m, n)` with a blob, `n` in `n_lo..=n_hi` increasing: a column of the
+    /// table bounded once, not each node looked up.
+    fn for_each_in_column(&self, m: i32, n_lo: i32, n_hi: i32, mut f: impl FnMut(i32, usize)) {
+        let i = m - self.lo.0;
+        if i < 0 || i >= self.cols {
+            return;
+        }
+        for j in (n_lo - self.lo.1).max(0)..=(n_hi - self.lo.1).min(self.rows - 1) {
+            let b = self.blobs[(j * self.cols + i) as usize];
+            if b != u32::MAX {
+                f(j + self.lo.1, b as usize);
+            }
+        }
+    }
+
     fn get(&self, m: i32, n: i32) -> Option<usize> {
         let (i, j) = (m - self.lo.0, n - self.lo.1);
         if i < 0 || j < 0 || i >= self.cols || j >= self.rows {
@@ -241,11 +256,9 @@ pub(crate) fn grow(
             // A local affine map from the labelled blobs around the target node.
             let mut support = AffineSums::default();
             for sm in tm - 2..=tm + 2 {
-                for sn in tn - 2..=tn + 2 {
-                    if let Some(b) = at.get(sm, sn) {
-                        support.add(sm - tm, sn - tn, ideal[b]);
-                    }
-                }
+                at.for_each_in_column(sm, tn - 2, tn + 2, |sn, b| {
+                    support.add(sm - tm, sn - tn, ideal[b]);
+                });
             }
             let Some((predicted, step)) = support.prediction() else {
                 continue;
