@@ -683,8 +683,10 @@ fn blob_geometry(
     let areas_px: Vec<f64> = blobs.iter().map(|b| b.area_px).collect();
     let typical_px = {
         let mut d: Vec<f64> = areas_px.iter().map(|a| a.sqrt()).collect();
-        d.sort_by(f64::total_cmp);
-        d[d.len() / 2].max(4.0)
+        // The median's value: the same whichever of equal values lands there, so selected, not sorted.
+        let middle = d.len() / 2;
+        d.select_nth_unstable_by(middle, f64::total_cmp);
+        d[middle].max(4.0)
     };
     let index = PointIndex::new(&ideal, 2.0 * typical_px);
     (ideal, areas_px, index)
