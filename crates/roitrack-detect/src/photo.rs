@@ -580,12 +580,12 @@ mod simd {
     use super::POLARITY_CELL_PX;
     use std::arch::x86_64::{
         __m128i, _mm_add_epi32, _mm_and_si128, _mm_loadu_si128, _mm_max_epi16, _mm_min_epi16,
-        _mm_or_si128, _mm_set1_epi16, _mm_set1_epi32, _mm_setzero_si128, _mm_storeu_si128,
-        _mm_xor_si128,
+        _mm_set1_epi16, _mm_set1_epi32, _mm_setzero_si128, _mm_storeu_si128, _mm_xor_si128,
     };
 
     /// One cell's minimum, maximum and sum over its rows so far, in 8 lanes of 16 bits (4 of 32 for the sum): the
-    /// pixels at even columns are the even lanes, the odd lanes hold what changes nothing.
+    /// pixels at even columns are the even lanes; the odd lanes, which see the odd columns, are left out when the
+    /// cell is taken (lanes never mix, so they need no neutral values of their own at each row).
     #[derive(Clone, Copy)]
     pub(super) struct CellLanes {
         /// Signed minimum and maximum of the values with their top bit flipped (SSE2 compares signed 16-bit values
@@ -616,16 +616,13 @@ mod simd {
             unsafe {
                 let bias = _mm_set1_epi16(i16::MIN);
                 let even = _mm_set1_epi32(0xFFFF);
-                // The odd lanes: the largest signed value (for the minimum), the smallest (for the maximum).
-                let odd_high = _mm_set1_epi32(0x7FFF_0000);
-                let odd_low = _mm_set1_epi32(i32::MIN);
                 let base = pixels.as_ptr().cast::<__m128i>();
                 for k in 0..POLARITY_CELL_PX / 8 {
                     let v = _mm_loadu_si128(base.add(k));
                     let evens = _mm_and_si128(v, even);
-                    let biased = _mm_and_si128(_mm_xor_si128(v, bias), even);
-                    self.min = _mm_min_epi16(self.min, _mm_or_si128(biased, odd_high));
-                    self.max = _mm_max_epi16(self.max, _mm_or_si128(biased, odd_low));
+                    let biased = _mm_xor_si128(v, bias);
+                    self.min = _mm_min_epi16(self.min, biased);
+                    self.max = _mm_max_epi16(self.max, biased);
                     // 16 rows of 4 values of at most 65535 a lane: far within 32 bits.
                     self.sum = _mm_add_epi32(self.sum, evens);
                 }
@@ -643,9 +640,10 @@ mod simd {
                 _mm_storeu_si128(sum.as_mut_ptr().cast(), self.sum);
             }
             let unbias = |v: i16| (v as u16) ^ 0x8000;
+            // The even lanes: the even columns.
             let found = (
-                unbias(*min.iter().min().unwrap_or(&i16::MAX)),
-                unbias(*max.iter().max().unwrap_or(&i16::MIN)),
+                unbias(*min.iter().step_by(2).min().unwrap_or(&i16::MAX)),
+                unbias(*max.iter().step_by(2).max().unwrap_or(&i16::MIN)),
                 sum.iter().map(|&s| u64::from(s)).sum(),
                 self.count,
             );
