@@ -808,9 +808,9 @@ fn passes_shape(c: &Component, options: &PhotoBlobOptions, max_area: f64) -> boo
 struct CellGrid {
     cols: usize,
     rows: usize,
-    /// Per cell, its first and last group (`NONE` for an empty cell).
+    /// Per cell, its first group (`NONE` for an empty cell). (No table of last groups: a cell holds a group or two,
+    /// and setting a second table's every cell costs more than walking them.)
     first: Vec<u32>,
-    last: Vec<u32>,
     /// Per group, the next group of its cell.
     next: Vec<u32>,
 }
@@ -828,7 +828,6 @@ impl CellGrid {
             cols,
             rows,
             first: vec![NONE; cols * rows],
-            last: vec![NONE; cols * rows],
             next: Vec::new(),
         }
     }
@@ -844,11 +843,15 @@ impl CellGrid {
     fn push(&mut self, c: usize, g: u32) {
         debug_assert_eq!(g as usize, self.next.len());
         self.next.push(NONE);
-        match self.last[c] {
+        match self.first[c] {
             NONE => self.first[c] = g,
-            last => self.next[last as usize] = g,
+            mut last => {
+                while self.next[last as usize] != NONE {
+                    last = self.next[last as usize];
+                }
+                self.next[last as usize] = g;
+            }
         }
-        self.last[c] = g;
     }
 
     /// The groups of cell `c`, in the order they were added.
