@@ -859,3 +859,137 @@ fn demo_writes_the_centroids_and_rois_its_loop_measured() {
             .contains("--mcap-rois is for the ROI images of `track --rois` and `demo`")
     );
 }
+
+/// `track --rig` with each camera's recorded centroids on a topic of one bag (written by `rosbags`, the two cameras'
+/// messages interleaved in time): the same estimates, byte for byte, as the same centroids from measurement files;
+/// a bag without its topic, a topic of a file that is not a bag, a topic of a camera with no input and a topic the
+/// bag does not have are refused naming the camera.
+#[test]
+fn a_rig_reads_each_cameras_topic_of_one_bag() {
+    let Some(python) = python() else { return };
+    let tmp = tempfile::tempdir().unwrap();
+    let dir = tmp.path();
+    simulate(
+        dir,
+        &[
+            "--scenario",
+            "sweep",
+            "--duration-s",
+            "0.5",
+            "--rig-cameras",
+            "2",
+        ],
+    );
+    // A bag's times are not negative, a camera's own clock may be: every camera's times 1 s later (the second
+    // camera's clock is learnt, so a shift common to all is no change to the run).
+    for name in ["cam0", "cam1"] {
+        let text = std::fs::read_to_string(dir.join(name).join("measurements.csv")).unwrap();
+        let mut shifted = String::from("t,id,u,v\n");
+        for line in text.lines().skip(1) {
+            let (t, rest) = line.split_once(',').unwrap();
+            shifted += &format!("{:?},{rest}\n", t.parse::<f64>().unwrap() + 1.0);
+        }
+        std::fs::write(dir.join(format!("{name}.csv")), shifted).unwrap();
+    }
+    let bag = dir.join("rig_bag");
+    let csvs = format!("{},{}", p(&dir.join("cam0.csv")), p(&dir.join("cam1.csv")));
+    succeeded(
+        Command::new(&python)
+            .arg(ros_script("write_measurement_bag.py"))
+            .args([p(&bag), &csvs, "/left/blobs,/right/blobs", "7"])
+            .output()
+            .unwrap(),
+    );
+    let (rig, target) = (dir.join("rig.yaml"), dir.join("target.csv"));
+    let track = |inputs: &[&str], out: &str| -> Vec<String> {
+        let outputs = [
+            dir.join(format!("{out}.tum")),
+            dir.join(format!("{out}.csv")),
+        ];
+        let mut args = vec!["track", "--rig", p(&rig), "--target", p(&target)];
+        args.extend_from_slice(inputs);
+        args.extend(["--poses", p(&outputs[0]), "--twists", p(&outputs[1])]);
+        ok(&args);
+        outputs
+            .iter()
+            .map(|f| std::fs::read_to_string(f).unwrap())
+            .collect()
+    };
+    let (cam0_csv, cam1_csv) = (
+        format!("cam0={}", p(&dir.join("cam0.csv"))),
+        format!("cam1={}", p(&dir.join("cam1.csv"))),
+    );
+    let from_files = track(
+        &["--measurements", &cam0_csv, "--measurements", &cam1_csv],
+        "files",
+    );
+    let (cam0_bag, cam1_bag) = (format!("cam0={}", p(&bag)), format!("cam1={}", p(&bag)));
+    let from_bag = track(
+        &[
+            "--measurements",
+            &cam0_bag,
+            "--topic",
+            "cam0=/left/blobs",
+            "--measurements",
+            &cam1_bag,
+            "--topic",
+            "cam1=/right/blobs",
+        ],
+        "bag",
+    );
+    assert!(from_files[0].lines().count() > 100, "{}", from_files[0]);
+    assert_eq!(from_bag, from_files);
+    // A camera's bag and a camera's file mixed in one run, too.
+    let mixed = track(
+        &[
+            "--measurements",
+            &cam0_csv,
+            "--measurements",
+            &cam1_bag,
+            "--topic",
+            "cam1=/right/blobs",
+        ],
+        "mixed",
+    );
+    assert_eq!(mixed, from_files);
+
+    // Bad input, each error naming the camera.
+    let refused = |inputs: &[&str]| {
+        let mut args = vec!["track", "--rig", p(&rig), "--target", p(&target)];
+        args.extend_from_slice(inputs);
+        let (poses, twists) = (dir.join("bad.tum"), dir.join("bad.csv"));
+        args.extend(["--poses", p(&poses), "--twists", p(&twists)]);
+        fails(&args)
+    };
+    let error = refused(&["--measurements", &cam0_bag, "--measurements", &cam1_csv]);
+    assert!(
+        error.contains("camera 'cam0'") && error.contains("--topic cam0=TOPIC"),
+        "{error}"
+    );
+    let error = refused(&[
+        "--measurements",
+        &cam0_csv,
+        "--topic",
+        "cam0=/left/blobs",
+        "--measurements",
+        &cam1_csv,
+    ]);
+    assert!(
+        error.contains("cam0") && error.contains("is not a ROS 2 bag"),
+        "{error}"
+    );
+    let error = refused(&["--measurements", &cam0_csv, "--topic", "cam1=/right/blobs"]);
+    assert!(error.contains("camera 'cam1' has no input"), "{error}");
+    let error = refused(&[
+        "--measurements",
+        &cam0_bag,
+        "--topic",
+        "cam0=/left/blob",
+        "--measurements",
+        &cam1_csv,
+    ]);
+    assert!(
+        error.contains("camera 'cam0'") && error.contains("/left/blob"),
+        "{error}"
+    );
+}

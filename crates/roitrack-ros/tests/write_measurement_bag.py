@@ -4,7 +4,8 @@ to test `roitrack track --mcap-in BAG --measurement-topic TOPIC` with a bag roit
 
     python write_measurement_bag.py OUT_DIR MEASUREMENTS.csv TOPIC PER_MESSAGE [DAMAGE]
 
-Each message holds the next PER_MESSAGE centroids of the CSV (t,id,u,v): stamped with the first one's time (rounded
+MEASUREMENTS.csv and TOPIC may be comma-separated lists of the same length: one topic per file (the cameras of a rig
+in one bag), their messages written in the order of their stamps. Each message holds the next PER_MESSAGE centroids of the CSV (t,id,u,v): stamped with the first one's time (rounded
 to the nanosecond), each centroid's time as its offset from the stamp, sigma_px 0.1 px each. DAMAGE, to test the
 errors: `unknown-id` (the 3rd message's 2nd id made 9999) or `short-u` (the 3rd message's u_px one entry short).
 """
@@ -35,13 +36,18 @@ def main():
     Time = store.types["builtin_interfaces/msg/Time"]
     Header = store.types["std_msgs/msg/Header"]
     BlobMeasurements = store.types["roitrack_msgs/msg/BlobMeasurements"]
-    with open(csv_path, newline="") as f:
-        rows = [(float(r["t"]), int(r["id"]), float(r["u"]), float(r["v"])) for r in csv.DictReader(f)]
-    with Writer(out, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
-        connection = writer.add_connection(topic, BlobMeasurements.__msgtype__, typestore=store)
+    batches = []
+    for topic_index, (one_csv, topic) in enumerate(zip(csv_path.split(","), topic.split(","), strict=True)):
+        with open(one_csv, newline="") as f:
+            rows = [(float(r["t"]), int(r["id"]), float(r["u"]), float(r["v"])) for r in csv.DictReader(f)]
         for index, start in enumerate(range(0, len(rows), per_message)):
-            batch = rows[start : start + per_message]
-            ns = round(batch[0][0] * 1e9)
+            batches.append((round(rows[start][0] * 1e9), topic_index, topic, index, rows[start : start + per_message]))
+    with Writer(out, version=8, storage_plugin=StoragePlugin.MCAP) as writer:
+        connections = {}
+        for _, _, topic, _, _ in batches:
+            if topic not in connections:
+                connections[topic] = writer.add_connection(topic, BlobMeasurements.__msgtype__, typestore=store)
+        for ns, _, topic, index, batch in sorted(batches, key=lambda b: (b[0], b[1], b[3])):
             stamp_s = (ns // 1_000_000_000) + 1e-9 * (ns % 1_000_000_000)
             ids = np.array([r[1] for r in batch], dtype=np.uint32)
             u = np.array([r[2] for r in batch], dtype=np.float64)
@@ -57,8 +63,7 @@ def main():
                 dt_s=np.array([r[0] - stamp_s for r in batch], dtype=np.float64),
                 sigma_px=np.full(len(batch), 0.1),
             )
-            writer.write(connection, ns, store.serialize_cdr(message, BlobMeasurements.__msgtype__))
-
+            writer.write(connections[topic], ns, store.serialize_cdr(message, BlobMeasurements.__msgtype__))
 
 if __name__ == "__main__":
     main()

@@ -1,6 +1,7 @@
 //! One camera's input of any kind turned into its stream of measurements, in time order, on the camera's own clock:
 //! a measurements file, a ROI recording (each ROI centroided) or frames (an image folder, a numbered pattern, a glob
-//! or a video, measured by the camera's own [`FrameTracker`]). A rig's cameras each give one such stream, and
+//! or a video, measured by the camera's own [`FrameTracker`]); with the feature `ros`, a topic of a ROS 2 bag
+//! (recorded centroids, or image frames measured as frames are). Several cameras may read topics of one bag. A rig's cameras each give one such stream, and
 //! [`crate::estimators::rig::merge_streams`] merges them for the [`crate::estimators::rig::RigTracker`].
 //!
 //! ```
@@ -20,8 +21,8 @@ use std::path::PathBuf;
 use roitrack_core::{CameraModel, Measurement, Target, TimeModel};
 use roitrack_estimators::ConfigError;
 use roitrack_formats::{
-    FormatError, FrameSource, FrameTiming, MeasurementReader, RoiRecordingReader, TimeUnit,
-    TimedMeasurements, open_input,
+    FormatError, FrameInfo, FrameSource, FrameTiming, MeasurementReader, RoiRecordingReader,
+    TimeUnit, TimedMeasurements, open_input,
 };
 use roitrack_image::{CentroidOptions, Frame, RoiImage, measure_roi};
 use roitrack_pipeline::{FrameError, FrameTracker, FrameTrackerConfig};
@@ -55,6 +56,26 @@ pub enum CameraInput {
         /// The frame tracker's options.
         config: Box<FrameTrackerConfig>,
     },
+    /// The blob centroids recorded on a `roitrack_msgs/msg/BlobMeasurements` topic of a ROS 2 bag, on the camera's
+    /// clock (the messages' stamps), checked as a measurements file is.
+    #[cfg(feature = "ros")]
+    BagMeasurements {
+        /// The bag: a `.mcap` file or a rosbag2 folder.
+        bag: PathBuf,
+        /// The topic.
+        topic: String,
+    },
+    /// The image frames of a `sensor_msgs/msg/Image` or `CompressedImage` topic of a ROS 2 bag, each at its header
+    /// stamp, measured by a [`FrameTracker`] of the camera with `config`; every frame must have the camera's size.
+    #[cfg(feature = "ros")]
+    BagImages {
+        /// The bag: a `.mcap` file or a rosbag2 folder.
+        bag: PathBuf,
+        /// The topic.
+        topic: String,
+        /// The frame tracker's options.
+        config: Box<FrameTrackerConfig>,
+    },
 }
 
 impl CameraInput {
@@ -63,15 +84,41 @@ impl CameraInput {
         match self {
             Self::Measurements { path, .. } | Self::Rois { path, .. } => path,
             Self::Images { source, .. } => source,
+            #[cfg(feature = "ros")]
+            Self::BagMeasurements { bag, .. } | Self::BagImages { bag, .. } => bag,
         }
     }
 
-    /// The command-line option of this kind of input (`--measurements`, `--rois`, `--images`).
+    /// The bag's topic read, for the inputs that are a topic of a ROS 2 bag.
+    pub fn topic(&self) -> Option<&str> {
+        match self {
+            #[cfg(feature = "ros")]
+            Self::BagMeasurements { topic, .. } | Self::BagImages { topic, .. } => Some(topic),
+            _ => None,
+        }
+    }
+
+    /// Whether the camera's measurements come from frames, which its own frame tracker measures.
+    pub fn is_frames(&self) -> bool {
+        match self {
+            Self::Images { .. } => true,
+            #[cfg(feature = "ros")]
+            Self::BagImages { .. } => true,
+            _ => false,
+        }
+    }
+
+    /// The command-line option of this kind of input (`--measurements`, `--rois`, `--images`; a bag's centroids
+    /// are given as measurements, its frames as images).
     pub fn option(&self) -> &'static str {
         match self {
             Self::Measurements { .. } => "--measurements",
+            #[cfg(feature = "ros")]
+            Self::BagMeasurements { .. } => "--measurements",
             Self::Rois { .. } => "--rois",
             Self::Images { .. } => "--images",
+            #[cfg(feature = "ros")]
+            Self::BagImages { .. } => "--images",
         }
     }
 }
@@ -155,16 +202,40 @@ pub fn open_camera_input(
             timing,
             config,
         } => {
-            let frames = FrameSource::open(source, timing)?;
-            let tracker = FrameTracker::new(camera.clone(), target.clone(), **config)
-                .map_err(CameraInputError::Config)?;
-            Ok(Box::new(FrameMeasurements {
-                frames,
-                tracker,
-                frame: Frame::default(),
-                pending: VecDeque::new(),
-                failed: false,
-            }))
+            let frames = Frames::Files(FrameSource::open(source, timing)?);
+            FrameMeasurements::new(frames, camera, target, config)
+        }
+        #[cfg(feature = "ros")]
+        CameraInput::BagMeasurements { bag, topic } => {
+            let reader = roitrack_ros::BagMeasurementSource::open(bag, topic)?
+                .with_known_ids(known_ids)
+                .with_image_size(camera.width_px, camera.height_px);
+            Ok(Box::new(reader.map(|m| m.map_err(Into::into))))
+        }
+        #[cfg(feature = "ros")]
+        CameraInput::BagImages { bag, topic, config } => {
+            let mut frames = roitrack_ros::BagFrameSource::open(bag, topic)?;
+            frames.expect_size(camera.width_px, camera.height_px);
+            FrameMeasurements::new(Frames::Bag(Box::new(frames)), camera, target, config)
+        }
+    }
+}
+
+/// Where a camera's frames come from.
+enum Frames {
+    /// Image files or a video.
+    Files(FrameSource),
+    /// A topic of a ROS 2 bag.
+    #[cfg(feature = "ros")]
+    Bag(Box<roitrack_ros::BagFrameSource>),
+}
+
+impl Frames {
+    fn next_frame(&mut self, frame: &mut Frame) -> Option<Result<FrameInfo, FormatError>> {
+        match self {
+            Self::Files(source) => source.next_frame(frame),
+            #[cfg(feature = "ros")]
+            Self::Bag(source) => source.next_frame(frame),
         }
     }
 }
@@ -195,11 +266,31 @@ impl<I: Iterator<Item = Result<RoiImage, FormatError>>> Iterator for RoiMeasurem
 
 /// The measurements of each frame as its frame tracker found them, frame after frame; ends after an error.
 struct FrameMeasurements {
-    frames: FrameSource,
+    frames: Frames,
     tracker: FrameTracker,
     frame: Frame,
     pending: VecDeque<Measurement>,
     failed: bool,
+}
+
+impl FrameMeasurements {
+    /// The stream of `frames` measured by a frame tracker of `camera` with `config`.
+    fn new(
+        frames: Frames,
+        camera: &CameraModel,
+        target: &Target,
+        config: &FrameTrackerConfig,
+    ) -> Result<MeasurementStream, CameraInputError> {
+        let tracker = FrameTracker::new(camera.clone(), target.clone(), *config)
+            .map_err(CameraInputError::Config)?;
+        Ok(Box::new(Self {
+            frames,
+            tracker,
+            frame: Frame::default(),
+            pending: VecDeque::new(),
+            failed: false,
+        }))
+    }
 }
 
 impl Iterator for FrameMeasurements {

@@ -34,8 +34,8 @@ pub struct TrackArgs {
     pub target: TargetArgs,
     /// Measured centroids (CSV t,id,u,v; raw pixels; time order; `-`: the standard input). Centroids that share a time (the blobs of a
     /// global-shutter frame) form one readout: an estimate comes only after the last of them. With --rig, one
-    /// NAME=FILE per camera of the rig (repeated), each file on its own camera's clock.
-    /// Default: none; this, --rois or --images is required.
+    /// NAME=FILE per camera of the rig (repeated), each file on its own camera's clock; a ROS 2 bag's recorded
+    /// centroids with --topic NAME=TOPIC. Default: none; this, --rois or --images is required.
     #[arg(long, value_name = "FILE | NAME=FILE", required_unless_present_any = ["rois", "images"])]
     pub measurements: Vec<PathBuf>,
     /// A rig of several cameras (YAML: each camera's name, calibration file relative to the rig file, camera_T_rig as
@@ -50,6 +50,12 @@ pub struct TrackArgs {
     /// Default: not written.
     #[arg(long, value_name = "FILE.yaml", requires = "camera_rig")]
     pub rig_out: Option<PathBuf>,
+    /// With --rig, for a camera whose input (--measurements NAME=BAG or --images NAME=BAG) is a ROS 2 bag (a .mcap
+    /// file or a rosbag2 folder): its topic, NAME=TOPIC (repeated; several cameras may read one bag). Recorded
+    /// centroids (roitrack_msgs/msg/BlobMeasurements) with --measurements, sensor_msgs/msg/Image or CompressedImage
+    /// with --images; on the camera's own clock (the messages' stamps). Default: none.
+    #[arg(long, value_name = "NAME=TOPIC", requires = "camera_rig")]
+    pub topic: Vec<PathBuf>,
     /// Instead of centroids: a recording of ROI images (see roitrack_formats::RoiRecordingReader), centroided here.
     /// With --rig, one NAME=FILE per camera (repeated). Default: none.
     #[arg(long, value_name = "FILE | NAME=FILE")]
@@ -63,7 +69,7 @@ pub struct TrackArgs {
     /// frame10), a numbered pattern (`frames/frame_%05d.png`), a quoted glob (`'frames/*.png'`), or a video (mp4,
     /// mkv, avi, mov, webm; decoded by Debian's `ffmpeg`). One estimate per frame where the target is found.
     /// Also a ROS 2 bag (a .mcap file or a rosbag2 folder; `--mcap-in BAG`) with --image-topic. With --rig, one
-    /// NAME=SOURCE per camera (repeated; not a bag), each on its own camera's clock, every camera with the options
+    /// NAME=SOURCE per camera (repeated; a bag with --topic NAME=TOPIC), each on its own camera's clock, every camera with the options
     /// below (--fps, --shutter, --polarity...), and its frames' times by --timestamps NAME=FILE.csv, --fps or a
     /// video's own. Default: none.
     #[arg(long, value_name = "SOURCE | NAME=SOURCE", visible_alias = "mcap-in")]
@@ -651,7 +657,8 @@ fn rig_inputs(
     rig: &roitrack::estimators::rig::Rig,
 ) -> Result<Vec<Option<roitrack::camera_input::CameraInput>>> {
     use roitrack::camera_input::CameraInput;
-    let timestamps = rig_timestamps(args, rig_path, rig)?;
+    let timestamps = per_camera("--timestamps", &args.timestamps, rig_path, rig)?;
+    let topics = per_camera("--topic", &args.topic, rig_path, rig)?;
     let mut inputs: Vec<Option<CameraInput>> = vec![None; rig.len()];
     let given = [
         ("--measurements", &args.measurements),
@@ -669,12 +676,31 @@ fn rig_inputs(
                     before.path().display()
                 );
             }
-            inputs[c] = Some(match option {
-                "--measurements" => CameraInput::Measurements {
+            let bag = option != "--rois" && crate::ros::is_bag(&path);
+            let topic = topics[c].as_ref().map(|t| t.to_string_lossy().into_owned());
+            inputs[c] = Some(match (option, bag, topic) {
+                (_, true, None) => bail!(
+                    "{option} {name}={}: a ROS 2 bag: give camera '{name}''s topic, --topic {name}=TOPIC",
+                    path.display()
+                ),
+                (_, false, Some(topic)) => bail!(
+                    "--topic {name}={topic}: camera '{name}''s input ({option} {name}={}) is not a ROS 2 bag (a .mcap \
+                     file or a rosbag2 folder)",
+                    path.display()
+                ),
+                ("--measurements", true, Some(topic)) => {
+                    CameraInput::BagMeasurements { bag: path, topic }
+                }
+                ("--images", true, Some(topic)) => CameraInput::BagImages {
+                    bag: path,
+                    topic,
+                    config: Box::new(frame_config(args)?),
+                },
+                ("--measurements", ..) => CameraInput::Measurements {
                     path,
                     time_units: args.time_units.map(Into::into),
                 },
-                "--rois" => {
+                ("--rois", ..) => {
                     let mut options = CentroidOptions::default();
                     if args.no_symmetry_check {
                         options.symmetry = None;
@@ -703,28 +729,41 @@ fn rig_inputs(
             path.display()
         );
     }
+    if let Some((name, topic)) = topics.iter().enumerate().find_map(|(c, topic)| {
+        let topic = topic.as_ref()?;
+        inputs[c]
+            .is_none()
+            .then_some((&rig.cameras()[c].name, topic))
+    }) {
+        bail!(
+            "--topic {name}={}: camera '{name}' has no input (--measurements {name}=BAG or --images {name}=BAG)",
+            topic.display()
+        );
+    }
     Ok(inputs)
 }
 
-/// Each camera's --timestamps NAME=FILE of a rig run, by camera: each name a camera of the rig, given once.
-fn rig_timestamps(
-    args: &TrackArgs,
+/// Each camera's `option NAME=VALUE` of a rig run (--timestamps, --topic), by camera: each name a camera of the rig,
+/// given once.
+fn per_camera(
+    option: &str,
+    values: &[PathBuf],
     rig_path: &std::path::Path,
     rig: &roitrack::estimators::rig::Rig,
 ) -> Result<Vec<Option<PathBuf>>> {
-    let mut timestamps: Vec<Option<PathBuf>> = vec![None; rig.len()];
-    for value in &args.timestamps {
-        let (c, name, path) = rig_camera("--timestamps", value, rig_path, rig)?;
-        if let Some(before) = &timestamps[c] {
+    let mut per_camera: Vec<Option<PathBuf>> = vec![None; rig.len()];
+    for value in values {
+        let (c, name, path) = rig_camera(option, value, rig_path, rig)?;
+        if let Some(before) = &per_camera[c] {
             bail!(
-                "--timestamps {name}={}: camera '{name}' is given twice (also --timestamps {name}={})",
+                "{option} {name}={}: camera '{name}' is given twice (also {option} {name}={})",
                 path.display(),
                 before.display()
             );
         }
-        timestamps[c] = Some(path);
+        per_camera[c] = Some(path);
     }
-    Ok(timestamps)
+    Ok(per_camera)
 }
 
 /// `track --rig`: every camera's input turned into measurements (frames through the camera's own frame tracker) and
@@ -738,10 +777,11 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         || args.ros.foxglove.is_some()
         || args.ros2.ros2
         || args.mcap_in.measurement_topic.is_some()
+        || args.mcap_in.image_topic.is_some()
     {
         bail!(
-            "--rig takes measurement files only (ROS 2 bags in or out, --foxglove and --ros2 are not supported with a \
-             rig yet)"
+            "--rig: a camera's bag topic is --topic NAME=TOPIC (not --measurement-topic or --image-topic); bags out, \
+             --foxglove and --ros2 are not supported with a rig yet"
         );
     }
     let file = roitrack::formats::read_rig_yaml(rig_path, &Default::default())?;
@@ -762,12 +802,18 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     for (c, input) in inputs.iter().enumerate() {
         let Some(input) = input else { continue };
         let name = &rig.cameras()[c].name;
-        let label = format!("{} {name}={}", input.option(), input.path().display());
-        let camera = match input {
-            roitrack::camera_input::CameraInput::Images { .. } => {
-                frame_camera(args, rig.cameras()[c].camera.clone())?
-            }
-            _ => rig.cameras()[c].camera.clone(),
+        let label = match input.topic() {
+            Some(topic) => format!(
+                "{} {name}={} --topic {name}={topic}",
+                input.option(),
+                input.path().display()
+            ),
+            None => format!("{} {name}={}", input.option(), input.path().display()),
+        };
+        let camera = if input.is_frames() {
+            frame_camera(args, rig.cameras()[c].camera.clone())?
+        } else {
+            rig.cameras()[c].camera.clone()
         };
         let reader = roitrack::camera_input::open_camera_input(input, &camera, &target)
             .with_context(|| format!("camera '{name}' ({label})"))?;
@@ -777,10 +823,7 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
             reader,
         });
     }
-    let any_frames = inputs
-        .iter()
-        .flatten()
-        .any(|i| matches!(i, roitrack::camera_input::CameraInput::Images { .. }));
+    let any_frames = inputs.iter().flatten().any(|i| i.is_frames());
     let config = roitrack::estimators::rig::RigTrackerConfig {
         tracker: if any_frames {
             frame_config(args)?.tracker
