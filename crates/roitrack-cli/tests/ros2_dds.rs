@@ -1,8 +1,9 @@
-//! `roitrack demo --ros2` and `track --ros2` (feature `ros2`) against an independent DDS: Eclipse Cyclone DDS (PyPI `cyclonedds`, one of
-//! ROS 2's middlewares) subscribes with the ROS 2 topic and type names through `crates/roitrack-ros/tests/
-//! ros2_subscriber.py`, and every estimate of a paced demo (400 Hz estimates from 4 kHz ROIs, in real time) must
-//! arrive, in order, equal to what the demo wrote to its TUM and CSV files (1e-9): pose, twist, odometry (its twist
-//! in the target frame), tf, status; the camera info once, the camera's.
+//! `roitrack demo --ros2`, `track --ros2` and `servo --ros2` (also `--live`) (feature `ros2`) against an independent
+//! DDS: Eclipse Cyclone DDS (PyPI `cyclonedds`, one of ROS 2's middlewares) subscribes with the ROS 2 topic and type
+//! names through `crates/roitrack-ros/tests/ros2_subscriber.py`, and every estimate of a paced demo (400 Hz
+//! estimates from 4 kHz ROIs, in real time) must arrive, in order, equal to what the demo wrote to its TUM and CSV
+//! files (1e-9): pose, twist, odometry (its twist in the target frame), tf, status; the camera info once, the
+//! camera's.
 //!
 //! DDS discovers by multicast: the publisher and the subscriber run in a network namespace of their own with only
 //! the loopback interface (`unshare -n`, then `ip link set lo up`; we are root), so nothing leaves the machine. Where
@@ -187,6 +188,27 @@ fn check_against_files(
     diagnostics_path: Option<&Path>,
     camera_path: Option<&Path>,
 ) -> usize {
+    check_against_files_on_their_clock(
+        messages,
+        poses_path,
+        twists_path,
+        diagnostics_path,
+        camera_path,
+        0.0,
+    )
+}
+
+/// [`check_against_files`] where the files' times are on another clock than the stamps: a stamp plus
+/// `stamp_to_file_s` is its row's time.
+fn check_against_files_on_their_clock(
+    messages: &[Received],
+    poses_path: &Path,
+    twists_path: &Path,
+    diagnostics_path: Option<&Path>,
+    camera_path: Option<&Path>,
+    stamp_to_file_s: f64,
+) -> usize {
+    let stamp_s = |header: &serde_json::Value| stamp_s(header) + stamp_to_file_s;
     let poses = roitrack::formats::read_tum(poses_path).unwrap();
     let twists = roitrack::formats::read_twists_csv(twists_path).unwrap();
     let diagnostics = diagnostics_path.map(|p| roitrack::formats::read_diagnostics_csv(p).unwrap());
@@ -611,6 +633,63 @@ fn every_estimate_of_a_paced_servo_run_reaches_cyclone_dds_equal_to_its_files() 
         MAX_DIFFERENCE.with(|max| max.get())
     );
     assert!(estimates >= 1000, "{estimates} estimates of the servo run");
+}
+
+/// `servo --live --sim-camera --ros2`: the real-time closed loop (the controller on its own thread at 1 kHz, the
+/// live loop's estimation thread handing each estimate to the publisher as it makes it) reaches the Cyclone DDS
+/// subscriber on every topic, none lost, each estimate equal to the live run's files (1e-9). The bus's stamps are on
+/// the live loop's clock, the files' on the path's: the run says the difference (`estimates_loop_to_path_s`), the
+/// same for every estimate.
+#[test]
+fn every_estimate_of_a_live_servo_run_reaches_cyclone_dds_equal_to_its_files() {
+    let Some(python) = python() else { return };
+    if !namespaces_allowed() {
+        return;
+    }
+    MAX_DIFFERENCE.with(|max| max.set(0.0));
+    let dir = tempfile::tempdir().unwrap();
+    let file = |name: &str| dir.path().join(name);
+    let (ok, log) = in_namespace(
+        r#"
+"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
+subscriber=$!
+"$ROITRACK" servo --live --sim-camera --controller ctc --rate-hz 1000 --json --ros2 --ros2-wait-s 30 \
+    --out "$OUT" >"$JSON" || exit 91
+wait $subscriber || exit 92
+"#,
+        &[
+            ("PYTHON", &python),
+            ("SUBSCRIBER", &subscriber_script()),
+            ("RECEIVED", &file("received.jsonl")),
+            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
+            ("OUT", &file("servo")),
+            ("JSON", &file("run.json")),
+        ],
+    );
+    assert!(ok, "{log}");
+    assert!(log.contains(" 0 dropped"), "{log}");
+    let json = std::fs::read_to_string(file("run.json")).unwrap();
+    let run: serde_json::Value = serde_json::from_str(json.lines().last().unwrap()).unwrap();
+    let run_dir = file("servo").join("ctc-live-sim-camera");
+    let estimates = check_against_files_on_their_clock(
+        &read_received(&file("received.jsonl")),
+        &run_dir.join("estimates.tum"),
+        &run_dir.join("estimates_twists.csv"),
+        Some(&run_dir.join("estimates_diagnostics.csv")),
+        None,
+        f(&run["estimates_loop_to_path_s"]),
+    );
+    eprintln!(
+        "servo --live: {estimates} estimates received by Cyclone DDS on every topic, none lost; largest difference \
+         from the files {:.1e}; {}",
+        MAX_DIFFERENCE.with(|max| max.get()),
+        json.trim()
+    );
+    // 1 kHz ROIs, an estimate every 10, over the path's 5 s.
+    assert!(
+        estimates >= 250,
+        "{estimates} estimates of the live servo run"
+    );
 }
 
 #[test]

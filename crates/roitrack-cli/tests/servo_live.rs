@@ -1,6 +1,7 @@
 //! `roitrack servo --live` refusing what it cannot run, with a message that says what to give instead (the runs
-//! themselves: roitrack-servo's tests/live.rs on the simulated camera, tests/live.rs here through Aravis), and
-//! telling the live tracker the commanded acceleration unless `--no-known-acceleration`.
+//! themselves: roitrack-servo's tests/live.rs on the simulated camera, tests/live.rs here through Aravis, and
+//! tests/ros2_dds.rs with `--ros2`), and telling the live tracker the commanded acceleration unless
+//! `--no-known-acceleration`.
 
 use std::process::Command;
 
@@ -43,6 +44,17 @@ fn fake_without_live_and_true_state_live_are_refused() {
     let (ok, stderr) = servo(&["--live", "--sim-camera", "--controller", "true-state"]);
     assert!(!ok);
     assert!(stderr.contains("true-state"), "{stderr}");
+}
+
+/// `--paced` paces a simulated-time run's publishing; the real-time loop publishes on the wall clock already.
+#[test]
+fn live_paced_is_refused_saying_why() {
+    let (ok, stderr) = servo(&["--live", "--sim-camera", "--paced"]);
+    assert!(!ok);
+    assert!(
+        stderr.contains("--paced") && stderr.contains("wall clock"),
+        "{stderr}"
+    );
 }
 
 #[cfg(not(feature = "genicam"))]

@@ -454,6 +454,10 @@ pub struct LiveServoReport {
     pub longest_missed_run: usize,
     /// Wall time from the start to the first estimate read by the controller (s): the live loop's full-frame start.
     pub start_delay_s: f64,
+    /// Added to an estimate's time on the live loop's clock (the camera's: the times the estimation thread made
+    /// them with, which [`run_live_servo_with_sink`]'s sink sees) gives its time on the path's clock, that of
+    /// [`ServoReport::estimates`] and the run's files (s); 0 if the path never started.
+    pub loop_to_path_s: f64,
     /// Estimates published to the control thread (vouched for and finite).
     pub published: usize,
     /// Whether the control thread ran under the real-time priority asked for ([`LiveOptions::realtime_priority`]).
@@ -526,6 +530,15 @@ pub fn run_live_servo_simulated(
     config: &ServoConfig,
     options: &LiveOptions,
 ) -> Result<LiveServoReport, ServoError> {
+    run_live_servo_simulated_with_sink(config, options, &mut |_| {})
+}
+
+/// [`run_live_servo_simulated`], also handing each estimate to `on_estimate` as [`run_live_servo_with_sink`] does.
+pub fn run_live_servo_simulated_with_sink(
+    config: &ServoConfig,
+    options: &LiveOptions,
+    on_estimate: &mut (dyn FnMut(&Estimate) + Send),
+) -> Result<LiveServoReport, ServoError> {
     let scene = RobotScene::new(&config.path);
     let renderer = RoiRenderer::new(
         roi_camera_model(config),
@@ -540,7 +553,7 @@ pub fn run_live_servo_simulated(
         SimulatedCamera::new(renderer, truth, config.seed),
         scene.clone(),
     );
-    run_live_servo(&mut camera, &scene, config, options)
+    run_live_servo_with_sink(&mut camera, &scene, config, options, on_estimate)
 }
 
 /// Runs the closed loop in real time (see the [module docs](self)): the controller of `config` on its own thread,
@@ -573,6 +586,36 @@ pub fn run_live_servo<C: RoiCamera>(
     scene: &RobotScene,
     config: &ServoConfig,
     options: &LiveOptions,
+) -> Result<LiveServoReport, ServoError> {
+    run_live_servo_with_sink(camera, scene, config, options, &mut |_| {})
+}
+
+/// [`run_live_servo`], also handing each finite estimate of the live loop to `on_estimate` as it is made: those
+/// [`ServoReport::estimates`] and the run's files hold, in their order, on the estimation thread, after the
+/// controller's estimate handle has it (so that the controller never waits for it). Their times are on the loop's
+/// clock (the camera's; [`LiveServoReport::loop_to_path_s`] takes them to the path's clock of the files, which is
+/// known only once the path has started). The sink must not block, or it holds the tracker back: a ROS 2 publisher
+/// hands each estimate over to a thread of its own (`roitrack_ros::ros2::Ros2Publisher::publish_estimate`).
+///
+/// ```no_run
+/// use roitrack_servo::live::{LiveOptions, run_live_servo_simulated_with_sink};
+/// use roitrack_servo::{CameraKind, ControllerKind, ServoConfig};
+///
+/// let config = ServoConfig::new(ControllerKind::Ctc, CameraKind::Roi, 1.0);
+/// let mut times_s = Vec::new();
+/// let report =
+///     run_live_servo_simulated_with_sink(&config, &LiveOptions::default(), &mut |e| times_s.push(e.t_ref_s))
+///         .unwrap();
+/// assert_eq!(times_s.len(), report.servo.estimates.iter().filter(|e| e.state.is_finite()).count());
+/// let on_the_path_s = times_s[0] + report.loop_to_path_s;
+/// # let _ = on_the_path_s;
+/// ```
+pub fn run_live_servo_with_sink<C: RoiCamera>(
+    camera: &mut LoopClockCamera<C>,
+    scene: &RobotScene,
+    config: &ServoConfig,
+    options: &LiveOptions,
+    on_estimate: &mut (dyn FnMut(&Estimate) + Send),
 ) -> Result<LiveServoReport, ServoError> {
     config.check()?;
     if config.camera != CameraKind::Roi {
@@ -648,6 +691,10 @@ pub fn run_live_servo<C: RoiCamera>(
                     let age_us = (scene.robot_time_s() - scene.loop_to_robot_s(e.t_ref_s)) * 1e6;
                     to_estimate_us.push_within_capacity_or_skip(age_us);
                 }
+            }
+            // After the controller's handle: what the files will hold (the finite ones), as it comes.
+            if e.state.is_finite() {
+                on_estimate(e);
             }
         };
         let hooks = LoopHooks {
@@ -730,6 +777,7 @@ fn report(
         missed_before_start: control.missed_before_start,
         longest_missed_run: control.longest_missed_run,
         start_delay_s: control.start_delay_s,
+        loop_to_path_s: shift_s,
         published: published as usize,
         realtime_priority: control.realtime_priority,
         sent_known_accelerations: control.sent_known_accelerations,

@@ -125,10 +125,11 @@ pub struct ServoArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// --ros2: the run's estimates on the ROS 2 DDS bus, as `track --ros2` publishes them (one run: give
-    /// --controller; not with --live yet).
+    /// --controller); with --live, the real-time loop's as it makes them, as `live --ros2` does.
     #[command(flatten)]
     pub ros2: crate::ros2_args::Ros2Args,
-    /// --paced: the estimates published at the run's own speed (simulated time runs faster than the wall clock).
+    /// --paced: the estimates published at the run's own speed (simulated time runs faster than the wall clock); not
+    /// with --live, which runs on the wall clock.
     #[command(flatten)]
     pub pace: crate::ros::PaceArgs,
 }

@@ -1,9 +1,15 @@
 //! `roitrack servo --live`: the closed loop in real time (docs/servo.md, "The real-time loop"), through Aravis' fake
 //! GigE camera (`--fake`, feature `genicam`) or the project's simulated ROI camera (`--sim-camera`), beside the
 //! simulated-time run of the same configuration; this file only builds the camera, calls the library and prints.
+//! With `--ros2`, the live loop's estimates go on the DDS bus as the loop makes them, as `live --ros2` publishes its
+//! own: the estimation thread hands each one to the publisher (`roitrack_ros::ros2::Ros2Publisher`) through the
+//! library's sink (`run_live_servo_with_sink`).
 
 use anyhow::{Context, Result, bail};
-use roitrack::servo::live::{LiveOptions, LiveServoReport, run_live_servo_simulated};
+use roitrack::Estimate;
+use roitrack::servo::live::{
+    LiveOptions, LiveServoReport, roi_camera_model, run_live_servo_simulated_with_sink,
+};
 use roitrack::servo::{CameraKind, CameraTiming, ControllerKind, ServoConfig, run_servo};
 
 use super::servo::ServoArgs;
@@ -61,10 +67,10 @@ fn config(args: &ServoArgs) -> Result<ServoConfig> {
 }
 
 pub fn run(args: &ServoArgs) -> Result<()> {
-    if args.ros2.ros2 || args.pace.paced.is_some() {
+    if args.pace.paced.is_some() {
         bail!(
-            "--ros2 and --paced publish a simulated-time run (servo without --live); the real-time loop does not \
-             publish yet"
+            "--paced paces the publishing of a simulated-time run (servo without --live) to its own clock; --live \
+             --ros2 publishes each estimate as the real-time loop makes it, already at the wall clock's pace"
         );
     }
     let camera = match (args.fake, args.sim_camera) {
@@ -88,11 +94,27 @@ pub fn run(args: &ServoArgs) -> Result<()> {
         ..LiveOptions::default()
     };
     roitrack::formats::create_output_dir(&args.out)?;
+    // --ros2: started before either run, so that a node that cannot start is an error before anything is computed;
+    // the camera info is the live loop's camera.
+    let mut ros2 = args
+        .ros2
+        .start(&roi_camera_model(&config), &Default::default())?;
     let simulated = run_servo(&config).context("the simulated-time run")?;
+    // On the estimation thread, each estimate as the live loop makes it (a hand-over that never waits); a publisher
+    // that failed does not stop the run, and its error comes after the outputs are written.
+    let mut ros2_failed = None;
+    let mut on_estimate = |e: &Estimate| {
+        if ros2_failed.is_none() {
+            ros2_failed = ros2.estimate(e).err();
+        }
+    };
     let (live, camera_line) = match camera {
-        LiveCamera::Simulated => (run_live_servo_simulated(&config, &live_options)?, None),
+        LiveCamera::Simulated => (
+            run_live_servo_simulated_with_sink(&config, &live_options, &mut on_estimate)?,
+            None,
+        ),
         LiveCamera::AravisFake => {
-            let (report, line) = run_aravis(&config, &live_options)?;
+            let (report, line) = run_aravis(&config, &live_options, &mut on_estimate)?;
             (report, Some(line))
         }
     };
@@ -104,6 +126,13 @@ pub fn run(args: &ServoArgs) -> Result<()> {
     let figures =
         roitrack::servo::output::render_figures(&[simulated.clone(), live.servo.clone()])?;
     crate::commands::plot::write_figure_files(&args.out, &figures)?;
+    if let Some(e) = ros2_failed {
+        return Err(crate::OutputsStand(format!(
+            "the ROS 2 publisher failed (the outputs are written): {e}"
+        ))
+        .into());
+    }
+    ros2.finish()?;
     print(
         args,
         camera,
@@ -117,10 +146,14 @@ pub fn run(args: &ServoArgs) -> Result<()> {
 }
 
 #[cfg(feature = "genicam")]
-fn run_aravis(config: &ServoConfig, live: &LiveOptions) -> Result<(LiveServoReport, String)> {
+fn run_aravis(
+    config: &ServoConfig,
+    live: &LiveOptions,
+    on_estimate: &mut (dyn FnMut(&Estimate) + Send),
+) -> Result<(LiveServoReport, String)> {
     use roitrack::image::SensorModel;
     use roitrack::servo::live::{
-        LoopClockCamera, RobotScene, roi_camera_model, run_live_servo, servo_target,
+        LoopClockCamera, RobotScene, run_live_servo_with_sink, servo_target,
     };
     use roitrack_genicam::{FakeGigeCamera, GenicamCamera, GenicamOptions};
     let scene = &RobotScene::new(&config.path);
@@ -153,7 +186,7 @@ fn run_aravis(config: &ServoConfig, live: &LiveOptions) -> Result<(LiveServoRepo
         start_timeout_s: 10.0,
         ..*live
     };
-    let report = run_live_servo(&mut camera, scene, config, &live_options);
+    let report = run_live_servo_with_sink(&mut camera, scene, config, &live_options, on_estimate);
     let stats = camera.inner().stats();
     let description = camera.inner().description().to_string();
     drop(camera);
@@ -173,7 +206,11 @@ fn run_aravis(config: &ServoConfig, live: &LiveOptions) -> Result<(LiveServoRepo
 }
 
 #[cfg(not(feature = "genicam"))]
-fn run_aravis(_config: &ServoConfig, _options: &LiveOptions) -> Result<(LiveServoReport, String)> {
+fn run_aravis(
+    _config: &ServoConfig,
+    _options: &LiveOptions,
+    _on_estimate: &mut (dyn FnMut(&Estimate) + Send),
+) -> Result<(LiveServoReport, String)> {
     run_aravis_unavailable().map(|()| unreachable!("refused above"))
 }
 
@@ -234,6 +271,7 @@ fn print(
             "initialisations": loop_report.initialisations,
             "rois_per_s": loop_report.rois_per_s(),
             "estimates_published": live.published,
+            "estimates_loop_to_path_s": live.loop_to_path_s,
             "known_acceleration": config.known_acceleration,
             "known_accelerations_sent": live.sent_known_accelerations,
             "known_accelerations_told": loop_report.known_accelerations,
@@ -312,6 +350,13 @@ fn print(
     }
     if let Some(line) = camera_line {
         println!("{line}");
+    }
+    if args.ros2.ros2 {
+        println!(
+            "ROS 2: the estimates are stamped on the live loop's clock (the camera's); a stamp plus {:.9} s is the \
+             estimate's time in the files (the path's clock)",
+            live.loop_to_path_s
+        );
     }
     println!("runs written to {}", args.out.display());
 }
