@@ -5,12 +5,15 @@
 //! share the machine's load as it varies). It prints, per estimate:
 //!
 //! - the tracking time without publishing and with it (the tracking thread's busy time: the estimator, and with
-//!   publishing the hand-over, `publish_estimate`: a copy into a ring and a wake-up), and their ratio: what
-//!   publishing costs the tracking;
+//!   publishing the hand-over, `publish_estimate`: a copy into a ring, and a wake-up only if the publishing thread
+//!   announced a long sleep), and their ratio: what publishing costs the tracking;
 //! - the hand-over alone, median and p99;
 //! - the CPU time of the publishing threads (roitrack's and RustDDS's), from `/proc/self/task/*/stat` (Linux): what
 //!   publishing costs the machine, on the other core;
 //! - and the estimates published and dropped, for the subscriber's count to be compared with.
+//!
+//! With `--handed-out FILE`, each published estimate's stamp (ns) and the wall clock at its hand-over (ns since the
+//! Unix epoch), one pair a line: against the subscriber's `taken_ns`, the latency from the hand-over.
 //!
 //! Run it where a subscriber listens (docs/ros2.md: in a network namespace of its own, beside
 //! `crates/roitrack-ros/tests/ros2_subscriber.py`), with `--wait-s` so that it waits for it:
@@ -46,6 +49,14 @@ fn threads_cpu_s() -> Vec<(String, f64)> {
         .unwrap_or_default();
     threads.sort_by(|a, b| b.1.total_cmp(&a.1));
     threads
+}
+
+/// The value of option `name`, if given.
+fn text_argument(name: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter()
+        .position(|a| a == name)
+        .map(|i| args[i + 1].clone())
 }
 
 fn argument(name: &str, default: f64) -> f64 {
@@ -88,6 +99,10 @@ fn main() {
     let wait_s = argument("--wait-s", 0.0);
     let domain_id = argument("--domain", 0.0) as u16;
     let block = argument("--block", 100.0) as u64;
+    // Each published estimate's stamp (ns) and the wall clock (ns since the Unix epoch) at its hand-over, written to
+    // this file: against the subscriber's `taken_ns`, the latency from the hand-over (the DDS source timestamp that
+    // the subscriber's own figure starts from is the publishing thread's write, later).
+    let handed_out = text_argument("--handed-out");
 
     let scenario = Scenario::new(ScenarioKind::Orthoglide, 1).with_duration_s(duration_s);
     let run = simulate(&scenario, &SimulationOptions::default()).expect("the simulation");
@@ -129,6 +144,7 @@ fn main() {
     });
     let (mut quiet, mut publishing) = (Blocks::default(), Blocks::default());
     let mut hand_over_us = Vec::new();
+    let mut handed_ns: Vec<(i64, i64)> = Vec::new();
     let mut estimates = 0u64;
     // The busy time already given to an estimate: each estimate's share (since the previous one) goes to its block.
     let mut counted = Duration::ZERO;
@@ -140,6 +156,12 @@ fn main() {
             let k = estimates / block;
             estimates += 1;
             let publishes = k % 2 == 1;
+            if publishes && handed_out.is_some() {
+                let wall = std::time::SystemTime::now()
+                    .duration_since(std::time::UNIX_EPOCH)
+                    .unwrap_or_default();
+                handed_ns.push(((e.t_ref_s * 1e9).round() as i64, wall.as_nanos() as i64));
+            }
             let t = Instant::now();
             if publishes {
                 publisher.publish_estimate(e)?;
@@ -170,6 +192,13 @@ fn main() {
         .map(|(name, s)| format!("{name} {s:.2} s"))
         .collect();
     let report = publisher.finish().expect("the publisher's end");
+    if let Some(path) = &handed_out {
+        let lines: Vec<String> = handed_ns
+            .iter()
+            .map(|(stamp, wall)| format!("{stamp} {wall}"))
+            .collect();
+        std::fs::write(path, lines.join("\n") + "\n").expect("--handed-out");
+    }
     hand_over_us.sort_by(f64::total_cmp);
     let quantile = |q: f64| hand_over_us[((hand_over_us.len() - 1) as f64 * q).round() as usize];
     let (without, with) = (quiet.us_per_estimate(), publishing.us_per_estimate());

@@ -4,7 +4,7 @@
 
 use std::net::IpAddr;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering, fence};
 use std::sync::mpsc;
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
@@ -31,9 +31,19 @@ pub const MAX_DOMAIN_ID: u16 = 232;
 /// Estimates in flight between the tracking thread and the publishing thread; when it is this far behind, further
 /// estimates are dropped (counted in [`Ros2Report::dropped`]), never waited for.
 const IN_FLIGHT: usize = 1024;
-/// How long the publishing thread sleeps when it has published everything handed over, unless woken by the next
-/// estimate (each hand-over wakes it, so that an estimate is published at once).
+/// How long the publishing thread sleeps when no estimate has come for [`POLL_FOR`], unless woken by the next one
+/// (a hand-over wakes it only then: it announced the sleep).
 const IDLE_SLEEP: Duration = Duration::from_millis(20);
+/// While estimates come (one within [`POLL_FOR`]), the publishing thread looks at the ring this often, on a timer,
+/// rather than being woken by each hand-over: the tracking thread then makes no system call per estimate.
+const POLL_INTERVAL: Duration = Duration::from_micros(50);
+/// How long after the last estimate the publishing thread keeps polling before it announces a long sleep: longer
+/// than the time between two estimates of a tracker at 50 Hz or faster, so that a steady stream never finds it
+/// asleep; a slower one (a 30 Hz frame camera) wakes it at each estimate, which then costs little beside tracking.
+const POLL_FOR: Duration = Duration::from_millis(20);
+/// How long before the next estimate is due (the last one's time plus the time between estimates) the publishing
+/// thread starts looking at the ring every [`POLL_INTERVAL`]; until then it sleeps.
+const POLL_LEAD: Duration = Duration::from_micros(300);
 /// The history depth of the estimate topics' writers. ROS 2's sensor-data profile keeps 5, but RustDDS sends from a
 /// thread of its own, out of the writer's history: with 5, a burst of estimates (or that thread held up for a few
 /// milliseconds) lost samples before they were sent (measured in docs/results.md, "Design measurements behind the
@@ -271,6 +281,8 @@ struct Shared {
     /// Set when nothing more will be handed over: the publishing thread then empties the queue and ends.
     closed: AtomicBool,
     published: AtomicU64,
+    /// Set by the publishing thread before a long sleep ([`IDLE_SLEEP`]): the next hand-over wakes it.
+    asleep: AtomicBool,
 }
 
 /// The estimates published live on the ROS 2 DDS bus, as the node `roitrack` in the domain and namespace of
@@ -281,8 +293,10 @@ struct Shared {
 /// the first estimate, latched for late subscribers.
 ///
 /// The node runs on a thread of its own (with RustDDS's own threads): [`publish_estimate`](Self::publish_estimate)
-/// copies the estimate into a ring and wakes that thread, never waiting; an estimate that finds the ring full (the
-/// publishing thread 1,024 estimates behind) is dropped and counted.
+/// copies the estimate into a ring, never waiting, and makes no system call while estimates come: that thread looks
+/// at the ring on a timer, from shortly before the next estimate is due, and is woken by a hand-over only after it
+/// announced a long sleep (no estimate for 20 ms). An estimate that finds the ring full (the publishing thread 1,024
+/// estimates behind) is dropped and counted.
 ///
 /// ```no_run
 /// use roitrack_ros::ros2::{Ros2Options, Ros2Publisher};
@@ -403,6 +417,8 @@ impl Ros2Publisher {
                     if let Some(inputs) = inputs {
                         writer.count_inputs(inputs);
                     }
+                    // RustDDS's threads are started: this one alone looks at the ring on time from now on.
+                    poll_on_time();
                     let subscribed =
                         wait_for_subscribers(&context, &namespace, options.wait_for_subscribers_s);
                     let _ = started_sender.send(Ok(subscribed));
@@ -440,8 +456,8 @@ impl Ros2Publisher {
         self.subscribed_at_start
     }
 
-    /// Hands an estimate over and wakes the publishing thread (never waits: dropped, and counted, if that thread is
-    /// 1,024 estimates behind); an error only if the publishing thread stopped on one (a time a ROS stamp cannot
+    /// Hands an estimate over, and wakes the publishing thread if it announced a long sleep (never waits: dropped,
+    /// and counted, if that thread is 1,024 estimates behind); an error only if the publishing thread stopped on one (a time a ROS stamp cannot
     /// hold, a DDS write that failed).
     pub fn publish_estimate(&mut self, estimate: &Estimate) -> Result<(), FormatError> {
         self.handed += 1;
@@ -454,7 +470,12 @@ impl Ros2Publisher {
         if self.queue.push(*estimate).is_err() {
             self.dropped += 1;
         }
-        if let Some(thread) = &self.thread {
+        // The push before the look at the flag, as the publishing thread's announcement before its last look at the
+        // ring: one of the two sees the other.
+        fence(Ordering::SeqCst);
+        if self.shared.asleep.load(Ordering::Relaxed)
+            && let Some(thread) = &self.thread
+        {
             thread.thread().unpark();
         }
         Ok(())
@@ -496,10 +517,12 @@ impl Drop for Ros2Publisher {
 }
 
 /// Puts the calling thread (and the threads it starts from now on) under Linux's `SCHED_BATCH` policy: a thread woken
-/// under it never preempts the thread that woke it. Each hand-over wakes the publishing thread, which wakes RustDDS's;
-/// under the default policy the woken thread often took the tracking thread's core at once, and the tracking waited for
-/// five messages to be serialised and sent, which multiplied its busy time per estimate under load. Under `SCHED_BATCH`
-/// they run on a free core, or when the tracking thread sleeps. Their weight is left as it is: a nice value of 10 as
+/// under it never preempts the thread that woke it. Each hand-over used to wake the publishing thread, which wakes
+/// RustDDS's; under the default policy the woken thread often took the tracking thread's core at once, and the
+/// tracking waited for five messages to be serialised and sent, which multiplied its busy time per estimate under
+/// load. Under `SCHED_BATCH` they run on a free core, or when the tracking thread sleeps. RustDDS's threads, which the
+/// publishing thread wakes at each write, keep it; the publishing thread itself returns to the default policy once
+/// they are started ([`poll_on_time`]). Their weight is left as it is: a nice value of 10 as
 /// well lowered the tracking's cost further under load, but RustDDS then fell behind and lost estimates, uncounted.
 /// Both measured with `examples/ros2_cost.rs` (docs/ros2.md, "Cost to the tracking, measured in one run"). Where the
 /// policy cannot be set (not Linux), nothing changes.
@@ -509,6 +532,24 @@ fn yield_to_the_tracker() {
         let param = libc::sched_param { sched_priority: 0 };
         // SAFETY: sched_setscheduler on the calling thread (pid 0) with a valid parameter; it only reads `param`.
         let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_BATCH, &param) };
+    }
+}
+
+/// Puts the publishing thread (not RustDDS's threads, started before, which stay under `SCHED_BATCH`) back under the
+/// default policy, with a timer slack of 1 µs rather than Linux's 50 µs: it wakes on its own timer to look at the
+/// ring ([`POLL_INTERVAL`]), and under `SCHED_BATCH` a timer's wake-up waited for the busy core's time slice (the
+/// publish latency's median rose by 300 to 900 µs); woken by its timer rather than by the tracking thread, it no
+/// longer needs to yield to it. Measured with `examples/ros2_cost.rs` (docs/ros2.md, "Cost to the tracking, measured in
+/// one run"). Where neither can be set (not Linux), nothing changes.
+fn poll_on_time() {
+    #[cfg(target_os = "linux")]
+    {
+        let param = libc::sched_param { sched_priority: 0 };
+        // SAFETY: sched_setscheduler on the calling thread (pid 0) with a valid parameter; it only reads `param`.
+        let _ = unsafe { libc::sched_setscheduler(0, libc::SCHED_OTHER, &param) };
+        const TIMER_SLACK_NS: libc::c_ulong = 1_000;
+        // SAFETY: PR_SET_TIMERSLACK on the calling thread, with an integer argument.
+        let _ = unsafe { libc::prctl(libc::PR_SET_TIMERSLACK, TIMER_SLACK_NS, 0, 0, 0) };
     }
 }
 
@@ -638,19 +679,54 @@ fn run(
     mut queue: rtrb::Consumer<Estimate>,
     shared: &Shared,
 ) -> Result<(), FormatError> {
+    let mut last_estimate: Option<Instant> = None;
+    // The time between two estimates, from their own times (the camera's clock, not when this thread happened to
+    // look): it follows a shorter one at once, a longer one slowly, so that a stream that speeds up is not slept
+    // through; a pause longer than POLL_FOR is not the stream's rate and is left out.
+    let mut expected_gap: Option<Duration> = None;
+    let mut previous_t_s: Option<f64> = None;
     loop {
         // Read before emptying the queue: what was handed over before the close is published too.
         let last = shared.closed.load(Ordering::Acquire);
+        let mut came = false;
         while let Ok(estimate) = queue.pop() {
             writer.write_estimate(&estimate)?;
             shared.published.fetch_add(1, Ordering::Release);
+            came = true;
+            let gap_s = previous_t_s.map_or(f64::NAN, |t| estimate.t_ref_s - t);
+            previous_t_s = Some(estimate.t_ref_s);
+            if gap_s > 0.0 && gap_s < POLL_FOR.as_secs_f64() {
+                let gap = Duration::from_secs_f64(gap_s);
+                expected_gap = Some(
+                    expected_gap.map_or(gap, |e| if gap < e { gap } else { e + (gap - e) / 8 }),
+                );
+            }
+        }
+        if came {
+            last_estimate = Some(Instant::now());
         }
         if last {
             // Dropping the node and its participant tells the subscribers that the writers are gone.
             writer.finish()?;
             return Ok(());
         }
-        std::thread::park_timeout(IDLE_SLEEP);
+        // While a stream of estimates comes: asleep until shortly before the next one is due, then a look every
+        // POLL_INTERVAL. Estimates further apart than POLL_FOR (or the first two) wake this thread instead.
+        if let (Some(since), Some(gap)) = (last_estimate.map(|t| t.elapsed()), expected_gap)
+            && since < POLL_FOR
+        {
+            let until_due = gap.saturating_sub(since + POLL_LEAD);
+            std::thread::park_timeout(until_due.max(POLL_INTERVAL));
+            continue;
+        }
+        // Announce the long sleep, then look at the ring once more: an estimate handed over before the hand-over
+        // could see the announcement is there now, and one handed over after it wakes this thread.
+        shared.asleep.store(true, Ordering::Relaxed);
+        fence(Ordering::SeqCst);
+        if queue.is_empty() && !shared.closed.load(Ordering::Acquire) {
+            std::thread::park_timeout(IDLE_SLEEP);
+        }
+        shared.asleep.store(false, Ordering::Relaxed);
     }
 }
 
