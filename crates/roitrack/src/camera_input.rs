@@ -203,7 +203,7 @@ pub fn open_camera_input(
             config,
         } => {
             let frames = Frames::Files(FrameSource::open(source, timing)?);
-            FrameMeasurements::new(frames, camera, target, config)
+            FrameMeasurements::stream(frames, camera, target, config)
         }
         #[cfg(feature = "ros")]
         CameraInput::BagMeasurements { bag, topic } => {
@@ -216,7 +216,7 @@ pub fn open_camera_input(
         CameraInput::BagImages { bag, topic, config } => {
             let mut frames = roitrack_ros::BagFrameSource::open(bag, topic)?;
             frames.expect_size(camera.width_px, camera.height_px);
-            FrameMeasurements::new(Frames::Bag(Box::new(frames)), camera, target, config)
+            FrameMeasurements::stream(Frames::Bag(Box::new(frames)), camera, target, config)
         }
     }
 }
@@ -275,7 +275,7 @@ struct FrameMeasurements {
 
 impl FrameMeasurements {
     /// The stream of `frames` measured by a frame tracker of `camera` with `config`.
-    fn new(
+    fn stream(
         frames: Frames,
         camera: &CameraModel,
         target: &Target,
