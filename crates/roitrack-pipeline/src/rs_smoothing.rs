@@ -1,12 +1,12 @@
-//! Offline rolling-shutter smoothing: each frame's estimate is held until the two frames after it are tracked, and its
-//! pose is fitted again from its own blobs at their row times with the twist of a central difference of the poses of
-//! the frames around it ([`roitrack_estimators::rolling_refit`]).
+//! Offline rolling-shutter smoothing: each frame's estimate is held until the four frames after it are tracked, and its
+//! pose is fitted again from its own blobs at their row times with the twist of a difference of the poses of the
+//! frames around it (two on each side; near a track's start, the frames after it) ([`roitrack_estimators::rolling_refit`]).
 //!
 //! Why: a rolling-shutter frame's blobs are read milliseconds apart, and the depth of its pose follows the twist
 //! assumed over the readout; the causal filter's twist lags by the angular acceleration and jerk, which left the
 //! position error of rolling-shutter frames about 5 times that of global-shutter frames of the same motion (docs/
 //! frames.md, "Rolling shutter: offline smoothing"). Only for offline sources ([`crate::track_frame_stream`]): the
-//! estimates come two frames late, which a live loop does not take.
+//! estimates come four frames late, which a live loop does not take.
 
 use std::collections::VecDeque;
 
@@ -14,8 +14,8 @@ use nalgebra::Matrix6;
 use roitrack_core::stats::chi2_upper_0_1_percent;
 use roitrack_core::{CameraModel, Measurement, SpatioTemporalModel, Target};
 use roitrack_estimators::{
-    Estimate, Matrix12, Observation, TimedPose, TrackStatus, pose_residuals, refit_pose,
-    stencil_motion, stencil_motion_at_start,
+    Estimate, MAX_STENCIL_POSES, Matrix12, Observation, TimedPose, TrackStatus, pose_residuals,
+    refit_pose, stencil_motion, stencil_motion_at_start,
 };
 
 use crate::frames::{FrameOutcome, observation_of};
@@ -23,6 +23,11 @@ use crate::frames::{FrameOutcome, observation_of};
 /// Frames on either side of the one refitted: a 5-point stencil, whose error (of order the fifth derivative times
 /// T⁴) is far below the centroid noise at 30 Hz, where a ±1 frame difference leaves jerk·T²/6.
 const REACH: usize = 2;
+/// Frames held after the one given back: a frame near a track's start, with fewer than [`REACH`] poses before it,
+/// takes its stencil's other poses after it (5 poses in all, as centred as the track allows), since a one-sided
+/// 3-pose difference leaves jerk·T²/3 in the twist, and over a rolling shutter's readout that twist error is a
+/// millimetre of depth on fast motions; 5 poses leave a term of order T⁴.
+const HELD_AFTER: usize = MAX_STENCIL_POSES - 1;
 /// Passes over the held frames per new frame: the neighbours' poses move with their own refits, and three passes bring
 /// the refits close enough to their fixed point (measured in docs/results.md, "Design measurements behind the code").
 const PASSES: usize = 3;
@@ -49,7 +54,7 @@ struct Held<I> {
 /// A frame's pose and covariance after it left the buffer: the past side of the next frames' stencils.
 type PastPose = Option<(TimedPose, Matrix6<f64>)>;
 
-/// Holds the last frames of an offline rolling-shutter run and gives each back refined two frames later.
+/// Holds the last frames of an offline rolling-shutter run and gives each back refined four frames later.
 ///
 /// ```
 /// use roitrack_core::{CameraModel, Target};
@@ -58,12 +63,13 @@ type PastPose = Option<(TimedPose, Matrix6<f64>)>;
 ///
 /// let mut smoother = RollingSmoother::new(CameraModel::canonical(), Target::grid4x4());
 /// let nothing = || FrameOutcome { estimate: None, method: FrameMethod::NotFound, measured: 0 };
-/// // Two frames of latency: the first frame comes back with the third.
-/// assert!(smoother.push(0, nothing(), &[]).is_none());
-/// assert!(smoother.push(1, nothing(), &[]).is_none());
-/// assert_eq!(smoother.push(2, nothing(), &[]).map(|(k, _, _)| k), Some(0));
+/// // Four frames of latency: the first frame comes back with the fifth.
+/// for k in 0..4 {
+///     assert!(smoother.push(k, nothing(), &[]).is_none());
+/// }
+/// assert_eq!(smoother.push(4, nothing(), &[]).map(|(k, _, _)| k), Some(0));
 /// let rest: Vec<usize> = smoother.finish().map(|(k, _, _)| k).collect();
-/// assert_eq!(rest, [1, 2]);
+/// assert_eq!(rest, [1, 2, 3, 4]);
 /// ```
 pub struct RollingSmoother<I> {
     camera: CameraModel,
@@ -82,12 +88,12 @@ impl<I> RollingSmoother<I> {
             camera,
             target,
             past: VecDeque::with_capacity(REACH),
-            pending: VecDeque::with_capacity(REACH + 1),
+            pending: VecDeque::with_capacity(HELD_AFTER + 1),
         }
     }
 
     /// Takes the next frame's outcome and its measurements (raw pixels, at their row times), and gives back the frame
-    /// two before it, refined, once there is one.
+    /// [`HELD_AFTER`] (4) before it, refined, once there is one.
     pub fn push(
         &mut self,
         info: I,
@@ -96,7 +102,7 @@ impl<I> RollingSmoother<I> {
     ) -> Option<(I, FrameOutcome, Vec<Measurement>)> {
         let held = self.held(info, outcome, measurements);
         self.pending.push_back(held);
-        if self.pending.len() <= REACH {
+        if self.pending.len() <= HELD_AFTER {
             return None;
         }
         // Every held frame but the newest has a frame after it.
@@ -155,8 +161,9 @@ impl<I> RollingSmoother<I> {
         }
     }
 
-    /// Refits held frame `p` from the poses of its neighbours (up to [`REACH`] on each side, contiguous, vouched
-    /// for); leaves it as it is without one after it, or without one before it and two after it.
+    /// Refits held frame `p` from the poses of its neighbours (contiguous, vouched for: up to [`REACH`] before it,
+    /// and after it as many as make [`MAX_STENCIL_POSES`] in all); leaves it as it is without one after it, or
+    /// without one before it and two after it.
     fn refit(&mut self, p: usize) {
         let position = self.past.len() + p;
         let pose_at = |i: usize| -> PastPose {
@@ -174,8 +181,9 @@ impl<I> RollingSmoother<I> {
         while first > 0 && position - first < REACH && pose_at(first - 1).is_some() {
             first -= 1;
         }
+        let after = MAX_STENCIL_POSES - 1 - (position - first);
         let mut last = position;
-        while last + 1 < total && last - position < REACH && pose_at(last + 1).is_some() {
+        while last + 1 < total && last - position < after && pose_at(last + 1).is_some() {
             last += 1;
         }
         let neighbours: Vec<(TimedPose, Matrix6<f64>)> =

@@ -31,7 +31,7 @@ pub struct FrameTrackerConfig {
     /// with a rolling shutter too, even where they equal the global-shutter defaults (which a rolling shutter
     /// otherwise replaces, see `FrameTracker::new`). `false`: the readout's defaults.
     pub jerk_psd_given: bool,
-    /// With a rolling shutter, [`track_frame_stream`] (offline sources) holds each estimate until the two frames
+    /// With a rolling shutter, [`track_frame_stream`] (offline sources) holds each estimate until the four frames
     /// after it are tracked and refits its pose with the twist of the poses around it
     /// ([`crate::rs_smoothing::RollingSmoother`]; docs/frames.md, "Rolling shutter: offline smoothing", has what
     /// it gains). Ignored with a global shutter (a pose read at one instant does not depend on the twist) and by

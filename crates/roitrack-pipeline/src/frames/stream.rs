@@ -46,7 +46,7 @@ const FRAMES_IN_FLIGHT: usize = 4;
 /// caller wants to know of it (a file name, say), `None` at the end. `sink` gets every frame's outcome with that
 /// information and the centroids measured in the frame ([`FrameTracker::measurements`]: what the tracker saw, the
 /// measurements its estimate rests on), in order. Returns the tracker's report; on an error, what was handed to `sink` stays handed.
-/// With a rolling shutter ([`FrameTracker::smooths_rolling_shutter`]), each frame reaches `sink` two frames late, its
+/// With a rolling shutter ([`FrameTracker::smooths_rolling_shutter`]), each frame reaches `sink` four frames late, its
 /// pose refitted with the twist of the poses around it ([`RollingSmoother`]); the frames held when the source ends or
 /// fails are handed over before it returns.
 ///
@@ -193,7 +193,7 @@ fn track_decoded<I, S, K>(
     leave_out: &mut impl FnMut(&I, &FrameError) -> bool,
 ) -> Result<(), FrameStreamError<S, K, I>> {
     let mut result = Ok(());
-    // Offline, a rolling shutter's estimates come two frames late, refined (FrameTrackerConfig::rs_smoothing).
+    // Offline, a rolling shutter's estimates come four frames late, refined (FrameTrackerConfig::rs_smoothing).
     let mut smoother = tracker
         .smooths_rolling_shutter()
         .then(|| RollingSmoother::new(tracker.camera().clone(), tracker.target.clone()));
