@@ -542,10 +542,9 @@ fn walk(dir: &Path) -> Vec<std::path::PathBuf> {
 /// Each camera of a rig of frames timed by its own `--timestamps NAME=FILE` (the simulator's, on that camera's
 /// clock): the same estimates, byte for byte, as with `--fps`; a timestamps file of an unknown camera, of a camera
 /// given twice or of a camera whose input is not frames is refused naming the camera.
-#[test]
-fn a_rig_of_frames_takes_each_cameras_timestamps() {
-    let tmp = tempfile::tempdir().unwrap();
-    let sim = tmp.path().join("sim");
+/// `simulate --frames` of a random rig of 2 cameras, 12 frames each, in `dir/sim`; returns that folder.
+fn simulate_frame_rig(dir: &Path) -> std::path::PathBuf {
+    let sim = dir.join("sim");
     ok(&[
         "simulate",
         "--frames",
@@ -558,6 +557,13 @@ fn a_rig_of_frames_takes_each_cameras_timestamps() {
         "--out",
         p(&sim),
     ]);
+    sim
+}
+
+#[test]
+fn a_rig_of_frames_takes_each_cameras_timestamps() {
+    let tmp = tempfile::tempdir().unwrap();
+    let sim = simulate_frame_rig(tmp.path());
     let file = |name: &str| p(&sim.join(name)).to_string();
     let (rig, target) = (file("rig.yaml"), file("target.csv"));
     let images = [
@@ -655,19 +661,7 @@ fn a_rig_reads_each_cameras_frames_from_a_bag() {
     // time, to the nanosecond), then tracked as a rig from the bags: the estimates of the same frames from files, to
     // what the nanosecond stamps change (a 0.5 ns time at a few m/s: under 1e-9 m).
     let tmp = tempfile::tempdir().unwrap();
-    let sim = tmp.path().join("sim");
-    ok(&[
-        "simulate",
-        "--frames",
-        "--scenario",
-        "sweep",
-        "--rig-cameras",
-        "2",
-        "--frame-count",
-        "12",
-        "--out",
-        p(&sim),
-    ]);
+    let sim = simulate_frame_rig(tmp.path());
     let file = |name: &str| p(&sim.join(name)).to_string();
     let (rig, target) = (file("rig.yaml"), file("target.csv"));
     let out = |stem: &str| {
