@@ -93,7 +93,7 @@ impl<I> RollingSmoother<I> {
     }
 
     /// Takes the next frame's outcome and its measurements (raw pixels, at their row times), and gives back the frame
-    /// [`HELD_AFTER`] (4) before it, refined, once there is one.
+    /// four before it, refined, once there is one.
     pub fn push(
         &mut self,
         info: I,
