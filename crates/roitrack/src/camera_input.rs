@@ -1,8 +1,9 @@
 //! One camera's input of any kind turned into its stream of measurements, in time order, on the camera's own clock:
 //! a measurements file, a ROI recording (each ROI centroided) or frames (an image folder, a numbered pattern, a glob
 //! or a video, measured by the camera's own [`FrameTracker`]); with the feature `ros`, a topic of a ROS 2 bag
-//! (recorded centroids, or image frames measured as frames are). Several cameras may read topics of one bag. A rig's cameras each give one such stream, and
-//! [`crate::estimators::rig::merge_streams`] merges them for the [`crate::estimators::rig::RigTracker`].
+//! (recorded centroids, or image frames measured as frames are; several cameras may read topics of one bag). A rig's
+//! cameras each give one such stream, and [`crate::estimators::rig::merge_streams`] merges them for the
+//! [`crate::estimators::rig::RigTracker`].
 //!
 //! ```
 //! use roitrack::camera_input::{CameraInput, open_camera_input};

@@ -69,9 +69,9 @@ pub struct TrackArgs {
     /// frame10), a numbered pattern (`frames/frame_%05d.png`), a quoted glob (`'frames/*.png'`), or a video (mp4,
     /// mkv, avi, mov, webm; decoded by Debian's `ffmpeg`). One estimate per frame where the target is found.
     /// Also a ROS 2 bag (a .mcap file or a rosbag2 folder; `--mcap-in BAG`) with --image-topic. With --rig, one
-    /// NAME=SOURCE per camera (repeated; a bag with --topic NAME=TOPIC), each on its own camera's clock, every camera with the options
-    /// below (--fps, --shutter, --polarity...), and its frames' times by --timestamps NAME=FILE.csv, --fps or a
-    /// video's own. Default: none.
+    /// NAME=SOURCE per camera (repeated; a bag with --topic NAME=TOPIC), each on its own camera's clock, every
+    /// camera with the options below (--fps, --shutter, --polarity...), and its frames' times by --timestamps
+    /// NAME=FILE.csv, --fps, a video's own or a bag's stamps. Default: none.
     #[arg(long, value_name = "SOURCE | NAME=SOURCE", visible_alias = "mcap-in")]
     pub images: Vec<PathBuf>,
     /// With --images: the frames' times, a CSV file with a header, a column `t` (s: the mid-exposure time of the
