@@ -9,7 +9,8 @@ use std::time::Duration;
 
 use anyhow::{Result, anyhow, bail};
 use clap::Args;
-use roitrack::formats::{FormatError, FrameInfo, FrameSource, FrameTiming};
+use roitrack::camera_input::Frames;
+use roitrack::formats::{FormatError, FrameTiming};
 use roitrack::image::RoiImage;
 use roitrack::ros::{
     BackgroundBag, BagFrameSource, BagMeasurementSource, BagOptions, BagWriter,
@@ -436,56 +437,31 @@ pub fn camera(
     }
 }
 
-/// Frames from files (`FrameSource`) or from a bag's topic (`BagFrameSource`).
-pub enum Frames {
-    Files(FrameSource),
-    Bag(Box<BagFrameSource>),
-}
-
-impl Frames {
-    /// Opens the frames of `source`: a bag's topic (--image-topic), checked against the camera's size, or files.
-    pub fn open(
-        source: &Path,
-        timing: &FrameTiming,
-        mcap_in: &McapInArgs,
-        camera: &CameraModel,
-    ) -> Result<Self> {
-        if !is_bag(source) {
-            if mcap_in.image_topic.is_some() {
-                bail!(
-                    "--image-topic is for a ROS 2 bag (a .mcap file or a rosbag2 folder), and {} is not one",
-                    source.display()
-                );
-            }
-            return Ok(Self::Files(FrameSource::open(source, timing)?));
-        }
-        if timing.timestamps.is_some() || timing.fps.is_some() {
+/// The frames of `source` (`roitrack::camera_input::Frames`): a bag's topic (--image-topic), checked against the
+/// camera's size, or files.
+pub fn open_frames(
+    source: &Path,
+    timing: &FrameTiming,
+    mcap_in: &McapInArgs,
+    camera: &CameraModel,
+) -> Result<Frames> {
+    if !is_bag(source) {
+        if mcap_in.image_topic.is_some() {
             bail!(
-                "--timestamps and --fps are not for a bag: its frames are at their header stamps"
-            );
-        }
-        let Some(topic) = &mcap_in.image_topic else {
-            bail!(
-                "{} is a ROS 2 bag: give the topic of its frames with --image-topic",
+                "--image-topic is for a ROS 2 bag (a .mcap file or a rosbag2 folder), and {} is not one",
                 source.display()
             );
-        };
-        let mut frames = BagFrameSource::open(source, topic)?;
-        frames.expect_size(camera.width_px, camera.height_px);
-        Ok(Self::Bag(Box::new(frames)))
-    }
-
-    pub fn next_frame(&mut self, frame: &mut Frame) -> Option<Result<FrameInfo, FormatError>> {
-        match self {
-            Self::Files(files) => files.next_frame(frame),
-            Self::Bag(bag) => bag.next_frame(frame),
         }
+        return Ok(Frames::files(source, timing)?);
     }
-
-    pub fn frame_count(&self) -> Option<usize> {
-        match self {
-            Self::Files(files) => files.frame_count(),
-            Self::Bag(_) => None,
-        }
+    if timing.timestamps.is_some() || timing.fps.is_some() {
+        bail!("--timestamps and --fps are not for a bag: its frames are at their header stamps");
     }
+    let Some(topic) = &mcap_in.image_topic else {
+        bail!(
+            "{} is a ROS 2 bag: give the topic of its frames with --image-topic",
+            source.display()
+        );
+    };
+    Ok(Frames::bag(source, topic, camera)?)
 }

@@ -202,10 +202,7 @@ pub fn open_camera_input(
             source,
             timing,
             config,
-        } => {
-            let frames = Frames::Files(FrameSource::open(source, timing)?);
-            FrameMeasurements::stream(frames, camera, target, config)
-        }
+        } => FrameMeasurements::stream(Frames::files(source, timing)?, camera, target, config),
         #[cfg(feature = "ros")]
         CameraInput::BagMeasurements { bag, topic } => {
             let reader = roitrack_ros::BagMeasurementSource::open(bag, topic)?
@@ -215,15 +212,23 @@ pub fn open_camera_input(
         }
         #[cfg(feature = "ros")]
         CameraInput::BagImages { bag, topic, config } => {
-            let mut frames = roitrack_ros::BagFrameSource::open(bag, topic)?;
-            frames.expect_size(camera.width_px, camera.height_px);
-            FrameMeasurements::stream(Frames::Bag(Box::new(frames)), camera, target, config)
+            FrameMeasurements::stream(Frames::bag(bag, topic, camera)?, camera, target, config)
         }
     }
 }
 
-/// Where a camera's frames come from.
-enum Frames {
+/// Where a camera's frames come from: image files or a video ([`FrameSource`]), or a topic of a ROS 2 bag (feature
+/// `ros`), each frame checked against the camera's size. What `track --images` and a rig's frame cameras read.
+///
+/// ```
+/// use roitrack::camera_input::Frames;
+/// use roitrack::formats::FrameTiming;
+///
+/// // A folder that is not there: the error names it.
+/// let err = Frames::files("no/such/frames".as_ref(), &FrameTiming::default()).err().unwrap();
+/// assert!(err.to_string().contains("no/such/frames"));
+/// ```
+pub enum Frames {
     /// Image files or a video.
     Files(FrameSource),
     /// A topic of a ROS 2 bag.
@@ -232,11 +237,39 @@ enum Frames {
 }
 
 impl Frames {
-    fn next_frame(&mut self, frame: &mut Frame) -> Option<Result<FrameInfo, FormatError>> {
+    /// The frames of image files or a video (a folder, a numbered pattern, a glob, a video), timed by `timing`.
+    pub fn files(source: &std::path::Path, timing: &FrameTiming) -> Result<Self, FormatError> {
+        Ok(Self::Files(FrameSource::open(source, timing)?))
+    }
+
+    /// The frames of `topic` of the ROS 2 bag `bag` (a `.mcap` file or a rosbag2 folder), each at its header stamp;
+    /// a frame of another size than `camera`'s is an error naming it.
+    #[cfg(feature = "ros")]
+    pub fn bag(
+        bag: &std::path::Path,
+        topic: &str,
+        camera: &CameraModel,
+    ) -> Result<Self, FormatError> {
+        let mut frames = roitrack_ros::BagFrameSource::open(bag, topic)?;
+        frames.expect_size(camera.width_px, camera.height_px);
+        Ok(Self::Bag(Box::new(frames)))
+    }
+
+    /// Fills `frame` with the next frame (its time set) and tells which it was; `None` at the end.
+    pub fn next_frame(&mut self, frame: &mut Frame) -> Option<Result<FrameInfo, FormatError>> {
         match self {
             Self::Files(source) => source.next_frame(frame),
             #[cfg(feature = "ros")]
             Self::Bag(source) => source.next_frame(frame),
+        }
+    }
+
+    /// How many frames there are, where the source knows it before reading them (files; not a video or a bag).
+    pub fn frame_count(&self) -> Option<usize> {
+        match self {
+            Self::Files(source) => source.frame_count(),
+            #[cfg(feature = "ros")]
+            Self::Bag(_) => None,
         }
     }
 }

@@ -363,7 +363,7 @@ fn run_frames(
         fps: args.fps,
         time_units: args.time_units.map(Into::into),
     };
-    let mut frames = crate::ros::Frames::open(source, &timing, &args.mcap_in, &camera)?;
+    let mut frames = crate::ros::open_frames(source, &timing, &args.mcap_in, &camera)?;
     let (mut bag, copy_frames) = (
         args.ros.open(&camera, Some(&target))?,
         args.ros.wants_frames(),
