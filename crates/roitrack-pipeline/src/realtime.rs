@@ -201,9 +201,21 @@ pub enum PipelineError {
     /// The estimation thread panicked; what it estimated is lost.
     #[error("the estimation thread panicked")]
     EstimatorPanicked,
+    /// A rig's loop was given another number of cameras than the rig has.
+    #[error("the rig has {rig} cameras, {given} were given")]
+    RigCameras {
+        /// Cameras given.
+        given: usize,
+        /// Cameras of the rig.
+        rig: usize,
+    },
+    /// The rig's tracker is refused ([`roitrack_estimators::rig::RigTracker::new`]).
+    #[error("the rig's tracker: {0}")]
+    Rig(#[from] roitrack_estimators::rig::RigError),
 }
 
-enum Event {
+/// What the camera side sends the estimation side.
+pub(crate) enum Event {
     Measurement {
         m: Measurement,
         grabbed: Instant,
@@ -213,6 +225,22 @@ enum Event {
         t_s: f64,
         state: MotionState,
     },
+    /// A slot that gave neither: no measurement of this camera before `t_s` will come. Sent only by a camera of a
+    /// rig ([`Acquisition::with_heartbeats`]), whose estimation side merges several cameras' queues in time order
+    /// and must not wait for a camera that sees nothing.
+    Passed {
+        t_s: f64,
+    },
+}
+
+impl Event {
+    /// The time of the event on its camera's clock (s).
+    pub(crate) fn t_s(&self) -> f64 {
+        match self {
+            Event::Measurement { m, .. } => m.t_s,
+            Event::Restart { t_s, .. } | Event::Passed { t_s } => *t_s,
+        }
+    }
 }
 
 /// The broad prior of a pose from a full frame: 2 mm, 0.02 rad, 1 m/s, 10 rad/s (1 sigma).
@@ -226,7 +254,7 @@ pub(crate) fn full_frame_covariance() -> Matrix12 {
 }
 
 /// Spins briefly, then yields: queues on a busy 2-core machine must not burn the other thread's core.
-fn backoff(spins: &mut u32) {
+pub(crate) fn backoff(spins: &mut u32) {
     if *spins < 64 {
         std::hint::spin_loop();
     } else {
@@ -592,7 +620,11 @@ pub fn run_loop_with_hooks<C: RoiCamera>(
 
 impl LoopReport {
     /// The report of a run from what each thread counted and kept, and the run's wall time.
-    fn from_sides(camera_side: Counters, estimation_side: EstimationSide, wall_s: f64) -> Self {
+    fn from_sides(
+        camera_side: AcquisitionCounts,
+        estimation_side: EstimationSide,
+        wall_s: f64,
+    ) -> Self {
         Self {
             estimates: estimation_side.estimates,
             latencies_us: estimation_side.latencies_us,
@@ -698,6 +730,7 @@ fn run_estimation(
             Ok(Event::Restart { t_s, state }) => {
                 tracker.start_from(t_s, state, Some(full_frame_covariance()));
             }
+            Ok(Event::Passed { .. }) => {}
             Err(_) => {
                 if camera_done.load(Ordering::Acquire) && measurements.is_empty() {
                     break;
@@ -724,7 +757,7 @@ enum Slots {
 
 /// The acquisition thread's state: the camera, the scheduler placing each ROI from the latest [`Predictor`], the
 /// buffers a grab fills (sized before the run), the counters, and its ends of the two queues.
-struct Acquisition<'a, C> {
+pub(crate) struct Acquisition<'a, C> {
     camera: &'a mut C,
     camera_model: &'a CameraModel,
     target: &'a Target,
@@ -736,15 +769,17 @@ struct Acquisition<'a, C> {
     predictor: Option<Predictor>,
     /// The time of the last full-frame restart: older estimates describe the old track.
     restart_t_s: f64,
-    counters: Counters,
+    pub(crate) counters: AcquisitionCounts,
     measurement_tx: rtrb::Producer<Event>,
     predictor_rx: rtrb::Consumer<Predictor>,
+    /// Whether a slot that queues nothing queues an [`Event::Passed`].
+    heartbeats: bool,
 }
 
 impl<'a, C: RoiCamera> Acquisition<'a, C> {
     /// The camera side before its first slot: no track yet, the ROI buffer sized for the largest ROI, and the
     /// acquisition ends of the measurement and predictor queues.
-    fn new(
+    pub(crate) fn new(
         camera: &'a mut C,
         camera_model: &'a CameraModel,
         target: &'a Target,
@@ -764,9 +799,10 @@ impl<'a, C: RoiCamera> Acquisition<'a, C> {
             frame: Frame::default(),
             predictor: None,
             restart_t_s: f64::NEG_INFINITY,
-            counters: Counters::default(),
+            counters: AcquisitionCounts::default(),
             measurement_tx,
             predictor_rx,
+            heartbeats: false,
             camera,
             camera_model,
             target,
@@ -774,9 +810,20 @@ impl<'a, C: RoiCamera> Acquisition<'a, C> {
         }
     }
 
+    /// The camera side of a rig's camera: every slot that queues no measurement and no restart queues an
+    /// [`Event::Passed`] (if the queue has room: a full queue holds events of this camera already).
+    pub(crate) fn with_heartbeats(mut self) -> Self {
+        self.heartbeats = true;
+        self
+    }
+
     /// The camera side: `config.roi_slots` slots from `start`, each a full frame (when there is no track to follow)
     /// or one ROI, until the slots are done or the camera ends.
-    fn run(&mut self, start: Instant, progress: Option<&std::sync::atomic::AtomicUsize>) {
+    pub(crate) fn run(
+        &mut self,
+        start: Instant,
+        progress: Option<&std::sync::atomic::AtomicUsize>,
+    ) {
         let period = Duration::from_secs_f64(1.0 / self.config.rate_hz);
         let mut slot = 0usize;
         while slot < self.config.roi_slots {
@@ -803,11 +850,17 @@ impl<'a, C: RoiCamera> Acquisition<'a, C> {
                     self.predictor = Some(p);
                 }
             }
+            let queued = self.counters.measurements + self.counters.initialisations;
             let step = if self.predictor.is_none() || self.scheduler.needs_reinitialisation() {
                 self.initialise(t_s)
             } else {
                 self.read_roi(t_s)
             };
+            if self.heartbeats
+                && self.counters.measurements + self.counters.initialisations == queued
+            {
+                let _ = self.measurement_tx.push(Event::Passed { t_s });
+            }
             match step {
                 Slots::Advance(n) => slot += n,
                 Slots::Stop => break,
@@ -977,18 +1030,35 @@ impl<'a, C: RoiCamera> Acquisition<'a, C> {
     }
 }
 
-#[derive(Debug, Default)]
-struct Counters {
-    rois: usize,
-    measurements: usize,
-    rejections: RejectionCounts,
-    dropped: usize,
-    late: usize,
-    skipped: usize,
-    initialisations: usize,
-    failed_initialisations: usize,
-    camera_errors: usize,
-    stopped_by: Option<GrabError>,
+/// What the camera side of a loop did (a single camera's are in [`LoopReport`]; a rig's, one per camera, in
+/// [`crate::rig_loop::RigLoopReport::cameras`]).
+///
+/// ```
+/// let counts = roitrack_pipeline::AcquisitionCounts::default();
+/// assert_eq!((counts.rois, counts.measurements), (0, 0));
+/// ```
+#[derive(Debug, Clone, Default)]
+pub struct AcquisitionCounts {
+    /// ROIs read.
+    pub rois: usize,
+    /// Centroids sent to the estimator.
+    pub measurements: usize,
+    /// ROIs that gave no centroid, by reason; `absent` also counts the slots in which the scheduler placed no ROI.
+    pub rejections: RejectionCounts,
+    /// Measurements lost because the queue was full.
+    pub dropped: usize,
+    /// Paced mode: triggers reached more than one period late.
+    pub late: usize,
+    /// With [`LoopConfig::skip_late_slots`]: slots skipped because they were reached late.
+    pub skipped: usize,
+    /// Full-frame (re-)initialisations that found the target and restarted the track.
+    pub initialisations: usize,
+    /// Full frames in which the target was not found.
+    pub failed_initialisations: usize,
+    /// Grabs that failed but may be retried (timeouts, dropped buffers).
+    pub camera_errors: usize,
+    /// The camera's end, if it ended before its last slot (disconnected, end of a recording).
+    pub stopped_by: Option<GrabError>,
 }
 
 #[cfg(test)]

@@ -26,8 +26,9 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 use roitrack_core::roi_order::bit_reversed_indices;
-use roitrack_core::{Measurement, PoseSample, TwistSample};
+use roitrack_core::{Measurement, MotionState, PoseSample, TwistSample};
 use roitrack_estimators::rig::{CameraMount, ClockModel, Rig, RigCamera, RigMeasurement};
+use roitrack_image::{RoiRenderer, SensorError, SensorModel, SimulatedCamera};
 
 use crate::{Scenario, SimError};
 
@@ -94,6 +95,69 @@ impl CameraRigScene {
         }
         let rig = Rig::new(list).expect("drawn cameras have unique names and finite poses");
         Self { scenario, rig }
+    }
+
+    /// The target's true pose and twist in camera `camera`'s frame at `t_camera_s` on that camera's clock: the
+    /// scenario at the rig time its clock reads then, seen through its mount. What the camera images.
+    ///
+    /// ```
+    /// use roitrack_sim::multi_camera::CameraRigScene;
+    /// use roitrack_sim::{Scenario, ScenarioKind};
+    ///
+    /// let scene = CameraRigScene::random(Scenario::new(ScenarioKind::Orthoglide, 1), 2, 1);
+    /// // The first camera is the rig: the scenario itself.
+    /// assert_eq!(scene.camera_state_at(0, 0.7), scene.scenario.state_at(0.7));
+    /// let camera = &scene.rig.cameras()[1];
+    /// let seen = scene.camera_state_at(1, 0.7);
+    /// let expected = camera.mount.camera_state(&scene.scenario.state_at(camera.clock.rig_time_s(0.7)));
+    /// assert_eq!(seen, expected);
+    /// ```
+    ///
+    /// # Panics
+    ///
+    /// If the rig has no camera `camera`.
+    pub fn camera_state_at(&self, camera: usize, t_camera_s: f64) -> MotionState {
+        let camera = &self.rig.cameras()[camera];
+        camera
+            .mount
+            .camera_state(&self.scenario.state_at(camera.clock.rig_time_s(t_camera_s)))
+    }
+
+    /// Each camera's simulated ROI camera (the rig's order): its calibration and the scenario's target rendered with
+    /// the default sensor at [`Self::camera_state_at`] of each ROI's exposure on its own clock, its noise drawn from
+    /// `seed` and its place in the rig. Refuses a camera whose time model is invalid.
+    ///
+    /// ```
+    /// use roitrack_image::{Frame, RoiCamera};
+    /// use roitrack_sim::multi_camera::CameraRigScene;
+    /// use roitrack_sim::{Scenario, ScenarioKind};
+    ///
+    /// let scene = CameraRigScene::random(Scenario::new(ScenarioKind::Orthoglide, 1), 3, 1);
+    /// let mut cameras = scene.simulated_cameras(1).unwrap();
+    /// let mut frame = Frame::default();
+    /// cameras[2].grab_full_frame(0.1, &mut frame).unwrap();
+    /// assert_eq!((frame.width, frame.t_s), (scene.rig.cameras()[2].camera.width_px, 0.1));
+    /// ```
+    pub fn simulated_cameras(
+        &self,
+        seed: u64,
+    ) -> Result<Vec<SimulatedCamera<impl Fn(f64) -> MotionState + Send + 'static>>, SensorError>
+    {
+        (0..self.rig.len())
+            .map(|c| {
+                let renderer = RoiRenderer::new(
+                    self.rig.cameras()[c].camera.clone(),
+                    self.scenario.target.clone(),
+                    SensorModel::default(),
+                )?;
+                let scene = self.clone();
+                Ok(SimulatedCamera::new(
+                    renderer,
+                    move |t_s| scene.camera_state_at(c, t_s),
+                    seed.wrapping_add(c as u64),
+                ))
+            })
+            .collect()
     }
 
     /// The rig as a user tells the tracker of it who knows every camera's calibration and mount but no clock beyond

@@ -21,7 +21,9 @@ impl RigTracker {
         };
         self.held = held;
         self.held.clear();
-        if let Some(e) = single.map_err(|source| self.measurement_error(c, source))?
+        let single = single.map_err(|source| self.measurement_error(c, source))?;
+        self.note_own(c, single);
+        if let Some(e) = single
             && e.status.is_vouched_for()
         {
             self.take_single(c, &e)?;

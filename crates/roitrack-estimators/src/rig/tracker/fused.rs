@@ -217,12 +217,16 @@ impl RigTracker {
                 0.0
             };
         }
+        let since_restart = m.t_s >= self.restarted_at_s[c];
         if nis > tuning.gate_sigma * tuning.gate_sigma {
-            f.gated_in_a_row += 1;
-            f.newest_gated = true;
             f.gated_since_estimate += 1;
             self.report.gated += 1;
             self.camera_counts[c].gated += 1;
+            if since_restart && self.fused_since_restart[c] < self.target.len() {
+                return;
+            }
+            f.gated_in_a_row += 1;
+            f.newest_gated = true;
             self.camera_counts[c].gated_in_a_row += 1;
             let n = self.target.len();
             if f.gated_in_a_row >= LOST_AFTER_GATED_CYCLES * n {
@@ -243,6 +247,9 @@ impl RigTracker {
         }
         f.gated_in_a_row = 0;
         f.newest_gated = false;
+        if since_restart {
+            self.fused_since_restart[c] = self.fused_since_restart[c].saturating_add(1);
+        }
         self.camera_counts[c].fused += 1;
         self.camera_counts[c].gated_in_a_row = 0;
         // Huber: beyond `huber_sigma`, the noise is inflated in proportion to the distance.

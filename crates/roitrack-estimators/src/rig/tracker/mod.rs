@@ -16,10 +16,10 @@ mod instant;
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, VecDeque};
 
-use roitrack_core::{Measurement, SpatioTemporalModel, Target};
+use roitrack_core::{Measurement, MotionState, SpatioTemporalModel, Target};
 
 use super::{Rig, RigMeasurement};
-use crate::{Estimate, Estimator, EstimatorConfig, KalmanTuning, Tracker};
+use crate::{Estimate, Estimator, EstimatorConfig, KalmanTuning, Matrix12, Tracker};
 use clock::TrackSample;
 use fused::Fused;
 
@@ -109,6 +109,19 @@ pub struct RigTracker {
     clocks: Vec<super::ClockModel>,
     /// Per camera: the newest vouched estimate of its own tracker (rig frame and clock).
     newest_single: Vec<Option<Estimate>>,
+    /// Per camera: the newest estimate of its own tracker, whatever its status (its frame and clock), until a live
+    /// loop takes it ([`Self::take_camera_estimate`]).
+    untaken_single: Vec<Option<Estimate>>,
+    /// Per camera: the time (its clock) from which its own tracker was last restarted by [`Self::restart_camera`]
+    /// (-inf: never), and how many of its centroids the fused filter has taken since. Until it has taken as many as
+    /// the target has points (a whole cycle of ROIs agreeing with the others' track), the camera's centroids that the
+    /// gate rejects do not dispute the fused estimate by a run of rejections or by one far beyond the gate: a track
+    /// started from a still pose in one frame may lose a fast target for a few ROIs and read its neighbouring blobs
+    /// (in a live rig, 10 centroids 14-28 px off 2 ms after a camera's view came back, its first ones right, the
+    /// fused track right all along), which tells against that camera, not against the track the others hold. Half
+    /// the centroids since the last estimate rejected still dispute it, whichever camera they came from.
+    restarted_at_s: Vec<f64>,
+    fused_since_restart: Vec<usize>,
     /// Each camera's own `tracking` estimates of the last [`CROSS_CHECK_SPAN_S`] behind the newest (rig frame and
     /// time, in time order, at most [`CROSS_CHECK_CAPACITY`]): the fused estimates, which lag by the reorder buffer, are checked
     /// against the one nearest in time.
@@ -220,6 +233,9 @@ impl RigTracker {
             clock_states,
             clocks: rig.cameras().iter().map(|c| c.clock).collect(),
             newest_single: vec![None; n],
+            untaken_single: vec![None; n],
+            restarted_at_s: vec![f64::NEG_INFINITY; n],
+            fused_since_restart: vec![usize::MAX; n],
             recent_singles: vec![VecDeque::new(); n],
             singles,
             held: Vec::new(),
@@ -267,6 +283,74 @@ impl RigTracker {
         self.singles.get_mut(camera)
     }
 
+    /// The newest estimate of camera `camera`'s own tracker (in its frame and on its clock, whatever its status) that
+    /// came since the last call, taken: what a live loop places that camera's next ROIs from, as a single camera's
+    /// loop does from its tracker's estimates (the fused ones come [`RigTrackerConfig::reorder_latency_s`] later).
+    /// `None` if no new one came, or for a camera the rig does not have.
+    ///
+    /// ```
+    /// use roitrack_estimators::rig::{Rig, RigMeasurement, RigTracker, RigTrackerConfig};
+    /// use roitrack_core::{CameraModel, Measurement, Target};
+    ///
+    /// let mut tracker = RigTracker::new(Rig::single("cam", CameraModel::canonical()), Target::grid4x4(),
+    ///     RigTrackerConfig::default()).unwrap();
+    /// let m = Measurement { t_s: 0.0, id: 0, u_px: 480.0, v_px: 480.0 };
+    /// tracker.push(&RigMeasurement { camera: 0, measurement: m }).unwrap();
+    /// // One centroid starts no track: no estimate to place ROIs from.
+    /// assert!(tracker.take_camera_estimate(0).is_none());
+    /// ```
+    pub fn take_camera_estimate(&mut self, camera: usize) -> Option<Estimate> {
+        self.untaken_single.get_mut(camera)?.take()
+    }
+
+    /// Restarts camera `camera`'s own tracker from `state` at `t_s` of its clock with `covariance` (a live loop's
+    /// full frame, where the target was found with no prior). Until the fused filter has taken as many of the
+    /// camera's centroids from `t_s` on as the target has points, those its gate rejects do not dispute the fused
+    /// estimate by a run of rejections or by one far beyond the gate. Nothing for a camera the rig does not have.
+    ///
+    /// ```
+    /// use roitrack_estimators::rig::{Rig, RigTracker, RigTrackerConfig};
+    /// use roitrack_estimators::Estimator;
+    /// use roitrack_core::{CameraModel, MotionState, Target};
+    ///
+    /// let mut tracker = RigTracker::new(Rig::single("cam", CameraModel::canonical()), Target::grid4x4(),
+    ///     RigTrackerConfig::default()).unwrap();
+    /// let pose = MotionState::at_rest(Default::default(), [0.0, 0.0, 0.6].into());
+    /// tracker.restart_camera(0, 0.5, pose, None);
+    /// assert_eq!(tracker.camera_tracker(0).unwrap().state().unwrap().0, 0.5);
+    /// ```
+    pub fn restart_camera(
+        &mut self,
+        camera: usize,
+        t_s: f64,
+        state: MotionState,
+        covariance: Option<Matrix12>,
+    ) {
+        if let Some(single) = self.singles.get_mut(camera) {
+            single.start_from(t_s, state, covariance);
+            self.restarted_at_s[camera] = t_s;
+            self.fused_since_restart[camera] = 0;
+        }
+    }
+
+    /// The newest estimate of camera `c`'s own tracker, if one came: kept for [`Self::take_camera_estimate`].
+    fn note_own(&mut self, c: usize, single: Option<Estimate>) {
+        if single.is_some() {
+            self.untaken_single[c] = single;
+        }
+    }
+
+    /// The time on the rig's clock of `t_camera_s` on camera `camera`'s clock, by that clock as known now (given,
+    /// or learnt so far: before its offset is found, the camera's own time). What a live loop merges the cameras'
+    /// streams by, as the reorder buffer orders them.
+    ///
+    /// # Panics
+    ///
+    /// If the rig has no camera `camera`.
+    pub fn rig_time_s(&self, camera: usize, t_camera_s: f64) -> f64 {
+        self.clocks[camera].rig_time_s(t_camera_s)
+    }
+
     /// Takes one centroid of one camera (its time on that camera's clock; each camera's times must not decrease; the
     /// cameras' streams merged in the order of their rig times as far as their clocks are known, within
     /// [`RigTrackerConfig::reorder_latency_s`]). Returns the estimates that became due: one every `every` fused
@@ -286,6 +370,7 @@ impl RigTracker {
                 .push(&m.measurement)
                 .map_err(|source| self.measurement_error(c, source))?;
             self.report.measurements += 1;
+            self.note_own(c, single);
             return Ok(single
                 .map(|estimate| {
                     self.report.estimates += 1;
@@ -312,6 +397,7 @@ impl RigTracker {
                 .push(&m.measurement)
                 .map_err(|source| self.measurement_error(c, source))?;
             self.newest_t_s[c] = m.measurement.t_s;
+            self.note_own(c, single);
             if let Some(e) = single
                 && e.status.is_vouched_for()
             {
