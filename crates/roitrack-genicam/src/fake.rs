@@ -1,4 +1,5 @@
-//! Aravis' fake GigE Vision camera, started in this process on 127.0.0.1, serving images of a simulated target.
+//! Aravis' fake GigE Vision camera, started in this process on 127.0.0.1 (or another loopback address), serving images
+//! of a simulated target.
 //!
 //! The fake camera speaks the real protocol (GVCP registers, GVSP packets) on the loopback interface; roitrack only
 //! replaces its test pattern: at each buffer it renders the scenario's target ([`RoiRenderer`]) in the window its
@@ -6,7 +7,8 @@
 //! GenICam description offers), at the scene time the host set ([`SceneClock`]), and stamps the buffer with its
 //! device clock: a real clock, started [`FAKE_DEVICE_CLOCK_START_S`] before the camera, so that the host estimates
 //! its offset as with a real camera. The scene time of each buffer is recorded under its timestamp. Only one fake
-//! camera can own 127.0.0.1's GVCP port at a time.
+//! camera can own an address's GVCP port at a time: a rig's second fake camera listens on another loopback address
+//! ([`FakeGigeCamera::start_rendering_at`]).
 
 use std::collections::VecDeque;
 use std::ffi::c_void;
@@ -232,6 +234,7 @@ pub struct FakeGigeCamera {
     gv: Mutex<Option<GvFakeCamera>>,
     scene: Arc<Scene>,
     serial: String,
+    address: String,
 }
 
 // SAFETY: the GObject is reference counted atomically and the fake camera serialises its own work on its thread;
@@ -279,6 +282,30 @@ impl FakeGigeCamera {
         sensor: SensorModel,
         seed: u64,
     ) -> Result<Self, GenicamError> {
+        Self::start_rendering_at(FAKE_ADDRESS, camera, target, truth, sensor, seed)
+    }
+
+    /// As [`Self::start_rendering`], on `address`, an IPv4 address of one of this host's interfaces (Aravis binds
+    /// the camera's GVCP port there): a second fake camera needs an address of its own, such as 127.0.0.2 added to
+    /// the loopback (`ip addr add 127.0.0.2/8 dev lo`, as root, in a network namespace of its own in the tests).
+    /// Refused if no interface has the address or its GVCP port is taken.
+    ///
+    /// ```no_run
+    /// use roitrack_core::{CameraModel, MotionState, Target};
+    /// use roitrack_genicam::FakeGigeCamera;
+    /// let still = MotionState::at_rest(Default::default(), [0.0, 0.0, 0.6].into());
+    /// let fake = FakeGigeCamera::start_rendering_at("127.0.0.2", &CameraModel::canonical(), &Target::grid4x4(),
+    ///     move |_t| still, Default::default(), 2).unwrap();
+    /// assert_eq!(fake.address(), "127.0.0.2");
+    /// ```
+    pub fn start_rendering_at(
+        address: &str,
+        camera: &CameraModel,
+        target: &Target,
+        truth: impl Fn(f64) -> MotionState + Send + Sync + 'static,
+        sensor: SensorModel,
+        seed: u64,
+    ) -> Result<Self, GenicamError> {
         let renderer = RoiRenderer::new(camera.clone(), target.clone(), sensor)
             .map_err(|e| GenicamError::Fake(e.to_string()))?;
         let scene = Arc::new(Scene {
@@ -296,11 +323,24 @@ impl FakeGigeCamera {
             last_ns: AtomicU64::new(0),
             fake: AtomicPtr::new(std::ptr::null_mut()),
         });
-        let serial = format!("ROITRACK-{}", std::process::id());
-        let gv = GvFakeCamera::new(Some(FAKE_ADDRESS), Some(&serial));
+        // Unique per camera (a GigE Vision serial number holds at most 16 characters).
+        let serial = if address == FAKE_ADDRESS {
+            format!("ROITRACK-{}", std::process::id())
+        } else {
+            let host = address.rsplit('.').next().unwrap_or(address);
+            format!("RT-{}-{host}", std::process::id() % 10_000_000)
+        };
+        let gv = GvFakeCamera::new(Some(address), Some(&serial));
         if !gv.is_running() {
             return Err(GenicamError::Fake(format!(
-                "cannot listen on {FAKE_ADDRESS}'s GVCP port (3956): another fake camera is running?"
+                "cannot listen on {address}'s GVCP port (3956): another fake camera is running there, or no \
+                 interface has that address{}",
+                if address == FAKE_ADDRESS {
+                    ""
+                } else {
+                    " (a loopback address other than 127.0.0.1 must be added to lo first: `ip addr add \
+                     ADDRESS/8 dev lo`)"
+                }
             )));
         }
         let fake = gv
@@ -322,12 +362,13 @@ impl FakeGigeCamera {
             gv: Mutex::new(Some(gv)),
             scene,
             serial,
+            address: address.to_string(),
         })
     }
 
-    /// The address to open it at ([`FAKE_ADDRESS`]).
+    /// The address to open it at ([`FAKE_ADDRESS`] unless started elsewhere).
     pub fn address(&self) -> &str {
-        FAKE_ADDRESS
+        &self.address
     }
 
     /// The serial number it was started with (check it when opening the camera: [`crate::GenicamOptions`]).

@@ -10,7 +10,9 @@
 //!   stops answering ends the run with [`roitrack_image::GrabError::Disconnected`], the estimates so far kept.
 //! - [`FakeGigeCamera`] is Aravis' fake camera whose images are the scenario's target rendered by
 //!   [`roitrack_image::RoiRenderer`] at the scene time the host sets, stamped by a device clock of its own.
-//! - [`run_live`] runs the two-thread loop on such a camera and reports what the camera did ([`LiveReport`]).
+//! - [`run_live`] runs the two-thread loop on such a camera and reports what the camera did ([`LiveReport`]);
+//!   [`run_rig_live`] runs a rig of them, one acquisition thread per camera and one fused track ([`run_fake_rig`]:
+//!   a fake camera per camera of a simulated rig, each on a loopback address of its own).
 //! - [`ClockOffset`] (always built) estimates the offset between a device's clock and the host's.
 //!
 //! Never enumerate devices: Aravis' discovery broadcasts on every network interface. Only `roitrack cameras --scan`
@@ -29,6 +31,8 @@ mod camera;
 mod fake;
 #[cfg(feature = "genicam")]
 mod live;
+#[cfg(feature = "genicam")]
+mod rig;
 
 #[cfg(feature = "genicam")]
 pub use camera::{
@@ -44,3 +48,5 @@ pub use live::{
     LiveOptions, LiveReport, run_device, run_fake, run_live, timestamp_to_estimate_us,
     truth_samples,
 };
+#[cfg(feature = "genicam")]
+pub use rig::{MAX_FAKE_RIG_CAMERAS, RigLiveReport, run_device_rig, run_fake_rig, run_rig_live};

@@ -222,17 +222,7 @@ pub fn run_live(
     on_estimate: &mut (dyn FnMut(&roitrack_estimators::Estimate) + Send),
 ) -> Result<LiveReport, GenicamError> {
     let (w, h) = camera.window();
-    let side = w.min(h);
-    let mut config = LoopConfig {
-        rate_hz: options.rate_hz,
-        paced,
-        roi_slots: (options.duration_s * options.rate_hz).round().max(0.0) as usize,
-        keep_measurements: options.keep_measurements,
-        ..LoopConfig::default()
-    };
-    // Every ROI is the camera's window: the scheduler places windows of that size.
-    config.scheduler.min_size_px = side;
-    config.scheduler.max_size_px = side;
+    let config = loop_config(options, w.min(h), paced);
     let loop_report = run_loop_with_sink(
         camera,
         camera_model,
@@ -255,6 +245,38 @@ pub fn run_live(
     })
 }
 
+/// The loop's options of a live run whose ROIs are all a camera's window of `side_px`: the scheduler places windows
+/// of that size.
+pub(crate) fn loop_config(options: &LiveOptions, side_px: u32, paced: bool) -> LoopConfig {
+    let mut config = LoopConfig {
+        rate_hz: options.rate_hz,
+        paced,
+        roi_slots: (options.duration_s * options.rate_hz).round().max(0.0) as usize,
+        keep_measurements: options.keep_measurements,
+        ..LoopConfig::default()
+    };
+    config.scheduler.min_size_px = side_px;
+    config.scheduler.max_size_px = side_px;
+    config
+}
+
+/// How to open `fake` with the options `camera` asks for: its address, its serial number checked, and in free run
+/// its fastest frame rate unless asked (it starts at 25 Hz).
+pub(crate) fn fake_camera_options(
+    fake: &FakeGigeCamera,
+    camera: &GenicamOptions,
+) -> GenicamOptions {
+    GenicamOptions {
+        address: fake.address().to_string(),
+        expected_serial: Some(fake.serial().to_string()),
+        frame_rate_hz: match camera.trigger {
+            TriggerChoice::FreeRun => camera.frame_rate_hz.or(Some(FAKE_MAX_FRAME_RATE_HZ)),
+            TriggerChoice::Software => camera.frame_rate_hz,
+        },
+        ..camera.clone()
+    }
+}
+
 /// See [`LiveReport`] for an example.
 ///
 /// Starts Aravis' fake camera on 127.0.0.1 rendering `scenario` (default sensor, noise seeded with `seed`), opens it
@@ -275,19 +297,7 @@ pub fn run_fake(
         SensorModel::default(),
         seed,
     )?);
-    let camera_options = GenicamOptions {
-        address: fake.address().to_string(),
-        expected_serial: Some(fake.serial().to_string()),
-        // Free run: the fake camera's fastest unless asked (it starts at 25 Hz).
-        frame_rate_hz: match options.camera.trigger {
-            TriggerChoice::FreeRun => options
-                .camera
-                .frame_rate_hz
-                .or(Some(FAKE_MAX_FRAME_RATE_HZ)),
-            TriggerChoice::Software => options.camera.frame_rate_hz,
-        },
-        ..options.camera.clone()
-    };
+    let camera_options = fake_camera_options(&fake, &options.camera);
     let full_size = (scenario.camera.width_px, scenario.camera.height_px);
     let mut camera = GenicamCamera::open(&camera_options, full_size)?
         .with_scene_clock(fake.clock())

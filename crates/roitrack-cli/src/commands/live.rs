@@ -1,15 +1,16 @@
 //! `roitrack live` and `roitrack cameras` (feature `genicam`): the two-thread loop on a live GenICam camera through
 //! Aravis, or on Aravis' fake GigE camera rendering a scenario (see `roitrack_genicam`, docs/cameras.md).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
 use roitrack::formats::EstimateWriter;
 use roitrack::sim::Scenario;
+use roitrack::sim::multi_camera::{CameraRigScene, draw_clocks};
 use roitrack_genicam::{
-    GenicamOptions, LiveOptions, PixelFormatChoice, TriggerChoice, run_device, run_fake,
-    truth_samples,
+    GenicamOptions, LiveOptions, PixelFormatChoice, TriggerChoice, run_device, run_device_rig,
+    run_fake, run_fake_rig, truth_samples,
 };
 
 use crate::args::ScenarioArg;
@@ -20,21 +21,36 @@ use crate::args::ScenarioArg;
 #[derive(Debug, Args)]
 pub struct LiveArgs {
     /// The camera's IPv4 address (GigE Vision), opened directly; an Aravis id (Vendor-Model-Serial, USB3 Vision)
-    /// only with --allow-discovery. Default: none; one of --device and --fake is required.
+    /// only with --allow-discovery. With --rig: NAME=ADDRESS, once for each camera of the rig. Default: none; one of
+    /// --device and --fake is required.
     #[arg(
         long,
         value_name = "ADDRESS",
         required_unless_present = "fake",
         conflicts_with = "fake"
     )]
-    pub device: Option<String>,
+    pub device: Vec<String>,
     /// With --device: let Aravis search for a camera given by its id: a GigE Vision discovery broadcast on every
     /// network interface, then the USB bus (USB3 Vision cameras need it). Without it, only an IP address is opened.
     #[arg(long, requires = "device")]
     pub allow_discovery: bool,
-    /// Start Aravis' fake GigE camera on 127.0.0.1 in this process and track the scenario it renders.
+    /// Start Aravis' fake GigE camera on 127.0.0.1 in this process and track the scenario it renders. With --rig:
+    /// one fake camera per camera of the rig, camera k on 127.0.0.k (every address but 127.0.0.1 must be on the
+    /// loopback first: `ip addr add 127.0.0.2/8 dev lo`), each rendering the scenario through its calibration, pose
+    /// and clock (the clocks the rig file leaves out drawn from --seed, within ±50 ms and ±100 ppm).
     #[arg(long)]
     pub fake: bool,
+    /// Several cameras that share no clock, one fused track: the rig file (docs/rig.md) with each camera's
+    /// calibration and pose; each camera runs on a thread of its own, its ROIs placed from its own track, and every
+    /// centroid is fused in the order of the rig's time; clocks the file leaves out are learnt. The poses and twists
+    /// are rig_T_object in the rig's frame on the rig's clock. Give each camera's address (--device NAME=ADDRESS) or
+    /// --fake. Default: one camera.
+    #[arg(long, value_name = "RIG.yaml", conflicts_with_all = ["camera", "allow_discovery"])]
+    pub rig: Option<PathBuf>,
+    /// With --rig: also write the rig file with the clocks learnt (offsets, drifts and their standard deviations).
+    /// Default: none.
+    #[arg(long, value_name = "FILE.yaml", requires = "rig")]
+    pub rig_out: Option<PathBuf>,
     /// With --fake: the scenario rendered.
     #[arg(long, value_enum, default_value = "orthoglide", requires = "fake")]
     pub scenario: ScenarioArg,
@@ -42,15 +58,16 @@ pub struct LiveArgs {
     #[arg(long, default_value_t = 1, requires = "fake")]
     pub seed: u64,
     /// With --fake: also write the ground truth (gt_poses.tum, gt_twists.csv) on the fake camera's clock, the
-    /// scenario's time, into this folder. Default: none.
+    /// scenario's time, into this folder (with --rig: in the rig's frame on the rig's clock, and rig_truth.yaml, the
+    /// rig with the clocks drawn). Default: none.
     #[arg(long, value_name = "DIR", requires = "fake")]
     pub truth_out: Option<PathBuf>,
     /// With --device: the camera's calibration (any format `track --camera` reads). Default: none (required with
-    /// --device).
+    /// --device, but with --rig, whose file gives each camera's).
     #[arg(
         long,
         value_name = "FILE",
-        required_unless_present = "fake",
+        required_unless_present_any = ["fake", "rig"],
         conflicts_with = "fake"
     )]
     pub camera: Option<PathBuf>,
@@ -150,15 +167,21 @@ pub fn cameras(args: &CamerasArgs) -> Result<()> {
 /// Refuses, before anything is read or written, outputs (poses, twists, the bag and its partial name, the truth's
 /// files) that are the camera or target file (also through links) or each other.
 fn check_paths(args: &LiveArgs) -> Result<()> {
-    let inputs: Vec<(&str, &std::path::Path)> =
-        [("--camera", &args.camera), ("--target", &args.target)]
-            .into_iter()
-            .filter_map(|(name, path)| path.as_deref().map(|p| (name, p)))
-            .collect();
+    let inputs: Vec<(&str, &std::path::Path)> = [
+        ("--camera", &args.camera),
+        ("--target", &args.target),
+        ("--rig", &args.rig),
+    ]
+    .into_iter()
+    .filter_map(|(name, path)| path.as_deref().map(|p| (name, p)))
+    .collect();
     let mut outputs: Vec<(&str, PathBuf)> = vec![
         ("--poses", args.poses.clone()),
         ("--twists", args.twists.clone()),
     ];
+    if let Some(out) = &args.rig_out {
+        outputs.push(("--rig-out", out.clone()));
+    }
     if let Some(mcap) = &args.ros.mcap {
         outputs.push(("--mcap", mcap.clone()));
         outputs.push((
@@ -175,6 +198,12 @@ fn check_paths(args: &LiveArgs) -> Result<()> {
             "--truth-out's gt_twists.csv",
             dir.join(super::simulate::TRUTH_TWISTS_FILE),
         ));
+        if args.rig.is_some() {
+            outputs.push((
+                "--truth-out's rig_truth.yaml",
+                dir.join(super::simulate::RIG_TRUTH_FILE),
+            ));
+        }
     }
     let outputs: Vec<(&str, &std::path::Path)> =
         outputs.iter().map(|(n, p)| (*n, p.as_path())).collect();
@@ -185,25 +214,17 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     if args.roi_size == 0 || args.roi_size > 64 {
         bail!("--roi-size must be in 1..=64 px, got {}", args.roi_size);
     }
-    let camera = GenicamOptions {
-        address: args.device.clone().unwrap_or_default(),
-        allow_discovery: args.allow_discovery,
-        pixel_format: args.pixel_format.map(|f| match f {
-            PixelFormatArg::Mono8 => PixelFormatChoice::Mono8,
-            PixelFormatArg::Mono12 => PixelFormatChoice::Mono12,
-            PixelFormatArg::Mono16 => PixelFormatChoice::Mono16,
-            PixelFormatArg::Mono12Packed => PixelFormatChoice::Mono12Packed,
-            PixelFormatArg::Mono12p => PixelFormatChoice::Mono12p,
-        }),
-        roi_size_px: args.roi_size,
-        exposure_us: args.exposure_us,
-        trigger: match args.trigger {
-            TriggerArg::Software => TriggerChoice::Software,
-            TriggerArg::FreeRun => TriggerChoice::FreeRun,
+    let camera = camera_options(args);
+    if let Some(rig) = &args.rig {
+        return run_rig(args, rig, camera);
+    }
+    let camera = match args.device.as_slice() {
+        [] => camera,
+        [address] => GenicamOptions {
+            address: address.clone(),
+            ..camera
         },
-        frame_rate_hz: args.frame_rate_hz,
-        timeout_s: args.timeout_s,
-        ..GenicamOptions::default()
+        _ => bail!("--device: one camera, or several with --rig (NAME=ADDRESS each)"),
     };
     check_paths(args)?;
     // The truth's folder first: the estimates may go into it.
@@ -332,6 +353,168 @@ pub fn run(args: &LiveArgs) -> Result<()> {
             "the camera ended the run: {e} (the estimates until then are written)"
         ))
         .into()),
+    }
+}
+
+/// `live --rig`: the rig's cameras (fake, or each at its --device NAME=ADDRESS) in one loop, one fused track.
+fn run_rig(args: &LiveArgs, rig_path: &Path, camera: GenicamOptions) -> Result<()> {
+    if args.ros.mcap.is_some() || args.ros.foxglove.is_some() || args.ros2.ros2 {
+        bail!("--rig: bags, --foxglove and --ros2 are not supported with a rig yet");
+    }
+    check_paths(args)?;
+    let file = roitrack::formats::read_rig_yaml(rig_path, &Default::default())?;
+    let rig = &file.rig;
+    let names: Vec<String> = rig.cameras().iter().map(|c| c.name.clone()).collect();
+    if let Some(dir) = &args.truth_out {
+        roitrack::formats::create_output_dir(dir)?;
+    }
+    let mut writer = EstimateWriter::create(&args.poses, &args.twists, None)?;
+    let stop = crate::signals::stop_flag();
+    let report = if args.fake {
+        let scenario = Scenario::new(args.scenario.into(), args.seed);
+        let scene = CameraRigScene {
+            rig: draw_clocks(rig, args.seed),
+            scenario,
+        };
+        let options = LiveOptions {
+            camera,
+            duration_s: args.duration.unwrap_or(scene.scenario.duration_s),
+            rate_hz: args.rate_hz.unwrap_or(4000.0),
+            ..LiveOptions::default()
+        };
+        if let Some(dir) = &args.truth_out {
+            let (poses, twists) =
+                truth_samples(&scene.scenario, options.duration_s, options.rate_hz);
+            roitrack::formats::write_tum(dir.join(super::simulate::TRUTH_POSES_FILE), &poses)?;
+            roitrack::formats::write_twists_csv(
+                dir.join(super::simulate::TRUTH_TWISTS_FILE),
+                &twists,
+            )?;
+            let truth_file = dir.join(super::simulate::RIG_TRUTH_FILE);
+            let calibrations = file.calibrations_for_output(&truth_file);
+            roitrack::formats::write_rig_yaml(&truth_file, &scene.rig, &calibrations, None)?;
+        }
+        run_fake_rig(&scene, rig, &options, args.seed, stop, &mut |_| {})
+            .with_context(|| format!("the fake cameras of {}", rig_path.display()))?
+    } else {
+        let target = crate::args::read_target(
+            args.target
+                .as_ref()
+                .context("--target is required with --device")?,
+            None,
+        )?;
+        let mut addresses: Vec<Option<String>> = vec![None; rig.len()];
+        for given in &args.device {
+            let Some((name, address)) = given.split_once('=') else {
+                bail!(
+                    "--device {given}: with --rig, NAME=ADDRESS (a camera of {})",
+                    rig_path.display()
+                );
+            };
+            let Some(c) = rig.index_of(name) else {
+                bail!(
+                    "--device {given}: {} has no camera '{name}' (it has {})",
+                    rig_path.display(),
+                    names.join(", ")
+                );
+            };
+            if addresses[c].replace(address.to_string()).is_some() {
+                bail!("--device: camera '{name}' given twice");
+            }
+        }
+        let cameras = addresses
+            .into_iter()
+            .zip(&names)
+            .map(|(address, name)| {
+                let address = address.with_context(|| {
+                    format!(
+                        "camera '{name}' of {} has no --device {name}=ADDRESS",
+                        rig_path.display()
+                    )
+                })?;
+                Ok(GenicamOptions {
+                    address,
+                    ..camera.clone()
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let options = LiveOptions {
+            camera,
+            duration_s: args.duration.unwrap_or(10.0),
+            rate_hz: args.rate_hz.unwrap_or(1000.0),
+            ..LiveOptions::default()
+        };
+        run_device_rig(rig, &cameras, &target, &options, stop, &mut |_| {})?
+    };
+    for e in &report.loop_report.estimates {
+        writer.write(&e.estimate)?;
+    }
+    writer.finish()?;
+    if let Some(out) = &args.rig_out {
+        let calibrations = file.calibrations_for_output(out);
+        roitrack::formats::write_rig_yaml(
+            out,
+            rig,
+            &calibrations,
+            Some(&report.loop_report.clocks),
+        )?;
+    }
+    println!("{}", report.summary(&names));
+    println!(
+        "wrote {} estimates to {} and {}",
+        report.loop_report.estimates.len(),
+        args.poses.display(),
+        args.twists.display()
+    );
+    let stopped: Vec<String> = report
+        .loop_report
+        .cameras
+        .iter()
+        .zip(&names)
+        .filter_map(|(counts, name)| match &counts.stopped_by {
+            None | Some(roitrack::image::GrabError::Stopped { .. }) => None,
+            Some(e) => Some(format!("camera '{name}': {e}")),
+        })
+        .collect();
+    if report.loop_report.cameras.iter().any(|c| {
+        matches!(
+            c.stopped_by,
+            Some(roitrack::image::GrabError::Stopped { .. })
+        )
+    }) {
+        crate::signals::acknowledge();
+    }
+    if !stopped.is_empty() {
+        return Err(crate::OutputsStand(format!(
+            "a camera ended the run: {} (the estimates until then are written)",
+            stopped.join("; ")
+        ))
+        .into());
+    }
+    Ok(())
+}
+
+/// The camera options every camera of the run takes (pixel format, window, exposure, trigger, timeout); the address
+/// is each camera's.
+fn camera_options(args: &LiveArgs) -> GenicamOptions {
+    GenicamOptions {
+        allow_discovery: args.allow_discovery,
+        pixel_format: args.pixel_format.map(|f| match f {
+            PixelFormatArg::Mono8 => PixelFormatChoice::Mono8,
+            PixelFormatArg::Mono12 => PixelFormatChoice::Mono12,
+            PixelFormatArg::Mono16 => PixelFormatChoice::Mono16,
+            PixelFormatArg::Mono12Packed => PixelFormatChoice::Mono12Packed,
+            PixelFormatArg::Mono12p => PixelFormatChoice::Mono12p,
+        }),
+        roi_size_px: args.roi_size,
+        exposure_us: args.exposure_us,
+        trigger: match args.trigger {
+            TriggerArg::Software => TriggerChoice::Software,
+            TriggerArg::FreeRun => TriggerChoice::FreeRun,
+        },
+        frame_rate_hz: args.frame_rate_hz,
+        timeout_s: args.timeout_s,
+        ..GenicamOptions::default()
     }
 }
 
