@@ -29,10 +29,12 @@ use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
 use roitrack_bench::cpu_time_of;
 use roitrack_core::{CameraModel, Measurement, Target};
 use roitrack_estimators::{Estimate, Tracker, TrackerConfig, track};
-use roitrack_image::{CentroidOptions, RoiImage, SensorModel};
+use roitrack_image::{CentroidOptions, RoiImage};
 use roitrack_pipeline::offline::{RoiEvent, track_rois_with};
 use roitrack_ros::{BackgroundBag, BagOptions, BagWriter};
-use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, render_roi_images, simulate};
+use roitrack_sim::{
+    Scenario, ScenarioKind, SensorModel, SimulationOptions, render_roi_images, simulate,
+};
 
 /// The writing's share of the tracking time allowed (10 %).
 const TARGET_RATIO: f64 = 0.10;

@@ -62,10 +62,8 @@ use roitrack_estimators::{
     Estimate, Estimator, InitError, KalmanEstimator, KalmanTuning, MotionModel, Observation,
     StaticPoses, TrackError, TrackerConfig, WindowProblem,
 };
-use roitrack_image::{
-    BlobRejection, Centroid, CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel,
-    measure_blob,
-};
+use roitrack_image::{BlobRejection, Centroid, CentroidOptions, Roi, measure_blob};
+use roitrack_sim::{RenderScratch, RoiRenderer, SensorModel};
 
 /// Time between two measurements (s): one ROI every 250 µs (4 kHz).
 pub const ROI_PERIOD_S: f64 = 250e-6;

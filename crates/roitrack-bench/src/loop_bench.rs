@@ -7,6 +7,7 @@ use roitrack_core::stats::{quantile, sorted};
 use roitrack_estimators::TrackerConfig;
 use roitrack_image::ReplayCamera;
 use roitrack_pipeline::{LoopConfig, LoopReport, PipelineError, run_loop};
+use roitrack_sim::camera::prerendered_replay;
 use roitrack_sim::{Scenario, ScenarioKind};
 
 /// The scenario time of the first ROI slot (s).
@@ -50,13 +51,13 @@ pub struct LoopBench {
 impl LoopBench {
     /// Renders `rois` ROIs (32 x 32, default sensor) of orthoglide in the scheduler's bit-reversed order: ROI k is
     /// exposed at slot k + 1 (slot 0 is the full frame).
-    pub fn new(rois: usize) -> Result<Self, roitrack_image::SensorError> {
+    pub fn new(rois: usize) -> Result<Self, roitrack_sim::SensorError> {
         let scenario = Scenario::new(ScenarioKind::Orthoglide, 1);
         let renderer = scenario.roi_renderer()?;
         let truth = |t: f64| scenario.state_at(t);
         // Replayed at the rate of each run (4 kHz free-running, 20 kHz paced): the ROIs are stamped with the slots'
         // times, as a live camera triggered at that rate would stamp them.
-        let replay = ReplayCamera::prerender(
+        let replay = prerendered_replay(
             &renderer,
             &truth,
             &bit_reversed_indices(scenario.target.len()),

@@ -18,13 +18,13 @@ use roitrack_estimators::{
     Estimate, EstimatorConfig, KalmanTuning, TrackStatus, TrackerConfig, VvsSettings,
 };
 use roitrack_image::camera::ObservedCamera;
-use roitrack_image::{
-    CentroidAccuracy, CentroidOptions, RoiImage, RoiRenderer, SimulatedCamera, centroid_accuracy,
-    measure_roi,
-};
+use roitrack_image::{CentroidOptions, RoiImage, measure_roi};
 use roitrack_pipeline::{LoopConfig, LoopReport, ScheduleOrder, run_loop_with_sink};
 use roitrack_plot::{TrackSeries, TruthSeries};
-use roitrack_sim::{Scenario, ScenarioKind, SimulatedRun, SimulationOptions, simulate};
+use roitrack_sim::{
+    CentroidAccuracy, RoiRenderer, Scenario, ScenarioKind, SimulatedCamera, SimulatedRun,
+    SimulationOptions, centroid_accuracy, simulate,
+};
 use thiserror::Error;
 
 /// What [`Demo::from_images_observed`] hands each ROI the camera grabs: the image, and the centroid the loop measures
@@ -430,7 +430,7 @@ pub enum DemoError {
     Rendering(#[from] roitrack_sim::RenderError),
     /// The sensor model is invalid.
     #[error("invalid sensor model: {0}")]
-    Sensor(#[from] roitrack_image::SensorError),
+    Sensor(#[from] roitrack_sim::SensorError),
     /// The estimator refused the run.
     #[error("tracking failed: {0}")]
     Tracking(#[from] roitrack_estimators::TrackAllError),

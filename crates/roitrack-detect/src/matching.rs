@@ -139,7 +139,8 @@ pub struct TargetDetection {
 /// use rand::SeedableRng;
 /// use rand_chacha::ChaCha8Rng;
 /// use roitrack_core::{CameraModel, MotionState, Target};
-/// use roitrack_image::{CentroidOptions, Frame, RenderScratch, RoiRenderer, SensorModel};
+/// use roitrack_image::{CentroidOptions, Frame};
+/// use roitrack_sim::{RenderScratch, RoiRenderer, SensorModel};
 /// use roitrack_detect::find_target;
 /// use nalgebra::{Rotation3, Vector3};
 ///

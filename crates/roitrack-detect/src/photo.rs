@@ -227,7 +227,8 @@ fn detected(blobs: &[PhotoBlob]) -> Vec<DetectedBlob> {
 /// ```
 /// use nalgebra::{Rotation3, Vector3};
 /// use roitrack_core::{CameraModel, MotionState, Target};
-/// use roitrack_image::{Frame, RenderScratch, RoiRenderer, SensorModel, Polarity};
+/// use roitrack_image::{Frame, Polarity};
+/// use roitrack_sim::{RenderScratch, RoiRenderer, SensorModel};
 /// use roitrack_detect::photo::{PhotoOptions, detect_target};
 /// use rand::SeedableRng;
 ///

@@ -1,8 +1,8 @@
 //! Initialisation from a rendered full frame: detect, match, pose.
 
 use roitrack_detect::matching::{DetectedBlob, match_full_frame};
-use roitrack_image::{CentroidOptions, RoiRenderer, SensorModel, detect_blobs};
-use roitrack_sim::{Scenario, ScenarioKind};
+use roitrack_image::{CentroidOptions, detect_blobs};
+use roitrack_sim::{RoiRenderer, Scenario, ScenarioKind, SensorModel};
 
 #[test]
 fn initialises_from_a_rendered_full_frame() {
@@ -20,7 +20,7 @@ fn initialises_from_a_rendered_full_frame() {
             &|t| scenario.state_at(t),
             t,
             &mut rng,
-            &mut roitrack_image::RenderScratch::new(),
+            &mut roitrack_sim::RenderScratch::new(),
             &mut frame,
         );
         let frame = frame.pixels;
@@ -51,7 +51,8 @@ fn initialises_from_a_rendered_full_frame() {
 fn rolling_shutter_blobs_are_where_the_target_was_when_their_row_was_read() {
     use roitrack_core::{MotionState, Readout, TimeModel};
     use roitrack_detect::find_target;
-    use roitrack_image::{Frame, RenderScratch};
+    use roitrack_image::Frame;
+    use roitrack_sim::RenderScratch;
 
     let line_delay_s = 20e-6;
     let scenario = Scenario::new(ScenarioKind::Static, 1);

@@ -14,11 +14,10 @@
 
 use nalgebra::Vector3;
 use roitrack_estimators::{Estimate, TrackStatus, TrackerConfig};
-use roitrack_image::{ReflectionFault, SimulatedCamera};
 use roitrack_pipeline::{LoopConfig, run_loop_with_progress};
 use roitrack_sim::{
-    Excursion, Jump, Occlusion, RoiBurst, Scenario, ScenarioKind, SimulationOptions, TimeGap,
-    simulate,
+    Excursion, Jump, Occlusion, ReflectionFault, RoiBurst, Scenario, ScenarioKind, SimulatedCamera,
+    SimulationOptions, TimeGap, simulate,
 };
 
 use crate::ExperimentError;

@@ -21,8 +21,8 @@ use aravis::glib::translate::ToGlibPtr;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
-use roitrack_image::{RenderScratch, Roi, RoiRenderer, SensorModel};
-use roitrack_sim::Scenario;
+use roitrack_image::Roi;
+use roitrack_sim::{RenderScratch, RoiRenderer, Scenario, SensorModel};
 
 use crate::GenicamError;
 

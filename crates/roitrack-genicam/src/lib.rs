@@ -9,7 +9,7 @@
 //!   loop's clock. Incomplete and lost buffers are counted and the grab is retried; a camera that
 //!   stops answering ends the run with [`roitrack_image::GrabError::Disconnected`], the estimates so far kept.
 //! - [`FakeGigeCamera`] is Aravis' fake camera whose images are the scenario's target rendered by
-//!   [`roitrack_image::RoiRenderer`] at the scene time the host sets, stamped by a device clock of its own.
+//!   [`roitrack_sim::RoiRenderer`] at the scene time the host sets, stamped by a device clock of its own.
 //! - [`run_live`] runs the two-thread loop on such a camera and reports what the camera did ([`LiveReport`]);
 //!   [`run_rig_live`] runs a rig of them, one acquisition thread per camera and one fused track ([`run_fake_rig`]:
 //!   a fake camera per camera of a simulated rig, each on a loopback address of its own).

@@ -5,9 +5,8 @@ use std::sync::atomic::AtomicBool;
 
 use roitrack_core::{CameraModel, PoseSample, Target, TwistSample};
 use roitrack_estimators::TrackerConfig;
-use roitrack_image::SensorModel;
 use roitrack_pipeline::{LoopConfig, LoopReport, run_loop_with_sink};
-use roitrack_sim::Scenario;
+use roitrack_sim::{Scenario, SensorModel};
 
 use crate::{
     CameraStats, FAKE_MAX_FRAME_RATE_HZ, FakeGigeCamera, GenicamCamera, GenicamError,

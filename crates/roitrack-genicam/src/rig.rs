@@ -6,8 +6,8 @@ use std::sync::atomic::AtomicBool;
 
 use roitrack_core::Target;
 use roitrack_estimators::rig::{Rig, RigEstimate, RigTrackerConfig};
-use roitrack_image::SensorModel;
 use roitrack_pipeline::{RigLoopReport, run_rig_loop};
+use roitrack_sim::SensorModel;
 use roitrack_sim::multi_camera::CameraRigScene;
 
 use crate::live::{fake_camera_options, loop_config};

@@ -66,10 +66,10 @@
 //!   is the blob's, much nearer the centre of the outline. A merged spot still skews the capped weights
 //!   and is rejected. Binary centroids ([`crate::CentroidOptions::binary`]) are rejected as before.
 //!
-//! The second look changes none of the outcomes that matter on the rendered spots of `tests/rendered.rs`, passes
-//! nearly none of the spots merged with large blobs of `tests/clean_disks.rs` that move the centroid by more than a
-//! tenth of a pixel, and accepts the real printed circles the moments alone rejected: measured in docs/results.md,
-//! "Reflections in the ROIs: the symmetry check".
+//! The second look changes none of the outcomes that matter on the rendered spots of roitrack-sim's
+//! `tests/rendered.rs`, passes nearly none of the spots merged with large blobs of `tests/clean_disks.rs` that move
+//! the centroid by more than a tenth of a pixel, and accepts the real printed circles the moments alone rejected:
+//! measured in docs/results.md, "Reflections in the ROIs: the symmetry check".
 
 use crate::centroid::SymmetryCheck;
 use crate::centroid::moments::{ShapeSums, scalar_shape_sums, visit_shape_weights};

@@ -396,7 +396,7 @@ fn large_flat_disk(rng: &mut impl Rng, slope: f64, u: f64) -> Disk {
 /// coma beyond what a clean disk of its size can: the weights `value - threshold` of its plateau follow the light and
 /// pull the centroid by `ramp * radius / 4`, 0.1 to 0.3 px here. It is measured by its weights capped at the plateau
 /// instead, which no longer see the ramp, rather than rejected; a spot merged with it still is (see
-/// `symmetry_check_rejects_blobs_with_a_merged_reflection` in `rendered.rs`).
+/// `symmetry_check_rejects_blobs_with_a_merged_reflection` in roitrack-sim's `tests/rendered.rs`).
 #[test]
 fn a_large_blob_lit_unevenly_is_measured_from_its_plateau() {
     let mut rng = ChaCha8Rng::seed_from_u64(8);

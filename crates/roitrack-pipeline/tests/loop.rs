@@ -1,9 +1,8 @@
 //! The loop end to end on rendered ROIs: it initialises from a full frame, tracks, drops nothing.
 
 use roitrack_estimators::{TrackStatus, TrackerConfig};
-use roitrack_image::SimulatedCamera;
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
-use roitrack_sim::{Scenario, ScenarioKind};
+use roitrack_sim::{Scenario, ScenarioKind, SimulatedCamera};
 
 /// The orthoglide scenario (seed 1).
 fn orthoglide() -> Scenario {
@@ -48,9 +47,8 @@ fn tracks_orthoglide_from_rendered_rois() {
 
 #[test]
 fn reflections_add_a_spot_that_moves_the_centroid_and_nothing_else() {
-    use roitrack_image::{
-        CentroidOptions, ReflectionFault, Roi, RoiCamera, RoiImage, RoiTrigger, measure_blob,
-    };
+    use roitrack_image::{CentroidOptions, Roi, RoiCamera, RoiImage, RoiTrigger, measure_blob};
+    use roitrack_sim::ReflectionFault;
     let scenario = orthoglide();
     let renderer = scenario.roi_renderer().unwrap();
     let state = scenario.state_at(0.1);

@@ -4,8 +4,8 @@
 
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_estimators::{EstimatorConfig, TrackerConfig, VvsSettings};
-use roitrack_image::ReplayCamera;
 use roitrack_pipeline::realtime::{LoopConfig, run_loop};
+use roitrack_sim::camera::prerendered_replay;
 use roitrack_sim::{Scenario, ScenarioKind};
 use roitrack_testkit::alloc::{CountingAllocator, allocations_in_all_threads as allocations};
 
@@ -20,7 +20,7 @@ fn steady_state_loop_does_not_allocate() {
     let order = bit_reversed_indices(16);
     let n = 3000;
     // ROI k is exposed at 0.3 s + (k + 1) / 4 kHz: slot 0 is the full frame.
-    let replay = ReplayCamera::prerender(
+    let replay = prerendered_replay(
         &renderer,
         &truth,
         &order,

@@ -9,7 +9,7 @@
 //!    actuator's limit;
 //! 4. the camera exposes: the ROI camera one ROI centred where roitrack's scheduler predicts the blob
 //!    ([`roitrack_pipeline::RoiScheduler`]), rendered from the robot's motion over its exposure
-//!    ([`roitrack_image::RoiRenderer`]), centroided ([`roitrack_image::measure_roi`]) and pushed to the tracker
+//!    ([`roitrack_sim::RoiRenderer`]), centroided ([`roitrack_image::measure_roi`]) and pushed to the tracker
 //!    ([`roitrack_estimators::Tracker`]); a frame camera a whole global-shutter frame when one is due, tracked by
 //!    [`roitrack_pipeline::FrameTracker`]. An estimate is available `exposure / 2 + readout + processing + extra
 //!    latency` after the time it refers to.
@@ -26,13 +26,11 @@ use rand_chacha::ChaCha8Rng;
 use roitrack_core::time::{Readout, TimeModel};
 use roitrack_core::{CameraModel, MotionState, Target};
 use roitrack_estimators::{Estimate, Estimator, TrackError, Tracker, TrackerConfig};
-use roitrack_image::{
-    CentroidOptions, Frame, RenderScratch, RoiImage, RoiRenderer, SensorError, SensorModel,
-    measure_roi,
-};
+use roitrack_image::{CentroidOptions, Frame, RoiImage, measure_roi};
 use roitrack_pipeline::{
     FrameError, FrameTracker, FrameTrackerConfig, Predictor, RoiScheduler, SchedulerConfig,
 };
+use roitrack_sim::{RenderScratch, RoiRenderer, SensorError, SensorModel};
 use thiserror::Error;
 
 use crate::control::{

@@ -39,13 +39,12 @@ use roitrack_core::Acceleration;
 use roitrack_core::time::{Readout, TimeModel};
 use roitrack_core::{CameraModel, MotionState, Target};
 use roitrack_estimators::Estimate;
-use roitrack_image::{
-    Frame, GrabError, RoiCamera, RoiImage, RoiRenderer, RoiTrigger, SensorModel, SimulatedCamera,
-};
+use roitrack_image::{Frame, GrabError, RoiCamera, RoiImage, RoiTrigger};
 use roitrack_pipeline::realtime::{
     KnownAccelerationSender, LoopHooks, known_acceleration_channel, run_loop_with_hooks,
 };
 use roitrack_pipeline::{LoopConfig, LoopReport};
+use roitrack_sim::{RoiRenderer, SensorModel, SimulatedCamera};
 
 use crate::closed_loop::{ServoError, ServoReport, ServoSample, build_controller};
 use crate::control::{ControlInput, Observation};
@@ -283,7 +282,8 @@ fn hermite(t_a: f64, a: &RobotState, t_b: f64, b: &RobotState, t_s: f64) -> Robo
 ///
 /// ```
 /// use roitrack_core::{CameraModel, Target};
-/// use roitrack_image::{RoiCamera, RoiRenderer, SensorModel, SimulatedCamera};
+/// use roitrack_image::RoiCamera;
+/// use roitrack_sim::{RoiRenderer, SensorModel, SimulatedCamera};
 /// use roitrack_servo::live::{LoopClockCamera, RobotScene};
 /// use roitrack_servo::reference::ReferencePath;
 ///
@@ -566,7 +566,7 @@ pub fn run_live_servo_simulated_with_sink(
 /// ROI slots ([`LoopReport::late`]) are counted.
 ///
 /// ```no_run
-/// use roitrack_image::{RoiRenderer, SensorModel, SimulatedCamera};
+/// use roitrack_sim::{RoiRenderer, SensorModel, SimulatedCamera};
 /// use roitrack_servo::live::{
 ///     LiveOptions, LoopClockCamera, RobotScene, roi_camera_model, run_live_servo, servo_target,
 /// };

@@ -50,10 +50,10 @@ use rand_chacha::ChaCha8Rng;
 use roitrack_core::time::{Readout, TimeModel, TimeModelError};
 use roitrack_core::{CameraModel, Measurement, MotionState, PoseSample, TwistSample};
 use roitrack_estimators::rig::{CameraMount, ClockModel, RigCamera};
-use roitrack_image::{Frame, Polarity, RenderScratch, RoiRenderer, SensorError, SensorModel};
+use roitrack_image::{Frame, Polarity};
 use thiserror::Error;
 
-use crate::Scenario;
+use crate::{RenderScratch, RoiRenderer, Scenario, SensorError, SensorModel};
 
 /// Fraction of the local light that a dark blob does not reflect: its ink reflects a quarter of what the paper does.
 ///

@@ -1,5 +1,15 @@
 //! # roitrack-sim
 //!
+//! The simulator: a high-speed camera's images and the motions it sees, each with its ground truth.
+//!
+//! The simulated camera: [`sensor`] and [`render`], a simulated high-speed camera ([`RoiRenderer`], [`SensorModel`])
+//! that renders ROIs or full frames of the target's blobs as exact perspective images of flat disks, with lens
+//! distortion, area coverage, optical and motion blur, shot and read noise and quantisation; [`camera`], the ROI camera
+//! the real-time loop drives that renders each ROI it is asked for from the true motion ([`SimulatedCamera`]), and a
+//! replay of ROIs rendered beforehand; [`reflection`], a simulated reflection, a second bright spot in an ROI
+//! ([`ReflectionFault`]); [`accuracy`], the centroid's bias and spread against the truth on rendered ROIs
+//! ([`centroid_accuracy`], [`reflection_accuracy`]).
+//!
 //! Ground-truth motions ([`scenario`]) and a measurement-level simulator of a camera that reads one ROI at a time
 //! ([`measurements`]): every centroid is the projection of the true pose at its own exposure-midpoint time, with
 //! Gaussian noise, dropped ROIs and outliers as options, and faults (occlusions, time gaps, bursts of lost ROIs, a
@@ -13,16 +23,23 @@
 //! have for them are in [`user_cameras`].
 #![deny(missing_docs)]
 
+pub mod accuracy;
+pub mod camera;
 pub mod frames;
 pub mod glints;
 pub mod measurements;
 pub mod multi_camera;
 pub mod photo;
+pub mod reflection;
+pub mod render;
 pub mod rigs;
 pub mod rois;
 pub mod scenario;
+pub mod sensor;
 pub mod user_cameras;
 
+pub use accuracy::{CentroidAccuracy, ReflectionAccuracy, centroid_accuracy, reflection_accuracy};
+pub use camera::SimulatedCamera;
 pub use frames::{
     DARK_BLOB_CONTRAST, DEFAULT_TRUTH_RATE_HZ, FrameOptions, FrameSequence, FrameSequenceError,
     FrameTruth, MAX_FRAMES,
@@ -35,5 +52,8 @@ pub use photo::{
     Background, CircleShade, Clutter, Glare, Illumination, PhotoError, PhotoPoint, PhotoScene,
     RenderedPhoto, Shadow, render_photo,
 };
+pub use reflection::ReflectionFault;
+pub use render::{DEFAULT_BLOB_DIAMETER_M, DiskOrientation, RenderScratch, RoiRenderer};
 pub use rois::{RenderError, RoiImageRenderer, render_roi_images};
 pub use scenario::{Scenario, ScenarioKind};
+pub use sensor::{SensorError, SensorModel};

@@ -505,7 +505,7 @@ fn check_options(opts: &SimulationOptions) -> Result<(), SimError> {
 /// Samples `scenario` one ROI at a time: every measurement is the projection of the true pose at its own time (the
 /// ROI's exposure middle) plus noise, with the faults of `opts`; the ground truth comes at every ROI time. This is a
 /// camera reading one ROI at a time whatever the camera model's time model says (for frames of a rolling or global
-/// shutter, render them: [`roitrack_image::RoiRenderer::render_frame`]). The run is held in memory; [`Simulation`]
+/// shutter, render them: [`crate::RoiRenderer::render_frame`]). The run is held in memory; [`Simulation`]
 /// gives the same ROIs one at a time.
 ///
 /// ```

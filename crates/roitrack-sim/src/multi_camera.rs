@@ -28,9 +28,8 @@ use rand_distr::{Distribution, Normal};
 use roitrack_core::roi_order::bit_reversed_indices;
 use roitrack_core::{Measurement, MotionState, PoseSample, TwistSample};
 use roitrack_estimators::rig::{CameraMount, ClockModel, Rig, RigCamera, RigMeasurement};
-use roitrack_image::{RoiRenderer, SensorError, SensorModel, SimulatedCamera};
 
-use crate::{Scenario, SimError};
+use crate::{RoiRenderer, Scenario, SensorError, SensorModel, SimError, SimulatedCamera};
 
 /// A scenario seen by a rig of cameras (their true mounts and clocks).
 #[derive(Debug, Clone)]

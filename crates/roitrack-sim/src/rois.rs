@@ -5,10 +5,13 @@ use nalgebra::Vector2;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{Measurement, MotionState};
-use roitrack_image::{ReflectionFault, RenderScratch, Roi, RoiImage, RoiRenderer, SensorModel};
+use roitrack_image::{Roi, RoiImage};
 use thiserror::Error;
 
-use crate::{Scenario, SimulatedRun, SimulationOptions};
+use crate::{
+    ReflectionFault, RenderScratch, RoiRenderer, Scenario, SensorModel, SimulatedRun,
+    SimulationOptions,
+};
 
 /// Side of the rendered ROIs (px).
 pub const RECORDED_ROI_SIZE_PX: u32 = 40;
@@ -20,7 +23,7 @@ pub const RECORDED_ROI_OFFSET_PX: f64 = 4.0;
 pub enum RenderError {
     /// The sensor model is invalid.
     #[error("invalid sensor model: {0}")]
-    Sensor(#[from] roitrack_image::SensorError),
+    Sensor(#[from] crate::SensorError),
     /// A measurement names a point the target does not have.
     #[error("measurement at t = {t_s} s: point id {id} is not in the target")]
     UnknownId {
@@ -50,8 +53,7 @@ pub enum RenderError {
 /// [`RoiImageRenderer`], which renders a measurement at a time for runs that are not held in memory).
 ///
 /// ```
-/// use roitrack_image::SensorModel;
-/// use roitrack_sim::{Scenario, ScenarioKind, SimulationOptions, render_roi_images, simulate};
+/// use roitrack_sim::{Scenario, ScenarioKind, SensorModel, SimulationOptions, render_roi_images, simulate};
 ///
 /// let scenario = Scenario::new(ScenarioKind::Static, 1);
 /// let options = SimulationOptions::default();
@@ -80,8 +82,7 @@ pub fn render_roi_images<'a>(
 /// images, in the same order, for the same measurements): for runs streamed by a [`crate::Simulation`].
 ///
 /// ```
-/// use roitrack_image::SensorModel;
-/// use roitrack_sim::{RoiImageRenderer, Scenario, ScenarioKind, Simulation, SimulationOptions};
+/// use roitrack_sim::{RoiImageRenderer, Scenario, ScenarioKind, SensorModel, Simulation, SimulationOptions};
 ///
 /// let scenario = Scenario::new(ScenarioKind::Static, 1);
 /// let options = SimulationOptions::default();

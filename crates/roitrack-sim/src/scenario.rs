@@ -9,7 +9,8 @@ use nalgebra::{Rotation3, Vector3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target, so3};
-use roitrack_image::{RoiRenderer, SensorError, SensorModel, SimulatedCamera};
+
+use crate::{RoiRenderer, SensorError, SensorModel, SimulatedCamera};
 
 /// The scenarios the simulator offers.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -12,8 +12,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use roitrack::core::so3;
 use roitrack::detect::find_target;
-use roitrack::image::{CentroidOptions, RenderScratch, RoiRenderer, SensorModel};
+use roitrack::image::CentroidOptions;
 use roitrack::nalgebra::{Rotation3, Vector3};
+use roitrack::sim::{RenderScratch, RoiRenderer, SensorModel};
 use roitrack::{CameraModel, Frame, MotionState, Readout, Target, TimeModel};
 
 type Result<T> = std::result::Result<T, Box<dyn std::error::Error>>;

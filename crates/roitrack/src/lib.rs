@@ -77,10 +77,10 @@
 //! | --- | --- | --- |
 //! | [`core`] | `roitrack-core` | camera models, SO(3), the target, the time model, the spatio-temporal projection and its Jacobians, the solver (no I/O, no threads) |
 //! | [`estimators`] | `roitrack-estimators` | the estimators (Kalman, VVS, batch, static), the tracker options, the rig of several cameras (no I/O, no threads) |
-//! | [`image`] | `roitrack-image` | ROIs and frames, the camera trait, the simulated and replay cameras, centroids, blob detection, the renderer |
+//! | [`image`] | `roitrack-image` | ROIs and frames, the camera trait, the replay camera, centroids, blob detection |
 //! | [`detect`] | `roitrack-detect` | finding the target in a full frame (`find_target`) or a photograph (`detect_target`) with no prior: which blob is which model point |
 //! | [`pipeline`] | `roitrack-pipeline` | the ROI scheduler, the two-thread real-time loop, offline ROI tracking, the frame tracker |
-//! | [`sim`] | `roitrack-sim` | scenario motions with ground truth, the measurement simulator, rendered ROI recordings, synthetic photographs |
+//! | [`sim`] | `roitrack-sim` | the renderer and sensor model, the simulated ROI camera and its reflections, the centroid's accuracy on rendered ROIs, scenario motions with ground truth, the measurement simulator, rendered ROI recordings, synthetic photographs |
 //! | [`eval`] | `roitrack-eval` | every accuracy metric, the velocity lag included |
 //! | [`formats`] | `roitrack-formats` | the files: camera YAML, target CSV, measurements CSV, TUM poses, twists, diagnostics, covariance, ROI recordings, images, detection overlays |
 //! | `plot` | `roitrack-plot` | charts and the figures of a run (feature `plot`, on by default) |

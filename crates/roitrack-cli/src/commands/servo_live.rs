@@ -151,10 +151,10 @@ fn run_aravis(
     live: &LiveOptions,
     on_estimate: &mut (dyn FnMut(&Estimate) + Send),
 ) -> Result<(LiveServoReport, String)> {
-    use roitrack::image::SensorModel;
     use roitrack::servo::live::{
         LoopClockCamera, RobotScene, run_live_servo_with_sink, servo_target,
     };
+    use roitrack::sim::SensorModel;
     use roitrack_genicam::{FakeGigeCamera, GenicamCamera, GenicamOptions};
     let scene = &RobotScene::new(&config.path);
     let model = roi_camera_model(config);

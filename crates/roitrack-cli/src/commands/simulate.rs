@@ -11,12 +11,13 @@ use roitrack::core::RoiOrder;
 use roitrack::core::time::Readout;
 use roitrack::estimators::rig::Rig;
 use roitrack::formats::AtomicFile;
-use roitrack::image::{Frame, Polarity, ReflectionFault, SensorModel};
+use roitrack::image::{Frame, Polarity};
 use roitrack::nalgebra::Vector3;
 use roitrack::sim::multi_camera::{CameraRigScene, RigFrames, draw_clocks, simulate_rig};
 use roitrack::sim::{
-    DEFAULT_TRUTH_RATE_HZ, Excursion, FrameOptions, FrameSequence, Jump, Occlusion, RoiBurst,
-    RoiImageRenderer, Scenario, ScenarioKind, SimulatedRun, Simulation, SimulationOptions, TimeGap,
+    DEFAULT_TRUTH_RATE_HZ, Excursion, FrameOptions, FrameSequence, Jump, Occlusion,
+    ReflectionFault, RoiBurst, RoiImageRenderer, Scenario, ScenarioKind, SensorModel, SimulatedRun,
+    Simulation, SimulationOptions, TimeGap,
 };
 
 use crate::args::{ScenarioArg, ShutterArg};

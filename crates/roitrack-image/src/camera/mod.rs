@@ -1,19 +1,18 @@
 //! Cameras that read one ROI at a time: the trait the real-time loop drives ([`RoiCamera`]), what can go wrong
-//! ([`GrabError`]), and two cameras of roitrack's own: [`SimulatedCamera`], which renders the true motion, and
-//! [`ReplayCamera`], which plays back ROIs read earlier.
+//! ([`GrabError`]), and two cameras of roitrack's own: [`ReplayCamera`], which plays back ROIs read earlier, and
+//! [`ObservedCamera`], which shows another camera's ROIs to a callback. The simulated camera, which renders the true
+//! motion, is `roitrack_sim::SimulatedCamera`.
 //!
 //! Grabbing is fallible, because real cameras time out, drop buffers and disconnect, and it fills buffers the caller
 //! owns ([`RoiImage`], [`Frame`]), so that a loop running at kHz rates allocates nothing.
 
 mod observed;
 mod replay;
-mod simulated;
 
 use thiserror::Error;
 
 pub use observed::ObservedCamera;
 pub use replay::ReplayCamera;
-pub use simulated::SimulatedCamera;
 
 use crate::{Frame, Roi, RoiImage};
 

@@ -8,14 +8,14 @@ use crate::{Frame, RoiImage};
 /// failed grabs are not shown. The observer's time is the grab's: a slow one slows the camera side.
 ///
 /// ```
-/// use roitrack_core::{CameraModel, MotionState, Target};
 /// use roitrack_image::camera::ObservedCamera;
-/// use roitrack_image::{Roi, RoiCamera, RoiImage, RoiRenderer, RoiTrigger, SensorModel, SimulatedCamera};
+/// use roitrack_image::{Frame, ReplayCamera, Roi, RoiCamera, RoiImage, RoiTrigger};
 ///
-/// let renderer = RoiRenderer::new(CameraModel::canonical(), Target::grid4x4(), SensorModel::default()).unwrap();
-/// let still = MotionState::at_rest(Default::default(), nalgebra::Vector3::new(0.0, 0.0, 0.6));
+/// let mut recorded = RoiImage::default();
+/// recorded.set(0.0, 5, Roi::new(500, 500, 24, 24), 8);
+/// let replay = ReplayCamera::new(vec![recorded], Frame::new(1024, 1024, 8));
 /// let mut seen = Vec::new();
-/// let mut camera = ObservedCamera::new(SimulatedCamera::new(renderer, move |_| still, 1), |image: &RoiImage| {
+/// let mut camera = ObservedCamera::new(replay, |image: &RoiImage| {
 ///     seen.push((image.point_id, image.roi));
 /// });
 /// let trigger = RoiTrigger { point_id: 5, roi: Roi::new(500, 500, 24, 24), t_s: 0.0 };

@@ -1,17 +1,14 @@
 //! A camera that plays back ROIs read earlier.
 
-use rand::SeedableRng;
-use rand_chacha::ChaCha8Rng;
-use roitrack_core::MotionState;
-
 use super::{GrabError, RoiCamera, RoiTrigger};
-use crate::{Frame, RenderScratch, Roi, RoiImage, RoiRenderer};
+use crate::{Frame, RoiImage};
 
 /// Replays recorded ROIs in order, whatever is requested (for throughput benchmarks, where rendering must not count,
-/// and for recorded camera data), each with its recorded time (or, [`ReplayCamera::with_trigger_times`], the time it
-/// is asked for), then ends ([`GrabError::EndOfRecording`]); its full frame comes with the time it is asked for. The
-/// schedule that recorded the ROIs must match the one that replays them: a request for another point than the
-/// recorded one is counted in [`ReplayCamera::mismatches`].
+/// such as the rendered ROIs of `roitrack_sim::camera::prerendered_replay`, and for recorded camera data), each with
+/// its recorded time (or, [`ReplayCamera::with_trigger_times`], the time it is asked for), then ends
+/// ([`GrabError::EndOfRecording`]); its full frame comes with the time it is asked for. The schedule that recorded
+/// the ROIs must match the one that replays them: a request for another point than the recorded one is counted in
+/// [`ReplayCamera::mismatches`].
 ///
 /// ```
 /// use roitrack_image::{GrabError, Frame, Roi, RoiCamera, RoiImage, RoiTrigger, ReplayCamera};
@@ -53,53 +50,6 @@ impl ReplayCamera {
     pub fn with_trigger_times(mut self) -> Self {
         self.trigger_times = true;
         self
-    }
-
-    /// Renders `count` ROIs of side `size` at the true blob positions, cycling through the target point indices of
-    /// `order`, starting at `t_start_s`, plus one full frame at `t_start_s`.
-    #[allow(clippy::too_many_arguments)]
-    pub fn prerender(
-        renderer: &RoiRenderer,
-        truth: &impl Fn(f64) -> MotionState,
-        order: &[usize],
-        size: u32,
-        t_start_s: f64,
-        rate_hz: f64,
-        count: usize,
-        seed: u64,
-    ) -> Self {
-        let mut rng = ChaCha8Rng::seed_from_u64(seed);
-        let camera = renderer.camera().clone();
-        let mut scratch = RenderScratch::new();
-        let mut full_frame = Frame::default();
-        renderer.render_frame(truth, t_start_s, &mut rng, &mut scratch, &mut full_frame);
-        let bit_depth = renderer.sensor().bit_depth as u8;
-        let rois = (0..count)
-            .filter_map(|k| {
-                let t = t_start_s + k as f64 / rate_hz;
-                let point_index = order[k % order.len()];
-                let centre = renderer.disk_image_centre_px(&truth(t), point_index)?;
-                let roi =
-                    Roi::centred(centre.x, centre.y, size, camera.width_px, camera.height_px)?;
-                let mut image = RoiImage::default();
-                image.set(
-                    t,
-                    renderer.target().points()[point_index].id,
-                    roi,
-                    bit_depth,
-                );
-                renderer.render_roi_with_scratch(
-                    truth,
-                    &roi,
-                    t,
-                    &mut rng,
-                    &mut scratch,
-                    &mut image.pixels,
-                );
-                Some(image)
-            })
-            .collect();
-        Self::new(rois, full_frame)
     }
 
     /// Number of ROIs recorded.

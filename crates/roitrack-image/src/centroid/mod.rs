@@ -124,7 +124,7 @@ pub struct CentroidOptions {
 /// both, spots inside the blob mostly in the coma. The allowances are fitted so that no clean rendered blob
 /// (`tests/clean_disks.rs`: any size from 3 to 20 px, sub-pixel position, blur, noise, bit depth, clipping, ellipse
 /// and background gradient) is rejected, while nearly every merged spot that moves the centroid by more than a tenth
-/// of a pixel is (`tests/rendered.rs`).
+/// of a pixel is (roitrack-sim's `tests/rendered.rs`).
 ///
 /// The allowances fall with the blob's size, and large real blobs go beyond them in two ways a spot does not explain;
 /// a second look, a float pass run only for the flagged blobs, tells them apart (see [`crate::symmetry`]): a trefoil

@@ -76,7 +76,8 @@ const RESTART_RESIDUAL_PX: f64 = 5.0;
 /// use nalgebra::Vector3;
 /// use rand::SeedableRng;
 /// use roitrack_core::{CameraModel, MotionState, Target};
-/// use roitrack_image::{Frame, RenderScratch, RoiRenderer, SensorModel};
+/// use roitrack_image::Frame;
+/// use roitrack_sim::{RenderScratch, RoiRenderer, SensorModel};
 /// use roitrack_pipeline::frames::{FrameMethod, FrameTracker, FrameTrackerConfig};
 ///
 /// // A target gliding sideways at 0.2 m/s, 30 frames a second through a global shutter.

@@ -205,7 +205,7 @@ pub fn render_photo(scene: &PhotoScene) -> Result<RenderedPhoto, PhotoError> {
         scene.camera.width_px as usize,
         scene.camera.height_px as usize,
     );
-    let kernel = roitrack_image::render::gaussian_kernel(scene.blur_sigma_px);
+    let kernel = crate::render::gaussian_kernel(scene.blur_sigma_px);
     let area = Area {
         margin: kernel.len() / 2,
         width: w + kernel.len() - 1,

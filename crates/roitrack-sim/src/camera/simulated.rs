@@ -3,9 +3,9 @@
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::MotionState;
+use roitrack_image::{Frame, GrabError, RoiCamera, RoiImage, RoiTrigger};
 
-use super::{GrabError, RoiCamera, RoiTrigger};
-use crate::{Frame, ReflectionFault, RenderScratch, RoiImage, RoiRenderer};
+use crate::{ReflectionFault, RenderScratch, RoiRenderer};
 
 /// A simulated camera: renders each requested ROI from the true motion `truth(t)` (pixels, noise, blur, and the
 /// exposure and readout of the camera's time model), exposed when it is triggered, deterministic per seed, with
@@ -14,7 +14,8 @@ use crate::{Frame, ReflectionFault, RenderScratch, RoiImage, RoiRenderer};
 /// ```
 /// use rand::SeedableRng;
 /// use roitrack_core::{CameraModel, MotionState, Target};
-/// use roitrack_image::{Frame, RoiCamera, RoiRenderer, SensorModel, SimulatedCamera};
+/// use roitrack_image::{Frame, RoiCamera};
+/// use roitrack_sim::{RoiRenderer, SensorModel, SimulatedCamera};
 /// use nalgebra::Vector3;
 ///
 /// let renderer = RoiRenderer::new(CameraModel::canonical(), Target::grid4x4(), SensorModel::default()).unwrap();

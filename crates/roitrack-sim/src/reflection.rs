@@ -3,7 +3,7 @@
 
 use rand::Rng;
 
-use crate::roi::Roi;
+use roitrack_image::Roi;
 
 /// A reflection in a fraction of the ROIs: a Gaussian spot at a random direction and distance from the ROI's centre
 /// (where the scheduler expects the blob), as bright as a random multiple of the blob's peak. Brighter than the blob

@@ -5,10 +5,10 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{MotionState, so3};
 
-use crate::centroid::{BlobRejection, CentroidOptions, measure_blob};
+use roitrack_image::{BlobRejection, CentroidOptions, Roi, measure_blob};
+
 use crate::reflection::ReflectionFault;
 use crate::render::{RenderScratch, RoiRenderer};
-use crate::roi::Roi;
 
 /// Largest random shift of the position about the bench pose, per axis (m).
 pub const ACCURACY_POSITION_SPREAD_M: f64 = 0.005;
@@ -50,7 +50,7 @@ pub struct CentroidAccuracy {
 /// [`RoiRenderer::disk_image_centre_px`]), not an error of the centroid; docs/image-side.md gives it with the spread.
 ///
 /// # Panics
-/// If `roi_size` is larger than [`crate::MAX_ROI_WIDTH`] (64).
+/// If `roi_size` is larger than [`roitrack_image::MAX_ROI_WIDTH`] (64).
 pub fn centroid_accuracy(
     renderer: &RoiRenderer,
     opts: &CentroidOptions,

@@ -41,8 +41,8 @@ use nalgebra::{Matrix2, Matrix2x3, Matrix3, Rotation3, Vector2, Vector3};
 use rand::Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
 
-use crate::Frame;
-use crate::roi::Roi;
+use roitrack_image::{Frame, Roi};
+
 use crate::sensor::{SensorError, SensorModel};
 
 /// Diameter of a blob whose model point has none (m).
@@ -318,7 +318,8 @@ impl RoiRenderer {
     /// use rand::SeedableRng;
     /// use rand_chacha::ChaCha8Rng;
     /// use roitrack_core::{CameraModel, MotionState, Target};
-    /// use roitrack_image::{Frame, RenderScratch, RoiRenderer, SensorModel};
+    /// use roitrack_image::Frame;
+    /// use roitrack_sim::{RenderScratch, RoiRenderer, SensorModel};
     /// use nalgebra::Vector3;
     ///
     /// let renderer = RoiRenderer::new(CameraModel::canonical(), Target::grid4x4(), SensorModel::default()).unwrap();
@@ -884,7 +885,7 @@ fn plane_axes(target: &Target) -> (Vector3<f64>, Vector3<f64>) {
 /// within 3 % of sigma² for sigma ≥ 0.5). A single tap for no blur.
 ///
 /// ```
-/// let k = roitrack_image::render::gaussian_kernel(1.0);
+/// let k = roitrack_sim::render::gaussian_kernel(1.0);
 /// assert_eq!(k.len(), 7);
 /// assert!((k.iter().sum::<f64>() - 1.0).abs() < 1e-12 && k[3] > k[2]);
 /// ```

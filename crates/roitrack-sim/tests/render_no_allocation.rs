@@ -5,7 +5,8 @@ use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
-use roitrack_image::{CentroidOptions, RenderScratch, Roi, RoiRenderer, SensorModel, measure_blob};
+use roitrack_image::{CentroidOptions, Roi, measure_blob};
+use roitrack_sim::{RenderScratch, RoiRenderer, SensorModel};
 use roitrack_testkit::alloc::{CountingAllocator, allocations_on_this_thread as allocations};
 
 #[global_allocator]

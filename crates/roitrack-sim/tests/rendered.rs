@@ -4,9 +4,10 @@ use nalgebra::{Vector2, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target, TargetPoint};
-use roitrack_image::{
-    BlobRejection, CentroidOptions, ReflectionFault, RenderScratch, Roi, RoiRenderer, SensorModel,
-    Threshold, centroid_accuracy, detect_blobs, measure_blob, reflection_accuracy,
+use roitrack_image::{BlobRejection, CentroidOptions, Roi, Threshold, detect_blobs, measure_blob};
+use roitrack_sim::{
+    ReflectionFault, RenderScratch, RoiRenderer, SensorModel, centroid_accuracy,
+    reflection_accuracy,
 };
 
 /// The whole sensor rendered at t = 0 with a seeded generator.
@@ -17,7 +18,7 @@ fn full_frame(r: &RoiRenderer, state_at: &impl Fn(f64) -> MotionState, seed: u64
         state_at,
         0.0,
         &mut rng,
-        &mut roitrack_image::RenderScratch::new(),
+        &mut roitrack_sim::RenderScratch::new(),
         &mut frame,
     );
     frame.pixels

@@ -1,5 +1,5 @@
-//! Speed and accuracy figures of roitrack-image on the canonical scene:
-//! `cargo run --release -p roitrack-image --example image_bench`.
+//! Speed and accuracy figures of the centroid (roitrack-image) and of the renderer on the canonical scene, kept with
+//! the renderer, which makes its ROIs: `cargo run --release -p roitrack-sim --example image_bench`.
 //!
 //! Timings are per call, over many repetitions: the median and the minimum of the repetition means (the minimum is
 //! the figure least disturbed by other processes on the machine).
@@ -16,9 +16,10 @@ use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, MotionState, Target};
-use roitrack_image::{
-    CentroidOptions, ReflectionFault, RenderScratch, Roi, RoiRenderer, SensorModel, Threshold,
-    centroid_accuracy, detect_blobs, measure_blob, reflection_accuracy,
+use roitrack_image::{CentroidOptions, Roi, Threshold, detect_blobs, measure_blob};
+use roitrack_sim::{
+    ReflectionFault, RenderScratch, RoiRenderer, SensorModel, centroid_accuracy,
+    reflection_accuracy,
 };
 
 /// (median, minimum) over `runs` repetitions of the mean time (µs) of `inner` calls of `f`.
