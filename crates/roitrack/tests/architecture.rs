@@ -1,5 +1,6 @@
 //! The architecture of docs/architecture.md, checked: which crate may depend on which, the pure math free of I/O and
-//! threads, and the command-line tool a thin shell (its sources at most 15 % of the workspace's).
+//! threads, the simulator out of the image side, and the command-line tool a thin shell (its sources at most 15 % of
+//! the workspace's).
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -8,6 +9,7 @@ use std::path::{Path, PathBuf};
 const ALLOWED: &[(&str, &[&str])] = &[
     ("roitrack-core", &[]),
     ("roitrack-estimators", &["roitrack-core"]),
+    // The image side, on any camera's pixels; the simulator that renders them is in roitrack-sim, which depends on it.
     ("roitrack-image", &["roitrack-core"]),
     (
         "roitrack-formats",
@@ -135,6 +137,14 @@ fn crates_dir() -> PathBuf {
 
 /// The roitrack crates in the `[dependencies]` tables (not dev-dependencies) of a manifest.
 fn roitrack_dependencies(manifest: &str) -> BTreeSet<String> {
+    dependencies(manifest)
+        .into_iter()
+        .filter(|name| name == "roitrack" || name.starts_with("roitrack-"))
+        .collect()
+}
+
+/// Every crate in the `[dependencies]` tables (not dev-dependencies) of a manifest.
+fn dependencies(manifest: &str) -> BTreeSet<String> {
     let mut deps = BTreeSet::new();
     let mut in_dependencies = false;
     for line in manifest.lines().map(str::trim) {
@@ -147,7 +157,7 @@ fn roitrack_dependencies(manifest: &str) -> BTreeSet<String> {
             continue;
         }
         let name = line.split(['=', '.', ' ']).next().unwrap_or("");
-        if name == "roitrack" || name.starts_with("roitrack-") {
+        if !name.is_empty() && !name.starts_with('#') {
             deps.insert(name.to_string());
         }
     }
@@ -181,6 +191,21 @@ fn every_crate_depends_only_on_what_the_architecture_allows() {
         seen.insert(name);
     }
     assert_eq!(seen.len(), ALLOWED.len(), "crates found: {seen:?}");
+}
+
+/// The simulator (the renderer, the sensor's noise, the simulated camera) is in roitrack-sim: roitrack-image, what
+/// runs on a real camera's pixels, needs no random numbers outside its tests.
+#[test]
+fn the_image_side_holds_no_simulator() {
+    let manifest = std::fs::read_to_string(crates_dir().join("roitrack-image/Cargo.toml")).unwrap();
+    let deps = dependencies(&manifest);
+    assert!(deps.contains("roitrack-core"), "{deps:?}");
+    for random in ["rand", "rand_chacha", "rand_distr"] {
+        assert!(
+            !deps.contains(random),
+            "roitrack-image depends on {random}: the simulator belongs in roitrack-sim"
+        );
+    }
 }
 
 /// Every `.rs` file under `dir`, recursively.
