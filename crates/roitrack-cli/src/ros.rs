@@ -47,14 +47,10 @@ pub struct McapArgs {
     /// anyway), so that it sees the run from its start. Default: no wait.
     #[arg(long, value_name = "S", requires = "foxglove", value_parser = parse_wait_s)]
     pub foxglove_wait_s: Option<f64>,
-    /// With --mcap, --foxglove or --ros2: the camera's frame id, the header frame of every message.
-    #[arg(
-        long,
-        default_value = "camera",
-        value_name = "ID",
-        requires = "ros_output"
-    )]
-    pub frame_id: String,
+    /// With --mcap, --foxglove or --ros2: the frame id of the estimates' frame, the header frame of every message:
+    /// the camera's, or with --rig the rig's. Default: camera (with --rig: rig).
+    #[arg(long, value_name = "ID", requires = "ros_output")]
+    pub frame_id: Option<String>,
     /// With --mcap, --foxglove or --ros2: the target's frame id, the child frame of /tf and of the odometry.
     #[arg(
         long,
@@ -106,7 +102,7 @@ fn check_interrupt(bag: &BackgroundBag) -> Result<(), FormatError> {
 impl McapArgs {
     /// Opens the bag on a writing thread of its own; `target` is drawn on the frames by each estimate. Refuses
     /// --mcap-rois, which only `track --rois` takes ([`Self::open_for_rois`]).
-    pub fn open(&self, camera: &CameraModel, target: Option<&Target>) -> Result<Bag> {
+    pub fn open(&self, camera: Option<&CameraModel>, target: Option<&Target>) -> Result<Bag> {
         if self.mcap_rois {
             bail!(
                 "--mcap-rois is for the ROI images of `track --rois` and `demo`: this run has none to write"
@@ -116,14 +112,28 @@ impl McapArgs {
     }
 
     /// [`Self::open`] for a run from ROI images (`track --rois`, `demo`), which --mcap-rois writes to the bag.
-    pub fn open_for_rois(&self, camera: &CameraModel, target: Option<&Target>) -> Result<Bag> {
-        let options = self.bag_options();
+    pub fn open_for_rois(
+        &self,
+        camera: Option<&CameraModel>,
+        target: Option<&Target>,
+    ) -> Result<Bag> {
+        self.open_with_options(camera, target, &self.bag_options())
+    }
+
+    /// [`Self::open_for_rois`] with the frame ids of `options` (a rig's: [`Self::rig_bag_options`]); `camera`
+    /// (`None` for a rig) goes to /roitrack/camera_info.
+    pub fn open_with_options(
+        &self,
+        camera: Option<&CameraModel>,
+        target: Option<&Target>,
+        options: &BagOptions,
+    ) -> Result<Bag> {
+        let options = options.clone();
         // The live server first: an address that cannot be served fails before the bag is created.
         let live = match self.foxglove {
             Some(address) => {
-                let live =
-                    LiveServer::start(address, &options, Some(camera.clone()), target.cloned())
-                        .map_err(|e| anyhow!("--foxglove {address}: {e}"))?;
+                let live = LiveServer::start(address, &options, camera.cloned(), target.cloned())
+                    .map_err(|e| anyhow!("--foxglove {address}: {e}"))?;
                 eprintln!(
                     "roitrack: live view on ws://{} (Foxglove: Open connection, Foxglove WebSocket)",
                     live.address()
@@ -140,7 +150,7 @@ impl McapArgs {
         };
         let bag = match &self.mcap {
             Some(path) => Some(BackgroundBag::spawn(
-                BagWriter::create(path, &options, Some(camera.clone()))?,
+                BagWriter::create(path, &options, camera.cloned())?,
                 target.cloned(),
             )),
             None => None,
@@ -153,10 +163,24 @@ impl McapArgs {
         })
     }
 
-    /// The frame ids (--frame-id, --child-frame-id) of the bag, the live view and --ros2.
+    /// The frame ids (--frame-id, --child-frame-id) of the bag, the live view and --ros2; the estimates' frame is
+    /// `camera` unless --frame-id names it.
     pub fn bag_options(&self) -> BagOptions {
+        self.bag_options_in("camera")
+    }
+
+    /// [`Self::bag_options`] of a rig's run, whose estimates are in the rig's frame: `rig` unless --frame-id names
+    /// it. Such a bag holds no camera info and no centroids (they belong to each camera).
+    pub fn rig_bag_options(&self) -> BagOptions {
+        self.bag_options_in("rig")
+    }
+
+    fn bag_options_in(&self, default_frame_id: &str) -> BagOptions {
         BagOptions {
-            frame_id: self.frame_id.clone(),
+            frame_id: self
+                .frame_id
+                .clone()
+                .unwrap_or_else(|| default_frame_id.to_string()),
             child_frame_id: self.child_frame_id.clone(),
             ..BagOptions::default()
         }

@@ -113,9 +113,9 @@ pub struct Ros2 {
 
 impl Ros2Args {
     /// Starts the node (and waits for subscribers with --ros2-wait-s) when --ros2 was given; `camera` goes to
-    /// /roitrack/camera_info, `options` gives the frame ids. A node that cannot start (no network interface, the
+    /// /roitrack/camera_info (a rig's run has none), `options` gives the frame ids. A node that cannot start (no network interface, the
     /// domain's ports taken, a bad namespace) is an error here, before tracking.
-    pub fn start(&self, camera: &CameraModel, options: &BagOptions) -> Result<Ros2> {
+    pub fn start(&self, camera: Option<&CameraModel>, options: &BagOptions) -> Result<Ros2> {
         if !self.ros2 {
             return Ok(Ros2::default());
         }
@@ -140,7 +140,7 @@ impl Ros2Args {
                     "roitrack: waiting up to {wait_s} s for subscribers on the ROS 2 estimate topics"
                 );
             }
-            let publisher = Ros2Publisher::start(&ros2_options, options, Some(camera.clone()))
+            let publisher = Ros2Publisher::start(&ros2_options, options, camera.cloned())
                 .map_err(|e| anyhow::anyhow!("--ros2: {e}"))?;
             eprintln!(
                 "roitrack: publishing on ROS 2 as the {}",

@@ -147,11 +147,14 @@ pub fn run(args: &DemoArgs) -> Result<()> {
             .expect("valid progress template"),
     );
     // Opened before the runs, so that a live viewer (--foxglove, --foxglove-wait-s) is there from the start.
-    let mut bag = Some(args.ros.open_for_rois(&demo.run.camera, None)?);
+    let mut bag = Some(args.ros.open_for_rois(Some(&demo.run.camera), None)?);
     // The live view follows the default estimator's run from the loop's estimation thread, as it tracks.
     let mut live = bag.as_mut().and_then(|b| b.take_live());
     // --ros2 publishes the same run's estimates on the DDS bus, from the estimation thread too.
-    let mut ros2 = Some(args.ros2.start(&demo.run.camera, &args.ros.bag_options())?);
+    let mut ros2 = Some(
+        args.ros2
+            .start(Some(&demo.run.camera), &args.ros.bag_options())?,
+    );
     let mut runs = Vec::new();
     for (k, estimator) in lineup.iter().enumerate() {
         // A signal stops the demo here, between two estimators' runs (a second or so after it came), through the

@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, ValueEnum};
+use roitrack::estimators::rig::RigEstimate;
 use roitrack::formats::EstimateWriter;
 use roitrack::sim::Scenario;
 use roitrack::sim::multi_camera::{CameraRigScene, draw_clocks};
@@ -252,30 +253,10 @@ pub fn run(args: &LiveArgs) -> Result<()> {
         (camera_model, target)
     };
     // The first signal stops the run at its next ROI; the bag is completed below with every estimate.
-    let mut bag = args.ros.open(&camera_model, Some(&target))?;
-    // The live view follows the run from the loop's estimation thread, as it tracks; the bag takes the estimates
-    // at the end.
-    let mut live = bag.take_live();
-    let mut live_failed = None;
-    // --ros2: the estimates on the DDS bus as the loop makes them, too (a node that cannot start fails here, before
-    // the camera is opened).
-    let ros2_options = roitrack::ros::BagOptions {
-        frame_id: args.ros.frame_id.clone(),
-        child_frame_id: args.ros.child_frame_id.clone(),
-        ..roitrack::ros::BagOptions::default()
-    };
-    let mut ros2 = args.ros2.start(&camera_model, &ros2_options)?;
-    let mut ros2_failed = None;
-    let mut on_estimate = |e: &roitrack::Estimate| {
-        if let Some(live) = live.as_mut()
-            && live_failed.is_none()
-        {
-            live_failed = live.publish_estimate(e).err();
-        }
-        if ros2_failed.is_none() {
-            ros2_failed = ros2.estimate(e).err();
-        }
-    };
+    let mut bag = args.ros.open(Some(&camera_model), Some(&target))?;
+    let mut outputs =
+        LiveOutputs::start(args, &mut bag, Some(&camera_model), &args.ros.bag_options())?;
+    let mut on_estimate = |e: &roitrack::Estimate| outputs.estimate(e);
     // The stop flag the camera reads: for a live run the usual way to end, which writes every output.
     let stop = crate::signals::stop_flag();
     let report = if args.fake {
@@ -318,23 +299,7 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     bag.run(&report.loop_report.measured, &report.loop_report.estimates)?;
     writer.finish()?;
     bag.finish()?;
-    // A live view or a ROS 2 publisher that failed does not cost the outputs: they are written first.
-    if let Some(e) = live_failed {
-        return Err(crate::OutputsStand(format!(
-            "the live view failed (the outputs are written): {e}"
-        ))
-        .into());
-    }
-    if let Some(e) = ros2_failed {
-        return Err(crate::OutputsStand(format!(
-            "the ROS 2 publisher failed (the outputs are written): {e}"
-        ))
-        .into());
-    }
-    if let Some(live) = live {
-        crate::ros::finish_live(live)?;
-    }
-    ros2.finish()?;
+    outputs.finish()?;
     println!("{}", report.summary());
     println!(
         "wrote {} estimates to {} and {}",
@@ -356,10 +321,69 @@ pub fn run(args: &LiveArgs) -> Result<()> {
     }
 }
 
+/// The live view (--foxglove) and the DDS bus (--ros2), fed from the loop's estimation thread as it tracks (the bag
+/// takes the estimates at the end), and the first failure of each, which stops feeding it.
+struct LiveOutputs {
+    live: Option<roitrack::ros::LiveServer>,
+    live_failed: Option<roitrack::formats::FormatError>,
+    ros2: crate::ros2_args::Ros2,
+    ros2_failed: Option<roitrack::formats::FormatError>,
+}
+
+impl LiveOutputs {
+    /// Takes the live view out of `bag` and starts --ros2 with `camera` (none for a rig) and `options`: a node that
+    /// cannot start fails here, before any camera is opened.
+    fn start(
+        args: &LiveArgs,
+        bag: &mut crate::ros::Bag,
+        camera: Option<&roitrack::CameraModel>,
+        options: &roitrack::ros::BagOptions,
+    ) -> Result<Self> {
+        Ok(Self {
+            live: bag.take_live(),
+            live_failed: None,
+            ros2: args.ros2.start(camera, options)?,
+            ros2_failed: None,
+        })
+    }
+
+    /// An estimate, to each output that has not failed.
+    fn estimate(&mut self, e: &roitrack::Estimate) {
+        if let Some(live) = self.live.as_mut()
+            && self.live_failed.is_none()
+        {
+            self.live_failed = live.publish_estimate(e).err();
+        }
+        if self.ros2_failed.is_none() {
+            self.ros2_failed = self.ros2.estimate(e).err();
+        }
+    }
+
+    /// Ends both, once the files are written: a live view or a ROS 2 publisher that failed does not cost them.
+    fn finish(self) -> Result<()> {
+        if let Some(e) = self.live_failed {
+            return Err(crate::OutputsStand(format!(
+                "the live view failed (the outputs are written): {e}"
+            ))
+            .into());
+        }
+        if let Some(e) = self.ros2_failed {
+            return Err(crate::OutputsStand(format!(
+                "the ROS 2 publisher failed (the outputs are written): {e}"
+            ))
+            .into());
+        }
+        if let Some(live) = self.live {
+            crate::ros::finish_live(live)?;
+        }
+        self.ros2.finish()
+    }
+}
+
 /// `live --rig`: the rig's cameras (fake, or each at its --device NAME=ADDRESS) in one loop, one fused track.
 fn run_rig(args: &LiveArgs, rig_path: &Path, camera: GenicamOptions) -> Result<()> {
-    if args.ros.mcap.is_some() || args.ros.foxglove.is_some() || args.ros2.ros2 {
-        bail!("--rig: bags, --foxglove and --ros2 are not supported with a rig yet");
+    if args.ros.mcap_rois {
+        bail!("--mcap-rois: a rig's bag holds its fused estimates only");
     }
     check_paths(args)?;
     let file = roitrack::formats::read_rig_yaml(rig_path, &Default::default())?;
@@ -369,6 +393,12 @@ fn run_rig(args: &LiveArgs, rig_path: &Path, camera: GenicamOptions) -> Result<(
         roitrack::formats::create_output_dir(dir)?;
     }
     let mut writer = EstimateWriter::create(&args.poses, &args.twists, None)?;
+    // The fused estimates (rig frame, rig clock) to the bag at the end, and as they come to the live view and the
+    // DDS bus.
+    let bag_options = args.ros.rig_bag_options();
+    let mut bag = args.ros.open_with_options(None, None, &bag_options)?;
+    let mut outputs = LiveOutputs::start(args, &mut bag, None, &bag_options)?;
+    let mut on_estimate = |e: &RigEstimate| outputs.estimate(&e.estimate);
     let stop = crate::signals::stop_flag();
     let report = if args.fake {
         let scenario = Scenario::new(args.scenario.into(), args.seed);
@@ -394,7 +424,7 @@ fn run_rig(args: &LiveArgs, rig_path: &Path, camera: GenicamOptions) -> Result<(
             let calibrations = file.calibrations_for_output(&truth_file);
             roitrack::formats::write_rig_yaml(&truth_file, &scene.rig, &calibrations, None)?;
         }
-        run_fake_rig(&scene, rig, &options, args.seed, stop, &mut |_| {})
+        run_fake_rig(&scene, rig, &options, args.seed, stop, &mut on_estimate)
             .with_context(|| format!("the fake cameras of {}", rig_path.display()))?
     } else {
         let target = crate::args::read_target(
@@ -444,12 +474,21 @@ fn run_rig(args: &LiveArgs, rig_path: &Path, camera: GenicamOptions) -> Result<(
             rate_hz: args.rate_hz.unwrap_or(1000.0),
             ..LiveOptions::default()
         };
-        run_device_rig(rig, &cameras, &target, &options, stop, &mut |_| {})?
+        run_device_rig(rig, &cameras, &target, &options, stop, &mut on_estimate)?
     };
-    for e in &report.loop_report.estimates {
-        writer.write(&e.estimate)?;
+    let estimates: Vec<roitrack::Estimate> = report
+        .loop_report
+        .estimates
+        .iter()
+        .map(|e| e.estimate)
+        .collect();
+    for e in &estimates {
+        writer.write(e)?;
     }
+    bag.run(&[], &estimates)?;
     writer.finish()?;
+    bag.finish()?;
+    outputs.finish()?;
     if let Some(out) = &args.rig_out {
         let calibrations = file.calibrations_for_output(out);
         roitrack::formats::write_rig_yaml(

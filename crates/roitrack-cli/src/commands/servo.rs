@@ -157,7 +157,9 @@ pub fn run(args: &ServoArgs) -> Result<()> {
     let mut ros2 = match ServoConfig::new(controllers[0], args.camera.into(), args.speed_scale)
         .camera_model()
     {
-        Some(camera) if args.ros2.ros2 => Some(args.ros2.start(&camera, &Default::default())?),
+        Some(camera) if args.ros2.ros2 => {
+            Some(args.ros2.start(Some(&camera), &Default::default())?)
+        }
         _ => None,
     };
     let mut reports = Vec::new();

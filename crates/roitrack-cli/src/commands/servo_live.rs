@@ -98,7 +98,7 @@ pub fn run(args: &ServoArgs) -> Result<()> {
     // the camera info is the live loop's camera.
     let mut ros2 = args
         .ros2
-        .start(&roi_camera_model(&config), &Default::default())?;
+        .start(Some(&roi_camera_model(&config)), &Default::default())?;
     let simulated = run_servo(&config).context("the simulated-time run")?;
     // On the estimation thread, each estimate as the live loop makes it (a hand-over that never waits); a publisher
     // that failed does not stop the run, and its error comes after the outputs are written.

@@ -235,12 +235,12 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         &camera,
     )?;
     let mut bag = if !args.rois.is_empty() {
-        args.ros.open_for_rois(&camera, None)?
+        args.ros.open_for_rois(Some(&camera), None)?
     } else {
-        args.ros.open(&camera, None)?
+        args.ros.open(Some(&camera), None)?
     };
     // --ros2: a node that cannot start fails here, before tracking (and --ros2-wait-s waits here for subscribers).
-    bag.publish_on_ros2(args.ros2.start(&camera, &args.ros.bag_options())?);
+    bag.publish_on_ros2(args.ros2.start(Some(&camera), &args.ros.bag_options())?);
     let mut pacer = args.pace.pacer();
     // Every estimate: paced (--paced), then to the files, the bag, the live view and the DDS bus.
     let mut on_estimate = |e: &roitrack::Estimate, bag: &mut crate::ros::Bag| {
@@ -365,11 +365,11 @@ fn run_frames(
     };
     let mut frames = crate::ros::open_frames(source, &timing, &args.mcap_in, &camera)?;
     let (mut bag, copy_frames) = (
-        args.ros.open(&camera, Some(&target))?,
+        args.ros.open(Some(&camera), Some(&target))?,
         args.ros.wants_frames(),
     );
     // --ros2: the estimates (not the frames) on the DDS bus, as --mcap writes them.
-    bag.publish_on_ros2(args.ros2.start(&camera, &args.ros.bag_options())?);
+    bag.publish_on_ros2(args.ros2.start(Some(&camera), &args.ros.bag_options())?);
     let mut tracker =
         FrameTracker::new(camera, target, config).context("invalid tracker options")?;
     let mut writer =
@@ -773,16 +773,13 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     if args.camera.is_some() {
         bail!("--rig gives the cameras: leave out --camera");
     }
-    if args.ros.mcap.is_some()
-        || args.ros.foxglove.is_some()
-        || args.ros2.ros2
-        || args.mcap_in.measurement_topic.is_some()
-        || args.mcap_in.image_topic.is_some()
-    {
+    if args.mcap_in.measurement_topic.is_some() || args.mcap_in.image_topic.is_some() {
         bail!(
-            "--rig: a camera's bag topic is --topic NAME=TOPIC (not --measurement-topic or --image-topic); bags out, \
-             --foxglove and --ros2 are not supported with a rig yet"
+            "--rig: a camera's bag topic is --topic NAME=TOPIC (not --measurement-topic or --image-topic)"
         );
+    }
+    if args.ros.mcap_rois {
+        bail!("--mcap-rois: a rig's bag holds its fused estimates only");
     }
     let file = roitrack::formats::read_rig_yaml(rig_path, &Default::default())?;
     let rig = &file.rig;
@@ -843,6 +840,10 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
     let mut writer =
         EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
             .with_covariance(args.covariance.as_deref())?;
+    // The fused estimates (rig frame, rig clock) also to the bag, the live view and the DDS bus, each if asked.
+    let bag_options = args.ros.rig_bag_options();
+    let mut bag = args.ros.open_with_options(None, None, &bag_options)?;
+    bag.publish_on_ros2(args.ros2.start(None, &bag_options)?);
     let start = Instant::now();
     let mut count = 0usize;
     let mut estimates = 0usize;
@@ -857,6 +858,7 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         });
         let report = roitrack::track(single, measurements, |e| {
             estimates += 1;
+            bag.estimate(e)?;
             writer.write(e)
         })
         .with_context(|| format!("tracking {path} failed"))?;
@@ -892,11 +894,13 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
                 .push(&m)
                 .with_context(|| format!("tracking {label} failed"))?;
             for e in fused {
+                bag.estimate(&e.estimate)?;
                 writer.write(&e.estimate)?;
                 estimates += 1;
             }
         }
         for e in tracker.finish() {
+            bag.estimate(&e.estimate)?;
             writer.write(&e.estimate)?;
             estimates += 1;
         }
@@ -909,6 +913,7 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         }
     }
     writer.finish()?;
+    bag.finish()?;
     let clocks = tracker.clocks();
     if let Some(out) = &args.rig_out {
         let calibrations = file.calibrations_for_output(out);
