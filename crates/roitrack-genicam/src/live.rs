@@ -244,17 +244,19 @@ pub fn run_live(
     })
 }
 
-/// The loop's options of a live run whose ROIs are all a camera's window of `side_px`: the scheduler places windows
-/// of that size.
+/// The loop's options of a live run whose camera reads a window of `side_px`: the scheduler places ROIs of at most
+/// that size, each read through the window centred on it and measured within the ROI alone (a neighbouring blob in
+/// the rest of the window does not get it refused).
 pub(crate) fn loop_config(options: &LiveOptions, side_px: u32, paced: bool) -> LoopConfig {
     let mut config = LoopConfig {
         rate_hz: options.rate_hz,
         paced,
         roi_slots: (options.duration_s * options.rate_hz).round().max(0.0) as usize,
         keep_measurements: options.keep_measurements,
+        crop_to_request: true,
         ..LoopConfig::default()
     };
-    config.scheduler.min_size_px = side_px;
+    config.scheduler.min_size_px = config.scheduler.min_size_px.min(side_px);
     config.scheduler.max_size_px = side_px;
     config
 }

@@ -183,11 +183,98 @@ impl RoiImage {
         self.bit_depth = bit_depth;
         self.pixels.resize(roi.len(), 0);
     }
+
+    /// Keeps only the part of the image within `roi` (a camera that reads a fixed window larger than the ROI asked
+    /// for: a neighbouring blob in the rest of the window would make the blob's ROI refused), in place, without
+    /// allocating; its time becomes that of its new first row by `time` (later, for a rolling shutter). Returns
+    /// whether anything was cut; an image that `roi` does not overlap, or that is not consistent, is left whole.
+    ///
+    /// ```
+    /// use roitrack_core::TimeModel;
+    /// use roitrack_image::{Roi, RoiImage};
+    /// let mut image = RoiImage::default();
+    /// image.set(1.0, 7, Roi::new(10, 20, 4, 3), 8);
+    /// image.pixels = (0..12).collect();
+    /// assert!(image.crop_to(&Roi::new(11, 21, 2, 5), &TimeModel::default()));
+    /// assert_eq!((image.roi, image.pixels.clone(), image.t_s), (Roi::new(11, 21, 2, 2), vec![5, 6, 9, 10], 1.0));
+    /// ```
+    pub fn crop_to(&mut self, roi: &Roi, time: &roitrack_core::TimeModel) -> bool {
+        if !self.is_consistent() {
+            return false;
+        }
+        let have = self.roi;
+        let (x0, y0) = (have.x0.max(roi.x0), have.y0.max(roi.y0));
+        let x1 = (have.x0 + have.width).min(roi.x0.saturating_add(roi.width));
+        let y1 = (have.y0 + have.height).min(roi.y0.saturating_add(roi.height));
+        if x1 <= x0 || y1 <= y0 || (x1 - x0, y1 - y0) == (have.width, have.height) {
+            return false;
+        }
+        let (width, height) = ((x1 - x0) as usize, (y1 - y0) as usize);
+        let (dx, dy) = ((x0 - have.x0) as usize, (y0 - have.y0) as usize);
+        let stride = have.width as usize;
+        // Row by row towards the front: a row's destination never lies after its source.
+        for row in 0..height {
+            let from = (dy + row) * stride + dx;
+            self.pixels.copy_within(from..from + width, row * width);
+        }
+        self.pixels.truncate(width * height);
+        self.t_s = time.blob_time_s(self.t_s, dy as f64);
+        self.roi = Roi::new(x0, y0, width as u32, height as u32);
+        true
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A window of `w` x `h` at (x0, y0) whose pixel at sensor (i, j) holds `1000 * j + i`: what a crop keeps is
+    /// checked pixel by pixel against where it lies on the sensor.
+    fn window(x0: u32, y0: u32, w: u32, h: u32) -> RoiImage {
+        let mut image = RoiImage::default();
+        image.set(2.0, 3, Roi::new(x0, y0, w, h), 16);
+        for (k, p) in image.pixels.iter_mut().enumerate() {
+            let (i, j) = (x0 + k as u32 % w, y0 + k as u32 / w);
+            *p = (1000 * j + i) as u16;
+        }
+        image
+    }
+
+    #[test]
+    fn a_crop_keeps_the_pixels_of_the_overlap_and_the_time_of_its_first_row() {
+        let rolling = roitrack_core::TimeModel {
+            readout: roitrack_core::Readout::RollingShutter { line_delay_s: 1e-5 },
+            exposure_s: 1e-4,
+        };
+        // Inside, across an edge, and the window whole: the overlap, its pixels where they lie, its first row's time.
+        for (asked, kept) in [
+            (Roi::new(13, 24, 5, 4), Roi::new(13, 24, 5, 4)),
+            (Roi::new(5, 30, 10, 40), Roi::new(10, 30, 5, 10)),
+            (Roi::new(0, 0, 100, 100), Roi::new(10, 20, 20, 20)),
+        ] {
+            let mut image = window(10, 20, 20, 20);
+            let capacity = image.pixels.capacity();
+            let cut = image.crop_to(&asked, &rolling);
+            assert_eq!(
+                (cut, image.roi),
+                (kept != Roi::new(10, 20, 20, 20), kept),
+                "{asked:?}"
+            );
+            let expected: Vec<u16> = (kept.y0..kept.y0 + kept.height)
+                .flat_map(|j| (kept.x0..kept.x0 + kept.width).map(move |i| (1000 * j + i) as u16))
+                .collect();
+            assert_eq!(image.pixels, expected, "{asked:?}");
+            assert!((image.t_s - (2.0 + f64::from(kept.y0 - 20) * 1e-5)).abs() < 1e-15);
+            assert_eq!(image.pixels.capacity(), capacity, "no allocation");
+        }
+        // No overlap: left whole.
+        let mut image = window(10, 20, 20, 20);
+        assert!(!image.crop_to(&Roi::new(40, 20, 8, 8), &rolling));
+        assert_eq!(
+            (image.roi, image.pixels.len(), image.t_s),
+            (Roi::new(10, 20, 20, 20), 400, 2.0)
+        );
+    }
 
     #[test]
     fn centred_puts_the_point_in_the_middle() {

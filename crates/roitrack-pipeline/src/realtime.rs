@@ -58,6 +58,10 @@ pub struct LoopConfig {
     /// saw, the ROS 2 bag's `/roitrack/measurements`); room for `roi_slots` is reserved before the run, so the loop
     /// still does not allocate. Default: false.
     pub keep_measurements: bool,
+    /// Measure each ROI only within the part the scheduler asked for ([`RoiImage::crop_to`]): for a camera that
+    /// reads a fixed window larger than the ROIs (a GenICam camera's, moved but not resized), whose rest may hold a
+    /// neighbouring blob that would get the ROI refused. Default: false (a replay's recorded ROI is measured whole).
+    pub crop_to_request: bool,
 }
 
 impl LoopConfig {
@@ -112,6 +116,7 @@ impl Default for LoopConfig {
             scheduler: SchedulerConfig::default(),
             centroid: CentroidOptions::default(),
             keep_measurements: false,
+            crop_to_request: false,
         }
     }
 }
@@ -1000,6 +1005,9 @@ impl<'a, C: RoiCamera> Acquisition<'a, C> {
         }
         let grabbed = Instant::now();
         self.counters.rois += 1;
+        if self.config.crop_to_request && self.image.point_id == trigger.point_id {
+            self.image.crop_to(&request.roi, &self.camera_model.time);
+        }
         // The point the camera says it read (a replay may not follow the schedule).
         let point_index = if self.image.point_id == trigger.point_id {
             request.point_index
