@@ -10,18 +10,26 @@
 //! ends (disconnected, or the end of a recording) ends the run; what was estimated until then is kept.
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
-use roitrack_core::{Acceleration, CameraModel, Measurement, MotionState, Target};
-use roitrack_estimators::{Estimate, Estimator, Matrix12, Tracker, TrackerConfig};
-use roitrack_image::{
-    CentroidOptions, Frame, GrabError, RejectionCounts, RoiCamera, RoiImage, RoiTrigger,
-    measure_roi,
-};
+use roitrack_core::{CameraModel, Measurement, MotionState, Target};
+use roitrack_estimators::{Estimate, Matrix12, Tracker, TrackerConfig};
+use roitrack_image::{CentroidOptions, GrabError, RejectionCounts, RoiCamera};
 use thiserror::Error;
 
-use crate::scheduler::{Predictor, RoiScheduler, SchedulerConfig};
-use roitrack_detect::matching::{MatchError, find_target};
+use crate::scheduler::{Predictor, SchedulerConfig};
+
+mod acquisition;
+mod estimation;
+mod known_acceleration;
+
+pub(crate) use acquisition::Acquisition;
+pub use acquisition::AcquisitionCounts;
+use estimation::{EstimationQueues, EstimationSide, run_estimation};
+pub use known_acceleration::{
+    KnownAccelerationReceiver, KnownAccelerationSender, TimedAcceleration,
+    known_acceleration_channel,
+};
 
 /// Options of the loop.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -52,13 +60,13 @@ pub struct LoopConfig {
     /// ROI the centroid measures ([`roitrack_image::MAX_ROI_WIDTH`]).
     pub scheduler: SchedulerConfig,
     /// How each ROI's blob is measured, and how the blobs of the full frames that (re)start the track are detected
-    /// ([`find_target`]).
+    /// ([`roitrack_detect::matching::find_target`]).
     pub centroid: CentroidOptions,
     /// Keep every measurement handed to the estimator in [`LoopReport::measured`] (for a record of what the tracker
     /// saw, the ROS 2 bag's `/roitrack/measurements`); room for `roi_slots` is reserved before the run, so the loop
     /// still does not allocate. Default: false.
     pub keep_measurements: bool,
-    /// Measure each ROI only within the part the scheduler asked for ([`RoiImage::crop_to`]): for a camera that
+    /// Measure each ROI only within the part the scheduler asked for ([`roitrack_image::RoiImage::crop_to`]): for a camera that
     /// reads a fixed window larger than the ROIs (a GenICam camera's, moved but not resized), whose rest may hold a
     /// neighbouring blob that would get the ROI refused. Default: false (a replay's recorded ROI is measured whole).
     pub crop_to_request: bool,
@@ -134,7 +142,7 @@ pub struct LoopReport {
     /// Centroids sent to the estimator.
     pub measurements: usize,
     /// ROIs that gave no centroid, by reason; `absent` also counts the slots in which the scheduler placed no ROI
-    /// ([`RoiScheduler::next`] gave `None`).
+    /// ([`crate::scheduler::RoiScheduler::next`] gave `None`).
     pub rejections: RejectionCounts,
     /// Measurements lost because the queue was full.
     pub dropped: usize,
@@ -144,7 +152,7 @@ pub struct LoopReport {
     pub skipped: usize,
     /// Full-frame (re-)initialisations that found the target and restarted the track.
     pub initialisations: usize,
-    /// Full frames in which the target was not found ([`find_target`] failed): the loop reads another full frame next.
+    /// Full frames in which the target was not found ([`roitrack_detect::matching::find_target`] failed): the loop reads another full frame next.
     pub failed_initialisations: usize,
     /// Measurements the tracker refused (none expected).
     pub refused: usize,
@@ -365,155 +373,6 @@ pub fn run_loop_with_sink<C: RoiCamera>(
     run_loop_with_hooks(camera, camera_model, target, tracker_config, config, hooks)
 }
 
-/// A known acceleration of the target (camera frame) from `t_s` on, on the loop's clock (the ROIs' and the
-/// measurements' times): what a controller commands, handed to the loop's tracker through a
-/// [`known_acceleration_channel`].
-///
-/// ```
-/// use nalgebra::Vector3;
-/// use roitrack_core::Acceleration;
-/// use roitrack_pipeline::realtime::TimedAcceleration;
-///
-/// // 20 m/s² along the optical axis from 10 ms on.
-/// let linear_mps2 = Vector3::new(0.0, 0.0, 20.0);
-/// let input = TimedAcceleration { t_s: 0.010, acceleration: Acceleration { linear_mps2, angular_radps2: Vector3::zeros() } };
-/// assert_eq!(input.acceleration.linear_mps2.z, 20.0);
-/// ```
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TimedAcceleration {
-    /// From when it holds (s, the loop's clock): the instant the commanded force acts.
-    pub t_s: f64,
-    /// The target's acceleration (camera frame); it holds until the next input's time.
-    pub acceleration: Acceleration,
-}
-
-/// The smallest ring a [`known_acceleration_channel`] is given, whatever its caller asks: a ring of none would queue
-/// nothing, and with two one input can wait for the estimation thread while the next is queued behind it.
-const MIN_KNOWN_ACCELERATION_SLOTS: usize = 2;
-
-/// A lock-free, allocation-free single-producer single-consumer channel of known accelerations, from a control thread
-/// (the [`KnownAccelerationSender`]) to the loop's estimation thread (the [`KnownAccelerationReceiver`] given to
-/// [`run_loop_with_hooks`]), which tells its tracker each input ([`Estimator::set_known_acceleration`]) before the
-/// measurements it pushes next. The ring holds `capacity` inputs (at least 2), allocated here and never again.
-///
-/// When the ring is full (the estimation thread held back longer than `capacity` inputs take to come), the newest input
-/// is what matters: the sender keeps the newest one it could not queue, replacing any older one it was keeping (counted
-/// in [`KnownAccelerationSender::superseded`]), and queues it first when room frees. An input replaced so is lost: the
-/// input before it holds over its interval, as if the command had not changed then; the inputs already queued are
-/// kept, in order (the tracker takes inputs in time order only).
-///
-/// ```
-/// use nalgebra::Vector3;
-/// use roitrack_core::Acceleration;
-/// use roitrack_pipeline::realtime::known_acceleration_channel;
-///
-/// let (mut sender, mut receiver) = known_acceleration_channel(2);
-/// let push = |z| Acceleration { linear_mps2: Vector3::new(0.0, 0.0, z), angular_radps2: Vector3::zeros() };
-/// for (k, z) in [1.0, 2.0, 3.0, 4.0].into_iter().enumerate() {
-///     sender.send(k as f64 * 1e-3, push(z));
-/// }
-/// // The ring held the first two; of the two that found it full, the newest is kept, the other superseded.
-/// assert_eq!(sender.superseded(), 1);
-/// let queued: Vec<f64> = std::iter::from_fn(|| receiver.pop()).map(|i| i.acceleration.linear_mps2.z).collect();
-/// assert_eq!(queued, [1.0, 2.0]);
-/// sender.flush();
-/// assert_eq!(receiver.pop().unwrap().acceleration.linear_mps2.z, 4.0);
-/// assert!(receiver.pop().is_none());
-/// ```
-pub fn known_acceleration_channel(
-    capacity: usize,
-) -> (KnownAccelerationSender, KnownAccelerationReceiver) {
-    let (tx, rx) = rtrb::RingBuffer::new(capacity.max(MIN_KNOWN_ACCELERATION_SLOTS));
-    (
-        KnownAccelerationSender {
-            tx,
-            held: None,
-            superseded: 0,
-        },
-        KnownAccelerationReceiver { rx },
-    )
-}
-
-/// The control thread's end of a [`known_acceleration_channel`]: never blocks, never allocates.
-///
-/// ```
-/// use nalgebra::Vector3;
-/// use roitrack_core::Acceleration;
-/// use roitrack_pipeline::realtime::known_acceleration_channel;
-///
-/// let (mut sender, _receiver) = known_acceleration_channel(64);
-/// sender.send(0.001, Acceleration { linear_mps2: Vector3::x(), angular_radps2: Vector3::zeros() });
-/// assert_eq!((sender.superseded(), sender.holds_back()), (0, false));
-/// ```
-pub struct KnownAccelerationSender {
-    tx: rtrb::Producer<TimedAcceleration>,
-    /// The newest input the ring had no room for: queued before any later one.
-    held: Option<TimedAcceleration>,
-    superseded: usize,
-}
-
-impl KnownAccelerationSender {
-    /// Hands the target's `acceleration` (camera frame) from `t_s` (the loop's clock) on to the estimation thread.
-    /// Inputs go in time order (the tracker refuses one older than the newest it has, and counts it in
-    /// [`LoopReport::refused_known_accelerations`]); a full ring keeps the newest (see [`known_acceleration_channel`]).
-    pub fn send(&mut self, t_s: f64, acceleration: Acceleration) {
-        self.flush();
-        let input = TimedAcceleration { t_s, acceleration };
-        if self.held.is_some() {
-            // Still no room: this input replaces the one kept back, which no later input can now precede.
-            self.superseded += 1;
-            self.held = Some(input);
-            return;
-        }
-        if let Err(rtrb::PushError::Full(input)) = self.tx.push(input) {
-            self.held = Some(input);
-        }
-    }
-
-    /// Queues the input kept back for want of room, if there is room now: a sender with nothing new to say calls it
-    /// so that its last input is not left waiting for the next.
-    pub fn flush(&mut self) {
-        if let Some(input) = self.held
-            && self.tx.push(input).is_ok()
-        {
-            self.held = None;
-        }
-    }
-
-    /// Inputs lost because the ring was full and a newer input replaced them.
-    pub fn superseded(&self) -> usize {
-        self.superseded
-    }
-
-    /// Whether an input waits for room in the ring ([`Self::flush`]).
-    pub fn holds_back(&self) -> bool {
-        self.held.is_some()
-    }
-}
-
-/// The estimation thread's end of a [`known_acceleration_channel`], given to [`run_loop_with_hooks`].
-///
-/// ```
-/// use nalgebra::Vector3;
-/// use roitrack_core::Acceleration;
-/// use roitrack_pipeline::realtime::known_acceleration_channel;
-///
-/// let (mut sender, mut receiver) = known_acceleration_channel(8);
-/// assert!(receiver.pop().is_none());
-/// sender.send(0.5, Acceleration { linear_mps2: Vector3::x(), angular_radps2: Vector3::zeros() });
-/// assert_eq!(receiver.pop().unwrap().t_s, 0.5);
-/// ```
-pub struct KnownAccelerationReceiver {
-    rx: rtrb::Consumer<TimedAcceleration>,
-}
-
-impl KnownAccelerationReceiver {
-    /// The oldest input queued, if any.
-    pub fn pop(&mut self) -> Option<TimedAcceleration> {
-        self.rx.pop().ok()
-    }
-}
-
 /// What a run hands to and takes from the loop besides the camera: the progress count, the estimates as they are
 /// made, and the known accelerations the tracker is told ([`run_loop_with_hooks`]).
 ///
@@ -539,7 +398,7 @@ pub struct LoopHooks<'a> {
 
 /// [`run_loop_with_sink`], its tracker also told the known accelerations a control thread sends
 /// ([`LoopHooks::known_acceleration`]): before each measurement it pushes, the estimation thread gives the tracker
-/// every input queued ([`Estimator::set_known_acceleration`]), which the Kalman filter adds to its prediction from
+/// every input queued ([`roitrack_estimators::Estimator::set_known_acceleration`]), which the Kalman filter adds to its prediction from
 /// each input's time on. Inputs may come ahead of the measurements (a command acts when it acts); one whose time the
 /// tracker has passed applies from the tracker's time on. Counted in [`LoopReport::known_accelerations`] and
 /// [`LoopReport::refused_known_accelerations`].
@@ -652,427 +511,11 @@ impl LoopReport {
     }
 }
 
-/// The estimation thread's ends of the two queues, and the camera side's signal that it is done.
-struct EstimationQueues<'a> {
-    measurements: &'a mut rtrb::Consumer<Event>,
-    predictors: &'a mut rtrb::Producer<Predictor>,
-    camera_done: &'a AtomicBool,
-    known_acceleration: Option<&'a mut KnownAccelerationReceiver>,
-}
-
-/// What the estimation thread hands back when the camera side is done and the queue is empty.
-struct EstimationSide {
-    estimates: Vec<Estimate>,
-    latencies_us: Vec<f64>,
-    refused: usize,
-    known_accelerations: usize,
-    refused_known_accelerations: usize,
-    measured: Vec<Measurement>,
-}
-
-/// The estimation thread: feeds each queued measurement to the tracker and sends each estimate back as a
-/// [`Predictor`], until the camera side is done and the queue is empty. Its vectors are sized before the run (the
-/// steady state does not allocate); estimates beyond `expected_estimates` reach `on_estimate` but are not kept.
-fn run_estimation(
-    tracker: &mut Tracker,
-    queues: EstimationQueues<'_>,
-    config: &LoopConfig,
-    expected_estimates: usize,
-    on_estimate: &mut (dyn FnMut(&Estimate) + Send),
-) -> EstimationSide {
-    let mut estimates = Vec::with_capacity(expected_estimates);
-    let mut latencies_us = Vec::with_capacity(expected_estimates);
-    let mut refused = 0usize;
-    let mut measured = Vec::with_capacity(if config.keep_measurements {
-        config.roi_slots
-    } else {
-        0
-    });
-    let EstimationQueues {
-        measurements,
-        predictors,
-        camera_done,
-        mut known_acceleration,
-    } = queues;
-    let (mut told, mut refused_known) = (0usize, 0usize);
-    let mut spins = 0u32;
-    loop {
-        // Every known acceleration sent so far, before the next measurement: the control thread sent it before the
-        // camera side queued what follows, so its input is in the prediction of the measurements after it.
-        if let Some(receiver) = known_acceleration.as_deref_mut() {
-            while let Some(input) = receiver.pop() {
-                match tracker.set_known_acceleration(input.t_s, input.acceleration) {
-                    Ok(()) => told += 1,
-                    Err(_) => refused_known += 1,
-                }
-            }
-        }
-        match measurements.pop() {
-            Ok(Event::Measurement { m, grabbed }) => {
-                spins = 0;
-                if config.keep_measurements && measured.len() < measured.capacity() {
-                    measured.push(m);
-                }
-                match tracker.push(&m) {
-                    Ok(Some(e)) => {
-                        on_estimate(&e);
-                        if estimates.len() < estimates.capacity() {
-                            latencies_us.push(grabbed.elapsed().as_secs_f64() * 1e6);
-                            estimates.push(e);
-                        }
-                        // If the camera side has not taken the previous ones, this one is skipped: it will get the
-                        // next.
-                        let _ = predictors.push(Predictor {
-                            t_ref_s: e.t_ref_s,
-                            state: e.state,
-                            covariance: e.covariance,
-                        });
-                    }
-                    Ok(None) => {}
-                    Err(_) => refused += 1,
-                }
-            }
-            Ok(Event::Restart { t_s, state }) => {
-                tracker.start_from(t_s, state, Some(full_frame_covariance()));
-            }
-            Ok(Event::Passed { .. }) => {}
-            Err(_) => {
-                if camera_done.load(Ordering::Acquire) && measurements.is_empty() {
-                    break;
-                }
-                backoff(&mut spins);
-            }
-        }
-    }
-    EstimationSide {
-        estimates,
-        latencies_us,
-        refused,
-        known_accelerations: told,
-        refused_known_accelerations: refused_known,
-        measured,
-    }
-}
-
-/// What one step of the camera side did with the ROI slots: go on after this many, or end the run.
-enum Slots {
-    Advance(usize),
-    Stop,
-}
-
-/// The acquisition thread's state: the camera, the scheduler placing each ROI from the latest [`Predictor`], the
-/// buffers a grab fills (sized before the run), the counters, and its ends of the two queues.
-pub(crate) struct Acquisition<'a, C> {
-    camera: &'a mut C,
-    camera_model: &'a CameraModel,
-    target: &'a Target,
-    config: &'a LoopConfig,
-    scheduler: RoiScheduler,
-    image: RoiImage,
-    frame: Frame,
-    /// The latest estimate to place ROIs from; none before the first full frame or after a failed one.
-    predictor: Option<Predictor>,
-    /// The time of the last full-frame restart: older estimates describe the old track.
-    restart_t_s: f64,
-    pub(crate) counters: AcquisitionCounts,
-    measurement_tx: rtrb::Producer<Event>,
-    predictor_rx: rtrb::Consumer<Predictor>,
-    /// Whether a slot that queues nothing queues an [`Event::Passed`].
-    heartbeats: bool,
-}
-
-impl<'a, C: RoiCamera> Acquisition<'a, C> {
-    /// The camera side before its first slot: no track yet, the ROI buffer sized for the largest ROI, and the
-    /// acquisition ends of the measurement and predictor queues.
-    pub(crate) fn new(
-        camera: &'a mut C,
-        camera_model: &'a CameraModel,
-        target: &'a Target,
-        config: &'a LoopConfig,
-        noise_px: f64,
-        (measurement_tx, predictor_rx): (rtrb::Producer<Event>, rtrb::Consumer<Predictor>),
-    ) -> Self {
-        let max_side = config.scheduler.max_size_px as usize;
-        Self {
-            scheduler: RoiScheduler::new(
-                camera_model.clone(),
-                target.clone(),
-                config.scheduler,
-                noise_px,
-            ),
-            image: RoiImage::with_capacity(max_side * max_side),
-            frame: Frame::default(),
-            predictor: None,
-            restart_t_s: f64::NEG_INFINITY,
-            counters: AcquisitionCounts::default(),
-            measurement_tx,
-            predictor_rx,
-            heartbeats: false,
-            camera,
-            camera_model,
-            target,
-            config,
-        }
-    }
-
-    /// The camera side of a rig's camera: every slot that queues no measurement and no restart queues an
-    /// [`Event::Passed`] (if the queue has room: a full queue holds events of this camera already).
-    pub(crate) fn with_heartbeats(mut self) -> Self {
-        self.heartbeats = true;
-        self
-    }
-
-    /// The camera side: `config.roi_slots` slots from `start`, each a full frame (when there is no track to follow)
-    /// or one ROI, until the slots are done or the camera ends.
-    pub(crate) fn run(
-        &mut self,
-        start: Instant,
-        progress: Option<&std::sync::atomic::AtomicUsize>,
-    ) {
-        let period = Duration::from_secs_f64(1.0 / self.config.rate_hz);
-        let mut slot = 0usize;
-        while slot < self.config.roi_slots {
-            if let Some(progress) = progress
-                && slot.is_multiple_of(256)
-            {
-                progress.store(slot, Ordering::Relaxed);
-            }
-            self.wait_for_slot(start, slot, period);
-            if self.config.paced && self.config.skip_late_slots {
-                let now_slot = (start.elapsed().as_secs_f64() * self.config.rate_hz) as usize;
-                if now_slot > slot {
-                    self.counters.skipped += now_slot - slot;
-                    slot = now_slot;
-                    if slot >= self.config.roi_slots {
-                        break;
-                    }
-                }
-            }
-            let t_s = self.config.t_start_s + slot as f64 / self.config.rate_hz;
-            while let Ok(p) = self.predictor_rx.pop() {
-                // Estimates from before the last re-initialisation describe the old track.
-                if p.t_ref_s >= self.restart_t_s {
-                    self.predictor = Some(p);
-                }
-            }
-            let queued = self.counters.measurements + self.counters.initialisations;
-            let step = if self.predictor.is_none() || self.scheduler.needs_reinitialisation() {
-                self.initialise(t_s)
-            } else {
-                self.read_roi(t_s)
-            };
-            if self.heartbeats
-                && self.counters.measurements + self.counters.initialisations == queued
-            {
-                let _ = self.measurement_tx.push(Event::Passed { t_s });
-            }
-            match step {
-                Slots::Advance(n) => slot += n,
-                Slots::Stop => break,
-            }
-        }
-    }
-
-    /// Paced: waits for the trigger time of `slot` (counting a trigger reached more than a `period` late).
-    /// Free-running: waits while more than `max_queued` measurements are unprocessed.
-    fn wait_for_slot(&mut self, start: Instant, slot: usize, period: Duration) {
-        let mut spins = 0;
-        if self.config.paced {
-            let due = start + period * slot as u32;
-            while Instant::now() < due {
-                backoff(&mut spins);
-            }
-            if Instant::now() > due + period {
-                self.counters.late += 1;
-            }
-        } else {
-            while self.measurement_tx.buffer().capacity() - self.measurement_tx.slots()
-                > self.config.max_queued
-            {
-                backoff(&mut spins);
-            }
-        }
-    }
-
-    /// Reads a full frame at `t_s` and finds the target in it with no prior; on success restarts the track (the
-    /// scheduler here, the tracker through the queue). A full frame costs `full_frame_slots` slots.
-    fn initialise(&mut self, t_s: f64) -> Slots {
-        let config = self.config;
-        let frame_slots = Slots::Advance(config.full_frame_slots.max(1));
-        if let Err(e) = self.camera.grab_full_frame(t_s, &mut self.frame) {
-            if !e.is_transient() {
-                self.counters.stopped_by = Some(e);
-                return Slots::Stop;
-            }
-            self.counters.camera_errors += 1;
-            return frame_slots;
-        }
-        match find_target(
-            self.camera_model,
-            self.target,
-            &self.frame,
-            &config.centroid,
-        ) {
-            Ok(found) => {
-                // The frame's own time, not the pose's (a rolling shutter's middle row, later): the next ROI slots
-                // must not come before the restart.
-                let restart_s = self.frame.t_s;
-                self.predictor = Some(Predictor {
-                    t_ref_s: restart_s,
-                    state: found.state,
-                    covariance: Some(full_frame_covariance()),
-                });
-                self.restart_t_s = restart_s;
-                self.scheduler.reset();
-                let mut spins = 0;
-                let mut event = Event::Restart {
-                    t_s: restart_s,
-                    state: found.state,
-                };
-                loop {
-                    match self.measurement_tx.push(event) {
-                        Ok(()) => break,
-                        Err(rtrb::PushError::Full(back)) => {
-                            event = back;
-                            backoff(&mut spins);
-                        }
-                    }
-                }
-                self.counters.initialisations += 1;
-            }
-            // Frames of another size than the camera model's will never match it: stop, saying so.
-            Err(MatchError::FrameSize {
-                frame_width,
-                frame_height,
-                camera_width,
-                camera_height,
-            }) => {
-                self.counters.stopped_by = Some(GrabError::FrameSize {
-                    width: frame_width,
-                    height: frame_height,
-                    expected_width: camera_width,
-                    expected_height: camera_height,
-                });
-                return Slots::Stop;
-            }
-            Err(_) => {
-                self.predictor = None;
-                self.counters.failed_initialisations += 1;
-            }
-        }
-        frame_slots
-    }
-
-    /// Places the next ROI from the latest predictor, reads it at `t_s`, measures its blob and queues the
-    /// measurement for the estimator. One slot.
-    fn read_roi(&mut self, t_s: f64) -> Slots {
-        let Some(p) = self.predictor else {
-            return Slots::Advance(1);
-        };
-        let Some(request) = self.scheduler.next(&p, t_s) else {
-            self.counters.rejections.absent += 1;
-            return Slots::Advance(1);
-        };
-        let trigger = RoiTrigger {
-            point_id: self.target.points()[request.point_index].id,
-            roi: request.roi,
-            t_s,
-        };
-        let image = &mut self.image;
-        let grab = self.camera.grab_roi(&trigger, image).and_then(|()| {
-            if image.is_consistent() {
-                Ok(())
-            } else {
-                Err(GrabError::Dropped {
-                    reason: format!(
-                        "{} pixel values for a {} x {} ROI",
-                        image.pixels.len(),
-                        image.roi.width,
-                        image.roi.height
-                    ),
-                })
-            }
-        });
-        if let Err(e) = grab {
-            if !e.is_transient() {
-                self.counters.stopped_by = Some(e);
-                return Slots::Stop;
-            }
-            // A point whose ROIs keep failing counts as lost, so the camera side re-initialises.
-            self.scheduler.report(request.point_index, false);
-            self.counters.camera_errors += 1;
-            return Slots::Advance(1);
-        }
-        let grabbed = Instant::now();
-        self.counters.rois += 1;
-        if self.config.crop_to_request && self.image.point_id == trigger.point_id {
-            self.image.crop_to(&request.roi, &self.camera_model.time);
-        }
-        // The point the camera says it read (a replay may not follow the schedule).
-        let point_index = if self.image.point_id == trigger.point_id {
-            request.point_index
-        } else {
-            self.target
-                .index_of(self.image.point_id)
-                .unwrap_or(request.point_index)
-        };
-        match measure_roi(&self.image, &self.config.centroid, &self.camera_model.time) {
-            Ok(m) => {
-                self.scheduler.report(point_index, true);
-                if self
-                    .measurement_tx
-                    .push(Event::Measurement { m, grabbed })
-                    .is_err()
-                {
-                    self.counters.dropped += 1;
-                } else {
-                    self.counters.measurements += 1;
-                }
-            }
-            Err(r) => {
-                self.scheduler.report(point_index, false);
-                self.counters.rejections.count(&r);
-            }
-        }
-        Slots::Advance(1)
-    }
-}
-
-/// What the camera side of a loop did (a single camera's are in [`LoopReport`]; a rig's, one per camera, in
-/// [`crate::rig_loop::RigLoopReport::cameras`]).
-///
-/// ```
-/// let counts = roitrack_pipeline::AcquisitionCounts::default();
-/// assert_eq!((counts.rois, counts.measurements), (0, 0));
-/// ```
-#[derive(Debug, Clone, Default)]
-pub struct AcquisitionCounts {
-    /// ROIs read.
-    pub rois: usize,
-    /// Centroids sent to the estimator.
-    pub measurements: usize,
-    /// ROIs that gave no centroid, by reason; `absent` also counts the slots in which the scheduler placed no ROI.
-    pub rejections: RejectionCounts,
-    /// Measurements lost because the queue was full.
-    pub dropped: usize,
-    /// Paced mode: triggers reached more than one period late.
-    pub late: usize,
-    /// With [`LoopConfig::skip_late_slots`]: slots skipped because they were reached late.
-    pub skipped: usize,
-    /// Full-frame (re-)initialisations that found the target and restarted the track.
-    pub initialisations: usize,
-    /// Full frames in which the target was not found.
-    pub failed_initialisations: usize,
-    /// Grabs that failed but may be retried (timeouts, dropped buffers).
-    pub camera_errors: usize,
-    /// The camera's end, if it ended before its last slot (disconnected, end of a recording).
-    pub stopped_by: Option<GrabError>,
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use nalgebra::Vector3;
+    use roitrack_core::Acceleration;
     use roitrack_sim::{Scenario, ScenarioKind};
 
     /// Spacing of the known accelerations given (s): a controller's tick.
