@@ -37,6 +37,20 @@ fn live_fake(dir: &Path, seconds: &str) -> (Command, [PathBuf; 3]) {
     (command, files)
 }
 
+/// `roitrack eval --json` of `poses` and `twists` against the truth in `truth`: its metrics.
+fn eval_json(truth: &Path, poses: &Path, twists: &Path) -> serde_json::Value {
+    let eval = roitrack()
+        .args(["eval", "--json", "--truth"])
+        .arg(truth)
+        .arg("--poses")
+        .arg(poses)
+        .arg("--twists")
+        .arg(twists)
+        .output()
+        .unwrap();
+    serde_json::from_str(&succeeded(eval)).unwrap()
+}
+
 #[test]
 fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
     let _turn = turn();
@@ -63,16 +77,7 @@ fn live_fake_writes_estimates_and_a_truth_that_eval_scores() {
             .windows(b"/roitrack/measurements".len())
             .any(|w| w == b"/roitrack/measurements")
     );
-    let eval = roitrack()
-        .args(["eval", "--json", "--truth"])
-        .arg(&truth)
-        .arg("--poses")
-        .arg(&poses)
-        .arg("--twists")
-        .arg(&twists)
-        .output()
-        .unwrap();
-    let metrics: serde_json::Value = serde_json::from_str(&succeeded(eval)).unwrap();
+    let metrics = eval_json(&truth, &poses, &twists);
     let rmse_mm = metrics["position_rmse_mm"].as_f64().unwrap();
     // The demo's default estimator on orthoglide: about 0.02 mm.
     assert!(rmse_mm < 0.1, "{metrics}");
@@ -416,16 +421,7 @@ fn a_rig_of_two_fake_cameras_gives_one_fused_track_and_learns_the_second_clock()
         "{stdout}"
     );
     // The fused track against the truth in the rig's frame, on the rig's clock.
-    let eval = roitrack()
-        .args(["eval", "--json", "--truth"])
-        .arg(&truth)
-        .arg("--poses")
-        .arg(&poses)
-        .arg("--twists")
-        .arg(&twists)
-        .output()
-        .unwrap();
-    let metrics: serde_json::Value = serde_json::from_str(&succeeded(eval)).unwrap();
+    let metrics = eval_json(&truth, &poses, &twists);
     // About 0.01 mm on this rig (each camera alone about 0.025 mm).
     assert!(
         metrics["position_rmse_mm"].as_f64().unwrap() < 0.05,

@@ -244,12 +244,7 @@ pub fn run(args: &LiveArgs) -> Result<()> {
                 .context("--camera is required with --device")?,
             &Default::default(),
         )?;
-        let target = crate::args::read_target(
-            args.target
-                .as_ref()
-                .context("--target is required with --device")?,
-            None,
-        )?;
+        let target = device_target(args)?;
         (camera_model, target)
     };
     // The first signal stops the run at its next ROI; the bag is completed below with every estimate.
@@ -427,12 +422,7 @@ fn run_rig(args: &LiveArgs, rig_path: &Path, camera: GenicamOptions) -> Result<(
         run_fake_rig(&scene, rig, &options, args.seed, stop, &mut on_estimate)
             .with_context(|| format!("the fake cameras of {}", rig_path.display()))?
     } else {
-        let target = crate::args::read_target(
-            args.target
-                .as_ref()
-                .context("--target is required with --device")?,
-            None,
-        )?;
+        let target = device_target(args)?;
         let mut addresses: Vec<Option<String>> = vec![None; rig.len()];
         for given in &args.device {
             let Some((name, address)) = given.split_once('=') else {
@@ -531,6 +521,16 @@ fn run_rig(args: &LiveArgs, rig_path: &Path, camera: GenicamOptions) -> Result<(
         .into());
     }
     Ok(())
+}
+
+/// The target of a run on real cameras (--target, required with --device).
+fn device_target(args: &LiveArgs) -> Result<roitrack::Target> {
+    crate::args::read_target(
+        args.target
+            .as_ref()
+            .context("--target is required with --device")?,
+        None,
+    )
 }
 
 /// The camera options every camera of the run takes (pixel format, window, exposure, trigger, timeout); the address
