@@ -1,7 +1,7 @@
 """Reads a roitrack bag back with two readers that are not roitrack's, and checks it against the run's other files.
 
     python check_bag.py BAG.mcap POSES.tum TWISTS.csv COVARIANCE.csv|- FRAME_ID CHILD_FRAME_ID [--images N] [--prefix]
-        [--measurements MEASUREMENTS.csv] [--rois N] [--distortion MODEL:N]
+        [--measurements MEASUREMENTS.csv] [--rois N] [--distortion MODEL:N] [--rig]
 
 1. `mcap` with `mcap-ros2-support`: the header profile `ros2`; every channel CDR with a `ros2msg` schema and its QoS
    profiles; every message decoded by the decoder built from the bag's own schemas.
@@ -18,8 +18,9 @@ by `rosbags` from the bag's own definition): parallel arrays, and with --measure
 in order, at `stamp + dt_s`. With --images, the annotations of each frame: green points (the measured centroids, each
 labelled with its id) near the magenta circles of the same ids (the target projected by the estimate). With --rois,
 each ROI image with its camera info (the `roi` its offset and size) and annotation (a centroid inside the image, at
-a measurement of /roitrack/measurements less the offset, or a rejection). Prints a summary; exits non-zero with the
-reason on the first failure.
+a measurement of /roitrack/measurements less the offset, or a rejection). With --rig, the bag of a rig's run: its fused
+estimates only, no camera info and no measurements (they belong to each camera). Prints a summary; exits non-zero with
+the reason on the first failure.
 """
 
 import argparse
@@ -242,6 +243,7 @@ def main():
     parser.add_argument("--measurements", help="the measurements CSV the bag's /roitrack/measurements must hold")
     parser.add_argument("--rois", type=int, default=0, help="ROI images expected on /roitrack/roi/image")
     parser.add_argument("--distortion", default="plumb_bob:5", help="the camera info's model and coefficient count")
+    parser.add_argument("--rig", action="store_true", help="a rig's bag: estimates only, no camera info or measurements")
     args = parser.parse_args()
 
     poses = read_tum(args.poses)
@@ -259,8 +261,9 @@ def main():
         "/roitrack/odometry": "nav_msgs/msg/Odometry",
         "/tf": "tf2_msgs/msg/TFMessage",
         "/roitrack/status": "diagnostic_msgs/msg/DiagnosticArray",
-        "/roitrack/camera_info": "sensor_msgs/msg/CameraInfo",
     }
+    if not args.rig:
+        expected_types["/roitrack/camera_info"] = "sensor_msgs/msg/CameraInfo"
     if args.images:
         expected_types["/roitrack/image"] = "sensor_msgs/msg/Image"
         expected_types["/roitrack/annotations"] = "foxglove_msgs/msg/ImageAnnotations"
@@ -268,7 +271,8 @@ def main():
         expected_types["/roitrack/roi/image"] = "sensor_msgs/msg/Image"
         expected_types["/roitrack/roi/camera_info"] = "sensor_msgs/msg/CameraInfo"
         expected_types["/roitrack/roi/annotations"] = "foxglove_msgs/msg/ImageAnnotations"
-    expected_types["/roitrack/measurements"] = "roitrack_msgs/msg/BlobMeasurements"
+    if not args.rig:
+        expected_types["/roitrack/measurements"] = "roitrack_msgs/msg/BlobMeasurements"
     if args.prefix:
         n = len(by_reader["mcap"].get("/roitrack/pose", []))
         check(0 < n <= len(poses), f"{n} poses in the bag of a failed run, {len(poses)} in the files")
@@ -278,7 +282,7 @@ def main():
             check(all(m[0] == type_name for m in messages[topic]), f"{name}: {topic} is not {type_name}")
         for topic in ["/roitrack/pose", "/roitrack/twist", "/roitrack/odometry", "/tf", "/roitrack/status"]:
             check(len(messages[topic]) == n, f"{name}: {len(messages[topic])} messages on {topic}, {n} estimates")
-        check(len(messages["/roitrack/camera_info"]) == 1, f"{name}: camera info not once")
+        check(args.rig or len(messages["/roitrack/camera_info"]) == 1, f"{name}: camera info not once")
         if args.images:
             check(len(messages["/roitrack/image"]) == args.images, f"{name}: {len(messages['/roitrack/image'])} images")
 
@@ -363,6 +367,18 @@ def main():
             for key in ("status", "residual_rms_px", "inverse_condition", "measurements_used"):
                 check(key in values, f"/roitrack/status {k}: no {key}")
             check(status[0].message == values["status"], f"/roitrack/status {k}: message and status differ")
+    extra = "; a rig's: no camera info, no measurements" if args.rig else check_camera_side(args, mcap_messages,
+                                                                                            rosbags_messages)
+    print(
+        f"check_bag: {args.bag}: {n} estimates read back by mcap and rosbags{extra}; worst differences: pose "
+        f"{worst['pose']:.2e}, twist {worst['twist']:.2e}, stamp {worst['stamp']:.2e} s, covariance "
+        f"{worst['covariance']:.2e} (relative)"
+    )
+
+
+def check_camera_side(args, mcap_messages, rosbags_messages):
+    """A single camera's part of the bag: the camera info, the frames, the measurements, the ROIs; the summary's
+    words for them."""
     info_a, info_b = mcap_messages["/roitrack/camera_info"][0][2], rosbags_messages["/roitrack/camera_info"][0][2]
     for info in (info_a, info_b):
         check(info.header.frame_id == args.frame_id, "camera info frame")
@@ -401,11 +417,7 @@ def main():
         check(centroids == len(measured), f"{centroids} ROI centroids, {len(measured)} measurements")
         check(len(rosbags_messages["/roitrack/roi/image"]) == args.rois, "rosbags: ROI count")
         extra += f"; {args.rois} ROI images, {centroids} with their centroid"
-    print(
-        f"check_bag: {args.bag}: {n} estimates read back by mcap and rosbags{extra}; worst differences: pose "
-        f"{worst['pose']:.2e}, twist {worst['twist']:.2e}, stamp {worst['stamp']:.2e} s, covariance "
-        f"{worst['covariance']:.2e} (relative)"
-    )
+    return extra
 
 
 if __name__ == "__main__":
