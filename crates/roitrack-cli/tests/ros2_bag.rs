@@ -19,6 +19,8 @@ use common::{fails, ok};
 #[path = "common/process.rs"]
 mod process;
 use process::{simulate, succeeded};
+#[path = "common/venv.rs"]
+mod venv;
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -26,26 +28,13 @@ fn p(path: &Path) -> &str {
 
 /// The Python of the readers' virtual environment, or `None` (the test is then skipped) if it is not installed.
 fn python() -> Option<PathBuf> {
-    let venv = std::env::var_os("ROITRACK_ROS_VENV").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/ros-venv"),
-        PathBuf::from,
-    );
-    let python = venv.join("bin/python");
-    let ready = python.is_file()
-        && Command::new(&python)
-            .args(["-c", "import rosbags, mcap, mcap_ros2, numpy"])
-            .status()
-            .is_ok_and(|s| s.success());
-    if ready {
-        return Some(python);
-    }
-    assert!(
-        std::env::var_os("ROITRACK_REQUIRE_ROS_PY").is_none(),
-        "rosbags and mcap-ros2-support are required (ROITRACK_REQUIRE_ROS_PY is set) but not in {}",
-        venv.display()
-    );
-    eprintln!("skipped: rosbags and mcap are not installed; run scripts/setup-test-deps");
-    None
+    venv::python(&venv::Venv {
+        dir_var: "ROITRACK_ROS_VENV",
+        default_dir: "ros-venv",
+        imports: "rosbags, mcap, mcap_ros2, numpy",
+        what: "rosbags and mcap-ros2-support",
+        require_var: "ROITRACK_REQUIRE_ROS_PY",
+    })
 }
 
 /// A script of roitrack-ros' tests (run by the readers' Python).
@@ -73,6 +62,14 @@ fn check_bag(python: &Path, dir: &Path, frame_ids: [&str; 2], extra: &[&str]) ->
         frame_ids,
         extra,
     ))
+}
+
+/// Asserts that a bag's error names the bag, the topic and `reason`.
+fn assert_names_bag_and_topic(error: &str, bag: &Path, topic: &str, reason: &str) {
+    assert!(
+        error.contains(p(bag)) && error.contains(topic) && error.contains(reason),
+        "{error}"
+    );
 }
 
 fn line_count(path: &Path) -> usize {
@@ -419,12 +416,7 @@ fn bad_bags_are_refused_naming_the_bag_and_the_topic() {
     let bag = dir.join("bag");
     write_bag(&python, &sim, &bag, "mono8", None);
     let error = track(&bag, "/cam/nothing", &[]);
-    assert!(
-        error.contains(p(&bag))
-            && error.contains("/cam/nothing")
-            && error.contains("no such topic"),
-        "{error}"
-    );
+    assert_names_bag_and_topic(&error, &bag, "/cam/nothing", "no such topic");
     assert!(
         error.contains("/cam/image_raw (sensor_msgs/msg/Image)"),
         "{error}"
@@ -435,12 +427,7 @@ fn bad_bags_are_refused_naming_the_bag_and_the_topic() {
     let wrong = dir.join("wrong_info");
     write_bag(&python, &sim, &wrong, "mono8", Some((640, 480)));
     let error = track(&wrong, "/cam/image_raw", &[]);
-    assert!(
-        error.contains(p(&wrong))
-            && error.contains("/cam/image_raw")
-            && error.contains("640 x 480"),
-        "{error}"
-    );
+    assert_names_bag_and_topic(&error, &wrong, "/cam/image_raw", "640 x 480");
     // A truncated bag.
     let mcap = std::fs::read_dir(&bag)
         .unwrap()
@@ -454,10 +441,7 @@ fn bad_bags_are_refused_naming_the_bag_and_the_topic() {
         "/cam/image_raw",
         &["--camera", p(&sim.join("camera.yaml"))],
     );
-    assert!(
-        error.contains(p(&bag)) && error.contains("/cam/image_raw") && error.contains("truncated"),
-        "{error}"
-    );
+    assert_names_bag_and_topic(&error, &bag, "/cam/image_raw", "truncated");
     // Without a camera and not a bag: --camera is required.
     let error = fails(&[
         "track",
@@ -615,12 +599,7 @@ fn recorded_measurements_replay_from_a_bag_to_the_estimates_of_the_csv() {
     };
     let run = dir.join("run.mcap");
     let error = track(&run, "/roitrack/blobs");
-    assert!(
-        error.contains(p(&run))
-            && error.contains("/roitrack/blobs")
-            && error.contains("no such topic"),
-        "{error}"
-    );
+    assert_names_bag_and_topic(&error, &run, "/roitrack/blobs", "no such topic");
     assert!(
         error.contains("/roitrack/measurements (roitrack_msgs/msg/BlobMeasurements)"),
         "{error}"
@@ -644,21 +623,13 @@ fn recorded_measurements_replay_from_a_bag_to_the_estimates_of_the_csv() {
         let bag = dir.join(damage);
         write(&bag, Some(damage));
         let error = track(&bag, "/cam/blobs");
-        assert!(
-            error.contains(p(&bag)) && error.contains("/cam/blobs") && error.contains(expected),
-            "{error}"
-        );
+        assert_names_bag_and_topic(&error, &bag, "/cam/blobs", expected);
     }
     let bytes = std::fs::read(&run).unwrap();
     let truncated = dir.join("truncated.mcap");
     std::fs::write(&truncated, &bytes[..bytes.len() * 2 / 3]).unwrap();
     let error = track(&truncated, "/roitrack/measurements");
-    assert!(
-        error.contains(p(&truncated))
-            && error.contains("/roitrack/measurements")
-            && error.contains("truncated"),
-        "{error}"
-    );
+    assert_names_bag_and_topic(&error, &truncated, "/roitrack/measurements", "truncated");
     // Options that do not go with a replay.
     let (target, csv) = (dir.join("target.csv"), dir.join("measurements.csv"));
     let (bad_tum, bad_csv) = (dir.join("bad.tum"), dir.join("bad.csv"));

@@ -5,6 +5,8 @@
 mod common;
 #[path = "../common/rig.rs"]
 mod rig;
+#[path = "../common/venv.rs"]
+mod venv;
 
 mod bench;
 mod compare;

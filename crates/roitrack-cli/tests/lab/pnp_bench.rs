@@ -14,26 +14,13 @@ use std::process::Command;
 
 /// The Python of OpenCV's virtual environment, or `None` (the test is then skipped) if it is not installed.
 fn python() -> Option<PathBuf> {
-    let venv = std::env::var_os("ROITRACK_OPENCV_VENV").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/opencv-venv"),
-        PathBuf::from,
-    );
-    let python = venv.join("bin/python");
-    let ready = python.is_file()
-        && Command::new(&python)
-            .args(["-c", "import cv2, numpy"])
-            .status()
-            .is_ok_and(|s| s.success());
-    if ready {
-        return Some(python);
-    }
-    assert!(
-        std::env::var_os("ROITRACK_REQUIRE_OPENCV").is_none(),
-        "opencv-python-headless is required (ROITRACK_REQUIRE_OPENCV is set) but not in {}",
-        venv.display()
-    );
-    eprintln!("skipped: opencv-python-headless is not installed; run scripts/setup-test-deps");
-    None
+    crate::venv::python(&crate::venv::Venv {
+        dir_var: "ROITRACK_OPENCV_VENV",
+        default_dir: "opencv-venv",
+        imports: "cv2, numpy",
+        what: "opencv-python-headless",
+        require_var: "ROITRACK_REQUIRE_OPENCV",
+    })
 }
 
 #[test]
