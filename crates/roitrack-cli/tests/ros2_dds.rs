@@ -17,6 +17,11 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+use roitrack::nalgebra::Vector3;
+
+#[path = "common/venv.rs"]
+mod venv;
+
 const REQUIRE: &str = "ROITRACK_REQUIRE_DDS";
 
 fn skip(why: &str) {
@@ -29,24 +34,13 @@ fn skip(why: &str) {
 
 /// The Python with `cyclonedds`, or `None` (skipped).
 fn python() -> Option<PathBuf> {
-    let venv = std::env::var_os("ROITRACK_DDS_VENV").map_or_else(
-        || Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/dds-venv"),
-        PathBuf::from,
-    );
-    let python = venv.join("bin/python");
-    let ready = python.is_file()
-        && Command::new(&python)
-            .args(["-c", "import cyclonedds.domain"])
-            .status()
-            .is_ok_and(|s| s.success());
-    if ready {
-        return Some(python);
-    }
-    skip(&format!(
-        "cyclonedds is not installed in {} (run scripts/setup-test-deps)",
-        venv.display()
-    ));
-    None
+    venv::python(&venv::Venv {
+        dir_var: "ROITRACK_DDS_VENV",
+        default_dir: "dds-venv",
+        imports: "cyclonedds.domain",
+        what: "cyclonedds",
+        require_var: REQUIRE,
+    })
 }
 
 /// Whether this process may make a network namespace (root, or a user namespace allowed).
@@ -61,6 +55,11 @@ fn namespaces_allowed() -> bool {
         );
     }
     allowed
+}
+
+/// The Python with `cyclonedds`, where this process may also make a network namespace; else `None` (skipped).
+fn python_in_a_namespace() -> Option<PathBuf> {
+    python().filter(|_| namespaces_allowed())
 }
 
 /// Runs `script` (bash) in a network namespace of its own whose loopback is up, with `env`; its combined output.
@@ -247,6 +246,19 @@ fn check_against_files_on_their_clock(
             &[r.i, r.j, r.k, r.w],
         );
     };
+    let check_twist =
+        |what: &str, k: usize, twist: &serde_json::Value, v: Vector3<f64>, w: Vector3<f64>| {
+            close(
+                &format!("{what} {k} linear"),
+                &xyz(&twist["linear"]),
+                &[v.x, v.y, v.z],
+            );
+            close(
+                &format!("{what} {k} angular"),
+                &xyz(&twist["angular"]),
+                &[w.x, w.y, w.z],
+            );
+        };
     for (k, m) in on("/roitrack/pose").iter().enumerate() {
         close("pose stamp", &[stamp_s(&m.msg["header"])], &[poses[k].t_s]);
         assert_eq!(m.msg["header"]["frame_id"], "camera");
@@ -281,17 +293,12 @@ fn check_against_files_on_their_clock(
             &[stamp_s(&m.msg["header"])],
             &[twists[k].t_s],
         );
-        let twist = &m.msg["twist"]["twist"];
-        let (v, w) = (twists[k].velocity_mps, twists[k].angular_velocity_radps);
-        close(
-            &format!("twist {k} linear"),
-            &xyz(&twist["linear"]),
-            &[v.x, v.y, v.z],
-        );
-        close(
-            &format!("twist {k} angular"),
-            &xyz(&twist["angular"]),
-            &[w.x, w.y, w.z],
+        check_twist(
+            "twist",
+            k,
+            &m.msg["twist"]["twist"],
+            twists[k].velocity_mps,
+            twists[k].angular_velocity_radps,
         );
     }
     for (k, m) in on("/roitrack/odometry").iter().enumerate() {
@@ -314,20 +321,12 @@ fn check_against_files_on_their_clock(
             .rotation
             .to_rotation_matrix()
             .transpose();
-        let (v, w) = (
+        check_twist(
+            "odometry",
+            k,
+            &m.msg["twist"]["twist"],
             r_t * twists[k].velocity_mps,
             r_t * twists[k].angular_velocity_radps,
-        );
-        let twist = &m.msg["twist"]["twist"];
-        close(
-            &format!("odometry {k} linear"),
-            &xyz(&twist["linear"]),
-            &[v.x, v.y, v.z],
-        );
-        close(
-            &format!("odometry {k} angular"),
-            &xyz(&twist["angular"]),
-            &[w.x, w.y, w.z],
         );
     }
     for (k, m) in on("/tf").iter().enumerate() {
@@ -408,10 +407,9 @@ fn check_against_files_on_their_clock(
 
 #[test]
 fn every_estimate_of_a_paced_demo_reaches_cyclone_dds_equal_to_the_files() {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let (received, out) = (dir.path().join("received.jsonl"), dir.path().join("demo"));
     beside_cyclone_dds(
@@ -459,31 +457,91 @@ fn every_estimate_of_a_paced_demo_reaches_cyclone_dds_equal_to_the_files() {
 /// what it receives to `received`, in a network namespace of its own; asserts that both succeeded and that the
 /// publisher dropped nothing.
 fn beside_cyclone_dds(python: &Path, received: &Path, out: &Path, command: &str) {
+    beside_subscriber(
+        python,
+        received,
+        r#""$ROITRACK" $COMMAND --out "$OUT" >/dev/null"#,
+        &[("OUT", out), ("COMMAND", Path::new(command))],
+    );
+}
+
+/// Runs `roitrack_line` (bash: `"$ROITRACK" ...` with `env`) in a network namespace of its own beside the Cyclone
+/// DDS subscriber, which writes what it receives to `received`; asserts that both succeeded and that the publisher
+/// dropped nothing. The log.
+fn beside_subscriber(
+    python: &Path,
+    received: &Path,
+    roitrack_line: &str,
+    env: &[(&str, &Path)],
+) -> String {
+    let subscriber = subscriber_script();
+    let mut all_env = vec![
+        ("PYTHON", python),
+        ("SUBSCRIBER", subscriber.as_path()),
+        ("RECEIVED", received),
+        ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
+    ];
+    all_env.extend_from_slice(env);
     let (ok, log) = in_namespace(
-        r#"
+        &format!(
+            r#"
 "$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
 subscriber=$!
-"$ROITRACK" $COMMAND --out "$OUT" >/dev/null || exit 91
+{roitrack_line} || exit 91
 wait $subscriber || exit 92
-"#,
-        &[
-            ("PYTHON", python),
-            ("SUBSCRIBER", &subscriber_script()),
-            ("RECEIVED", received),
-            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
-            ("OUT", out),
-            ("COMMAND", Path::new(command)),
-        ],
+"#
+        ),
+        &all_env,
     );
     assert!(ok, "{log}");
     assert!(log.contains(" 0 dropped"), "{log}");
+    log
 }
 
-/// `roitrack simulate --scenario SCENARIO --duration-s 1 --out DIR` plus `extra`: the run's folder.
-fn simulate(dir: &Path, extra: &[&str]) -> PathBuf {
+/// The node's poses (`DIR/node.tum`) and those `track` wrote from the file (`DIR/track.tum`): more than 100, the
+/// same byte for byte.
+fn node_poses_are_tracks(dir: &Path) {
+    let (node, track) = (
+        std::fs::read_to_string(dir.join("node.tum")).unwrap(),
+        std::fs::read_to_string(dir.join("track.tum")).unwrap(),
+    );
+    assert!(track.lines().count() > 100, "{track}");
+    assert_eq!(node, track, "the node's poses, and track's from the file");
+}
+
+/// The node's poses and twists (`DIR/node.tum`, `DIR/node.csv`) as many as `track`'s (`DIR/track.tum`,
+/// `DIR/track.csv`), each [`close`] to its own; `track`'s poses.
+fn node_against_track(dir: &Path, what: &str, log: &str) -> Vec<roitrack::core::PoseSample> {
+    let (node, track) = (
+        roitrack::formats::read_tum(dir.join("node.tum")).unwrap(),
+        roitrack::formats::read_tum(dir.join("track.tum")).unwrap(),
+    );
+    assert_eq!(
+        node.len(),
+        track.len(),
+        "estimates of the node and of track:\n{log}"
+    );
+    close_poses(what, &node, &track);
+    let (node_twists, track_twists) = (
+        roitrack::formats::read_twists_csv(dir.join("node.csv")).unwrap(),
+        roitrack::formats::read_twists_csv(dir.join("track.csv")).unwrap(),
+    );
+    assert_eq!(node_twists.len(), track_twists.len());
+    close_twists("node's twist", &node_twists, &track_twists);
+    track
+}
+
+/// `roitrack simulate --scenario SCENARIO --duration-s DURATION_S EXTRA... --out DIR/sim`: the run's folder.
+fn simulate(dir: &Path, scenario: &str, duration_s: &str, extra: &[&str]) -> PathBuf {
     let sim = dir.join("sim");
     let out = Command::new(env!("CARGO_BIN_EXE_roitrack"))
-        .args(["simulate", "--scenario", "orthoglide", "--duration-s", "1"])
+        .args([
+            "simulate",
+            "--scenario",
+            scenario,
+            "--duration-s",
+            duration_s,
+        ])
         .args(extra)
         .arg("--out")
         .arg(&sim)
@@ -503,19 +561,12 @@ fn simulate(dir: &Path, extra: &[&str]) -> PathBuf {
 fn track_to_cyclone_dds(python: &Path, dir: &Path, sim: &Path, input: &[&str]) -> usize {
     MAX_DIFFERENCE.with(|max| max.set(0.0));
     let file = |name: &str| dir.join(name);
-    let (ok, log) = in_namespace(
-        r#"
-"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
-subscriber=$!
-"$ROITRACK" track --camera "$SIM/camera.yaml" --target "$SIM/target.csv" $INPUT \
-    --poses "$POSES" --twists "$TWISTS" --diagnostics "$DIAGNOSTICS" --ros2 --ros2-wait-s 30 --paced || exit 91
-wait $subscriber || exit 92
-"#,
+    beside_subscriber(
+        python,
+        &file("received.jsonl"),
+        r#""$ROITRACK" track --camera "$SIM/camera.yaml" --target "$SIM/target.csv" $INPUT \
+    --poses "$POSES" --twists "$TWISTS" --diagnostics "$DIAGNOSTICS" --ros2 --ros2-wait-s 30 --paced"#,
         &[
-            ("PYTHON", python),
-            ("SUBSCRIBER", &subscriber_script()),
-            ("RECEIVED", &file("received.jsonl")),
-            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
             ("SIM", sim),
             // Split by the shell: the input's option and paths (no spaces in a temporary folder's name).
             ("INPUT", Path::new(&input.join(" "))),
@@ -524,8 +575,6 @@ wait $subscriber || exit 92
             ("DIAGNOSTICS", &file("diagnostics.csv")),
         ],
     );
-    assert!(ok, "{log}");
-    assert!(log.contains(" 0 dropped"), "{log}");
     let estimates = check_against_files(
         &read_received(&file("received.jsonl")),
         &file("poses.tum"),
@@ -544,12 +593,11 @@ wait $subscriber || exit 92
 
 #[test]
 fn every_estimate_of_a_paced_track_of_measurements_reaches_cyclone_dds_equal_to_the_files() {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
-    let sim = simulate(dir.path(), &[]);
+    let sim = simulate(dir.path(), "orthoglide", "1", &[]);
     let measurements = sim.join("measurements.csv");
     let estimates = track_to_cyclone_dds(
         &python,
@@ -563,12 +611,11 @@ fn every_estimate_of_a_paced_track_of_measurements_reaches_cyclone_dds_equal_to_
 /// `track --rois` and `track --images` publish through the same sink as `--measurements`: every estimate, the files'.
 #[test]
 fn every_estimate_of_a_paced_track_of_rois_and_of_frames_reaches_cyclone_dds() {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
-    let sim = simulate(dir.path(), &["--rois"]);
+    let sim = simulate(dir.path(), "orthoglide", "1", &["--rois"]);
     let rois = sim.join("rois.bin");
     assert!(
         rois.is_file(),
@@ -584,7 +631,7 @@ fn every_estimate_of_a_paced_track_of_rois_and_of_frames_reaches_cyclone_dds() {
     assert!(estimates >= 390, "{estimates} estimates in 1 s at 400 Hz");
 
     let dir = tempfile::tempdir().unwrap();
-    let sim = simulate(dir.path(), &["--frames"]);
+    let sim = simulate(dir.path(), "orthoglide", "1", &["--frames"]);
     let (frames, timestamps) = (sim.join("frames"), sim.join("timestamps.csv"));
     let estimates = track_to_cyclone_dds(
         &python,
@@ -606,10 +653,9 @@ fn every_estimate_of_a_paced_track_of_rois_and_of_frames_reaches_cyclone_dds() {
 /// subscriber on every topic, none lost, each equal to the run's own files.
 #[test]
 fn every_estimate_of_a_paced_servo_run_reaches_cyclone_dds_equal_to_its_files() {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     MAX_DIFFERENCE.with(|max| max.set(0.0));
     let dir = tempfile::tempdir().unwrap();
     let (received, out) = (dir.path().join("received.jsonl"), dir.path().join("servo"));
@@ -642,32 +688,19 @@ fn every_estimate_of_a_paced_servo_run_reaches_cyclone_dds_equal_to_its_files() 
 /// same for every estimate.
 #[test]
 fn every_estimate_of_a_live_servo_run_reaches_cyclone_dds_equal_to_its_files() {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     MAX_DIFFERENCE.with(|max| max.set(0.0));
     let dir = tempfile::tempdir().unwrap();
     let file = |name: &str| dir.path().join(name);
-    let (ok, log) = in_namespace(
-        r#"
-"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
-subscriber=$!
-"$ROITRACK" servo --live --sim-camera --controller ctc --rate-hz 1000 --json --ros2 --ros2-wait-s 30 \
-    --out "$OUT" >"$JSON" || exit 91
-wait $subscriber || exit 92
-"#,
-        &[
-            ("PYTHON", &python),
-            ("SUBSCRIBER", &subscriber_script()),
-            ("RECEIVED", &file("received.jsonl")),
-            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
-            ("OUT", &file("servo")),
-            ("JSON", &file("run.json")),
-        ],
+    beside_subscriber(
+        &python,
+        &file("received.jsonl"),
+        r#""$ROITRACK" servo --live --sim-camera --controller ctc --rate-hz 1000 --json --ros2 --ros2-wait-s 30 \
+    --out "$OUT" >"$JSON""#,
+        &[("OUT", &file("servo")), ("JSON", &file("run.json"))],
     );
-    assert!(ok, "{log}");
-    assert!(log.contains(" 0 dropped"), "{log}");
     let json = std::fs::read_to_string(file("run.json")).unwrap();
     let run: serde_json::Value = serde_json::from_str(json.lines().last().unwrap()).unwrap();
     let run_dir = file("servo").join("ctc-live-sim-camera");
@@ -734,30 +767,20 @@ fn a_node_with_no_interface_up_or_an_address_no_interface_has_is_refused_at_star
 #[cfg(feature = "genicam")]
 #[test]
 fn every_estimate_of_the_live_fake_camera_reaches_cyclone_dds_equal_to_the_files() {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let file = |name: &str| dir.path().join(name);
-    let (ok, log) = in_namespace(
-        r#"
-"$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 &
-subscriber=$!
-"$ROITRACK" live --fake --duration 1 --poses "$POSES" --twists "$TWISTS" --ros2 --ros2-wait-s 30 >/dev/null || exit 91
-wait $subscriber || exit 92
-"#,
+    beside_subscriber(
+        &python,
+        &file("received.jsonl"),
+        r#""$ROITRACK" live --fake --duration 1 --poses "$POSES" --twists "$TWISTS" --ros2 --ros2-wait-s 30 >/dev/null"#,
         &[
-            ("PYTHON", &python),
-            ("SUBSCRIBER", &subscriber_script()),
-            ("RECEIVED", &file("received.jsonl")),
-            ("ROITRACK", Path::new(env!("CARGO_BIN_EXE_roitrack"))),
             ("POSES", &file("poses.tum")),
             ("TWISTS", &file("twists.csv")),
         ],
     );
-    assert!(ok, "{log}");
-    assert!(log.contains("0 dropped"), "{log}");
     let messages = read_received(&file("received.jsonl"));
     let estimates = check_against_files(
         &messages,
@@ -777,26 +800,12 @@ fn publisher_script() -> PathBuf {
 #[test]
 fn the_node_tracks_centroids_from_cyclone_dds_as_track_does_the_file_and_names_malformed_messages()
 {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
-    let sim = dir.path().join("sim");
-    let simulated = Command::new(roitrack)
-        .args([
-            "simulate",
-            "--scenario",
-            "orthoglide",
-            "--duration-s",
-            "1",
-            "--out",
-        ])
-        .arg(&sim)
-        .output()
-        .unwrap();
-    assert!(simulated.status.success());
+    let sim = simulate(dir.path(), "orthoglide", "1", &[]);
     let file = |name: &str| dir.path().join(name);
     let tracked = Command::new(roitrack)
         .args(["track", "--camera"])
@@ -845,18 +854,8 @@ wait $subscriber || exit 93
     ] {
         assert!(log.contains(reason), "{reason}:\n{log}");
     }
-    let (node, track) = (
-        roitrack::formats::read_tum(file("node.tum")).unwrap(),
-        roitrack::formats::read_tum(file("track.tum")).unwrap(),
-    );
+    let track = node_against_track(dir.path(), "node against track", &log);
     assert!(track.len() >= 390, "{} estimates", track.len());
-    assert_eq!(node.len(), track.len());
-    close_poses("node against track", &node, &track);
-    let (node, track) = (
-        roitrack::formats::read_twists_csv(file("node.csv")).unwrap(),
-        roitrack::formats::read_twists_csv(file("track.csv")).unwrap(),
-    );
-    close_twists("node's twist", &node, &track);
     // And the node published them all.
     let received = read_received(&file("received.jsonl"));
     let poses = received
@@ -879,13 +878,12 @@ wait $subscriber || exit 93
 /// with the file; with no camera info in time, it stops at start with an error naming the topic.
 #[test]
 fn the_node_takes_its_camera_from_a_latched_camera_info_and_names_a_missing_one() {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
-    let sim = simulate_spin(roitrack, dir.path());
+    let sim = simulate(dir.path(), "spin", "0.5", &[]);
     let file = |name: &str| dir.path().join(name);
     let (ok, log) = in_namespace(
         r#"
@@ -913,12 +911,7 @@ wait $publisher || exit 92
         log.contains("--camera-info-topic /roitrack/camera_info: no camera info on /roitrack/camera_info within 0.5 s"),
         "{log}"
     );
-    let (node, track) = (
-        std::fs::read_to_string(file("node.tum")).unwrap(),
-        std::fs::read_to_string(file("track.tum")).unwrap(),
-    );
-    assert!(track.lines().count() > 100, "{track}");
-    assert_eq!(node, track, "the node's poses, and track's from the file");
+    node_poses_are_tracks(dir.path());
 }
 
 /// `ros2-node --params-file`: the node's options from a ROS 2 parameters file (target, camera, topic, idle time,
@@ -926,13 +919,12 @@ wait $publisher || exit 92
 /// file with the same options, byte for byte.
 #[test]
 fn the_node_takes_its_options_from_a_parameters_file_and_the_command_line_overrides_it() {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
-    let sim = simulate_spin(roitrack, dir.path());
+    let sim = simulate(dir.path(), "spin", "0.5", &[]);
     let file = |name: &str| dir.path().join(name);
     // every: 3 and poses are overridden by the command line; the rest is the file's.
     let params = file("params.yaml");
@@ -972,12 +964,7 @@ wait $publisher || exit 92
     assert!(ok, "{log}");
     assert!(log.contains("takes centroids from /centroids"), "{log}");
     assert!(!file("not_these.tum").exists());
-    let (node, track) = (
-        std::fs::read_to_string(file("node.tum")).unwrap(),
-        std::fs::read_to_string(file("track.tum")).unwrap(),
-    );
-    assert!(track.lines().count() > 100, "{track}");
-    assert_eq!(node, track, "the node's poses, and track's from the file");
+    node_poses_are_tracks(dir.path());
 }
 
 /// A parameters file that is wrong stops the node before it starts, naming the file, the key and its line.
@@ -1026,25 +1013,6 @@ fn a_wrong_parameters_file_is_refused_naming_the_file_the_key_and_the_line() {
     );
 }
 
-/// Half a second of the `spin` scene simulated into `dir/sim`, which it returns.
-fn simulate_spin(roitrack: &Path, dir: &Path) -> PathBuf {
-    let sim = dir.join("sim");
-    let simulated = Command::new(roitrack)
-        .args([
-            "simulate",
-            "--scenario",
-            "spin",
-            "--duration-s",
-            "0.5",
-            "--out",
-        ])
-        .arg(&sim)
-        .output()
-        .unwrap();
-    assert!(simulated.status.success());
-    sim
-}
-
 fn image_publisher_script() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../roitrack-ros/tests/ros2_image_publisher.py")
 }
@@ -1071,32 +1039,17 @@ struct ImageCase<'a> {
 /// left out, track the rest to the estimates of `track --images` on the same frames (1e-9), publish every one, and
 /// count what it left out in its status, by reason.
 fn node_tracks_images_as_track_does(case: &ImageCase<'_>) {
-    let Some(python) = python() else { return };
-    if !namespaces_allowed() {
+    let Some(python) = python_in_a_namespace() else {
         return;
-    }
+    };
     let dir = tempfile::tempdir().unwrap();
     let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
-    let sim = dir.path().join("sim");
     // Half a second: 16 frames (the pure-Python PNG decoding takes about a second a frame).
-    let simulated = Command::new(roitrack)
-        .args([
-            "simulate",
-            "--scenario",
-            "orthoglide",
-            "--duration-s",
-            "0.5",
-            "--frames",
-        ])
-        .args(case.shutter)
-        .arg("--out")
-        .arg(&sim)
-        .output()
-        .unwrap();
-    assert!(
-        simulated.status.success(),
-        "{}",
-        String::from_utf8_lossy(&simulated.stderr)
+    let sim = simulate(
+        dir.path(),
+        "orthoglide",
+        "0.5",
+        &[&["--frames"], case.shutter].concat(),
     );
     let file = |name: &str| dir.path().join(name);
     // The frames' times as the node reads them from the stamps: rounded to the nanosecond, sec + 1e-9 nanosec.
@@ -1177,24 +1130,9 @@ wait $subscriber || exit 93
     for reason in case.log {
         assert!(log.contains(reason), "{reason}:\n{log}");
     }
-    let (node, track) = (
-        roitrack::formats::read_tum(file("node.tum")).unwrap(),
-        roitrack::formats::read_tum(file("track.tum")).unwrap(),
-    );
-    assert!(track.len() >= 10, "{} estimates", track.len());
-    assert_eq!(
-        node.len(),
-        track.len(),
-        "estimates of the node and of track:\n{log}"
-    );
     MAX_DIFFERENCE.with(|max| max.set(0.0));
-    close_poses("node against track --images", &node, &track);
-    let (node_twists, track_twists) = (
-        roitrack::formats::read_twists_csv(file("node.csv")).unwrap(),
-        roitrack::formats::read_twists_csv(file("track.csv")).unwrap(),
-    );
-    assert_eq!(node_twists.len(), track_twists.len());
-    close_twists("node's twist", &node_twists, &track_twists);
+    let track = node_against_track(dir.path(), "node against track --images", &log);
+    assert!(track.len() >= 10, "{} estimates", track.len());
     // And the node published them all, each pose the file's.
     let received = read_received(&file("received.jsonl"));
     let on =
