@@ -22,14 +22,8 @@ use outputs::*;
 use std::io::Write;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::Path;
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
-
-/// Previous outputs of `track` in `out`, as a run before would have left them, and no partial bag.
-fn previous_track_outputs(out: &Path) {
-    previous_outputs(out);
-    let _ = std::fs::remove_file(out.join("run.partial.mcap"));
-}
 
 /// `simulate` of ten minutes (far longer than any test waits) into `out`.
 fn long_simulation(out: &Path, seed: &str) -> Command {
@@ -73,19 +67,6 @@ fn with_file_size_limit(command: &mut Command, bytes: u64) {
     }
 }
 
-/// Waits for `child` to end, at most `limit`, and returns how it ended.
-fn wait_within(child: Child, limit: Duration) -> Output {
-    let start = Instant::now();
-    let out = child.wait_with_output().unwrap();
-    assert!(
-        start.elapsed() < limit,
-        "took {:?}: {}",
-        start.elapsed(),
-        stderr(&out)
-    );
-    out
-}
-
 const SIGNALS: [i32; 4] = [libc::SIGINT, libc::SIGTERM, libc::SIGHUP, libc::SIGPIPE];
 
 #[test]
@@ -98,16 +79,8 @@ fn each_signal_at_a_random_moment_of_track_keeps_the_outputs_and_the_partial_bag
     for signal in SIGNALS {
         previous_track_outputs(&out);
         let before = snapshot(&out);
-        let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
-            .spawn()
-            .unwrap();
-        let feeder = feed_forever(&mut child);
         let delay_ms = moments.next_in(200, 1000);
-        std::thread::sleep(Duration::from_millis(delay_ms));
-        assert!(child.try_wait().unwrap().is_none(), "ended before {signal}");
-        send(&child, signal);
-        let result = wait_within(child, Duration::from_secs(5));
-        feeder.join().unwrap();
+        let result = track_signalled(&camera, &target, &out, signal, delay_ms);
         let context = format!("signal {signal} at {delay_ms} ms: {}", stderr(&result));
         assert_eq!(result.status.signal(), Some(signal), "{context}");
         // A reader gone (SIGPIPE) wants no message; the others say what happened and what was kept.
@@ -116,11 +89,7 @@ fn each_signal_at_a_random_moment_of_track_keeps_the_outputs_and_the_partial_bag
         } else {
             assert!(stderr(&result).contains("interrupted"), "{context}");
         }
-        let mut after = snapshot(&out);
-        let partial = out.join("run.partial.mcap");
-        assert!(after.remove(&partial).is_some(), "{context}");
-        assert_eq!(after, before, "{context}");
-        assert!(bag_is_readable(&partial), "{context}");
+        assert_kept_with_partial_bag(&out, &before, &context);
         assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
     }
 }
@@ -183,15 +152,7 @@ fn a_second_signal_ends_a_run_at_once_without_temporaries() {
     ] {
         previous_track_outputs(&out);
         let before = snapshot(&out);
-        let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
-            .spawn()
-            .unwrap();
-        let _stdin = child.stdin.take().unwrap();
-        let started = Instant::now();
-        while temporaries(&out).len() < 4 && started.elapsed() < Duration::from_secs(10) {
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        assert_eq!(temporaries(&out).len(), 4, "the outputs' temporaries");
+        let (mut child, _stdin) = track_waiting(&camera, &target, &out);
         send(&child, first);
         std::thread::sleep(Duration::from_millis(200));
         assert!(child.try_wait().unwrap().is_none(), "{first} waits");

@@ -202,11 +202,7 @@ fn a_failed_run_changes_no_output_and_leaves_no_temporary() {
         error.contains("broken.csv") && error.contains("run.partial.mcap"),
         "{error}"
     );
-    let mut after = snapshot(&out);
-    let partial = out.join("run.partial.mcap");
-    assert!(after.remove(&partial).is_some());
-    assert_eq!(after, before);
-    assert!(bag_is_readable(&partial));
+    assert_kept_with_partial_bag(&out, &before, &error);
     assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
     // The same run on good measurements replaces them all.
     let result = track(&sim.join("measurements.csv"));
@@ -230,37 +226,17 @@ fn signals_at_random_moments_keep_the_previous_outputs_and_the_partial_bag() {
         libc::SIGINT,
         libc::SIGHUP,
     ] {
-        previous_outputs(&out);
-        let _ = std::fs::remove_file(out.join("run.partial.mcap"));
+        previous_track_outputs(&out);
         let before = snapshot(&out);
-        let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
-            .spawn()
-            .unwrap();
-        let feeder = feed_forever(&mut child);
         let delay_ms = moments.next_in(150, 900);
-        std::thread::sleep(Duration::from_millis(delay_ms));
-        assert!(
-            child.try_wait().unwrap().is_none(),
-            "ended before the signal"
-        );
-        send(&child, signal);
-        let start = Instant::now();
-        let result = child.wait_with_output().unwrap();
-        feeder.join().unwrap();
+        let result = track_signalled(&camera, &target, &out, signal, delay_ms);
         let error = stderr(&result);
-        assert!(start.elapsed() < Duration::from_secs(5), "{error}");
         assert_eq!(result.status.signal(), Some(signal), "{error}");
         assert!(error.contains("interrupted"), "{error}");
-        let mut after = snapshot(&out);
-        let partial = out.join("run.partial.mcap");
-        assert!(
-            after.remove(&partial).is_some(),
-            "signal {signal} at {delay_ms} ms: {error}"
-        );
-        assert_eq!(after, before, "signal {signal} at {delay_ms} ms");
-        assert!(
-            bag_is_readable(&partial),
-            "signal {signal} at {delay_ms} ms"
+        assert_kept_with_partial_bag(
+            &out,
+            &before,
+            &format!("signal {signal} at {delay_ms} ms: {error}"),
         );
         assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
     }
@@ -276,19 +252,7 @@ fn a_second_signal_ends_the_run_at_once_without_temporaries() {
     let before = snapshot(&out);
     // Waiting for measurements that do not come: the first signal is noted, but the run never reaches its next
     // estimate.
-    let mut child = track_stdin(&camera, &target, &out, p(&out.join("poses.tum")))
-        .spawn()
-        .unwrap();
-    let _stdin = child.stdin.take().unwrap();
-    let started = Instant::now();
-    while temporaries(&out).len() < 4 && started.elapsed() < Duration::from_secs(10) {
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    assert_eq!(
-        temporaries(&out).len(),
-        4,
-        "the outputs' temporaries are there"
-    );
+    let (mut child, _stdin) = track_waiting(&camera, &target, &out);
     send(&child, libc::SIGINT);
     std::thread::sleep(Duration::from_millis(300));
     assert!(

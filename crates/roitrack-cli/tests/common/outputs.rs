@@ -6,7 +6,8 @@
 use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Output, Stdio};
+use std::process::{Child, ChildStdin, Command, Output, Stdio};
+use std::time::{Duration, Instant};
 
 pub fn roitrack() -> Command {
     Command::new(env!("CARGO_BIN_EXE_roitrack"))
@@ -149,4 +150,79 @@ pub fn previous_outputs(out: &Path) {
     for name in ["poses.tum", "twists.csv", "covariance.csv", "run.mcap"] {
         std::fs::write(out.join(name), format!("previous {name}\n")).unwrap();
     }
+}
+
+/// Previous outputs of `track` in `out`, as a run before would have left them, and no partial bag.
+pub fn previous_track_outputs(out: &Path) {
+    previous_outputs(out);
+    let _ = std::fs::remove_file(out.join("run.partial.mcap"));
+}
+
+/// Waits for `child` to end, at most `limit`, and returns how it ended.
+pub fn wait_within(child: Child, limit: Duration) -> Output {
+    let start = Instant::now();
+    let out = child.wait_with_output().unwrap();
+    assert!(
+        start.elapsed() < limit,
+        "took {:?}: {}",
+        start.elapsed(),
+        stderr(&out)
+    );
+    out
+}
+
+/// [`track_stdin`] fed measurements without end, sent `signal` after `delay_ms` (asserting it still runs then); how
+/// it ended, within 5 s of the signal.
+pub fn track_signalled(
+    camera: &Path,
+    target: &Path,
+    out: &Path,
+    signal: i32,
+    delay_ms: u64,
+) -> Output {
+    let mut child = track_stdin(camera, target, out, p(&out.join("poses.tum")))
+        .spawn()
+        .unwrap();
+    let feeder = feed_forever(&mut child);
+    std::thread::sleep(Duration::from_millis(delay_ms));
+    assert!(child.try_wait().unwrap().is_none(), "ended before {signal}");
+    send(&child, signal);
+    let result = wait_within(child, Duration::from_secs(5));
+    feeder.join().unwrap();
+    result
+}
+
+/// [`track_stdin`] into `out` once its four outputs' temporaries are there (at most 10 s), waiting for measurements
+/// that do not come (so never reaching its next estimate); the child and its standard input, to keep open.
+pub fn track_waiting(camera: &Path, target: &Path, out: &Path) -> (Child, ChildStdin) {
+    let mut child = track_stdin(camera, target, out, p(&out.join("poses.tum")))
+        .spawn()
+        .unwrap();
+    let stdin = child.stdin.take().unwrap();
+    let started = Instant::now();
+    while temporaries(out).len() < 4 && started.elapsed() < Duration::from_secs(10) {
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert_eq!(
+        temporaries(out).len(),
+        4,
+        "the outputs' temporaries are there"
+    );
+    (child, stdin)
+}
+
+/// `out` as it was (`before`) but for `track`'s bag, kept, readable, as `run.partial.mcap`.
+pub fn assert_kept_with_partial_bag(
+    out: &Path,
+    before: &BTreeMap<PathBuf, Vec<u8>>,
+    context: &str,
+) {
+    let mut after = snapshot(out);
+    let partial = out.join("run.partial.mcap");
+    assert!(
+        after.remove(&partial).is_some(),
+        "no partial bag: {context}"
+    );
+    assert_eq!(&after, before, "{context}");
+    assert!(bag_is_readable(&partial), "{context}");
 }
