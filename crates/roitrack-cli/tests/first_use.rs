@@ -143,41 +143,27 @@ fn step_1_every_camera_file_and_model_is_read_projects_like_opencv_and_tracks() 
         .unwrap();
         let poses = dir.path().join(format!("p{k}.tum"));
         let twists = dir.path().join(format!("w{k}.csv"));
-        let mut args = vec![
-            "track",
-            "--camera",
+        ok(&track_args(
             path.to_str().unwrap(),
-            "--target",
             target_path.to_str().unwrap(),
-            "--measurements",
             measurements.to_str().unwrap(),
-            "--poses",
             poses.to_str().unwrap(),
-            "--twists",
             twists.to_str().unwrap(),
-        ];
-        args.extend_from_slice(extra);
-        ok(&args);
+            extra,
+        ));
         let error_m = (last_position_m(&poses) - truth.cam_t_obj_m).norm();
         assert!(error_m < 1e-5, "{file}: position error {error_m} m");
     }
     // What a file leaves out, and what does not fit, is said with the option that helps.
     let track = |camera: &Path, extra: &[&str]| {
-        let mut args = vec![
-            "track",
-            "--camera",
+        fails(&track_args(
             camera.to_str().unwrap(),
-            "--target",
             target_path.to_str().unwrap(),
-            "--measurements",
             "nowhere.csv",
-            "--poses",
             "p.tum",
-            "--twists",
             "w.csv",
-        ];
-        args.extend_from_slice(extra);
-        fails(&args)
+            extra,
+        ))
     };
     let e = track(&camera_file("opencv5_fisheye.yaml"), &[]);
     assert!(e.contains("opencv5_fisheye.yaml: field 'image_width': missing: give the image size with --image-size WxH"), "{e}");
@@ -208,6 +194,33 @@ fn step_1_every_camera_file_and_model_is_read_projects_like_opencv_and_tracks() 
     assert!(e.contains("--image-size"), "{e}");
 }
 
+/// `track --camera CAMERA --target TARGET --measurements MEASUREMENTS --poses POSES --twists TWISTS EXTRA...`: the
+/// arguments of the tracking run every step of a first use makes.
+fn track_args<'a>(
+    camera: &'a str,
+    target: &'a str,
+    measurements: &'a str,
+    poses: &'a str,
+    twists: &'a str,
+    extra: &[&'a str],
+) -> Vec<&'a str> {
+    let mut args = vec![
+        "track",
+        "--camera",
+        camera,
+        "--target",
+        target,
+        "--measurements",
+        measurements,
+        "--poses",
+        poses,
+        "--twists",
+        twists,
+    ];
+    args.extend_from_slice(extra);
+    args
+}
+
 /// Runs `track` on the canonical camera with these files and extra options.
 fn track(dir: &Path, target: &Path, measurements: &Path, extra: &[&str]) -> Result<String, String> {
     let camera = dir.join("camera.yaml");
@@ -216,21 +229,14 @@ fn track(dir: &Path, target: &Path, measurements: &Path, extra: &[&str]) -> Resu
     }
     let poses = dir.join("poses.tum");
     let twists = dir.join("twists.csv");
-    let mut args = vec![
-        "track",
-        "--camera",
+    let out = common::roitrack(&track_args(
         camera.to_str().unwrap(),
-        "--target",
         target.to_str().unwrap(),
-        "--measurements",
         measurements.to_str().unwrap(),
-        "--poses",
         poses.to_str().unwrap(),
-        "--twists",
         twists.to_str().unwrap(),
-    ];
-    args.extend_from_slice(extra);
-    let out = common::roitrack(&args);
+        extra,
+    ));
     if out.status.success() {
         Ok(std::fs::read_to_string(&poses).unwrap())
     } else {
