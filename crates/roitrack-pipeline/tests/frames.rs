@@ -13,6 +13,9 @@ use roitrack_pipeline::frames::{FrameMethod, FrameTracker, FrameTrackerConfig};
 use roitrack_sim::photo::{CircleShade, Clutter, PhotoScene, render_photo};
 use roitrack_sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
 
+mod common;
+use common::{ROLLING, fast_motion, frames_from_fastest_instant};
+
 struct Run {
     /// Per estimate: position error (m), velocity error (m/s), rotation error (rad).
     errors: Vec<(f64, f64, f64)>,
@@ -147,10 +150,7 @@ fn global_shutter_frames_are_tracked_in_windows_with_an_estimate_per_frame() {
 fn rolling_shutter_model_beats_the_global_model_on_rolling_frames() {
     // A part swept at up to 0.5 m/s before a 1024-row sensor read in 30.7 ms: the rows of a frame see it up to 15 mm
     // apart.
-    let rolling = Readout::RollingShutter {
-        line_delay_s: 30e-6,
-    };
-    let mut frames = sequence_of(ScenarioKind::Sweep, rolling, Polarity::Bright, 2);
+    let mut frames = sequence_of(ScenarioKind::Sweep, ROLLING, Polarity::Bright, 2);
     let camera = frames.camera().clone();
     let mut global_camera = camera.clone();
     global_camera.time.readout = Readout::GlobalShutter;
@@ -185,10 +185,7 @@ fn the_frame_default_follows_accelerations_that_a_constant_twist_misses() {
     // The sweep's third seed turns at up to ~4 rad/s² about the vertical: between two frames 33 ms apart the twist
     // changes, and a constant-twist filter carries last frame's twist over the next readout, where the rows it pins
     // the depth with are read milliseconds apart. The frame default carries the accelerations too.
-    let rolling = Readout::RollingShutter {
-        line_delay_s: 30e-6,
-    };
-    let mut frames = sequence_of(ScenarioKind::Sweep, rolling, Polarity::Bright, 3);
+    let mut frames = sequence_of(ScenarioKind::Sweep, ROLLING, Polarity::Bright, 3);
     let camera = frames.camera().clone();
     let velocity_config = FrameTrackerConfig {
         tracker: FrameTrackerConfig::frame_estimator(
@@ -271,20 +268,10 @@ fn a_fast_start_never_vouches_for_a_pose_a_grid_spacing_off() {
     // with the last estimate's covariance alone, with no process noise over the frame interval: on seed 4's
     // global-shutter frames a prediction 4 px sure lay 43 px off, one grid spacing, every window took its
     // neighbour's blob and the estimate, 20 mm off, was marked converging; on seed 3's rolling-shutter frames, 31 mm.
-    let rolling = Readout::RollingShutter {
-        line_delay_s: 30e-6,
-    };
     for seed in 1..=4 {
-        let scenario = Scenario::random_with(seed, 1.5, 5.0, 4.0);
-        for readout in [Readout::GlobalShutter, rolling] {
-            let options = FrameOptions {
-                readout,
-                seed,
-                start_s: scenario.fastest_instant_s(1.0),
-                frame_count: Some(30),
-                ..FrameOptions::default()
-            };
-            let mut frames = FrameSequence::new(&scenario, &options).unwrap();
+        let scenario = fast_motion(seed);
+        for readout in [Readout::GlobalShutter, ROLLING] {
+            let mut frames = frames_from_fastest_instant(&scenario, readout, seed);
             let mut tracker = FrameTracker::new(
                 frames.camera().clone(),
                 scenario.target.clone(),
@@ -318,10 +305,7 @@ fn rolling_shutter_frames_follow_steps_of_acceleration() {
     // Orthoglide's moves switch 16.7 m/s² on and off at once. With the global-shutter frames' jerk densities the
     // constant-acceleration filter took 4.3 mm of depth error on these rolling-shutter frames (0.30 mm with constant
     // velocity); a rolling-shutter frame shows the motion within its readout, and its own densities follow the steps.
-    let rolling = Readout::RollingShutter {
-        line_delay_s: 30e-6,
-    };
-    let mut frames = sequence_of(ScenarioKind::Orthoglide, rolling, Polarity::Bright, 1);
+    let mut frames = sequence_of(ScenarioKind::Orthoglide, ROLLING, Polarity::Bright, 1);
     let run = run(&mut frames, None, 150);
     let (pos, vel) = summary("orthoglide, rolling shutter", &run);
     assert_eq!(run.errors.len(), run.frames);
@@ -551,12 +535,7 @@ fn the_noise_is_learnt_from_global_shutter_frames_and_held_for_rolling_ones() {
     // Four dots, as on a hand-made target: a control step's window of two cycles of points would span 7 frames
     // (233 ms at 30 Hz), over which a constant twist is far from the sweep's motion; each global-shutter frame is
     // sampled alone.
-    for readout in [
-        Readout::GlobalShutter,
-        Readout::RollingShutter {
-            line_delay_s: 30e-6,
-        },
-    ] {
+    for readout in [Readout::GlobalShutter, ROLLING] {
         let scenario = Scenario::new(ScenarioKind::Sweep, 2).with_target(four_dots());
         let mut frames = frames_of(scenario, readout, Polarity::Bright, 2);
         let camera = frames.camera().clone();
@@ -608,10 +587,7 @@ fn dark_blobs_on_uneven_light_are_tracked() {
 
 #[test]
 fn rolling_shutter_estimates_are_timed_in_the_middle_of_their_frames_blobs() {
-    let rolling = Readout::RollingShutter {
-        line_delay_s: 30e-6,
-    };
-    let mut frames = sequence_of(ScenarioKind::Sweep, rolling, Polarity::Bright, 2);
+    let mut frames = sequence_of(ScenarioKind::Sweep, ROLLING, Polarity::Bright, 2);
     let mut tracker = FrameTracker::new(
         frames.camera().clone(),
         frames.scenario().target.clone(),

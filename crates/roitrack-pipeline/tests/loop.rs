@@ -1,12 +1,29 @@
 //! The loop end to end on rendered ROIs: it initialises from a full frame, tracks, drops nothing.
 
 use roitrack_estimators::{TrackStatus, TrackerConfig};
-use roitrack_pipeline::realtime::{LoopConfig, run_loop};
+use roitrack_image::RoiCamera;
+use roitrack_pipeline::PipelineError;
+use roitrack_pipeline::realtime::{LoopConfig, LoopReport, run_loop};
 use roitrack_sim::{Scenario, ScenarioKind, SimulatedCamera};
 
 /// The orthoglide scenario (seed 1).
 fn orthoglide() -> Scenario {
     Scenario::new(ScenarioKind::Orthoglide, 1)
+}
+
+/// [`run_loop`] of `camera` with the scenario's camera model and target and the default tracker.
+fn run_scenario<C: RoiCamera>(
+    scenario: &Scenario,
+    camera: &mut C,
+    config: &LoopConfig,
+) -> Result<LoopReport, PipelineError> {
+    run_loop(
+        camera,
+        &scenario.camera,
+        &scenario.target,
+        TrackerConfig::default(),
+        config,
+    )
 }
 
 #[test]
@@ -19,14 +36,7 @@ fn tracks_orthoglide_from_rendered_rois() {
         t_start_s: 0.2,
         ..Default::default()
     };
-    let report = run_loop(
-        &mut camera,
-        &scenario.camera,
-        &scenario.target,
-        TrackerConfig::default(),
-        &config,
-    )
-    .unwrap();
+    let report = run_scenario(&scenario, &mut camera, &config).unwrap();
     assert_eq!(report.initialisations, 1);
     assert_eq!(report.dropped, 0);
     assert_eq!(report.refused, 0);
@@ -47,7 +57,7 @@ fn tracks_orthoglide_from_rendered_rois() {
 
 #[test]
 fn reflections_add_a_spot_that_moves_the_centroid_and_nothing_else() {
-    use roitrack_image::{CentroidOptions, Roi, RoiCamera, RoiImage, RoiTrigger, measure_blob};
+    use roitrack_image::{CentroidOptions, Roi, RoiImage, RoiTrigger, measure_blob};
     use roitrack_sim::ReflectionFault;
     let scenario = orthoglide();
     let renderer = scenario.roi_renderer().unwrap();
@@ -151,14 +161,7 @@ fn a_failing_camera_is_survived_and_its_end_keeps_the_estimates() {
         roi_slots: 4000,
         ..Default::default()
     };
-    let report = run_loop(
-        &mut camera,
-        &scenario.camera,
-        &scenario.target,
-        TrackerConfig::default(),
-        &config,
-    )
-    .unwrap();
+    let report = run_scenario(&scenario, &mut camera, &config).unwrap();
     assert_eq!(report.camera_errors, 30, "{report:?}");
     assert!(matches!(
         report.stopped_by,
@@ -186,14 +189,7 @@ fn invalid_loop_options_and_wrong_frames_are_refused() {
         rate_hz: 0.0,
         ..Default::default()
     };
-    let error = run_loop(
-        &mut camera,
-        &scenario.camera,
-        &scenario.target,
-        TrackerConfig::default(),
-        &bad,
-    )
-    .unwrap_err();
+    let error = run_scenario(&scenario, &mut camera, &bad).unwrap_err();
     assert!(error.to_string().contains("rate_hz"), "{error}");
     // A camera model of another size than the camera's frames: the run stops at once, saying so.
     let mut small = scenario.camera.clone();
@@ -260,14 +256,7 @@ fn a_paced_loop_that_skips_late_slots_reads_fewer_rois_all_of_the_present() {
         skip_late_slots: true,
         ..Default::default()
     };
-    let report = run_loop(
-        &mut camera,
-        &scenario.camera,
-        &scenario.target,
-        TrackerConfig::default(),
-        &config,
-    )
-    .unwrap();
+    let report = run_scenario(&scenario, &mut camera, &config).unwrap();
     // At most one ROI a millisecond: most slots skipped, counted; every slot accounted for.
     assert!(
         (report.rois as f64) <= report.wall_s * 1000.0 + 10.0,

@@ -8,6 +8,9 @@ use roitrack_image::{Frame, Polarity};
 use roitrack_pipeline::frames::{FrameTracker, FrameTrackerConfig, track_frame_stream};
 use roitrack_sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
 
+mod common;
+use common::{ROLLING, fast_motion, frames_from_fastest_instant};
+
 const FRAMES: usize = 90;
 /// The first estimates converge from a static start; the comparison leaves them out (as `roitrack frame-study` does).
 const SETTLING: usize = 5;
@@ -89,13 +92,10 @@ fn settled_rms_m(run: &[(usize, Option<(f64, TrackStatus)>)]) -> f64 {
 
 #[test]
 fn smoothed_rolling_shutter_frames_are_tracked_about_as_closely_as_global_shutter_ones() {
-    let rolling = Readout::RollingShutter {
-        line_delay_s: 30e-6,
-    };
     let global_run = track(Readout::GlobalShutter, true);
     let global = settled_rms_m(&global_run);
-    let causal_run = track(rolling, false);
-    let smoothed_run = track(rolling, true);
+    let causal_run = track(ROLLING, false);
+    let smoothed_run = track(ROLLING, true);
     let (causal, smoothed) = (settled_rms_m(&causal_run), settled_rms_m(&smoothed_run));
     eprintln!(
         "position RMS after {SETTLING} estimates: global {:.4} mm, rolling causal {:.4} mm, rolling smoothed {:.4} mm",
@@ -137,23 +137,11 @@ fn a_track_started_at_a_fast_motion_is_smoothed_from_its_first_frame() {
     // there, and its first frames have no pose before them. Their twist from the poses after them (a one-sided
     // difference of three poses left jerk T^2/3, the first estimate 0.7-2.3 mm off after smoothing and the run's
     // RMSE 0.28-0.42 mm on seeds 2-4); with four poses after them, the rolling-shutter target over every estimate.
-    let rolling = Readout::RollingShutter {
-        line_delay_s: 30e-6,
-    };
     for seed in 1..=4 {
-        let scenario = Scenario::random_with(seed, 1.5, 5.0, 4.0);
-        let sequence = |readout| {
-            let options = FrameOptions {
-                readout,
-                seed,
-                start_s: scenario.fastest_instant_s(1.0),
-                frame_count: Some(30),
-                ..FrameOptions::default()
-            };
-            FrameSequence::new(&scenario, &options).unwrap()
-        };
+        let scenario = fast_motion(seed);
+        let sequence = |readout| frames_from_fastest_instant(&scenario, readout, seed);
         let global = rms_after_m(&track_sequence(&sequence, Readout::GlobalShutter, true), 0);
-        let smoothed = rms_after_m(&track_sequence(&sequence, rolling, true), 0);
+        let smoothed = rms_after_m(&track_sequence(&sequence, ROLLING, true), 0);
         eprintln!(
             "seed {seed}: position RMS over every estimate, global {:.3} mm, rolling smoothed {:.3} mm",
             global * 1e3,
