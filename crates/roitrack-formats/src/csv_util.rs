@@ -80,6 +80,26 @@ pub(crate) fn read_header<R: Read>(
     Ok(all)
 }
 
+/// Calls `each` with every row after the header, in order, as a [`Row`] of `columns`; stops at the end of the input
+/// or at the first error, the reader's or `each`'s, which it returns.
+pub(crate) fn for_each_row<R: Read>(
+    reader: &mut csv::Reader<R>,
+    path: &Path,
+    columns: &[&'static str],
+    mut each: impl FnMut(&Row<'_>) -> Result<(), FormatError>,
+) -> Result<(), FormatError> {
+    let mut record = StringRecord::new();
+    while let Some(line) = read_row(reader, &mut record, path, columns)? {
+        each(&Row {
+            record: &record,
+            line,
+            path,
+            columns,
+        })?;
+    }
+    Ok(())
+}
+
 /// Reads the next row into `record`; `Ok(None)` at the end of the input, else the row's 1-based line.
 pub(crate) fn read_row<R: Read>(
     reader: &mut csv::Reader<R>,

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use roitrack_image::Frame;
 
 use crate::FormatError;
-use crate::csv_util::{Row, check_time_order, csv_reader, read_row};
+use crate::csv_util::{check_time_order, csv_reader, for_each_row};
 use crate::image_file::{decode_frame_into, read_image_file};
 use crate::limits::{Limited, MAX_TIMESTAMPS_FILE_BYTES, open_file};
 use crate::units::{TimeUnit, check_time_unit};
@@ -795,24 +795,18 @@ fn read_times_csv(path: &Path, is_video: bool) -> Result<Vec<TimeRow>, FormatErr
         .with_field("file"));
     }
     let mut rows = Vec::new();
-    let mut record = csv::StringRecord::new();
     let mut previous: Option<(f64, u64)> = None;
-    while let Some(line) = read_row(&mut reader, &mut record, path, &columns)? {
-        let row = Row {
-            record: &record,
-            line,
-            path,
-            columns: &columns,
-        };
+    for_each_row(&mut reader, path, &columns, |row| {
         let t_s = row.finite(t_column)?;
-        check_time_order(previous, t_s, true, path, line, "t")?;
-        previous = Some((t_s, line));
+        check_time_order(previous, t_s, true, path, row.line, "t")?;
+        previous = Some((t_s, row.line));
         rows.push(TimeRow {
             t_s,
-            line,
+            line: row.line,
             file: file_column.map(|i| row.text(i).to_string()),
         });
-    }
+        Ok(())
+    })?;
     Ok(rows)
 }
 

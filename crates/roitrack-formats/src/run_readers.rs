@@ -5,12 +5,11 @@
 use std::io::Read;
 use std::path::Path;
 
-use csv::StringRecord;
 use roitrack_estimators::{Matrix12, TrackStatus};
 
 use crate::FormatError;
 use crate::covariance::{COVARIANCE_ENTRIES, covariance_from_upper_triangle, covariance_header};
-use crate::csv_util::{Row, check_time_order, csv_reader, read_header, read_row};
+use crate::csv_util::{Row, check_time_order, csv_reader, for_each_row, read_header};
 use crate::limits::{DEFAULT_MAX_TRAJECTORY_FILE_BYTES, Limited, open_file};
 
 const DIAGNOSTICS_COLUMNS: [&str; 12] = [
@@ -85,19 +84,12 @@ pub fn parse_diagnostics_csv<R: Read>(
     // Lines bounded whatever the source; the file's size is bounded by the `_limited` readers.
     let mut csv = csv_reader(Limited::new(reader, "a diagnostics CSV", None));
     read_header(&mut csv, path, &DIAGNOSTICS_COLUMNS, None)?;
-    let mut record = StringRecord::new();
     let mut rows = Vec::new();
     let mut previous = None;
-    while let Some(line) = read_row(&mut csv, &mut record, path, &DIAGNOSTICS_COLUMNS)? {
-        let row = Row {
-            record: &record,
-            line,
-            path,
-            columns: &DIAGNOSTICS_COLUMNS,
-        };
+    for_each_row(&mut csv, path, &DIAGNOSTICS_COLUMNS, |row| {
         let t_s = row.finite(0)?;
-        check_time_order(previous, t_s, true, path, line, "t")?;
-        previous = Some((t_s, line));
+        check_time_order(previous, t_s, true, path, row.line, "t")?;
+        previous = Some((t_s, row.line));
         let status_text = row.text(1);
         let status = TrackStatus::ALL
             .into_iter()
@@ -112,19 +104,20 @@ pub fn parse_diagnostics_csv<R: Read>(
             })?;
         let mut sigmas = [0.0; 6];
         for (k, sigma) in sigmas.iter_mut().enumerate() {
-            *sigma = number_or_nan(&row, 6 + k)?;
+            *sigma = number_or_nan(row, 6 + k)?;
         }
         rows.push(DiagnosticsRow {
             t_s,
             status,
-            residual_rms_px: number_or_nan(&row, 2)?,
-            inverse_condition: number_or_nan(&row, 3)?,
-            measurements_used: count(&row, 4)?,
-            iterations: count(&row, 5)?,
+            residual_rms_px: number_or_nan(row, 2)?,
+            inverse_condition: number_or_nan(row, 3)?,
+            measurements_used: count(row, 4)?,
+            iterations: count(row, 5)?,
             sigma_position_m: [sigmas[0], sigmas[1], sigmas[2]],
             sigma_velocity_mps: [sigmas[3], sigmas[4], sigmas[5]],
         });
-    }
+        Ok(())
+    })?;
     Ok(rows)
 }
 
@@ -182,22 +175,15 @@ pub fn parse_covariance_csv<R: Read>(
     let columns = covariance_columns();
     let mut csv = csv_reader(Limited::new(reader, "a covariance CSV", None));
     read_header(&mut csv, path, columns, None)?;
-    let mut record = StringRecord::new();
     let mut rows = Vec::new();
     let mut previous = None;
-    while let Some(line) = read_row(&mut csv, &mut record, path, columns)? {
-        let row = Row {
-            record: &record,
-            line,
-            path,
-            columns,
-        };
+    for_each_row(&mut csv, path, columns, |row| {
         let t_s = row.finite(0)?;
-        check_time_order(previous, t_s, true, path, line, "t")?;
-        previous = Some((t_s, line));
+        check_time_order(previous, t_s, true, path, row.line, "t")?;
+        previous = Some((t_s, row.line));
         let mut entries = [0.0; COVARIANCE_ENTRIES];
         for (k, entry) in entries.iter_mut().enumerate() {
-            *entry = number_or_nan(&row, 1 + k)?;
+            *entry = number_or_nan(row, 1 + k)?;
         }
         let missing = entries.iter().filter(|v| v.is_nan()).count();
         let covariance = match missing {
@@ -219,7 +205,8 @@ pub fn parse_covariance_csv<R: Read>(
             }
         };
         rows.push(CovarianceRow { t_s, covariance });
-    }
+        Ok(())
+    })?;
     Ok(rows)
 }
 

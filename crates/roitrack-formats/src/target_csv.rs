@@ -8,11 +8,10 @@ use std::fmt::Write as _;
 use std::io::{Read, Write};
 use std::path::Path;
 
-use csv::StringRecord;
 use nalgebra::Vector3;
 use roitrack_core::{Target, TargetError, TargetPoint};
 
-use crate::csv_util::{Row, csv_reader, read_header, read_row};
+use crate::csv_util::{csv_reader, for_each_row, read_header};
 use crate::limits::{Limited, MAX_TARGET_FILE_BYTES, open_file};
 use crate::{AtomicFile, FormatError};
 
@@ -38,16 +37,9 @@ pub fn parse_target_csv<R: Read>(reader: R, path: impl AsRef<Path>) -> Result<Ta
     let path = path.as_ref();
     let mut csv = csv_reader(Limited::new(reader, WHAT, Some(MAX_TARGET_FILE_BYTES)));
     let columns = read_header(&mut csv, path, &COLUMNS, Some(DIAMETER))?;
-    let mut record = StringRecord::new();
     let mut points = Vec::new();
     let mut line_of_id: HashMap<u32, u64> = HashMap::new();
-    while let Some(line) = read_row(&mut csv, &mut record, path, &columns)? {
-        let row = Row {
-            record: &record,
-            line,
-            path,
-            columns: &columns,
-        };
+    for_each_row(&mut csv, path, &columns, |row| {
         let id = row.id(0)?;
         let point_in_obj_m = Vector3::new(row.finite(1)?, row.finite(2)?, row.finite(3)?);
         let diameter_m = if columns.len() > COLUMNS.len() && !row.text(4).is_empty() {
@@ -59,7 +51,7 @@ pub fn parse_target_csv<R: Read>(reader: R, path: impl AsRef<Path>) -> Result<Ta
         } else {
             None
         };
-        if let Some(first) = line_of_id.insert(id, line) {
+        if let Some(first) = line_of_id.insert(id, row.line) {
             return Err(row.error(
                 0,
                 format!("duplicate point id {id}: already on line {first}"),
@@ -70,7 +62,8 @@ pub fn parse_target_csv<R: Read>(reader: R, path: impl AsRef<Path>) -> Result<Ta
             point_in_obj_m,
             diameter_m,
         });
-    }
+        Ok(())
+    })?;
     Target::new(points).map_err(|e| target_error(e, path, &line_of_id))
 }
 

@@ -6,12 +6,11 @@
 use std::io::Read;
 use std::path::Path;
 
-use csv::StringRecord;
 use nalgebra::Vector3;
 use roitrack_core::TwistSample;
 
 use crate::FormatError;
-use crate::csv_util::{Row, check_time_order, csv_reader, read_header, read_row};
+use crate::csv_util::{check_time_order, csv_reader, for_each_row, read_header};
 use crate::limits::{DEFAULT_MAX_TRAJECTORY_FILE_BYTES, Limited, open_file};
 use crate::row_writer::RowWriter;
 use crate::units::{ANGULAR_SPEED, SPEED, check_plausible, check_trajectory_time};
@@ -65,34 +64,28 @@ fn parse_twists<R: Read>(
 ) -> Result<Vec<TwistSample>, FormatError> {
     let mut csv = csv_reader(Limited::new(reader, WHAT, Some(max_file_bytes)));
     read_header(&mut csv, path, &COLUMNS, None)?;
-    let mut record = StringRecord::new();
     let mut twists = Vec::new();
     let mut previous = None;
-    while let Some(line) = read_row(&mut csv, &mut record, path, &COLUMNS)? {
-        let row = Row {
-            record: &record,
-            line,
-            path,
-            columns: &COLUMNS,
-        };
+    for_each_row(&mut csv, path, &COLUMNS, |row| {
         let mut values = [0.0; 7];
         for (i, value) in values.iter_mut().enumerate() {
             *value = row.finite(i)?;
         }
         let [t_s, vx, vy, vz, wx, wy, wz] = values;
-        check_trajectory_time(t_s, path, line)?;
+        check_trajectory_time(t_s, path, row.line)?;
         for (i, value) in values.iter().enumerate().skip(1) {
             let kind = if i <= 3 { &SPEED } else { &ANGULAR_SPEED };
-            check_plausible(*value, kind, path, line, COLUMNS[i])?;
+            check_plausible(*value, kind, path, row.line, COLUMNS[i])?;
         }
-        check_time_order(previous, t_s, true, path, line, "t")?;
-        previous = Some((t_s, line));
+        check_time_order(previous, t_s, true, path, row.line, "t")?;
+        previous = Some((t_s, row.line));
         twists.push(TwistSample {
             t_s,
             velocity_mps: Vector3::new(vx, vy, vz),
             angular_velocity_radps: Vector3::new(wx, wy, wz),
         });
-    }
+        Ok(())
+    })?;
     Ok(twists)
 }
 
