@@ -3,7 +3,7 @@
 //! one-camera rig of a ROI recording is `track --rois`, byte for byte; two cameras' frames fuse; bad `NAME=...` inputs
 //! are refused naming the camera.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 mod common;
 use common::{fails, ok};
@@ -25,6 +25,24 @@ fn write_rig(path: &Path, cameras: &[(&str, &str)]) {
         }
     }
     std::fs::write(path, text).unwrap();
+}
+
+/// `simulate --rois --scenario random --duration-s DURATION_S --out SIM`, and beside it the rig file of `cameras`
+/// ([`write_rig`]), which it returns.
+fn random_rois_and_rig(sim: &Path, duration_s: &str, cameras: &[(&str, &str)]) -> PathBuf {
+    ok(&[
+        "simulate",
+        "--rois",
+        "--scenario",
+        "random",
+        "--duration-s",
+        duration_s,
+        "--out",
+        p(sim),
+    ]);
+    let rig = sim.join("rig.yaml");
+    write_rig(&rig, cameras);
+    rig
 }
 
 /// TUM rows: (t, position).
@@ -59,22 +77,19 @@ fn position_rmse_m(estimates: &Path, truth: &Path) -> (f64, usize) {
     )
 }
 
+/// `rmse_m` plus 4 standard deviations of an RMS error over `count` estimates: an RMS error over n independent errors
+/// has a relative standard deviation of 1/sqrt(2 n), and a filter's errors are correlated over about its settling
+/// time, taken as 5 frames (n = count / 5).
+fn rmse_bound_m(rmse_m: f64, count: usize) -> f64 {
+    let independent = count as f64 / 5.0;
+    rmse_m * (1.0 + 4.0 / (2.0 * independent).sqrt())
+}
+
 #[test]
 fn a_one_camera_rig_of_a_roi_recording_is_track_rois_byte_for_byte() {
     let tmp = tempfile::tempdir().unwrap();
     let sim = tmp.path().join("sim");
-    ok(&[
-        "simulate",
-        "--rois",
-        "--scenario",
-        "random",
-        "--duration-s",
-        "1",
-        "--out",
-        p(&sim),
-    ]);
-    let rig = sim.join("rig.yaml");
-    write_rig(&rig, &[("cam0", "camera.yaml")]);
+    let rig = random_rois_and_rig(&sim, "1", &[("cam0", "camera.yaml")]);
     let target = sim.join("target.csv");
     let rois = sim.join("rois.bin");
     let single = [tmp.path().join("a.tum"), tmp.path().join("a.csv")];
@@ -192,12 +207,10 @@ fn two_cameras_of_frames_fuse_no_worse_than_the_better_one() {
         count > frames * 9 / 10,
         "{count} fused estimates of {frames} frames"
     );
-    // An RMS error over n independent errors has a relative standard deviation of 1/sqrt(2 n); a filter's errors
-    // are correlated over about its settling time, taken as 5 frames. Ideal fusion of two equal cameras is 1/sqrt(2)
-    // of one; allow the better single camera's error plus 4 of those standard deviations.
-    let independent = count as f64 / 5.0;
+    // Ideal fusion of two equal cameras is 1/sqrt(2) of one; allow the better single camera's error plus the
+    // sampling spread of an RMS error.
     let best = single_m.iter().copied().fold(f64::INFINITY, f64::min);
-    let bound = best * (1.0 + 4.0 / (2.0 * independent).sqrt());
+    let bound = rmse_bound_m(best, count);
     assert!(
         fused_m <= bound,
         "fused position RMSE {fused_m:e} m > {bound:e} m (the cameras alone: {single_m:?})"
@@ -208,18 +221,11 @@ fn two_cameras_of_frames_fuse_no_worse_than_the_better_one() {
 fn bad_rig_inputs_are_refused_naming_the_camera() {
     let tmp = tempfile::tempdir().unwrap();
     let sim = tmp.path().join("sim");
-    ok(&[
-        "simulate",
-        "--rois",
-        "--scenario",
-        "random",
-        "--duration-s",
+    let rig = random_rois_and_rig(
+        &sim,
         "0.2",
-        "--out",
-        p(&sim),
-    ]);
-    let rig = sim.join("rig.yaml");
-    write_rig(&rig, &[("cam0", "camera.yaml"), ("cam1", "camera.yaml")]);
+        &[("cam0", "camera.yaml"), ("cam1", "camera.yaml")],
+    );
     let target = sim.join("target.csv");
     let rois = p(&sim.join("rois.bin")).to_string();
     let measurements = p(&sim.join("measurements.csv")).to_string();
@@ -449,9 +455,8 @@ fn simulate_frames_rig_writes_each_cameras_frames_on_its_clock_and_they_fuse() {
         "{count} fused estimates of {frames} frames per camera"
     );
     let fused_m = eval_position_rmse_m(&sim, &fused, &fused_twists);
-    // As above: the RMS error's relative spread over count / 5 independent errors, 4 of its standard deviations.
     let worse = left_m.max(right_m);
-    let bound = worse * (1.0 + 4.0 / (2.0 * count as f64 / 5.0).sqrt());
+    let bound = rmse_bound_m(worse, count);
     eprintln!(
         "position RMSE: left alone {left_m:e} m, right alone {right_m:e} m (clock ignored: {right_unclocked_m:e} m), \
          fused {fused_m:e} m ({count} estimates), bound {bound:e} m"
