@@ -139,10 +139,7 @@ fn detect_reports_every_image_as_json_and_draws_overlays() {
     let dir = tmp.path();
     let camera = camera();
     let target = Target::grid4x4();
-    let camera_path = dir.join("camera.yaml");
-    let target_path = dir.join("target.csv");
-    roitrack::formats::write_camera_yaml(&camera_path, &camera).unwrap();
-    roitrack::formats::write_target_csv(&target_path, &target).unwrap();
+    let (camera_path, target_path) = write_setup(dir, &camera, &target);
 
     // Printed circles in a cluttered, unevenly lit scene (8 bits), and bright circles on black (16 bits).
     // (Seed 1 puts two blobs of a board mark on the grid's lattice, which hides the target: see
@@ -173,25 +170,13 @@ fn detect_reports_every_image_as_json_and_draws_overlays() {
     image::GrayImage::new(64, 48).save(&small).unwrap();
 
     let overlays = dir.join("overlays");
-    let args = [
-        "detect",
-        "--camera",
-        p(&camera_path),
-        "--target",
-        p(&target_path),
-        "--json",
-        "--overlay",
-        p(&overlays),
-        p(&dark_png),
-        p(&broken),
-        p(&missing),
-        p(&small),
-        p(&bright_png),
-    ];
-    let out = roitrack(&args);
-    let stdout = String::from_utf8(out.stdout).unwrap();
-    let stderr = String::from_utf8(out.stderr).unwrap();
-    assert!(!out.status.success(), "three images failed: {stdout}");
+    // Three images failed.
+    let (stdout, stderr) = detect_failing_json(
+        &camera_path,
+        &target_path,
+        &overlays,
+        &[&dark_png, &broken, &missing, &small, &bright_png],
+    );
     assert!(
         stderr.contains("3 of 5 images"),
         "standard error: {stderr}, standard output: {stdout}"
@@ -238,9 +223,9 @@ fn detect_reports_every_image_as_json_and_draws_overlays() {
     let table = ok(&[
         "detect",
         "--camera",
-        p(&camera_path),
+        &camera_path,
         "--target",
-        p(&target_path),
+        &target_path,
         "--polarity",
         "dark",
         p(&dark_png),
@@ -254,9 +239,9 @@ fn detect_reports_every_image_as_json_and_draws_overlays() {
     let out = roitrack(&[
         "detect",
         "--camera",
-        p(&camera_path),
+        &camera_path,
         "--target",
-        p(&target_path),
+        &target_path,
         "--polarity",
         "bright",
         "--json",
@@ -383,6 +368,32 @@ fn detect_refuses_a_target_of_three_points() {
 }
 
 /// The camera and target files of a test, in `dir`.
+/// `roitrack detect --camera CAMERA --target TARGET --json --overlay OVERLAYS IMAGES...`, which must fail (an image
+/// not found or not read): its standard output and error.
+fn detect_failing_json(
+    camera: &str,
+    target: &str,
+    overlays: &Path,
+    images: &[&Path],
+) -> (String, String) {
+    let mut args = vec![
+        "detect",
+        "--camera",
+        camera,
+        "--target",
+        target,
+        "--json",
+        "--overlay",
+        p(overlays),
+    ];
+    args.extend(images.iter().map(|image| p(image)));
+    let out = roitrack(&args);
+    let stdout = String::from_utf8(out.stdout).unwrap();
+    let stderr = String::from_utf8(out.stderr).unwrap();
+    assert!(!out.status.success(), "{stdout}");
+    (stdout, stderr)
+}
+
 fn write_setup(dir: &Path, camera: &CameraModel, target: &Target) -> (String, String) {
     let camera_path = dir.join("camera.yaml");
     let target_path = dir.join("target.csv");
@@ -423,21 +434,12 @@ fn detect_writes_an_overlay_of_what_was_seen_where_the_target_is_not_found() {
         .save(&blank_png)
         .unwrap();
     let overlays = dir.join("overlays");
-    let out = roitrack(&[
-        "detect",
-        "--camera",
+    let (stdout, stderr) = detect_failing_json(
         &camera_path,
-        "--target",
         &target_path,
-        "--json",
-        "--overlay",
-        p(&overlays),
-        p(&grid_png),
-        p(&blank_png),
-    ]);
-    let stdout = String::from_utf8(out.stdout).unwrap();
-    let stderr = String::from_utf8(out.stderr).unwrap();
-    assert!(!out.status.success(), "{stdout}");
+        &overlays,
+        &[&grid_png, &blank_png],
+    );
     assert!(stderr.contains("not found in 2 of 2 images"), "{stderr}");
     let json = lines(&stdout);
     assert_eq!(json.len(), 2, "{stdout}");
@@ -503,21 +505,8 @@ fn detect_says_a_truncated_image_could_not_be_decoded() {
         cut.push(path);
     }
     let overlays = dir.join("overlays");
-    let out = roitrack(&[
-        "detect",
-        "--camera",
-        &camera_path,
-        "--target",
-        &target_path,
-        "--json",
-        "--overlay",
-        p(&overlays),
-        p(&cut[0]),
-        p(&cut[1]),
-    ]);
-    let stdout = String::from_utf8(out.stdout).unwrap();
-    let stderr = String::from_utf8(out.stderr).unwrap();
-    assert!(!out.status.success(), "{stdout}");
+    let (stdout, stderr) =
+        detect_failing_json(&camera_path, &target_path, &overlays, &[&cut[0], &cut[1]]);
     assert!(
         stderr.contains("2 of 2 images failed: 2 could not be decoded")
             && !stderr.contains("not found"),
