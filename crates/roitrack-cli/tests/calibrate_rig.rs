@@ -18,19 +18,7 @@ fn p(path: &Path) -> &str {
 fn a_rig_without_poses_is_calibrated_then_tracked() {
     let tmp = tempfile::tempdir().unwrap();
     let sim = tmp.path().join("sim");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "random",
-        "--rig-cameras",
-        "3",
-        "--duration-s",
-        "6",
-        "--seed",
-        "3",
-        "--out",
-        p(&sim),
-    ]);
+    common::simulate_random_rig(&sim, "3", "6", &["--seed", "3"]);
     // What a user has before calibration: the calibrations only.
     let rig_text = std::fs::read_to_string(sim.join("rig.yaml")).unwrap();
     let bare_text: String = rig_text
@@ -94,38 +82,28 @@ fn a_rig_without_poses_is_calibrated_then_tracked() {
         assert!(f.mount_known && f.clock_known());
     }
     assert!(text.contains("camera_T_rig_sigma_m:") && text.contains("clock_drift_sigma_ppm:"));
+    // `track --rig RIG` over every camera's measurements, run by `run` (`ok` or `fails`).
+    let track = |rig: &Path, run: fn(&[&str]) -> String| {
+        let mut args = vec![
+            "track",
+            "--rig",
+            p(rig),
+            "--target",
+            p(&target),
+            "--poses",
+            p(&poses),
+            "--twists",
+            p(&twists),
+        ];
+        for m in &measurements {
+            args.extend(["--measurements", m.as_str()]);
+        }
+        run(&args)
+    };
     // The calibrated rig tracks as the true one does.
-    let mut args = vec![
-        "track",
-        "--rig",
-        p(&found),
-        "--target",
-        p(&target),
-        "--poses",
-        p(&poses),
-        "--twists",
-        p(&twists),
-    ];
-    for m in &measurements {
-        args.extend(["--measurements", m.as_str()]);
-    }
-    ok(&args);
+    track(&found, ok);
     // An uncalibrated rig is refused by track, naming the camera and the command.
-    let mut args = vec![
-        "track",
-        "--rig",
-        p(&bare),
-        "--target",
-        p(&target),
-        "--poses",
-        p(&poses),
-        "--twists",
-        p(&twists),
-    ];
-    for m in &measurements {
-        args.extend(["--measurements", m.as_str()]);
-    }
-    let e = fails(&args);
+    let e = track(&bare, fails);
     assert!(
         e.contains("bare.yaml: camera 'cam1'")
             && e.contains("calibrate-rig")

@@ -16,17 +16,7 @@ fn p(path: &Path) -> &str {
 fn a_simulated_rig_is_tracked_and_its_clocks_written_back() {
     let tmp = tempfile::tempdir().unwrap();
     let sim = tmp.path().join("sim");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "random",
-        "--rig-cameras",
-        "2",
-        "--duration-s",
-        "2",
-        "--out",
-        p(&sim),
-    ]);
+    common::simulate_random_rig(&sim, "2", "2", &[]);
     for file in [
         "cam0/measurements.csv",
         "cam1/measurements.csv",
@@ -147,17 +137,7 @@ fn a_one_camera_rig_is_the_single_camera_path() {
 fn bad_rigs_and_streams_are_refused_naming_the_file_and_the_camera() {
     let tmp = tempfile::tempdir().unwrap();
     let sim = tmp.path().join("sim");
-    ok(&[
-        "simulate",
-        "--scenario",
-        "random",
-        "--rig-cameras",
-        "2",
-        "--duration-s",
-        "0.2",
-        "--out",
-        p(&sim),
-    ]);
+    common::simulate_random_rig(&sim, "2", "0.2", &[]);
     let good = std::fs::read_to_string(sim.join("rig.yaml")).unwrap();
     let track = |rig_text: &str, streams: &[&str]| {
         let rig = sim.join("bad_rig.yaml");

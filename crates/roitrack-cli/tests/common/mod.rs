@@ -1,5 +1,6 @@
 //! Helpers shared by the integration tests: run the `roitrack` binary and check how it ended.
 
+use std::path::Path;
 use std::process::{Command, Output};
 
 pub fn roitrack(args: &[&str]) -> Output {
@@ -28,4 +29,22 @@ pub fn fails(args: &[&str]) -> String {
         "roitrack {args:?} should have failed"
     );
     String::from_utf8(out.stderr).unwrap()
+}
+
+/// `roitrack simulate --scenario random --rig-cameras CAMERAS --duration-s DURATION_S EXTRA... --out SIM`: a simulated
+/// rig, a folder per camera and the rig file.
+#[allow(dead_code)] // Only the rig tests simulate a rig.
+pub fn simulate_random_rig(sim: &Path, cameras: &str, duration_s: &str, extra: &[&str]) {
+    let mut args = vec![
+        "simulate",
+        "--scenario",
+        "random",
+        "--rig-cameras",
+        cameras,
+        "--duration-s",
+        duration_s,
+    ];
+    args.extend_from_slice(extra);
+    args.extend(["--out", sim.to_str().unwrap()]);
+    ok(&args);
 }
