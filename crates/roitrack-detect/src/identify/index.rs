@@ -177,6 +177,26 @@ impl PointIndex {
         found
     }
 
+    /// The first `take` of [`Self::neighbours`] `(i, k, radius)` whose area is within a factor `ratio` of point `i`'s
+    /// (strictly; `areas_px` by point): the blobs that may be circles of the same target as `i`'s seen from about as
+    /// far, nearest first.
+    pub fn similar_neighbours(
+        &self,
+        i: usize,
+        k: usize,
+        radius: f64,
+        areas_px: &[f64],
+        ratio: f64,
+        take: usize,
+    ) -> Vec<usize> {
+        self.neighbours(i, k, radius)
+            .into_iter()
+            .map(|(b, _)| b)
+            .filter(|&b| areas_px[b] < ratio * areas_px[i] && areas_px[b] > areas_px[i] / ratio)
+            .take(take)
+            .collect()
+    }
+
     /// [`Self::neighbours`] into `found` (cleared first), for a caller that asks for many.
     pub fn neighbours_into(&self, i: usize, k: usize, radius: f64, found: &mut Vec<(usize, f64)>) {
         // Search a growing disk, not the whole `radius` (often "everything"): once it holds k others, the k nearest

@@ -329,18 +329,27 @@ impl AffineSums {
         let ata = nalgebra::Matrix3::new(count, m, n, m, mm, mn, n, mn, nn);
         let [[x0, y0], [x1, y1], [x2, y2]] = self.x;
         let atx = nalgebra::Matrix3x2::new(x0, y0, x1, y1, x2, y2);
-        let decomposition = ata.cholesky()?;
-        // Collinear supports make the normal matrix nearly singular.
-        let diagonal_min = decomposition.l().diagonal().min();
-        if diagonal_min < 0.3 {
-            return None;
-        }
-        let solution = decomposition.solve(&atx);
-        let c = Vector2::new(solution[(0, 0)], solution[(0, 1)]);
-        let a1 = Vector2::new(solution[(1, 0)], solution[(1, 1)]);
-        let a2 = Vector2::new(solution[(2, 0)], solution[(2, 1)]);
-        Some((c, a1.norm().min(a2.norm())))
+        affine_fit(ata, atx)
     }
+}
+
+/// The affine map's fit from its normal equations (AᵀA, Aᵀx; A's rows (1, m, n)): the position at the origin, and
+/// the map's shorter step; `None` where the supports are (nearly) collinear.
+fn affine_fit(
+    ata: nalgebra::Matrix3<f64>,
+    atx: nalgebra::Matrix3x2<f64>,
+) -> Option<(Vector2<f64>, f64)> {
+    let decomposition = ata.cholesky()?;
+    // Collinear supports make the normal matrix nearly singular.
+    let diagonal_min = decomposition.l().diagonal().min();
+    if diagonal_min < 0.3 {
+        return None;
+    }
+    let solution = decomposition.solve(&atx);
+    let c = Vector2::new(solution[(0, 0)], solution[(0, 1)]);
+    let a1 = Vector2::new(solution[(1, 0)], solution[(1, 1)]);
+    let a2 = Vector2::new(solution[(2, 0)], solution[(2, 1)]);
+    Some((c, a1.norm().min(a2.norm())))
 }
 
 /// Integer 2 x 2 maps with entries in -1..=1 and determinant ±1.
@@ -423,15 +432,7 @@ mod tests {
             ata += a * a.transpose();
             atx += a * x.transpose();
         }
-        let decomposition = ata.cholesky()?;
-        if decomposition.l().diagonal().min() < 0.3 {
-            return None;
-        }
-        let solution = decomposition.solve(&atx);
-        let c = Vector2::new(solution[(0, 0)], solution[(0, 1)]);
-        let a1 = Vector2::new(solution[(1, 0)], solution[(1, 1)]);
-        let a2 = Vector2::new(solution[(2, 0)], solution[(2, 1)]);
-        Some((c, a1.norm().min(a2.norm())))
+        affine_fit(ata, atx)
     }
 
     /// The sums give the matrix products' fit bit for bit: random subsets of the 5 x 5 offsets (collinear and

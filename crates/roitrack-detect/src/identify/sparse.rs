@@ -350,13 +350,7 @@ impl<'a> TripleSearch<'a> {
             if !ideal[b0].x.is_finite() {
                 continue;
             }
-            let near: Vec<usize> = index
-                .neighbours(b0, 12, image_radius)
-                .into_iter()
-                .map(|(b, _)| b)
-                .filter(|&b| areas_px[b] < 3.0 * areas_px[b0] && areas_px[b] > areas_px[b0] / 3.0)
-                .take(6)
-                .collect();
+            let near = index.similar_neighbours(b0, 12, image_radius, areas_px, 3.0, 6);
             for &b1 in &near {
                 for &b2 in &near {
                     if b1 == b2 {
@@ -536,13 +530,7 @@ mod tests {
         }
         let mut ordered = 0;
         for b0 in 0..ideal.len().min(MAX_SEED_BLOBS) {
-            let near: Vec<usize> = index
-                .neighbours(b0, 12, 1e6)
-                .into_iter()
-                .map(|(b, _)| b)
-                .filter(|&b| areas_px[b] < 3.0 * areas_px[b0] && areas_px[b] > areas_px[b0] / 3.0)
-                .take(6)
-                .collect();
+            let near = index.similar_neighbours(b0, 12, 1e6, areas_px, 3.0, 6);
             for &b1 in &near {
                 for &b2 in &near {
                     let (f1, f2) = (ideal[b1] - ideal[b0], ideal[b2] - ideal[b0]);

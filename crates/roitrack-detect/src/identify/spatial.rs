@@ -93,13 +93,7 @@ pub(crate) fn quadruple_hypotheses(
         if !ideal[b0].x.is_finite() {
             continue;
         }
-        let near: Vec<usize> = index
-            .neighbours(b0, 10, 1e6)
-            .into_iter()
-            .map(|(b, _)| b)
-            .filter(|&b| areas_px[b] < 4.0 * areas_px[b0] && areas_px[b] > areas_px[b0] / 4.0)
-            .take(5)
-            .collect();
+        let near = index.similar_neighbours(b0, 10, 1e6, areas_px, 4.0, 5);
         for &b1 in &near {
             for &b2 in &near {
                 for &b3 in &near {

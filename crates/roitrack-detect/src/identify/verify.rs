@@ -68,7 +68,12 @@ impl Verifier<'_> {
     pub(super) fn observations(&self, pairs: &[(usize, usize)]) -> Vec<Observation> {
         let mut by_blob = pairs.to_vec();
         by_blob.sort_unstable_by_key(|&(_, b)| b);
-        by_blob
+        self.observations_as_listed(&by_blob)
+    }
+
+    /// The observations of `pairs` (point index, blob), in their order.
+    fn observations_as_listed(&self, pairs: &[(usize, usize)]) -> Vec<Observation> {
+        pairs
             .iter()
             .map(|&(point_index, b)| Observation {
                 t_s: 0.0,
@@ -116,14 +121,7 @@ impl Verifier<'_> {
         self.bounds.set(self.bounds.get() + 1);
         let mut sorted = pairs.to_vec();
         sorted.sort_unstable();
-        let obs: Vec<Observation> = sorted
-            .iter()
-            .map(|&(point_index, b)| Observation {
-                t_s: 0.0,
-                point_index,
-                ideal_px: self.ideal[b],
-            })
-            .collect();
+        let obs = self.observations_as_listed(&sorted);
         static_model_residual(&self.model, self.target, &obs, state)
             .map_or(-1.0, |model_residual| {
                 model_residual.bound_rms_px(IDENTIFY_NOISE_PX, MODEL_BOUND_SIGMAS)
