@@ -7,14 +7,17 @@
 //! photographs that show every dot whole, never wrong, and never flagged ambiguous when the key dot decided. The same
 //! grids without a key dot stay ambiguous (flagged) or right: relative sizes never invent a decision.
 
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{Target, TargetPoint};
 use roitrack_detect::detect_target;
 use roitrack_detect::photo::PhotoOptions;
-use roitrack_sim::photo::{CircleShade, Clutter, PhotoScene, render_photo};
+use roitrack_sim::photo::{Clutter, PhotoScene, render_photo};
 use roitrack_sim::user_cameras::random_photo_camera;
+
+mod common;
+use common::random_tilt_and_shade;
 
 /// A `rows` x `cols` grid `spacing_m` apart, each dot `diameter_m` across but point 0's, `key_factor` times that.
 fn grid(rows: usize, cols: usize, spacing_m: f64, diameter_m: f64, key_factor: f64) -> Target {
@@ -49,16 +52,7 @@ fn run(seed: u64, keyed: bool) -> (bool, bool, bool, bool) {
     // The grid about 0.35-0.6 of the image wide.
     let width_m = spacing_m * (cols.max(rows) - 1) as f64;
     let distance_m = f_px * width_m / (rng.random_range(0.35..0.6) * f64::from(width));
-    let tilt = Rotation3::from_euler_angles(
-        rng.random_range(-0.5..0.5),
-        rng.random_range(-0.5..0.5),
-        rng.random_range(-3.1..3.1),
-    );
-    let shade = if rng.random_bool(0.5) {
-        CircleShade::BrightOnDark
-    } else {
-        CircleShade::DarkOnLight
-    };
+    let (tilt, shade) = random_tilt_and_shade(&mut rng);
     let mut scene = PhotoScene::facing(truth, drawn, distance_m, tilt).with_shade(shade);
     scene.clutter = Clutter::busy(if rng.random_bool(0.5) { 40 } else { 0 });
     scene.noise_sigma = 0.01;

@@ -9,14 +9,17 @@
 //! file's error allows; given the distance range it is found as well. Without diameters nothing identifies a dot
 //! but its place: a cluttered view may then be refused, never answered wrong.
 
-use nalgebra::{Rotation3, Vector3};
+use nalgebra::Vector3;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use roitrack_core::{CameraModel, Target, TargetPoint};
 use roitrack_detect::detect_target;
 use roitrack_detect::photo::{PhotoDetection, PhotoOptions};
-use roitrack_sim::photo::{CircleShade, Clutter, PhotoScene, RenderedPhoto, render_photo};
+use roitrack_sim::photo::{Clutter, PhotoScene, RenderedPhoto, render_photo};
 use roitrack_sim::user_cameras::random_photo_camera;
+
+mod common;
+use common::random_tilt_and_shade;
 
 /// Id of the large disk drawn in the middle of a plate (not in the target file).
 const DISK_ID: u32 = 999;
@@ -114,16 +117,7 @@ fn case(family: Family, seed: u64) -> Case {
             diameter_m: Some(0.5 * width_m.min(2.0 * corners[2].1)),
         });
     }
-    let tilt = Rotation3::from_euler_angles(
-        rng.random_range(-0.5..0.5),
-        rng.random_range(-0.5..0.5),
-        rng.random_range(-3.1..3.1),
-    );
-    let shade = if rng.random_bool(0.5) {
-        CircleShade::BrightOnDark
-    } else {
-        CircleShade::DarkOnLight
-    };
+    let (tilt, shade) = random_tilt_and_shade(&mut rng);
     let mut scene =
         PhotoScene::facing(truth, Target::new(drawn).unwrap(), distance_m, tilt).with_shade(shade);
     scene.clutter = Clutter::busy(if rng.random_bool(0.6) { 60 } else { 0 });
