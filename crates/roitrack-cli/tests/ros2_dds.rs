@@ -19,6 +19,8 @@ use std::process::Command;
 
 use roitrack::nalgebra::Vector3;
 
+#[path = "common/process.rs"]
+mod process;
 #[path = "common/venv.rs"]
 mod venv;
 
@@ -534,23 +536,13 @@ fn node_against_track(dir: &Path, what: &str, log: &str) -> Vec<roitrack::core::
 /// `roitrack simulate --scenario SCENARIO --duration-s DURATION_S EXTRA... --out DIR/sim`: the run's folder.
 fn simulate(dir: &Path, scenario: &str, duration_s: &str, extra: &[&str]) -> PathBuf {
     let sim = dir.join("sim");
-    let out = Command::new(env!("CARGO_BIN_EXE_roitrack"))
-        .args([
-            "simulate",
-            "--scenario",
-            scenario,
-            "--duration-s",
-            duration_s,
-        ])
-        .args(extra)
-        .arg("--out")
-        .arg(&sim)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
+    process::simulate(
+        &sim,
+        &[
+            &["--scenario", scenario, "--duration-s", duration_s][..],
+            extra,
+        ]
+        .concat(),
     );
     sim
 }

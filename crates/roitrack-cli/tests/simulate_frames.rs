@@ -11,6 +11,8 @@ use roitrack::sim::{FrameOptions, FrameSequence, Scenario, ScenarioKind};
 
 mod common;
 use common::{fails, ok, roitrack};
+#[path = "common/process.rs"]
+mod process;
 
 fn p(path: &Path) -> &str {
     path.to_str().unwrap()
@@ -166,15 +168,12 @@ fn simulated_frames_are_tracked_and_scored_as_the_readme_says() {
     let readme = std::fs::read_to_string(out.join("README.txt")).unwrap();
     assert!(readme.contains(track));
     let args: Vec<&str> = track.split_whitespace().skip(1).collect();
-    let tracked = std::process::Command::new(env!("CARGO_BIN_EXE_roitrack"))
-        .args(&args)
-        .current_dir(tmp.path())
-        .output()
-        .unwrap();
-    assert!(
-        tracked.status.success(),
-        "{}",
-        String::from_utf8_lossy(&tracked.stderr)
+    process::succeeded(
+        process::roitrack_command()
+            .args(&args)
+            .current_dir(tmp.path())
+            .output()
+            .unwrap(),
     );
     let metrics = ok(&[
         "eval",

@@ -2,6 +2,9 @@
 //! script): the `roitrack` binary as a command, a simulated scene, a finished program checked, Ctrl-C (included by
 //! the tests that use it with `#[path]`, not through `common`).
 
+// Each test that includes this module uses some of it.
+#![allow(dead_code)]
+
 use std::path::Path;
 use std::process::{Command, Output};
 

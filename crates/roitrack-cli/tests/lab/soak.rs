@@ -1,24 +1,10 @@
 //! `roitrack lab soak`: a long run stays flat.
 
-use std::process::Command;
-
-fn roitrack() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_roitrack"))
-}
-
 #[test]
 fn soak_run_has_flat_memory_error_and_time() {
     // 30 s of 4 kHz stream (the full 10-minute soak is `roitrack lab soak`, about 10 s).
-    let out = roitrack()
-        .args(["lab", "soak", "--minutes", "0.5", "--json"])
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    let m: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let stdout = crate::common::ok(&["lab", "soak", "--minutes", "0.5", "--json"]);
+    let m: serde_json::Value = serde_json::from_str(&stdout).unwrap();
     assert_eq!(m["lost"].as_u64(), Some(0), "{m}");
     assert!(m["memory_growth_mib"].as_f64().unwrap().abs() < 1.0, "{m}");
     let errors = m["position_rmse_mm"].as_array().unwrap();
