@@ -41,7 +41,7 @@ from cyclonedds.pub import DataWriter
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from ros2_measurement_publisher import camera_info
+from ros2_measurement_publisher import camera_info, publish_paced, wait_until
 from ros2_subscriber import LATCHED, CameraInfo, Header, Time, ros_type
 
 
@@ -182,12 +182,8 @@ def main():
     message_type = CompressedImage if args.encoding == "png" else Image
     topic = Topic(participant, "rt" + args.topic, message_type, qos=qos)
     writer = DataWriter(participant, topic, qos=qos)
-    start = time.monotonic()
-    while not writer.get_matched_subscriptions():
-        if time.monotonic() - start > args.wait_s:
-            print("no subscriber", file=sys.stderr)
-            return 1
-        time.sleep(0.01)
+    if not wait_until(writer.get_matched_subscriptions, args.wait_s, "subscriber"):
+        return 1
     # The subscriber's side of the discovery (its matching of this writer).
     time.sleep(0.3)
     first = frames[0]
@@ -200,23 +196,19 @@ def main():
     info_writer = DataWriter(participant, info_topic, qos=LATCHED)
     info_writer.write(camera_info(args.camera))
     # The camera info taken before any frame: a subscriber of it matched, the message acknowledged, then a moment.
-    start = time.monotonic()
-    while not info_writer.get_matched_subscriptions():
-        if time.monotonic() - start > args.wait_s:
-            print("no subscriber of the camera info", file=sys.stderr)
-            return 1
-        time.sleep(0.01)
+    if not wait_until(info_writer.get_matched_subscriptions, args.wait_s, "subscriber of the camera info"):
+        return 1
     info_writer.wait_for_acks(duration(seconds=10))
     # The node publishes its estimates best effort: wait until its pose publisher is seen on the bus (then a moment,
     # for every subscriber to match it), so that none of them goes out before a subscriber is there.
     if args.wait_for_publisher:
         publications = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
-        start = time.monotonic()
-        while not any(p.topic_name == args.wait_for_publisher for p in publications.read(N=1000)):
-            if time.monotonic() - start > args.wait_s:
-                print(f"no publisher of {args.wait_for_publisher}", file=sys.stderr)
-                return 1
-            time.sleep(0.01)
+
+        def published():
+            return any(p.topic_name == args.wait_for_publisher for p in publications.read(N=1000))
+
+        if not wait_until(published, args.wait_s, f"publisher of {args.wait_for_publisher}"):
+            return 1
     time.sleep(1.0)
     messages = list(frames)
     if args.too_close is not None:
@@ -233,13 +225,7 @@ def main():
             image(t0, w, h, 8, first.data[: w * (h - 1)]),
         ]
         messages = bad + messages
-    start = time.monotonic()
-    for k, m in enumerate(messages):
-        due = start + k / args.rate_hz
-        now = time.monotonic()
-        if due > now:
-            time.sleep(due - now)
-        writer.write(m)
+    publish_paced(writer, messages, args.rate_hz)
     writer.wait_for_acks(duration(seconds=30))
     print(f"published {len(messages)} images", flush=True)
     return 0

@@ -95,6 +95,29 @@ def malformed(rows):
     return [short, unknown, nan]
 
 
+def wait_until(seen, wait_s, what):
+    """Waits until `seen()` holds (a reader matched, a publisher discovered), at most `wait_s`: whether it did (if
+    not, says `no WHAT`)."""
+    start = time.monotonic()
+    while not seen():
+        if time.monotonic() - start > wait_s:
+            print(f"no {what}", file=sys.stderr)
+            return False
+        time.sleep(0.01)
+    return True
+
+
+def publish_paced(writer, messages, rate_hz):
+    """Writes `messages` at `rate_hz` from now, each when it is due (one that is late at once)."""
+    start = time.monotonic()
+    for k, m in enumerate(messages):
+        due = start + k / rate_hz
+        now = time.monotonic()
+        if due > now:
+            time.sleep(due - now)
+        writer.write(m)
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("measurements")
@@ -123,21 +146,11 @@ def main():
     qos = Qos(Policy.Reliability.Reliable(duration(seconds=1)), Policy.Durability.Volatile, Policy.History.KeepAll)
     topic = Topic(participant, "rt" + args.topic, BlobMeasurements, qos=qos)
     writer = DataWriter(participant, topic, qos=qos)
-    start = time.monotonic()
-    while not writer.get_matched_subscriptions():
-        if time.monotonic() - start > args.wait_s:
-            print("no subscriber", file=sys.stderr)
-            return 1
-        time.sleep(0.01)
+    if not wait_until(writer.get_matched_subscriptions, args.wait_s, "subscriber"):
+        return 1
     # The subscriber's side of the discovery (its matching of this writer).
     time.sleep(0.3)
-    start = time.monotonic()
-    for k, m in enumerate(messages):
-        due = start + k / args.rate_hz
-        now = time.monotonic()
-        if due > now:
-            time.sleep(due - now)
-        writer.write(m)
+    publish_paced(writer, messages, args.rate_hz)
     writer.wait_for_acks(duration(seconds=10))
     print(f"published {len(messages)} messages", flush=True)
     return 0
