@@ -4,24 +4,28 @@ use nalgebra::Vector3;
 use roitrack_core::{CameraModel, Measurement, MotionState, Target, TargetPoint};
 use roitrack_estimators::{Estimator, TrackError, Tracker, TrackerConfig};
 
-/// The tracker's first result over measurements of the grid 0.6 m away, with the target given as `target`.
-fn first_result(target: &Target, config: TrackerConfig) -> Result<Vector3<f64>, TrackError> {
+/// Measurement `k` of the 4 x 4 grid at rest 0.6 m in front of the canonical camera: its points in turn, 4 kHz.
+fn grid_measurement(k: usize) -> Measurement {
     let camera = CameraModel::canonical();
     let grid = Target::grid4x4();
     let truth = MotionState::at_rest(Default::default(), Vector3::new(0.01, 0.0, 0.6));
-    let mut tracker = Tracker::new(camera.clone(), target.clone(), config).unwrap();
+    let p = &grid.points()[k % 16];
+    let px = camera
+        .raw_pixel_from_cam(&truth.point_in_cam_at(&p.point_in_obj_m, 0.0))
+        .unwrap();
+    Measurement {
+        t_s: k as f64 * 2.5e-4,
+        id: p.id,
+        u_px: px.x,
+        v_px: px.y,
+    }
+}
+
+/// The tracker's first result over measurements of the grid 0.6 m away, with the target given as `target`.
+fn first_result(target: &Target, config: TrackerConfig) -> Result<Vector3<f64>, TrackError> {
+    let mut tracker = Tracker::new(CameraModel::canonical(), target.clone(), config).unwrap();
     for k in 0..64 {
-        let p = &grid.points()[k % 16];
-        let px = camera
-            .raw_pixel_from_cam(&truth.point_in_cam_at(&p.point_in_obj_m, 0.0))
-            .unwrap();
-        let m = Measurement {
-            t_s: k as f64 * 2.5e-4,
-            id: p.id,
-            u_px: px.x,
-            v_px: px.y,
-        };
-        if let Some(e) = tracker.push(&m)? {
+        if let Some(e) = tracker.push(&grid_measurement(k))? {
             return Ok(e.state.cam_t_obj_m);
         }
     }
@@ -30,24 +34,15 @@ fn first_result(target: &Target, config: TrackerConfig) -> Result<Vector3<f64>, 
 
 /// The errors over `cycles` cycles of the grid seen with `target`: every first pose tried is checked.
 fn refusals(target: &Target, cycles: usize) -> usize {
-    let camera = CameraModel::canonical();
-    let grid = Target::grid4x4();
-    let truth = MotionState::at_rest(Default::default(), Vector3::new(0.01, 0.0, 0.6));
-    let mut tracker =
-        Tracker::new(camera.clone(), target.clone(), TrackerConfig::default()).unwrap();
+    let mut tracker = Tracker::new(
+        CameraModel::canonical(),
+        target.clone(),
+        TrackerConfig::default(),
+    )
+    .unwrap();
     let mut refused = 0;
     for k in 0..16 * cycles {
-        let p = &grid.points()[k % 16];
-        let px = camera
-            .raw_pixel_from_cam(&truth.point_in_cam_at(&p.point_in_obj_m, 0.0))
-            .unwrap();
-        let m = Measurement {
-            t_s: k as f64 * 2.5e-4,
-            id: p.id,
-            u_px: px.x,
-            v_px: px.y,
-        };
-        match tracker.push(&m) {
+        match tracker.push(&grid_measurement(k)) {
             Err(TrackError::ImplausibleFirstPose { .. }) => refused += 1,
             Err(e) => panic!("{e}"),
             Ok(_) => {}

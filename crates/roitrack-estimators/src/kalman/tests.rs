@@ -180,6 +180,26 @@ fn a_readout_blobs_jacobian_matches_central_differences() {
     }
 }
 
+/// The sequential update of the readout's measurement `m` (0.1 px of white noise), marked gated or used as
+/// [`ErrorStateKalman::refine`] takes it.
+fn update_and_mark<const N: usize>(
+    filter: &mut ErrorStateKalman<N>,
+    model: &SpatioTemporalModel,
+    state: &mut MotionState,
+    m: &mut ReadoutMeasurement,
+) {
+    let outcome = filter.update(
+        model,
+        state,
+        &m.point_in_obj_m,
+        &m.ideal_px,
+        CentroidNoise::white(0.1),
+        None,
+    );
+    m.gated = matches!(outcome, UpdateOutcome::Gated { .. });
+    m.used = !m.gated;
+}
+
 #[test]
 fn a_readout_far_from_a_wide_prior_is_refined_to_the_pose_its_blobs_show() {
     // Six blobs seen exactly, 15 mm and 0.1 rad from a prior of 1 m and 1 rad: the refinement finds the blobs'
@@ -226,16 +246,7 @@ fn a_readout_far_from_a_wide_prior_is_refined_to_the_pose_its_blobs_show() {
     let mut sequential = prior;
     let mut state = prior_state;
     for m in &mut readout {
-        let outcome = sequential.update(
-            &model,
-            &mut state,
-            &m.point_in_obj_m,
-            &m.ideal_px,
-            CentroidNoise::white(0.1),
-            None,
-        );
-        m.gated = matches!(outcome, UpdateOutcome::Gated { .. });
-        m.used = !m.gated;
+        update_and_mark(&mut sequential, &model, &mut state, m);
     }
     // Linearised where the blobs before them left the state, later blobs look like outliers.
     let gated = readout.iter().filter(|m| m.gated).count();
@@ -347,16 +358,7 @@ fn a_rolling_readout_is_refined_to_fit_its_blobs() {
     for m in &mut readout {
         sequential.predict(&mut state, m.dt_s - t_s, [1.0, 1.0]);
         t_s = m.dt_s;
-        let outcome = sequential.update(
-            &model,
-            &mut state,
-            &m.point_in_obj_m,
-            &m.ideal_px,
-            CentroidNoise::white(0.1),
-            None,
-        );
-        m.gated = matches!(outcome, UpdateOutcome::Gated { .. });
-        m.used = !m.gated;
+        update_and_mark(&mut sequential, &model, &mut state, m);
     }
     let span_s = t_s;
     let sequential_px = residual_px(&readout, &state, &sequential.acceleration, span_s);
