@@ -789,6 +789,38 @@ fn publisher_script() -> PathBuf {
         .join("../roitrack-ros/tests/ros2_measurement_publisher.py")
 }
 
+/// Runs `script` (bash) in a network namespace of its own with the measurement publisher at hand: `$PYTHON`,
+/// `$PUBLISHER`, `$ROITRACK`, the simulation `$SIM`, the node's outputs `$POSES` and `$TWISTS` (`dir`'s node.tum and
+/// node.csv) and track's `$TRACK_POSES` and `$TRACK_TWISTS` (track.tum, track.csv), and `env`; asserts that it
+/// succeeded. Its log.
+fn with_publisher(
+    python: &Path,
+    dir: &Path,
+    sim: &Path,
+    script: &str,
+    env: &[(&str, &Path)],
+) -> String {
+    let (publisher, roitrack) = (
+        publisher_script(),
+        Path::new(env!("CARGO_BIN_EXE_roitrack")),
+    );
+    let outputs = ["node.tum", "node.csv", "track.tum", "track.csv"].map(|name| dir.join(name));
+    let mut all_env = vec![
+        ("PYTHON", python),
+        ("PUBLISHER", publisher.as_path()),
+        ("ROITRACK", roitrack),
+        ("SIM", sim),
+        ("POSES", outputs[0].as_path()),
+        ("TWISTS", outputs[1].as_path()),
+        ("TRACK_POSES", outputs[2].as_path()),
+        ("TRACK_TWISTS", outputs[3].as_path()),
+    ];
+    all_env.extend_from_slice(env);
+    let (ok, log) = in_namespace(script, &all_env);
+    assert!(ok, "{log}");
+    log
+}
+
 #[test]
 fn the_node_tracks_centroids_from_cyclone_dds_as_track_does_the_file_and_names_malformed_messages()
 {
@@ -815,7 +847,10 @@ fn the_node_tracks_centroids_from_cyclone_dds_as_track_does_the_file_and_names_m
     assert!(tracked.status.success());
     // Cyclone DDS publishes the measurements (with three malformed messages among them) to the node, and takes
     // the node's estimates.
-    let (ok, log) = in_namespace(
+    let log = with_publisher(
+        &python,
+        dir.path(),
+        &sim,
         r#"
 "$PYTHON" "$SUBSCRIBER" --out "$RECEIVED" --idle-s 3 --timeout-s 120 >/dev/null &
 subscriber=$!
@@ -827,17 +862,10 @@ wait $publisher || exit 92
 wait $subscriber || exit 93
 "#,
         &[
-            ("PYTHON", &python),
             ("SUBSCRIBER", &subscriber_script()),
-            ("PUBLISHER", &publisher_script()),
             ("RECEIVED", &file("received.jsonl")),
-            ("ROITRACK", roitrack),
-            ("SIM", &sim),
-            ("POSES", &file("node.tum")),
-            ("TWISTS", &file("node.csv")),
         ],
     );
-    assert!(ok, "{log}");
     for reason in [
         "message 0: field u_px: 9 entries for 10 point ids",
         "centroid 0: unknown point id 9999",
@@ -874,10 +902,11 @@ fn the_node_takes_its_camera_from_a_latched_camera_info_and_names_a_missing_one(
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
     let sim = simulate(dir.path(), "spin", "0.5", &[]);
-    let file = |name: &str| dir.path().join(name);
-    let (ok, log) = in_namespace(
+    let log = with_publisher(
+        &python,
+        dir.path(),
+        &sim,
         r#"
 "$ROITRACK" ros2-node --target "$SIM/target.csv" --camera-info-wait-s 0.5 && exit 90
 "$PYTHON" "$PUBLISHER" "$SIM/measurements.csv" --camera-info "$SIM/camera.yaml" --wait-s 60 &
@@ -887,18 +916,8 @@ wait $publisher || exit 92
 "$ROITRACK" track --camera "$SIM/camera.yaml" --target "$SIM/target.csv" --measurements "$SIM/measurements.csv" \
     --poses "$TRACK_POSES" --twists "$TRACK_TWISTS" || exit 93
 "#,
-        &[
-            ("PYTHON", &python),
-            ("PUBLISHER", &publisher_script()),
-            ("ROITRACK", roitrack),
-            ("SIM", &sim),
-            ("POSES", &file("node.tum")),
-            ("TWISTS", &file("node.csv")),
-            ("TRACK_POSES", &file("track.tum")),
-            ("TRACK_TWISTS", &file("track.csv")),
-        ],
+        &[],
     );
-    assert!(ok, "{log}");
     assert!(
         log.contains("--camera-info-topic /roitrack/camera_info: no camera info on /roitrack/camera_info within 0.5 s"),
         "{log}"
@@ -915,7 +934,6 @@ fn the_node_takes_its_options_from_a_parameters_file_and_the_command_line_overri
         return;
     };
     let dir = tempfile::tempdir().unwrap();
-    let roitrack = Path::new(env!("CARGO_BIN_EXE_roitrack"));
     let sim = simulate(dir.path(), "spin", "0.5", &[]);
     let file = |name: &str| dir.path().join(name);
     // every: 3 and poses are overridden by the command line; the rest is the file's.
@@ -932,7 +950,10 @@ fn the_node_takes_its_options_from_a_parameters_file_and_the_command_line_overri
         ),
     )
     .unwrap();
-    let (ok, log) = in_namespace(
+    let log = with_publisher(
+        &python,
+        dir.path(),
+        &sim,
         r#"
 "$PYTHON" "$PUBLISHER" "$SIM/measurements.csv" --topic /centroids --wait-s 60 &
 publisher=$!
@@ -941,19 +962,8 @@ wait $publisher || exit 92
 "$ROITRACK" track --camera "$SIM/camera.yaml" --target "$SIM/target.csv" --measurements "$SIM/measurements.csv" \
     --every 10 --poses "$TRACK_POSES" --twists "$TRACK_TWISTS" || exit 93
 "#,
-        &[
-            ("PYTHON", &python),
-            ("PUBLISHER", &publisher_script()),
-            ("ROITRACK", roitrack),
-            ("SIM", &sim),
-            ("PARAMS", &params),
-            ("POSES", &file("node.tum")),
-            ("TWISTS", &file("node.csv")),
-            ("TRACK_POSES", &file("track.tum")),
-            ("TRACK_TWISTS", &file("track.csv")),
-        ],
+        &[("PARAMS", &params)],
     );
-    assert!(ok, "{log}");
     assert!(log.contains("takes centroids from /centroids"), "{log}");
     assert!(!file("not_these.tum").exists());
     node_poses_are_tracks(dir.path());
