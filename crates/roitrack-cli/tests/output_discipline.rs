@@ -13,11 +13,20 @@ mod outputs;
 use outputs::*;
 use std::os::unix::process::{CommandExt, ExitStatusExt};
 use std::path::Path;
-use std::process::{Output, Stdio};
+use std::process::{Child, Output, Stdio};
 use std::time::{Duration, Instant};
 
 fn run(args: &[&str]) -> Output {
     roitrack().args(args).output().unwrap()
+}
+
+/// Sends `signal` to `child` after `delay_ms`, and asserts that it ended by that signal; how it ended.
+fn ended_by(child: Child, signal: i32, delay_ms: u64) -> Output {
+    std::thread::sleep(Duration::from_millis(delay_ms));
+    send(&child, signal);
+    let result = child.wait_with_output().unwrap();
+    assert_eq!(result.status.signal(), Some(signal), "{}", stderr(&result));
+    result
 }
 
 #[test]
@@ -343,15 +352,7 @@ fn interrupted_simulate_and_demo_leave_their_previous_folders() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(moments.next_in(300, 1200)));
-    send(&child, libc::SIGTERM);
-    let result = child.wait_with_output().unwrap();
-    assert_eq!(
-        result.status.signal(),
-        Some(libc::SIGTERM),
-        "{}",
-        stderr(&result)
-    );
+    ended_by(child, libc::SIGTERM, moments.next_in(300, 1200));
     assert_eq!(snapshot(&sim), before);
     assert!(temporaries(dir).is_empty(), "{:?}", temporaries(dir));
     // demo --mcap: SIGHUP during its runs stops it after the current one; its folder stays as it was, and the bag
@@ -367,15 +368,7 @@ fn interrupted_simulate_and_demo_leave_their_previous_folders() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    std::thread::sleep(Duration::from_millis(moments.next_in(1200, 1800)));
-    send(&child, libc::SIGHUP);
-    let result = child.wait_with_output().unwrap();
-    assert_eq!(
-        result.status.signal(),
-        Some(libc::SIGHUP),
-        "{}",
-        stderr(&result)
-    );
+    let result = ended_by(child, libc::SIGHUP, moments.next_in(1200, 1800));
     assert_eq!(snapshot(&demo), before);
     assert_eq!(std::fs::read(&bag).unwrap(), bag_before);
     assert!(
