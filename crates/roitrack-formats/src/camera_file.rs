@@ -362,6 +362,40 @@ fn size(value: &Value, path: &Path, field: &str) -> Result<u32, FormatError> {
     }
 }
 
+/// The image width and height at `keys` of `map`, each optional ([`size`]), named `fields` in errors; the width
+/// is read first.
+fn width_height(
+    map: &Mapping,
+    keys: [&str; 2],
+    path: &Path,
+    fields: [&str; 2],
+) -> Result<(Option<u32>, Option<u32>), FormatError> {
+    let width = get(map, keys[0])
+        .map(|v| size(v, path, fields[0]))
+        .transpose()?;
+    let height = get(map, keys[1])
+        .map(|v| size(v, path, fields[1]))
+        .transpose()?;
+    Ok((width, height))
+}
+
+/// `[width, height]` as an image size: two whole numbers of pixels from 1 to `u32::MAX`; else `None`.
+fn image_size_px(wh: &[f64]) -> Option<(u32, u32)> {
+    match *wh {
+        [w, h]
+            if w >= 1.0
+                && h >= 1.0
+                && w.fract() == 0.0
+                && h.fract() == 0.0
+                && w <= u32::MAX as f64
+                && h <= u32::MAX as f64 =>
+        {
+            Some((w as u32, h as u32))
+        }
+        _ => None,
+    }
+}
+
 /// The 9 numbers of K checked: its layout `[[fx, s, cx], [0, fy, cy], [0, 0, 1]]` and positive focal lengths.
 fn intrinsics_from_k(
     k: &[f64],
@@ -511,12 +545,7 @@ fn parse_ros_message(
     let d_field = if map.contains_key("D") { "D" } else { "d" };
     let distortion =
         Distortion::from_model(&model, &coefficients).map_err(|e| field_error(path, d_field, e))?;
-    let width = get(map, "width")
-        .map(|v| size(v, path, "width"))
-        .transpose()?;
-    let height = get(map, "height")
-        .map(|v| size(v, path, "height"))
-        .transpose()?;
+    let (width, height) = width_height(map, ["width", "height"], path, ["width", "height"])?;
     // A message from a driver that has no calibration says 0 x 0 and K all zero; K is refused above.
     let name = get(map, "header")
         .and_then(|h| h.get("frame_id"))
@@ -652,29 +681,20 @@ fn parse_opencv(
         (m, _) => Distortion::from_model(m, &coefficients),
     }
     .map_err(|e| field_error(path, d_field, e))?;
-    let mut width = get(map, "image_width")
-        .map(|v| size(v, path, "image_width"))
-        .transpose()?;
-    let mut height = get(map, "image_height")
-        .map(|v| size(v, path, "image_height"))
-        .transpose()?;
+    let (mut width, mut height) = width_height(
+        map,
+        ["image_width", "image_height"],
+        path,
+        ["image_width", "image_height"],
+    )?;
     for key in ["image_size", "imageSize", "cameraResolution"] {
         if let Some(v) = get(map, key) {
             let wh = numbers(v, path, key)?;
-            match wh.as_slice() {
-                &[w, h]
-                    if w >= 1.0
-                        && h >= 1.0
-                        && w.fract() == 0.0
-                        && h.fract() == 0.0
-                        && w <= u32::MAX as f64
-                        && h <= u32::MAX as f64 =>
-                {
-                    width = width.or(Some(w as u32));
-                    height = height.or(Some(h as u32));
-                }
-                _ => return Err(field_error(path, key, "expected [width, height] in pixels")),
-            }
+            let Some((w, h)) = image_size_px(&wh) else {
+                return Err(field_error(path, key, "expected [width, height] in pixels"));
+            };
+            width = width.or(Some(w));
+            height = height.or(Some(h));
         }
     }
     build(
@@ -773,25 +793,14 @@ fn parse_kalibr(
     let resolution = match get(cam, "resolution") {
         Some(v) => {
             let r = numbers(v, path, &f("resolution"))?;
-            match r.as_slice() {
-                &[w, h]
-                    if w >= 1.0
-                        && h >= 1.0
-                        && w.fract() == 0.0
-                        && h.fract() == 0.0
-                        && w <= u32::MAX as f64
-                        && h <= u32::MAX as f64 =>
-                {
-                    (Some(w as u32), Some(h as u32))
-                }
-                _ => {
-                    return Err(field_error(
-                        path,
-                        &f("resolution"),
-                        "expected [width, height] in pixels",
-                    ));
-                }
-            }
+            let Some((w, h)) = image_size_px(&r) else {
+                return Err(field_error(
+                    path,
+                    &f("resolution"),
+                    "expected [width, height] in pixels",
+                ));
+            };
+            (Some(w), Some(h))
         }
         None => (None, None),
     };
@@ -927,12 +936,12 @@ fn parse_boofcv(
             ));
         }
     };
-    let width = get(pinhole, "width")
-        .map(|v| size(v, path, "pinhole.width"))
-        .transpose()?;
-    let height = get(pinhole, "height")
-        .map(|v| size(v, path, "pinhole.height"))
-        .transpose()?;
+    let (width, height) = width_height(
+        pinhole,
+        ["width", "height"],
+        path,
+        ["pinhole.width", "pinhole.height"],
+    )?;
     build(
         file_stem(path),
         (width, height),
