@@ -229,19 +229,14 @@ fn malformed_inputs_name_the_file_line_and_field() {
     simulate(dir, "static", &[]);
     let camera = std::fs::read_to_string(dir.join("camera.yaml")).unwrap();
     let track = |camera: &Path, target: &Path, measurements: &Path| {
-        fails(&[
-            "track",
-            "--camera",
+        fails(&common::track_args(
             p(camera),
-            "--target",
             p(target),
-            "--measurements",
             p(measurements),
-            "--poses",
             p(&dir.join("out.tum")),
-            "--twists",
             p(&dir.join("out.csv")),
-        ])
+            &[],
+        ))
     };
     let (cam, tgt, meas) = (
         dir.join("camera.yaml"),
@@ -448,19 +443,14 @@ fn densities_of_the_other_motion_model_are_refused() {
     let (camera, target) = (dir.join("camera.yaml"), dir.join("target.csv"));
     let measurements = dir.join("measurements.csv");
     let (poses, twists) = (dir.join("p.tum"), dir.join("t.csv"));
-    let base = [
-        "track",
-        "--camera",
+    let base = common::track_args(
         p(&camera),
-        "--target",
         p(&target),
-        "--measurements",
         p(&measurements),
-        "--poses",
         p(&poses),
-        "--twists",
         p(&twists),
-    ];
+        &[],
+    );
     for (options, given) in [
         (
             &["--motion-model", "constant-velocity", "--jerk-psd", "50"][..],

@@ -41,23 +41,19 @@ fn track(
         dir.join("target.csv"),
         dir.join("measurements.csv"),
     );
-    let mut args = vec![
-        "track",
-        "--camera",
+    let mut args = common::track_args(
         p(&camera),
-        "--target",
         p(&target),
-        "--measurements",
         p(&measurements),
-        "--poses",
         p(&poses),
-        "--twists",
         p(&twists),
-        "--diagnostics",
-        p(&diagnostics),
-        "--covariance",
-        p(&covariance),
-    ];
+        &[
+            "--diagnostics",
+            p(&diagnostics),
+            "--covariance",
+            p(&covariance),
+        ],
+    );
     args.extend_from_slice(options);
     ok(&args);
     (poses, diagnostics, covariance)

@@ -6,7 +6,7 @@ mod common;
 
 use std::path::{Path, PathBuf};
 
-use common::{fails, ok};
+use common::{fails, ok, track_args};
 use roitrack::formats::{
     CameraFileOptions, read_camera_file, write_measurements_csv, write_target_csv,
 };
@@ -192,33 +192,6 @@ fn step_1_every_camera_file_and_model_is_read_projects_like_opencv_and_tracks() 
         "photo.png",
     ]);
     assert!(e.contains("--image-size"), "{e}");
-}
-
-/// `track --camera CAMERA --target TARGET --measurements MEASUREMENTS --poses POSES --twists TWISTS EXTRA...`: the
-/// arguments of the tracking run every step of a first use makes.
-fn track_args<'a>(
-    camera: &'a str,
-    target: &'a str,
-    measurements: &'a str,
-    poses: &'a str,
-    twists: &'a str,
-    extra: &[&'a str],
-) -> Vec<&'a str> {
-    let mut args = vec![
-        "track",
-        "--camera",
-        camera,
-        "--target",
-        target,
-        "--measurements",
-        measurements,
-        "--poses",
-        poses,
-        "--twists",
-        twists,
-    ];
-    args.extend_from_slice(extra);
-    args
 }
 
 /// Runs `track` on the canonical camera with these files and extra options.

@@ -48,3 +48,31 @@ pub fn simulate_random_rig(sim: &Path, cameras: &str, duration_s: &str, extra: &
     args.extend(["--out", sim.to_str().unwrap()]);
     ok(&args);
 }
+
+/// `track --camera CAMERA --target TARGET --measurements MEASUREMENTS --poses POSES --twists TWISTS EXTRA...`: the
+/// arguments of a run that tracks a measurements file.
+#[allow(dead_code)] // Not every test tracks a measurements file.
+pub fn track_args<'a>(
+    camera: &'a str,
+    target: &'a str,
+    measurements: &'a str,
+    poses: &'a str,
+    twists: &'a str,
+    extra: &[&'a str],
+) -> Vec<&'a str> {
+    let mut args = vec![
+        "track",
+        "--camera",
+        camera,
+        "--target",
+        target,
+        "--measurements",
+        measurements,
+        "--poses",
+        poses,
+        "--twists",
+        twists,
+    ];
+    args.extend_from_slice(extra);
+    args
+}
