@@ -584,37 +584,21 @@ impl Filter {
 
     /// [`ErrorStateKalman::refine`] from `prior`, a copy of this filter before the readout (`false` if it is of
     /// the other motion model, which no filter changes into).
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn refine(
         &mut self,
         prior: &Self,
-        prior_state: &MotionState,
+        fit: &ReadoutFit<'_>,
         state: &mut MotionState,
-        span_s: f64,
-        model: &SpatioTemporalModel,
         readout: &mut [ReadoutMeasurement],
-        noise: CentroidNoise,
-        process_scale: [f64; 2],
         known: Option<(f64, &KnownAcceleration)>,
     ) -> bool {
-        macro_rules! refine_from {
-            ($f:expr, $p:expr) => {
-                $f.refine_known(
-                    $p,
-                    prior_state,
-                    state,
-                    span_s,
-                    model,
-                    readout,
-                    noise,
-                    process_scale,
-                    known,
-                )
-            };
-        }
         match (self, prior) {
-            (Self::ConstantVelocity(f), Self::ConstantVelocity(p)) => refine_from!(f, p),
-            (Self::ConstantAcceleration(f), Self::ConstantAcceleration(p)) => refine_from!(f, p),
+            (Self::ConstantVelocity(f), Self::ConstantVelocity(p)) => {
+                f.refine_known(p, fit, state, readout, known)
+            }
+            (Self::ConstantAcceleration(f), Self::ConstantAcceleration(p)) => {
+                f.refine_known(p, fit, state, readout, known)
+            }
             _ => false,
         }
     }

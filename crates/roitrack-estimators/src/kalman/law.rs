@@ -594,15 +594,18 @@ impl KalmanLaw {
             let span_s = core.t_ref_s - first.t_s;
             let process_scale = self.process_log_scale.map(f64::exp);
             let noise = self.weighed_noise(core.noise_px);
-            let refined = self.filter.refine(
-                &prior.0,
-                &prior.1,
-                &mut core.state,
+            let fit = ReadoutFit {
+                prior_state: &prior.1,
                 span_s,
-                &core.model,
-                &mut readout,
+                model: &core.model,
                 noise,
                 process_scale,
+            };
+            let refined = self.filter.refine(
+                &prior.0,
+                &fit,
+                &mut core.state,
+                &mut readout,
                 Some((first.t_s, &self.known)),
             );
             if refined {

@@ -29,6 +29,18 @@ pub(super) const REFINE_MAX_ITERATIONS: usize = 10;
 /// A refinement stops when no entry of the scaled correction (in prior standard deviations) moves more than this.
 pub(super) const REFINE_TOLERANCE: f64 = 1e-6;
 
+/// What a readout's refinement ([`ErrorStateKalman::refine`]) fits against, beside the filter, its prior and the
+/// readout's measurements: the prior's state at the readout's first time, the readout's span after it, the camera
+/// model, the centroid noise, and the process noise's scale for the move to the readout's last time.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ReadoutFit<'a> {
+    pub(super) prior_state: &'a MotionState,
+    pub(super) span_s: f64,
+    pub(super) model: &'a SpatioTemporalModel,
+    pub(super) noise: CentroidNoise,
+    pub(super) process_scale: [f64; 2],
+}
+
 /// A readout's refined state at its first measurement time: the state, its accelerations, and their covariance.
 pub(super) type Refined<const N: usize> = (MotionState, Acceleration, SMatrix<f64, N, N>);
 
@@ -37,30 +49,16 @@ impl<const N: usize> ErrorStateKalman<N> {
     /// readout's first time; without one, exactly [`Self::refine`]): the readout is fitted, and moved to its last
     /// time, with the sum of the filter's acceleration and the input in force at its first time, held over its span:
     /// a change of the input within one readout (a frame's few milliseconds) is not followed.
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn refine_known(
         &mut self,
         prior: &Self,
-        prior_state: &MotionState,
+        fit: &ReadoutFit<'_>,
         state: &mut MotionState,
-        span_s: f64,
-        model: &SpatioTemporalModel,
         readout: &mut [ReadoutMeasurement],
-        noise: CentroidNoise,
-        process_scale: [f64; 2],
         known: Option<(f64, &KnownAcceleration)>,
     ) -> bool {
         let Some((first_s, known)) = known.filter(|(_, k)| !k.is_empty()) else {
-            return self.refine(
-                prior,
-                prior_state,
-                state,
-                span_s,
-                model,
-                readout,
-                noise,
-                process_scale,
-            );
+            return self.refine(prior, fit, state, readout);
         };
         // The filter and its prior as if their own acceleration were the sum; the input taken back out after.
         let u = known.at(first_s);
@@ -68,16 +66,7 @@ impl<const N: usize> ErrorStateKalman<N> {
         shifted.acceleration = known::sum(&self.acceleration, &u);
         let mut shifted_prior = *prior;
         shifted_prior.acceleration = known::sum(&prior.acceleration, &u);
-        if !shifted.refine(
-            &shifted_prior,
-            prior_state,
-            state,
-            span_s,
-            model,
-            readout,
-            noise,
-            process_scale,
-        ) {
+        if !shifted.refine(&shifted_prior, fit, state, readout) {
             return false;
         }
         *self = shifted;
@@ -86,8 +75,8 @@ impl<const N: usize> ErrorStateKalman<N> {
     }
 
     /// The iterated update of a readout (the blobs of a frame), from this filter after its sequential updates, whose
-    /// state is `state`, `span_s` after the readout's first measurement; `prior` and `prior_state` are the filter
-    /// before them, at that first time.
+    /// state is `state`, `fit.span_s` after the readout's first measurement; `prior` and `fit.prior_state` are the
+    /// filter before them, at that first time.
     ///
     /// 1. The state that best fits both the prior and every blob the sequential updates used, at once
     ///    ([`Self::refined`]).
@@ -109,18 +98,20 @@ impl<const N: usize> ErrorStateKalman<N> {
     /// target, 4.5 ms, a few hundredths of a pixel with the rolling-shutter jerk densities; the noise over the span is
     /// added once, at the end), and the Jacobians at the iterate are used for corrections from the prior, without the
     /// left Jacobian of the rotation's correction (1.5 % on the rotation's columns at 0.03 rad).
-    #[allow(clippy::too_many_arguments)]
     pub(super) fn refine(
         &mut self,
         prior: &Self,
-        prior_state: &MotionState,
+        fit: &ReadoutFit<'_>,
         state: &mut MotionState,
-        span_s: f64,
-        model: &SpatioTemporalModel,
         readout: &mut [ReadoutMeasurement],
-        noise: CentroidNoise,
-        process_scale: [f64; 2],
     ) -> bool {
+        let ReadoutFit {
+            prior_state,
+            span_s,
+            model,
+            noise,
+            process_scale,
+        } = *fit;
         let start = (
             self.acceleration.predicted(state, -span_s),
             self.acceleration,

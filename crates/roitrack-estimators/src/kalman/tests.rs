@@ -255,16 +255,14 @@ fn a_readout_far_from_a_wide_prior_is_refined_to_the_pose_its_blobs_show() {
         .fixed_rows::<6>(0)
         .amax();
     let mut refined = sequential;
-    assert!(refined.refine(
-        &prior,
-        &prior_state,
-        &mut state,
-        0.0,
-        &model,
-        &mut readout,
-        CentroidNoise::white(0.1),
-        [1.0, 1.0],
-    ));
+    let fit = ReadoutFit {
+        prior_state: &prior_state,
+        span_s: 0.0,
+        model: &model,
+        noise: CentroidNoise::white(0.1),
+        process_scale: [1.0, 1.0],
+    };
+    assert!(refined.refine(&prior, &fit, &mut state, &mut readout));
     let error = MotionState::difference(&truth, &state)
         .fixed_rows::<6>(0)
         .amax();
@@ -363,16 +361,14 @@ fn a_rolling_readout_is_refined_to_fit_its_blobs() {
     let span_s = t_s;
     let sequential_px = residual_px(&readout, &state, &sequential.acceleration, span_s);
     let mut refined = sequential;
-    assert!(refined.refine(
-        &prior,
-        &prior_state,
-        &mut state,
+    let fit = ReadoutFit {
+        prior_state: &prior_state,
         span_s,
-        &model,
-        &mut readout,
-        CentroidNoise::white(0.1),
-        [1.0, 1.0],
-    ));
+        model: &model,
+        noise: CentroidNoise::white(0.1),
+        process_scale: [1.0, 1.0],
+    };
+    assert!(refined.refine(&prior, &fit, &mut state, &mut readout));
     let refined_px = residual_px(&readout, &state, &refined.acceleration, span_s);
     assert!(
         // (0.0075 against 0.023 px: the prior's twist pulls the fit a little.)
