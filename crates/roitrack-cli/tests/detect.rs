@@ -144,9 +144,7 @@ fn detect_reports_every_image_as_json_and_draws_overlays() {
     // Printed circles in a cluttered, unevenly lit scene (8 bits), and bright circles on black (16 bits).
     // (Seed 1 puts two blobs of a board mark on the grid's lattice, which hides the target: see
     // `stray_blobs_on_the_lattice_beyond_the_target_do_not_hide_it` in roitrack-pipeline's tests/photographs.rs.)
-    let dark = PhotoScene::facing(camera.clone(), target.clone(), 0.45, tilt(35.0, 60.0, 20.0))
-        .harsh()
-        .with_seed(2);
+    let dark = harsh_grid_scene(&camera);
     let bright = PhotoScene::facing(
         camera.clone(),
         target.clone(),
@@ -394,6 +392,19 @@ fn detect_failing_json(
     (stdout, stderr)
 }
 
+/// The photograph several tests take: the 4 x 4 grid printed 0.45 m from `camera`, tilted, in a cluttered, unevenly
+/// lit scene (seed 2).
+fn harsh_grid_scene(camera: &CameraModel) -> PhotoScene {
+    PhotoScene::facing(
+        camera.clone(),
+        Target::grid4x4(),
+        0.45,
+        tilt(35.0, 60.0, 20.0),
+    )
+    .harsh()
+    .with_seed(2)
+}
+
 fn write_setup(dir: &Path, camera: &CameraModel, target: &Target) -> (String, String) {
     let camera_path = dir.join("camera.yaml");
     let target_path = dir.join("target.csv");
@@ -419,14 +430,7 @@ fn detect_writes_an_overlay_of_what_was_seen_where_the_target_is_not_found() {
     })
     .unwrap();
     let (camera_path, target_path) = write_setup(dir, &camera, &other);
-    let scene = PhotoScene::facing(
-        camera.clone(),
-        Target::grid4x4(),
-        0.45,
-        tilt(35.0, 60.0, 20.0),
-    )
-    .harsh()
-    .with_seed(2);
+    let scene = harsh_grid_scene(&camera);
     let grid_png = dir.join("grid.png");
     write_png(&grid_png, &render_photo(&scene).unwrap());
     let blank_png = dir.join("blank.png");
@@ -489,9 +493,7 @@ fn detect_says_a_truncated_image_could_not_be_decoded() {
     let camera = camera();
     let target = Target::grid4x4();
     let (camera_path, target_path) = write_setup(dir, &camera, &target);
-    let scene = PhotoScene::facing(camera.clone(), target, 0.45, tilt(35.0, 60.0, 20.0))
-        .harsh()
-        .with_seed(2);
+    let scene = harsh_grid_scene(&camera);
     let photo = render_photo(&scene).unwrap();
     let whole = dir.join("whole.png");
     write_png(&whole, &photo);
