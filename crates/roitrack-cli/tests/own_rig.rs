@@ -24,6 +24,15 @@ fn gt_peak_speed(dir: &Path) -> f64 {
         .fold(0.0, f64::max)
 }
 
+/// The camera a run wrote into its folder `dir` (`camera.yaml`), read back.
+fn written_camera(dir: &Path) -> roitrack::CameraModel {
+    roitrack::formats::read_camera_file(
+        dir.join("camera.yaml"),
+        &roitrack::formats::CameraFileOptions::default(),
+    )
+    .unwrap()
+}
+
 #[test]
 fn own_camera_and_target_simulated_tracked_scored_and_plotted() {
     let tmp = tempfile::tempdir().unwrap();
@@ -65,11 +74,7 @@ fn own_camera_and_target_simulated_tracked_scored_and_plotted() {
         p(&mine),
     ]);
     // The rig's own camera and target are what the simulation wrote and used.
-    let written = roitrack::formats::read_camera_file(
-        mine.join("camera.yaml"),
-        &roitrack::formats::CameraFileOptions::default(),
-    )
-    .unwrap();
+    let written = written_camera(&mine);
     assert_eq!((written.width_px, written.height_px), (1280, 1024));
     assert_eq!(written.distortion.model_name(), "equidistant");
     assert_eq!(
@@ -186,11 +191,7 @@ fn demo_takes_the_rig() {
         "--out",
         p(&out),
     ]);
-    let written = roitrack::formats::read_camera_file(
-        out.join("camera.yaml"),
-        &roitrack::formats::CameraFileOptions::default(),
-    )
-    .unwrap();
+    let written = written_camera(&out);
     assert_eq!(written.distortion.model_name(), "equidistant");
     assert!(out.join("kalman_poses.tum").is_file());
     // A plain 4 x 5 grid looks the same turned half way round: the loop cannot start, and says why.
