@@ -106,21 +106,14 @@ fn covariance_into_a_missing_folder_is_refused_and_writes_nothing() {
     let dir = tmp.path();
     small_measurements(dir, 400);
     let poses = dir.join("p.tum");
-    let err = fails(&[
-        "track",
-        "--camera",
+    let err = fails(&common::track_args(
         p(&dir.join("camera.yaml")),
-        "--target",
         p(&dir.join("target.csv")),
-        "--measurements",
         p(&dir.join("measurements.csv")),
-        "--poses",
         p(&poses),
-        "--twists",
         p(&dir.join("t.csv")),
-        "--covariance",
-        p(&dir.join("missing").join("c.csv")),
-    ]);
+        &["--covariance", p(&dir.join("missing").join("c.csv"))],
+    ));
     assert!(err.contains("c.csv") && err.contains("missing"), "{err}");
     assert!(!poses.exists());
 }

@@ -99,21 +99,14 @@ fn side_files_of_another_run_are_refused() {
     let measurements = std::fs::read_to_string(b.join("measurements.csv")).unwrap();
     let half: Vec<&str> = measurements.lines().take(2000).collect();
     std::fs::write(b.join("short.csv"), half.join("\n") + "\n").unwrap();
-    ok(&[
-        "track",
-        "--camera",
+    ok(&common::track_args(
         p(&b.join("camera.yaml")),
-        "--target",
         p(&b.join("target.csv")),
-        "--measurements",
         p(&b.join("short.csv")),
-        "--poses",
         p(&b.join("est.tum")),
-        "--twists",
         p(&b.join("est.csv")),
-        "--diagnostics",
-        p(&b.join("diag.csv")),
-    ]);
+        &["--diagnostics", p(&b.join("diag.csv"))],
+    ));
     let err = fails(&[
         "plot",
         "--poses",

@@ -6,22 +6,13 @@ use std::path::Path;
 /// est.csv, diag.csv and cov.csv.
 pub fn track_simulated(dir: &Path) {
     let file = |name: &str| dir.join(name).to_str().unwrap().to_string();
-    let args = [
-        "track",
-        "--camera",
+    let (diagnostics, covariance) = (file("diag.csv"), file("cov.csv"));
+    super::ok(&crate::common::track_args(
         &file("camera.yaml"),
-        "--target",
         &file("target.csv"),
-        "--measurements",
         &file("measurements.csv"),
-        "--poses",
         &file("est.tum"),
-        "--twists",
         &file("est.csv"),
-        "--diagnostics",
-        &file("diag.csv"),
-        "--covariance",
-        &file("cov.csv"),
-    ];
-    super::ok(&args);
+        &["--diagnostics", &diagnostics, "--covariance", &covariance],
+    ));
 }
