@@ -165,23 +165,15 @@ fn a_failed_run_changes_no_output_and_leaves_no_temporary() {
     previous_outputs(&out);
     let text = std::fs::read_to_string(sim.join("measurements.csv")).unwrap();
     let track = |measurements: &Path| {
-        run(&[
-            "track",
-            "--camera",
-            p(&sim.join("camera.yaml")),
-            "--target",
-            p(&sim.join("target.csv")),
-            "--measurements",
-            p(measurements),
-            "--poses",
-            p(&out.join("poses.tum")),
-            "--twists",
-            p(&out.join("twists.csv")),
-            "--covariance",
-            p(&out.join("covariance.csv")),
-            "--mcap",
-            p(&out.join("run.mcap")),
-        ])
+        roitrack()
+            .args(track_into(
+                &sim.join("camera.yaml"),
+                &sim.join("target.csv"),
+                measurements,
+                &out,
+            ))
+            .output()
+            .unwrap()
     };
     let before = snapshot(&out);
     // Times in milliseconds, the commonest mistake: refused, nothing changed, no partial bag (no estimate).

@@ -19,6 +19,8 @@ use common::{fails, ok};
 #[path = "common/process.rs"]
 mod process;
 use process::{simulate, succeeded};
+#[path = "common/outputs.rs"]
+mod outputs;
 #[path = "common/venv.rs"]
 mod venv;
 
@@ -102,26 +104,14 @@ fn stopped_bag_estimates(
     (estimates, line_count(&dir.join("poses.tum")))
 }
 
+/// `track` of `dir`'s camera and target over `measurements`, every output (the bag too) into `out`.
 fn track_args(dir: &Path, measurements: &Path, out: &Path) -> Vec<String> {
-    [
-        "track",
-        "--camera",
-        p(&dir.join("camera.yaml")),
-        "--target",
-        p(&dir.join("target.csv")),
-        "--measurements",
-        p(measurements),
-        "--poses",
-        p(&out.join("poses.tum")),
-        "--twists",
-        p(&out.join("twists.csv")),
-        "--covariance",
-        p(&out.join("covariance.csv")),
-        "--mcap",
-        p(&out.join("run.mcap")),
-    ]
-    .map(String::from)
-    .to_vec()
+    outputs::track_into(
+        &dir.join("camera.yaml"),
+        &dir.join("target.csv"),
+        measurements,
+        out,
+    )
 }
 
 fn strs(args: &[String]) -> Vec<&str> {

@@ -144,6 +144,30 @@ pub fn track_stdin(camera: &Path, target: &Path, out: &Path, poses: &str) -> Com
     command
 }
 
+/// `track --camera CAMERA --target TARGET --measurements MEASUREMENTS` writing every output it has into `out`:
+/// poses.tum, twists.csv, covariance.csv and the bag run.mcap (the files [`previous_outputs`] leaves).
+pub fn track_into(camera: &Path, target: &Path, measurements: &Path, out: &Path) -> Vec<String> {
+    [
+        "track",
+        "--camera",
+        p(camera),
+        "--target",
+        p(target),
+        "--measurements",
+        p(measurements),
+        "--poses",
+        p(&out.join("poses.tum")),
+        "--twists",
+        p(&out.join("twists.csv")),
+        "--covariance",
+        p(&out.join("covariance.csv")),
+        "--mcap",
+        p(&out.join("run.mcap")),
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
 /// Previous outputs in `out`, as a run before would have left them.
 pub fn previous_outputs(out: &Path) {
     std::fs::create_dir_all(out).unwrap();
