@@ -5,7 +5,7 @@
 //! the bag of a run that fails midway readable up to its last estimate; the measured centroids of
 //! `/roitrack/measurements` (roitrack's own message) those of the measurements CSV, replayed by `track --mcap-in BAG
 //! --measurement-topic` to the same estimates (also from a bag `rosbags` wrote); the annotations of frames and of ROI
-//! images (`--mcap-rois`); the camera info's distortion model the camera's own.
+//! images (`--mcap-rois`); the camera info's distortion model the camera's own; a rig's bag of fused estimates.
 //!
 //! The readers live in the virtual environment that scripts/setup-test-deps makes (`target/ros-venv`, or
 //! `ROITRACK_ROS_VENV`). Without it the tests say they were skipped, unless `ROITRACK_REQUIRE_ROS_PY` is set (as
@@ -953,4 +953,78 @@ fn a_rig_reads_each_cameras_topic_of_one_bag() {
         error.contains("camera 'cam0'") && error.contains("/left/blob"),
         "{error}"
     );
+}
+
+/// A rig's fused estimates go to the bag in the rig's frame (`--frame-id` defaulting to `rig`), read back by both
+/// readers equal to the files; a rig's bag holds no camera info and no centroids (they belong to each camera).
+#[test]
+fn a_rigs_bag_holds_its_fused_estimates_in_the_rig_frame() {
+    let Some(python) = python() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let sim = dir.path().join("sim");
+    common::simulate_random_rig(&sim, "2", "1", &[]);
+    let file = |name: &str| dir.path().join(name);
+    let measurements =
+        |camera: &str| format!("{camera}={}", p(&sim.join(camera).join("measurements.csv")));
+    let (cam0, cam1) = (measurements("cam0"), measurements("cam1"));
+    let (rig, target) = (sim.join("rig.yaml"), sim.join("target.csv"));
+    let (poses, twists, covariance, bag) = (
+        file("poses.tum"),
+        file("twists.csv"),
+        file("covariance.csv"),
+        file("run.mcap"),
+    );
+    ok(&[
+        "track",
+        "--rig",
+        p(&rig),
+        "--target",
+        p(&target),
+        "--measurements",
+        &cam0,
+        "--measurements",
+        &cam1,
+        "--poses",
+        p(&poses),
+        "--twists",
+        p(&twists),
+        "--covariance",
+        p(&covariance),
+        "--mcap",
+        p(&bag),
+    ]);
+    assert!(line_count(&poses) > 100);
+    let report = check_bag(&python, dir.path(), ["rig", "target"], &["--rig"]);
+    assert!(
+        report.contains("no camera info, no measurements"),
+        "{report}"
+    );
+    // Read as a single camera's bag, it lacks the camera's topics: the check can fail.
+    let single = run_check_bag(
+        &python,
+        [&bag, &poses, &twists, &covariance],
+        ["rig", "target"],
+        &[],
+    );
+    assert!(!single.status.success());
+    // --mcap-rois has no ROI images to write in a rig's run.
+    let error = fails(&[
+        "track",
+        "--rig",
+        p(&rig),
+        "--target",
+        p(&target),
+        "--measurements",
+        &cam0,
+        "--measurements",
+        &cam1,
+        "--poses",
+        p(&poses),
+        "--twists",
+        p(&twists),
+        "--mcap",
+        p(&bag),
+        "--mcap-rois",
+    ]);
+    assert!(error.contains("--mcap-rois"), "{error}");
 }
