@@ -39,7 +39,7 @@ impl RigLiveReport {
     /// let report = RigLiveReport {
     ///     loop_report: RigLoopReport {
     ///         estimates: vec![], latencies_us: vec![], cameras: vec![AcquisitionCounts::default()], refused: 0,
-    ///         tracker: Default::default(), clocks: vec![Default::default()], wall_s: 1.0,
+    ///         tracker: Default::default(), clocks: vec![], wall_s: 1.0,
     ///     },
     ///     cameras: vec![Default::default()],
     ///     descriptions: vec!["fake".into()],
