@@ -34,25 +34,9 @@ fn a_simulated_rig_is_tracked_and_its_clocks_written_back() {
         tmp.path().join("twists.csv"),
         tmp.path().join("learnt.yaml"),
     );
-    let cam0 = format!("cam0={}", p(&sim.join("cam0/measurements.csv")));
-    let cam1 = format!("cam1={}", p(&sim.join("cam1/measurements.csv")));
-    ok(&[
-        "track",
-        "--rig",
-        p(&sim.join("rig.yaml")),
-        "--target",
-        p(&sim.join("target.csv")),
-        "--measurements",
-        &cam0,
-        "--measurements",
-        &cam1,
-        "--poses",
-        p(&poses),
-        "--twists",
-        p(&twists),
-        "--rig-out",
-        p(&learnt),
-    ]);
+    let args =
+        common::track_simulated_rig_args(&sim, 2, &poses, &twists, &["--rig-out", p(&learnt)]);
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
     // The learnt rig reads back (its calibrations made absolute: it is in another folder) with cam1's clock known,
     // within 0.1 ms of the truth.
     let options = Default::default();

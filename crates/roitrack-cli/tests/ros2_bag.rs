@@ -964,35 +964,16 @@ fn a_rigs_bag_holds_its_fused_estimates_in_the_rig_frame() {
     let sim = dir.path().join("sim");
     common::simulate_random_rig(&sim, "2", "1", &[]);
     let file = |name: &str| dir.path().join(name);
-    let measurements =
-        |camera: &str| format!("{camera}={}", p(&sim.join(camera).join("measurements.csv")));
-    let (cam0, cam1) = (measurements("cam0"), measurements("cam1"));
-    let (rig, target) = (sim.join("rig.yaml"), sim.join("target.csv"));
     let (poses, twists, covariance, bag) = (
         file("poses.tum"),
         file("twists.csv"),
         file("covariance.csv"),
         file("run.mcap"),
     );
-    ok(&[
-        "track",
-        "--rig",
-        p(&rig),
-        "--target",
-        p(&target),
-        "--measurements",
-        &cam0,
-        "--measurements",
-        &cam1,
-        "--poses",
-        p(&poses),
-        "--twists",
-        p(&twists),
-        "--covariance",
-        p(&covariance),
-        "--mcap",
-        p(&bag),
-    ]);
+    let rig_run =
+        |extra: &[&str]| common::track_simulated_rig_args(&sim, 2, &poses, &twists, extra);
+    let args = rig_run(&["--covariance", p(&covariance), "--mcap", p(&bag)]);
+    ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(line_count(&poses) > 100);
     let report = check_bag(&python, dir.path(), ["rig", "target"], &["--rig"]);
     assert!(
@@ -1008,23 +989,7 @@ fn a_rigs_bag_holds_its_fused_estimates_in_the_rig_frame() {
     );
     assert!(!single.status.success());
     // --mcap-rois has no ROI images to write in a rig's run.
-    let error = fails(&[
-        "track",
-        "--rig",
-        p(&rig),
-        "--target",
-        p(&target),
-        "--measurements",
-        &cam0,
-        "--measurements",
-        &cam1,
-        "--poses",
-        p(&poses),
-        "--twists",
-        p(&twists),
-        "--mcap",
-        p(&bag),
-        "--mcap-rois",
-    ]);
+    let args = rig_run(&["--mcap", p(&bag), "--mcap-rois"]);
+    let error = fails(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(error.contains("--mcap-rois"), "{error}");
 }

@@ -49,6 +49,38 @@ pub fn simulate_random_rig(sim: &Path, cameras: &str, duration_s: &str, extra: &
     ok(&args);
 }
 
+/// `track --rig SIM/rig.yaml --target SIM/target.csv --measurements camK=SIM/camK/measurements.csv (each of the
+/// first `cameras`) --poses POSES --twists TWISTS EXTRA...`: the arguments of a run that tracks the measurement files
+/// of a simulated rig (`simulate --rig-cameras`) together.
+#[allow(dead_code)] // Not every test tracks a rig.
+pub fn track_simulated_rig_args(
+    sim: &Path,
+    cameras: usize,
+    poses: &Path,
+    twists: &Path,
+    extra: &[&str],
+) -> Vec<String> {
+    let path = |p: &Path| p.to_str().unwrap().to_string();
+    let mut args: Vec<String> = ["track", "--rig"].map(String::from).to_vec();
+    args.extend([
+        path(&sim.join("rig.yaml")),
+        "--target".into(),
+        path(&sim.join("target.csv")),
+    ]);
+    for k in 0..cameras {
+        let file = sim.join(format!("cam{k}")).join("measurements.csv");
+        args.extend(["--measurements".into(), format!("cam{k}={}", path(&file))]);
+    }
+    args.extend([
+        "--poses".into(),
+        path(poses),
+        "--twists".into(),
+        path(twists),
+    ]);
+    args.extend(extra.iter().map(|a| a.to_string()));
+    args
+}
+
 /// `track --camera CAMERA --target TARGET --measurements MEASUREMENTS --poses POSES --twists TWISTS EXTRA...`: the
 /// arguments of a run that tracks a measurements file.
 #[allow(dead_code)] // Not every test tracks a measurements file.
