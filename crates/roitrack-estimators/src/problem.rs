@@ -389,7 +389,16 @@ impl<'a> WindowProblem<'a> {
         initial: MotionState,
         max_iterations: usize,
     ) -> Solution<MotionState, 12> {
-        let options = SolverOptions::levenberg_marquardt(max_iterations);
+        self.fit_robustly_with(initial, &SolverOptions::levenberg_marquardt(max_iterations))
+    }
+
+    /// [`Self::fit_robustly`] with the solver's options given.
+    pub fn fit_robustly_with(
+        &self,
+        initial: MotionState,
+        options: &SolverOptions,
+    ) -> Solution<MotionState, 12> {
+        let options = *options;
         let mut plain = self.with_loss(RobustLoss::None, 1.0);
         let mut fit = solver::solve(&mut plain, initial, &options);
         if self.loss == RobustLoss::None {
