@@ -1,0 +1,383 @@
+//! The control thread: on the wall clock at the control rate, the newest estimate read, the command computed and
+//! the simulated robot integrated to the next tick, without allocating or locking.
+
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use nalgebra::Vector3;
+use roitrack_core::Acceleration;
+use roitrack_pipeline::realtime::KnownAccelerationSender;
+
+use super::run::LiveOptions;
+use super::scene::RobotScene;
+use crate::ServoConfig;
+use crate::closed_loop::{ServoSample, build_controller};
+use crate::control::{ControlInput, Observation};
+use crate::robot::{Geometry, RobotState, step_rk4};
+
+/// What the control thread hands back.
+pub(super) struct ControlSide {
+    pub(super) samples: Vec<ServoSample>,
+    pub(super) ages_s: Vec<f64>,
+    pub(super) to_actuation_us: Vec<f64>,
+    pub(super) to_command_us: Vec<f64>,
+    pub(super) ticks: usize,
+    pub(super) missed: usize,
+    pub(super) missed_before_start: usize,
+    pub(super) longest_missed_run: usize,
+    pub(super) saturated_ticks: usize,
+    pub(super) stop_reason: Option<String>,
+    pub(super) path_start_robot_s: Option<f64>,
+    pub(super) start_delay_s: f64,
+    pub(super) realtime_priority: bool,
+    pub(super) sent_known_accelerations: usize,
+    pub(super) superseded_known_accelerations: usize,
+}
+
+/// The control thread sleeps until this long before each tick (s), then spins: a sleep wakes tens of microseconds
+/// late, and the other threads need the two cores between ticks.
+const SPIN_BEFORE_TICK_S: f64 = 10e-6;
+
+/// Asks the scheduler to run the calling thread under `SCHED_FIFO` at `priority` (1-99): it then preempts the
+/// machine's ordinary threads when its sleep ends. Refused without the privilege (`CAP_SYS_NICE`); false then, or
+/// off Linux.
+fn request_realtime_priority(priority: i32) -> bool {
+    #[cfg(target_os = "linux")]
+    {
+        let param = libc::sched_param {
+            sched_priority: priority,
+        };
+        // SAFETY: `pthread_self` is the calling thread, alive during the call; `param` outlives it.
+        unsafe { libc::pthread_setschedparam(libc::pthread_self(), libc::SCHED_FIFO, &param) == 0 }
+    }
+    #[cfg(not(target_os = "linux"))]
+    {
+        let _ = priority;
+        false
+    }
+}
+
+/// What the control thread and the loop tell each other.
+pub(super) struct ControlFlags<'a> {
+    /// Set when the live loop has ended.
+    pub(super) loop_done: &'a AtomicBool,
+    /// Set by the control thread when the path starts.
+    pub(super) path_started: &'a AtomicBool,
+    /// Where the control thread sends the acceleration each command asks of its model
+    /// ([`ServoConfig::known_acceleration`]); `None`: the tracker is not told.
+    pub(super) known_acceleration: Option<&'a mut KnownAccelerationSender>,
+}
+
+/// The control thread: ticks on the robot's clock until the path's end, the loop's end, a divergence or the start's
+/// timeout. Everything it keeps is sized before its first tick: no allocation, no lock.
+pub(super) fn control_thread(
+    config: &ServoConfig,
+    options: &LiveOptions,
+    scene: &RobotScene,
+    reader: &crate::handle::EstimateReader,
+    flags: ControlFlags<'_>,
+    wall: Instant,
+) -> ControlSide {
+    let ControlFlags {
+        loop_done,
+        path_started,
+        mut known_acceleration,
+    } = flags;
+    let robot = config.robot;
+    let path = &config.path;
+    let (_, mut controller) = build_controller(config);
+    let model = robot
+        .with_mass_factor(config.model_mass_factor)
+        .with_friction_factor(config.model_friction_factor);
+    let control_rate_hz = options.control_rate_hz.unwrap_or(config.control_rate_hz);
+    let tick_s = 1.0 / control_rate_hz;
+    let step_s = tick_s / config.substeps as f64;
+    let path_ticks = (path.duration_s() / tick_s).round() as usize;
+    let expected_estimates = path_ticks / config.tracker.every.max(1) + 256;
+    let mut side = ControlSide {
+        samples: Vec::with_capacity(path_ticks + 2),
+        ages_s: Vec::with_capacity(path_ticks + 2),
+        to_actuation_us: Vec::with_capacity(expected_estimates),
+        to_command_us: Vec::with_capacity(expected_estimates),
+        ticks: 0,
+        missed: 0,
+        missed_before_start: 0,
+        longest_missed_run: 0,
+        saturated_ticks: 0,
+        stop_reason: None,
+        path_start_robot_s: None,
+        start_delay_s: f64::NAN,
+        realtime_priority: false,
+        sent_known_accelerations: 0,
+        superseded_known_accelerations: 0,
+    };
+    let (_, home_cam) = path.home_in_camera();
+    let limit = robot.force_limit_n;
+    let clip = |f: Vector3<f64>| f.map(|x| x.clamp(-limit, limit));
+    let hold = Geometry::at(&model, &Vector3::zeros())
+        .map(|g| g.gravity_forces(&model))
+        .unwrap_or_else(|_| Vector3::zeros());
+    let mut force = hold;
+    // Commands waiting for their actuation instant (robot clock); a few at most.
+    let mut commands: VecDeque<(f64, Vector3<f64>)> = VecDeque::with_capacity(256);
+    let window_ticks = ((config.saturation_window_s * control_rate_hz).round() as usize).max(1);
+    let mut recent_saturation: VecDeque<bool> = VecDeque::with_capacity(window_ticks + 1);
+    let mut recent_saturated = 0usize;
+    let mut state = RobotState::default();
+    let mut t_robot_s = scene.robot_time_s();
+    scene.push(t_robot_s, &state);
+    let mut last_sequence = 0u64;
+    let mut observation: Option<Observation> = None;
+    let mut path_start: Option<f64> = None;
+    let mut next_tick_s = t_robot_s;
+    side.realtime_priority = options
+        .realtime_priority
+        .is_some_and(request_realtime_priority);
+    loop {
+        if loop_done.load(Ordering::Acquire) {
+            if path_start.is_none() {
+                side.stop_reason = Some("the live loop ended before its first estimate".into());
+            } else {
+                side.stop_reason = Some("the live loop ended before the path's end".into());
+            }
+            break;
+        }
+        // Wait for the tick's instant: asleep until just before it, then spinning.
+        let now_s = scene.robot_time_s();
+        if now_s < next_tick_s {
+            let left_s = next_tick_s - now_s;
+            if left_s > SPIN_BEFORE_TICK_S {
+                std::thread::sleep(Duration::from_secs_f64(left_s - SPIN_BEFORE_TICK_S));
+            } else {
+                std::hint::spin_loop();
+            }
+            continue;
+        }
+        // Ticks whose instant passed a whole period ago were missed: the drive held its force over them.
+        let behind = ((now_s - next_tick_s) / tick_s).floor() as usize;
+        if behind > 0 {
+            if path_start.is_some() {
+                side.missed += behind;
+                side.longest_missed_run = side.longest_missed_run.max(behind);
+            } else {
+                side.missed_before_start += behind;
+            }
+            next_tick_s += behind as f64 * tick_s;
+        }
+        if path_start.is_none() && wall.elapsed().as_secs_f64() > options.start_timeout_s {
+            side.stop_reason = Some(format!(
+                "no estimate within {:.1} s of the start",
+                options.start_timeout_s
+            ));
+            break;
+        }
+        // The newest estimate, if new: on the robot's clock, then the path's. Its latency is measured when the
+        // command it makes is issued, below.
+        let mut fresh_exposure_s = None;
+        if let Some(snapshot) = reader.read()
+            && snapshot.sequence != last_sequence
+        {
+            last_sequence = snapshot.sequence;
+            let t_ref_robot_s = scene.loop_to_robot_s(snapshot.t_ref_s);
+            // The path starts with the first estimate the loop makes on time: after its full-frame start the paced
+            // loop catches up on the slots it missed, with estimates of the past.
+            if path_start.is_none() && now_s - t_ref_robot_s <= options.start_max_age_s {
+                side.start_delay_s = wall.elapsed().as_secs_f64();
+                side.path_start_robot_s = Some(now_s);
+                path_start = Some(now_s);
+                path_started.store(true, Ordering::Release);
+            }
+            let Some(start) = path_start else {
+                hold_home(scene, &mut t_robot_s, next_tick_s + tick_s);
+                next_tick_s += tick_s;
+                continue;
+            };
+            observation = Some(Observation {
+                t_s: t_ref_robot_s - start,
+                position_m: snapshot.state.cam_t_obj_m - home_cam,
+                velocity_mps: snapshot.state.velocity_mps,
+                acceleration_mps2: None,
+            });
+            fresh_exposure_s = Some(t_ref_robot_s);
+        }
+        let Some(start) = path_start else {
+            hold_home(scene, &mut t_robot_s, next_tick_s + tick_s);
+            next_tick_s += tick_s;
+            continue;
+        };
+        // The command, acting the drive's delay after it is issued.
+        let geometry = match Geometry::at(&robot, &state.position_m) {
+            Ok(g) => g,
+            Err(e) => {
+                side.stop_reason = Some(e.to_string());
+                break;
+            }
+        };
+        let issued_s = scene.robot_time_s();
+        let t_act_s = issued_s + config.actuation_delay_s;
+        if let Some(o) = &observation {
+            side.ages_s
+                .push_within_capacity_or_skip(t_act_s - start - o.t_s);
+        }
+        let input = ControlInput {
+            t_act_s: t_act_s - start,
+            dt_s: tick_s,
+            reference: path.at(t_act_s - start),
+            observation,
+            drive_joint_velocity_mps: geometry.joint_velocity(&state.velocity_mps),
+        };
+        let command = controller.command(&input);
+        let after_s = scene.robot_time_s();
+        if let Some(exposure_s) = fresh_exposure_s {
+            side.to_command_us
+                .push_within_capacity_or_skip((after_s - exposure_s) * 1e6);
+            side.to_actuation_us.push_within_capacity_or_skip(
+                (after_s + config.actuation_delay_s - exposure_s) * 1e6,
+            );
+        }
+        if !command.iter().all(|f| f.is_finite()) {
+            side.stop_reason = Some(format!(
+                "the controller gave a force that is not finite at t = {:.4} s",
+                issued_s - start
+            ));
+            break;
+        }
+        let command = clip(command);
+        let queued = commands.len() < commands.capacity();
+        if queued {
+            commands.push_back((after_s + config.actuation_delay_s, command));
+        }
+        // What the command asks of the controller's model, from the instant it acts, told to the tracker on the
+        // loop's clock (as `run_servo` does in simulated time: the robot frame has the camera's axes). A command the
+        // drive never gets (its queue full) is not told either.
+        if queued
+            && let Some(sender) = known_acceleration.as_deref_mut()
+            && let Some(believed_mps2) = controller.believed_acceleration(&command)
+            && let Some(offset_s) = scene.loop_offset_s()
+        {
+            let acceleration = Acceleration {
+                linear_mps2: believed_mps2,
+                angular_radps2: Vector3::zeros(),
+            };
+            sender.send(after_s + config.actuation_delay_s - offset_s, acceleration);
+            side.sent_known_accelerations += 1;
+            side.superseded_known_accelerations = sender.superseded();
+        }
+        // The robot to the next tick.
+        let saturated_before = force.amax() >= limit;
+        if let Err(reason) = integrate(
+            config,
+            scene,
+            &mut state,
+            &mut t_robot_s,
+            next_tick_s + tick_s,
+            step_s,
+            &mut commands,
+            &mut force,
+        ) {
+            side.stop_reason = Some(reason);
+            break;
+        }
+        next_tick_s += tick_s;
+        side.ticks += 1;
+        let saturated = saturated_before || force.amax() >= limit;
+        side.saturated_ticks += usize::from(saturated);
+        recent_saturation.push_back(saturated);
+        recent_saturated += usize::from(saturated);
+        if recent_saturation.len() > window_ticks {
+            recent_saturated -= usize::from(recent_saturation.pop_front().unwrap_or(false));
+        }
+        if recent_saturation.len() == window_ticks && 2 * recent_saturated > window_ticks {
+            side.stop_reason = Some(format!(
+                "unstable: an actuator at its force limit {:.0} % of the {:.0} ms before t = {:.4} s",
+                100.0 * recent_saturated as f64 / window_ticks as f64,
+                config.saturation_window_s * 1e3,
+                t_robot_s - start
+            ));
+            break;
+        }
+        let t_path_s = t_robot_s - start;
+        let sample = ServoSample {
+            t_s: t_path_s,
+            reference: path.at(t_path_s),
+            achieved_m: state.position_m,
+            achieved_velocity_mps: state.velocity_mps,
+            force_n: force,
+        };
+        if side.samples.len() < side.samples.capacity() {
+            side.samples.push(sample);
+        }
+        if sample.error_m() > config.divergence_error_m {
+            side.stop_reason = Some(format!(
+                "diverged: {:.1} mm from the path at t = {t_path_s:.4} s (limit {:.1} mm)",
+                sample.error_m() * 1e3,
+                config.divergence_error_m * 1e3
+            ));
+            break;
+        }
+        if t_path_s >= path.duration_s() {
+            break;
+        }
+    }
+    side
+}
+
+/// Before the path starts the robot's brakes hold it at rest at home: its state as it is, published up to `until_s`.
+fn hold_home(scene: &RobotScene, t_robot_s: &mut f64, until_s: f64) {
+    *t_robot_s = until_s;
+    scene.push(until_s, &RobotState::default());
+}
+
+/// Pushes onto a vector only within the room it was given: the control thread never allocates.
+pub(super) trait PushWithinCapacity<T> {
+    fn push_within_capacity_or_skip(&mut self, value: T);
+}
+
+impl<T> PushWithinCapacity<T> for Vec<T> {
+    fn push_within_capacity_or_skip(&mut self, value: T) {
+        if self.len() < self.capacity() {
+            self.push(value);
+        }
+    }
+}
+
+/// Integrates the robot from `t_robot_s` to `until_s` (robot clock) in steps of at most `step_s`, applying each
+/// queued command from its actuation instant, and publishes every step to `scene`.
+#[allow(clippy::too_many_arguments)]
+fn integrate(
+    config: &ServoConfig,
+    scene: &RobotScene,
+    state: &mut RobotState,
+    t_robot_s: &mut f64,
+    until_s: f64,
+    step_s: f64,
+    commands: &mut VecDeque<(f64, Vector3<f64>)>,
+    force: &mut Vector3<f64>,
+) -> Result<(), String> {
+    while *t_robot_s < until_s - 1e-12 {
+        while let Some(&(at_s, f)) = commands.front()
+            && at_s <= *t_robot_s + 1e-12
+        {
+            *force = f;
+            commands.pop_front();
+        }
+        let dt_s = step_s.min(until_s - *t_robot_s);
+        let next = step_rk4(&config.robot, state, force, dt_s).map_err(|e| e.to_string())?;
+        if !next
+            .position_m
+            .iter()
+            .chain(&next.velocity_mps)
+            .all(|x| x.is_finite())
+        {
+            return Err(format!(
+                "the robot's state is not finite at robot time {:.4} s",
+                *t_robot_s
+            ));
+        }
+        *state = next;
+        *t_robot_s += dt_s;
+        scene.push(*t_robot_s, state);
+    }
+    Ok(())
+}
