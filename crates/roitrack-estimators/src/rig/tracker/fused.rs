@@ -6,6 +6,7 @@ use nalgebra::{DMatrix, Vector2, Vector3};
 use roitrack_core::{Measurement, MotionState, Vector12};
 
 use super::RigTracker;
+use super::estimate::CROSS_CHECK_SPAN_S;
 use crate::rig::rig_projection;
 use crate::{KalmanTuning, Matrix12};
 
@@ -217,14 +218,20 @@ impl RigTracker {
                 0.0
             };
         }
-        let since_restart = m.t_s >= self.restarted_at_s[c];
-        if nis > tuning.gate_sigma * tuning.gate_sigma {
-            f.gated_since_estimate += 1;
+        let settling = self.restarts[c].settling(m.t_s, self.target.len());
+        let accepted = nis <= tuning.gate_sigma * tuning.gate_sigma;
+        self.restarts[c].judged(accepted);
+        if !accepted {
             self.report.gated += 1;
             self.camera_counts[c].gated += 1;
-            if since_restart && self.fused_since_restart[c] < self.target.len() {
+            // A settling camera's rejection, while another camera's centroids agree with the track, tells against
+            // that camera (`RigTracker::restarts`).
+            let others_agree = (0..self.rig.len())
+                .any(|k| k != c && t_rig_s - self.agreed_at_rig_s[k] <= CROSS_CHECK_SPAN_S);
+            if settling && others_agree {
                 return;
             }
+            f.gated_since_estimate += 1;
             f.gated_in_a_row += 1;
             f.newest_gated = true;
             self.camera_counts[c].gated_in_a_row += 1;
@@ -247,8 +254,8 @@ impl RigTracker {
         }
         f.gated_in_a_row = 0;
         f.newest_gated = false;
-        if since_restart {
-            self.fused_since_restart[c] = self.fused_since_restart[c].saturating_add(1);
+        if !settling {
+            self.agreed_at_rig_s[c] = t_rig_s;
         }
         self.camera_counts[c].fused += 1;
         self.camera_counts[c].gated_in_a_row = 0;

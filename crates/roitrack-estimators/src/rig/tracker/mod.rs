@@ -12,6 +12,7 @@ mod config;
 mod estimate;
 mod fused;
 mod instant;
+mod restarts;
 
 use std::cmp::Reverse;
 use std::collections::{BinaryHeap, VecDeque};
@@ -22,6 +23,7 @@ use super::{Rig, RigMeasurement};
 use crate::{Estimate, Estimator, EstimatorConfig, KalmanTuning, Matrix12, Tracker};
 use clock::TrackSample;
 use fused::Fused;
+use restarts::Restarts;
 
 pub use clock::ClockEstimate;
 pub use config::{RigError, RigTrackerConfig};
@@ -112,16 +114,18 @@ pub struct RigTracker {
     /// Per camera: the newest estimate of its own tracker, whatever its status (its frame and clock), until a live
     /// loop takes it ([`Self::take_camera_estimate`]).
     untaken_single: Vec<Option<Estimate>>,
-    /// Per camera: the time (its clock) from which its own tracker was last restarted by [`Self::restart_camera`]
-    /// (-inf: never), and how many of its centroids the fused filter has taken since. Until it has taken as many as
-    /// the target has points (a whole cycle of ROIs agreeing with the others' track), the camera's centroids that the
-    /// gate rejects do not dispute the fused estimate by a run of rejections or by one far beyond the gate: a track
-    /// started from a still pose in one frame may lose a fast target for a few ROIs and read its neighbouring blobs
-    /// (in a live rig, 10 centroids 14-28 px off 2 ms after a camera's view came back, its first ones right, the
-    /// fused track right all along), which tells against that camera, not against the track the others hold. Half
-    /// the centroids since the last estimate rejected still dispute it, whichever camera they came from.
-    restarted_at_s: Vec<f64>,
-    fused_since_restart: Vec<usize>,
+    /// Per camera: its restarts by a live loop ([`Self::restart_camera`]) as the fused filter meets them. While a
+    /// restarted camera's centroids have not agreed with the fused track for a whole cycle in a row (as many as the
+    /// target has points), those the gate rejects tell against that camera, not against the track, as long as
+    /// another camera's centroids agree with the track (accepted within [`CROSS_CHECK_SPAN_S`]): they dispute the
+    /// fused estimate neither by a run of rejections, nor by one far beyond the gate, nor in the share of rejected
+    /// centroids. A track started from a still pose in one frame may lose a fast target for a few ROIs and read its
+    /// neighbouring blobs (in a live rig, centroids 14-28 px off 2 ms after a camera's view came back, the fused
+    /// track right all along). With no other camera agreeing, its rejections count as any camera's.
+    restarts: Vec<Restarts>,
+    /// Per camera: the rig time of its newest centroid the fused filter accepted while the camera was not settling
+    /// (-inf: none).
+    agreed_at_rig_s: Vec<f64>,
     /// Each camera's own `tracking` estimates of the last [`CROSS_CHECK_SPAN_S`] behind the newest (rig frame and
     /// time, in time order, at most [`CROSS_CHECK_CAPACITY`]): the fused estimates, which lag by the reorder buffer, are checked
     /// against the one nearest in time.
@@ -234,8 +238,8 @@ impl RigTracker {
             clocks: rig.cameras().iter().map(|c| c.clock).collect(),
             newest_single: vec![None; n],
             untaken_single: vec![None; n],
-            restarted_at_s: vec![f64::NEG_INFINITY; n],
-            fused_since_restart: vec![usize::MAX; n],
+            restarts: vec![Restarts::default(); n],
+            agreed_at_rig_s: vec![f64::NEG_INFINITY; n],
             recent_singles: vec![VecDeque::new(); n],
             singles,
             held: Vec::new(),
@@ -304,9 +308,9 @@ impl RigTracker {
     }
 
     /// Restarts camera `camera`'s own tracker from `state` at `t_s` of its clock with `covariance` (a live loop's
-    /// full frame, where the target was found with no prior). Until the fused filter has taken as many of the
-    /// camera's centroids from `t_s` on as the target has points, those its gate rejects do not dispute the fused
-    /// estimate by a run of rejections or by one far beyond the gate. Nothing for a camera the rig does not have.
+    /// full frame, where the target was found with no prior). Until the camera's centroids from `t_s` on have agreed
+    /// with the fused track for a whole cycle in a row, those the fused filter's gate rejects do not dispute the fused
+    /// estimate while another camera's agree with it. Nothing for a camera the rig does not have.
     ///
     /// ```
     /// use roitrack_estimators::rig::{Rig, RigTracker, RigTrackerConfig};
@@ -328,8 +332,7 @@ impl RigTracker {
     ) {
         if let Some(single) = self.singles.get_mut(camera) {
             single.start_from(t_s, state, covariance);
-            self.restarted_at_s[camera] = t_s;
-            self.fused_since_restart[camera] = 0;
+            self.restarts[camera].push(t_s);
         }
     }
 
