@@ -123,9 +123,9 @@ impl LoopBench {
             rois_per_s: best.rois_per_s(),
             latency_p50_us: quantile(&sorted(&p50s), 0.5),
             latency_p99_us: quantile(&sorted(&p99s), 0.5),
-            dropped: best.dropped,
-            late: best.late,
-            rejected: best.rejections.total(),
+            dropped: best.acquisition.dropped,
+            late: best.acquisition.late,
+            rejected: best.acquisition.rejections.total(),
         })
     }
 }

@@ -114,10 +114,10 @@ impl DemoRun {
         };
         format!(
             "{} ROIs, {} rejected, {} dropped, {} init, latency p50/p99 {:.0}/{:.0} us",
-            r.rois,
-            r.rejections.total(),
-            r.dropped,
-            r.initialisations,
+            r.acquisition.rois,
+            r.acquisition.rejections.total(),
+            r.acquisition.dropped,
+            r.acquisition.initialisations,
             r.latency_quantile_us(0.5),
             r.latency_quantile_us(0.99)
         )
@@ -303,7 +303,7 @@ impl Demo {
         };
         if report.estimates.is_empty() {
             return Err(DemoError::NeverStarted {
-                attempts: report.failed_initialisations,
+                attempts: report.acquisition.failed_initialisations,
             });
         }
         let scored = score(&self.run, report.estimates.clone(), report.wall_s)?;

@@ -147,12 +147,12 @@ impl LiveReport {
             r.latency_quantile_us(0.5),
             r.latency_quantile_us(0.99),
             r.estimates.len(),
-            r.measurements,
-            r.rejections.total(),
-            r.initialisations,
-            r.failed_initialisations,
-            r.dropped,
-            r.late,
+            r.acquisition.measurements,
+            r.acquisition.rejections.total(),
+            r.acquisition.initialisations,
+            r.acquisition.failed_initialisations,
+            r.acquisition.dropped,
+            r.acquisition.late,
         );
         let mut text = text;
         if c.retimed > 0 {
@@ -178,7 +178,7 @@ impl LiveReport {
                 (truth - estimate) * 1e6
             ));
         }
-        if let Some(e) = &r.stopped_by {
+        if let Some(e) = &r.acquisition.stopped_by {
             text.push_str(&format!("\nthe run stopped early: {e}"));
         }
         text
@@ -210,8 +210,8 @@ impl LiveReport {
 /// Runs the loop on `camera` for `options.duration_s`: the full-frame start (and re-initialisations), then one ROI a
 /// slot where the tracker predicts each blob. `paced`: slots at their wall-clock times (a real camera); otherwise as
 /// fast as the camera delivers. A camera that stops (disconnected, Ctrl-C) ends the run with the estimates so far
-/// ([`LoopReport::stopped_by`]). `on_estimate` gets each estimate on the loop's estimation thread as it is made (a
-/// live view); it must not block.
+/// ([`roitrack_pipeline::AcquisitionCounts::stopped_by`] of [`LoopReport::acquisition`]). `on_estimate` gets each
+/// estimate on the loop's estimation thread as it is made (a live view); it must not block.
 pub fn run_live(
     camera: &mut GenicamCamera,
     camera_model: &CameraModel,

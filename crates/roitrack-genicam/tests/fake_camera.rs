@@ -91,9 +91,9 @@ fn track_like_the_demo(camera: GenicamOptions, duration_s: f64) -> LiveReport {
         "position RMSE up to {duration_s} s: fake camera {fake_mm:.4} mm ({fake_n} estimates), demo {demo_mm:.4} mm ({demo_n})"
     );
     assert!(
-        report.loop_report.stopped_by.is_none(),
+        report.loop_report.acquisition.stopped_by.is_none(),
         "{:?}",
-        report.loop_report.stopped_by
+        report.loop_report.acquisition.stopped_by
     );
     assert!(
         fake_n as f64 > 0.8 * demo_n as f64,
@@ -390,11 +390,11 @@ fn ctrl_c_stops_cleanly_with_the_estimates_so_far() {
     .unwrap();
     assert!(
         matches!(
-            report.loop_report.stopped_by,
+            report.loop_report.acquisition.stopped_by,
             Some(GrabError::Stopped { .. })
         ),
         "{:?}",
-        report.loop_report.stopped_by
+        report.loop_report.acquisition.stopped_by
     );
     assert!(!report.loop_report.estimates.is_empty());
     assert!(
@@ -429,7 +429,7 @@ fn a_camera_that_disappears_ends_the_run_with_a_clear_error_and_the_estimates_ke
         &mut |_| {},
     )
     .unwrap();
-    let stopped = report.loop_report.stopped_by.clone();
+    let stopped = report.loop_report.acquisition.stopped_by.clone();
     let Some(GrabError::Disconnected { reason }) = stopped else {
         panic!("expected a disconnection, got {stopped:?}");
     };

@@ -37,10 +37,14 @@ fn tracks_orthoglide_from_rendered_rois() {
         ..Default::default()
     };
     let report = run_scenario(&scenario, &mut camera, &config).unwrap();
-    assert_eq!(report.initialisations, 1);
-    assert_eq!(report.dropped, 0);
+    assert_eq!(report.acquisition.initialisations, 1);
+    assert_eq!(report.acquisition.dropped, 0);
     assert_eq!(report.refused, 0);
-    assert!(report.rejections.total() == 0, "{:?}", report.rejections);
+    assert!(
+        report.acquisition.rejections.total() == 0,
+        "{:?}",
+        report.acquisition.rejections
+    );
     assert!(
         report.estimates.len() > 200,
         "{} estimates",
@@ -162,13 +166,13 @@ fn a_failing_camera_is_survived_and_its_end_keeps_the_estimates() {
         ..Default::default()
     };
     let report = run_scenario(&scenario, &mut camera, &config).unwrap();
-    assert_eq!(report.camera_errors, 30, "{report:?}");
+    assert_eq!(report.acquisition.camera_errors, 30, "{report:?}");
     assert!(matches!(
-        report.stopped_by,
+        report.acquisition.stopped_by,
         Some(roitrack_image::GrabError::Disconnected { .. })
     ));
     // Every ROI read before the end was measured and tracked.
-    assert_eq!(report.rois, 1470);
+    assert_eq!(report.acquisition.rois, 1470);
     assert!(report.estimates.len() >= 140, "{}", report.estimates.len());
     assert!(
         report
@@ -204,7 +208,7 @@ fn invalid_loop_options_and_wrong_frames_are_refused() {
     .unwrap();
     assert!(
         matches!(
-            report.stopped_by,
+            report.acquisition.stopped_by,
             Some(roitrack_image::GrabError::FrameSize {
                 width: 1024,
                 expected_width: 640,
@@ -212,7 +216,7 @@ fn invalid_loop_options_and_wrong_frames_are_refused() {
             })
         ),
         "{:?}",
-        report.stopped_by
+        report.acquisition.stopped_by
     );
     assert!(report.estimates.is_empty());
 }
@@ -257,14 +261,15 @@ fn a_paced_loop_that_skips_late_slots_reads_fewer_rois_all_of_the_present() {
         ..Default::default()
     };
     let report = run_scenario(&scenario, &mut camera, &config).unwrap();
+    let counts = &report.acquisition;
     // At most one ROI a millisecond: most slots skipped, counted; every slot accounted for.
     assert!(
-        (report.rois as f64) <= report.wall_s * 1000.0 + 10.0,
+        (counts.rois as f64) <= report.wall_s * 1000.0 + 10.0,
         "{} ROIs in {} s",
-        report.rois,
+        counts.rois,
         report.wall_s
     );
-    assert!(report.skipped > 2 * report.rois, "{report:?}");
-    assert!(report.rois + report.skipped + 4 * report.initialisations >= 12_000 - 4);
+    assert!(counts.skipped > 2 * counts.rois, "{report:?}");
+    assert!(counts.rois + counts.skipped + 4 * counts.initialisations >= 12_000 - 4);
     assert!(report.estimates.len() >= 5, "{report:?}");
 }

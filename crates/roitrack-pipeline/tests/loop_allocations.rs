@@ -66,8 +66,8 @@ fn steady_state_loop_does_not_allocate() {
                 "{name}: {} estimates",
                 report.estimates.len()
             );
-            assert_eq!(report.dropped, 0);
-            counts.push((allocations, report.rois));
+            assert_eq!(report.acquisition.dropped, 0);
+            counts.push((allocations, report.acquisition.rois));
         }
         assert_eq!(
             counts[1].0, counts[2].0,

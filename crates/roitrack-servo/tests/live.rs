@@ -46,19 +46,19 @@ fn the_real_time_loop_tracks_like_the_simulated_time_one() {
         live.ticks,
         live.missed_ticks,
         live.longest_missed_run,
-        live.loop_report.late,
-        live.loop_report.skipped,
+        live.loop_report.acquisition.late,
+        live.loop_report.acquisition.skipped,
         live.start_delay_s,
         live.realtime_priority
     );
     // A loop that skipped most of its ROI slots ran on a machine too busy to hold 1 kHz (other jobs on the two
     // cores): its estimates came at a fraction of the rate the gains assume, and what it did says nothing of the
     // loop. Said, and not judged; on a machine that holds the rate the loop is judged below.
-    let offered = live.loop_report.rois + live.loop_report.skipped;
-    if live.loop_report.skipped as f64 > MAX_SKIPPED_FRACTION * offered as f64 {
+    let offered = live.loop_report.acquisition.rois + live.loop_report.acquisition.skipped;
+    if live.loop_report.acquisition.skipped as f64 > MAX_SKIPPED_FRACTION * offered as f64 {
         eprintln!(
             "NOT CHECKED: the machine did not hold {rate_hz} Hz ({} of {offered} ROI slots skipped)",
-            live.loop_report.skipped
+            live.loop_report.acquisition.skipped
         );
         return;
     }

@@ -74,12 +74,13 @@ fn rms(values: &[f64]) -> f64 {
 
 /// Said and not judged when the machine did not hold the rate (another job on the two cores).
 fn held_the_rate(report: &LiveServoReport, label: &str) -> bool {
-    let offered = report.loop_report.rois + report.loop_report.skipped;
-    let held = report.loop_report.skipped as f64 <= MAX_SKIPPED_FRACTION * offered as f64;
+    let offered = report.loop_report.acquisition.rois + report.loop_report.acquisition.skipped;
+    let held =
+        report.loop_report.acquisition.skipped as f64 <= MAX_SKIPPED_FRACTION * offered as f64;
     if !held {
         eprintln!(
             "NOT CHECKED: the run {label} did not hold 1 kHz ({} of {offered} ROI slots skipped)",
-            report.loop_report.skipped
+            report.loop_report.acquisition.skipped
         );
     }
     held
@@ -100,8 +101,8 @@ fn the_live_tracker_told_the_commanded_acceleration_does_not_lag_the_robot() {
         not_told.servo.stop_reason,
         told.missed_ticks,
         not_told.missed_ticks,
-        told.loop_report.late,
-        not_told.loop_report.late
+        told.loop_report.acquisition.late,
+        not_told.loop_report.acquisition.late
     );
     eprintln!(
         "told: {:.4} mm RMS, velocity error {:.4} m/s RMS in the accelerations ({n_told} estimates), {:.4} in the calm \
@@ -113,8 +114,8 @@ fn the_live_tracker_told_the_commanded_acceleration_does_not_lag_the_robot() {
         told.loop_report.known_accelerations,
         told.loop_report.refused_known_accelerations,
         told.superseded_known_accelerations,
-        told.loop_report.skipped,
-        told.loop_report.rois + told.loop_report.skipped,
+        told.loop_report.acquisition.skipped,
+        told.loop_report.acquisition.rois + told.loop_report.acquisition.skipped,
     );
     eprintln!(
         "not told: {:.4} mm RMS, velocity error {:.4} m/s RMS in the accelerations ({n_not_told} estimates), {:.4} in \
@@ -122,8 +123,8 @@ fn the_live_tracker_told_the_commanded_acceleration_does_not_lag_the_robot() {
         not_told.servo.rms_error_mm,
         accelerating_not_told,
         calm_not_told,
-        not_told.loop_report.skipped,
-        not_told.loop_report.rois + not_told.loop_report.skipped,
+        not_told.loop_report.acquisition.skipped,
+        not_told.loop_report.acquisition.rois + not_told.loop_report.acquisition.skipped,
     );
     // The path is wired whatever the machine: every command's acceleration sent reaches the tracker, in order.
     assert!(told.sent_known_accelerations > 0);

@@ -129,11 +129,11 @@ fn main() -> Result<()> {
     println!(
         "{} ROIs read ({:.0} per second), {} estimates, {} rejected blobs, {} full-frame initialisation(s), median \
          latency {:.1} us",
-        report.rois,
+        report.acquisition.rois,
         report.rois_per_s(),
         report.estimates.len(),
-        report.rejections.total(),
-        report.initialisations,
+        report.acquisition.rejections.total(),
+        report.acquisition.initialisations,
         report.latency_quantile_us(0.5)
     );
     let tracking: Vec<_> = report

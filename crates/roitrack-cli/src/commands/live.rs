@@ -302,7 +302,7 @@ pub fn run(args: &LiveArgs) -> Result<()> {
         args.poses.display(),
         args.twists.display()
     );
-    match &report.loop_report.stopped_by {
+    match &report.loop_report.acquisition.stopped_by {
         Some(roitrack::image::GrabError::Stopped { .. }) => {
             // Stopped by a signal: the run's normal end, its outputs committed.
             crate::signals::acknowledge();
@@ -577,7 +577,7 @@ pub fn bench_fake_camera(duration_s: f64) -> Result<super::lab::bench::FakeCamer
         |_| {},
         &mut |_| {},
     )?;
-    if let Some(e) = &report.loop_report.stopped_by {
+    if let Some(e) = &report.loop_report.acquisition.stopped_by {
         bail!("the fake camera's run stopped early: {e}");
     }
     let (latency_p50_us, latency_p99_us) = report.timestamp_to_estimate_quantiles_us();

@@ -265,10 +265,10 @@ fn print(
             "missed_ticks": live.missed_ticks,
             "missed_ticks_before_start": live.missed_before_start,
             "longest_missed_run_ticks": live.longest_missed_run,
-            "late_roi_slots": loop_report.late,
-            "skipped_roi_slots": loop_report.skipped,
-            "rois": loop_report.rois,
-            "initialisations": loop_report.initialisations,
+            "late_roi_slots": loop_report.acquisition.late,
+            "skipped_roi_slots": loop_report.acquisition.skipped,
+            "rois": loop_report.acquisition.rois,
+            "initialisations": loop_report.acquisition.initialisations,
             "rois_per_s": loop_report.rois_per_s(),
             "estimates_published": live.published,
             "estimates_loop_to_path_s": live.loop_to_path_s,
@@ -329,10 +329,10 @@ fn print(
         } else {
             "refused (ordinary thread)"
         },
-        loop_report.rois,
+        loop_report.acquisition.rois,
         loop_report.rois_per_s(),
-        loop_report.late,
-        loop_report.skipped,
+        loop_report.acquisition.late,
+        loop_report.acquisition.skipped,
         live.published,
         live.start_delay_s
     );

@@ -297,8 +297,8 @@ impl<'a, C: RoiCamera> Acquisition<'a, C> {
     }
 }
 
-/// What the camera side of a loop did (a single camera's are in [`super::LoopReport`]; a rig's, one per camera, in
-/// [`crate::rig_loop::RigLoopReport::cameras`]).
+/// What the camera side of a loop did (a single camera's are in [`super::LoopReport::acquisition`]; a rig's, one per
+/// camera, in [`crate::rig_loop::RigLoopReport::cameras`]).
 ///
 /// ```
 /// let counts = roitrack_pipeline::AcquisitionCounts::default();
@@ -310,20 +310,22 @@ pub struct AcquisitionCounts {
     pub rois: usize,
     /// Centroids sent to the estimator.
     pub measurements: usize,
-    /// ROIs that gave no centroid, by reason; `absent` also counts the slots in which the scheduler placed no ROI.
+    /// ROIs that gave no centroid, by reason; `absent` also counts the slots in which the scheduler placed no ROI
+    /// ([`crate::scheduler::RoiScheduler::next`] gave `None`).
     pub rejections: RejectionCounts,
     /// Measurements lost because the queue was full.
     pub dropped: usize,
-    /// Paced mode: triggers reached more than one period late.
+    /// Paced mode: triggers the camera side reached more than one period late.
     pub late: usize,
-    /// With [`LoopConfig::skip_late_slots`]: slots skipped because they were reached late.
+    /// With [`LoopConfig::skip_late_slots`]: slots skipped because the camera side reached them late.
     pub skipped: usize,
     /// Full-frame (re-)initialisations that found the target and restarted the track.
     pub initialisations: usize,
-    /// Full frames in which the target was not found.
+    /// Full frames in which the target was not found ([`roitrack_detect::matching::find_target`] failed): the loop
+    /// reads another full frame next.
     pub failed_initialisations: usize,
     /// Grabs that failed but may be retried (timeouts, dropped buffers).
     pub camera_errors: usize,
-    /// The camera's end, if it ended before its last slot (disconnected, end of a recording).
+    /// The camera's end, if it ended the run before its last slot (disconnected, end of a recording).
     pub stopped_by: Option<GrabError>,
 }

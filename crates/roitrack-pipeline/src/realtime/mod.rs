@@ -14,7 +14,7 @@ use std::time::Instant;
 
 use roitrack_core::{CameraModel, Measurement, MotionState, Target};
 use roitrack_estimators::{Estimate, Matrix12, Tracker, TrackerConfig};
-use roitrack_image::{CentroidOptions, GrabError, RejectionCounts, RoiCamera};
+use roitrack_image::{CentroidOptions, RoiCamera};
 use thiserror::Error;
 
 use crate::scheduler::{Predictor, SchedulerConfig};
@@ -39,9 +39,9 @@ pub struct LoopConfig {
     /// Wait for each trigger time on the wall clock (a real camera's trigger); otherwise run as fast as possible.
     pub paced: bool,
     /// Paced only: a camera side that finds itself past a slot's period skips to the slot of now (the skipped
-    /// slots counted in [`LoopReport::skipped`]) instead of reading the slots it missed one after the other with
-    /// ROIs of the past; for a loop feeding a controller, where an old ROI is worth less than a fresh one. Default:
-    /// false (every slot read).
+    /// slots counted in [`AcquisitionCounts::skipped`]) instead of reading the slots it missed one after the other
+    /// with ROIs of the past; for a loop feeding a controller, where an old ROI is worth less than a fresh one.
+    /// Default: false (every slot read).
     pub skip_late_slots: bool,
     /// Number of ROI slots to run.
     pub roi_slots: usize,
@@ -137,23 +137,9 @@ pub struct LoopReport {
     pub estimates: Vec<Estimate>,
     /// Per estimate: wall time from the grab of the ROI that completed it to the estimate (µs).
     pub latencies_us: Vec<f64>,
-    /// ROIs read.
-    pub rois: usize,
-    /// Centroids sent to the estimator.
-    pub measurements: usize,
-    /// ROIs that gave no centroid, by reason; `absent` also counts the slots in which the scheduler placed no ROI
-    /// ([`crate::scheduler::RoiScheduler::next`] gave `None`).
-    pub rejections: RejectionCounts,
-    /// Measurements lost because the queue was full.
-    pub dropped: usize,
-    /// Paced mode: triggers the camera side reached more than one period late.
-    pub late: usize,
-    /// With [`LoopConfig::skip_late_slots`]: slots skipped because the camera side reached them late.
-    pub skipped: usize,
-    /// Full-frame (re-)initialisations that found the target and restarted the track.
-    pub initialisations: usize,
-    /// Full frames in which the target was not found ([`roitrack_detect::matching::find_target`] failed): the loop reads another full frame next.
-    pub failed_initialisations: usize,
+    /// What the camera side did: the ROIs read, the measurements queued, the rejections, the initialisations, the
+    /// camera's errors and end.
+    pub acquisition: AcquisitionCounts,
     /// Measurements the tracker refused (none expected).
     pub refused: usize,
     /// Known accelerations the tracker was told ([`LoopHooks::known_acceleration`]).
@@ -161,10 +147,6 @@ pub struct LoopReport {
     /// Known accelerations the tracker refused: out of time order, not finite, too many ahead of the measurements, or
     /// an estimator that takes none ([`roitrack_estimators::KnownAccelerationError`]).
     pub refused_known_accelerations: usize,
-    /// Grabs that failed but may be retried (timeouts, dropped buffers).
-    pub camera_errors: usize,
-    /// The camera's end, if it ended the run before its last slot (disconnected, end of a recording).
-    pub stopped_by: Option<GrabError>,
     /// Wall time of the whole run (s).
     pub wall_s: f64,
     /// With [`LoopConfig::keep_measurements`]: the measurements handed to the estimator, in order (else empty).
@@ -174,7 +156,7 @@ pub struct LoopReport {
 impl LoopReport {
     /// ROIs read per second of wall time.
     pub fn rois_per_s(&self) -> f64 {
-        self.rois as f64 / self.wall_s.max(1e-12)
+        self.acquisition.rois as f64 / self.wall_s.max(1e-12)
     }
 
     /// The `q` quantile (nearest rank, 0 to 1) of the ROI-to-estimate latencies (µs); NaN without estimates.
@@ -184,7 +166,7 @@ impl LoopReport {
 }
 
 /// Why the real-time loop did not run, or ended without a report. A camera that fails or ends is not an error
-/// ([`LoopReport::stopped_by`]).
+/// ([`AcquisitionCounts::stopped_by`]).
 ///
 /// ```
 /// use roitrack_pipeline::{LoopConfig, PipelineError};
@@ -278,8 +260,8 @@ pub(crate) fn backoff(spins: &mut u32) {
 
 /// Runs the loop: `camera` on the acquisition thread (the calling one), a [`Tracker`] on the estimation thread. It
 /// starts with a full frame (the target found with no prior), then reads `config.roi_slots` ROI slots; a camera that
-/// ends early ends the run ([`LoopReport::stopped_by`]). The camera is borrowed: it is the caller's again after the
-/// run.
+/// ends early ends the run ([`AcquisitionCounts::stopped_by`]). The camera is borrowed: it is the caller's again
+/// after the run.
 ///
 /// ```
 /// use roitrack_estimators::TrackerConfig;
@@ -291,8 +273,8 @@ pub(crate) fn backoff(spins: &mut u32) {
 /// let config = LoopConfig { roi_slots: 800, ..LoopConfig::default() };
 /// let report =
 ///     run_loop(&mut camera, &scenario.camera, &scenario.target, TrackerConfig::default(), &config).unwrap();
-/// assert_eq!(report.initialisations, 1);
-/// assert!(report.estimates.len() > 60 && report.stopped_by.is_none());
+/// assert_eq!(report.acquisition.initialisations, 1);
+/// assert!(report.estimates.len() > 60 && report.acquisition.stopped_by.is_none());
 /// ```
 pub fn run_loop<C: RoiCamera>(
     camera: &mut C,
@@ -492,19 +474,10 @@ impl LoopReport {
         Self {
             estimates: estimation_side.estimates,
             latencies_us: estimation_side.latencies_us,
-            rois: camera_side.rois,
-            measurements: camera_side.measurements,
-            rejections: camera_side.rejections,
-            dropped: camera_side.dropped,
-            late: camera_side.late,
-            skipped: camera_side.skipped,
-            initialisations: camera_side.initialisations,
-            failed_initialisations: camera_side.failed_initialisations,
+            acquisition: camera_side,
             refused: estimation_side.refused,
             known_accelerations: estimation_side.known_accelerations,
             refused_known_accelerations: estimation_side.refused_known_accelerations,
-            camera_errors: camera_side.camera_errors,
-            stopped_by: camera_side.stopped_by,
             wall_s,
             measured: estimation_side.measured,
         }

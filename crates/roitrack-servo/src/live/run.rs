@@ -115,9 +115,10 @@ pub fn run_live_servo_simulated_with_sink(
 /// [`crate::run_servo`]), or if no estimate comes within [`LiveOptions::start_timeout_s`].
 ///
 /// A rate the machine cannot hold is run, not refused: deadline misses ([`LiveServoReport::missed_ticks`]) and late
-/// ROI slots ([`LoopReport::late`]) are counted.
+/// ROI slots ([`AcquisitionCounts::late`] of [`LoopReport::acquisition`]) are counted.
 ///
-/// [`LoopReport::late`]: roitrack_pipeline::LoopReport::late
+/// [`AcquisitionCounts::late`]: roitrack_pipeline::AcquisitionCounts::late
+/// [`LoopReport::acquisition`]: roitrack_pipeline::LoopReport::acquisition
 ///
 /// ```no_run
 /// use roitrack_sim::{RoiRenderer, SensorModel, SimulatedCamera};
