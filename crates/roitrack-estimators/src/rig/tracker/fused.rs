@@ -2,12 +2,12 @@
 //! and drift, started from a camera's own track, updated by every centroid at its own rig time through its
 //! camera's projection, its process noise adapted as the single-camera filter's.
 
-use nalgebra::{DMatrix, Vector2, Vector3};
-use roitrack_core::{Measurement, MotionState, Vector12};
+use nalgebra::{DMatrix, Matrix2, Vector2, Vector3};
+use roitrack_core::{Matrix2x12, Measurement, MotionState, Vector12};
 
 use super::RigTracker;
 use super::estimate::CROSS_CHECK_SPAN_S;
-use crate::rig::rig_projection;
+use crate::rig::{RigProjection, rig_projection};
 use crate::{KalmanTuning, Matrix12};
 
 /// Gated measurements in a row, per target point, after which the fused track is lost.
@@ -116,7 +116,8 @@ impl RigTracker {
         self.report.starts += 1;
     }
 
-    /// One update of the fused filter with a centroid of camera `c` (already checked by its own tracker).
+    /// One update of the fused filter with a centroid of camera `c` (already checked by its own tracker): predicted
+    /// to its rig time, projected through its camera, gated, and taken in.
     pub(super) fn fuse(&mut self, c: usize, m: &Measurement) {
         let camera = &self.rig.cameras()[c];
         let Some(point_index) = self.target.index_of(m.id) else {
@@ -149,9 +150,115 @@ impl RigTracker {
         ) else {
             return;
         };
-        // H is the state's 12 columns and at most two clock columns: P Hᵀ by those columns of P, into the filter's
-        // own scratch (no allocation per measurement).
-        let n = f.p.nrows();
+        let hph_t = f.load_ph_t(&projected, offset_index, drift_index);
+        let innovation = ideal_px - projected.pixel;
+        let noise2 = self.noise_px[c] * self.noise_px[c];
+        let Some(s_inv) = innovation_inverse(&hph_t, noise2) else {
+            return;
+        };
+        let nis = (innovation.transpose() * s_inv * innovation)[0];
+        if !nis.is_finite() {
+            return;
+        }
+        f.sum_squares_px2 += innovation.norm_squared();
+        f.count += 1;
+        f.newest_nis = nis;
+        self.report.fused += 1;
+        self.since_estimate += 1;
+        let persistence = f.persistence(&projected.jacobian, &innovation, &s_inv);
+        let settling = self.restarts[c].settling(m.t_s, self.target.len());
+        let accepted = nis <= tuning.gate_sigma * tuning.gate_sigma;
+        self.restarts[c].judged(accepted);
+        if !accepted {
+            self.rejected(c, t_rig_s, settling);
+            return;
+        }
+        f.gated_in_a_row = 0;
+        f.newest_gated = false;
+        if !settling {
+            self.agreed_at_rig_s[c] = t_rig_s;
+        }
+        self.camera_counts[c].fused += 1;
+        self.camera_counts[c].gated_in_a_row = 0;
+        // Huber: beyond `huber_sigma`, the noise is inflated in proportion to the distance.
+        let distance = nis.sqrt();
+        let s_inv = if distance > tuning.huber_sigma {
+            match innovation_inverse(&hph_t, noise2 * distance / tuning.huber_sigma) {
+                Some(inverse) => inverse,
+                None => return,
+            }
+        } else {
+            s_inv
+        };
+        let Some((delta, clock_corrections)) =
+            f.correct(&innovation, &s_inv, offset_index, drift_index)
+        else {
+            return;
+        };
+        self.clocks[c].offset_s += clock_corrections[0];
+        self.clocks[c].drift_ppm += clock_corrections[1];
+        f.adapt(&tuning, persistence, &delta);
+    }
+
+    /// A centroid of camera `c` at `t_rig_s` that the fused filter's gate rejected. A settling camera's rejection,
+    /// while another camera's centroids agree with the track, tells against that camera (`RigTracker::restarts`);
+    /// any other counts against the track: a run of them loses it, and a run from one camera searches its clock
+    /// again (the first camera's: the fused track is started again from its own).
+    fn rejected(&mut self, c: usize, t_rig_s: f64, settling: bool) {
+        self.report.gated += 1;
+        self.camera_counts[c].gated += 1;
+        let others_agree = (0..self.rig.len())
+            .any(|k| k != c && t_rig_s - self.agreed_at_rig_s[k] <= CROSS_CHECK_SPAN_S);
+        if settling && others_agree {
+            return;
+        }
+        let Some(f) = self.fused.as_mut() else {
+            return;
+        };
+        f.gated_since_estimate += 1;
+        f.gated_in_a_row += 1;
+        f.newest_gated = true;
+        self.camera_counts[c].gated_in_a_row += 1;
+        let n = self.target.len();
+        if f.gated_in_a_row >= LOST_AFTER_GATED_CYCLES * n {
+            self.fused = None;
+        } else if self.camera_counts[c].gated_in_a_row >= CAMERA_GATED_CYCLES * n {
+            self.camera_counts[c].gated_in_a_row = 0;
+            if c == 0 {
+                // The first camera, which holds the rig's clock, no longer agrees with the fused track: the other
+                // clocks have carried it away. Started again from the first camera's own track, every clock kept
+                // but as uncertain as after its search.
+                self.fused = None;
+                self.start_fused();
+            } else {
+                self.resync(c);
+            }
+        }
+    }
+}
+
+/// `S⁻¹` of a centroid's innovation, `S = H P Hᵀ + noise² I` (px²).
+fn innovation_inverse(hph_t: &Matrix2<f64>, noise2_px2: f64) -> Option<Matrix2<f64>> {
+    (hph_t + Matrix2::identity() * noise2_px2).try_inverse()
+}
+
+/// The broad prior of a track with no covariance: 1 cm, 0.1 rad, 1 m/s, 10 rad/s.
+pub(super) fn broad_prior() -> Matrix12 {
+    let sigmas = [
+        1e-2, 1e-2, 1e-2, 0.1, 0.1, 0.1, 1.0, 1.0, 1.0, 10.0, 10.0, 10.0,
+    ];
+    Matrix12::from_diagonal(&Vector12::from_fn(|i, _| sigmas[i] * sigmas[i]))
+}
+
+impl Fused {
+    /// `P Hᵀ` into the filter's scratch for a centroid's projection (H: the state's 12 columns and the camera's clock
+    /// columns, by those columns of P, no allocation per measurement); returns `H P Hᵀ`.
+    fn load_ph_t(
+        &mut self,
+        projected: &RigProjection,
+        offset_index: Option<usize>,
+        drift_index: Option<usize>,
+    ) -> Matrix2<f64> {
         let mut columns = [(0usize, Vector2::zeros()); 14];
         for (k, column) in columns.iter_mut().take(12).enumerate() {
             *column = (k, projected.jacobian.column(k).into_owned());
@@ -167,49 +274,37 @@ impl RigTracker {
             }
         }
         let columns = &columns[..used];
-        f.ph_t.clear();
-        f.ph_t.resize(n, [0.0; 2]);
+        self.ph_t.clear();
+        self.ph_t.resize(self.p.nrows(), [0.0; 2]);
         for &(j, h) in columns {
-            for (row, entry) in f.ph_t.iter_mut().zip(f.p.column(j).iter()) {
+            for (row, entry) in self.ph_t.iter_mut().zip(self.p.column(j).iter()) {
                 row[0] += entry * h[0];
                 row[1] += entry * h[1];
             }
         }
-        let mut hph_t = nalgebra::Matrix2::zeros();
+        let mut hph_t = Matrix2::zeros();
         for &(j, h) in columns {
             for r in 0..2 {
-                hph_t[(0, r)] += h[0] * f.ph_t[j][r];
-                hph_t[(1, r)] += h[1] * f.ph_t[j][r];
+                hph_t[(0, r)] += h[0] * self.ph_t[j][r];
+                hph_t[(1, r)] += h[1] * self.ph_t[j][r];
             }
         }
-        let innovation = ideal_px - projected.pixel;
-        let noise2 = self.noise_px[c] * self.noise_px[c];
-        let s = nalgebra::Matrix2::new(
-            hph_t[(0, 0)] + noise2,
-            hph_t[(0, 1)],
-            hph_t[(1, 0)],
-            hph_t[(1, 1)] + noise2,
-        );
-        let Some(s_inv) = s.try_inverse() else {
-            return;
-        };
-        let nis = (innovation.transpose() * s_inv * innovation)[0];
-        if !nis.is_finite() {
-            return;
-        }
-        f.sum_squares_px2 += innovation.norm_squared();
-        f.count += 1;
-        f.newest_nis = nis;
-        self.report.fused += 1;
-        self.since_estimate += 1;
-        // Persistence of the innovation along the displacement the recent corrections predict (the single-camera
-        // filter's adaptation of the process noise).
-        let h12 = projected.jacobian;
+        hph_t
+    }
+
+    /// Persistence of the innovation along the displacement the recent corrections predict, translational and
+    /// rotational (the single-camera filter's adaptation of the process noise).
+    fn persistence(
+        &self,
+        h12: &Matrix2x12,
+        innovation: &Vector2<f64>,
+        s_inv: &Matrix2<f64>,
+    ) -> [f64; 2] {
         let mut persistence = [0.0; 2];
         for (part, rows) in [(0, [0, 6]), (1, [3, 9])] {
             let expected: Vector2<f64> = rows
                 .iter()
-                .map(|&r| h12.fixed_columns::<3>(r) * f.trend.fixed_rows::<3>(r))
+                .map(|&r| h12.fixed_columns::<3>(r) * self.trend.fixed_rows::<3>(r))
                 .sum();
             let spread2 = (expected.transpose() * s_inv * expected)[0];
             persistence[part] = if spread2 > 0.0 {
@@ -218,68 +313,23 @@ impl RigTracker {
                 0.0
             };
         }
-        let settling = self.restarts[c].settling(m.t_s, self.target.len());
-        let accepted = nis <= tuning.gate_sigma * tuning.gate_sigma;
-        self.restarts[c].judged(accepted);
-        if !accepted {
-            self.report.gated += 1;
-            self.camera_counts[c].gated += 1;
-            // A settling camera's rejection, while another camera's centroids agree with the track, tells against
-            // that camera (`RigTracker::restarts`).
-            let others_agree = (0..self.rig.len())
-                .any(|k| k != c && t_rig_s - self.agreed_at_rig_s[k] <= CROSS_CHECK_SPAN_S);
-            if settling && others_agree {
-                return;
-            }
-            f.gated_since_estimate += 1;
-            f.gated_in_a_row += 1;
-            f.newest_gated = true;
-            self.camera_counts[c].gated_in_a_row += 1;
-            let n = self.target.len();
-            if f.gated_in_a_row >= LOST_AFTER_GATED_CYCLES * n {
-                self.fused = None;
-            } else if self.camera_counts[c].gated_in_a_row >= CAMERA_GATED_CYCLES * n {
-                self.camera_counts[c].gated_in_a_row = 0;
-                if c == 0 {
-                    // The first camera, which holds the rig's clock, no longer agrees with the fused track: the other
-                    // clocks have carried it away. Started again from the first camera's own track, every clock
-                    // kept but as uncertain as after its search.
-                    self.fused = None;
-                    self.start_fused();
-                } else {
-                    self.resync(c);
-                }
-            }
-            return;
-        }
-        f.gated_in_a_row = 0;
-        f.newest_gated = false;
-        if !settling {
-            self.agreed_at_rig_s[c] = t_rig_s;
-        }
-        self.camera_counts[c].fused += 1;
-        self.camera_counts[c].gated_in_a_row = 0;
-        // Huber: beyond `huber_sigma`, the noise is inflated in proportion to the distance.
-        let distance = nis.sqrt();
-        let s_inv = if distance > tuning.huber_sigma {
-            let inflated = noise2 * distance / tuning.huber_sigma;
-            let s = nalgebra::Matrix2::new(
-                hph_t[(0, 0)] + inflated,
-                hph_t[(0, 1)],
-                hph_t[(1, 0)],
-                hph_t[(1, 1)] + inflated,
-            );
-            match s.try_inverse() {
-                Some(inv) => inv,
-                None => return,
-            }
-        } else {
-            s_inv
-        };
-        // K = P Hᵀ S⁻¹, the correction K r, and P - K (P Hᵀ)ᵀ as a rank-2 downdate in place.
-        let gain: &mut Vec<[f64; 2]> = &mut f.gain;
+        persistence
+    }
+
+    /// Takes in an accepted centroid with the `P Hᵀ` of [`Self::load_ph_t`]: `K = P Hᵀ S⁻¹`, the state corrected by
+    /// `K r`, and `P - K (P Hᵀ)ᵀ` as a rank-2 downdate in place. Returns the state's correction and the camera's clock
+    /// corrections (offset in s, drift in ppm; 0 for a clock not estimated); `None`, and nothing changed, if the
+    /// corrected state is not finite.
+    fn correct(
+        &mut self,
+        innovation: &Vector2<f64>,
+        s_inv: &Matrix2<f64>,
+        offset_index: Option<usize>,
+        drift_index: Option<usize>,
+    ) -> Option<(Vector12, [f64; 2])> {
+        let gain: &mut Vec<[f64; 2]> = &mut self.gain;
         gain.clear();
-        gain.extend(f.ph_t.iter().map(|row| {
+        gain.extend(self.ph_t.iter().map(|row| {
             [
                 row[0] * s_inv[(0, 0)] + row[1] * s_inv[(1, 0)],
                 row[0] * s_inv[(0, 1)] + row[1] * s_inv[(1, 1)],
@@ -287,55 +337,47 @@ impl RigTracker {
         }));
         let correction = |i: usize| gain[i][0] * innovation[0] + gain[i][1] * innovation[1];
         let delta = Vector12::from_fn(|i, _| correction(i));
-        let corrected = f.state.corrected(&delta);
+        let corrected = self.state.corrected(&delta);
         if !corrected.is_finite() {
-            return;
+            return None;
         }
-        f.state = corrected;
-        if let Some(i) = offset_index {
-            self.clocks[c].offset_s += correction(i);
-        }
-        if let Some(j) = drift_index {
-            self.clocks[c].drift_ppm += correction(j);
-        }
-        for (j, mut column) in f.p.column_iter_mut().enumerate() {
-            let (a, b) = (f.ph_t[j][0], f.ph_t[j][1]);
+        self.state = corrected;
+        let clock_corrections = [offset_index, drift_index].map(|i| i.map_or(0.0, correction));
+        for (j, mut column) in self.p.column_iter_mut().enumerate() {
+            let (a, b) = (self.ph_t[j][0], self.ph_t[j][1]);
             for (entry, k) in column.iter_mut().zip(gain.iter()) {
                 *entry -= k[0] * a + k[1] * b;
             }
         }
-        f.updates += 1;
-        if f.updates.is_multiple_of(SYMMETRISE_EVERY_UPDATES) {
+        self.updates += 1;
+        if self.updates.is_multiple_of(SYMMETRISE_EVERY_UPDATES) {
+            let n = self.p.nrows();
             for i in 0..n {
                 for j in i + 1..n {
-                    let mean = 0.5 * (f.p[(i, j)] + f.p[(j, i)]);
-                    f.p[(i, j)] = mean;
-                    f.p[(j, i)] = mean;
+                    let mean = 0.5 * (self.p[(i, j)] + self.p[(j, i)]);
+                    self.p[(i, j)] = mean;
+                    self.p[(j, i)] = mean;
                 }
             }
         }
+        Some((delta, clock_corrections))
+    }
+
+    /// After an update: the process noise's scales moved by the innovation's `persistence` (if adapted), and the
+    /// trend of the corrections followed by `delta`.
+    fn adapt(&mut self, tuning: &KalmanTuning, persistence: [f64; 2], delta: &Vector12) {
         if tuning.adapt_motion {
-            for (scale, z) in f.process_log_scale.iter_mut().zip(persistence) {
+            for (scale, z) in self.process_log_scale.iter_mut().zip(persistence) {
                 *scale = (*scale + PROCESS_ADAPTATION_RATE * z.clamp(-3.0, 3.0))
                     .clamp(PROCESS_SCALE_RANGE.0.ln(), PROCESS_SCALE_RANGE.1.ln());
             }
         }
-        let rates = f.trend_rates();
-        for (row, (trend, correction)) in f.trend.iter_mut().zip(&delta).enumerate() {
+        let rates = self.trend_rates();
+        for (row, (trend, correction)) in self.trend.iter_mut().zip(delta).enumerate() {
             *trend += (correction - *trend) * rates[usize::from(row % 6 >= 3)];
         }
     }
-}
 
-/// The broad prior of a track with no covariance: 1 cm, 0.1 rad, 1 m/s, 10 rad/s.
-pub(super) fn broad_prior() -> Matrix12 {
-    let sigmas = [
-        1e-2, 1e-2, 1e-2, 0.1, 0.1, 0.1, 1.0, 1.0, 1.0, 10.0, 10.0, 10.0,
-    ];
-    Matrix12::from_diagonal(&Vector12::from_fn(|i, _| sigmas[i] * sigmas[i]))
-}
-
-impl Fused {
     /// Moves the state `dt_s` ahead (or back) under its constant twist and grows the covariance.
     pub(super) fn predict(&mut self, dt_s: f64, tuning: &KalmanTuning) {
         if dt_s == 0.0 {
