@@ -5,11 +5,11 @@ use std::cmp::Reverse;
 
 use nalgebra::{Matrix6, Vector2, Vector3, Vector6};
 use roitrack_core::stats::chi2_upper_0_1_percent;
-use roitrack_core::{Measurement, Vector12};
+use roitrack_core::{Measurement, MotionState, SpatioTemporalModel, Vector12};
 
 use super::{Pending, RigTracker};
 use crate::kalman::pose_matching_scale;
-use crate::rig::rig_projection;
+use crate::rig::{CameraMount, ClockModel, rig_projection};
 
 /// Gauss-Newton steps of an instant's pose fit ([`RigTracker::match_instant`]): from a prediction millimetres off,
 /// the third step moves the pose by nanometres.
@@ -67,48 +67,21 @@ impl RigTracker {
                 Some((self.target.points()[index].point_in_obj_m, ideal_px, m.t_s))
             })
             .collect();
-        // The pose alone fitted to the blobs, from the prediction: a few Gauss-Newton steps (each a correction on the
-        // left, as the filter's), the sum of the steps its move `x`.
-        let mut fitted = f.state;
-        let mut x = Vector6::zeros();
-        let mut fit_covariance = Matrix6::zeros();
-        // The blobs' squared residuals at the last linearisation, for the estimate's residual RMS as blob-by-blob
-        // updates add theirs.
-        let mut sum_squares_px2 = 0.0;
-        for _ in 0..POSE_FIT_ITERATIONS {
-            let (mut information, mut gradient) = (Matrix6::zeros(), Vector6::zeros());
-            sum_squares_px2 = 0.0;
-            for (point, ideal_px, t_s) in &points {
-                let Some(projected) = rig_projection(
-                    &self.models[c],
-                    &camera.mount,
-                    &clock,
-                    &fitted,
-                    point,
-                    *t_s,
-                    f.t_s,
-                ) else {
-                    continue;
-                };
-                let j = projected.jacobian.fixed_view::<2, 6>(0, 0).into_owned();
-                let residual_px = ideal_px - projected.pixel;
-                sum_squares_px2 += residual_px.norm_squared();
-                information += j.transpose() * j / noise2;
-                gradient += j.transpose() * residual_px / noise2;
-            }
-            let Some(covariance) = information.try_inverse() else {
-                return false;
-            };
-            let step = covariance * gradient;
-            let mut delta = Vector12::zeros();
-            delta.fixed_rows_mut::<6>(0).copy_from(&step);
-            fitted = fitted.corrected(&delta);
-            x += step;
-            fit_covariance = covariance;
-            if !x.iter().all(|v| v.is_finite()) {
-                return false;
-            }
-        }
+        let instant = InstantView {
+            model: &self.models[c],
+            mount: &camera.mount,
+            clock: &clock,
+            t_ref_s: f.t_s,
+            noise2_px2: noise2,
+        };
+        let Some(PoseFit {
+            x,
+            covariance: fit_covariance,
+            sum_squares_px2,
+        }) = instant.fit_pose(&f.state, &points)
+        else {
+            return false;
+        };
         let pose = f.p.fixed_view::<6, 6>(0, 0).into_owned();
         let Some(alpha) =
             pose_matching_scale(&pose, &fit_covariance, &x, chi2_upper_0_1_percent(6.0))
@@ -160,5 +133,79 @@ impl RigTracker {
         self.camera_counts[c].gated_in_a_row = 0;
         self.since_estimate += taken;
         true
+    }
+}
+
+/// One camera's view of an instant, for the pose fit: its projection, mount and clock, the fused filter's time and
+/// the camera's centroid variance (px²).
+struct InstantView<'a> {
+    model: &'a SpatioTemporalModel,
+    mount: &'a CameraMount,
+    clock: &'a ClockModel,
+    t_ref_s: f64,
+    noise2_px2: f64,
+}
+
+/// The pose alone fitted to an instant's blobs ([`InstantView::fit_pose`]).
+struct PoseFit {
+    /// The fit's move of the pose from the prediction (the sum of its steps, each a correction on the left).
+    x: Vector6<f64>,
+    /// Its covariance, `(Σ Jᵢᵀ Jᵢ / σ²)⁻¹`.
+    covariance: Matrix6<f64>,
+    /// The blobs' squared residuals at the last linearisation (px²).
+    sum_squares_px2: f64,
+}
+
+impl InstantView<'_> {
+    /// The pose alone fitted to `points` (model point, ideal pixel, camera time) from `predicted`: a few
+    /// Gauss-Newton steps, each a correction on the left as the filter's. `None` if the fit is singular or runs away.
+    fn fit_pose(
+        &self,
+        predicted: &MotionState,
+        points: &[(Vector3<f64>, Vector2<f64>, f64)],
+    ) -> Option<PoseFit> {
+        let mut fitted = *predicted;
+        let mut x = Vector6::zeros();
+        let mut fit_covariance = Matrix6::zeros();
+        // The blobs' squared residuals at the last linearisation, for the estimate's residual RMS as blob-by-blob
+        // updates add theirs.
+        let mut sum_squares_px2 = 0.0;
+        for _ in 0..POSE_FIT_ITERATIONS {
+            let (mut information, mut gradient) = (Matrix6::zeros(), Vector6::zeros());
+            sum_squares_px2 = 0.0;
+            for (point, ideal_px, t_s) in points {
+                let Some(projected) = rig_projection(
+                    self.model,
+                    self.mount,
+                    self.clock,
+                    &fitted,
+                    point,
+                    *t_s,
+                    self.t_ref_s,
+                ) else {
+                    continue;
+                };
+                let j = projected.jacobian.fixed_view::<2, 6>(0, 0).into_owned();
+                let residual_px = ideal_px - projected.pixel;
+                sum_squares_px2 += residual_px.norm_squared();
+                information += j.transpose() * j / self.noise2_px2;
+                gradient += j.transpose() * residual_px / self.noise2_px2;
+            }
+            let covariance = information.try_inverse()?;
+            let step = covariance * gradient;
+            let mut delta = Vector12::zeros();
+            delta.fixed_rows_mut::<6>(0).copy_from(&step);
+            fitted = fitted.corrected(&delta);
+            x += step;
+            fit_covariance = covariance;
+            if !x.iter().all(|v| v.is_finite()) {
+                return None;
+            }
+        }
+        Some(PoseFit {
+            x,
+            covariance: fit_covariance,
+            sum_squares_px2,
+        })
     }
 }
