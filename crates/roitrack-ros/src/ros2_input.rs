@@ -175,6 +175,68 @@ fn subscribe(
     Ok((full, participant, reader))
 }
 
+/// A subscriber's reader and what it keeps of the messages it takes, with when it stops: when `stop` is raised, or
+/// when no message has come for `idle` after the first one.
+struct Subscription {
+    reader: no_key::SimpleDataReader<RawMessage, RawAdapter>,
+    // Kept alive with the reader.
+    _participant: rustdds::DomainParticipant,
+    intake: Intake,
+    stop: Arc<AtomicBool>,
+    idle: Duration,
+    last_message: Option<Instant>,
+}
+
+impl Subscription {
+    /// Subscribes to `topic` (in the namespace of `options`) of type `full_type` ([`subscribe`]).
+    fn start(
+        options: &Ros2Options,
+        topic: &str,
+        full_type: &str,
+        qos: &QosProfile,
+        stop: Arc<AtomicBool>,
+        idle: Duration,
+    ) -> Result<Self, Ros2Error> {
+        let (full, participant, reader) = subscribe(options, topic, full_type, qos)?;
+        Ok(Self {
+            reader,
+            _participant: participant,
+            intake: Intake::new(full),
+            stop,
+            idle,
+            last_message: None,
+        })
+    }
+
+    /// The next message DDS hands over (not yet counted as taken); blocks until one comes, `None` when `stop` is
+    /// raised or no message came for `idle`.
+    fn next_message(&mut self) -> Option<RawMessage> {
+        loop {
+            if self.stop.load(Ordering::Relaxed) {
+                return None;
+            }
+            match self.reader.try_take_one() {
+                Ok(Some(change)) => {
+                    self.last_message = Some(Instant::now());
+                    return Some(change.into_value());
+                }
+                Err(e) => {
+                    // A sample DDS could not hand over (an encoding no adapter takes, ...): counted and named too.
+                    let index = self.intake.take();
+                    self.intake
+                        .left_out(index, LeftOut::Malformed, format!("not taken: {e}"));
+                }
+                Ok(None) => {
+                    if self.last_message.is_some_and(|t| t.elapsed() >= self.idle) {
+                        return None;
+                    }
+                    std::thread::sleep(POLL);
+                }
+            }
+        }
+    }
+}
+
 /// The centroids of a `roitrack_msgs/msg/BlobMeasurements` topic on the ROS 2 DDS bus, as an iterator of
 /// [`Measurement`]s in the order they come (each at `header.stamp + dt_s`), blocking until the next one; it ends when
 /// `stop` is raised, or when no message has come for `idle` after the first one.
@@ -205,23 +267,17 @@ fn subscribe(
 /// println!("{} malformed messages: {:?}", centroids.report().malformed, centroids.report().reasons);
 /// ```
 pub struct MeasurementSubscriber {
-    reader: no_key::SimpleDataReader<RawMessage, RawAdapter>,
-    // Kept alive with the reader.
-    _participant: rustdds::DomainParticipant,
-    intake: Intake,
+    subscription: Subscription,
     checks: MeasurementChecks,
     pending: VecDeque<Measurement>,
     decoded: VecDeque<Measurement>,
-    stop: Arc<AtomicBool>,
-    idle: Duration,
-    last_message: Option<Instant>,
 }
 
 impl std::fmt::Debug for MeasurementSubscriber {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("MeasurementSubscriber")
-            .field("topic", &self.intake.topic)
-            .field("report", &self.intake.report)
+            .field("topic", &self.subscription.intake.topic)
+            .field("report", &self.subscription.intake.report)
             .finish_non_exhaustive()
     }
 }
@@ -239,46 +295,40 @@ impl MeasurementSubscriber {
         let qos = QosProfile::subscription_default()
             .reliability_reliable(ros2_client::qos::WhenFull::Fail)
             .history(History::KeepLast { depth: DEPTH });
-        let (full, participant, reader) = subscribe(options, topic, BLOB_MEASUREMENTS, &qos)?;
         Ok(Self {
-            reader,
-            _participant: participant,
-            intake: Intake::new(full),
+            subscription: Subscription::start(options, topic, BLOB_MEASUREMENTS, &qos, stop, idle)?,
             checks,
             pending: Default::default(),
             decoded: Default::default(),
-            stop,
-            idle,
-            last_message: None,
         })
     }
 
     /// The topic subscribed to (with its namespace).
     pub fn topic(&self) -> &str {
-        &self.intake.topic
+        &self.subscription.intake.topic
     }
 
     /// What was received so far.
     pub fn report(&self) -> &SubscriberReport {
-        &self.intake.report
+        &self.subscription.intake.report
     }
 
     /// The messages taken and those left out by reason, as they are counted (for the status:
     /// [`Ros2Publisher::start_counting_inputs`](crate::ros2::Ros2Publisher::start_counting_inputs)).
     pub fn counts(&self) -> Arc<InputCounts> {
-        Arc::clone(&self.intake.counts)
+        Arc::clone(&self.subscription.intake.counts)
     }
 
     /// Decodes and checks one message whole; its centroids to `pending`, or the reason it is left out.
     fn take_message(&mut self, message: RawMessage) {
-        let index = self.intake.take();
+        let index = self.subscription.intake.take();
         match checked_message(&self.checks, &message, &mut self.decoded) {
             Ok(checks) => {
                 self.checks = checks;
-                self.intake.report.measurements += self.decoded.len() as u64;
+                self.subscription.intake.report.measurements += self.decoded.len() as u64;
                 self.pending.extend(self.decoded.drain(..));
             }
-            Err((why, reason)) => self.intake.left_out(index, why, reason),
+            Err((why, reason)) => self.subscription.intake.left_out(index, why, reason),
         }
     }
 }
@@ -421,27 +471,8 @@ impl Iterator for MeasurementSubscriber {
             if let Some(m) = self.pending.pop_front() {
                 return Some(Ok(m));
             }
-            if self.stop.load(Ordering::Relaxed) {
-                return None;
-            }
-            match self.reader.try_take_one() {
-                Ok(Some(change)) => {
-                    self.last_message = Some(Instant::now());
-                    self.take_message(change.into_value());
-                }
-                Err(e) => {
-                    // A sample DDS could not hand over (an encoding no adapter takes, ...): counted and named too.
-                    let index = self.intake.take();
-                    self.intake
-                        .left_out(index, LeftOut::Malformed, format!("not taken: {e}"));
-                }
-                Ok(None) => {
-                    if self.last_message.is_some_and(|t| t.elapsed() >= self.idle) {
-                        return None;
-                    }
-                    std::thread::sleep(POLL);
-                }
-            }
+            let message = self.subscription.next_message()?;
+            self.take_message(message);
         }
     }
 }
@@ -458,23 +489,17 @@ impl Iterator for MeasurementSubscriber {
 /// Subscribed reliable (keep last 100) by default, as `image_transport` publishes, or best effort (a camera driver's
 /// sensor-data QoS).
 pub struct ImageSubscriber {
-    reader: no_key::SimpleDataReader<RawMessage, RawAdapter>,
-    // Kept alive with the reader.
-    _participant: rustdds::DomainParticipant,
-    intake: Intake,
+    subscription: Subscription,
     compressed: bool,
     expected_size: Option<(u32, u32)>,
     last_t_s: Option<f64>,
-    stop: Arc<AtomicBool>,
-    idle: Duration,
-    last_message: Option<Instant>,
 }
 
 impl std::fmt::Debug for ImageSubscriber {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.debug_struct("ImageSubscriber")
-            .field("topic", &self.intake.topic)
-            .field("report", &self.intake.report)
+            .field("topic", &self.subscription.intake.topic)
+            .field("report", &self.subscription.intake.report)
             .finish_non_exhaustive()
     }
 }
@@ -506,35 +531,29 @@ impl ImageSubscriber {
         } else {
             IMAGE_TYPES[0]
         };
-        let (full, participant, reader) = subscribe(options, topic, type_name, &qos)?;
         Ok(Self {
-            reader,
-            _participant: participant,
-            intake: Intake::new(full),
+            subscription: Subscription::start(options, topic, type_name, &qos, stop, idle)?,
             compressed,
             expected_size: None,
             last_t_s: None,
-            stop,
-            idle,
-            last_message: None,
         })
     }
 
     /// The topic subscribed to (with its namespace).
     pub fn topic(&self) -> &str {
-        &self.intake.topic
+        &self.subscription.intake.topic
     }
 
     /// What was received so far: `measurements` counts the frames handed on.
     pub fn report(&self) -> &SubscriberReport {
-        &self.intake.report
+        &self.subscription.intake.report
     }
 
     /// The images taken and those left out by reason, as they are counted (for the status:
     /// [`Ros2Publisher::start_counting_inputs`](crate::ros2::Ros2Publisher::start_counting_inputs); the frame
     /// tracker's refusals are counted there too, as [`LeftOut::TooClose`]).
     pub fn counts(&self) -> Arc<InputCounts> {
-        Arc::clone(&self.intake.counts)
+        Arc::clone(&self.subscription.intake.counts)
     }
 
     /// From now on, every image must be `width` x `height` px (the camera's).
@@ -544,11 +563,11 @@ impl ImageSubscriber {
 
     /// Takes every image waiting and leaves it out, counted and named: called while there is no camera yet.
     pub fn discard_waiting(&mut self) {
-        while let Ok(Some(change)) = self.reader.try_take_one() {
+        while let Ok(Some(change)) = self.subscription.reader.try_take_one() {
             drop(change);
             // Not a message of the tracking: --idle-s counts from the first image tracked.
-            let index = self.intake.take();
-            self.intake.left_out(
+            let index = self.subscription.intake.take();
+            self.subscription.intake.left_out(
                 index,
                 LeftOut::NoCameraInfo,
                 "an image before any camera info".to_string(),
@@ -560,38 +579,20 @@ impl ImageSubscriber {
     /// which it is; blocks until one comes, `None` when `stop` is raised or no image came for `idle`.
     pub fn next_frame(&mut self, frame: &mut Frame) -> Option<FrameInfo> {
         loop {
-            if self.stop.load(Ordering::Relaxed) {
-                return None;
-            }
-            match self.reader.try_take_one() {
-                Ok(Some(change)) => {
-                    self.last_message = Some(Instant::now());
-                    let index = self.intake.take();
-                    match self.decode(&change.into_value(), frame) {
-                        Ok(t_s) => {
-                            self.last_t_s = Some(t_s);
-                            self.intake.report.measurements += 1;
-                            frame.t_s = t_s;
-                            return Some(FrameInfo {
-                                index: index as usize,
-                                name: format!("message {index} of {}", self.intake.topic),
-                                t_s,
-                            });
-                        }
-                        Err((why, reason)) => self.intake.left_out(index, why, reason),
-                    }
+            let message = self.subscription.next_message()?;
+            let index = self.subscription.intake.take();
+            match self.decode(&message, frame) {
+                Ok(t_s) => {
+                    self.last_t_s = Some(t_s);
+                    self.subscription.intake.report.measurements += 1;
+                    frame.t_s = t_s;
+                    return Some(FrameInfo {
+                        index: index as usize,
+                        name: format!("message {index} of {}", self.subscription.intake.topic),
+                        t_s,
+                    });
                 }
-                Err(e) => {
-                    let index = self.intake.take();
-                    self.intake
-                        .left_out(index, LeftOut::Malformed, format!("not taken: {e}"));
-                }
-                Ok(None) => {
-                    if self.last_message.is_some_and(|t| t.elapsed() >= self.idle) {
-                        return None;
-                    }
-                    std::thread::sleep(POLL);
-                }
+                Err((why, reason)) => self.subscription.intake.left_out(index, why, reason),
             }
         }
     }
@@ -600,7 +601,8 @@ impl ImageSubscriber {
     fn decode(&self, message: &RawMessage, frame: &mut Frame) -> Result<f64, (LeftOut, String)> {
         checked_image(
             message,
-            self.compressed.then_some(self.intake.topic.as_str()),
+            self.compressed
+                .then_some(self.subscription.intake.topic.as_str()),
             self.expected_size,
             self.last_t_s,
             frame,
