@@ -591,15 +591,7 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
         FrameSequence::new(&scenario, &options).context("cannot simulate these frames")?;
     let count = sequence.len();
     let dir = &args.out;
-    let frames_dir = dir.join(FRAMES_DIR);
-    roitrack::formats::create_output_dir(&frames_dir)?;
-    remove_other_runs_files(dir, true, false)?;
-    remove_dead_frame_temporaries(&frames_dir);
-    remove_stale_frames(&frames_dir, count)?;
-    roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), sequence.camera())?;
-    roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scenario.target)?;
-    render_frames(&sequence, &frames_dir)?;
-    write_timestamps(&sequence, &dir.join(TIMESTAMPS_FILE))?;
+    let frames_dir = write_camera_frames(dir, &sequence, &scenario.target)?;
     write_dense_truth(
         dir,
         sequence
@@ -607,12 +599,10 @@ fn run_frames(args: &SimulateArgs) -> Result<()> {
             .context("cannot sample the ground truth")?,
     )?;
     let track = track_command(args);
-    let readme = frames_readme(args, &sequence, &track);
-    let readme_path = dir.join(FRAMES_README_FILE);
-    let mut file = AtomicFile::create(&readme_path)?;
-    file.write_all(readme.as_bytes())
-        .with_context(|| format!("cannot write {}", readme_path.display()))?;
-    file.finish()?;
+    write_text(
+        &dir.join(FRAMES_README_FILE),
+        &frames_readme(args, &sequence, &track),
+    )?;
     eprintln!(
         "roitrack: {} scenario: {count} frames of {} x {} px ({} shutter, {} blobs) written to {}; a camera_info \
          file has no time model: track them with\n  {track}",
@@ -701,14 +691,38 @@ fn render_frames(sequence: &FrameSequence, frames_dir: &Path) -> Result<()> {
     result
 }
 
+/// Writes one camera's frames to `dir` (the folder of frames, the camera file, the target `target`, the timestamps),
+/// first removing what a previous run there left that would not match them; the folder of frames.
+fn write_camera_frames(
+    dir: &Path,
+    sequence: &FrameSequence,
+    target: &roitrack::core::Target,
+) -> Result<PathBuf> {
+    let frames_dir = dir.join(FRAMES_DIR);
+    roitrack::formats::create_output_dir(&frames_dir)?;
+    remove_other_runs_files(dir, true, false)?;
+    remove_dead_frame_temporaries(&frames_dir);
+    remove_stale_frames(&frames_dir, sequence.len())?;
+    roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), sequence.camera())?;
+    roitrack::formats::write_target_csv(dir.join(TARGET_FILE), target)?;
+    render_frames(sequence, &frames_dir)?;
+    write_timestamps(sequence, &dir.join(TIMESTAMPS_FILE))?;
+    Ok(frames_dir)
+}
+
 /// `t,file`: each frame's time (s, the mid-exposure time of its row 0) and file name, as `roitrack track
 /// --timestamps` reads them. Times are written in full (shortest round-trip form).
 fn write_timestamps(sequence: &FrameSequence, path: &Path) -> Result<()> {
-    let mut file = AtomicFile::create(path)?;
     let mut text = String::from("t,file\n");
     for k in 0..sequence.len() {
         text += &format!("{},{}\n", sequence.frame_time_s(k), frame_file_name(k));
     }
+    write_text(path, &text)
+}
+
+/// Writes `text` to `path` atomically: nothing appears there until it is whole.
+fn write_text(path: &Path, text: &str) -> Result<()> {
+    let mut file = AtomicFile::create(path)?;
     file.write_all(text.as_bytes())
         .with_context(|| format!("cannot write {}", path.display()))?;
     file.finish()?;
@@ -933,21 +947,11 @@ fn run_rig_frames(args: &SimulateArgs) -> Result<()> {
     let mut counts = Vec::with_capacity(scene.rig.len());
     for (camera, sequence) in scene.rig.cameras().iter().zip(rig_frames.cameras()) {
         let dir = out.join(&camera.name);
-        let frames_dir = dir.join(FRAMES_DIR);
-        roitrack::formats::create_output_dir(&frames_dir)?;
-        remove_other_runs_files(&dir, true, false)?;
-        remove_dead_frame_temporaries(&frames_dir);
-        remove_stale_frames(&frames_dir, sequence.len())?;
-        roitrack::formats::write_camera_yaml(dir.join(CAMERA_FILE), sequence.camera())?;
-        roitrack::formats::write_target_csv(dir.join(TARGET_FILE), &scene.scenario.target)?;
-        render_frames(sequence, &frames_dir)?;
-        write_timestamps(sequence, &dir.join(TIMESTAMPS_FILE))?;
-        let readme = rig_camera_readme(args, &camera.name, sequence, &track);
-        let readme_path = dir.join(FRAMES_README_FILE);
-        let mut file = AtomicFile::create(&readme_path)?;
-        file.write_all(readme.as_bytes())
-            .with_context(|| format!("cannot write {}", readme_path.display()))?;
-        file.finish()?;
+        write_camera_frames(&dir, sequence, &scene.scenario.target)?;
+        write_text(
+            &dir.join(FRAMES_README_FILE),
+            &rig_camera_readme(args, &camera.name, sequence, &track),
+        )?;
         calibrations.push(format!("{}/{CAMERA_FILE}", camera.name));
         counts.push(format!("{} {}", camera.name, sequence.len()));
     }
