@@ -64,8 +64,7 @@ impl LensModel for PlumbBob {
     #[inline]
     fn distort_with_jacobian(&self, n: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
         let r2 = n.x * n.x + n.y * n.y;
-        let radial = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
-        let d_radial_d_r2 = self.k1 + r2 * (2.0 * self.k2 + 3.0 * r2 * self.k3);
+        let (radial, d_radial_d_r2) = radial_polynomial(r2, self.k1, self.k2, self.k3);
         radial_tangential(n, r2, radial, d_radial_d_r2, self.p1, self.p2)
     }
 
@@ -98,6 +97,16 @@ impl LensModel for PlumbBob {
             ),
         ]
     }
+}
+
+/// The polynomial `1 + k1 r² + k2 r⁴ + k3 r⁶` of `r2 = r²` (Horner's form) and its derivative `d / d r²`: plumb_bob's
+/// radial factor, and each of the numerator and the denominator of rational_polynomial's.
+#[inline(always)]
+pub(super) fn radial_polynomial(r2: f64, k1: f64, k2: f64, k3: f64) -> (f64, f64) {
+    (
+        1.0 + r2 * (k1 + r2 * (k2 + r2 * k3)),
+        k1 + r2 * (2.0 * k2 + 3.0 * r2 * k3),
+    )
 }
 
 /// The Brown-Conrady form shared by plumb_bob and rational_polynomial: the normalised point `n` (with `r2 = |n|²`)

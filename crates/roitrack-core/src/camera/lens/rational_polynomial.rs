@@ -2,7 +2,7 @@
 
 use nalgebra::{Matrix2, Vector2};
 
-use super::plumb_bob::radial_tangential;
+use super::plumb_bob::{radial_polynomial, radial_tangential};
 use super::{LensExample, LensModel, undistort_by_newton};
 
 /// rational_polynomial lens distortion (OpenCV's `CALIB_RATIONAL_MODEL`, ROS's `rational_polynomial`): the radial
@@ -92,10 +92,8 @@ impl LensModel for RationalPolynomial {
     #[inline]
     fn distort_with_jacobian(&self, n: &Vector2<f64>) -> (Vector2<f64>, Matrix2<f64>) {
         let r2 = n.x * n.x + n.y * n.y;
-        let num = 1.0 + r2 * (self.k1 + r2 * (self.k2 + r2 * self.k3));
-        let den = 1.0 + r2 * (self.k4 + r2 * (self.k5 + r2 * self.k6));
-        let d_num = self.k1 + r2 * (2.0 * self.k2 + 3.0 * r2 * self.k3);
-        let d_den = self.k4 + r2 * (2.0 * self.k5 + 3.0 * r2 * self.k6);
+        let (num, d_num) = radial_polynomial(r2, self.k1, self.k2, self.k3);
+        let (den, d_den) = radial_polynomial(r2, self.k4, self.k5, self.k6);
         let d_radial_d_r2 = (d_num * den - num * d_den) / (den * den);
         radial_tangential(n, r2, num / den, d_radial_d_r2, self.p1, self.p2)
     }
