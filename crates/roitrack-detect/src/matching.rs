@@ -27,6 +27,28 @@ impl From<&roitrack_image::Centroid> for DetectedBlob {
     }
 }
 
+impl From<&roitrack_image::photo::PhotoBlob> for DetectedBlob {
+    /// A photograph's blob, its area that of its ellipse.
+    fn from(b: &roitrack_image::photo::PhotoBlob) -> Self {
+        Self {
+            u_px: b.u_px,
+            v_px: b.v_px,
+            area_px: b.area_px,
+        }
+    }
+}
+
+impl From<&roitrack_image::photo::RoughBlob> for DetectedBlob {
+    /// A photograph's blob as the thresholds see it, before its centre is measured.
+    fn from(b: &roitrack_image::photo::RoughBlob) -> Self {
+        Self {
+            u_px: b.u_px,
+            v_px: b.v_px,
+            area_px: b.area_px,
+        }
+    }
+}
+
 /// Why the target was not identified among the blobs of a frame or a photograph ([`find_target`],
 /// [`match_full_frame`], [`crate::identify::identify`]).
 ///

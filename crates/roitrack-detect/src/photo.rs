@@ -210,14 +210,7 @@ impl PhotoError {
 
 /// The blobs as identification takes them.
 fn detected(blobs: &[PhotoBlob]) -> Vec<DetectedBlob> {
-    blobs
-        .iter()
-        .map(|b| DetectedBlob {
-            u_px: b.u_px,
-            v_px: b.v_px,
-            area_px: b.area_px,
-        })
-        .collect()
+    blobs.iter().map(DetectedBlob::from).collect()
 }
 
 /// Finds, identifies and measures the target in a photograph: blob detection
@@ -457,11 +450,7 @@ fn rough(candidates: &PhotoBlobCandidates<'_>) -> Vec<DetectedBlob> {
     candidates
         .rough_blobs()
         .iter()
-        .map(|b| DetectedBlob {
-            u_px: b.u_px,
-            v_px: b.v_px,
-            area_px: b.area_px,
-        })
+        .map(DetectedBlob::from)
         .collect()
 }
 
