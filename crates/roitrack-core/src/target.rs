@@ -210,6 +210,28 @@ pub struct TargetPlane {
     pub points_in_plane_m: Vec<nalgebra::Vector2<f64>>,
 }
 
+impl TargetPlane {
+    /// The plane of origin `centre_m` and frame `obj_r_plane`, with each of `points` in it.
+    fn of_points(
+        points: &[TargetPoint],
+        centre_m: Vector3<f64>,
+        obj_r_plane: Matrix3<f64>,
+    ) -> Self {
+        let points_in_plane_m = points
+            .iter()
+            .map(|p| {
+                let q = obj_r_plane.transpose() * (p.point_in_obj_m - centre_m);
+                nalgebra::Vector2::new(q.x, q.y)
+            })
+            .collect();
+        Self {
+            centre_m,
+            obj_r_plane,
+            points_in_plane_m,
+        }
+    }
+}
+
 /// Minimum number of points of a target: 3 points not on one line fix a pose up to at most four (see
 /// [`Target::ambiguity`]); a fourth makes it unique in almost every view.
 pub const MIN_TARGET_POINTS: usize = 3;
@@ -355,19 +377,11 @@ impl Target {
         }
         if target.is_planar() {
             let (centre_m, obj_r_plane) = target.principal_frame();
-            let points_in_plane_m = target
-                .points
-                .iter()
-                .map(|p| {
-                    let q = obj_r_plane.transpose() * (p.point_in_obj_m - centre_m);
-                    nalgebra::Vector2::new(q.x, q.y)
-                })
-                .collect();
-            target.plane = Some(TargetPlane {
+            target.plane = Some(TargetPlane::of_points(
+                &target.points,
                 centre_m,
                 obj_r_plane,
-                points_in_plane_m,
-            });
+            ));
         }
         Ok(target)
     }
@@ -591,19 +605,7 @@ impl Target {
         } else {
             (centre, frame)
         };
-        let points_in_plane_m = self
-            .points
-            .iter()
-            .map(|p| {
-                let q = obj_r_plane.transpose() * (p.point_in_obj_m - centre_m);
-                nalgebra::Vector2::new(q.x, q.y)
-            })
-            .collect();
-        TargetPlane {
-            centre_m,
-            obj_r_plane,
-            points_in_plane_m,
-        }
+        TargetPlane::of_points(&self.points, centre_m, obj_r_plane)
     }
 
     /// Whether all points lie on one plane (to 1e-6 m).
