@@ -51,29 +51,30 @@ impl Histogram {
 
     /// The smallest value with at least `fraction` of the pixels at or below it.
     pub fn percentile(&self, fraction: f64) -> u16 {
-        let rank = (fraction * self.total as f64).ceil().max(1.0) as u64;
-        let mut seen = 0u64;
         self.counts
             .iter()
-            .position(|&c| {
-                seen += u64::from(c);
-                seen >= rank
-            })
+            .position(self.reaches(fraction))
             .unwrap_or(0) as u16
     }
 
     /// The largest value with at least `fraction` of the pixels at or above it: of the image `top - p` (the values
     /// above `top` counted as `top`), `top - self.percentile_from_top(fraction)` is the percentile.
     pub fn percentile_from_top(&self, fraction: f64) -> u16 {
-        let rank = (fraction * self.total as f64).ceil().max(1.0) as u64;
-        let mut seen = 0u64;
         self.counts
             .iter()
-            .rposition(|&c| {
-                seen += u64::from(c);
-                seen >= rank
-            })
+            .rposition(self.reaches(fraction))
             .unwrap_or(self.counts.len() - 1) as u16
+    }
+
+    /// A test of the counts in the order they are given: true from the count that brings the pixels seen to
+    /// `fraction` of them (at least one pixel) on.
+    fn reaches(&self, fraction: f64) -> impl FnMut(&u32) -> bool {
+        let rank = (fraction * self.total as f64).ceil().max(1.0) as u64;
+        let mut seen = 0u64;
+        move |&c| {
+            seen += u64::from(c);
+            seen >= rank
+        }
     }
 }
 
