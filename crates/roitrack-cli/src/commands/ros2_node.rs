@@ -14,11 +14,11 @@ use clap::Args;
 use roitrack::estimators::{Tracker, track};
 use roitrack::formats::{EstimateWriter, MeasurementChecks};
 use roitrack::ros::BagOptions;
-use roitrack_ros::LeftOut;
 use roitrack_ros::ros2::{Ros2Options, Ros2Publisher};
 use roitrack_ros::ros2_input::{
     ImageSubscriber, MeasurementSubscriber, REASONS_KEPT, wait_for_camera_info_with,
 };
+use roitrack_ros::{InputCounts, LeftOut};
 
 use crate::args::{EstimatorArgs, ShutterArg, TargetArgs};
 use crate::commands::detect::PolarityArg;
@@ -211,25 +211,18 @@ pub fn run(args: &Ros2NodeArgs) -> Result<()> {
     )
     .map_err(|e| anyhow!("--measurement-topic {}: {e}", args.measurement_topic))?;
     let counts = subscriber.counts();
-    let mut publisher = Ros2Publisher::start_counting_inputs(
+    let mut publisher = start_publisher(
         &options,
         &bag_options,
-        Some(camera.clone()),
-        Arc::clone(&counts),
-    )
-    .map_err(|e| anyhow!("ros2-node: {e}"))?;
-    eprintln!(
-        "roitrack: {} takes centroids from {} and publishes its estimates (Ctrl-C ends it)",
-        publisher.description(),
-        subscriber.topic()
-    );
+        &camera,
+        &counts,
+        "centroids",
+        subscriber.topic(),
+    )?;
     let mut tracker = Tracker::new(camera, target, config)?;
     let mut estimates = 0u64;
     let tracked = track(&mut tracker, &mut subscriber, |e| -> Result<()> {
-        publisher.publish_estimate(e)?;
-        if let Some(writer) = &mut writer {
-            writer.write(e)?;
-        }
+        hand_on(e, &mut publisher, &mut writer)?;
         estimates += 1;
         Ok(())
     });
@@ -249,6 +242,43 @@ pub fn run(args: &Ros2NodeArgs) -> Result<()> {
     print_reasons(&report.reasons);
     tracked.map_err(|e| anyhow!("tracking: {e}"))?;
     finish(writer, &stop)
+}
+
+/// The node's publisher, counting what its subscriber takes and leaves out (`counts`), announced on stderr: it takes
+/// `what` (centroids, images) from `topic`.
+fn start_publisher(
+    options: &Ros2Options,
+    bag_options: &BagOptions,
+    camera: &roitrack::CameraModel,
+    counts: &Arc<InputCounts>,
+    what: &str,
+    topic: &str,
+) -> Result<Ros2Publisher> {
+    let publisher = Ros2Publisher::start_counting_inputs(
+        options,
+        bag_options,
+        Some(camera.clone()),
+        Arc::clone(counts),
+    )
+    .map_err(|e| anyhow!("ros2-node: {e}"))?;
+    eprintln!(
+        "roitrack: {} takes {what} from {topic} and publishes its estimates (Ctrl-C ends it)",
+        publisher.description(),
+    );
+    Ok(publisher)
+}
+
+/// Publishes the estimate `e`, and writes it to `writer` if there is one.
+fn hand_on(
+    e: &roitrack::Estimate,
+    publisher: &mut Ros2Publisher,
+    writer: &mut Option<EstimateWriter>,
+) -> Result<()> {
+    publisher.publish_estimate(e)?;
+    if let Some(writer) = writer {
+        writer.write(e)?;
+    }
+    Ok(())
 }
 
 fn print_reasons(reasons: &[String]) {
@@ -298,18 +328,14 @@ fn run_images(
     )?;
     images.expect_size(camera.width_px, camera.height_px);
     let counts = images.counts();
-    let mut publisher = Ros2Publisher::start_counting_inputs(
+    let mut publisher = start_publisher(
         options,
         bag_options,
-        Some(camera.clone()),
-        Arc::clone(&counts),
-    )
-    .map_err(|e| anyhow!("ros2-node: {e}"))?;
-    eprintln!(
-        "roitrack: {} takes images from {} and publishes its estimates (Ctrl-C ends it)",
-        publisher.description(),
-        images.topic()
-    );
+        &camera,
+        &counts,
+        "images",
+        images.topic(),
+    )?;
     let mut tracker =
         FrameTracker::new(camera, target, config).context("invalid tracker options")?;
     let mut estimates = 0u64;
@@ -326,10 +352,7 @@ fn run_images(
         },
         |_, outcome, _| -> Result<()> {
             if let Some(e) = &outcome.estimate {
-                publisher.publish_estimate(e)?;
-                if let Some(writer) = &mut writer {
-                    writer.write(e)?;
-                }
+                hand_on(e, &mut publisher, &mut writer)?;
                 estimates += 1;
             }
             Ok(())
