@@ -38,6 +38,11 @@ impl Ellipse {
         }
     }
 
+    /// The area of the ellipse (px²).
+    pub fn area_px(&self) -> f64 {
+        std::f64::consts::PI * self.semi_major_px * self.semi_minor_px
+    }
+
     /// The ellipse grown by `grow_px` on both axes, as a distance function.
     fn grown(&self, grow_px: f64) -> GrownEllipse {
         let (sin, cos) = self.angle_rad.sin_cos();

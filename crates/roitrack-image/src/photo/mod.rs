@@ -339,13 +339,11 @@ impl<'a> PhotoBlobCandidates<'a> {
             .groups()
             .iter()
             .map(|g| {
-                let c = middle_member(g);
-                let (u_px, v_px) = c.centre();
-                let shape = Ellipse::from_moments(u_px, v_px, c.covariance());
+                let shape = middle_shape(g);
                 RoughBlob {
-                    u_px,
-                    v_px,
-                    area_px: std::f64::consts::PI * shape.semi_major_px * shape.semi_minor_px,
+                    u_px: shape.u_px,
+                    v_px: shape.v_px,
+                    area_px: shape.area_px(),
                     levels: g.members.len() as u32,
                 }
             })
@@ -641,10 +639,12 @@ fn unlabelled<'a>(
     candidates
 }
 
-/// The component of a group at its middle level: its threshold sits halfway up the blob's edge, so its area is the
-/// blob's.
-fn middle_member(g: &Group) -> &Component {
-    &g.members[g.members.len() / 2]
+/// The shape of the component of a group at its middle level: its threshold sits halfway up the blob's edge, so its
+/// area is the blob's.
+fn middle_shape(g: &Group) -> Ellipse {
+    let c = &g.members[g.members.len() / 2];
+    let (u_px, v_px) = c.centre();
+    Ellipse::from_moments(u_px, v_px, c.covariance())
 }
 
 /// The blob of a group: its centre and contrast from the outline, its shape from the middle level.
@@ -657,12 +657,10 @@ fn measure(
     min_contrast: f64,
     worker: &mut WorkerScratch,
 ) -> Option<PhotoBlob> {
-    let c = middle_member(g);
-    let (cu, cv) = c.centre();
-    let shape = Ellipse::from_moments(cu, cv, c.covariance());
+    let shape = middle_shape(g);
     // The outline's ellipse, from rays cast from the threshold's centre: the better centre under uneven light and on
     // real photographs. Where it cannot be fitted, background-corrected grey-level moments.
-    let start = nalgebra::Vector2::new(cu, cv);
+    let start = nalgebra::Vector2::new(shape.u_px, shape.v_px);
     let (centre, contrast) = match edge::edge_centre(
         image,
         w,
@@ -685,7 +683,7 @@ fn measure(
     Some(PhotoBlob {
         u_px: centre.x,
         v_px: centre.y,
-        area_px: std::f64::consts::PI * shape.semi_major_px * shape.semi_minor_px,
+        area_px: shape.area_px(),
         semi_major_px: shape.semi_major_px,
         semi_minor_px: shape.semi_minor_px,
         angle_rad: shape.angle_rad,
