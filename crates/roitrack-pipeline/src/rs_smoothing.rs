@@ -123,14 +123,17 @@ impl<I> RollingSmoother<I> {
             .filter_map(|m| observation_of(&self.target, &self.camera, m))
             .collect();
         // Only estimates the filter vouches for are refitted or lent to a neighbour's stencil, and a track's first
-        // estimate when it is flagged degenerate: a static pose of a rolling frame (one frame does not show the
-        // twist), which the frames after it can set right.
+        // estimate when it is flagged degenerate (a static pose of a rolling frame: one frame does not show the
+        // twist) or disputed (a start fitted with a twist its frames refute), which the frames after it can set
+        // right. The refit changes such an estimate's pose and twist, never its flag.
         let previous_has_pose = match self.pending.back() {
             Some(previous) => previous.pose.is_some(),
             None => self.past.back().is_some_and(Option::is_some),
         };
         let pose = outcome.estimate.as_ref().and_then(|e| {
-            let starts_a_track = e.status == TrackStatus::Degenerate && !previous_has_pose;
+            let starts_a_track =
+                matches!(e.status, TrackStatus::Degenerate | TrackStatus::Disputed)
+                    && !previous_has_pose;
             (e.status.is_vouched_for() || starts_a_track).then(|| {
                 (
                     TimedPose {
@@ -225,12 +228,12 @@ impl<I> RollingSmoother<I> {
             roitrack_core::so3::angle_between(&fit.state.cam_r_obj, &filter.state.cam_r_obj);
         // A track's first pose was fitted with no twist, or with one the frames after it have not pinned yet: it may
         // be off by more than the shifts allowed (a rolling frame's, by millimetres and degrees), and the refit is
-        // taken when it explains the frame's blobs better: a degenerate start by the filter's residual, any start when
-        // its own blobs refute the filter's pose ([`refutes_the_filter`]).
+        // taken when it explains the frame's blobs better: a start the filter does not vouch for (degenerate or
+        // disputed) by the filter's residual, any start when its own blobs refute the filter's pose
+        // ([`refutes_the_filter`]).
         let within_shifts = shift_m <= MAX_SHIFT_M && shift_rad <= MAX_SHIFT_RAD;
         let explains_a_start_better = position == first
-            && ((filter.status == TrackStatus::Degenerate
-                && fit.residual_rms_px <= filter.residual_rms_px)
+            && ((!filter.status.is_vouched_for() && fit.residual_rms_px <= filter.residual_rms_px)
                 || refutes_the_filter(
                     &self.model,
                     &self.target,

@@ -137,7 +137,8 @@ fn a_track_started_at_a_fast_motion_is_smoothed_from_its_first_frame() {
     // there, and its first frames have no pose before them. Their twist from the poses after them (a one-sided
     // difference of three poses left jerk T^2/3, the first estimate 0.7-2.3 mm off after smoothing and the run's
     // RMSE 0.28-0.42 mm on seeds 2-4); with four poses after them, the rolling-shutter target over every estimate.
-    for seed in 1..=4 {
+    // Seed 9's track starts with an estimate the filter disputes (4.8 mm off): refitted too (0.87 mm RMSE before).
+    for seed in [1, 2, 3, 4, 9] {
         let scenario = fast_motion(seed);
         let sequence = |readout| frames_from_fastest_instant(&scenario, readout, seed);
         let global = rms_after_m(&track_sequence(&sequence, Readout::GlobalShutter, true), 0);
