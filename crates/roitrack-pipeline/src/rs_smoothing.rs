@@ -33,9 +33,10 @@ const HELD_AFTER: usize = MAX_STENCIL_POSES - 1;
 const PASSES: usize = 3;
 /// Gauss-Newton steps per refit, from the last refit (or the filter's pose): the pose moves by tenths of a millimetre.
 const REFIT_ITERATIONS: usize = 4;
-/// A refit moving the pose farther than this (m, rad) from the filter's is not taken: the stencil's poses are then
-/// not one smooth motion (a relabelled or restarted track the filter has not flagged), and the filter's estimate is
-/// the safer one. The refits move poses by tenths of a millimetre and milliradians.
+/// A refit moving the pose farther than this (m, rad) from the filter's is not taken, unless the filter's own pose
+/// covariance allows it ([`within_the_filters_uncertainty`]): the stencil's poses are then not one smooth motion (a
+/// relabelled or restarted track the filter has not flagged), and the filter's estimate is the safer one. The refits
+/// move poses by tenths of a millimetre and milliradians; a young track's depth, by millimetres.
 const MAX_SHIFT_M: f64 = 0.005;
 const MAX_SHIFT_RAD: f64 = 0.05;
 
@@ -231,7 +232,8 @@ impl<I> RollingSmoother<I> {
         // taken when it explains the frame's blobs better: a start the filter does not vouch for (degenerate or
         // disputed) by the filter's residual, any start when its own blobs refute the filter's pose
         // ([`refutes_the_filter`]).
-        let within_shifts = shift_m <= MAX_SHIFT_M && shift_rad <= MAX_SHIFT_RAD;
+        let within_shifts = (shift_m <= MAX_SHIFT_M && shift_rad <= MAX_SHIFT_RAD)
+            || within_the_filters_uncertainty(filter, &fit.state, &fit.pose_covariance);
         let explains_a_start_better = position == first
             && ((!filter.status.is_vouched_for() && fit.residual_rms_px <= filter.residual_rms_px)
                 || refutes_the_filter(
@@ -323,6 +325,29 @@ fn refutes_the_filter(
         && noise_px2 > 0.0
         && filter_px2 > chi2_upper_0_1_percent(dof) * noise_px2
         && refit_px2 < filter_px2
+}
+
+/// Whether `refit`'s pose (with covariance `refit_covariance`) is where the filter's estimate allows its pose to be: the
+/// squared Mahalanobis distance of their difference under the sum of both pose covariances within the chi-square's
+/// upper 0.1 % point for 6 degrees of freedom. A young track's filter, unsure of its depth, allows the refit to move
+/// the pose by more than [`MAX_SHIFT_M`]; a track the filter has settled does not, whatever the stencil says.
+fn within_the_filters_uncertainty(
+    filter: &Estimate,
+    refit: &roitrack_core::MotionState,
+    refit_covariance: &Matrix6<f64>,
+) -> bool {
+    let Some(covariance) = filter.covariance.as_ref() else {
+        return false;
+    };
+    let difference = roitrack_core::MotionState::difference(&filter.state, refit)
+        .fixed_rows::<6>(0)
+        .into_owned();
+    let sum = covariance.fixed_view::<6, 6>(0, 0) + refit_covariance;
+    let Some(inverse) = sum.try_inverse() else {
+        return false;
+    };
+    let d2 = (difference.transpose() * inverse * difference)[(0, 0)];
+    d2.is_finite() && d2 <= chi2_upper_0_1_percent(6.0)
 }
 
 /// The pose block of an estimate's covariance; without one, the centroid noise's order of magnitude (used only to

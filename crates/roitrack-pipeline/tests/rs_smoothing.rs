@@ -138,7 +138,9 @@ fn a_track_started_at_a_fast_motion_is_smoothed_from_its_first_frame() {
     // difference of three poses left jerk T^2/3, the first estimate 0.7-2.3 mm off after smoothing and the run's
     // RMSE 0.28-0.42 mm on seeds 2-4); with four poses after them, the rolling-shutter target over every estimate.
     // Seed 9's track starts with an estimate the filter disputes (4.8 mm off): refitted too (0.87 mm RMSE before).
-    for seed in [1, 2, 3, 4, 9] {
+    // Seed 5's frames 2-4, 5-6 mm off and marked converging, are refitted by more than the fixed shifts allow, within
+    // what the young filter's covariance allows (1.78 mm RMSE before).
+    for seed in [1, 2, 3, 4, 5, 9] {
         let scenario = fast_motion(seed);
         let sequence = |readout| frames_from_fastest_instant(&scenario, readout, seed);
         let global = rms_after_m(&track_sequence(&sequence, Readout::GlobalShutter, true), 0);
