@@ -270,179 +270,221 @@ fn detect_target_with(
             camera_height: camera.height_px,
         });
     }
-    let blob_options = options.blob_options(camera, target);
-    let find_rough = |polarity: Polarity, scratch: &mut PhotoScratch| {
+    let mut search = PolaritySearch {
+        camera,
+        target,
+        frame,
+        blob_options: options.blob_options(camera, target),
+        tally: Tally::default(),
+    };
+    let (polarity, blobs, found) = match options.polarity {
+        PolarityChoice::Bright => search.given(Polarity::Bright, scratch)?,
+        PolarityChoice::Dark => search.given(Polarity::Dark, scratch)?,
+        // The likelier polarity first. If its blobs hold a structure the size of the whole target in view (the
+        // first hypotheses its search would verify match that many points), they are identified at once: the guess
+        // is taken. If not, the wrong polarity's blobs (sky, foliage, glints) may hold thousands of small placements
+        // whose verification fails slowly: the other polarity's blobs are found too and the more promising set is
+        // identified first. Both are identified before the target is declared not found, so the order changes only
+        // the time.
+        PolarityChoice::Auto if on_lattice(target) => search.auto_on_lattice(scratch)?,
+        PolarityChoice::Auto => search.auto_off_lattice(scratch)?,
+    };
+    Ok(search
+        .tally
+        .into(finish(camera, target, polarity, blobs, found)))
+}
+
+/// A polarity's blobs, and the target identified among them.
+type Found = (Polarity, Vec<PhotoBlob>, Identification);
+
+/// One photograph's search for the target among the blobs of one polarity or both, counting the work.
+struct PolaritySearch<'a> {
+    camera: &'a CameraModel,
+    target: &'a Target,
+    frame: &'a Frame,
+    blob_options: PhotoBlobOptions,
+    tally: Tally,
+}
+
+impl<'a> PolaritySearch<'a> {
+    /// The blobs of `polarity` at the few levels that rank the polarities ([`find_rough_photo_blob_candidates`]).
+    fn find_rough(
+        &self,
+        polarity: Polarity,
+        scratch: &mut PhotoScratch,
+    ) -> PhotoBlobCandidates<'a> {
+        let frame = self.frame;
         find_rough_photo_blob_candidates(
             &frame.pixels,
             frame.width,
             frame.height,
             frame.bit_depth,
             polarity,
-            &blob_options,
+            &self.blob_options,
             scratch,
         )
-    };
-    let find = |polarity: Polarity, scratch: &mut PhotoScratch| {
+    }
+
+    /// The blobs of `polarity` at every level.
+    fn find(&self, polarity: Polarity, scratch: &mut PhotoScratch) -> PhotoBlobCandidates<'a> {
+        let frame = self.frame;
         find_photo_blob_candidates(
             &frame.pixels,
             frame.width,
             frame.height,
             frame.bit_depth,
             polarity,
-            &blob_options,
+            &self.blob_options,
             scratch,
         )
-    };
-    // The candidates' centres measured, the work counted.
-    let measure =
-        |candidates: PhotoBlobCandidates<'_>, scratch: &mut PhotoScratch, tally: &mut Tally| {
-            tally.measured.push(candidates.polarity());
-            candidates.measure(scratch)
-        };
-    let mut tally = Tally::default();
-    // Identifies the target among `blobs` if their search's first hypotheses match at least `min_promise` points
-    // (`None` if not), counting the work; also returns that promise.
-    let attempt =
-        |polarity: Polarity, blobs: &[PhotoBlob], min_promise: usize, tally: &mut Tally| {
-            let (outcome, work) =
-                identify_if_promising(camera, target, &detected(blobs), min_promise);
-            tally.hypotheses += work.hypotheses;
-            if outcome.is_some() {
-                tally.polarities.push(polarity);
-            }
-            (outcome, work.promise)
-        };
-    // Identification of every hypothesis.
-    let identify_among = |polarity: Polarity, blobs: &[PhotoBlob], tally: &mut Tally| {
-        attempt(polarity, blobs, 0, tally)
+    }
+
+    /// The candidates' centres measured, the work counted.
+    fn measure(
+        &mut self,
+        candidates: PhotoBlobCandidates<'_>,
+        scratch: &mut PhotoScratch,
+    ) -> Vec<PhotoBlob> {
+        self.tally.measured.push(candidates.polarity());
+        candidates.measure(scratch)
+    }
+
+    /// Identifies the target among `blobs` if their search's first hypotheses match at least `min_promise` points
+    /// (`None` if not), counting the work; also returns that promise.
+    fn attempt(
+        &mut self,
+        polarity: Polarity,
+        blobs: &[PhotoBlob],
+        min_promise: usize,
+    ) -> (Option<Result<Identification, MatchError>>, usize) {
+        let (outcome, work) =
+            identify_if_promising(self.camera, self.target, &detected(blobs), min_promise);
+        self.tally.hypotheses += work.hypotheses;
+        if outcome.is_some() {
+            self.tally.polarities.push(polarity);
+        }
+        (outcome, work.promise)
+    }
+
+    /// Identification of every hypothesis.
+    fn identify_among(
+        &mut self,
+        polarity: Polarity,
+        blobs: &[PhotoBlob],
+    ) -> Result<Identification, MatchError> {
+        self.attempt(polarity, blobs, 0)
             .0
             .expect("a search asking no promise stopped")
-    };
-    let (polarity, blobs, found) = match options.polarity {
-        PolarityChoice::Bright | PolarityChoice::Dark => {
-            let polarity = if options.polarity == PolarityChoice::Bright {
-                Polarity::Bright
+    }
+
+    /// The target among the blobs of the polarity the user gave.
+    fn given(
+        &mut self,
+        polarity: Polarity,
+        scratch: &mut PhotoScratch,
+    ) -> Result<Found, PhotoError> {
+        let candidates = self.find(polarity, scratch);
+        let blobs = self.measure(candidates, scratch);
+        match self.identify_among(polarity, &blobs) {
+            Ok(found) => Ok((polarity, blobs, found)),
+            Err(source) => Err(PhotoError::NotFound {
+                polarity: polarity.name(),
+                blobs,
+                source,
+            }),
+        }
+    }
+
+    /// A target on a lattice: each polarity judged by its lattices' growth on the blobs of two thresholds, before
+    /// the other levels are labelled and any centre is measured (a wrong polarity's few hundred glints cost as much
+    /// to label and measure as identifying the target), and only the first in that order labelled in full and
+    /// measured unless it fails.
+    fn auto_on_lattice(&mut self, scratch: &mut PhotoScratch) -> Result<Found, PhotoError> {
+        let (camera, target) = (self.camera, self.target);
+        let whole_view = whole_view_points(target.len());
+        let guess_candidates = self.find_rough(likely_polarity(self.frame), scratch);
+        // Promises are compared with the whole view's size and with each other only: each is grown no further than
+        // the comparison needs (the right polarity's lattice, grown in full, was most of its cost).
+        let guess_promise =
+            lattice_promise(camera, target, &rough(&guess_candidates), whole_view).unwrap_or(0);
+        let (first, second) = if guess_promise >= whole_view {
+            (guess_candidates, None)
+        } else if guess_promise == 0 {
+            // Nothing grew: the other polarity cannot promise less.
+            (
+                guess_candidates.other_polarity_rough(scratch),
+                Some(guess_candidates),
+            )
+        } else {
+            let other_candidates = guess_candidates.other_polarity_rough(scratch);
+            // Only whether it exceeds the guess's matters.
+            let other_promise =
+                lattice_promise(camera, target, &rough(&other_candidates), guess_promise + 1)
+                    .unwrap_or(0);
+            if other_promise > guess_promise {
+                (other_candidates, Some(guess_candidates))
             } else {
-                Polarity::Dark
-            };
-            let blobs = measure(find(polarity, scratch), scratch, &mut tally);
-            match identify_among(polarity, &blobs, &mut tally) {
-                Ok(found) => (polarity, blobs, found),
-                Err(source) => {
-                    return Err(PhotoError::NotFound {
-                        polarity: polarity.name(),
-                        blobs,
-                        source,
-                    });
-                }
+                (guess_candidates, Some(other_candidates))
+            }
+        };
+        let first_polarity = first.polarity();
+        let first_blobs = self.measure(first, scratch);
+        match self.identify_among(first_polarity, &first_blobs) {
+            Ok(found) => Ok((first_polarity, first_blobs, found)),
+            Err(first_error) => {
+                let second = second.unwrap_or_else(|| self.find(first_polarity.other(), scratch));
+                let second_polarity = second.polarity();
+                let second_blobs = self.measure(second, scratch);
+                let outcome = self.identify_among(second_polarity, &second_blobs);
+                fall_back(
+                    (first_polarity, first_blobs, first_error),
+                    (second_polarity, second_blobs, outcome),
+                )
             }
         }
-        PolarityChoice::Auto => {
-            // The likelier polarity first. If its blobs hold a structure the size of the whole target in view (the
-            // first hypotheses its search would verify match that many points), they are identified at once: the
-            // guess is taken. If not, the wrong polarity's blobs (sky, foliage, glints) may hold thousands of small
-            // placements whose verification fails slowly: the other polarity's blobs are found too and the more
-            // promising set is identified first. Both are identified before the target is declared not found, so
-            // the order changes only the time.
-            let guess = likely_polarity(frame);
-            let other = guess.other();
-            let whole_view = whole_view_points(target.len());
-            if on_lattice(target) {
-                // A target on a lattice: each polarity judged by its lattices' growth on the blobs of two
-                // thresholds, before the other levels are labelled and any centre is measured (a wrong polarity's
-                // few hundred glints cost as much to label and measure as identifying the target), and only the
-                // first in that order labelled in full and measured unless it fails.
-                let guess_candidates = find_rough(guess, scratch);
-                // Promises are compared with the whole view's size and with each other only: each is grown no
-                // further than the comparison needs (the right polarity's lattice, grown in full, was most of
-                // its cost).
-                let guess_promise =
-                    lattice_promise(camera, target, &rough(&guess_candidates), whole_view)
-                        .unwrap_or(0);
-                let (first, second) = if guess_promise >= whole_view {
-                    (guess_candidates, None)
-                } else if guess_promise == 0 {
-                    // Nothing grew: the other polarity cannot promise less.
-                    (
-                        guess_candidates.other_polarity_rough(scratch),
-                        Some(guess_candidates),
-                    )
-                } else {
-                    let other_candidates = guess_candidates.other_polarity_rough(scratch);
-                    // Only whether it exceeds the guess's matters.
-                    let other_promise = lattice_promise(
-                        camera,
-                        target,
-                        &rough(&other_candidates),
-                        guess_promise + 1,
-                    )
-                    .unwrap_or(0);
-                    if other_promise > guess_promise {
-                        (other_candidates, Some(guess_candidates))
-                    } else {
-                        (guess_candidates, Some(other_candidates))
+    }
+
+    /// A target on no lattice: judging a polarity costs about as much as identifying it, so the guess is measured
+    /// and its promise known from its search's first hypotheses. If it does not hold the whole target, the other
+    /// polarity's is asked for more.
+    fn auto_off_lattice(&mut self, scratch: &mut PhotoScratch) -> Result<Found, PhotoError> {
+        let guess = likely_polarity(self.frame);
+        let other = guess.other();
+        let whole_view = whole_view_points(self.target.len());
+        let candidates = self.find(guess, scratch);
+        let guess_blobs = self.measure(candidates, scratch);
+        let (outcome, guess_promise) = self.attempt(guess, &guess_blobs, whole_view);
+        let guess_error = match outcome {
+            Some(Ok(found)) => return Ok((guess, guess_blobs, found)),
+            Some(Err(guess_error)) => guess_error,
+            None => {
+                let candidates = self.find(other, scratch);
+                let other_blobs = self.measure(candidates, scratch);
+                let (other_outcome, _) = self.attempt(other, &other_blobs, guess_promise + 1);
+                if let Some(Ok(found)) = other_outcome {
+                    return Ok((other, other_blobs, found));
+                }
+                return match self.identify_among(guess, &guess_blobs) {
+                    Ok(found) => Ok((guess, guess_blobs, found)),
+                    Err(guess_error) => {
+                        let outcome = other_outcome
+                            .unwrap_or_else(|| self.identify_among(other, &other_blobs));
+                        fall_back(
+                            (guess, guess_blobs, guess_error),
+                            (other, other_blobs, outcome),
+                        )
                     }
                 };
-                let first_polarity = first.polarity();
-                let first_blobs = measure(first, scratch, &mut tally);
-                match identify_among(first_polarity, &first_blobs, &mut tally) {
-                    Ok(found) => (first_polarity, first_blobs, found),
-                    Err(first_error) => {
-                        let second =
-                            second.unwrap_or_else(|| find(first_polarity.other(), scratch));
-                        let second_polarity = second.polarity();
-                        let second_blobs = measure(second, scratch, &mut tally);
-                        let outcome = identify_among(second_polarity, &second_blobs, &mut tally);
-                        fall_back(
-                            (first_polarity, first_blobs, first_error),
-                            (second_polarity, second_blobs, outcome),
-                        )?
-                    }
-                }
-            } else {
-                // A target on no lattice: judging a polarity costs about as much as identifying it, so the guess
-                // is measured and its promise known from its search's first hypotheses. If it does not hold the
-                // whole target, the other polarity's is asked for more.
-                {
-                    let guess_blobs = measure(find(guess, scratch), scratch, &mut tally);
-                    let (outcome, guess_promise) =
-                        attempt(guess, &guess_blobs, whole_view, &mut tally);
-                    match outcome {
-                        Some(Ok(found)) => (guess, guess_blobs, found),
-                        Some(Err(guess_error)) => {
-                            let other_blobs = measure(find(other, scratch), scratch, &mut tally);
-                            let outcome = identify_among(other, &other_blobs, &mut tally);
-                            fall_back(
-                                (guess, guess_blobs, guess_error),
-                                (other, other_blobs, outcome),
-                            )?
-                        }
-                        None => {
-                            let other_blobs = measure(find(other, scratch), scratch, &mut tally);
-                            let (other_outcome, _) =
-                                attempt(other, &other_blobs, guess_promise + 1, &mut tally);
-                            match other_outcome {
-                                Some(Ok(found)) => (other, other_blobs, found),
-                                _ => match identify_among(guess, &guess_blobs, &mut tally) {
-                                    Ok(found) => (guess, guess_blobs, found),
-                                    Err(guess_error) => {
-                                        let outcome = other_outcome.unwrap_or_else(|| {
-                                            identify_among(other, &other_blobs, &mut tally)
-                                        });
-                                        fall_back(
-                                            (guess, guess_blobs, guess_error),
-                                            (other, other_blobs, outcome),
-                                        )?
-                                    }
-                                },
-                            }
-                        }
-                    }
-                }
             }
-        }
-    };
-    Ok(tally.into(finish(camera, target, polarity, blobs, found)))
+        };
+        let candidates = self.find(other, scratch);
+        let other_blobs = self.measure(candidates, scratch);
+        let outcome = self.identify_among(other, &other_blobs);
+        fall_back(
+            (guess, guess_blobs, guess_error),
+            (other, other_blobs, outcome),
+        )
+    }
 }
 
 /// The blobs as the thresholds see them, for ranking the polarities ([`lattice_promise`]).
@@ -458,7 +500,7 @@ fn rough(candidates: &PhotoBlobCandidates<'_>) -> Vec<DetectedBlob> {
 fn fall_back(
     (first, first_blobs, first_error): (Polarity, Vec<PhotoBlob>, MatchError),
     (second, second_blobs, outcome): (Polarity, Vec<PhotoBlob>, Result<Identification, MatchError>),
-) -> Result<(Polarity, Vec<PhotoBlob>, Identification), PhotoError> {
+) -> Result<Found, PhotoError> {
     match outcome {
         Ok(found) => Ok((second, second_blobs, found)),
         Err(second_error) => {
