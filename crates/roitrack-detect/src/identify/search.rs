@@ -117,7 +117,6 @@ pub(super) fn identify_search(
         return Err(MatchError::ThreePoints);
     }
     let facts = TargetFacts::of(target);
-    let planar = &facts.planar;
     let min_matched = n.clamp(4, 6);
     if blobs.len() < min_matched {
         return Err(MatchError::TooFewBlobs {
@@ -127,7 +126,6 @@ pub(super) fn identify_search(
         });
     }
     let (ideal, areas_px, index) = blob_geometry(camera, blobs);
-    let points = target.points();
     let verifier = Verifier {
         camera,
         target,
@@ -136,31 +134,53 @@ pub(super) fn identify_search(
         areas_px: &areas_px,
         index: &index,
         nearest_point: &facts.nearest_point,
-        front_normal: planar.as_ref().map(|(_, front)| *front),
+        front_normal: facts.planar.as_ref().map(|(_, front)| *front),
         centre_m: facts.centre_m,
         bounds: std::cell::Cell::new(0),
         poses: Default::default(),
     };
-    let lattice = facts.lattice.clone();
-    let diameters: Vec<Option<f64>> = points.iter().map(|p| p.diameter_m).collect();
-    let (ideal_ref, areas_ref, index_ref, diameters_ref) = (&ideal, &areas_px, &index, &diameters);
-    let plane_ref: &[Vector2<f64>] = planar.as_ref().map_or(&[], |(plane, _)| plane);
-    // Only called for a planar target (`plane_ref` its points in its plane).
+    let diameters: Vec<Option<f64>> = target.points().iter().map(|p| p.diameter_m).collect();
+    let groups = hypothesis_groups(&verifier, &facts, &diameters, min_matched);
+    let outcome = verify_groups(&verifier, groups, min_matched, min_promise, work)
+        .map(|verified| judge(&verifier, verified, min_matched, work.hypotheses));
+    work.bounds = verifier.bounds.get();
+    outcome.transpose()
+}
+
+/// The hypotheses of the target's kind, in groups in order of promise: a lattice's growths (and for a small grid,
+/// the triple search after them), a planar layout's triples, a 3-D layout's quadruples.
+fn hypothesis_groups<'a>(
+    verifier: &Verifier<'a>,
+    facts: &'a TargetFacts,
+    diameters: &'a [Option<f64>],
+    min_matched: usize,
+) -> HypothesisGroups<'a> {
+    let Verifier {
+        camera,
+        target,
+        ideal,
+        areas_px,
+        index,
+        ..
+    } = *verifier;
+    let n = target.len();
+    let plane: &[Vector2<f64>] = facts.planar.as_ref().map_or(&[], |(plane, _)| plane);
+    // Only called for a planar target (`plane` its points in its plane).
     let triples = move || {
         let model = PlanarModel {
-            plane_m: plane_ref,
-            diameters_m: diameters_ref,
+            plane_m: plane,
+            diameters_m: diameters,
             focal_px: camera.intrinsics.fx_px.max(camera.intrinsics.fy_px),
         };
         // One search, resumed tier after tier for fewer points.
-        let mut search = TripleSearch::new(model, ideal_ref, areas_ref, index_ref);
+        let mut search = TripleSearch::new(model, ideal, areas_px, index);
         in_tiers(n, min_matched, true, move |fewest| {
             search.hypotheses(fewest)
         })
     };
-    let hypothesis_groups: HypothesisGroups = match (planar, lattice) {
+    match (&facts.planar, facts.lattice.clone()) {
         (Some(_), Some(lattice)) => {
-            let grown = lattice_hypotheses(lattice, &ideal, &areas_px, &index);
+            let grown = lattice_hypotheses(lattice, ideal, areas_px, index);
             if n <= SMALL_LATTICE_POINTS {
                 // Made when the search reaches them (after the lattice's groups).
                 Box::new(grown.chain(std::iter::once_with(triples).flatten()))
@@ -169,23 +189,36 @@ pub(super) fn identify_search(
             }
         }
         (None, _) => {
-            let spread: Vec<Vector3<f64>> = points.iter().map(|p| p.point_in_obj_m).collect();
+            let spread: Vec<Vector3<f64>> =
+                target.points().iter().map(|p| p.point_in_obj_m).collect();
             in_tiers(n, min_matched, false, move |fewest| {
-                quadruple_hypotheses(&spread, ideal_ref, areas_ref, index_ref, fewest)
+                quadruple_hypotheses(&spread, ideal, areas_px, index, fewest)
             })
         }
         (Some(_), None) => triples(),
-    };
+    }
+}
+
+/// The hypotheses verified group after group, until what is accepted cannot be rivalled; `None` when the first
+/// group promises fewer than `min_promise` points (its size then in `work.promise`).
+fn verify_groups(
+    verifier: &Verifier<'_>,
+    groups: HypothesisGroups<'_>,
+    min_matched: usize,
+    min_promise: usize,
+    work: &mut Work,
+) -> Option<Vec<Verified>> {
+    let n = verifier.target.len();
     // Groups in order of promise (the largest grown lattice first): a large target's search stops at the first that
     // gives an accepted fit.
     let mut verified: Vec<Verified> = Vec::new();
     let mut first_group = true;
-    for group in hypothesis_groups {
+    for group in groups {
         if first_group && !group.is_empty() {
             first_group = false;
             work.promise = group.iter().map(Vec::len).max().unwrap_or(0);
             if work.promise < min_promise {
-                return Ok(None);
+                return None;
             }
         }
         work.hypotheses += group.len();
@@ -196,7 +229,7 @@ pub(super) fn identify_search(
         // explain them all too, n blobs in the target's layout, which the lattice's placements (the twins among them)
         // have already laid; the triple search would verify thousands of partial labellings of a regular grid (a 4 x 4
         // grid seen whole: about 4,200) that cannot rival it.
-        let accepted = |v: &Verified| v.accepted(&verifier, min_matched);
+        let accepted = |v: &Verified| v.accepted(verifier, min_matched);
         let complete = |v: &Verified| v.pairs.len() == n && v.missing == 0 && accepted(v);
         if n > SMALL_LATTICE_POINTS && verified.iter().any(accepted)
             || n > ALWAYS_SEARCHED_POINTS && verified.iter().any(complete)
@@ -204,23 +237,31 @@ pub(super) fn identify_search(
             break;
         }
     }
+    Some(verified)
+}
+
+/// The labelling the verified hypotheses support: the best accepted one against its rivals (a rival the geometry
+/// cannot tell from it and not its symmetric twin is a partial view), the canonical one of a symmetric target's
+/// twins.
+fn judge(
+    verifier: &Verifier<'_>,
+    mut verified: Vec<Verified>,
+    min_matched: usize,
+    hypotheses: usize,
+) -> Result<Identification, MatchError> {
     verified.sort_by(Verified::rank);
     let Some(best) = verified
         .iter()
-        .find(|v| v.accepted(&verifier, min_matched))
+        .find(|v| v.accepted(verifier, min_matched))
         .cloned()
     else {
         let best = verified.first();
-        work.bounds = verifier.bounds.get();
         return Err(MatchError::NoFit {
             residual_px: best.map_or(f64::INFINITY, |b| b.residual_px),
             matched: best.map_or(0, |b| b.pairs.len()),
-            expected: n,
+            expected: verifier.target.len(),
         });
     };
-    // A labelling the geometry cannot tell from the best (as many points, missing and mismatched sizes, a residual
-    // within the rivals' ratio) but whose blob sizes fit significantly better is the best: a key dot a little larger
-    // than the rest decides what the layout alone cannot.
     // A rival on as many points is told apart from the best only if its cost is larger than noise makes the ratio
     // of two fits' costs on as many degrees of freedom, at one chance in a thousand: with 4 points (2 degrees of
     // freedom) a rival a little less than 32 times the best's residual might be the truth.
@@ -230,70 +271,117 @@ pub(super) fn identify_search(
     // has the best's number of blobs, hence its degrees of freedom.
     let size_quantile_cell = std::cell::OnceCell::new();
     let size_quantile = |dof: f64| *size_quantile_cell.get_or_init(|| rival_quantile(dof));
-    let sizes_better = verified
-        .iter()
-        .filter(|v| {
-            v.from_back == best.from_back
+    let judged = Judged {
+        verifier,
+        min_matched,
+        rival_cost_ratio,
+        size_quantile: &size_quantile,
+    };
+    let best = judged.sizes_decide(&verified, best);
+    let equals = judged.equals_of(&verified, &best)?;
+    let ambiguous = equals.len() > 1;
+    let chosen = canonical(verifier, &equals).unwrap_or(&best).clone();
+    Ok(finish(verifier, chosen, ambiguous, hypotheses))
+}
+
+/// What rivals are judged by.
+struct Judged<'a, 'v> {
+    verifier: &'a Verifier<'v>,
+    min_matched: usize,
+    /// The largest ratio of a rival's cost to the best's that the noise explains.
+    rival_cost_ratio: f64,
+    /// The quantile that tells blob sizes apart, by degrees of freedom.
+    size_quantile: &'a dyn Fn(f64) -> f64,
+}
+
+impl Judged<'_, '_> {
+    /// A labelling the geometry cannot tell from the best (as many points, missing and mismatched sizes, a residual
+    /// within the rivals' ratio) but whose blob sizes fit significantly better is the best: a key dot a little larger
+    /// than the rest decides what the layout alone cannot.
+    fn sizes_decide(&self, verified: &[Verified], best: Verified) -> Verified {
+        verified
+            .iter()
+            .filter(|v| {
+                v.from_back == best.from_back
+                    && v.pairs.len() == best.pairs.len()
+                    && v.missing == best.missing
+                    && v.size_mismatches == best.size_mismatches
+                    && best
+                        .size_spread
+                        .worse_than(&v.size_spread, self.size_quantile)
+                    && v.residual_px.powi(2) <= self.rival_cost_ratio * best.residual_px.powi(2)
+                    && v.accepted(self.verifier, self.min_matched)
+            })
+            .min_by(|a, b| a.size_spread.sum_sq.total_cmp(&b.size_spread.sum_sq))
+            .cloned()
+            .unwrap_or(best)
+    }
+
+    /// The best and the labellings as good as it, each once: its symmetric twins; [`MatchError::PartialView`] if one
+    /// is not a twin.
+    fn equals_of<'b>(
+        &self,
+        verified: &'b [Verified],
+        best: &'b Verified,
+    ) -> Result<Vec<&'b Verified>, MatchError> {
+        let verifier = self.verifier;
+        let mut best_pairs = best.pairs.clone();
+        best_pairs.sort_unstable();
+        let mut equals: Vec<&Verified> = vec![best];
+        for v in verified {
+            // What ranks it below the best is checked first: it is cheaper than whether it is accepted.
+            let as_good = v.from_back == best.from_back
                 && v.pairs.len() == best.pairs.len()
                 && v.missing == best.missing
                 && v.size_mismatches == best.size_mismatches
-                && best.size_spread.worse_than(&v.size_spread, size_quantile)
-                && v.residual_px.powi(2) <= rival_cost_ratio * best.residual_px.powi(2)
-                && v.accepted(&verifier, min_matched)
-        })
-        .min_by(|a, b| a.size_spread.sum_sq.total_cmp(&b.size_spread.sum_sq))
-        .cloned();
-    let best = sizes_better.unwrap_or(best);
-    let mut best_pairs = best.pairs.clone();
-    best_pairs.sort_unstable();
-    let mut equals: Vec<&Verified> = vec![&best];
-    for v in &verified {
-        // What ranks it below the best is checked first: it is cheaper than whether it is accepted.
-        let as_good = v.from_back == best.from_back
-            && v.pairs.len() == best.pairs.len()
-            && v.missing == best.missing
-            && v.size_mismatches == best.size_mismatches
-            && !v.size_spread.worse_than(&best.size_spread, size_quantile)
-            && v.accepted(&verifier, min_matched)
-            && if same_blobs(&best, v) {
-                // The same measurements labelled otherwise: judged as the static pose judges its rivals, the
-                // user's model error included.
-                relabelling_is_rival(
-                    &verifier.model,
-                    target,
-                    (&verifier.observations(&best.pairs), &best.state),
-                    (&verifier.observations(&v.pairs), &v.state),
-                    IDENTIFY_NOISE_PX,
-                    MODEL_BOUND_SIGMAS,
-                )
-            } else {
-                v.residual_px.powi(2) <= rival_cost_ratio * best.residual_px.powi(2)
-            };
-        let mut pairs = v.pairs.clone();
-        pairs.sort_unstable();
-        if pairs != best_pairs
-            && as_good
-            && equals.iter().all(|e| {
-                let mut p = e.pairs.clone();
-                p.sort_unstable();
-                p != pairs
-            })
-        {
-            if !related_by_symmetry(target, &best, v) {
-                work.bounds = verifier.bounds.get();
-                return Err(MatchError::PartialView);
+                && !v
+                    .size_spread
+                    .worse_than(&best.size_spread, self.size_quantile)
+                && v.accepted(verifier, self.min_matched)
+                && if same_blobs(best, v) {
+                    // The same measurements labelled otherwise: judged as the static pose judges its rivals, the
+                    // user's model error included.
+                    relabelling_is_rival(
+                        &verifier.model,
+                        verifier.target,
+                        (&verifier.observations(&best.pairs), &best.state),
+                        (&verifier.observations(&v.pairs), &v.state),
+                        IDENTIFY_NOISE_PX,
+                        MODEL_BOUND_SIGMAS,
+                    )
+                } else {
+                    v.residual_px.powi(2) <= self.rival_cost_ratio * best.residual_px.powi(2)
+                };
+            let mut pairs = v.pairs.clone();
+            pairs.sort_unstable();
+            if pairs != best_pairs
+                && as_good
+                && equals.iter().all(|e| {
+                    let mut p = e.pairs.clone();
+                    p.sort_unstable();
+                    p != pairs
+                })
+            {
+                if !related_by_symmetry(verifier.target, best, v) {
+                    return Err(MatchError::PartialView);
+                }
+                equals.push(v);
             }
-            equals.push(v);
         }
+        Ok(equals)
     }
-    let ambiguous = equals.len() > 1;
-    // The canonical labelling: the lowest id projected nearest the top-left corner.
-    let lowest = (0..n).min_by_key(|&i| points[i].id).unwrap_or(0);
-    let chosen = equals
+}
+
+/// The canonical labelling among a symmetric target's twins: the lowest id projected nearest the top-left corner.
+fn canonical<'b>(verifier: &Verifier<'_>, equals: &[&'b Verified]) -> Option<&'b Verified> {
+    let points = verifier.target.points();
+    let lowest = (0..points.len()).min_by_key(|&i| points[i].id).unwrap_or(0);
+    equals
         .iter()
         .min_by(|a, b| {
             let corner = |v: &Verified| {
-                camera
+                verifier
+                    .camera
                     .raw_pixel_from_cam(
                         &v.state.point_in_cam_at(&points[lowest].point_in_obj_m, 0.0),
                     )
@@ -302,8 +390,4 @@ pub(super) fn identify_search(
             corner(a).total_cmp(&corner(b))
         })
         .copied()
-        .unwrap_or(&best)
-        .clone();
-    work.bounds = verifier.bounds.get();
-    Ok(Some(finish(&verifier, chosen, ambiguous, work.hypotheses)))
 }
