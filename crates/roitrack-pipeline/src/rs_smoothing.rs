@@ -14,8 +14,8 @@ use nalgebra::Matrix6;
 use roitrack_core::stats::chi2_upper_0_1_percent;
 use roitrack_core::{CameraModel, Measurement, SpatioTemporalModel, Target};
 use roitrack_estimators::{
-    Estimate, MAX_STENCIL_POSES, Matrix12, Observation, TimedPose, TrackStatus, pose_residuals,
-    refit_pose, stencil_motion, stencil_motion_at_start,
+    Estimate, MAX_STENCIL_POSES, Matrix12, Observation, PoseRefit, StencilMotion, TimedPose,
+    TrackStatus, pose_residuals, refit_pose, stencil_motion, stencil_motion_at_start,
 };
 
 use crate::frames::{FrameOutcome, observation_of};
@@ -54,6 +54,15 @@ struct Held<I> {
 
 /// A frame's pose and covariance after it left the buffer: the past side of the next frames' stencils.
 type PastPose = Option<(TimedPose, Matrix6<f64>)>;
+
+/// A held frame's neighbours and the motion they give at its time ([`RollingSmoother::stencil`]).
+struct Stencil {
+    /// The neighbours' poses and covariances in time order, the frame's own among them.
+    neighbours: Vec<(TimedPose, Matrix6<f64>)>,
+    motion: StencilMotion,
+    /// The frame has no pose before it: it starts a track.
+    starts: bool,
+}
 
 /// Holds the last frames of an offline rolling-shutter run and gives each back refined four frames later.
 ///
@@ -169,37 +178,12 @@ impl<I> RollingSmoother<I> {
     /// and after it as many as make [`MAX_STENCIL_POSES`] in all); leaves it as it is without one after it, or
     /// without one before it and two after it.
     fn refit(&mut self, p: usize) {
-        let position = self.past.len() + p;
-        let pose_at = |i: usize| -> PastPose {
-            if i < self.past.len() {
-                self.past[i]
-            } else {
-                self.pending[i - self.past.len()].pose
-            }
-        };
-        let total = self.past.len() + self.pending.len();
-        if pose_at(position).is_none() {
-            return;
-        }
-        let mut first = position;
-        while first > 0 && position - first < REACH && pose_at(first - 1).is_some() {
-            first -= 1;
-        }
-        let after = MAX_STENCIL_POSES - 1 - (position - first);
-        let mut last = position;
-        while last + 1 < total && last - position < after && pose_at(last + 1).is_some() {
-            last += 1;
-        }
-        let neighbours: Vec<(TimedPose, Matrix6<f64>)> =
-            (first..=last).filter_map(pose_at).collect();
-        let poses: Vec<TimedPose> = neighbours.iter().map(|(pose, _)| *pose).collect();
-        // A frame with no pose before it starts a track: its twist from the poses after it.
-        let motion = if position == first {
-            stencil_motion_at_start(&poses)
-        } else {
-            stencil_motion(&poses, position - first)
-        };
-        let Some(motion) = motion else {
+        let Some(Stencil {
+            neighbours,
+            motion,
+            starts,
+        }) = self.stencil(p)
+        else {
             return;
         };
         let held = &self.pending[p];
@@ -224,27 +208,7 @@ impl<I> RollingSmoother<I> {
         ) else {
             return;
         };
-        let shift_m = (fit.state.cam_t_obj_m - filter.state.cam_t_obj_m).norm();
-        let shift_rad =
-            roitrack_core::so3::angle_between(&fit.state.cam_r_obj, &filter.state.cam_r_obj);
-        // A track's first pose was fitted with no twist, or with one the frames after it have not pinned yet: it may
-        // be off by more than the shifts allowed (a rolling frame's, by millimetres and degrees), and the refit is
-        // taken when it explains the frame's blobs better: a start the filter does not vouch for (degenerate or
-        // disputed) by the filter's residual, any start when its own blobs refute the filter's pose
-        // ([`refutes_the_filter`]).
-        let within_shifts = (shift_m <= MAX_SHIFT_M && shift_rad <= MAX_SHIFT_RAD)
-            || within_the_filters_uncertainty(filter, &fit.state, &fit.pose_covariance);
-        let explains_a_start_better = position == first
-            && ((!filter.status.is_vouched_for() && fit.residual_rms_px <= filter.residual_rms_px)
-                || refutes_the_filter(
-                    &self.model,
-                    &self.target,
-                    &held.observations,
-                    filter,
-                    &fit.state,
-                    &motion.acceleration,
-                ));
-        if !fit.state.is_finite() || !(within_shifts || explains_a_start_better) {
+        if !self.takes(p, filter, &fit, &motion.acceleration, starts) {
             return;
         }
         let mut estimate = *filter;
@@ -277,6 +241,80 @@ impl<I> RollingSmoother<I> {
             fit.pose_covariance,
         ));
         held.refined = Some(estimate);
+    }
+
+    /// The stencil of held frame `p`: its neighbours' poses and covariances (itself among them), the motion they
+    /// give at its time, and whether it starts a track (no pose before it); `None` if it has no pose or too few
+    /// neighbours.
+    fn stencil(&self, p: usize) -> Option<Stencil> {
+        let position = self.past.len() + p;
+        let pose_at = |i: usize| -> PastPose {
+            if i < self.past.len() {
+                self.past[i]
+            } else {
+                self.pending[i - self.past.len()].pose
+            }
+        };
+        let total = self.past.len() + self.pending.len();
+        pose_at(position)?;
+        let mut first = position;
+        while first > 0 && position - first < REACH && pose_at(first - 1).is_some() {
+            first -= 1;
+        }
+        let after = MAX_STENCIL_POSES - 1 - (position - first);
+        let mut last = position;
+        while last + 1 < total && last - position < after && pose_at(last + 1).is_some() {
+            last += 1;
+        }
+        let neighbours: Vec<(TimedPose, Matrix6<f64>)> =
+            (first..=last).filter_map(pose_at).collect();
+        let poses: Vec<TimedPose> = neighbours.iter().map(|(pose, _)| *pose).collect();
+        // A frame with no pose before it starts a track: its twist from the poses after it.
+        let starts = position == first;
+        let motion = if starts {
+            stencil_motion_at_start(&poses)
+        } else {
+            stencil_motion(&poses, position - first)
+        }?;
+        Some(Stencil {
+            neighbours,
+            motion,
+            starts,
+        })
+    }
+
+    /// Whether held frame `p`'s refit `fit` replaces the filter's estimate `filter`: within the shifts allowed (or
+    /// the filter's own uncertainty), or, for a frame that `starts` a track, when it explains the frame's blobs
+    /// better.
+    fn takes(
+        &self,
+        p: usize,
+        filter: &Estimate,
+        fit: &PoseRefit,
+        acceleration: &roitrack_core::Acceleration,
+        starts: bool,
+    ) -> bool {
+        let shift_m = (fit.state.cam_t_obj_m - filter.state.cam_t_obj_m).norm();
+        let shift_rad =
+            roitrack_core::so3::angle_between(&fit.state.cam_r_obj, &filter.state.cam_r_obj);
+        // A track's first pose was fitted with no twist, or with one the frames after it have not pinned yet: it may
+        // be off by more than the shifts allowed (a rolling frame's, by millimetres and degrees), and the refit is
+        // taken when it explains the frame's blobs better: a start the filter does not vouch for (degenerate or
+        // disputed) by the filter's residual, any start when its own blobs refute the filter's pose
+        // ([`refutes_the_filter`]).
+        let within_shifts = (shift_m <= MAX_SHIFT_M && shift_rad <= MAX_SHIFT_RAD)
+            || within_the_filters_uncertainty(filter, &fit.state, &fit.pose_covariance);
+        let explains_a_start_better = starts
+            && ((!filter.status.is_vouched_for() && fit.residual_rms_px <= filter.residual_rms_px)
+                || refutes_the_filter(
+                    &self.model,
+                    &self.target,
+                    &self.pending[p].observations,
+                    filter,
+                    &fit.state,
+                    acceleration,
+                ));
+        fit.state.is_finite() && (within_shifts || explains_a_start_better)
     }
 
     /// Gives back the oldest held frame, its estimate the last refit's if there was one.
