@@ -20,6 +20,9 @@ pub(super) struct Restarts {
     times_s: VecDeque<f64>,
     /// The camera's centroids the fused filter accepted in a row since the restart in effect.
     agreeing_in_a_row: usize,
+    /// A whole cycle was accepted in a row since the restart in effect: the track has settled, and stays settled
+    /// until the next restart whatever the gate says of its later centroids (they count as any camera's).
+    settled: bool,
 }
 
 impl Restarts {
@@ -32,13 +35,18 @@ impl Restarts {
     }
 
     /// Whether the camera's centroid at `t_s` (its clock; centroids of a camera come in time order) is from a track
-    /// that is settling: restarted before it, and fewer than `cycle` of its centroids accepted in a row since.
+    /// that is settling: restarted before it, and never `cycle` of its centroids accepted in a row since. Settled
+    /// once, a track does not settle again before its next restart: a settled camera's rejections (the fused track
+    /// gone wrong at a hard turn, say) must count against the fused track, or the other cameras, whose clock states
+    /// can absorb its error, would outvote the first camera for good.
     pub(super) fn settling(&mut self, t_s: f64, cycle: usize) -> bool {
         while self.times_s.len() >= 2 && self.times_s[1] <= t_s {
             self.times_s.pop_front();
             self.agreeing_in_a_row = 0;
+            self.settled = false;
         }
-        self.times_s.front().is_some_and(|&r| t_s >= r) && self.agreeing_in_a_row < cycle
+        self.settled |= self.agreeing_in_a_row >= cycle;
+        self.times_s.front().is_some_and(|&r| t_s >= r) && !self.settled
     }
 
     /// The camera's centroid just judged by [`Self::settling`] was accepted (`true`) or rejected by the gate.
@@ -74,6 +82,13 @@ mod tests {
         r.judged(false);
         r.judged(true);
         assert!(r.settling(2.1, 2), "a rejection starts the run again");
+        r.judged(true);
+        assert!(!r.settling(2.2, 2), "settled");
+        r.judged(false);
+        assert!(
+            !r.settling(2.3, 2),
+            "a settled track's rejection does not make it settle again"
+        );
     }
 
     #[test]
