@@ -13,7 +13,7 @@ use super::run::LiveOptions;
 use super::scene::RobotScene;
 use crate::ServoConfig;
 use crate::closed_loop::{ServoSample, build_controller};
-use crate::control::{ControlInput, Observation};
+use crate::control::{ControlInput, Controller, Observation};
 use crate::robot::{Geometry, RobotState, step_rk4};
 
 /// What the control thread hands back.
@@ -84,87 +84,37 @@ pub(super) fn control_thread(
         path_started,
         mut known_acceleration,
     } = flags;
-    let robot = config.robot;
     let path = &config.path;
     let (_, mut controller) = build_controller(config);
-    let model = robot
-        .with_mass_factor(config.model_mass_factor)
-        .with_friction_factor(config.model_friction_factor);
     let control_rate_hz = options.control_rate_hz.unwrap_or(config.control_rate_hz);
     let tick_s = 1.0 / control_rate_hz;
     let step_s = tick_s / config.substeps as f64;
     let path_ticks = (path.duration_s() / tick_s).round() as usize;
     let expected_estimates = path_ticks / config.tracker.every.max(1) + 256;
-    let mut side = ControlSide {
-        samples: Vec::with_capacity(path_ticks + 2),
-        ages_s: Vec::with_capacity(path_ticks + 2),
-        to_actuation_us: Vec::with_capacity(expected_estimates),
-        to_command_us: Vec::with_capacity(expected_estimates),
-        ticks: 0,
-        missed: 0,
-        missed_before_start: 0,
-        longest_missed_run: 0,
-        saturated_ticks: 0,
-        stop_reason: None,
-        path_start_robot_s: None,
-        start_delay_s: f64::NAN,
-        realtime_priority: false,
-        sent_known_accelerations: 0,
-        superseded_known_accelerations: 0,
-    };
+    let mut side = ControlSide::with_room(path_ticks, expected_estimates);
     let (_, home_cam) = path.home_in_camera();
-    let limit = robot.force_limit_n;
-    let clip = |f: Vector3<f64>| f.map(|x| x.clamp(-limit, limit));
-    let hold = Geometry::at(&model, &Vector3::zeros())
-        .map(|g| g.gravity_forces(&model))
-        .unwrap_or_else(|_| Vector3::zeros());
-    let mut force = hold;
-    // Commands waiting for their actuation instant (robot clock); a few at most.
-    let mut commands: VecDeque<(f64, Vector3<f64>)> = VecDeque::with_capacity(256);
-    let window_ticks = ((config.saturation_window_s * control_rate_hz).round() as usize).max(1);
-    let mut recent_saturation: VecDeque<bool> = VecDeque::with_capacity(window_ticks + 1);
-    let mut recent_saturated = 0usize;
-    let mut state = RobotState::default();
-    let mut t_robot_s = scene.robot_time_s();
-    scene.push(t_robot_s, &state);
+    let mut saturation = SaturationWindow::new(
+        ((config.saturation_window_s * control_rate_hz).round() as usize).max(1),
+    );
+    let mut drive = SimulatedDrive::at_home(config, scene);
     let mut last_sequence = 0u64;
     let mut observation: Option<Observation> = None;
     let mut path_start: Option<f64> = None;
-    let mut next_tick_s = t_robot_s;
+    let mut next_tick_s = drive.t_robot_s;
     side.realtime_priority = options
         .realtime_priority
         .is_some_and(request_realtime_priority);
     loop {
         if loop_done.load(Ordering::Acquire) {
-            if path_start.is_none() {
-                side.stop_reason = Some("the live loop ended before its first estimate".into());
-            } else {
-                side.stop_reason = Some("the live loop ended before the path's end".into());
-            }
+            side.stop_reason = Some(loop_ended_reason(path_start.is_some()).into());
             break;
         }
-        // Wait for the tick's instant: asleep until just before it, then spinning.
         let now_s = scene.robot_time_s();
         if now_s < next_tick_s {
-            let left_s = next_tick_s - now_s;
-            if left_s > SPIN_BEFORE_TICK_S {
-                std::thread::sleep(Duration::from_secs_f64(left_s - SPIN_BEFORE_TICK_S));
-            } else {
-                std::hint::spin_loop();
-            }
+            wait_towards_tick(next_tick_s - now_s);
             continue;
         }
-        // Ticks whose instant passed a whole period ago were missed: the drive held its force over them.
-        let behind = ((now_s - next_tick_s) / tick_s).floor() as usize;
-        if behind > 0 {
-            if path_start.is_some() {
-                side.missed += behind;
-                side.longest_missed_run = side.longest_missed_run.max(behind);
-            } else {
-                side.missed_before_start += behind;
-            }
-            next_tick_s += behind as f64 * tick_s;
-        }
+        next_tick_s = side.skip_missed_ticks(now_s, next_tick_s, tick_s, path_start.is_some());
         if path_start.is_none() && wall.elapsed().as_secs_f64() > options.start_timeout_s {
             side.stop_reason = Some(format!(
                 "no estimate within {:.1} s of the start",
@@ -188,126 +138,94 @@ pub(super) fn control_thread(
                 path_start = Some(now_s);
                 path_started.store(true, Ordering::Release);
             }
-            let Some(start) = path_start else {
-                hold_home(scene, &mut t_robot_s, next_tick_s + tick_s);
-                next_tick_s += tick_s;
-                continue;
-            };
-            observation = Some(Observation {
-                t_s: t_ref_robot_s - start,
-                position_m: snapshot.state.cam_t_obj_m - home_cam,
-                velocity_mps: snapshot.state.velocity_mps,
-                acceleration_mps2: None,
-            });
-            fresh_exposure_s = Some(t_ref_robot_s);
+            if let Some(start) = path_start {
+                observation = Some(Observation {
+                    t_s: t_ref_robot_s - start,
+                    position_m: snapshot.state.cam_t_obj_m - home_cam,
+                    velocity_mps: snapshot.state.velocity_mps,
+                    acceleration_mps2: None,
+                });
+                fresh_exposure_s = Some(t_ref_robot_s);
+            }
         }
         let Some(start) = path_start else {
-            hold_home(scene, &mut t_robot_s, next_tick_s + tick_s);
+            drive.hold_home(scene, next_tick_s + tick_s);
             next_tick_s += tick_s;
             continue;
         };
-        // The command, acting the drive's delay after it is issued.
-        let geometry = match Geometry::at(&robot, &state.position_m) {
-            Ok(g) => g,
-            Err(e) => {
-                side.stop_reason = Some(e.to_string());
+        let tick = TickContext {
+            config,
+            scene,
+            tick_s,
+            start_s: start,
+        };
+        let issued = match issue_command(
+            &tick,
+            controller.as_mut(),
+            &drive.state,
+            observation,
+            &mut side,
+        ) {
+            Ok(issued) => issued,
+            Err(reason) => {
+                side.stop_reason = Some(reason);
                 break;
             }
         };
-        let issued_s = scene.robot_time_s();
-        let t_act_s = issued_s + config.actuation_delay_s;
-        if let Some(o) = &observation {
-            side.ages_s
-                .push_within_capacity_or_skip(t_act_s - start - o.t_s);
-        }
-        let input = ControlInput {
-            t_act_s: t_act_s - start,
-            dt_s: tick_s,
-            reference: path.at(t_act_s - start),
-            observation,
-            drive_joint_velocity_mps: geometry.joint_velocity(&state.velocity_mps),
-        };
-        let command = controller.command(&input);
-        let after_s = scene.robot_time_s();
+        // The command acts the drive's delay after it is ready.
+        let acts_s = issued.ready_s + config.actuation_delay_s;
         if let Some(exposure_s) = fresh_exposure_s {
-            side.to_command_us
-                .push_within_capacity_or_skip((after_s - exposure_s) * 1e6);
-            side.to_actuation_us.push_within_capacity_or_skip(
-                (after_s + config.actuation_delay_s - exposure_s) * 1e6,
-            );
+            side.record_latency(issued.ready_s, acts_s, exposure_s);
         }
-        if !command.iter().all(|f| f.is_finite()) {
+        if !issued.force_n.iter().all(|f| f.is_finite()) {
             side.stop_reason = Some(format!(
                 "the controller gave a force that is not finite at t = {:.4} s",
-                issued_s - start
+                issued.issued_s - start
             ));
             break;
         }
-        let command = clip(command);
-        let queued = commands.len() < commands.capacity();
-        if queued {
-            commands.push_back((after_s + config.actuation_delay_s, command));
-        }
-        // What the command asks of the controller's model, from the instant it acts, told to the tracker on the
-        // loop's clock (as `run_servo` does in simulated time: the robot frame has the camera's axes). A command the
-        // drive never gets (its queue full) is not told either.
-        if queued
-            && let Some(sender) = known_acceleration.as_deref_mut()
-            && let Some(believed_mps2) = controller.believed_acceleration(&command)
-            && let Some(offset_s) = scene.loop_offset_s()
-        {
-            let acceleration = Acceleration {
-                linear_mps2: believed_mps2,
-                angular_radps2: Vector3::zeros(),
-            };
-            sender.send(after_s + config.actuation_delay_s - offset_s, acceleration);
-            side.sent_known_accelerations += 1;
-            side.superseded_known_accelerations = sender.superseded();
+        let command = drive.clip(issued.force_n);
+        let queued = drive.queue(acts_s, command);
+        // A command the drive never gets (its queue full) is not told to the tracker either.
+        if queued && let Some(sender) = known_acceleration.as_deref_mut() {
+            tell_known_acceleration(
+                sender,
+                controller.as_ref(),
+                &command,
+                acts_s,
+                scene,
+                &mut side,
+            );
         }
         // The robot to the next tick.
-        let saturated_before = force.amax() >= limit;
-        if let Err(reason) = integrate(
-            config,
-            scene,
-            &mut state,
-            &mut t_robot_s,
-            next_tick_s + tick_s,
-            step_s,
-            &mut commands,
-            &mut force,
-        ) {
-            side.stop_reason = Some(reason);
-            break;
-        }
+        let saturated = match drive.advance(config, scene, next_tick_s + tick_s, step_s) {
+            Ok(saturated) => saturated,
+            Err(reason) => {
+                side.stop_reason = Some(reason);
+                break;
+            }
+        };
         next_tick_s += tick_s;
         side.ticks += 1;
-        let saturated = saturated_before || force.amax() >= limit;
         side.saturated_ticks += usize::from(saturated);
-        recent_saturation.push_back(saturated);
-        recent_saturated += usize::from(saturated);
-        if recent_saturation.len() > window_ticks {
-            recent_saturated -= usize::from(recent_saturation.pop_front().unwrap_or(false));
-        }
-        if recent_saturation.len() == window_ticks && 2 * recent_saturated > window_ticks {
+        if let Some(saturated_percent) = saturation.push(saturated) {
             side.stop_reason = Some(format!(
                 "unstable: an actuator at its force limit {:.0} % of the {:.0} ms before t = {:.4} s",
-                100.0 * recent_saturated as f64 / window_ticks as f64,
+                saturated_percent,
                 config.saturation_window_s * 1e3,
-                t_robot_s - start
+                drive.t_robot_s - start
             ));
             break;
         }
-        let t_path_s = t_robot_s - start;
+        let t_path_s = drive.t_robot_s - start;
         let sample = ServoSample {
             t_s: t_path_s,
             reference: path.at(t_path_s),
-            achieved_m: state.position_m,
-            achieved_velocity_mps: state.velocity_mps,
-            force_n: force,
+            achieved_m: drive.state.position_m,
+            achieved_velocity_mps: drive.state.velocity_mps,
+            force_n: drive.force_n,
         };
-        if side.samples.len() < side.samples.capacity() {
-            side.samples.push(sample);
-        }
+        side.samples.push_within_capacity_or_skip(sample);
         if sample.error_m() > config.divergence_error_m {
             side.stop_reason = Some(format!(
                 "diverged: {:.1} mm from the path at t = {t_path_s:.4} s (limit {:.1} mm)",
@@ -321,6 +239,262 @@ pub(super) fn control_thread(
         }
     }
     side
+}
+
+impl ControlSide {
+    /// Nothing counted yet, with room for every tick's sample and every estimate's latency the path is expected to
+    /// need: the control thread pushes only within this room.
+    fn with_room(path_ticks: usize, expected_estimates: usize) -> Self {
+        ControlSide {
+            samples: Vec::with_capacity(path_ticks + 2),
+            ages_s: Vec::with_capacity(path_ticks + 2),
+            to_actuation_us: Vec::with_capacity(expected_estimates),
+            to_command_us: Vec::with_capacity(expected_estimates),
+            ticks: 0,
+            missed: 0,
+            missed_before_start: 0,
+            longest_missed_run: 0,
+            saturated_ticks: 0,
+            stop_reason: None,
+            path_start_robot_s: None,
+            start_delay_s: f64::NAN,
+            realtime_priority: false,
+            sent_known_accelerations: 0,
+            superseded_known_accelerations: 0,
+        }
+    }
+
+    /// Counts the ticks whose instant passed a whole period before `now_s` as missed (the drive held its force over
+    /// them) and gives the instant of the tick due now.
+    fn skip_missed_ticks(
+        &mut self,
+        now_s: f64,
+        next_tick_s: f64,
+        tick_s: f64,
+        path_running: bool,
+    ) -> f64 {
+        let behind = ((now_s - next_tick_s) / tick_s).floor() as usize;
+        if behind == 0 {
+            return next_tick_s;
+        }
+        if path_running {
+            self.missed += behind;
+            self.longest_missed_run = self.longest_missed_run.max(behind);
+        } else {
+            self.missed_before_start += behind;
+        }
+        next_tick_s + behind as f64 * tick_s
+    }
+
+    /// A fresh estimate's latency (µs) from its exposure to the command it made being ready, and to that command
+    /// acting.
+    fn record_latency(&mut self, ready_s: f64, acts_s: f64, exposure_s: f64) {
+        self.to_command_us
+            .push_within_capacity_or_skip((ready_s - exposure_s) * 1e6);
+        self.to_actuation_us
+            .push_within_capacity_or_skip((acts_s - exposure_s) * 1e6);
+    }
+}
+
+/// Why the control thread stopped when the live loop ended first.
+fn loop_ended_reason(path_running: bool) -> &'static str {
+    if path_running {
+        "the live loop ended before the path's end"
+    } else {
+        "the live loop ended before its first estimate"
+    }
+}
+
+/// Waits towards a tick `left_s` ahead: asleep until just before it, then spinning. The caller checks the clock
+/// again after.
+fn wait_towards_tick(left_s: f64) {
+    if left_s > SPIN_BEFORE_TICK_S {
+        std::thread::sleep(Duration::from_secs_f64(left_s - SPIN_BEFORE_TICK_S));
+    } else {
+        std::hint::spin_loop();
+    }
+}
+
+/// What one tick of the running path reads and does not change.
+struct TickContext<'a> {
+    config: &'a ServoConfig,
+    scene: &'a RobotScene,
+    tick_s: f64,
+    /// The path's start on the robot's clock (s).
+    start_s: f64,
+}
+
+/// A tick's command as the controller gave it (not yet checked or clipped), with when it was asked for and when it
+/// was ready (robot clock, s).
+struct IssuedCommand {
+    issued_s: f64,
+    ready_s: f64,
+    force_n: Vector3<f64>,
+}
+
+/// Asks the controller for the tick's command, for the instant it will act (the drive's delay after it is issued),
+/// and records the observation's age at that instant. An error when the robot's geometry is out of reach.
+fn issue_command(
+    tick: &TickContext<'_>,
+    controller: &mut (dyn Controller + Send),
+    state: &RobotState,
+    observation: Option<Observation>,
+    side: &mut ControlSide,
+) -> Result<IssuedCommand, String> {
+    let config = tick.config;
+    let start = tick.start_s;
+    let geometry = Geometry::at(&config.robot, &state.position_m).map_err(|e| e.to_string())?;
+    let issued_s = tick.scene.robot_time_s();
+    let t_act_s = issued_s + config.actuation_delay_s;
+    if let Some(o) = &observation {
+        side.ages_s
+            .push_within_capacity_or_skip(t_act_s - start - o.t_s);
+    }
+    let input = ControlInput {
+        t_act_s: t_act_s - start,
+        dt_s: tick.tick_s,
+        reference: config.path.at(t_act_s - start),
+        observation,
+        drive_joint_velocity_mps: geometry.joint_velocity(&state.velocity_mps),
+    };
+    let force_n = controller.command(&input);
+    Ok(IssuedCommand {
+        issued_s,
+        ready_s: tick.scene.robot_time_s(),
+        force_n,
+    })
+}
+
+/// Tells the tracker what `command` asks of the controller's model, from the instant it acts (`acts_s`, robot
+/// clock), on the loop's clock (as `run_servo` does in simulated time: the robot frame has the camera's axes).
+/// Nothing when the controller has no model or the clocks are not yet tied.
+fn tell_known_acceleration(
+    sender: &mut KnownAccelerationSender,
+    controller: &(dyn Controller + Send),
+    command: &Vector3<f64>,
+    acts_s: f64,
+    scene: &RobotScene,
+    side: &mut ControlSide,
+) {
+    let Some(believed_mps2) = controller.believed_acceleration(command) else {
+        return;
+    };
+    let Some(offset_s) = scene.loop_offset_s() else {
+        return;
+    };
+    let acceleration = Acceleration {
+        linear_mps2: believed_mps2,
+        angular_radps2: Vector3::zeros(),
+    };
+    sender.send(acts_s - offset_s, acceleration);
+    side.sent_known_accelerations += 1;
+    side.superseded_known_accelerations = sender.superseded();
+}
+
+/// The share of recent ticks with an actuator at its force limit, over a window of ticks: a loop that keeps its
+/// actuators saturated most of the time has gone unstable.
+struct SaturationWindow {
+    recent: VecDeque<bool>,
+    saturated: usize,
+    window_ticks: usize,
+}
+
+impl SaturationWindow {
+    fn new(window_ticks: usize) -> Self {
+        SaturationWindow {
+            recent: VecDeque::with_capacity(window_ticks + 1),
+            saturated: 0,
+            window_ticks,
+        }
+    }
+
+    /// Adds a tick; once the window is full and more than half its ticks saturated, their share (%).
+    fn push(&mut self, saturated: bool) -> Option<f64> {
+        self.recent.push_back(saturated);
+        self.saturated += usize::from(saturated);
+        if self.recent.len() > self.window_ticks {
+            self.saturated -= usize::from(self.recent.pop_front().unwrap_or(false));
+        }
+        (self.recent.len() == self.window_ticks && 2 * self.saturated > self.window_ticks)
+            .then(|| 100.0 * self.saturated as f64 / self.window_ticks as f64)
+    }
+}
+
+/// The simulated robot as the control thread drives it: its state on the robot's clock, the force its actuators
+/// hold and the commands waiting for their actuation instant.
+struct SimulatedDrive {
+    state: RobotState,
+    t_robot_s: f64,
+    force_n: Vector3<f64>,
+    /// Commands waiting for their actuation instant (robot clock); a few at most.
+    commands: VecDeque<(f64, Vector3<f64>)>,
+    force_limit_n: f64,
+}
+
+impl SimulatedDrive {
+    /// At rest at home now, holding the force the controller's model needs against gravity there; published to
+    /// `scene`.
+    fn at_home(config: &ServoConfig, scene: &RobotScene) -> Self {
+        let model = config
+            .robot
+            .with_mass_factor(config.model_mass_factor)
+            .with_friction_factor(config.model_friction_factor);
+        let hold_n = Geometry::at(&model, &Vector3::zeros())
+            .map(|g| g.gravity_forces(&model))
+            .unwrap_or_else(|_| Vector3::zeros());
+        let drive = SimulatedDrive {
+            state: RobotState::default(),
+            t_robot_s: scene.robot_time_s(),
+            force_n: hold_n,
+            commands: VecDeque::with_capacity(256),
+            force_limit_n: config.robot.force_limit_n,
+        };
+        scene.push(drive.t_robot_s, &drive.state);
+        drive
+    }
+
+    /// Before the path starts the robot's brakes hold it at rest at home, up to `until_s`.
+    fn hold_home(&mut self, scene: &RobotScene, until_s: f64) {
+        hold_home(scene, &mut self.t_robot_s, until_s);
+    }
+
+    /// A force within the actuators' limit, axis by axis.
+    fn clip(&self, force_n: Vector3<f64>) -> Vector3<f64> {
+        let limit = self.force_limit_n;
+        force_n.map(|x| x.clamp(-limit, limit))
+    }
+
+    /// Queues a command to act at `acts_s` (robot clock); false, and dropped, when the queue is full.
+    fn queue(&mut self, acts_s: f64, command: Vector3<f64>) -> bool {
+        let queued = self.commands.len() < self.commands.capacity();
+        if queued {
+            self.commands.push_back((acts_s, command));
+        }
+        queued
+    }
+
+    /// Integrates the robot to `until_s`, publishing every step; whether an actuator was at its force limit at the
+    /// tick's start or end.
+    fn advance(
+        &mut self,
+        config: &ServoConfig,
+        scene: &RobotScene,
+        until_s: f64,
+        step_s: f64,
+    ) -> Result<bool, String> {
+        let saturated_before = self.force_n.amax() >= self.force_limit_n;
+        integrate(
+            config,
+            scene,
+            &mut self.state,
+            &mut self.t_robot_s,
+            until_s,
+            step_s,
+            &mut self.commands,
+            &mut self.force_n,
+        )?;
+        Ok(saturated_before || self.force_n.amax() >= self.force_limit_n)
+    }
 }
 
 /// Before the path starts the robot's brakes hold it at rest at home: its state as it is, published up to `until_s`.
