@@ -82,48 +82,40 @@ pub(super) fn control_thread(
     let ControlFlags {
         loop_done,
         path_started,
-        mut known_acceleration,
+        known_acceleration,
     } = flags;
-    let path = &config.path;
-    let (_, mut controller) = build_controller(config);
     let control_rate_hz = options.control_rate_hz.unwrap_or(config.control_rate_hz);
-    let tick_s = 1.0 / control_rate_hz;
-    let step_s = tick_s / config.substeps as f64;
-    let path_ticks = (path.duration_s() / tick_s).round() as usize;
-    let expected_estimates = path_ticks / config.tracker.every.max(1) + 256;
-    let mut side = ControlSide::with_room(path_ticks, expected_estimates);
-    let (_, home_cam) = path.home_in_camera();
-    let mut saturation = SaturationWindow::new(
-        ((config.saturation_window_s * control_rate_hz).round() as usize).max(1),
-    );
-    let mut drive = SimulatedDrive::at_home(config, scene);
+    let mut follower = PathFollower::new(config, scene, control_rate_hz, known_acceleration);
+    let tick_s = follower.tick_s;
+    let (_, home_cam) = config.path.home_in_camera();
     let mut last_sequence = 0u64;
     let mut observation: Option<Observation> = None;
     let mut path_start: Option<f64> = None;
-    let mut next_tick_s = drive.t_robot_s;
-    side.realtime_priority = options
+    let mut next_tick_s = follower.drive.t_robot_s;
+    follower.side.realtime_priority = options
         .realtime_priority
         .is_some_and(request_realtime_priority);
-    loop {
+    let stop_reason = loop {
         if loop_done.load(Ordering::Acquire) {
-            side.stop_reason = Some(loop_ended_reason(path_start.is_some()).into());
-            break;
+            break Some(loop_ended_reason(path_start.is_some()).into());
         }
         let now_s = scene.robot_time_s();
         if now_s < next_tick_s {
             wait_towards_tick(next_tick_s - now_s);
             continue;
         }
-        next_tick_s = side.skip_missed_ticks(now_s, next_tick_s, tick_s, path_start.is_some());
+        next_tick_s =
+            follower
+                .side
+                .skip_missed_ticks(now_s, next_tick_s, tick_s, path_start.is_some());
         if path_start.is_none() && wall.elapsed().as_secs_f64() > options.start_timeout_s {
-            side.stop_reason = Some(format!(
+            break Some(format!(
                 "no estimate within {:.1} s of the start",
                 options.start_timeout_s
             ));
-            break;
         }
         // The newest estimate, if new: on the robot's clock, then the path's. Its latency is measured when the
-        // command it makes is issued, below.
+        // command it makes is issued, in the tick.
         let mut fresh_exposure_s = None;
         if let Some(snapshot) = reader.read()
             && snapshot.sequence != last_sequence
@@ -133,8 +125,8 @@ pub(super) fn control_thread(
             // The path starts with the first estimate the loop makes on time: after its full-frame start the paced
             // loop catches up on the slots it missed, with estimates of the past.
             if path_start.is_none() && now_s - t_ref_robot_s <= options.start_max_age_s {
-                side.start_delay_s = wall.elapsed().as_secs_f64();
-                side.path_start_robot_s = Some(now_s);
+                follower.side.start_delay_s = wall.elapsed().as_secs_f64();
+                follower.side.path_start_robot_s = Some(now_s);
                 path_start = Some(now_s);
                 path_started.store(true, Ordering::Release);
             }
@@ -148,97 +140,175 @@ pub(super) fn control_thread(
                 fresh_exposure_s = Some(t_ref_robot_s);
             }
         }
+        let until_s = next_tick_s + tick_s;
+        next_tick_s += tick_s;
         let Some(start) = path_start else {
-            drive.hold_home(scene, next_tick_s + tick_s);
-            next_tick_s += tick_s;
+            follower.drive.hold_home(scene, until_s);
             continue;
         };
-        let tick = TickContext {
+        match follower.tick(start, observation, fresh_exposure_s, until_s) {
+            Ok(TickEnd::PathGoesOn) => {}
+            Ok(TickEnd::PathDone) => break None,
+            Err(reason) => break Some(reason),
+        }
+    };
+    let mut side = follower.side;
+    side.stop_reason = stop_reason;
+    side
+}
+
+/// How a tick of the running path ended, when nothing stopped the thread.
+enum TickEnd {
+    PathGoesOn,
+    PathDone,
+}
+
+/// The running path's side of the control thread: each tick's command, the simulated drive it acts on, the
+/// watch for instability and what is counted for the report.
+struct PathFollower<'a> {
+    config: &'a ServoConfig,
+    scene: &'a RobotScene,
+    tick_s: f64,
+    /// The integration step (s): a tick in `config.substeps`.
+    step_s: f64,
+    controller: Box<dyn Controller + Send>,
+    /// Where each command's believed acceleration goes; `None`: the tracker is not told.
+    known_acceleration: Option<&'a mut KnownAccelerationSender>,
+    drive: SimulatedDrive,
+    saturation: SaturationWindow,
+    side: ControlSide,
+}
+
+impl<'a> PathFollower<'a> {
+    /// Sized for the whole path at `control_rate_hz`, the robot at rest at home (published to `scene`).
+    fn new(
+        config: &'a ServoConfig,
+        scene: &'a RobotScene,
+        control_rate_hz: f64,
+        known_acceleration: Option<&'a mut KnownAccelerationSender>,
+    ) -> Self {
+        let (_, controller) = build_controller(config);
+        let tick_s = 1.0 / control_rate_hz;
+        let step_s = tick_s / config.substeps as f64;
+        let path_ticks = (config.path.duration_s() / tick_s).round() as usize;
+        let expected_estimates = path_ticks / config.tracker.every.max(1) + 256;
+        let window_ticks = ((config.saturation_window_s * control_rate_hz).round() as usize).max(1);
+        PathFollower {
             config,
             scene,
             tick_s,
-            start_s: start,
-        };
-        let issued = match issue_command(
-            &tick,
-            controller.as_mut(),
-            &drive.state,
-            observation,
-            &mut side,
-        ) {
-            Ok(issued) => issued,
-            Err(reason) => {
-                side.stop_reason = Some(reason);
-                break;
-            }
-        };
-        // The command acts the drive's delay after it is ready.
+            step_s,
+            controller,
+            known_acceleration,
+            side: ControlSide::with_room(path_ticks, expected_estimates),
+            saturation: SaturationWindow::new(window_ticks),
+            drive: SimulatedDrive::at_home(config, scene),
+        }
+    }
+
+    /// One tick of the path started at `start` (robot clock): the command from the newest observation, queued to
+    /// act the drive's delay after it is ready, and the robot integrated to `until_s`. Err: why the thread stops
+    /// (a force or state not finite, the robot out of reach, instability, divergence).
+    fn tick(
+        &mut self,
+        start: f64,
+        observation: Option<Observation>,
+        fresh_exposure_s: Option<f64>,
+        until_s: f64,
+    ) -> Result<TickEnd, String> {
+        let config = self.config;
+        let issued = self.issue_command(start, observation)?;
         let acts_s = issued.ready_s + config.actuation_delay_s;
         if let Some(exposure_s) = fresh_exposure_s {
-            side.record_latency(issued.ready_s, acts_s, exposure_s);
+            self.side.record_latency(issued.ready_s, acts_s, exposure_s);
         }
         if !issued.force_n.iter().all(|f| f.is_finite()) {
-            side.stop_reason = Some(format!(
+            return Err(format!(
                 "the controller gave a force that is not finite at t = {:.4} s",
                 issued.issued_s - start
             ));
-            break;
         }
-        let command = drive.clip(issued.force_n);
-        let queued = drive.queue(acts_s, command);
+        let command = self.drive.clip(issued.force_n);
+        let queued = self.drive.queue(acts_s, command);
         // A command the drive never gets (its queue full) is not told to the tracker either.
-        if queued && let Some(sender) = known_acceleration.as_deref_mut() {
+        if queued && let Some(sender) = self.known_acceleration.as_deref_mut() {
             tell_known_acceleration(
                 sender,
-                controller.as_ref(),
+                self.controller.as_ref(),
                 &command,
                 acts_s,
-                scene,
-                &mut side,
+                self.scene,
+                &mut self.side,
             );
         }
         // The robot to the next tick.
-        let saturated = match drive.advance(config, scene, next_tick_s + tick_s, step_s) {
-            Ok(saturated) => saturated,
-            Err(reason) => {
-                side.stop_reason = Some(reason);
-                break;
-            }
-        };
-        next_tick_s += tick_s;
-        side.ticks += 1;
-        side.saturated_ticks += usize::from(saturated);
-        if let Some(saturated_percent) = saturation.push(saturated) {
-            side.stop_reason = Some(format!(
+        let saturated = self
+            .drive
+            .advance(config, self.scene, until_s, self.step_s)?;
+        self.side.ticks += 1;
+        self.side.saturated_ticks += usize::from(saturated);
+        if let Some(saturated_percent) = self.saturation.push(saturated) {
+            return Err(format!(
                 "unstable: an actuator at its force limit {:.0} % of the {:.0} ms before t = {:.4} s",
                 saturated_percent,
                 config.saturation_window_s * 1e3,
-                drive.t_robot_s - start
+                self.drive.t_robot_s - start
             ));
-            break;
         }
-        let t_path_s = drive.t_robot_s - start;
+        let t_path_s = self.drive.t_robot_s - start;
         let sample = ServoSample {
             t_s: t_path_s,
-            reference: path.at(t_path_s),
-            achieved_m: drive.state.position_m,
-            achieved_velocity_mps: drive.state.velocity_mps,
-            force_n: drive.force_n,
+            reference: config.path.at(t_path_s),
+            achieved_m: self.drive.state.position_m,
+            achieved_velocity_mps: self.drive.state.velocity_mps,
+            force_n: self.drive.force_n,
         };
-        side.samples.push_within_capacity_or_skip(sample);
+        self.side.samples.push_within_capacity_or_skip(sample);
         if sample.error_m() > config.divergence_error_m {
-            side.stop_reason = Some(format!(
+            return Err(format!(
                 "diverged: {:.1} mm from the path at t = {t_path_s:.4} s (limit {:.1} mm)",
                 sample.error_m() * 1e3,
                 config.divergence_error_m * 1e3
             ));
-            break;
         }
-        if t_path_s >= path.duration_s() {
-            break;
-        }
+        Ok(if t_path_s >= config.path.duration_s() {
+            TickEnd::PathDone
+        } else {
+            TickEnd::PathGoesOn
+        })
     }
-    side
+
+    /// Asks the controller for the tick's command, for the instant it will act (the drive's delay after it is
+    /// issued), and records the observation's age at that instant. Err when the robot's geometry is out of reach.
+    fn issue_command(
+        &mut self,
+        start: f64,
+        observation: Option<Observation>,
+    ) -> Result<IssuedCommand, String> {
+        let config = self.config;
+        let state = &self.drive.state;
+        let geometry = Geometry::at(&config.robot, &state.position_m).map_err(|e| e.to_string())?;
+        let issued_s = self.scene.robot_time_s();
+        let t_act_s = issued_s + config.actuation_delay_s;
+        if let Some(o) = &observation {
+            self.side
+                .ages_s
+                .push_within_capacity_or_skip(t_act_s - start - o.t_s);
+        }
+        let input = ControlInput {
+            t_act_s: t_act_s - start,
+            dt_s: self.tick_s,
+            reference: config.path.at(t_act_s - start),
+            observation,
+            drive_joint_velocity_mps: geometry.joint_velocity(&state.velocity_mps),
+        };
+        let force_n = self.controller.command(&input);
+        Ok(IssuedCommand {
+            issued_s,
+            ready_s: self.scene.robot_time_s(),
+            force_n,
+        })
+    }
 }
 
 impl ControlSide {
@@ -315,54 +385,12 @@ fn wait_towards_tick(left_s: f64) {
     }
 }
 
-/// What one tick of the running path reads and does not change.
-struct TickContext<'a> {
-    config: &'a ServoConfig,
-    scene: &'a RobotScene,
-    tick_s: f64,
-    /// The path's start on the robot's clock (s).
-    start_s: f64,
-}
-
 /// A tick's command as the controller gave it (not yet checked or clipped), with when it was asked for and when it
 /// was ready (robot clock, s).
 struct IssuedCommand {
     issued_s: f64,
     ready_s: f64,
     force_n: Vector3<f64>,
-}
-
-/// Asks the controller for the tick's command, for the instant it will act (the drive's delay after it is issued),
-/// and records the observation's age at that instant. An error when the robot's geometry is out of reach.
-fn issue_command(
-    tick: &TickContext<'_>,
-    controller: &mut (dyn Controller + Send),
-    state: &RobotState,
-    observation: Option<Observation>,
-    side: &mut ControlSide,
-) -> Result<IssuedCommand, String> {
-    let config = tick.config;
-    let start = tick.start_s;
-    let geometry = Geometry::at(&config.robot, &state.position_m).map_err(|e| e.to_string())?;
-    let issued_s = tick.scene.robot_time_s();
-    let t_act_s = issued_s + config.actuation_delay_s;
-    if let Some(o) = &observation {
-        side.ages_s
-            .push_within_capacity_or_skip(t_act_s - start - o.t_s);
-    }
-    let input = ControlInput {
-        t_act_s: t_act_s - start,
-        dt_s: tick.tick_s,
-        reference: config.path.at(t_act_s - start),
-        observation,
-        drive_joint_velocity_mps: geometry.joint_velocity(&state.velocity_mps),
-    };
-    let force_n = controller.command(&input);
-    Ok(IssuedCommand {
-        issued_s,
-        ready_s: tick.scene.robot_time_s(),
-        force_n,
-    })
 }
 
 /// Tells the tracker what `command` asks of the controller's model, from the instant it acts (`acts_s`, robot
