@@ -756,206 +756,16 @@ pub(crate) fn build_controller(config: &ServoConfig) -> (Gains, Box<dyn Controll
 /// ```
 pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
     config.check()?;
-    let path = &config.path;
-    let robot = config.robot;
-    let model = robot
-        .with_mass_factor(config.model_mass_factor)
-        .with_friction_factor(config.model_friction_factor);
-    let (gains, mut controller) = build_controller(config);
-    let truth_fed = config.controller == ControllerKind::TrueState;
-    let actuation_delay_s = if truth_fed {
-        0.0
-    } else {
-        config.actuation_delay_s
-    };
-    let timing = config.camera_timing();
-    let availability_s = timing.latency_s() + config.extra_latency_s;
-
-    let tick_s = 1.0 / config.control_rate_hz;
-    let step_s = tick_s / config.substeps as f64;
-    let ticks = (path.duration_s() / tick_s).round() as usize;
-    let mut camera = CameraSide::new(config)?;
-    let mut state = RobotState::default();
-    let mut history = History {
-        dt_s: step_s,
-        states: Vec::with_capacity(ticks * config.substeps + 1),
-    };
-    history.states.push(state);
-    // The forces acting, and the commands waiting for their actuation instant.
-    let hold = Geometry::at(&model, &Vector3::zeros())
-        .expect("home is in the workspace")
-        .gravity_forces(&model);
-    let mut force = hold;
-    let mut commands: VecDeque<(f64, Vector3<f64>)> = VecDeque::new();
-    let mut pending: VecDeque<(f64, Observation)> = VecDeque::new();
-    let mut observation: Option<Observation> = None;
-    let mut estimates = Vec::new();
-    let mut new_estimates = Vec::new();
-    let mut samples = Vec::with_capacity(ticks + 1);
-    let mut ages = Vec::with_capacity(ticks);
-    let mut saturated_ticks = 0usize;
-    // The ticks of the last `saturation_window_s` at which an actuator was at its limit.
-    let window_ticks =
-        ((config.saturation_window_s * config.control_rate_hz).round() as usize).max(1);
-    let mut recent_saturation: VecDeque<bool> = VecDeque::with_capacity(window_ticks + 1);
-    let mut recent_saturated = 0usize;
+    let (gains, controller) = build_controller(config);
+    let mut run = SimulatedLoop::new(config, controller)?;
     let mut stop_reason = None;
-    let (_, home_cam) = path.home_in_camera();
-    let limit = robot.force_limit_n;
-    let clip = |f: Vector3<f64>| f.map(|x| x.clamp(-limit, limit));
-    samples.push(ServoSample {
-        t_s: 0.0,
-        reference: path.at(0.0),
-        achieved_m: state.position_m,
-        achieved_velocity_mps: state.velocity_mps,
-        force_n: force,
-    });
-
-    'ticks: for n in 0..ticks {
-        let t_s = n as f64 * tick_s;
-        // 1. The estimates ready by now.
-        while pending
-            .front()
-            .is_some_and(|(ready_s, _)| *ready_s <= t_s + 1e-12)
-        {
-            observation = pending.pop_front().map(|(_, o)| o);
+    for n in 0..run.ticks {
+        if let Some(reason) = run.tick(n)? {
+            stop_reason = Some(reason);
+            break;
         }
-        // 2. The command.
-        let t_act_s = t_s + actuation_delay_s;
-        let geometry = Geometry::at(&robot, &state.position_m).expect("checked at each step");
-        let fed = if truth_fed {
-            // The true state, `extra_latency_s` old.
-            let t_seen_s = (t_s - config.extra_latency_s).max(0.0);
-            let seen = if config.extra_latency_s > 0.0 {
-                history.at(t_seen_s)
-            } else {
-                state
-            };
-            Some(Observation {
-                t_s: t_seen_s,
-                position_m: seen.position_m,
-                velocity_mps: seen.velocity_mps,
-                acceleration_mps2: None,
-            })
-        } else {
-            observation
-        };
-        if let Some(o) = &fed {
-            ages.push(t_act_s - o.t_s);
-        }
-        let input = ControlInput {
-            t_act_s,
-            dt_s: tick_s,
-            reference: path.at(t_act_s),
-            observation: fed,
-            drive_joint_velocity_mps: geometry.joint_velocity(&state.velocity_mps),
-        };
-        let command = controller.command(&input);
-        if !command.iter().all(|f| f.is_finite()) {
-            stop_reason = Some(format!(
-                "the controller gave a force that is not finite at t = {t_s:.4} s"
-            ));
-            break 'ticks;
-        }
-        let command = clip(command);
-        commands.push_back((t_act_s, command));
-        if config.known_acceleration
-            && let Some(believed) = controller.believed_acceleration(&command)
-        {
-            // The robot frame has the camera's axes (docs/servo.md, "The robot"): the platform's acceleration is
-            // the target's in the camera frame as it is; the platform only translates.
-            camera.tell_acceleration(t_act_s, &believed)?;
-        }
-        // 3. The robot to the next tick.
-        let mut saturated = false;
-        for j in 0..config.substeps {
-            let t_step = t_s + j as f64 * step_s;
-            while commands
-                .front()
-                .is_some_and(|(at_s, _)| *at_s <= t_step + 1e-12)
-            {
-                force = commands.pop_front().map(|(_, f)| f).expect("checked");
-            }
-            saturated |= force.amax() >= limit;
-            match step_rk4(&robot, &state, &force, step_s) {
-                Ok(next)
-                    if next
-                        .position_m
-                        .iter()
-                        .chain(&next.velocity_mps)
-                        .all(|x| x.is_finite()) =>
-                {
-                    state = next
-                }
-                Ok(_) => {
-                    stop_reason = Some(format!(
-                        "the robot's state is not finite at t = {t_step:.4} s"
-                    ));
-                    break 'ticks;
-                }
-                Err(e) => {
-                    stop_reason = Some(format!("at t = {t_step:.4} s {e}"));
-                    break 'ticks;
-                }
-            }
-            history.states.push(state);
-        }
-        saturated_ticks += usize::from(saturated);
-        recent_saturation.push_back(saturated);
-        recent_saturated += usize::from(saturated);
-        if recent_saturation.len() > window_ticks {
-            recent_saturated -= usize::from(recent_saturation.pop_front().unwrap_or(false));
-        }
-        if recent_saturation.len() == window_ticks && 2 * recent_saturated > window_ticks {
-            stop_reason = Some(format!(
-                "unstable: an actuator at its force limit {:.0} % of the {:.0} ms before t = {:.4} s (a limit cycle \
-                 the force limit bounds)",
-                100.0 * recent_saturated as f64 / window_ticks as f64,
-                config.saturation_window_s * 1e3,
-                t_s + tick_s
-            ));
-            break 'ticks;
-        }
-        let t_next = (n + 1) as f64 * tick_s;
-        let sample = ServoSample {
-            t_s: t_next,
-            reference: path.at(t_next),
-            achieved_m: state.position_m,
-            achieved_velocity_mps: state.velocity_mps,
-            force_n: force,
-        };
-        samples.push(sample);
-        if sample.error_m() > config.divergence_error_m {
-            stop_reason = Some(format!(
-                "diverged: {:.1} mm from the path at t = {t_next:.4} s (limit {:.1} mm)",
-                sample.error_m() * 1e3,
-                config.divergence_error_m * 1e3
-            ));
-            break 'ticks;
-        }
-        // 4. The camera: the ROI exposed around this tick (its exposure has ended), or the frames due.
-        let state_at = |t: f64| {
-            let s = history.at(t);
-            path.camera_state(&s.position_m, &s.velocity_mps)
-        };
-        new_estimates.clear();
-        camera.expose(t_s, t_next, &state_at, &mut new_estimates)?;
-        for estimate in &new_estimates {
-            if estimate.status.is_vouched_for() && estimate.state.is_finite() {
-                pending.push_back((
-                    estimate.t_ref_s + availability_s,
-                    Observation {
-                        t_s: estimate.t_ref_s,
-                        position_m: estimate.state.cam_t_obj_m - home_cam,
-                        velocity_mps: estimate.state.velocity_mps,
-                        acceleration_mps2: estimate.acceleration.map(|a| a.linear_mps2),
-                    },
-                ));
-            }
-        }
-        estimates.extend_from_slice(&new_estimates);
     }
-    let errors: Vec<f64> = samples.iter().map(ServoSample::error_m).collect();
+    let errors: Vec<f64> = run.samples.iter().map(ServoSample::error_m).collect();
     let rms_error_mm =
         (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt() * 1e3;
     let max_error_mm = errors.iter().copied().fold(0.0, f64::max) * 1e3;
@@ -968,13 +778,317 @@ pub fn run_servo(config: &ServoConfig) -> Result<ServoReport, ServoError> {
         stable: stop_reason.is_none(),
         stop_reason,
         gains,
-        median_feedback_age_s: if ages.is_empty() {
+        median_feedback_age_s: if run.ages.is_empty() {
             f64::NAN
         } else {
-            roitrack_core::stats::median(&ages)
+            roitrack_core::stats::median(&run.ages)
         },
-        saturated_fraction: saturated_ticks as f64 / ticks.max(1) as f64,
-        samples,
-        estimates,
+        saturated_fraction: run.saturated_ticks as f64 / run.ticks.max(1) as f64,
+        samples: run.samples,
+        estimates: run.estimates,
     })
+}
+
+/// One closed loop in simulated time: the controller, the robot it drives, the camera and tracker watching it, and
+/// what is kept for the report. Ticks run one after the other from [`SimulatedLoop::tick`].
+struct SimulatedLoop<'a> {
+    config: &'a ServoConfig,
+    controller: Box<dyn Controller + Send>,
+    /// The controller sees the true state (the floor): no actuation delay, no camera.
+    truth_fed: bool,
+    actuation_delay_s: f64,
+    /// When an estimate reaches the controller after the instant it refers to: the camera's latency and the extra.
+    availability_s: f64,
+    tick_s: f64,
+    step_s: f64,
+    ticks: usize,
+    camera: CameraSide,
+    state: RobotState,
+    /// Every integration step's state, for the camera and the delayed truth.
+    history: History,
+    /// The forces acting.
+    force: Vector3<f64>,
+    /// The commands waiting for their actuation instant.
+    commands: VecDeque<(f64, Vector3<f64>)>,
+    /// The estimates not yet available to the controller, with the instant they are.
+    pending: VecDeque<(f64, Observation)>,
+    /// The newest estimate available to the controller.
+    observation: Option<Observation>,
+    estimates: Vec<Estimate>,
+    new_estimates: Vec<Estimate>,
+    samples: Vec<ServoSample>,
+    ages: Vec<f64>,
+    saturated_ticks: usize,
+    saturation: SaturationWindow,
+}
+
+impl<'a> SimulatedLoop<'a> {
+    /// The robot at rest at home, holding against gravity the force the controller's model asks there.
+    fn new(
+        config: &'a ServoConfig,
+        controller: Box<dyn Controller + Send>,
+    ) -> Result<Self, ServoError> {
+        let path = &config.path;
+        let model = config
+            .robot
+            .with_mass_factor(config.model_mass_factor)
+            .with_friction_factor(config.model_friction_factor);
+        let truth_fed = config.controller == ControllerKind::TrueState;
+        let actuation_delay_s = if truth_fed {
+            0.0
+        } else {
+            config.actuation_delay_s
+        };
+        let timing = config.camera_timing();
+        let availability_s = timing.latency_s() + config.extra_latency_s;
+        let tick_s = 1.0 / config.control_rate_hz;
+        let step_s = tick_s / config.substeps as f64;
+        let ticks = (path.duration_s() / tick_s).round() as usize;
+        let camera = CameraSide::new(config)?;
+        let state = RobotState::default();
+        let mut history = History {
+            dt_s: step_s,
+            states: Vec::with_capacity(ticks * config.substeps + 1),
+        };
+        history.states.push(state);
+        let hold = Geometry::at(&model, &Vector3::zeros())
+            .expect("home is in the workspace")
+            .gravity_forces(&model);
+        let mut samples = Vec::with_capacity(ticks + 1);
+        samples.push(ServoSample {
+            t_s: 0.0,
+            reference: path.at(0.0),
+            achieved_m: state.position_m,
+            achieved_velocity_mps: state.velocity_mps,
+            force_n: hold,
+        });
+        // The ticks of the last `saturation_window_s` at which an actuator was at its limit.
+        let window_ticks =
+            ((config.saturation_window_s * config.control_rate_hz).round() as usize).max(1);
+        Ok(SimulatedLoop {
+            config,
+            controller,
+            truth_fed,
+            actuation_delay_s,
+            availability_s,
+            tick_s,
+            step_s,
+            ticks,
+            camera,
+            state,
+            history,
+            force: hold,
+            commands: VecDeque::new(),
+            pending: VecDeque::new(),
+            observation: None,
+            estimates: Vec::new(),
+            new_estimates: Vec::new(),
+            samples,
+            ages: Vec::with_capacity(ticks),
+            saturated_ticks: 0,
+            saturation: SaturationWindow::new(window_ticks),
+        })
+    }
+
+    /// Tick `n`: the estimates ready by now, the command, the robot to the next tick, the camera. Some: why the
+    /// loop stops there (a force or state not finite, instability, divergence).
+    fn tick(&mut self, n: usize) -> Result<Option<String>, ServoError> {
+        let config = self.config;
+        let path = &config.path;
+        let tick_s = self.tick_s;
+        let t_s = n as f64 * tick_s;
+        // 1. The estimates ready by now.
+        while self
+            .pending
+            .front()
+            .is_some_and(|(ready_s, _)| *ready_s <= t_s + 1e-12)
+        {
+            self.observation = self.pending.pop_front().map(|(_, o)| o);
+        }
+        // 2. The command.
+        let t_act_s = t_s + self.actuation_delay_s;
+        let command = self.command(t_s, t_act_s);
+        if !command.iter().all(|f| f.is_finite()) {
+            return Ok(Some(format!(
+                "the controller gave a force that is not finite at t = {t_s:.4} s"
+            )));
+        }
+        let limit = config.robot.force_limit_n;
+        let command = command.map(|x| x.clamp(-limit, limit));
+        self.commands.push_back((t_act_s, command));
+        if config.known_acceleration
+            && let Some(believed) = self.controller.believed_acceleration(&command)
+        {
+            // The robot frame has the camera's axes (docs/servo.md, "The robot"): the platform's acceleration is
+            // the target's in the camera frame as it is; the platform only translates.
+            self.camera.tell_acceleration(t_act_s, &believed)?;
+        }
+        // 3. The robot to the next tick.
+        let saturated = match self.advance_robot(t_s) {
+            Ok(saturated) => saturated,
+            Err(reason) => return Ok(Some(reason)),
+        };
+        self.saturated_ticks += usize::from(saturated);
+        if let Some(saturated_percent) = self.saturation.push(saturated) {
+            return Ok(Some(format!(
+                "unstable: an actuator at its force limit {:.0} % of the {:.0} ms before t = {:.4} s (a limit cycle \
+                 the force limit bounds)",
+                saturated_percent,
+                config.saturation_window_s * 1e3,
+                t_s + tick_s
+            )));
+        }
+        let t_next = (n + 1) as f64 * tick_s;
+        let sample = ServoSample {
+            t_s: t_next,
+            reference: path.at(t_next),
+            achieved_m: self.state.position_m,
+            achieved_velocity_mps: self.state.velocity_mps,
+            force_n: self.force,
+        };
+        self.samples.push(sample);
+        if sample.error_m() > config.divergence_error_m {
+            return Ok(Some(format!(
+                "diverged: {:.1} mm from the path at t = {t_next:.4} s (limit {:.1} mm)",
+                sample.error_m() * 1e3,
+                config.divergence_error_m * 1e3
+            )));
+        }
+        // 4. The camera: the ROI exposed around this tick (its exposure has ended), or the frames due.
+        self.expose(t_s, t_next)?;
+        Ok(None)
+    }
+
+    /// The controller's command at tick `t_s` for the instant it acts, `t_act_s`, from what it is fed; records the
+    /// feedback's age at that instant.
+    fn command(&mut self, t_s: f64, t_act_s: f64) -> Vector3<f64> {
+        let config = self.config;
+        let geometry =
+            Geometry::at(&config.robot, &self.state.position_m).expect("checked at each step");
+        let fed = if self.truth_fed {
+            // The true state, `extra_latency_s` old.
+            let t_seen_s = (t_s - config.extra_latency_s).max(0.0);
+            let seen = if config.extra_latency_s > 0.0 {
+                self.history.at(t_seen_s)
+            } else {
+                self.state
+            };
+            Some(Observation {
+                t_s: t_seen_s,
+                position_m: seen.position_m,
+                velocity_mps: seen.velocity_mps,
+                acceleration_mps2: None,
+            })
+        } else {
+            self.observation
+        };
+        if let Some(o) = &fed {
+            self.ages.push(t_act_s - o.t_s);
+        }
+        let input = ControlInput {
+            t_act_s,
+            dt_s: self.tick_s,
+            reference: config.path.at(t_act_s),
+            observation: fed,
+            drive_joint_velocity_mps: geometry.joint_velocity(&self.state.velocity_mps),
+        };
+        self.controller.command(&input)
+    }
+
+    /// Integrates the robot over the tick from `t_s` in `substeps` steps, each command taking over from its
+    /// actuation instant; whether an actuator was at its force limit at any step. Err: why the loop stops.
+    fn advance_robot(&mut self, t_s: f64) -> Result<bool, String> {
+        let robot = &self.config.robot;
+        let step_s = self.step_s;
+        let mut saturated = false;
+        for j in 0..self.config.substeps {
+            let t_step = t_s + j as f64 * step_s;
+            while self
+                .commands
+                .front()
+                .is_some_and(|(at_s, _)| *at_s <= t_step + 1e-12)
+            {
+                self.force = self.commands.pop_front().map(|(_, f)| f).expect("checked");
+            }
+            saturated |= self.force.amax() >= robot.force_limit_n;
+            match step_rk4(robot, &self.state, &self.force, step_s) {
+                Ok(next)
+                    if next
+                        .position_m
+                        .iter()
+                        .chain(&next.velocity_mps)
+                        .all(|x| x.is_finite()) =>
+                {
+                    self.state = next
+                }
+                Ok(_) => {
+                    return Err(format!(
+                        "the robot's state is not finite at t = {t_step:.4} s"
+                    ));
+                }
+                Err(e) => return Err(format!("at t = {t_step:.4} s {e}")),
+            }
+            self.history.states.push(self.state);
+        }
+        Ok(saturated)
+    }
+
+    /// The camera over the tick from `t_s` to `t_next`: its new estimates kept, and those the tracker vouches for
+    /// queued for the controller from the instant they are available, in the robot frame (relative to home).
+    fn expose(&mut self, t_s: f64, t_next: f64) -> Result<(), ServoError> {
+        let path = &self.config.path;
+        let history = &self.history;
+        let state_at = |t: f64| {
+            let s = history.at(t);
+            path.camera_state(&s.position_m, &s.velocity_mps)
+        };
+        self.new_estimates.clear();
+        self.camera
+            .expose(t_s, t_next, &state_at, &mut self.new_estimates)?;
+        let (_, home_cam) = path.home_in_camera();
+        for estimate in &self.new_estimates {
+            if estimate.status.is_vouched_for() && estimate.state.is_finite() {
+                self.pending.push_back((
+                    estimate.t_ref_s + self.availability_s,
+                    Observation {
+                        t_s: estimate.t_ref_s,
+                        position_m: estimate.state.cam_t_obj_m - home_cam,
+                        velocity_mps: estimate.state.velocity_mps,
+                        acceleration_mps2: estimate.acceleration.map(|a| a.linear_mps2),
+                    },
+                ));
+            }
+        }
+        self.estimates.extend_from_slice(&self.new_estimates);
+        Ok(())
+    }
+}
+
+/// The share of recent control ticks with an actuator at its force limit, over a window of ticks: a loop that keeps
+/// its actuators saturated most of the time has gone unstable (in simulated time and in real time alike).
+pub(crate) struct SaturationWindow {
+    recent: VecDeque<bool>,
+    saturated: usize,
+    window_ticks: usize,
+}
+
+impl SaturationWindow {
+    pub(crate) fn new(window_ticks: usize) -> Self {
+        SaturationWindow {
+            recent: VecDeque::with_capacity(window_ticks + 1),
+            saturated: 0,
+            window_ticks,
+        }
+    }
+
+    /// Adds a tick; once the window is full and more than half its ticks saturated, their share (%).
+    pub(crate) fn push(&mut self, saturated: bool) -> Option<f64> {
+        self.recent.push_back(saturated);
+        self.saturated += usize::from(saturated);
+        if self.recent.len() > self.window_ticks {
+            self.saturated -= usize::from(self.recent.pop_front().unwrap_or(false));
+        }
+        (self.recent.len() == self.window_ticks && 2 * self.saturated > self.window_ticks)
+            .then(|| 100.0 * self.saturated as f64 / self.window_ticks as f64)
+    }
 }

@@ -12,7 +12,7 @@ use roitrack_pipeline::realtime::KnownAccelerationSender;
 use super::run::LiveOptions;
 use super::scene::RobotScene;
 use crate::ServoConfig;
-use crate::closed_loop::{ServoSample, build_controller};
+use crate::closed_loop::{SaturationWindow, ServoSample, build_controller};
 use crate::control::{ControlInput, Controller, Observation};
 use crate::robot::{Geometry, RobotState, step_rk4};
 
@@ -417,35 +417,6 @@ fn tell_known_acceleration(
     sender.send(acts_s - offset_s, acceleration);
     side.sent_known_accelerations += 1;
     side.superseded_known_accelerations = sender.superseded();
-}
-
-/// The share of recent ticks with an actuator at its force limit, over a window of ticks: a loop that keeps its
-/// actuators saturated most of the time has gone unstable.
-struct SaturationWindow {
-    recent: VecDeque<bool>,
-    saturated: usize,
-    window_ticks: usize,
-}
-
-impl SaturationWindow {
-    fn new(window_ticks: usize) -> Self {
-        SaturationWindow {
-            recent: VecDeque::with_capacity(window_ticks + 1),
-            saturated: 0,
-            window_ticks,
-        }
-    }
-
-    /// Adds a tick; once the window is full and more than half its ticks saturated, their share (%).
-    fn push(&mut self, saturated: bool) -> Option<f64> {
-        self.recent.push_back(saturated);
-        self.saturated += usize::from(saturated);
-        if self.recent.len() > self.window_ticks {
-            self.saturated -= usize::from(self.recent.pop_front().unwrap_or(false));
-        }
-        (self.recent.len() == self.window_ticks && 2 * self.saturated > self.window_ticks)
-            .then(|| 100.0 * self.saturated as f64 / self.window_ticks as f64)
-    }
 }
 
 /// The simulated robot as the control thread drives it: its state on the robot's clock, the force its actuators
