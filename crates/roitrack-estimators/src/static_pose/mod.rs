@@ -498,43 +498,13 @@ fn search_static_pose(
     if obs.len() < 3 {
         return Err(too_few());
     }
-    let points = target.points();
     let n = obs.len();
-    // Model points centred on their centroid and scaled to unit RMS: every quantity of the hypotheses is of order one.
-    let centre_m = obs
-        .iter()
-        .map(|o| points[o.point_index].point_in_obj_m)
-        .sum::<Vector3<f64>>()
-        / n as f64;
-    let scale_m = (obs
-        .iter()
-        .map(|o| (points[o.point_index].point_in_obj_m - centre_m).norm_squared())
-        .sum::<f64>()
-        / n as f64)
-        .sqrt();
-    if !(scale_m > 0.0 && scale_m.is_finite()) {
-        return Err(InitError::Degenerate {
-            reason: "the observed points are all at one place",
-        });
-    }
-    let centred: Vec<Vector3<f64>> = obs
-        .iter()
-        .map(|o| (points[o.point_index].point_in_obj_m - centre_m) / scale_m)
-        .collect();
-    let image: Vec<Vector2<f64>> = obs
-        .iter()
-        .map(|o| model.intrinsics.normalized_from_pixel(&o.ideal_px))
-        .collect();
-    if !image.iter().all(|m| m.x.is_finite() && m.y.is_finite()) {
-        return Err(InitError::Degenerate {
-            reason: "an observation is not a finite pixel",
-        });
-    }
-    let bearings: Vec<Vector3<f64>> = image.iter().map(|m| Vector3::new(m.x, m.y, 1.0)).collect();
-    let cost = ObjectSpaceCost::new(&centred, &bearings).ok_or(InitError::Degenerate {
-        reason: "the observations' rays are parallel",
-    })?;
-    let mut triples = match Triples::new(obs, &image) {
+    let view = CentredView::new(model, target, obs)?;
+    let cost =
+        ObjectSpaceCost::new(&view.centred, &view.bearings).ok_or(InitError::Degenerate {
+            reason: "the observations' rays are parallel",
+        })?;
+    let mut triples = match Triples::new(obs, &view.image) {
         Ok(triples) => triples,
         Err(TriplesError::TooFewPoints) => return Err(too_few()),
         Err(TriplesError::OnALine) => {
@@ -547,10 +517,131 @@ fn search_static_pose(
     let focal_px = model.intrinsics.fx_px.max(model.intrinsics.fy_px);
     let noise_normalised = noise_px / focal_px;
     let dof = (2 * n).saturating_sub(6).max(1) as f64;
+    // A few points constrain the pose weakly: a view of them can hold minima that neither one triple nor a mirror
+    // tilt reaches, so all their triples are tried (at most 20, for 6 points).
+    let few = match search {
+        Search::Whole => n <= FEW_POINTS,
+        Search::BestOnly => n <= FEW_POINTS_BEST_ONLY,
+    };
+    let mut minima = minima_from_triples(&view, &cost, &mut triples, noise_normalised, dof, few);
+    add_mirror_twins(&view.centred, &cost, &mut minima);
+    let Some(best) = minima.best() else {
+        return Err(InitError::Degenerate {
+            reason: "no pose puts the points in front of the camera",
+        });
+    };
+    // Refine, in the image, every minimum that could rival the best there; the object-space error only ranks them.
+    let depth2 = mean_squared_depth(&view.centred, &best.0, &cost.translation(&best.0));
+    let margin = 4.0 * AMBIGUITY_CHI2;
+    let keep_below = best.1 * (1.0 + margin / dof) + margin * noise_normalised.powi(2) * depth2;
+    let problem = StaticPoseProblem { model, target, obs };
+    let fits = refine_in_image(&problem, &view, &cost, &minima, keep_below);
+    let Some(&best_fit) = fits.first() else {
+        return Err(InitError::Degenerate {
+            reason: "no pose puts the points in front of the camera",
+        });
+    };
+    if search == Search::BestOnly {
+        return Ok(StaticPoses {
+            fits: [best_fit; MAX_STATIC_POSES],
+            len: 1,
+            runner_up: None,
+        });
+    }
+    let variance_px2 = rival_variance_px2(noise, &best_fit, n);
+    Ok(rivals_of_best(&problem, fits, variance_px2))
+}
+
+/// The observations as the object-space search sees them: the model points centred on their centroid and scaled to
+/// unit RMS (every quantity of the hypotheses is then of order one), and their images in normalised coordinates,
+/// also as bearings (z = 1).
+struct CentredView {
+    centre_m: Vector3<f64>,
+    scale_m: f64,
+    centred: Vec<Vector3<f64>>,
+    image: Vec<Vector2<f64>>,
+    bearings: Vec<Vector3<f64>>,
+}
+
+impl CentredView {
+    /// Err when the points are all at one place or an observation is not a finite pixel.
+    fn new(
+        model: &SpatioTemporalModel,
+        target: &Target,
+        obs: &[Observation],
+    ) -> Result<Self, InitError> {
+        let points = target.points();
+        let n = obs.len();
+        let centre_m = obs
+            .iter()
+            .map(|o| points[o.point_index].point_in_obj_m)
+            .sum::<Vector3<f64>>()
+            / n as f64;
+        let scale_m = (obs
+            .iter()
+            .map(|o| (points[o.point_index].point_in_obj_m - centre_m).norm_squared())
+            .sum::<f64>()
+            / n as f64)
+            .sqrt();
+        if !(scale_m > 0.0 && scale_m.is_finite()) {
+            return Err(InitError::Degenerate {
+                reason: "the observed points are all at one place",
+            });
+        }
+        let centred: Vec<Vector3<f64>> = obs
+            .iter()
+            .map(|o| (points[o.point_index].point_in_obj_m - centre_m) / scale_m)
+            .collect();
+        let image: Vec<Vector2<f64>> = obs
+            .iter()
+            .map(|o| model.intrinsics.normalized_from_pixel(&o.ideal_px))
+            .collect();
+        if !image.iter().all(|m| m.x.is_finite() && m.y.is_finite()) {
+            return Err(InitError::Degenerate {
+                reason: "an observation is not a finite pixel",
+            });
+        }
+        let bearings: Vec<Vector3<f64>> =
+            image.iter().map(|m| Vector3::new(m.x, m.y, 1.0)).collect();
+        Ok(CentredView {
+            centre_m,
+            scale_m,
+            centred,
+            image,
+            bearings,
+        })
+    }
+}
+
+/// The mean squared distance of the centred points from the camera at rotation `r` and translation `t` (both of the
+/// centred problem).
+fn mean_squared_depth(centred: &[Vector3<f64>], r: &Rotation3<f64>, t: &Vector3<f64>) -> f64 {
+    centred
+        .iter()
+        .map(|x| (r * x + t).norm_squared())
+        .sum::<f64>()
+        / centred.len() as f64
+}
+
+/// The minima of the object-space error reached from the P3P hypotheses of the triples, best conditioned first:
+/// until one fits the noise (each coordinate's noise `noise_normalised` times the point's distance, over `dof`
+/// degrees of freedom), or, when none does (a gross error in the data, or a user's model off the truth), until two
+/// triples in a row find nothing better. With `few` points every triple is tried.
+fn minima_from_triples(
+    view: &CentredView,
+    cost: &ObjectSpaceCost,
+    triples: &mut Triples<'_>,
+    noise_normalised: f64,
+    dof: f64,
+    few: bool,
+) -> Minima {
     let mut minima = Minima::default();
     let mut stale = 0;
-    while let Some(triple) = triples.next(&image) {
-        let solutions = p3p::p3p(&triple.map(|k| bearings[k]), &triple.map(|k| centred[k]));
+    while let Some(triple) = triples.next(&view.image) {
+        let solutions = p3p::p3p(
+            &triple.map(|k| view.bearings[k]),
+            &triple.map(|k| view.centred[k]),
+        );
         let previous_best = minima.best_cost();
         for (r, _) in solutions.as_slice() {
             let (r, e) = cost.minimise(r, 30);
@@ -558,37 +649,28 @@ fn search_static_pose(
         }
         let Some(best) = minima.best() else { continue };
         // The object-space error that the noise alone explains: each coordinate's noise times the point's distance.
-        let t = cost.translation(&best.0);
-        let depth2 = centred
-            .iter()
-            .map(|x| (best.0 * x + t).norm_squared())
-            .sum::<f64>()
-            / n as f64;
+        let depth2 = mean_squared_depth(&view.centred, &best.0, &cost.translation(&best.0));
         let noise_cost = noise_normalised.powi(2) * depth2;
-        // A few points constrain the pose weakly: a view of them can hold minima that neither one triple nor a
-        // mirror tilt reaches, so all their triples are tried (at most 20, for 6 points).
-        let few = match search {
-            Search::Whole => n <= FEW_POINTS,
-            Search::BestOnly => n <= FEW_POINTS_BEST_ONLY,
-        };
         if !few && best.1 <= noise_cost * (dof + 6.0 * (2.0 * dof).sqrt() + 10.0) {
             break;
         }
         if few {
             continue;
         }
-        // No hypothesis fits the noise (a gross error in the data, or a user's model off the truth): more triples,
-        // until two in a row find nothing better.
         let improved = previous_best.is_none_or(|p| best.1 < p * (1.0 - 1e-9));
         stale = if improved { 0 } else { stale + 1 };
         if stale >= 2 {
             break;
         }
     }
-    // Each minimum's mirror twin: a target seen small is fitted about as well by its depths reflected about its
-    // centre, which for a planar target is another pose (the plane tilted the other way). One triple's hypotheses do
-    // not always reach it, and the ambiguity must not go unseen.
-    let normal = thinnest_direction(&centred);
+    minima
+}
+
+/// Adds each of the two best minima's mirror twin: a target seen small is fitted about as well by its depths
+/// reflected about its centre, which for a planar target is another pose (the plane tilted the other way). One
+/// triple's hypotheses do not always reach it, and the ambiguity must not go unseen.
+fn add_mirror_twins(centred: &[Vector3<f64>], cost: &ObjectSpaceCost, minima: &mut Minima) {
+    let normal = thinnest_direction(centred);
     for (r, _) in minima.sorted().into_iter().take(2) {
         let sight = cost.translation(&r).normalize();
         let mirrored = (Matrix3::identity() - 2.0 * sight * sight.transpose())
@@ -603,20 +685,17 @@ fn search_static_pose(
         let (twin, e) = cost.minimise(&start, 30);
         minima.add(twin, e);
     }
-    let Some(best) = minima.best() else {
-        return Err(InitError::Degenerate {
-            reason: "no pose puts the points in front of the camera",
-        });
-    };
-    // Refine, in the image, every minimum that could rival the best there; the object-space error only ranks them.
-    let t = cost.translation(&best.0);
-    let depth2 = centred
-        .iter()
-        .map(|x| (best.0 * x + t).norm_squared())
-        .sum::<f64>()
-        / n as f64;
-    let margin = 4.0 * AMBIGUITY_CHI2;
-    let keep_below = best.1 * (1.0 + margin / dof) + margin * noise_normalised.powi(2) * depth2;
+}
+
+/// The minima whose object-space cost is at most `keep_below` (at most [`MAX_STATIC_POSES`] + 1 of them), refined
+/// in the image, back in the target's metres; the finite and distinct ones, best first.
+fn refine_in_image(
+    problem: &StaticPoseProblem<'_>,
+    view: &CentredView,
+    cost: &ObjectSpaceCost,
+    minima: &Minima,
+    keep_below: f64,
+) -> Vec<PoseFit> {
     let mut fits: Vec<PoseFit> = Vec::with_capacity(MAX_STATIC_POSES + 1);
     for &(r, _) in minima
         .sorted()
@@ -624,8 +703,14 @@ fn search_static_pose(
         .filter(|(_, e)| *e <= keep_below)
         .take(MAX_STATIC_POSES + 1)
     {
-        let t_m = cost.translation(&r) * scale_m - r * centre_m;
-        let fit = refine_static_pose(model, target, obs, &MotionState::at_rest(r, t_m), 50);
+        let t_m = cost.translation(&r) * view.scale_m - r * view.centre_m;
+        let fit = refine_static_pose(
+            problem.model,
+            problem.target,
+            problem.obs,
+            &MotionState::at_rest(r, t_m),
+            50,
+        );
         let finite = fit.cost_px2.is_finite() && fit.state.is_finite();
         let duplicate = fits.iter().any(|f| same_pose(&f.state, &fit.state));
         if finite && !duplicate {
@@ -633,41 +718,43 @@ fn search_static_pose(
         }
     }
     fits.sort_by(|a, b| a.cost_px2.total_cmp(&b.cost_px2));
-    let Some(&best_fit) = fits.first() else {
-        return Err(InitError::Degenerate {
-            reason: "no pose puts the points in front of the camera",
-        });
-    };
-    if search == Search::BestOnly {
-        return Ok(StaticPoses {
-            fits: [best_fit; MAX_STATIC_POSES],
-            len: 1,
-            runner_up: None,
-        });
-    }
-    // The rivals: minima whose cost is within the ambiguity bound of the best, against the larger of the given noise
-    // and what the best's residual says of it, model error included. A few points leave few degrees of freedom and a
-    // residual that often shows far less than the noise: the variance is its upper 95 % confidence bound, not its
-    // estimate (for 4 points, 19.5 times the residual per degree of freedom; for 16, 1.7 times).
+    fits
+}
+
+/// The variance (px²) rivals are judged against: the larger of the given noise's and what the best's residual over
+/// `n` observations says of it, model error included. A few points leave few degrees of freedom and a residual that
+/// often shows far less than the noise: for an assumed noise the variance is its upper 95 % confidence bound, not
+/// its estimate (for 4 points, 19.5 times the residual per degree of freedom; for 16, 1.7 times).
+fn rival_variance_px2(noise: PixelNoise, best_fit: &PoseFit, n: usize) -> f64 {
+    let noise_px = noise.px();
     let residual_dof = (2 * n).saturating_sub(6) as f64;
     let per_dof = match noise {
         PixelNoise::Assumed(_) => roitrack_core::stats::chi2_lower_5_percent(residual_dof),
         PixelNoise::Measured(_) => residual_dof,
     };
-    let variance_px2 = if per_dof > 0.0 {
+    if per_dof > 0.0 {
         (noise_px * noise_px).max(best_fit.cost_px2 / per_dof)
     } else {
         // Three points: every pose that puts them on their rays fits exactly.
         f64::INFINITY
-    };
+    }
+}
+
+/// The best of `fits` (sorted, not empty) with its rivals, the minima whose cost is within the ambiguity bound of
+/// the best against `variance_px2` once the model's error is allowed for, and the best of the others as the runner-up.
+fn rivals_of_best(
+    problem: &StaticPoseProblem<'_>,
+    mut fits: Vec<PoseFit>,
+    variance_px2: f64,
+) -> StaticPoses {
+    let best_fit = fits[0];
     // How far the model's error could move each rival's excess, given what the best's residual shows of it.
-    let problem = StaticPoseProblem { model, target, obs };
     for fit in &mut fits[1..] {
         fit.model_effect = cost_difference_effect(
-            &problem,
-            model,
-            target,
-            obs,
+            problem,
+            problem.model,
+            problem.target,
+            problem.obs,
             |_| 0.0,
             &best_fit.state,
             &fit.state,
@@ -690,7 +777,7 @@ fn search_static_pose(
             poses.runner_up = Some(*fit);
         }
     }
-    Ok(poses)
+    poses
 }
 
 /// The unit direction along which points (centred) spread least: a planar target's normal.
