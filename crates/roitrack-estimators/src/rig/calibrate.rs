@@ -598,7 +598,6 @@ impl RigCalibrator {
         partner: &Placed,
     ) -> Result<(CameraCalibration, SMatrix<f64, 7, 7>), RigCalibrationError> {
         let camera = &self.rig.cameras()[c];
-        let names = || (camera.name.clone(), self.rig.cameras()[p].name.clone());
         let unknowns = Unknowns {
             mount: !camera.mount_known,
             offset: !camera.offset_known,
@@ -608,76 +607,24 @@ impl RigCalibrator {
         let mut clock = camera.clock;
         let mut mount = camera.mount;
         let needed = self.config.min_samples;
-        let overlap_error = || RigCalibrationError::NoOverlap {
-            camera: camera.name.clone(),
-            placed: self.rig.cameras()[p].name.clone(),
-            needed,
-            max_offset_s: self.config.max_offset_s,
-        };
         if unknowns.offset {
-            // A coarse grid, then a fine one about its best: the offset whose best mount lays the tracks closest.
-            let search = self.config.max_offset_s;
-            let coarse_step_s = 1e-3;
-            let steps = (search / coarse_step_s).ceil() as i64;
-            let start = clock.offset_s;
-            let score = |offset_s: f64| -> Option<(f64, CameraMount)> {
-                let trial = ClockModel { offset_s, ..clock };
-                let pairs = self.pairs(c, p, partner, trial, 400);
-                if pairs.len() < needed {
-                    return None;
-                }
-                let m = if unknowns.mount {
-                    mean_mount(&pairs, &points)
-                } else {
-                    mount
-                };
-                Some((mean_square_residual(&pairs, &points, &m), m))
-            };
-            let mut best: Option<(f64, f64, CameraMount)> = None;
-            for k in -steps..=steps {
-                let offset_s = start + k as f64 * coarse_step_s;
-                if let Some((cost, m)) = score(offset_s)
-                    && best.is_none_or(|(b, _, _)| cost < b)
-                {
-                    best = Some((cost, offset_s, m));
-                }
-            }
-            let (_, coarse_s, _) = best.ok_or_else(overlap_error)?;
-            if (coarse_s - start).abs() > search - 1.5 * coarse_step_s {
-                let (camera, partner) = names();
-                return Err(RigCalibrationError::ClockBeyondSearch {
-                    camera,
-                    partner,
-                    max_offset_s: search,
-                });
-            }
-            let fine_step_s = 5e-5;
-            for k in -20..=20 {
-                let offset_s = coarse_s + k as f64 * fine_step_s;
-                if let Some((cost, m)) = score(offset_s)
-                    && best.is_none_or(|(b, _, _)| cost < b)
-                {
-                    best = Some((cost, offset_s, m));
-                }
-            }
-            let (_, offset_s, m) = best.expect("the coarse search found one");
-            clock.offset_s = offset_s;
-            mount = m;
+            (clock.offset_s, mount) =
+                self.search_offset((c, p), partner, unknowns, (mount, clock), &points)?;
         } else if unknowns.mount {
             let pairs = self.pairs(c, p, partner, clock, 400);
             if pairs.len() < needed {
-                return Err(overlap_error());
+                return Err(self.no_overlap_with(c, p));
             }
             mount = mean_mount(&pairs, &points);
         }
         let pairs = self.pairs(c, p, partner, clock, 4000);
         if pairs.len() < needed {
-            return Err(overlap_error());
+            return Err(self.no_overlap_with(c, p));
         }
         if unknowns.offset || unknowns.drift {
             let moved_m = largest_distance_m(&pairs);
             if moved_m < self.config.min_motion_m {
-                let (camera, partner) = names();
+                let (camera, partner) = self.names(c, p);
                 return Err(RigCalibrationError::StillTarget {
                     camera,
                     partner,
@@ -686,74 +633,11 @@ impl RigCalibrator {
                 });
             }
         }
-        // The mount with every point weighed alike; then the clock again, the mount held, each residual weighed by
-        // the covariance the two tracks state (see the module documentation for why the two differ).
-        let joint = self.refine(
-            (c, p),
-            partner,
-            unknowns,
-            (mount, clock),
-            &points,
-            &Weights::Common(Matrix3::identity()),
-        );
-        let fit = if unknowns.offset || unknowns.drift {
-            let clock_only = Unknowns {
-                mount: false,
-                ..unknowns
-            };
-            let timed = self.refine(
-                (c, p),
-                partner,
-                clock_only,
-                (joint.mount, joint.clock),
-                &points,
-                &Weights::Stated,
-            );
-            let n = unknowns.count();
-            let m = 6 * unknowns.mount as usize;
-            let mut covariance = DMatrix::zeros(n, n);
-            covariance
-                .view_mut((0, 0), (m, m))
-                .copy_from(&joint.covariance.view((0, 0), (m, m)));
-            covariance
-                .view_mut((m, m), (n - m, n - m))
-                .copy_from(&timed.covariance);
-            Fit {
-                covariance,
-                ..timed
-            }
-        } else {
-            joint
-        };
+        let fit = self.fit_mount_then_clock((c, p), partner, unknowns, (mount, clock), &points);
         let (mount, clock) = (fit.mount, fit.clock);
-        // The partner's own uncertainty, carried to this camera: its mount's error turns with the relative rotation
-        // (a left error of the partner's camera_T_rig is R_rel of it on this camera's), its offset adds.
-        let relative = mount.camera_r_rig * partner.mount.camera_r_rig.inverse();
-        let mut carry = SMatrix::<f64, 7, 7>::zeros();
-        carry
-            .fixed_view_mut::<3, 3>(0, 0)
-            .copy_from(relative.matrix());
-        carry
-            .fixed_view_mut::<3, 3>(3, 3)
-            .copy_from(relative.matrix());
-        carry[(6, 6)] = 1.0;
-        let inherited_from_partner = carry * partner.inherited * carry.transpose();
+        let inherited_from_partner = carried_from_partner(&mount, partner);
+        let index = columns_of_unknowns(unknowns);
         let mut own = SMatrix::<f64, 7, 7>::zeros();
-        let mut k = 0;
-        let mut index = [None; 8];
-        for (slot, unknown) in [
-            (0, unknowns.mount),
-            (6, unknowns.offset),
-            (7, unknowns.drift),
-        ] {
-            if unknown {
-                let width = if slot == 0 { 6 } else { 1 };
-                for j in 0..width {
-                    index[slot + j] = Some(k + j);
-                }
-                k += width;
-            }
-        }
         for i in 0..7 {
             for j in 0..7 {
                 if let (Some(a), Some(b)) = (index[i], index[j]) {
@@ -777,6 +661,133 @@ impl RigCalibrator {
             covariance: fit.covariance,
         };
         Ok((result, total))
+    }
+
+    /// The names of camera `c` and of its partner `p`, for an error.
+    fn names(&self, c: usize, p: usize) -> (String, String) {
+        let cameras = self.rig.cameras();
+        (cameras[c].name.clone(), cameras[p].name.clone())
+    }
+
+    /// Camera `c` and its partner `p` see the target together too rarely, at any clock offset searched.
+    fn no_overlap_with(&self, c: usize, p: usize) -> RigCalibrationError {
+        let (camera, placed) = self.names(c, p);
+        RigCalibrationError::NoOverlap {
+            camera,
+            placed,
+            needed: self.config.min_samples,
+            max_offset_s: self.config.max_offset_s,
+        }
+    }
+
+    /// The clock offset (s) of camera `c`, and the mount found with it: a coarse grid (1 ms) over ± `max_offset_s`
+    /// about `clock`'s, then a fine one (50 µs) about its best, each offset scored by how close its best mount (or
+    /// `mount`, when known) lays the two tracks. Err when the tracks never overlap enough, or when the best lies at
+    /// the search's edge (the offset is likely beyond it).
+    fn search_offset(
+        &self,
+        (c, p): (usize, usize),
+        partner: &Placed,
+        unknowns: Unknowns,
+        (mount, clock): (CameraMount, ClockModel),
+        points: &[Vector3<f64>],
+    ) -> Result<(f64, CameraMount), RigCalibrationError> {
+        let needed = self.config.min_samples;
+        let search = self.config.max_offset_s;
+        let coarse_step_s = 1e-3;
+        let steps = (search / coarse_step_s).ceil() as i64;
+        let start = clock.offset_s;
+        let score = |offset_s: f64| -> Option<(f64, CameraMount)> {
+            let trial = ClockModel { offset_s, ..clock };
+            let pairs = self.pairs(c, p, partner, trial, 400);
+            if pairs.len() < needed {
+                return None;
+            }
+            let m = if unknowns.mount {
+                mean_mount(&pairs, points)
+            } else {
+                mount
+            };
+            Some((mean_square_residual(&pairs, points, &m), m))
+        };
+        let mut best: Option<(f64, f64, CameraMount)> = None;
+        for k in -steps..=steps {
+            let offset_s = start + k as f64 * coarse_step_s;
+            if let Some((cost, m)) = score(offset_s)
+                && best.is_none_or(|(b, _, _)| cost < b)
+            {
+                best = Some((cost, offset_s, m));
+            }
+        }
+        let (_, coarse_s, _) = best.ok_or_else(|| self.no_overlap_with(c, p))?;
+        if (coarse_s - start).abs() > search - 1.5 * coarse_step_s {
+            let (camera, partner) = self.names(c, p);
+            return Err(RigCalibrationError::ClockBeyondSearch {
+                camera,
+                partner,
+                max_offset_s: search,
+            });
+        }
+        let fine_step_s = 5e-5;
+        for k in -20..=20 {
+            let offset_s = coarse_s + k as f64 * fine_step_s;
+            if let Some((cost, m)) = score(offset_s)
+                && best.is_none_or(|(b, _, _)| cost < b)
+            {
+                best = Some((cost, offset_s, m));
+            }
+        }
+        let (_, offset_s, m) = best.expect("the coarse search found one");
+        Ok((offset_s, m))
+    }
+
+    /// The mount with every point weighed alike; then the clock again, the mount held, each residual weighed by the
+    /// covariance the two tracks state (see the module documentation for why the two differ). The covariance joins
+    /// the first fit's of the mount to the second's of the clock.
+    fn fit_mount_then_clock(
+        &self,
+        (c, p): (usize, usize),
+        partner: &Placed,
+        unknowns: Unknowns,
+        (mount, clock): (CameraMount, ClockModel),
+        points: &[Vector3<f64>],
+    ) -> Fit {
+        let joint = self.refine(
+            (c, p),
+            partner,
+            unknowns,
+            (mount, clock),
+            points,
+            &Weights::Common(Matrix3::identity()),
+        );
+        if !(unknowns.offset || unknowns.drift) {
+            return joint;
+        }
+        let clock_only = Unknowns {
+            mount: false,
+            ..unknowns
+        };
+        let timed = self.refine(
+            (c, p),
+            partner,
+            clock_only,
+            (joint.mount, joint.clock),
+            points,
+            &Weights::Stated,
+        );
+        let n = unknowns.count();
+        let m = 6 * unknowns.mount as usize;
+        let mut covariance = DMatrix::zeros(n, n);
+        covariance
+            .view_mut((0, 0), (m, m))
+            .copy_from(&joint.covariance.view((0, 0), (m, m)));
+        covariance
+            .view_mut((m, m), (n - m, n - m))
+            .copy_from(&timed.covariance);
+        Fit {
+            covariance,
+            ..timed
+        }
     }
 
     /// Gauss-Newton with Huber weights on the unknown mount, offset and drift of camera `c`, from `mount` and `clock`.
@@ -851,6 +862,42 @@ impl RigCalibrator {
             rms_residual_m: (mean_square_residual(&pairs, points, &mount) / 3.0).sqrt(),
         }
     }
+}
+
+/// The partner's own uncertainty (translation, rotation, offset) carried to a camera of mount `mount` placed against
+/// it: the partner mount's error turns with the relative rotation (a left error of the partner's camera_T_rig is
+/// R_rel of it on this camera's), its offset adds.
+fn carried_from_partner(mount: &CameraMount, partner: &Placed) -> SMatrix<f64, 7, 7> {
+    let relative = mount.camera_r_rig * partner.mount.camera_r_rig.inverse();
+    let mut carry = SMatrix::<f64, 7, 7>::zeros();
+    carry
+        .fixed_view_mut::<3, 3>(0, 0)
+        .copy_from(relative.matrix());
+    carry
+        .fixed_view_mut::<3, 3>(3, 3)
+        .copy_from(relative.matrix());
+    carry[(6, 6)] = 1.0;
+    carry * partner.inherited * carry.transpose()
+}
+
+/// Where each of translation (3), rotation (3), offset and drift sits among the fit's columns, `None` when known.
+fn columns_of_unknowns(unknowns: Unknowns) -> [Option<usize>; 8] {
+    let mut k = 0;
+    let mut index = [None; 8];
+    for (slot, unknown) in [
+        (0, unknowns.mount),
+        (6, unknowns.offset),
+        (7, unknowns.drift),
+    ] {
+        if unknown {
+            let width = if slot == 0 { 6 } else { 1 };
+            for j in 0..width {
+                index[slot + j] = Some(k + j);
+            }
+            k += width;
+        }
+    }
+    index
 }
 
 /// The result of [`RigCalibrator::refine`].
