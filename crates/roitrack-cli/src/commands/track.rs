@@ -157,6 +157,103 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     if let Some(rig) = &args.camera_rig {
         return run_rig(args, rig);
     }
+    check_one_camera_inputs(args)?;
+    let camera = crate::ros::camera(
+        args.camera.as_ref(),
+        args.images.first().map(PathBuf::as_path),
+        &args.mcap_in,
+    )?;
+    let target = args.target.read()?;
+    if let Some(source) = args.images.first()
+        && args.mcap_in.measurement_topic.is_none()
+    {
+        return run_frames(args, source, camera, target);
+    }
+    if args.line_delay_s.is_some() {
+        bail!("--line-delay-s is for --images with --shutter rolling");
+    }
+    if !args.timestamps.is_empty() || args.fps.is_some() || args.distance_m.is_some() {
+        bail!(
+            "--timestamps, --fps and --distance-m are for frames, not for replayed measurements (--measurement-topic)"
+        );
+    }
+    let known_ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
+    let mut tracker = Tracker::new(camera.clone(), target, args.estimator.config()?)
+        .context("invalid tracker options")?;
+    let writer = EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
+        .with_covariance(args.covariance.as_deref())?;
+    // Progress on stderr for long files (drawn only when stderr is a terminal).
+    let progress = indicatif::ProgressBar::new_spinner().with_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} {human_pos} inputs tracked ({per_sec}) {elapsed}",
+        )
+        .expect("valid progress template"),
+    );
+    let tick = |count: usize| {
+        if count.is_multiple_of(4096) {
+            progress.set_position(count as u64);
+        }
+    };
+    let replay = args.mcap_in.measurement_replay(
+        args.images.first().map(PathBuf::as_path),
+        known_ids.clone(),
+        &camera,
+    )?;
+    let mut bag = if !args.rois.is_empty() {
+        args.ros.open_for_rois(Some(&camera), None)?
+    } else {
+        args.ros.open(Some(&camera), None)?
+    };
+    // --ros2: a node that cannot start fails here, before tracking (and --ros2-wait-s waits here for subscribers).
+    bag.publish_on_ros2(args.ros2.start(Some(&camera), &args.ros.bag_options())?);
+    let mut sinks = EstimateSinks {
+        writer,
+        bag,
+        pacer: args.pace.pacer(),
+    };
+    let start = Instant::now();
+    let measurements = open_measurements(args, replay, &known_ids, &camera)?;
+    let (path, report, rois) = match (measurements, args.rois.first()) {
+        (Some((path, source)), _) => {
+            let report = track_measurements(&mut tracker, &path, source, &mut sinks, &tick)?;
+            (path, report, None)
+        }
+        (None, Some(path)) => {
+            let options = centroid_options(args);
+            let report = track_roi_recording(
+                &mut tracker,
+                path,
+                known_ids,
+                &options,
+                &camera.time,
+                &mut sinks,
+                &tick,
+            )?;
+            (path.clone(), report.estimator, Some(report))
+        }
+        (None, None) => {
+            bail!("give --measurements, --rois or --mcap-in BAG --measurement-topic TOPIC")
+        }
+    };
+    let seconds = start.elapsed().as_secs_f64();
+    progress.finish_and_clear();
+    if report.estimates.total() == 0 {
+        bail!(
+            "{}: no estimate from {} measurements: {}",
+            path.display(),
+            report.measurements,
+            report.why_no_start()
+        );
+    }
+    sinks.writer.finish()?;
+    sinks.bag.finish()?;
+    print_one_camera_summary(rois.as_ref(), &report, seconds);
+    Ok(())
+}
+
+/// Refuses what only a rig takes (several inputs, or several kinds of input) and options without what they are
+/// for, and checks the paths, before anything is read.
+fn check_one_camera_inputs(args: &TrackArgs) -> Result<()> {
     if args.measurements.len() > 1 {
         bail!(
             "several --measurements are for the cameras of a rig: give --rig RIG.yaml and NAME=FILE for each"
@@ -192,142 +289,121 @@ pub fn run(args: &TrackArgs) -> Result<()> {
             "--time-units is the unit of the times of --measurements or --timestamps, and neither is given"
         );
     }
-    let camera = crate::ros::camera(
-        args.camera.as_ref(),
-        args.images.first().map(PathBuf::as_path),
-        &args.mcap_in,
-    )?;
-    let target = args.target.read()?;
-    if let Some(source) = args.images.first()
-        && args.mcap_in.measurement_topic.is_none()
-    {
-        return run_frames(args, source, camera, target);
-    }
-    if args.line_delay_s.is_some() {
-        bail!("--line-delay-s is for --images with --shutter rolling");
-    }
-    if !args.timestamps.is_empty() || args.fps.is_some() || args.distance_m.is_some() {
-        bail!(
-            "--timestamps, --fps and --distance-m are for frames, not for replayed measurements (--measurement-topic)"
-        );
-    }
-    let known_ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
-    let mut tracker = Tracker::new(camera.clone(), target, args.estimator.config()?)
-        .context("invalid tracker options")?;
-    let mut writer =
-        EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
-            .with_covariance(args.covariance.as_deref())?;
-    // Progress on stderr for long files (drawn only when stderr is a terminal).
-    let progress = indicatif::ProgressBar::new_spinner().with_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} {human_pos} inputs tracked ({per_sec}) {elapsed}",
-        )
-        .expect("valid progress template"),
-    );
-    let tick = |count: usize| {
-        if count.is_multiple_of(4096) {
-            progress.set_position(count as u64);
-        }
-    };
-    let replay = args.mcap_in.measurement_replay(
-        args.images.first().map(PathBuf::as_path),
-        known_ids.clone(),
-        &camera,
-    )?;
-    let mut bag = if !args.rois.is_empty() {
-        args.ros.open_for_rois(Some(&camera), None)?
-    } else {
-        args.ros.open(Some(&camera), None)?
-    };
-    // --ros2: a node that cannot start fails here, before tracking (and --ros2-wait-s waits here for subscribers).
-    bag.publish_on_ros2(args.ros2.start(Some(&camera), &args.ros.bag_options())?);
-    let mut pacer = args.pace.pacer();
-    // Every estimate: paced (--paced), then to the files, the bag, the live view and the DDS bus.
-    let mut on_estimate = |e: &roitrack::Estimate, bag: &mut crate::ros::Bag| {
-        if let Some(pacer) = &mut pacer {
+    Ok(())
+}
+
+/// Where every estimate of a one-camera run goes: paced (--paced), then to the files, the bag, the live view and the
+/// DDS bus.
+struct EstimateSinks {
+    writer: EstimateWriter,
+    bag: crate::ros::Bag,
+    pacer: Option<roitrack::ros::Pacer>,
+}
+
+impl EstimateSinks {
+    fn estimate(&mut self, e: &roitrack::Estimate) -> Result<(), FormatError> {
+        if let Some(pacer) = &mut self.pacer {
             pacer.wait_until(e.t_ref_s);
         }
-        writer.write(e).and_then(|()| bag.estimate(e))
-    };
-    let start = Instant::now();
-    // Measurements replayed from a bag or read from a CSV; checked either way: known ids, centroids on the camera's
-    // image, times in order (and, from a CSV, in seconds or converted).
-    let measurements: Option<(PathBuf, MeasurementSource)> =
-        match (replay, args.measurements.first()) {
-            (Some(source), _) => Some((source.bag().to_path_buf(), Box::new(source))),
-            (None, Some(path)) => {
-                let reader = MeasurementReader::from_reader(open_input(path)?, path)?
-                    .with_known_ids(known_ids.iter().copied())
-                    .with_image_size(camera.width_px, camera.height_px);
-                let reader = TimedMeasurements::new(reader, args.time_units.map(Into::into));
-                Some((path.clone(), Box::new(reader)))
-            }
-            (None, None) => None,
-        };
-    let (path, report, rois) = match (measurements, args.rois.first()) {
-        (Some((path, source)), _) => {
-            // Each measurement also goes to the bag's /roitrack/measurements (a RefCell: the estimates' sink
-            // writes to the bag too).
-            let bag = std::cell::RefCell::new(&mut bag);
-            let measurements = source.enumerate().map(|(k, m)| {
-                tick(k);
-                // A signal stops the run here, through the error path (src/signals.rs).
-                crate::signals::check(&path)?;
-                let m = m?;
-                bag.borrow_mut().measurements(std::slice::from_ref(&m))?;
-                Ok::<_, FormatError>(m)
-            });
-            let report = roitrack::track(&mut tracker, measurements, |e| {
-                on_estimate(e, &mut bag.borrow_mut())
-            })
-            .with_context(|| format!("tracking {} failed", path.display()))?;
-            (path, report, None)
-        }
+        self.writer.write(e).and_then(|()| self.bag.estimate(e))
+    }
+}
+
+/// The measurements to track and where they come from: replayed from a bag, or read from a CSV; checked either way
+/// (known ids, centroids on the camera's image, times in order and, from a CSV, in seconds or converted). `None`
+/// without either (a ROI recording instead).
+fn open_measurements(
+    args: &TrackArgs,
+    replay: Option<roitrack::ros::BagMeasurementSource>,
+    known_ids: &[u32],
+    camera: &roitrack::CameraModel,
+) -> Result<Option<(PathBuf, MeasurementSource)>> {
+    Ok(match (replay, args.measurements.first()) {
+        (Some(source), _) => Some((source.bag().to_path_buf(), Box::new(source))),
         (None, Some(path)) => {
-            let reader = RoiRecordingReader::open(path)?.with_known_ids(known_ids);
-            let mut options = CentroidOptions::default();
-            if args.no_symmetry_check {
-                options.symmetry = None;
-            }
-            let images = reader.enumerate().map(|(k, image)| {
-                tick(k);
-                crate::signals::check(path)?;
-                image
-            });
-            // Every ROI and what its centroid gave goes to the bag (its measurement; with --mcap-rois, the image).
-            let report = roitrack::pipeline::track_rois_with(
-                &mut tracker,
-                &options,
-                &camera.time,
-                images,
-                |event| match event {
-                    RoiEvent::Roi { image, measured } => bag.roi(image, measured.ok()),
-                    RoiEvent::Estimate(e) => on_estimate(e, &mut bag),
-                },
-            )
-            .with_context(|| format!("tracking {} failed", path.display()))?;
-            (path.clone(), report.estimator, Some(report))
+            let reader = MeasurementReader::from_reader(open_input(path)?, path)?
+                .with_known_ids(known_ids.iter().copied())
+                .with_image_size(camera.width_px, camera.height_px);
+            let reader = TimedMeasurements::new(reader, args.time_units.map(Into::into));
+            Some((path.clone(), Box::new(reader)))
         }
-        (None, None) => {
-            bail!("give --measurements, --rois or --mcap-in BAG --measurement-topic TOPIC")
-        }
-    };
-    let seconds = start.elapsed().as_secs_f64();
-    progress.finish_and_clear();
+        (None, None) => None,
+    })
+}
+
+/// Tracks `source`, read from `path`; each measurement also goes to the bag's /roitrack/measurements. A signal
+/// stops the run at the next measurement, through the error path (src/signals.rs).
+fn track_measurements(
+    tracker: &mut Tracker,
+    path: &std::path::Path,
+    source: MeasurementSource,
+    sinks: &mut EstimateSinks,
+    tick: &dyn Fn(usize),
+) -> Result<EstimatorReport> {
+    // A RefCell: the estimates' sink writes to the bag too.
+    let sinks = std::cell::RefCell::new(sinks);
+    let measurements = source.enumerate().map(|(k, m)| {
+        tick(k);
+        crate::signals::check(path)?;
+        let m = m?;
+        sinks
+            .borrow_mut()
+            .bag
+            .measurements(std::slice::from_ref(&m))?;
+        Ok::<_, FormatError>(m)
+    });
+    let report = roitrack::track(tracker, measurements, |e| sinks.borrow_mut().estimate(e))
+        .with_context(|| format!("tracking {} failed", path.display()))?;
+    Ok(report)
+}
+
+/// Tracks the ROI recording at `path`, each ROI centroided here with `options`; every ROI and what its centroid gave
+/// also goes to the bag (its measurement; with --mcap-rois, the image).
+fn track_roi_recording(
+    tracker: &mut Tracker,
+    path: &std::path::Path,
+    known_ids: Vec<u32>,
+    options: &CentroidOptions,
+    time: &roitrack::core::time::TimeModel,
+    sinks: &mut EstimateSinks,
+    tick: &dyn Fn(usize),
+) -> Result<roitrack::pipeline::RoiTrackReport> {
+    let reader = RoiRecordingReader::open(path)?.with_known_ids(known_ids);
+    let images = reader.enumerate().map(|(k, image)| {
+        tick(k);
+        crate::signals::check(path)?;
+        image
+    });
+    let report =
+        roitrack::pipeline::track_rois_with(tracker, options, time, images, |event| match event {
+            RoiEvent::Roi { image, measured } => sinks.bag.roi(image, measured.ok()),
+            RoiEvent::Estimate(e) => sinks.estimate(e),
+        })
+        .with_context(|| format!("tracking {} failed", path.display()))?;
+    Ok(report)
+}
+
+/// --rois' centroid options: the defaults, without the symmetry check with --no-symmetry-check.
+fn centroid_options(args: &TrackArgs) -> CentroidOptions {
+    let mut options = CentroidOptions::default();
+    if args.no_symmetry_check {
+        options.symmetry = None;
+    }
+    options
+}
+
+/// The one-camera run's closing lines on stderr: the ROIs centroided (with --rois), then the measurements, the
+/// estimates and the time per measurement.
+fn print_one_camera_summary(
+    rois: Option<&roitrack::pipeline::RoiTrackReport>,
+    report: &EstimatorReport,
+    seconds: f64,
+) {
     let EstimatorReport {
         measurements,
         estimates,
         ..
     } = report;
-    if estimates.total() == 0 {
-        bail!(
-            "{}: no estimate from {measurements} measurements: {}",
-            path.display(),
-            report.why_no_start()
-        );
-    }
-    writer.finish()?;
-    bag.finish()?;
     if let Some(rois) = rois {
         eprintln!(
             "roitrack: {} ROIs centroided; rejected: {}",
@@ -340,9 +416,8 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         estimates.total(),
         estimates.get(TrackStatus::Degenerate),
         estimates.get(TrackStatus::Lost),
-        1e6 * seconds / measurements.max(1) as f64
+        1e6 * seconds / (*measurements).max(1) as f64
     );
-    Ok(())
 }
 
 /// `track --images`: frames decoded on their own thread, tracked by the frame tracker, one estimate per frame. On an
@@ -354,8 +429,6 @@ fn run_frames(
     camera: roitrack::CameraModel,
     target: roitrack::Target,
 ) -> Result<()> {
-    use roitrack::pipeline::{FrameStreamError, FrameTracker};
-
     let camera = frame_camera(args, camera)?;
     let config = frame_config(args)?;
     let timing = roitrack::formats::FrameTiming {
@@ -370,23 +443,12 @@ fn run_frames(
     );
     // --ros2: the estimates (not the frames) on the DDS bus, as --mcap writes them.
     bag.publish_on_ros2(args.ros2.start(Some(&camera), &args.ros.bag_options())?);
-    let mut tracker =
-        FrameTracker::new(camera, target, config).context("invalid tracker options")?;
+    let mut tracker = roitrack::pipeline::FrameTracker::new(camera, target, config)
+        .context("invalid tracker options")?;
     let mut writer =
         EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
             .with_covariance(args.covariance.as_deref())?;
-    let progress = match frames.frame_count() {
-        Some(n) => indicatif::ProgressBar::new(n as u64).with_style(
-            indicatif::ProgressStyle::with_template(
-                "{bar:30} {human_pos}/{human_len} frames ({per_sec}, {eta} left)",
-            )
-            .expect("valid progress template"),
-        ),
-        None => indicatif::ProgressBar::new_spinner().with_style(
-            indicatif::ProgressStyle::with_template("{spinner} {human_pos} frames ({per_sec})")
-                .expect("valid progress template"),
-        ),
-    };
+    let progress = frames_progress(frames.frame_count());
     let mut pacer = args.pace.pacer();
     let start = Instant::now();
     let result = roitrack::pipeline::track_frame_stream(
@@ -425,13 +487,7 @@ fn run_frames(
     // What was estimated before an error or an interruption is kept, under the outputs' partial names
     // (NAME.partial.EXT; the outputs themselves stay as they were): the files are completed first.
     if result.is_err() && report.estimates > 0 {
-        for path in [Some(&args.poses), Some(&args.twists)]
-            .into_iter()
-            .chain([args.diagnostics.as_ref(), args.covariance.as_ref()])
-            .flatten()
-        {
-            roitrack::formats::keep_if_failed(path);
-        }
+        keep_partial_outputs(args);
     }
     let written = if report.estimates > 0 {
         writer.finish().map(|()| true)
@@ -439,6 +495,54 @@ fn run_frames(
         Ok(false)
     };
     let bag_finished = bag.finish();
+    print_frames_summary(&report, seconds);
+    if let Err(e) = result {
+        return Err(frame_stream_error(e, source, report.estimates));
+    }
+    written?;
+    bag_finished?;
+    if report.estimates == 0 {
+        bail!(
+            "{}: no estimate from {} frames: the target was never found (check --camera, --target, --polarity; \
+             `roitrack detect --overlay DIR` on one frame's image writes DIR/<image name>.overlay.png with the blobs \
+             seen in it, found or not)",
+            source.display(),
+            report.frames
+        );
+    }
+    Ok(())
+}
+
+/// The progress of `track --images` on stderr (drawn only when stderr is a terminal): a bar when the number of
+/// frames is known, else a spinner.
+fn frames_progress(frame_count: Option<usize>) -> indicatif::ProgressBar {
+    match frame_count {
+        Some(n) => indicatif::ProgressBar::new(n as u64).with_style(
+            indicatif::ProgressStyle::with_template(
+                "{bar:30} {human_pos}/{human_len} frames ({per_sec}, {eta} left)",
+            )
+            .expect("valid progress template"),
+        ),
+        None => indicatif::ProgressBar::new_spinner().with_style(
+            indicatif::ProgressStyle::with_template("{spinner} {human_pos} frames ({per_sec})")
+                .expect("valid progress template"),
+        ),
+    }
+}
+
+/// Has every file output of a failed run kept under its partial name (NAME.partial.EXT) once completed.
+fn keep_partial_outputs(args: &TrackArgs) {
+    for path in [Some(&args.poses), Some(&args.twists)]
+        .into_iter()
+        .chain([args.diagnostics.as_ref(), args.covariance.as_ref()])
+        .flatten()
+    {
+        roitrack::formats::keep_if_failed(path);
+    }
+}
+
+/// The frame run's closing line on stderr: frames, estimates, rate, how the target was measured, the polarity.
+fn print_frames_summary(report: &roitrack::pipeline::FrameTrackReport, seconds: f64) {
     let polarity = report.polarity.map_or("none", |p| p.name());
     let blend = if report.by_windows > 0 {
         format!(
@@ -459,39 +563,35 @@ fn run_frames(
         report.restarts,
         report.not_found,
     );
-    if let Err(e) = result {
-        let kept = if report.estimates > 0 {
-            format!(
-                " (the {} estimates before it are kept under the outputs' partial names)",
-                report.estimates
-            )
-        } else {
-            String::new()
-        };
-        return Err(match e {
-            FrameStreamError::Source(e) => anyhow::Error::new(e),
-            FrameStreamError::Frame {
-                info, source: err, ..
-            } => {
-                anyhow::anyhow!("frame {} ({}): {err}", info.0.index, info.0.name)
-            }
-            FrameStreamError::Sink(e) => anyhow::Error::new(e),
-            FrameStreamError::DecoderPanicked => anyhow::anyhow!("the decoding thread panicked"),
+}
+
+/// What stopped a frame run, as the user reads it: the frame at fault if one was, and the `estimates` kept.
+fn frame_stream_error<S, K, I>(
+    e: roitrack::pipeline::FrameStreamError<S, K, (roitrack::formats::FrameInfo, I)>,
+    source: &std::path::Path,
+    estimates: usize,
+) -> anyhow::Error
+where
+    S: std::error::Error + Send + Sync + 'static,
+    K: std::error::Error + Send + Sync + 'static,
+{
+    use roitrack::pipeline::FrameStreamError;
+    let kept = if estimates > 0 {
+        format!(" (the {estimates} estimates before it are kept under the outputs' partial names)")
+    } else {
+        String::new()
+    };
+    match e {
+        FrameStreamError::Source(e) => anyhow::Error::new(e),
+        FrameStreamError::Frame {
+            info, source: err, ..
+        } => {
+            anyhow::anyhow!("frame {} ({}): {err}", info.0.index, info.0.name)
         }
-        .context(format!("tracking {} stopped{kept}", source.display())));
+        FrameStreamError::Sink(e) => anyhow::Error::new(e),
+        FrameStreamError::DecoderPanicked => anyhow::anyhow!("the decoding thread panicked"),
     }
-    written?;
-    bag_finished?;
-    if report.estimates == 0 {
-        bail!(
-            "{}: no estimate from {} frames: the target was never found (check --camera, --target, --polarity; \
-             `roitrack detect --overlay DIR` on one frame's image writes DIR/<image name>.overlay.png with the blobs \
-             seen in it, found or not)",
-            source.display(),
-            report.frames
-        );
-    }
-    Ok(())
+    .context(format!("tracking {} stopped{kept}", source.display()))
 }
 
 /// Refuses, before anything is read or written, outputs (the files, the bag and its partial name) that are inputs
@@ -700,13 +800,10 @@ fn rig_inputs(
                     path,
                     time_units: args.time_units.map(Into::into),
                 },
-                ("--rois", ..) => {
-                    let mut options = CentroidOptions::default();
-                    if args.no_symmetry_check {
-                        options.symmetry = None;
-                    }
-                    CameraInput::Rois { path, options }
-                }
+                ("--rois", ..) => CameraInput::Rois {
+                    path,
+                    options: centroid_options(args),
+                },
                 _ => CameraInput::Images {
                     source: path,
                     timing: roitrack::formats::FrameTiming {
@@ -770,17 +867,7 @@ fn per_camera(
 /// merged in the order of their rig times (as far as the rig file gives
 /// the clocks; the tracker's reorder buffer takes the rest), fused into one pose and twist in the rig's frame.
 fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
-    if args.camera.is_some() {
-        bail!("--rig gives the cameras: leave out --camera");
-    }
-    if args.mcap_in.measurement_topic.is_some() || args.mcap_in.image_topic.is_some() {
-        bail!(
-            "--rig: a camera's bag topic is --topic NAME=TOPIC (not --measurement-topic or --image-topic)"
-        );
-    }
-    if args.ros.mcap_rois {
-        bail!("--mcap-rois: a rig's bag holds its fused estimates only");
-    }
+    check_rig_options(args)?;
     let file = roitrack::formats::read_rig_yaml(rig_path, &Default::default())?;
     let rig = &file.rig;
     let target = args.target.read()?;
@@ -795,6 +882,70 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         );
     }
     check_rig_paths(args, rig_path, &file, &inputs)?;
+    let streams = open_camera_streams(args, rig, &inputs, &target)?;
+    let any_frames = inputs.iter().flatten().any(|i| i.is_frames());
+    let mut tracker = rig_tracker(args, rig_path, rig, target, any_frames)?;
+    let mut writer =
+        EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
+            .with_covariance(args.covariance.as_deref())?;
+    // The fused estimates (rig frame, rig clock) also to the bag, the live view and the DDS bus, each if asked.
+    let bag_options = args.ros.rig_bag_options();
+    let mut bag = args.ros.open_with_options(None, None, &bag_options)?;
+    bag.publish_on_ros2(args.ros2.start(None, &bag_options)?);
+    let start = Instant::now();
+    let (count, estimates) = if tracker.is_single() {
+        track_rig_of_one(&mut tracker, streams, rig_path, &mut bag, &mut writer)?
+    } else {
+        track_merged_streams(&mut tracker, streams, rig_path, rig, &mut bag, &mut writer)?
+    };
+    writer.finish()?;
+    bag.finish()?;
+    let clocks = tracker.clocks();
+    if let Some(out) = &args.rig_out {
+        let calibrations = file.calibrations_for_output(out);
+        roitrack::formats::write_rig_yaml(out, rig, &calibrations, Some(&clocks))?;
+    }
+    let seconds = start.elapsed().as_secs_f64();
+    print_learnt_clocks(rig, &clocks);
+    let report = tracker.report();
+    eprintln!(
+        "roitrack: {count} measurements of {} cameras -> {estimates} estimates in {seconds:.3} s ({:.2} us per \
+         measurement); fused {}, rejected by the gate {}, fused tracks started {}, instants widened {}",
+        rig.len(),
+        1e6 * seconds / count.max(1) as f64,
+        report.fused,
+        report.gated,
+        report.starts,
+        report.instants_widened
+    );
+    Ok(())
+}
+
+/// Refuses the options a rig run does not take: --camera (the rig gives the cameras), the one-camera bag topics,
+/// --mcap-rois.
+fn check_rig_options(args: &TrackArgs) -> Result<()> {
+    if args.camera.is_some() {
+        bail!("--rig gives the cameras: leave out --camera");
+    }
+    if args.mcap_in.measurement_topic.is_some() || args.mcap_in.image_topic.is_some() {
+        bail!(
+            "--rig: a camera's bag topic is --topic NAME=TOPIC (not --measurement-topic or --image-topic)"
+        );
+    }
+    if args.ros.mcap_rois {
+        bail!("--mcap-rois: a rig's bag holds its fused estimates only");
+    }
+    Ok(())
+}
+
+/// Every given camera's input opened as measurements against its camera (with the time model of --shutter and
+/// --exposure-s for frames), in the rig's order, each labelled for messages.
+fn open_camera_streams(
+    args: &TrackArgs,
+    rig: &roitrack::estimators::rig::Rig,
+    inputs: &[Option<roitrack::camera_input::CameraInput>],
+    target: &roitrack::Target,
+) -> Result<Vec<CameraStream>> {
     let mut streams = Vec::new();
     for (c, input) in inputs.iter().enumerate() {
         let Some(input) = input else { continue };
@@ -812,7 +963,7 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         } else {
             rig.cameras()[c].camera.clone()
         };
-        let reader = roitrack::camera_input::open_camera_input(input, &camera, &target)
+        let reader = roitrack::camera_input::open_camera_input(input, &camera, target)
             .with_context(|| format!("camera '{name}' ({label})"))?;
         streams.push(CameraStream {
             camera: c,
@@ -820,7 +971,18 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
             reader,
         });
     }
-    let any_frames = inputs.iter().flatten().any(|i| i.is_frames());
+    Ok(streams)
+}
+
+/// The rig's tracker, with the frame tracker's estimator options when any camera gives frames. A pose left out of
+/// the rig file is the file's fault, not the options': the error names the file.
+fn rig_tracker(
+    args: &TrackArgs,
+    rig_path: &std::path::Path,
+    rig: &roitrack::estimators::rig::Rig,
+    target: roitrack::Target,
+    any_frames: bool,
+) -> Result<roitrack::estimators::rig::RigTracker> {
     let config = roitrack::estimators::rig::RigTrackerConfig {
         tracker: if any_frames {
             frame_config(args)?.tracker
@@ -829,98 +991,108 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
         },
         ..Default::default()
     };
-    // A pose left out of the rig file is the file's fault, not the options'.
-    let mut tracker = roitrack::estimators::rig::RigTracker::new(rig.clone(), target, config)
-        .map_err(|e| match e {
-            roitrack::estimators::rig::RigError::MountUnknown { .. } => {
-                anyhow::anyhow!("{}: {e}", rig_path.display())
-            }
-            e => anyhow::Error::new(e),
-        })?;
-    let mut writer =
-        EstimateWriter::create(&args.poses, &args.twists, args.diagnostics.as_deref())?
-            .with_covariance(args.covariance.as_deref())?;
-    // The fused estimates (rig frame, rig clock) also to the bag, the live view and the DDS bus, each if asked.
-    let bag_options = args.ros.rig_bag_options();
-    let mut bag = args.ros.open_with_options(None, None, &bag_options)?;
-    bag.publish_on_ros2(args.ros2.start(None, &bag_options)?);
-    let start = Instant::now();
+    roitrack::estimators::rig::RigTracker::new(rig.clone(), target, config).map_err(|e| match e {
+        roitrack::estimators::rig::RigError::MountUnknown { .. } => {
+            anyhow::anyhow!("{}: {e}", rig_path.display())
+        }
+        e => anyhow::Error::new(e),
+    })
+}
+
+/// One camera that is the rig: the single-camera path itself (readouts of one time pushed whole). The measurements
+/// read and the estimates written.
+fn track_rig_of_one(
+    tracker: &mut roitrack::estimators::rig::RigTracker,
+    mut streams: Vec<CameraStream>,
+    rig_path: &std::path::Path,
+    bag: &mut crate::ros::Bag,
+    writer: &mut EstimateWriter,
+) -> Result<(usize, usize)> {
+    let mut estimates = 0usize;
+    let stream = streams.remove(0);
+    let path = stream.label.clone();
+    let single = tracker.camera_tracker(0).expect("a rig has a first camera");
+    let measurements = stream.reader.map(|m| {
+        crate::signals::check(rig_path)?;
+        m
+    });
+    let report = roitrack::track(single, measurements, |e| {
+        estimates += 1;
+        bag.estimate(e)?;
+        writer.write(e)
+    })
+    .with_context(|| format!("tracking {path} failed"))?;
+    let count = report.measurements;
+    if report.estimates.total() == 0 {
+        bail!(
+            "{path}: no estimate from {count} measurements: {}",
+            report.why_no_start()
+        );
+    }
+    Ok((count, estimates))
+}
+
+/// Several cameras: their measurements merged by the rig file's clocks (or by each camera's own when the file
+/// leaves them out) and fused. The measurements read and the estimates written.
+fn track_merged_streams(
+    tracker: &mut roitrack::estimators::rig::RigTracker,
+    streams: Vec<CameraStream>,
+    rig_path: &std::path::Path,
+    rig: &roitrack::estimators::rig::Rig,
+    bag: &mut crate::ros::Bag,
+    writer: &mut EstimateWriter,
+) -> Result<(usize, usize)> {
     let mut count = 0usize;
     let mut estimates = 0usize;
-    if tracker.is_single() {
-        // One camera that is the rig: the single-camera path itself (readouts of one time pushed whole).
-        let stream = streams.remove(0);
-        let path = stream.label.clone();
-        let single = tracker.camera_tracker(0).expect("a rig has a first camera");
-        let measurements = stream.reader.map(|m| {
-            crate::signals::check(rig_path)?;
-            m
-        });
-        let report = roitrack::track(single, measurements, |e| {
-            estimates += 1;
-            bag.estimate(e)?;
-            writer.write(e)
-        })
-        .with_context(|| format!("tracking {path} failed"))?;
-        count = report.measurements;
-        if report.estimates.total() == 0 {
-            bail!(
-                "{path}: no estimate from {count} measurements: {}",
-                report.why_no_start()
-            );
-        }
-    } else {
-        // Merged by the rig file's clocks, or by the camera's own when the file leaves them out.
-        let clocks: Vec<roitrack::estimators::rig::ClockModel> =
-            rig.cameras().iter().map(|c| c.clock).collect();
-        let labels: Vec<String> = streams.iter().map(|s| s.label.clone()).collect();
-        let streams_cameras: Vec<usize> = streams.iter().map(|s| s.camera).collect();
-        let merged = roitrack::estimators::rig::merge_streams(
-            streams.into_iter().map(|s| (s.camera, s.reader)).collect(),
-            &clocks,
-        );
-        for (k, m) in merged {
-            crate::signals::check(rig_path)?;
-            // k: the stream's position among the streams given.
-            let label = &labels[k];
-            let m = m.with_context(|| {
-                format!(
-                    "camera '{}' ({label})",
-                    rig.cameras()[streams_cameras[k]].name
-                )
-            })?;
-            count += 1;
-            let fused = tracker
-                .push(&m)
-                .with_context(|| format!("tracking {label} failed"))?;
-            for e in fused {
-                bag.estimate(&e.estimate)?;
-                writer.write(&e.estimate)?;
-                estimates += 1;
-            }
-        }
-        for e in tracker.finish() {
+    let clocks: Vec<roitrack::estimators::rig::ClockModel> =
+        rig.cameras().iter().map(|c| c.clock).collect();
+    let labels: Vec<String> = streams.iter().map(|s| s.label.clone()).collect();
+    let streams_cameras: Vec<usize> = streams.iter().map(|s| s.camera).collect();
+    let merged = roitrack::estimators::rig::merge_streams(
+        streams.into_iter().map(|s| (s.camera, s.reader)).collect(),
+        &clocks,
+    );
+    for (k, m) in merged {
+        crate::signals::check(rig_path)?;
+        // k: the stream's position among the streams given.
+        let label = &labels[k];
+        let m = m.with_context(|| {
+            format!(
+                "camera '{}' ({label})",
+                rig.cameras()[streams_cameras[k]].name
+            )
+        })?;
+        count += 1;
+        let fused = tracker
+            .push(&m)
+            .with_context(|| format!("tracking {label} failed"))?;
+        for e in fused {
             bag.estimate(&e.estimate)?;
             writer.write(&e.estimate)?;
             estimates += 1;
         }
-        if estimates == 0 {
-            bail!(
-                "{}: no estimate from {count} measurements: no camera's own track started, or no clock offset was found \
-                 (the target must move)",
-                rig_path.display()
-            );
-        }
     }
-    writer.finish()?;
-    bag.finish()?;
-    let clocks = tracker.clocks();
-    if let Some(out) = &args.rig_out {
-        let calibrations = file.calibrations_for_output(out);
-        roitrack::formats::write_rig_yaml(out, rig, &calibrations, Some(&clocks))?;
+    for e in tracker.finish() {
+        bag.estimate(&e.estimate)?;
+        writer.write(&e.estimate)?;
+        estimates += 1;
     }
-    let seconds = start.elapsed().as_secs_f64();
-    for (camera, clock) in rig.cameras().iter().zip(&clocks).skip(1) {
+    if estimates == 0 {
+        bail!(
+            "{}: no estimate from {count} measurements: no camera's own track started, or no clock offset was found \
+             (the target must move)",
+            rig_path.display()
+        );
+    }
+    Ok((count, estimates))
+}
+
+/// Each clock the rig file left out, as learnt (or not found), on stderr.
+fn print_learnt_clocks(
+    rig: &roitrack::estimators::rig::Rig,
+    clocks: &[roitrack::estimators::rig::ClockEstimate],
+) {
+    for (camera, clock) in rig.cameras().iter().zip(clocks).skip(1) {
         if !camera.clock_known() {
             eprintln!(
                 "roitrack: camera '{}': clock offset {:.6} s ± {:.1} us, drift {:.2} ppm ± {:.2} ppm{}",
@@ -937,18 +1109,6 @@ fn run_rig(args: &TrackArgs, rig_path: &std::path::Path) -> Result<()> {
             );
         }
     }
-    let report = tracker.report();
-    eprintln!(
-        "roitrack: {count} measurements of {} cameras -> {estimates} estimates in {seconds:.3} s ({:.2} us per \
-         measurement); fused {}, rejected by the gate {}, fused tracks started {}, instants widened {}",
-        rig.len(),
-        1e6 * seconds / count.max(1) as f64,
-        report.fused,
-        report.gated,
-        report.starts,
-        report.instants_widened
-    );
-    Ok(())
 }
 
 /// The rig run's inputs (the rig, its calibrations, the target, the measurement files) against its outputs.
