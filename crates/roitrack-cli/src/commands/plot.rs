@@ -54,28 +54,7 @@ pub struct PlotArgs {
 }
 
 pub fn run(args: &PlotArgs) -> Result<()> {
-    // No figure may overwrite an input.
-    let inputs: Vec<(&str, &std::path::Path)> = [
-        ("--poses", Some(args.poses.as_path())),
-        ("--twists", args.twists.as_deref()),
-        ("--diagnostics", args.diagnostics.as_deref()),
-        ("--covariance", args.covariance.as_deref()),
-        ("--truth-poses", args.truth_poses.as_deref()),
-        ("--truth-twists", args.truth_twists.as_deref()),
-    ]
-    .into_iter()
-    .filter_map(|(name, path)| path.map(|p| (name, p)))
-    .collect();
-    let figures: Vec<(String, PathBuf)> = ["motion", "errors", "status"]
-        .iter()
-        .flat_map(|stem| ["png", "svg"].map(|ext| format!("{stem}.{ext}")))
-        .map(|name| (format!("--out's {name}"), args.out.join(&name)))
-        .collect();
-    let outputs: Vec<(&str, &std::path::Path)> = figures
-        .iter()
-        .map(|(n, p)| (n.as_str(), p.as_path()))
-        .collect();
-    roitrack::formats::check_output_paths(&inputs, &outputs)?;
+    check_plot_paths(args)?;
     let max_bytes = (args.max_file_mib as u64) << 20;
     let read_tum = |path: &PathBuf| roitrack::formats::read_tum_limited(path, max_bytes);
     let read_twists = |path: &PathBuf| roitrack::formats::read_twists_csv_limited(path, max_bytes);
@@ -84,26 +63,7 @@ pub fn run(args: &PlotArgs) -> Result<()> {
     let times: Vec<f64> = poses.iter().map(|p| p.t_s).collect();
     // Side files must be of the same run: one row per estimate, at its time.
     let check_times = |what: &str, path: &PathBuf, side: &[f64]| -> Result<()> {
-        if side.len() != times.len() {
-            bail!(
-                "{}: {} rows for {} poses in {}: not the same run",
-                path.display(),
-                side.len(),
-                times.len(),
-                args.poses.display()
-            );
-        }
-        if let Some(k) = (0..side.len()).find(|&k| (side[k] - times[k]).abs() > 1e-6) {
-            bail!(
-                "{}: {what} row {} is at t = {} s but pose {} is at t = {} s: not the same run",
-                path.display(),
-                k + 1,
-                side[k],
-                k + 1,
-                times[k]
-            );
-        }
-        Ok(())
+        check_same_run(what, path, side, &times, &args.poses)
     };
     if let (Some(path), Some(twists)) = (&args.twists, &twists) {
         check_times(
@@ -138,36 +98,8 @@ pub fn run(args: &PlotArgs) -> Result<()> {
             Ok(rows)
         })
         .transpose()?;
-    let sigmas: Option<Vec<[f64; 12]>> = match (&covariance, &diagnostics) {
-        (Some(rows), _) => Some(
-            rows.iter()
-                .map(|r| {
-                    r.covariance
-                        .as_ref()
-                        .map_or([f64::NAN; 12], roitrack::estimators::standard_deviations)
-                })
-                .collect(),
-        ),
-        (None, Some(rows)) => Some(
-            rows.iter()
-                .map(|r| {
-                    let mut s = [f64::NAN; 12];
-                    s[..3].copy_from_slice(&r.sigma_position_m);
-                    s[6..9].copy_from_slice(&r.sigma_velocity_mps);
-                    s
-                })
-                .collect(),
-        ),
-        (None, None) => None,
-    };
-    let (truth_poses_path, truth_twists_path) = match (&args.truth, &args.truth_poses) {
-        (Some(dir), _) => (
-            Some(dir.join(TRUTH_POSES_FILE)),
-            Some(dir.join(TRUTH_TWISTS_FILE)),
-        ),
-        (None, Some(poses)) => (Some(poses.clone()), args.truth_twists.clone()),
-        (None, None) => (None, None),
-    };
+    let sigmas = band_sigmas(covariance.as_deref(), diagnostics.as_deref());
+    let (truth_poses_path, truth_twists_path) = truth_paths(args);
     let truth_poses = truth_poses_path.as_ref().map(read_tum).transpose()?;
     let truth_twists = match (&truth_twists_path, &twists) {
         // With --truth DIR the twists are read only when the estimates have twists to compare.
@@ -175,29 +107,12 @@ pub fn run(args: &PlotArgs) -> Result<()> {
         _ => None,
     };
     let errors = match &truth_poses {
-        Some(truth) => Some(
-            estimate_errors(
-                truth,
-                truth_twists.as_deref(),
-                &poses,
-                twists.as_deref().filter(|_| truth_twists.is_some()),
-                &EvalOptions {
-                    alignment: super::eval::alignment(args.align),
-                    time_offset: TimeOffset::Fixed(args.time_offset),
-                    skip_outside_truth: true,
-                    ..EvalOptions::default()
-                },
-            )
-            .with_context(|| {
-                format!(
-                    "comparing {} with the truth {}",
-                    args.poses.display(),
-                    truth_poses_path
-                        .as_ref()
-                        .map_or(String::new(), |p| p.display().to_string())
-                )
-            })?,
-        ),
+        Some(truth) => Some(errors_against_truth(
+            args,
+            (truth, truth_twists.as_deref()),
+            (&poses, twists.as_deref()),
+            truth_poses_path.as_deref(),
+        )?),
         None => None,
     };
     let inputs = RunFigureInputs {
@@ -222,6 +137,140 @@ pub fn run(args: &PlotArgs) -> Result<()> {
         println!("{}", path.display());
     }
     Ok(())
+}
+
+/// Refuses figures that would overwrite an input.
+fn check_plot_paths(args: &PlotArgs) -> Result<()> {
+    let inputs: Vec<(&str, &std::path::Path)> = [
+        ("--poses", Some(args.poses.as_path())),
+        ("--twists", args.twists.as_deref()),
+        ("--diagnostics", args.diagnostics.as_deref()),
+        ("--covariance", args.covariance.as_deref()),
+        ("--truth-poses", args.truth_poses.as_deref()),
+        ("--truth-twists", args.truth_twists.as_deref()),
+    ]
+    .into_iter()
+    .filter_map(|(name, path)| path.map(|p| (name, p)))
+    .collect();
+    let figures: Vec<(String, PathBuf)> = ["motion", "errors", "status"]
+        .iter()
+        .flat_map(|stem| ["png", "svg"].map(|ext| format!("{stem}.{ext}")))
+        .map(|name| (format!("--out's {name}"), args.out.join(&name)))
+        .collect();
+    let outputs: Vec<(&str, &std::path::Path)> = figures
+        .iter()
+        .map(|(n, p)| (n.as_str(), p.as_path()))
+        .collect();
+    roitrack::formats::check_output_paths(&inputs, &outputs)?;
+    Ok(())
+}
+
+/// Refuses a side file (`what`: twist, diagnostics, covariance) at `path` that is not of the run of `poses_path`:
+/// its rows' times `side` must be the poses' `times`, one row per estimate.
+fn check_same_run(
+    what: &str,
+    path: &std::path::Path,
+    side: &[f64],
+    times: &[f64],
+    poses_path: &std::path::Path,
+) -> Result<()> {
+    if side.len() != times.len() {
+        bail!(
+            "{}: {} rows for {} poses in {}: not the same run",
+            path.display(),
+            side.len(),
+            times.len(),
+            poses_path.display()
+        );
+    }
+    if let Some(k) = (0..side.len()).find(|&k| (side[k] - times[k]).abs() > 1e-6) {
+        bail!(
+            "{}: {what} row {} is at t = {} s but pose {} is at t = {} s: not the same run",
+            path.display(),
+            k + 1,
+            side[k],
+            k + 1,
+            times[k]
+        );
+    }
+    Ok(())
+}
+
+/// The sigmas of the error bands per estimate, in the 12 components of the covariance: all of them from the
+/// covariance file, else position and velocity from the diagnostics (NaN for the others); none without either.
+fn band_sigmas(
+    covariance: Option<&[roitrack::formats::CovarianceRow]>,
+    diagnostics: Option<&[roitrack::formats::DiagnosticsRow]>,
+) -> Option<Vec<[f64; 12]>> {
+    match (covariance, diagnostics) {
+        (Some(rows), _) => Some(
+            rows.iter()
+                .map(|r| {
+                    r.covariance
+                        .as_ref()
+                        .map_or([f64::NAN; 12], roitrack::estimators::standard_deviations)
+                })
+                .collect(),
+        ),
+        (None, Some(rows)) => Some(
+            rows.iter()
+                .map(|r| {
+                    let mut s = [f64::NAN; 12];
+                    s[..3].copy_from_slice(&r.sigma_position_m);
+                    s[6..9].copy_from_slice(&r.sigma_velocity_mps);
+                    s
+                })
+                .collect(),
+        ),
+        (None, None) => None,
+    }
+}
+
+/// The truth's poses and twists files: in --truth's folder, or --truth-poses and --truth-twists.
+fn truth_paths(args: &PlotArgs) -> (Option<PathBuf>, Option<PathBuf>) {
+    match (&args.truth, &args.truth_poses) {
+        (Some(dir), _) => (
+            Some(dir.join(TRUTH_POSES_FILE)),
+            Some(dir.join(TRUTH_TWISTS_FILE)),
+        ),
+        (None, Some(poses)) => (Some(poses.clone()), args.truth_twists.clone()),
+        (None, None) => (None, None),
+    }
+}
+
+/// The estimates' errors against the truth, aligned and offset in time as --align and --time-offset say (as `roitrack
+/// eval` does), estimates outside the truth's time left out; the twists compared only when both have them.
+fn errors_against_truth(
+    args: &PlotArgs,
+    (truth, truth_twists): (
+        &[roitrack::core::PoseSample],
+        Option<&[roitrack::core::TwistSample]>,
+    ),
+    (poses, twists): (
+        &[roitrack::core::PoseSample],
+        Option<&[roitrack::core::TwistSample]>,
+    ),
+    truth_poses_path: Option<&std::path::Path>,
+) -> Result<roitrack::eval::EstimateErrors> {
+    estimate_errors(
+        truth,
+        truth_twists,
+        poses,
+        twists.filter(|_| truth_twists.is_some()),
+        &EvalOptions {
+            alignment: super::eval::alignment(args.align),
+            time_offset: TimeOffset::Fixed(args.time_offset),
+            skip_outside_truth: true,
+            ..EvalOptions::default()
+        },
+    )
+    .with_context(|| {
+        format!(
+            "comparing {} with the truth {}",
+            args.poses.display(),
+            truth_poses_path.map_or(String::new(), |p| p.display().to_string())
+        )
+    })
 }
 
 /// Writes figures rendered in memory into `dir` (created if needed, and removed again if the run fails), each through
