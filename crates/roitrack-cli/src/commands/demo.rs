@@ -9,7 +9,7 @@ use std::time::Duration;
 use anyhow::Result;
 use clap::Args;
 use roitrack::Measurement;
-use roitrack::demo::{self, Demo, DemoOptions, Source};
+use roitrack::demo::{self, Demo, DemoEstimator, DemoOptions, DemoRun, Source};
 use roitrack::formats::EstimateWriter;
 use roitrack::image::RoiImage;
 
@@ -101,22 +101,7 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         paced: args.paced,
         order: args.order.into(),
     };
-    // The duration is checked before the scenario's image margin, which samples the whole motion (a day's run: two
-    // minutes before this refusal).
-    let scenario = args.rig.scenario_within(
-        roitrack::sim::Scenario::new(options.scenario, options.seed),
-        |scenario| {
-            if scenario.duration_s > MAX_DEMO_DURATION_S {
-                anyhow::bail!(
-                    "the demo's scenario lasts {:.0} s (--duration-s, --speed-scale): the demo holds its whole run in \
-                     memory (about 7 MB per simulated second), so it runs at most {MAX_DEMO_DURATION_S} s; \
-                     `roitrack simulate` streams longer runs to files for `roitrack track`",
-                    scenario.duration_s
-                );
-            }
-            Ok(())
-        },
-    )?;
+    let scenario = demo_scenario(args, &options)?;
     check_paths(args)?;
     let demo = Demo::with_scenario(options, scenario)?;
     write_run(&demo.run, &args.out)?;
@@ -125,36 +110,12 @@ pub fn run(args: &DemoArgs) -> Result<()> {
     super::simulate::remove_other_runs_files(&args.out, false, false)?;
     let lineup = demo::lineup();
     let slots = demo.slots();
-    let accuracy = &demo.accuracy;
-    eprintln!(
-        "roitrack demo: {} scenario, {:.3} s, {} ROI slots at {} Hz, {} estimators from rendered ROIs (two threads) \
-         and from ideal centroids; centroid error of the image side over {} ROIs: bias {:+.4}/{:+.4} px, std \
-         {:.4}/{:.4} px (u/v); output in {}",
-        demo.scenario.kind.name(),
-        demo.scenario.duration_s,
-        slots,
-        demo.simulation.rate_hz,
-        lineup.len(),
-        accuracy.count,
-        accuracy.bias_u_px,
-        accuracy.bias_v_px,
-        accuracy.std_u_px,
-        accuracy.std_v_px,
-        args.out.display()
-    );
+    print_demo_header(&demo, lineup.len(), &args.out);
     let bar = indicatif::ProgressBar::new((slots * lineup.len()) as u64).with_style(
         indicatif::ProgressStyle::with_template("{bar:40} {percent:>3}% ROIs {msg} ({elapsed})")
             .expect("valid progress template"),
     );
-    // Opened before the runs, so that a live viewer (--foxglove, --foxglove-wait-s) is there from the start.
-    let mut bag = Some(args.ros.open_for_rois(Some(&demo.run.camera), None)?);
-    // The live view follows the default estimator's run from the loop's estimation thread, as it tracks.
-    let mut live = bag.as_mut().and_then(|b| b.take_live());
-    // --ros2 publishes the same run's estimates on the DDS bus, from the estimation thread too.
-    let mut ros2 = Some(
-        args.ros2
-            .start(Some(&demo.run.camera), &args.ros.bag_options())?,
-    );
+    let mut sinks = DefaultRunSinks::open(args, &demo)?;
     let mut runs = Vec::new();
     for (k, estimator) in lineup.iter().enumerate() {
         // A signal stops the demo here, between two estimators' runs (a second or so after it came), through the
@@ -162,76 +123,17 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         // NAME.partial.mcap (src/signals.rs).
         crate::signals::check(&args.out)?;
         bar.set_message(estimator.label);
-        let done = AtomicUsize::new(0);
-        let finished = AtomicBool::new(false);
-        let from_images = std::thread::scope(|scope| {
-            scope.spawn(|| {
-                while !finished.load(Ordering::Relaxed) {
-                    bar.set_position((k * slots + done.load(Ordering::Relaxed)) as u64);
-                    std::thread::sleep(Duration::from_millis(100));
-                }
-            });
-            let run = if k > 0 {
-                demo.from_images(estimator, Some(&done))
+        let from_images = with_progress(&bar, k * slots, |done| {
+            if k > 0 {
+                demo.from_images(estimator, Some(done))
                     .map_err(anyhow::Error::from)
             } else {
-                // The default estimator's run: each estimate to the live view as the loop makes it, and with
-                // --mcap-rois each ROI to the bag as the camera grabs it (on two threads: an error slot each).
-                let (mut live_error, mut roi_error, mut ros2_error) = (None, None, None);
-                let wants_rois = bag.as_ref().is_some_and(|b| b.wants_rois());
-                let mut on_roi = |image: &RoiImage, measured: Option<&Measurement>| {
-                    if let (None, Some(bag)) = (&roi_error, bag.as_mut()) {
-                        roi_error = bag.roi_image(image, measured).err();
-                    }
-                };
-                let run = demo.from_images_observed(
-                    estimator,
-                    Some(&done),
-                    &mut |e| {
-                        if let (None, Some(live)) = (&live_error, live.as_mut()) {
-                            live_error = live.publish_estimate(e).err();
-                        }
-                        if let (None, Some(ros2)) = (&ros2_error, ros2.as_mut()) {
-                            ros2_error = ros2.estimate(e).err();
-                        }
-                    },
-                    match wants_rois {
-                        true => Some(&mut on_roi),
-                        false => None,
-                    },
-                );
-                match live_error.or(roi_error).or(ros2_error) {
-                    Some(e) => Err(e.into()),
-                    None => run.map_err(anyhow::Error::from),
-                }
-            };
-            finished.store(true, Ordering::Relaxed);
-            run
+                sinks.observed_run(&demo, estimator, done)
+            }
         })?;
         bar.set_position(((k + 1) * slots) as u64);
-        let mut writer = EstimateWriter::create(
-            &args.out.join(format!("{}_poses.tum", estimator.stem)),
-            &args.out.join(format!("{}_twists.csv", estimator.stem)),
-            Some(&args.out.join(format!("{}_diagnostics.csv", estimator.stem))),
-        )?;
-        for e in &from_images.scored.estimates {
-            writer.write(e)?;
-        }
-        writer.finish()?;
-        if let Some(mut bag) = bag.take() {
-            let measured = from_images
-                .loop_report
-                .as_ref()
-                .map_or(&[][..], |r| &r.measured);
-            bag.run(measured, &from_images.scored.estimates)?;
-            bag.finish()?;
-        }
-        if let Some(live) = live.take() {
-            crate::ros::finish_live(live)?;
-        }
-        if let Some(ros2) = ros2.take() {
-            ros2.finish()?;
-        }
+        write_estimates(&args.out, estimator.stem, &from_images.scored.estimates)?;
+        sinks.finish(&from_images)?;
         runs.push(from_images);
         runs.push(demo.from_centroids(estimator)?);
     }
@@ -263,4 +165,167 @@ pub fn run(args: &DemoArgs) -> Result<()> {
         args.out.display()
     );
     Ok(())
+}
+
+/// The scenario of `options` on the rig the options give, refused if it lasts over [`MAX_DEMO_DURATION_S`]. The
+/// duration is checked before the scenario's image margin, which samples the whole motion (a day's run: two
+/// minutes before this refusal).
+fn demo_scenario(args: &DemoArgs, options: &DemoOptions) -> Result<roitrack::sim::Scenario> {
+    args.rig.scenario_within(
+        roitrack::sim::Scenario::new(options.scenario, options.seed),
+        |scenario| {
+            if scenario.duration_s > MAX_DEMO_DURATION_S {
+                anyhow::bail!(
+                    "the demo's scenario lasts {:.0} s (--duration-s, --speed-scale): the demo holds its whole run in \
+                     memory (about 7 MB per simulated second), so it runs at most {MAX_DEMO_DURATION_S} s; \
+                     `roitrack simulate` streams longer runs to files for `roitrack track`",
+                    scenario.duration_s
+                );
+            }
+            Ok(())
+        },
+    )
+}
+
+/// What the demo runs, on stderr before it starts: the scenario, the ROI slots, the estimators, the image side's
+/// centroid error, the output folder.
+fn print_demo_header(demo: &Demo, estimators: usize, out: &std::path::Path) {
+    let accuracy = &demo.accuracy;
+    eprintln!(
+        "roitrack demo: {} scenario, {:.3} s, {} ROI slots at {} Hz, {} estimators from rendered ROIs (two threads) \
+         and from ideal centroids; centroid error of the image side over {} ROIs: bias {:+.4}/{:+.4} px, std \
+         {:.4}/{:.4} px (u/v); output in {}",
+        demo.scenario.kind.name(),
+        demo.scenario.duration_s,
+        demo.slots(),
+        demo.simulation.rate_hz,
+        estimators,
+        accuracy.count,
+        accuracy.bias_u_px,
+        accuracy.bias_v_px,
+        accuracy.std_u_px,
+        accuracy.std_v_px,
+        out.display()
+    );
+}
+
+/// Runs `run` while a thread moves `bar` to `base` plus the ROI slots it says are done, every 100 ms.
+fn with_progress<T>(
+    bar: &indicatif::ProgressBar,
+    base: usize,
+    run: impl FnOnce(&AtomicUsize) -> T,
+) -> T {
+    let done = AtomicUsize::new(0);
+    let finished = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        scope.spawn(|| {
+            while !finished.load(Ordering::Relaxed) {
+                bar.set_position((base + done.load(Ordering::Relaxed)) as u64);
+                std::thread::sleep(Duration::from_millis(100));
+            }
+        });
+        let result = run(&done);
+        finished.store(true, Ordering::Relaxed);
+        result
+    })
+}
+
+/// Writes an estimator's estimates into `out` as `<stem>_poses.tum`, `<stem>_twists.csv` and
+/// `<stem>_diagnostics.csv`.
+fn write_estimates(
+    out: &std::path::Path,
+    stem: &str,
+    estimates: &[roitrack::Estimate],
+) -> Result<()> {
+    let mut writer = EstimateWriter::create(
+        &out.join(format!("{stem}_poses.tum")),
+        &out.join(format!("{stem}_twists.csv")),
+        Some(&out.join(format!("{stem}_diagnostics.csv"))),
+    )?;
+    for e in estimates {
+        writer.write(e)?;
+    }
+    writer.finish()?;
+    Ok(())
+}
+
+/// Where the default estimator's run goes besides its files, each if asked: the bag (--mcap), the live view
+/// (--foxglove) and the DDS bus (--ros2). Opened before the runs, so that a live viewer (--foxglove,
+/// --foxglove-wait-s) is there from the start; each is finished, and taken, once that run is done.
+struct DefaultRunSinks {
+    bag: Option<crate::ros::Bag>,
+    /// The live view follows the default estimator's run from the loop's estimation thread, as it tracks.
+    live: Option<roitrack::ros::LiveServer>,
+    /// --ros2 publishes the same run's estimates on the DDS bus, from the estimation thread too.
+    ros2: Option<crate::ros2_args::Ros2>,
+}
+
+impl DefaultRunSinks {
+    fn open(args: &DemoArgs, demo: &Demo) -> Result<Self> {
+        let mut bag = Some(args.ros.open_for_rois(Some(&demo.run.camera), None)?);
+        let live = bag.as_mut().and_then(|b| b.take_live());
+        let ros2 = Some(
+            args.ros2
+                .start(Some(&demo.run.camera), &args.ros.bag_options())?,
+        );
+        Ok(DefaultRunSinks { bag, live, ros2 })
+    }
+
+    /// The default estimator's run: each estimate to the live view and the DDS bus as the loop makes it, and with
+    /// --mcap-rois each ROI to the bag as the camera grabs it (on two threads: an error slot each).
+    fn observed_run(
+        &mut self,
+        demo: &Demo,
+        estimator: &DemoEstimator,
+        done: &AtomicUsize,
+    ) -> Result<DemoRun> {
+        let DefaultRunSinks { bag, live, ros2 } = self;
+        let (mut live_error, mut roi_error, mut ros2_error) = (None, None, None);
+        let wants_rois = bag.as_ref().is_some_and(|b| b.wants_rois());
+        let mut on_roi = |image: &RoiImage, measured: Option<&Measurement>| {
+            if let (None, Some(bag)) = (&roi_error, bag.as_mut()) {
+                roi_error = bag.roi_image(image, measured).err();
+            }
+        };
+        let run = demo.from_images_observed(
+            estimator,
+            Some(done),
+            &mut |e| {
+                if let (None, Some(live)) = (&live_error, live.as_mut()) {
+                    live_error = live.publish_estimate(e).err();
+                }
+                if let (None, Some(ros2)) = (&ros2_error, ros2.as_mut()) {
+                    ros2_error = ros2.estimate(e).err();
+                }
+            },
+            match wants_rois {
+                true => Some(&mut on_roi),
+                false => None,
+            },
+        );
+        match live_error.or(roi_error).or(ros2_error) {
+            Some(e) => Err(e.into()),
+            None => run.map_err(anyhow::Error::from),
+        }
+    }
+
+    /// After the default estimator's run (`from_images`): its measurements and estimates to the bag, then the bag,
+    /// the live view and the DDS node finished. Nothing after the first run: each is taken.
+    fn finish(&mut self, from_images: &DemoRun) -> Result<()> {
+        if let Some(mut bag) = self.bag.take() {
+            let measured = from_images
+                .loop_report
+                .as_ref()
+                .map_or(&[][..], |r| &r.measured);
+            bag.run(measured, &from_images.scored.estimates)?;
+            bag.finish()?;
+        }
+        if let Some(live) = self.live.take() {
+            crate::ros::finish_live(live)?;
+        }
+        if let Some(ros2) = self.ros2.take() {
+            ros2.finish()?;
+        }
+        Ok(())
+    }
 }
