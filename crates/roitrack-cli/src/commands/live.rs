@@ -396,68 +396,10 @@ fn run_rig(args: &LiveArgs, rig_path: &Path, camera: GenicamOptions) -> Result<(
     let mut on_estimate = |e: &RigEstimate| outputs.estimate(&e.estimate);
     let stop = crate::signals::stop_flag();
     let report = if args.fake {
-        let scenario = Scenario::new(args.scenario.into(), args.seed);
-        let scene = CameraRigScene {
-            rig: draw_clocks(rig, args.seed),
-            scenario,
-        };
-        let options = LiveOptions {
-            camera,
-            duration_s: args.duration.unwrap_or(scene.scenario.duration_s),
-            rate_hz: args.rate_hz.unwrap_or(4000.0),
-            ..LiveOptions::default()
-        };
-        if let Some(dir) = &args.truth_out {
-            let (poses, twists) =
-                truth_samples(&scene.scenario, options.duration_s, options.rate_hz);
-            roitrack::formats::write_tum(dir.join(super::simulate::TRUTH_POSES_FILE), &poses)?;
-            roitrack::formats::write_twists_csv(
-                dir.join(super::simulate::TRUTH_TWISTS_FILE),
-                &twists,
-            )?;
-            let truth_file = dir.join(super::simulate::RIG_TRUTH_FILE);
-            let calibrations = file.calibrations_for_output(&truth_file);
-            roitrack::formats::write_rig_yaml(&truth_file, &scene.rig, &calibrations, None)?;
-        }
-        run_fake_rig(&scene, rig, &options, args.seed, stop, &mut on_estimate)
-            .with_context(|| format!("the fake cameras of {}", rig_path.display()))?
+        run_fake_rig_writing_truth(args, &file, rig_path, camera, stop, &mut on_estimate)?
     } else {
         let target = device_target(args)?;
-        let mut addresses: Vec<Option<String>> = vec![None; rig.len()];
-        for given in &args.device {
-            let Some((name, address)) = given.split_once('=') else {
-                bail!(
-                    "--device {given}: with --rig, NAME=ADDRESS (a camera of {})",
-                    rig_path.display()
-                );
-            };
-            let Some(c) = rig.index_of(name) else {
-                bail!(
-                    "--device {given}: {} has no camera '{name}' (it has {})",
-                    rig_path.display(),
-                    names.join(", ")
-                );
-            };
-            if addresses[c].replace(address.to_string()).is_some() {
-                bail!("--device: camera '{name}' given twice");
-            }
-        }
-        let cameras = addresses
-            .into_iter()
-            .zip(&names)
-            .map(|(address, name)| {
-                let address = address.with_context(|| {
-                    format!(
-                        "camera '{name}' of {} has no --device {name}=ADDRESS",
-                        rig_path.display()
-                    )
-                })?;
-                Ok(GenicamOptions {
-                    address,
-                    ..camera.clone()
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
+        let cameras = device_rig_cameras(args, rig_path, rig, &names, &camera)?;
         let options = LiveOptions {
             camera,
             duration_s: args.duration.unwrap_or(10.0),
@@ -495,11 +437,101 @@ fn run_rig(args: &LiveArgs, rig_path: &Path, camera: GenicamOptions) -> Result<(
         args.poses.display(),
         args.twists.display()
     );
+    cameras_that_ended_the_run(&report, &names)
+}
+
+/// `live --rig --fake`: the rig's cameras simulated (their clocks drawn from the seed) on the scenario; with
+/// --truth-out, the truth's poses and twists and the rig as simulated written there first.
+fn run_fake_rig_writing_truth(
+    args: &LiveArgs,
+    file: &roitrack::formats::RigFile,
+    rig_path: &Path,
+    camera: GenicamOptions,
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    on_estimate: &mut (dyn FnMut(&RigEstimate) + Send),
+) -> Result<roitrack_genicam::RigLiveReport> {
+    let rig = &file.rig;
+    let scenario = Scenario::new(args.scenario.into(), args.seed);
+    let scene = CameraRigScene {
+        rig: draw_clocks(rig, args.seed),
+        scenario,
+    };
+    let options = LiveOptions {
+        camera,
+        duration_s: args.duration.unwrap_or(scene.scenario.duration_s),
+        rate_hz: args.rate_hz.unwrap_or(4000.0),
+        ..LiveOptions::default()
+    };
+    if let Some(dir) = &args.truth_out {
+        let (poses, twists) = truth_samples(&scene.scenario, options.duration_s, options.rate_hz);
+        roitrack::formats::write_tum(dir.join(super::simulate::TRUTH_POSES_FILE), &poses)?;
+        roitrack::formats::write_twists_csv(dir.join(super::simulate::TRUTH_TWISTS_FILE), &twists)?;
+        let truth_file = dir.join(super::simulate::RIG_TRUTH_FILE);
+        let calibrations = file.calibrations_for_output(&truth_file);
+        roitrack::formats::write_rig_yaml(&truth_file, &scene.rig, &calibrations, None)?;
+    }
+    let report = run_fake_rig(&scene, rig, &options, args.seed, stop, on_estimate)
+        .with_context(|| format!("the fake cameras of {}", rig_path.display()))?;
+    Ok(report)
+}
+
+/// Each camera of the rig with its address from --device NAME=ADDRESS (every camera given once) and the options
+/// all cameras take.
+fn device_rig_cameras(
+    args: &LiveArgs,
+    rig_path: &Path,
+    rig: &roitrack::estimators::rig::Rig,
+    names: &[String],
+    camera: &GenicamOptions,
+) -> Result<Vec<GenicamOptions>> {
+    let mut addresses: Vec<Option<String>> = vec![None; rig.len()];
+    for given in &args.device {
+        let Some((name, address)) = given.split_once('=') else {
+            bail!(
+                "--device {given}: with --rig, NAME=ADDRESS (a camera of {})",
+                rig_path.display()
+            );
+        };
+        let Some(c) = rig.index_of(name) else {
+            bail!(
+                "--device {given}: {} has no camera '{name}' (it has {})",
+                rig_path.display(),
+                names.join(", ")
+            );
+        };
+        if addresses[c].replace(address.to_string()).is_some() {
+            bail!("--device: camera '{name}' given twice");
+        }
+    }
+    addresses
+        .into_iter()
+        .zip(names)
+        .map(|(address, name)| {
+            let address = address.with_context(|| {
+                format!(
+                    "camera '{name}' of {} has no --device {name}=ADDRESS",
+                    rig_path.display()
+                )
+            })?;
+            Ok(GenicamOptions {
+                address,
+                ..camera.clone()
+            })
+        })
+        .collect()
+}
+
+/// An error naming each camera that ended the run by an error of its own (the estimates until then are written);
+/// a camera stopped by a signal is not one, and the signal is acknowledged.
+fn cameras_that_ended_the_run(
+    report: &roitrack_genicam::RigLiveReport,
+    names: &[String],
+) -> Result<()> {
     let stopped: Vec<String> = report
         .loop_report
         .cameras
         .iter()
-        .zip(&names)
+        .zip(names)
         .filter_map(|(counts, name)| match &counts.stopped_by {
             None | Some(roitrack::image::GrabError::Stopped { .. }) => None,
             Some(e) => Some(format!("camera '{name}': {e}")),
