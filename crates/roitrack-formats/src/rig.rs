@@ -156,6 +156,34 @@ pub fn parse_rig_yaml(
     options: &CameraFileOptions,
 ) -> Result<RigFile, FormatError> {
     let path = path.as_ref();
+    let doc = parse_rig_document(text, path)?;
+    let folder = path.parent().unwrap_or(Path::new(""));
+    let mut cameras = Vec::with_capacity(doc.cameras.len());
+    let mut written = Vec::with_capacity(doc.cameras.len());
+    let mut paths = Vec::with_capacity(doc.cameras.len());
+    for (index, c) in doc.cameras.iter().enumerate() {
+        let entry = CameraEntry {
+            path,
+            index,
+            yaml: c,
+        };
+        let calibration = folder.join(&c.calibration);
+        cameras.push(entry.rig_camera(&doc.cameras[..index], &calibration, options)?);
+        written.push(c.calibration.clone());
+        paths.push(calibration);
+    }
+    let rig = Rig::new(cameras).map_err(|e| FormatError::new(path, e.to_string()))?;
+    Ok(RigFile {
+        rig,
+        calibrations_as_written: written,
+        calibration_paths: paths,
+        path: path.to_path_buf(),
+    })
+}
+
+/// The rig file's document: not empty, not nested too deep, valid YAML of the rig's shape (a syntax error at its
+/// line), with between 1 and [`MAX_RIG_CAMERAS`] cameras.
+fn parse_rig_document(text: &str, path: &Path) -> Result<RigYaml, FormatError> {
     if text.trim().is_empty() {
         return Err(FormatError::new(
             path,
@@ -187,31 +215,45 @@ pub fn parse_rig_yaml(
         )
         .with_field("cameras"));
     }
-    let folder = path.parent().unwrap_or(Path::new(""));
-    let mut cameras = Vec::with_capacity(doc.cameras.len());
-    let mut written = Vec::with_capacity(doc.cameras.len());
-    let mut paths = Vec::with_capacity(doc.cameras.len());
-    for (index, c) in doc.cameras.iter().enumerate() {
-        let field = |key: &str| format!("cameras[{index}].{key}");
-        let error = |key: &str, message: String| {
-            FormatError::new(path, format!("camera '{}': {message}", c.name)).with_field(field(key))
-        };
+    Ok(doc)
+}
+
+/// Camera `index` of the rig file at `path`, as written: its errors name the file, the camera and the field.
+struct CameraEntry<'a> {
+    path: &'a Path,
+    index: usize,
+    yaml: &'a CameraYaml,
+}
+
+impl CameraEntry<'_> {
+    /// `cameras[index].key`.
+    fn field(&self, key: &str) -> String {
+        format!("cameras[{}].{key}", self.index)
+    }
+
+    fn error(&self, key: &str, message: String) -> FormatError {
+        FormatError::new(self.path, format!("camera '{}': {message}", self.yaml.name))
+            .with_field(self.field(key))
+    }
+
+    /// Refuses a camera without a name or with the name of one `before` it.
+    fn check_name(&self, before: &[CameraYaml]) -> Result<(), FormatError> {
+        let c = self.yaml;
         if c.name.trim().is_empty() {
-            return Err(FormatError::new(path, "a camera needs a name").with_field(field("name")));
+            return Err(
+                FormatError::new(self.path, "a camera needs a name").with_field(self.field("name"))
+            );
         }
-        if doc.cameras[..index].iter().any(|o| o.name == c.name) {
-            return Err(error(
-                "name",
-                "listed twice: camera names must be unique".into(),
-            ));
+        if before.iter().any(|o| o.name == c.name) {
+            return Err(self.error("name", "listed twice: camera names must be unique".into()));
         }
-        // A pose left out is to be found by calibrate-rig (the tracker refuses the rig until then), but the first
-        // camera's, whose frame is then the rig's.
-        let mount_known = index == 0 || c.camera_t_rig.is_some();
-        let mount = match &c.camera_t_rig {
-            Some(values) => mount_from(values).map_err(|m| error("camera_T_rig", m))?,
-            None => CameraMount::IDENTITY,
-        };
+        Ok(())
+    }
+
+    /// Refuses sigmas that are not 3 finite numbers of at least 0, clock values that are not finite, and a drift
+    /// beyond what a clock may have (likely another unit).
+    fn check_sigmas_and_clock(&self) -> Result<(), FormatError> {
+        let c = self.yaml;
         for (key, values) in [
             ("camera_T_rig_sigma_m", &c.camera_t_rig_sigma_m),
             ("camera_T_rig_sigma_deg", &c.camera_t_rig_sigma_deg),
@@ -219,13 +261,12 @@ pub fn parse_rig_yaml(
             if let Some(values) = values
                 && (values.len() != 3 || values.iter().any(|v| !v.is_finite() || *v < 0.0))
             {
-                return Err(error(
+                return Err(self.error(
                     key,
                     format!("expected 3 finite numbers of at least 0 (x y z), got {values:?}"),
                 ));
             }
         }
-        let first = index == 0;
         for (key, value) in [
             ("clock_offset_s", c.clock_offset_s),
             ("clock_drift_ppm", c.clock_drift_ppm),
@@ -235,13 +276,13 @@ pub fn parse_rig_yaml(
             if let Some(v) = value
                 && !v.is_finite()
             {
-                return Err(error(key, format!("not a finite number: {v}")));
+                return Err(self.error(key, format!("not a finite number: {v}")));
             }
         }
         if let Some(d) = c.clock_drift_ppm
             && d.abs() > roitrack_estimators::rig::MAX_DRIFT_PPM
         {
-            return Err(error(
+            return Err(self.error(
                 "clock_drift_ppm",
                 format!(
                     "{d} ppm is beyond ±{} ppm: check the unit (parts per million)",
@@ -249,16 +290,35 @@ pub fn parse_rig_yaml(
                 ),
             ));
         }
-        let calibration = folder.join(&c.calibration);
-        let camera = read_camera_file(&calibration, options).map_err(|e| {
-            error(
+        Ok(())
+    }
+
+    /// The camera as the rig holds it, checked (its name against those `before` it), its calibration read from
+    /// `calibration`. A pose left out is to be found by calibrate-rig (the tracker refuses the rig until then), but
+    /// the first camera's, whose frame is then the rig's; the first camera's clock is the rig's unless the file
+    /// says otherwise, the others' absent values are estimated.
+    fn rig_camera(
+        &self,
+        before: &[CameraYaml],
+        calibration: &Path,
+        options: &CameraFileOptions,
+    ) -> Result<RigCamera, FormatError> {
+        let c = self.yaml;
+        self.check_name(before)?;
+        let first = self.index == 0;
+        let mount_known = first || c.camera_t_rig.is_some();
+        let mount = match &c.camera_t_rig {
+            Some(values) => mount_from(values).map_err(|m| self.error("camera_T_rig", m))?,
+            None => CameraMount::IDENTITY,
+        };
+        self.check_sigmas_and_clock()?;
+        let camera = read_camera_file(calibration, options).map_err(|e| {
+            self.error(
                 "calibration",
                 format!("calibration '{}': {e}", calibration.display()),
             )
         })?;
-        // The first camera's clock is the rig's unless the file says otherwise; the others' absent values are
-        // estimated.
-        cameras.push(RigCamera {
+        Ok(RigCamera {
             name: c.name.clone(),
             camera,
             mount,
@@ -269,17 +329,8 @@ pub fn parse_rig_yaml(
             },
             offset_known: first || c.clock_offset_s.is_some(),
             drift_known: first || c.clock_drift_ppm.is_some(),
-        });
-        written.push(c.calibration.clone());
-        paths.push(calibration);
+        })
     }
-    let rig = Rig::new(cameras).map_err(|e| FormatError::new(path, e.to_string()))?;
-    Ok(RigFile {
-        rig,
-        calibrations_as_written: written,
-        calibration_paths: paths,
-        path: path.to_path_buf(),
-    })
 }
 
 /// `camera_T_rig` from `tx ty tz qx qy qz qw`.
