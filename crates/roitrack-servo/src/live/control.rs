@@ -117,10 +117,7 @@ pub(super) fn control_thread(
         // The newest estimate, if new: on the robot's clock, then the path's. Its latency is measured when the
         // command it makes is issued, in the tick.
         let mut fresh_exposure_s = None;
-        if let Some(snapshot) = reader.read()
-            && snapshot.sequence != last_sequence
-        {
-            last_sequence = snapshot.sequence;
+        if let Some(snapshot) = read_new_estimate(reader, &mut last_sequence) {
             let t_ref_robot_s = scene.loop_to_robot_s(snapshot.t_ref_s);
             // The path starts with the first estimate the loop makes on time: after its full-frame start the paced
             // loop catches up on the slots it missed, with estimates of the past.
@@ -131,12 +128,11 @@ pub(super) fn control_thread(
                 path_started.store(true, Ordering::Release);
             }
             if let Some(start) = path_start {
-                observation = Some(Observation {
-                    t_s: t_ref_robot_s - start,
-                    position_m: snapshot.state.cam_t_obj_m - home_cam,
-                    velocity_mps: snapshot.state.velocity_mps,
-                    acceleration_mps2: None,
-                });
+                observation = Some(observation_on_path(
+                    &snapshot,
+                    t_ref_robot_s - start,
+                    &home_cam,
+                ));
                 fresh_exposure_s = Some(t_ref_robot_s);
             }
         }
@@ -155,6 +151,35 @@ pub(super) fn control_thread(
     let mut side = follower.side;
     side.stop_reason = stop_reason;
     side
+}
+
+/// The newest estimate, if the loop published one since `last_sequence` (then updated to it).
+fn read_new_estimate(
+    reader: &crate::handle::EstimateReader,
+    last_sequence: &mut u64,
+) -> Option<crate::handle::EstimateSnapshot> {
+    let snapshot = reader.read()?;
+    if snapshot.sequence == *last_sequence {
+        return None;
+    }
+    *last_sequence = snapshot.sequence;
+    Some(snapshot)
+}
+
+/// What the controller observes of an estimate: the platform's position relative to home (`home_cam`, the target's
+/// position at home in the camera frame: the robot frame has the camera's axes) and its velocity, at `t_path_s` on
+/// the path's clock.
+fn observation_on_path(
+    snapshot: &crate::handle::EstimateSnapshot,
+    t_path_s: f64,
+    home_cam: &Vector3<f64>,
+) -> Observation {
+    Observation {
+        t_s: t_path_s,
+        position_m: snapshot.state.cam_t_obj_m - home_cam,
+        velocity_mps: snapshot.state.velocity_mps,
+        acceleration_mps2: None,
+    }
 }
 
 /// How a tick of the running path ended, when nothing stopped the thread.
