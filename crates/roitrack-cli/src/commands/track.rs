@@ -169,14 +169,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
     {
         return run_frames(args, source, camera, target);
     }
-    if args.line_delay_s.is_some() {
-        bail!("--line-delay-s is for --images with --shutter rolling");
-    }
-    if !args.timestamps.is_empty() || args.fps.is_some() || args.distance_m.is_some() {
-        bail!(
-            "--timestamps, --fps and --distance-m are for frames, not for replayed measurements (--measurement-topic)"
-        );
-    }
+    check_no_frame_options(args)?;
     let known_ids: Vec<u32> = target.points().iter().map(|p| p.id).collect();
     let mut tracker = Tracker::new(camera.clone(), target, args.estimator.config()?)
         .context("invalid tracker options")?;
@@ -199,18 +192,7 @@ pub fn run(args: &TrackArgs) -> Result<()> {
         known_ids.clone(),
         &camera,
     )?;
-    let mut bag = if !args.rois.is_empty() {
-        args.ros.open_for_rois(Some(&camera), None)?
-    } else {
-        args.ros.open(Some(&camera), None)?
-    };
-    // --ros2: a node that cannot start fails here, before tracking (and --ros2-wait-s waits here for subscribers).
-    bag.publish_on_ros2(args.ros2.start(Some(&camera), &args.ros.bag_options())?);
-    let mut sinks = EstimateSinks {
-        writer,
-        bag,
-        pacer: args.pace.pacer(),
-    };
+    let mut sinks = EstimateSinks::open(args, &camera, writer)?;
     let start = Instant::now();
     let measurements = open_measurements(args, replay, &known_ids, &camera)?;
     let (path, report, rois) = match (measurements, args.rois.first()) {
@@ -292,6 +274,19 @@ fn check_one_camera_inputs(args: &TrackArgs) -> Result<()> {
     Ok(())
 }
 
+/// Refuses the frames' options on measurements (from a file, a ROI recording or replayed from a bag).
+fn check_no_frame_options(args: &TrackArgs) -> Result<()> {
+    if args.line_delay_s.is_some() {
+        bail!("--line-delay-s is for --images with --shutter rolling");
+    }
+    if !args.timestamps.is_empty() || args.fps.is_some() || args.distance_m.is_some() {
+        bail!(
+            "--timestamps, --fps and --distance-m are for frames, not for replayed measurements (--measurement-topic)"
+        );
+    }
+    Ok(())
+}
+
 /// Where every estimate of a one-camera run goes: paced (--paced), then to the files, the bag, the live view and the
 /// DDS bus.
 struct EstimateSinks {
@@ -301,6 +296,27 @@ struct EstimateSinks {
 }
 
 impl EstimateSinks {
+    /// The bag (--mcap, --foxglove; with --rois, room for the ROIs) and the DDS node (--ros2) opened for `camera`
+    /// beside `writer`. A node that cannot start fails here, before tracking (and --ros2-wait-s waits here for
+    /// subscribers).
+    fn open(
+        args: &TrackArgs,
+        camera: &roitrack::CameraModel,
+        writer: EstimateWriter,
+    ) -> Result<Self> {
+        let mut bag = if !args.rois.is_empty() {
+            args.ros.open_for_rois(Some(camera), None)?
+        } else {
+            args.ros.open(Some(camera), None)?
+        };
+        bag.publish_on_ros2(args.ros2.start(Some(camera), &args.ros.bag_options())?);
+        Ok(EstimateSinks {
+            writer,
+            bag,
+            pacer: args.pace.pacer(),
+        })
+    }
+
     fn estimate(&mut self, e: &roitrack::Estimate) -> Result<(), FormatError> {
         if let Some(pacer) = &mut self.pacer {
             pacer.wait_until(e.t_ref_s);
@@ -431,11 +447,7 @@ fn run_frames(
 ) -> Result<()> {
     let camera = frame_camera(args, camera)?;
     let config = frame_config(args)?;
-    let timing = roitrack::formats::FrameTiming {
-        timestamps: args.timestamps.first().cloned(),
-        fps: args.fps,
-        time_units: args.time_units.map(Into::into),
-    };
+    let timing = frame_timing(args, args.timestamps.first().cloned());
     let mut frames = crate::ros::open_frames(source, &timing, &args.mcap_in, &camera)?;
     let (mut bag, copy_frames) = (
         args.ros.open(Some(&camera), Some(&target))?,
@@ -502,15 +514,28 @@ fn run_frames(
     written?;
     bag_finished?;
     if report.estimates == 0 {
-        bail!(
-            "{}: no estimate from {} frames: the target was never found (check --camera, --target, --polarity; \
-             `roitrack detect --overlay DIR` on one frame's image writes DIR/<image name>.overlay.png with the blobs \
-             seen in it, found or not)",
-            source.display(),
-            report.frames
-        );
+        return Err(target_never_found(source, report.frames));
     }
     Ok(())
+}
+
+/// The frames' times of `track --images`: the `timestamps` file, else --fps, else a video's own; in --time-units.
+fn frame_timing(args: &TrackArgs, timestamps: Option<PathBuf>) -> roitrack::formats::FrameTiming {
+    roitrack::formats::FrameTiming {
+        timestamps,
+        fps: args.fps,
+        time_units: args.time_units.map(Into::into),
+    }
+}
+
+/// No estimate from the `frames` of `source`: what to check, and how to see the blobs of a frame.
+fn target_never_found(source: &std::path::Path, frames: usize) -> anyhow::Error {
+    anyhow::anyhow!(
+        "{}: no estimate from {frames} frames: the target was never found (check --camera, --target, --polarity; \
+         `roitrack detect --overlay DIR` on one frame's image writes DIR/<image name>.overlay.png with the blobs \
+         seen in it, found or not)",
+        source.display(),
+    )
 }
 
 /// The progress of `track --images` on stderr (drawn only when stderr is a terminal): a bar when the number of
@@ -806,11 +831,7 @@ fn rig_inputs(
                 },
                 _ => CameraInput::Images {
                     source: path,
-                    timing: roitrack::formats::FrameTiming {
-                        timestamps: timestamps[c].clone(),
-                        fps: args.fps,
-                        time_units: args.time_units.map(Into::into),
-                    },
+                    timing: frame_timing(args, timestamps[c].clone()),
                     config: Box::new(frame_config(args)?),
                 },
             });
