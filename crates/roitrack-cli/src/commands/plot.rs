@@ -62,42 +62,23 @@ pub fn run(args: &PlotArgs) -> Result<()> {
     let twists = args.twists.as_ref().map(read_twists).transpose()?;
     let times: Vec<f64> = poses.iter().map(|p| p.t_s).collect();
     // Side files must be of the same run: one row per estimate, at its time.
-    let check_times = |what: &str, path: &PathBuf, side: &[f64]| -> Result<()> {
-        check_same_run(what, path, side, &times, &args.poses)
+    let run = SameRun {
+        times: &times,
+        poses_path: &args.poses,
     };
     if let (Some(path), Some(twists)) = (&args.twists, &twists) {
-        check_times(
+        run.check(
             "twist",
             path,
             &twists.iter().map(|t| t.t_s).collect::<Vec<_>>(),
         )?;
     }
-    let diagnostics = args
-        .diagnostics
-        .as_ref()
-        .map(|path| -> Result<_> {
-            let rows = roitrack::formats::read_diagnostics_csv_limited(path, max_bytes)?;
-            check_times(
-                "diagnostics",
-                path,
-                &rows.iter().map(|r| r.t_s).collect::<Vec<_>>(),
-            )?;
-            Ok(rows)
-        })
-        .transpose()?;
-    let covariance = args
-        .covariance
-        .as_ref()
-        .map(|path| -> Result<_> {
-            let rows = roitrack::formats::read_covariance_csv_limited(path, max_bytes)?;
-            check_times(
-                "covariance",
-                path,
-                &rows.iter().map(|r| r.t_s).collect::<Vec<_>>(),
-            )?;
-            Ok(rows)
-        })
-        .transpose()?;
+    let diagnostics = read_side_file(args.diagnostics.as_ref(), "diagnostics", &run, |path| {
+        roitrack::formats::read_diagnostics_csv_limited(path, max_bytes)
+    })?;
+    let covariance = read_side_file(args.covariance.as_ref(), "covariance", &run, |path| {
+        roitrack::formats::read_covariance_csv_limited(path, max_bytes)
+    })?;
     let sigmas = band_sigmas(covariance.as_deref(), diagnostics.as_deref());
     let (truth_poses_path, truth_twists_path) = truth_paths(args);
     let truth_poses = truth_poses_path.as_ref().map(read_tum).transpose()?;
@@ -165,35 +146,74 @@ fn check_plot_paths(args: &PlotArgs) -> Result<()> {
     Ok(())
 }
 
-/// Refuses a side file (`what`: twist, diagnostics, covariance) at `path` that is not of the run of `poses_path`:
-/// its rows' times `side` must be the poses' `times`, one row per estimate.
-fn check_same_run(
+/// The run the side files must be of: the times of the poses read from `poses_path`.
+struct SameRun<'a> {
+    times: &'a [f64],
+    poses_path: &'a std::path::Path,
+}
+
+impl SameRun<'_> {
+    /// Refuses a side file (`what`: twist, diagnostics, covariance) at `path` that is not of this run: its rows'
+    /// times `side` must be the poses' times, one row per estimate.
+    fn check(&self, what: &str, path: &std::path::Path, side: &[f64]) -> Result<()> {
+        let times = self.times;
+        if side.len() != times.len() {
+            bail!(
+                "{}: {} rows for {} poses in {}: not the same run",
+                path.display(),
+                side.len(),
+                times.len(),
+                self.poses_path.display()
+            );
+        }
+        if let Some(k) = (0..side.len()).find(|&k| (side[k] - times[k]).abs() > 1e-6) {
+            bail!(
+                "{}: {what} row {} is at t = {} s but pose {} is at t = {} s: not the same run",
+                path.display(),
+                k + 1,
+                side[k],
+                k + 1,
+                times[k]
+            );
+        }
+        Ok(())
+    }
+}
+
+/// A side file's rows (`what`: diagnostics, covariance), read by `read` when given and checked to be of `run`.
+fn read_side_file<R: TimedRow>(
+    path: Option<&PathBuf>,
     what: &str,
-    path: &std::path::Path,
-    side: &[f64],
-    times: &[f64],
-    poses_path: &std::path::Path,
-) -> Result<()> {
-    if side.len() != times.len() {
-        bail!(
-            "{}: {} rows for {} poses in {}: not the same run",
-            path.display(),
-            side.len(),
-            times.len(),
-            poses_path.display()
-        );
+    run: &SameRun<'_>,
+    read: impl Fn(&PathBuf) -> Result<Vec<R>, roitrack::formats::FormatError>,
+) -> Result<Option<Vec<R>>> {
+    path.map(|path| -> Result<_> {
+        let rows = read(path)?;
+        run.check(
+            what,
+            path,
+            &rows.iter().map(|r| r.t_s()).collect::<Vec<_>>(),
+        )?;
+        Ok(rows)
+    })
+    .transpose()
+}
+
+/// A row of a side file, at the time of its estimate.
+trait TimedRow {
+    fn t_s(&self) -> f64;
+}
+
+impl TimedRow for roitrack::formats::DiagnosticsRow {
+    fn t_s(&self) -> f64 {
+        self.t_s
     }
-    if let Some(k) = (0..side.len()).find(|&k| (side[k] - times[k]).abs() > 1e-6) {
-        bail!(
-            "{}: {what} row {} is at t = {} s but pose {} is at t = {} s: not the same run",
-            path.display(),
-            k + 1,
-            side[k],
-            k + 1,
-            times[k]
-        );
+}
+
+impl TimedRow for roitrack::formats::CovarianceRow {
+    fn t_s(&self) -> f64 {
+        self.t_s
     }
-    Ok(())
 }
 
 /// The sigmas of the error bands per estimate, in the 12 components of the covariance: all of them from the
