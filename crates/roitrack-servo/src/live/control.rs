@@ -87,7 +87,6 @@ pub(super) fn control_thread(
     let control_rate_hz = options.control_rate_hz.unwrap_or(config.control_rate_hz);
     let mut follower = PathFollower::new(config, scene, control_rate_hz, known_acceleration);
     let tick_s = follower.tick_s;
-    let (_, home_cam) = config.path.home_in_camera();
     let mut last_sequence = 0u64;
     let mut observation: Option<Observation> = None;
     let mut path_start: Option<f64> = None;
@@ -131,7 +130,7 @@ pub(super) fn control_thread(
                 observation = Some(observation_on_path(
                     &snapshot,
                     t_ref_robot_s - start,
-                    &home_cam,
+                    config,
                 ));
                 fresh_exposure_s = Some(t_ref_robot_s);
             }
@@ -166,14 +165,15 @@ fn read_new_estimate(
     Some(snapshot)
 }
 
-/// What the controller observes of an estimate: the platform's position relative to home (`home_cam`, the target's
-/// position at home in the camera frame: the robot frame has the camera's axes) and its velocity, at `t_path_s` on
+/// What the controller observes of an estimate: the platform's position relative to home (the target's position at
+/// the path's home, in the camera frame: the robot frame has the camera's axes) and its velocity, at `t_path_s` on
 /// the path's clock.
 fn observation_on_path(
     snapshot: &crate::handle::EstimateSnapshot,
     t_path_s: f64,
-    home_cam: &Vector3<f64>,
+    config: &ServoConfig,
 ) -> Observation {
+    let (_, home_cam) = config.path.home_in_camera();
     Observation {
         t_s: t_path_s,
         position_m: snapshot.state.cam_t_obj_m - home_cam,
