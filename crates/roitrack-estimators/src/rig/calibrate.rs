@@ -710,15 +710,21 @@ impl RigCalibrator {
             };
             Some((mean_square_residual(&pairs, points, &m), m))
         };
-        let mut best: Option<(f64, f64, CameraMount)> = None;
-        for k in -steps..=steps {
-            let offset_s = start + k as f64 * coarse_step_s;
-            if let Some((cost, m)) = score(offset_s)
-                && best.is_none_or(|(b, _, _)| cost < b)
-            {
-                best = Some((cost, offset_s, m));
-            }
-        }
+        // The offsets `centre_s + k step_s` for |k| <= reach, each kept in `best` if it scores lower (cost, offset,
+        // mount).
+        let scan =
+            |best: &mut Option<(f64, f64, CameraMount)>, centre_s: f64, step_s: f64, reach: i64| {
+                for k in -reach..=reach {
+                    let offset_s = centre_s + k as f64 * step_s;
+                    if let Some((cost, m)) = score(offset_s)
+                        && best.is_none_or(|(b, _, _)| cost < b)
+                    {
+                        *best = Some((cost, offset_s, m));
+                    }
+                }
+            };
+        let mut best = None;
+        scan(&mut best, start, coarse_step_s, steps);
         let (_, coarse_s, _) = best.ok_or_else(|| self.no_overlap_with(c, p))?;
         if (coarse_s - start).abs() > search - 1.5 * coarse_step_s {
             let (camera, partner) = self.names(c, p);
@@ -728,15 +734,7 @@ impl RigCalibrator {
                 max_offset_s: search,
             });
         }
-        let fine_step_s = 5e-5;
-        for k in -20..=20 {
-            let offset_s = coarse_s + k as f64 * fine_step_s;
-            if let Some((cost, m)) = score(offset_s)
-                && best.is_none_or(|(b, _, _)| cost < b)
-            {
-                best = Some((cost, offset_s, m));
-            }
-        }
+        scan(&mut best, coarse_s, 5e-5, 20);
         let (_, offset_s, m) = best.expect("the coarse search found one");
         Ok((offset_s, m))
     }
