@@ -339,6 +339,12 @@ impl<'a> PolaritySearch<'a> {
         )
     }
 
+    /// The blobs of `polarity` at every level, their centres measured, the work counted.
+    fn measured(&mut self, polarity: Polarity, scratch: &mut PhotoScratch) -> Vec<PhotoBlob> {
+        let candidates = self.find(polarity, scratch);
+        self.measure(candidates, scratch)
+    }
+
     /// The candidates' centres measured, the work counted.
     fn measure(
         &mut self,
@@ -383,8 +389,7 @@ impl<'a> PolaritySearch<'a> {
         polarity: Polarity,
         scratch: &mut PhotoScratch,
     ) -> Result<Found, PhotoError> {
-        let candidates = self.find(polarity, scratch);
-        let blobs = self.measure(candidates, scratch);
+        let blobs = self.measured(polarity, scratch);
         match self.identify_among(polarity, &blobs) {
             Ok(found) => Ok((polarity, blobs, found)),
             Err(source) => Err(PhotoError::NotFound {
@@ -451,20 +456,26 @@ impl<'a> PolaritySearch<'a> {
         let guess = likely_polarity(self.frame);
         let other = guess.other();
         let whole_view = whole_view_points(self.target.len());
-        let candidates = self.find(guess, scratch);
-        let guess_blobs = self.measure(candidates, scratch);
+        let guess_blobs = self.measured(guess, scratch);
         let (outcome, guess_promise) = self.attempt(guess, &guess_blobs, whole_view);
-        let guess_error = match outcome {
-            Some(Ok(found)) => return Ok((guess, guess_blobs, found)),
-            Some(Err(guess_error)) => guess_error,
+        match outcome {
+            Some(Ok(found)) => Ok((guess, guess_blobs, found)),
+            Some(Err(guess_error)) => {
+                let other_blobs = self.measured(other, scratch);
+                let outcome = self.identify_among(other, &other_blobs);
+                fall_back(
+                    (guess, guess_blobs, guess_error),
+                    (other, other_blobs, outcome),
+                )
+            }
+            // The guess's search stopped for too small a promise: the other polarity is asked for more.
             None => {
-                let candidates = self.find(other, scratch);
-                let other_blobs = self.measure(candidates, scratch);
+                let other_blobs = self.measured(other, scratch);
                 let (other_outcome, _) = self.attempt(other, &other_blobs, guess_promise + 1);
                 if let Some(Ok(found)) = other_outcome {
                     return Ok((other, other_blobs, found));
                 }
-                return match self.identify_among(guess, &guess_blobs) {
+                match self.identify_among(guess, &guess_blobs) {
                     Ok(found) => Ok((guess, guess_blobs, found)),
                     Err(guess_error) => {
                         let outcome = other_outcome
@@ -474,16 +485,9 @@ impl<'a> PolaritySearch<'a> {
                             (other, other_blobs, outcome),
                         )
                     }
-                };
+                }
             }
-        };
-        let candidates = self.find(other, scratch);
-        let other_blobs = self.measure(candidates, scratch);
-        let outcome = self.identify_among(other, &other_blobs);
-        fall_back(
-            (guess, guess_blobs, guess_error),
-            (other, other_blobs, outcome),
-        )
+        }
     }
 }
 
